@@ -1,0 +1,174 @@
+"""Run directories: the time series (CSV), metrics.json and the plots, for sim, run and replay.
+
+Layout of a run directory:
+  timeseries.csv  one row per recorded step (columns below, SI units, NED, radians)
+  path_T.csv      the path's node positions in the target frame (m), for the plots
+  metrics.json    tracking figures (see :func:`compute_metrics`) plus run facts
+  *.png           the paper's figures (see :mod:`mpf_mavlink.plots`)
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import MpfError
+
+COLUMNS = [
+    "t", "s", "sdot",
+    "p_n", "p_e", "p_d", "pf_n", "pf_e", "pf_d", "tgt_n", "tgt_e", "tgt_d",
+    "rel_x", "rel_y", "rel_z",
+    "pt_n", "pt_e", "pt_d", "pt_norm", "psi", "e2", "e3", "y_w", "z_w",
+    "w2_cmd", "w3_cmd", "w2", "w3", "margin", "saturated", "psi_turn",
+    "wind_n", "wind_e", "wind_d",
+]  # fmt: skip
+
+
+@dataclass
+class RunTable:
+    """Columns of a run, appended row by row (floats only)."""
+
+    rows: list[list[float]] = field(default_factory=list)
+    extra: dict[str, list[float]] = field(default_factory=dict)
+
+    def append(self, row: list[float]) -> None:
+        self.rows.append(row)
+
+    def arrays(self) -> dict[str, NDArray[np.float64]]:
+        A = np.array(self.rows, dtype=float).reshape(-1, len(COLUMNS))
+        return {c: A[:, i] for i, c in enumerate(COLUMNS)}
+
+
+def row_from(
+    diag: Any,
+    p: Any,
+    w_cmd: tuple[float, float],
+    w_act: tuple[float, float],
+    sdot: float,
+    target_p: Any,
+    target_R: Any,
+    wind: Any,
+) -> list[float]:
+    """One CSV row from the law's diagnostics and the vehicle/target state (NED)."""
+    rel = np.asarray(target_R).T @ (np.asarray(p) - np.asarray(target_p))
+    return [
+        diag.t, diag.s, sdot,
+        float(p[0]), float(p[1]), float(p[2]), *diag.p_f,
+        float(target_p[0]), float(target_p[1]), float(target_p[2]),
+        float(rel[0]), float(rel[1]), float(rel[2]),
+        *diag.pt, diag.pt_norm, diag.psi, diag.e[0], diag.e[1], diag.y_w, diag.z_w,
+        w_cmd[0], w_cmd[1], float(w_act[0]), float(w_act[1]), diag.path_speed_margin,
+        1.0 if "sat" in diag.mode else 0.0, 1.0 if "psi_turn" in diag.mode else 0.0,
+        float(wind[0]), float(wind[1]), float(wind[2]),
+    ]  # fmt: skip
+
+
+def compute_metrics(
+    cols: dict[str, NDArray[np.float64]], steady_after_s: float, threshold_m: float = 1.0
+) -> dict[str, Any]:
+    """Tracking figures.
+
+    convergence_time_s: first time after which |pt| stays below threshold (None if it never
+    does); steady_*: over t >= steady_after_s (None when the run is shorter);
+    max_rate_cmd_rad_s: peak |[w2, w3]_cmd| over the whole run.
+    """
+    t = cols["t"]
+    e = cols["pt_norm"]
+    if len(t) == 0:
+        return {"convergence_time_s": None, "steady_rms_m": None, "steady_max_m": None,
+                "steady_psi_max": None, "max_rate_cmd_rad_s": None}  # fmt: skip
+    above = np.nonzero(e >= threshold_m)[0]
+    if len(above) == 0:
+        conv: float | None = float(t[0])
+    elif above[-1] == len(t) - 1:
+        conv = None
+    else:
+        conv = float(t[above[-1] + 1])
+    m = t >= steady_after_s
+    rate = np.hypot(cols["w2_cmd"], cols["w3_cmd"])
+    out: dict[str, Any] = {
+        "convergence_time_s": conv,
+        "steady_rms_m": float(np.sqrt(np.mean(e[m] ** 2))) if m.any() else None,
+        "steady_max_m": float(np.max(e[m])) if m.any() else None,
+        "steady_psi_max": float(np.max(cols["psi"][m])) if m.any() else None,
+        "max_rate_cmd_rad_s": float(np.max(rate)),
+        "initial_pt_m": float(e[0]),
+        "saturated_fraction": float(np.mean(cols["saturated"])),
+    }
+    return out
+
+
+def prepare_out_dir(out: str | Path) -> Path:
+    """Create the run directory and prove it is writable now, before anything flies."""
+    d = Path(out)
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        probe = d / ".write-test"
+        with open(probe, "wb") as f:
+            f.write(b"0" * 4096)
+            f.flush()
+            os.fsync(f.fileno())
+        probe.unlink()
+    except OSError as e:
+        raise MpfError(f"{d}: output directory is not writable ({e.strerror})") from None
+    return d
+
+
+def _clean(v: Any) -> Any:
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    if isinstance(v, dict):
+        return {k: _clean(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_clean(x) for x in v]
+    if isinstance(v, np.floating | np.integer | np.bool_):
+        return _clean(v.item())
+    return v
+
+
+def write_run(
+    out: Path,
+    cols: dict[str, NDArray[np.float64]],
+    metrics: dict[str, Any],
+    path_T: NDArray[np.float64] | None,
+    plots: bool = True,
+) -> list[Path]:
+    """Write timeseries.csv, path_T.csv, metrics.json and (optionally) the plots."""
+    out.mkdir(parents=True, exist_ok=True)
+    A = np.column_stack([cols[c] for c in COLUMNS]) if len(cols["t"]) else np.zeros((0, len(COLUMNS)))
+    np.savetxt(out / "timeseries.csv", A, delimiter=",", header=",".join(COLUMNS), comments="", fmt="%.9g")
+    if path_T is not None:
+        np.savetxt(out / "path_T.csv", path_T, delimiter=",", header="x,y,z", comments="", fmt="%.6f")
+    (out / "metrics.json").write_text(json.dumps(_clean(metrics), indent=2) + "\n")
+    written = [out / "timeseries.csv", out / "metrics.json"]
+    if plots:
+        from .plots import plot_run
+
+        written += plot_run(out)
+    return written
+
+
+def read_run(d: str | Path) -> tuple[dict[str, NDArray[np.float64]], NDArray[np.float64] | None, dict[str, Any]]:
+    """Read a run directory back (for ``mpf-mavlink plot``)."""
+    d = Path(d)
+    f = d / "timeseries.csv"
+    if not f.is_file():
+        raise MpfError(f"{d}: not a run directory (no timeseries.csv)")
+    try:
+        A = np.loadtxt(f, delimiter=",", skiprows=1, ndmin=2)
+        header = f.open().readline().strip().split(",")
+    except (OSError, ValueError) as e:
+        raise MpfError(f"{f}: unreadable time series ({e})") from None
+    cols = {c: (A[:, i] if A.size else np.zeros(0)) for i, c in enumerate(header)}
+    path_T = None
+    if (d / "path_T.csv").is_file():
+        path_T = np.loadtxt(d / "path_T.csv", delimiter=",", skiprows=1, ndmin=2)
+    metrics = json.loads((d / "metrics.json").read_text()) if (d / "metrics.json").is_file() else {}
+    return cols, path_T, metrics

@@ -1,0 +1,163 @@
+"""Target motions: the moving frame {T} that carries the path.
+
+A :class:`TargetState` gives, at time t (s): position p_t (NED, m), velocity and acceleration
+(NED, m/s, m/s^2), attitude R_T^I, angular velocity omega_TI^T and its rate (both in {T},
+rad/s, rad/s^2). Motions are pure functions of t.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import so3
+
+
+@dataclass(frozen=True)
+class TargetState:
+    """Target kinematics at time t. Vectors in NED except the angular ones (in {T})."""
+
+    t: float
+    position: NDArray[np.float64]
+    velocity: NDArray[np.float64]
+    acceleration: NDArray[np.float64]
+    R_T_I: NDArray[np.float64]
+    omega_T: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    omega_dot_T: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+
+    def extrapolate(self, t: float) -> TargetState:
+        """Constant-acceleration, constant-angular-acceleration prediction to time t (s)."""
+        h = t - self.t
+        phi = h * self.omega_T + 0.5 * h * h * self.omega_dot_T
+        return TargetState(
+            t,
+            self.position + h * self.velocity + 0.5 * h * h * self.acceleration,
+            self.velocity + h * self.acceleration,
+            self.acceleration,
+            self.R_T_I @ so3.exp(phi),
+            self.omega_T + h * self.omega_dot_T,
+            self.omega_dot_T,
+        )
+
+
+class TargetMotion(Protocol):
+    """Anything that gives the target's state at time t (s)."""
+
+    def state(self, t: float) -> TargetState: ...
+
+
+@dataclass(frozen=True)
+class Stationary:
+    """A target that does not move: position (NED, m), yaw (rad)."""
+
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    yaw: float = 0.0
+
+    def state(self, t: float) -> TargetState:
+        z = np.zeros(3)
+        return TargetState(t, np.array(self.position, float), z, z.copy(), so3.rot_z(self.yaw))
+
+
+@dataclass(frozen=True)
+class ConstantTurn:
+    """Constant ground speed (m/s), turn rate (rad/s, > 0 turns right) and climb rate (m/s, up).
+
+    {T} is the level heading frame (x along the horizontal velocity, z down); its angular
+    velocity is [0, 0, turn_rate].
+    """
+
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    speed: float = 0.0
+    heading: float = 0.0
+    turn_rate: float = 0.0
+    climb_rate: float = 0.0
+
+    def state(self, t: float) -> TargetState:
+        V, w, psi0 = self.speed, self.turn_rate, self.heading
+        psi = psi0 + w * t
+        p0 = np.array(self.position, float)
+        if abs(w) > 1e-9:
+            dn = V / w * (math.sin(psi) - math.sin(psi0))
+            de = V / w * (math.cos(psi0) - math.cos(psi))
+        else:
+            dn, de = V * t * math.cos(psi0), V * t * math.sin(psi0)
+        pos = p0 + np.array([dn, de, -self.climb_rate * t])
+        vel = np.array([V * math.cos(psi), V * math.sin(psi), -self.climb_rate])
+        acc = np.array([-V * w * math.sin(psi), V * w * math.cos(psi), 0.0])
+        return TargetState(t, pos, vel, acc, so3.rot_z(psi), np.array([0.0, 0.0, w]), np.zeros(3))
+
+
+class PaperProfile:
+    """Section V of the paper: body-frame speed and angular velocity given as functions of t.
+
+    pdot_t^T = [3 sqrt((cos 0.1t + 1)^2 + 1), 0, 0],
+    omega_TI^T = [0, -0.001 cos 0.03t, -sin 0.1t / (10 ((cos 0.1t + 1)^2 + 1)^1.5)],
+    p_t(0) = position, R_T^I(0) = Rz(yaw). Position and attitude have no closed form: they
+    are integrated by RK4 on a 0.01 s grid (kept as it grows) and one RK4 step of the
+    remaining fraction, so state(t) is a deterministic pure function of t.
+    """
+
+    DT = 0.01
+
+    def __init__(self, position: ArrayLike = (0.0, 0.0, 5.0), yaw: float = math.pi / 4) -> None:
+        self._grid_p: list[NDArray[np.float64]] = [np.asarray(position, float)]
+        self._grid_R: list[NDArray[np.float64]] = [so3.rot_z(yaw)]
+
+    @staticmethod
+    def speed(t: float) -> tuple[float, float]:
+        """Body-axis speed v (m/s) and its rate (m/s^2)."""
+        c, s = math.cos(0.1 * t), math.sin(0.1 * t)
+        g = (c + 1.0) ** 2 + 1.0
+        return 3.0 * math.sqrt(g), -0.3 * (c + 1.0) * s / math.sqrt(g)
+
+    @staticmethod
+    def omega(t: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """omega_TI^T (rad/s) and its time derivative (rad/s^2)."""
+        c, s = math.cos(0.1 * t), math.sin(0.1 * t)
+        g = (c + 1.0) ** 2 + 1.0
+        gdot = -0.2 * (c + 1.0) * s
+        w3 = -s / (10.0 * g**1.5)
+        w3dot = -(0.1 * c) / (10.0 * g**1.5) + s * 1.5 * gdot / (10.0 * g**2.5)
+        w = np.array([0.0, -0.001 * math.cos(0.03 * t), w3])
+        wd = np.array([0.0, 0.00003 * math.sin(0.03 * t), w3dot])
+        return w, wd
+
+    def _f(self, t: float, R: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        v, _ = self.speed(t)
+        w, _ = self.omega(t)
+        return R[:, 0] * v, R @ so3.hat(w)
+
+    def _rk4(
+        self, t: float, p: NDArray[np.float64], R: NDArray[np.float64], h: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        k1p, k1R = self._f(t, R)
+        k2p, k2R = self._f(t + h / 2, R + h / 2 * k1R)
+        k3p, k3R = self._f(t + h / 2, R + h / 2 * k2R)
+        k4p, k4R = self._f(t + h, R + h * k3R)
+        p2 = p + h / 6 * (k1p + 2 * k2p + 2 * k3p + k4p)
+        R2 = R + h / 6 * (k1R + 2 * k2R + 2 * k3R + k4R)
+        return p2, R2
+
+    def state(self, t: float) -> TargetState:
+        if t < 0:
+            raise ValueError("the paper's target profile starts at t = 0")
+        k = int(t / self.DT)
+        while len(self._grid_p) <= k:
+            j = len(self._grid_p) - 1
+            p2, R2 = self._rk4(j * self.DT, self._grid_p[j], self._grid_R[j], self.DT)
+            self._grid_p.append(p2)
+            self._grid_R.append(so3.orthonormalize(R2) if j % 100 == 0 else R2)
+        h = t - k * self.DT
+        p, R = self._grid_p[k], self._grid_R[k]
+        if h > 0:
+            p, R = self._rk4(k * self.DT, p, R, h)
+        v, vdot = self.speed(t)
+        w, wd = self.omega(t)
+        vel = R[:, 0] * v
+        # a = R (vdot e1 + omega x (v e1)) in body components.
+        acc = R @ np.array([vdot, w[2] * v, -w[1] * v])
+        return TargetState(t, p.copy(), vel, acc, R.copy(), w, wd)
