@@ -104,8 +104,9 @@ class PaperProfile:
     DT = 0.01
 
     def __init__(self, position: ArrayLike = (0.0, 0.0, 5.0), yaw: float = math.pi / 4) -> None:
-        self._grid_p: list[NDArray[np.float64]] = [np.asarray(position, float)]
-        self._grid_R: list[NDArray[np.float64]] = [so3.rot_z(yaw)]
+        # Grid of (position, row-major R_T^I) every DT seconds, as plain floats for speed.
+        self._grid_p: list[list[float]] = [[float(v) for v in np.asarray(position, float)]]
+        self._grid_R: list[list[float]] = [so3.rot_z(yaw).ravel().tolist()]
 
     @staticmethod
     def speed(t: float) -> tuple[float, float]:
@@ -126,38 +127,53 @@ class PaperProfile:
         wd = np.array([0.0, 0.00003 * math.sin(0.03 * t), w3dot])
         return w, wd
 
-    def _f(self, t: float, R: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        v, _ = self.speed(t)
-        w, _ = self.omega(t)
-        return R[:, 0] * v, R @ so3.hat(w)
+    def _f(self, t: float, R: list[float]) -> tuple[list[float], list[float]]:
+        """(pdot, Rdot) with R a row-major list of 9 floats: pdot = R e1 v, Rdot = R hat(w)."""
+        c, s = math.cos(0.1 * t), math.sin(0.1 * t)
+        g = (c + 1.0) ** 2 + 1.0
+        v = 3.0 * math.sqrt(g)
+        wy = -0.001 * math.cos(0.03 * t)
+        wz = -s / (10.0 * g**1.5)
+        pd = [R[0] * v, R[3] * v, R[6] * v]
+        # R hat(w) with w = (0, wy, wz): columns [R2 wz - R3 wy, -R1 wz, R1 wy].
+        Rd = []
+        for i in (0, 3, 6):
+            r0, r1, r2 = R[i], R[i + 1], R[i + 2]
+            Rd += [r1 * wz - r2 * wy, -r0 * wz, r0 * wy]
+        return pd, Rd
 
-    def _rk4(
-        self, t: float, p: NDArray[np.float64], R: NDArray[np.float64], h: float
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def _rk4(self, t: float, p: list[float], R: list[float], h: float) -> tuple[list[float], list[float]]:
         k1p, k1R = self._f(t, R)
-        k2p, k2R = self._f(t + h / 2, R + h / 2 * k1R)
-        k3p, k3R = self._f(t + h / 2, R + h / 2 * k2R)
-        k4p, k4R = self._f(t + h, R + h * k3R)
-        p2 = p + h / 6 * (k1p + 2 * k2p + 2 * k3p + k4p)
-        R2 = R + h / 6 * (k1R + 2 * k2R + 2 * k3R + k4R)
+        k2p, k2R = self._f(t + h / 2, [R[i] + h / 2 * k1R[i] for i in range(9)])
+        k3p, k3R = self._f(t + h / 2, [R[i] + h / 2 * k2R[i] for i in range(9)])
+        k4p, k4R = self._f(t + h, [R[i] + h * k3R[i] for i in range(9)])
+        c = h / 6
+        p2 = [p[i] + c * (k1p[i] + 2 * k2p[i] + 2 * k3p[i] + k4p[i]) for i in range(3)]
+        R2 = [R[i] + c * (k1R[i] + 2 * k2R[i] + 2 * k3R[i] + k4R[i]) for i in range(9)]
         return p2, R2
 
     def state(self, t: float) -> TargetState:
         if t < 0:
             raise ValueError("the paper's target profile starts at t = 0")
-        k = int(t / self.DT)
+        x = t / self.DT
+        k = int(round(x))
+        if abs(x - k) > 1e-9:  # not on the grid (up to float round-off)
+            k = int(x)
         while len(self._grid_p) <= k:
             j = len(self._grid_p) - 1
             p2, R2 = self._rk4(j * self.DT, self._grid_p[j], self._grid_R[j], self.DT)
+            if j % 100 == 0:
+                R2 = so3.orthonormalize(np.array(R2).reshape(3, 3)).ravel().tolist()
             self._grid_p.append(p2)
-            self._grid_R.append(so3.orthonormalize(R2) if j % 100 == 0 else R2)
+            self._grid_R.append(R2)
         h = t - k * self.DT
         p, R = self._grid_p[k], self._grid_R[k]
-        if h > 0:
+        if h > 1e-12:
             p, R = self._rk4(k * self.DT, p, R, h)
         v, vdot = self.speed(t)
         w, wd = self.omega(t)
-        vel = R[:, 0] * v
+        Rm = np.array(R).reshape(3, 3)
+        vel = Rm[:, 0] * v
         # a = R (vdot e1 + omega x (v e1)) in body components.
-        acc = R @ np.array([vdot, w[2] * v, -w[1] * v])
-        return TargetState(t, p.copy(), vel, acc, R.copy(), w, wd)
+        acc = Rm @ np.array([vdot, w[2] * v, -w[1] * v])
+        return TargetState(t, np.array(p), vel, acc, Rm, w, wd)

@@ -78,6 +78,7 @@ class ClosedLoop:
         self.lambda_w = lambda_w  # None: perfect rate tracking (w = w_cmd)
         self.wind = wind
         self._tcache: tuple[float, object] | None = None
+        self.last: Sample | None = None
 
     def target_state(self, t: float):  # noqa: ANN201
         c = self._tcache
@@ -93,31 +94,61 @@ class ClosedLoop:
         return mpf_law(s, veh, self.target_state(t), self.path, self.gains, self.ext, diag), eta
 
     def deriv(
-        self, t: float, p: NDArray[np.float64], R: NDArray[np.float64], w: NDArray[np.float64], s: float
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float, tuple[float, float]]:
-        (cmd, _), eta = self.law(t, p, R, s, False)
+        self, t: float, p: list[float], R: list[float], w: list[float], s: float, keep: bool = False
+    ) -> tuple[list[float], list[float], list[float], float, tuple[float, float]]:
+        """(pdot, Rdot, wdot, sdot, w_cmd) with R a row-major list of 9 floats.
+
+        keep: also build the diagnostics and keep them as ``self.last`` (the recorder reads
+        them, so a recorded step costs no extra law evaluation)."""
+        pa = np.array(p)
+        Ra = np.array(R).reshape(3, 3)
+        (cmd, diag), eta = self.law(t, pa, Ra, s, keep)
+        if keep:
+            self.last = Sample(
+                t, pa, Ra, np.array(w), diag, (cmd.w2, cmd.w3), cmd.sdot,  # type: ignore[arg-type]
+                self.target_state(t).position, self.target_state(t).R_T_I, eta,
+            )  # fmt: skip
         wc = (cmd.w2, cmd.w3)
         if self.lambda_w is None:
-            w = np.array(wc)
-            wdot = np.zeros(2)
+            w = list(wc)
+            wdot = [0.0, 0.0]
         else:
-            wdot = self.lambda_w * (np.array(wc) - w)
-        pdot = self.v_w * R[:, 0] + eta
-        Rdot = R @ so3.hat((0.0, float(w[0]), float(w[1])))
+            lam = self.lambda_w
+            wdot = [lam * (wc[0] - w[0]), lam * (wc[1] - w[1])]
+        v = self.v_w
+        e = eta.tolist()
+        pdot = [v * R[0] + e[0], v * R[3] + e[1], v * R[6] + e[2]]
+        # R hat([0, w2, w3]): columns [R2 w3 - R3 w2, -R1 w3, R1 w2].
+        w2, w3 = w[0], w[1]
+        Rdot = []
+        for i in (0, 3, 6):
+            r0, r1, r2 = R[i], R[i + 1], R[i + 2]
+            Rdot += [r1 * w3 - r2 * w2, -r0 * w3, r0 * w2]
         return pdot, Rdot, wdot, cmd.sdot, wc
 
     def step(self, x: KinematicState, dt: float) -> KinematicState:
         """One classical RK4 step of (p, R, w, s); R re-orthonormalised afterwards."""
-        t, p, R, w, s = x.t, x.p, x.R, x.w, x.s
-        k1 = self.deriv(t, p, R, w, s)
+        t, s = x.t, x.s
+        p, R, w = x.p.tolist(), x.R.ravel().tolist(), x.w.tolist()
+
+        def add(a: list[float], k: list[float], h: float) -> list[float]:
+            return [a[i] + h * k[i] for i in range(len(a))]
+
+        k1 = self.deriv(t, p, R, w, s, keep=True)
         h2 = dt / 2
-        k2 = self.deriv(t + h2, p + h2 * k1[0], R + h2 * k1[1], w + h2 * k1[2], s + h2 * k1[3])
-        k3 = self.deriv(t + h2, p + h2 * k2[0], R + h2 * k2[1], w + h2 * k2[2], s + h2 * k2[3])
-        k4 = self.deriv(t + dt, p + dt * k3[0], R + dt * k3[1], w + dt * k3[2], s + dt * k3[3])
+        k2 = self.deriv(t + h2, add(p, k1[0], h2), add(R, k1[1], h2), add(w, k1[2], h2), s + h2 * k1[3])
+        k3 = self.deriv(t + h2, add(p, k2[0], h2), add(R, k2[1], h2), add(w, k2[2], h2), s + h2 * k2[3])
+        k4 = self.deriv(t + dt, add(p, k3[0], dt), add(R, k3[1], dt), add(w, k3[2], dt), s + dt * k3[3])
         c = dt / 6
-        p2 = p + c * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
-        R2 = R + c * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
-        w2 = w + c * (k1[2] + 2 * k2[2] + 2 * k3[2] + k4[2])
+
+        def comb(a: list[float], j: int) -> list[float]:
+            return [
+                a[i] + c * (k1[j][i] + 2 * k2[j][i] + 2 * k3[j][i] + k4[j][i]) for i in range(len(a))
+            ]
+
+        p2 = np.array(comb(p, 0))
+        R2 = np.array(comb(R, 1)).reshape(3, 3)
+        w2 = np.array(comb(w, 2))
         s2 = s + c * (k1[3] + 2 * k2[3] + 2 * k3[3] + k4[3])
         if self.lambda_w is None:
             w2 = np.array(k4[4])

@@ -61,15 +61,16 @@ def run_kinematic(cfg: Config, progress: bool = True) -> SimResult:
         total=n, desc="sim", unit="step", disable=not progress, delay=2.0, file=sys.stderr,
         mininterval=0.5, leave=False,
     )  # fmt: skip
-    for i in range(n + 1):
-        if i % every == 0 or i == n:
-            smp = record(loop, x)
-            table.append(row_from(smp.diag, smp.p, smp.w_cmd, smp.w, smp.sdot, smp.target_p, smp.target_R, smp.wind))
-        if i == n:
-            break
+    def rec(smp: Any) -> None:
+        table.append(row_from(smp.diag, smp.p, smp.w_cmd, smp.w, smp.sdot, smp.target_p, smp.target_R, smp.wind))
+
+    for i in range(n):
         x = loop.step(x, dt)
-        if i % 500 == 0:
-            bar.update(500 if i else 0)
+        if i % every == 0:
+            rec(loop.last)  # the first RK4 stage of this step: the state before it
+        if i % 500 == 499:
+            bar.update(500)
+    rec(record(loop, x))
     bar.close()
     wall = time.perf_counter() - wall0
     cols = table.arrays()

@@ -159,6 +159,16 @@ class TabulatedPath:
         self._F2l = [tuple(map(float, r)) for r in F2]
         self._K1l = [float(v) for v in self._K1]
         self._K2l = [float(v) for v in self._K2]
+        # Per cell: the angle about f1_{i+1} between f2_i carried to node i+1 and f2_{i+1}.
+        # Interpolating it linearly makes the frame continuous at every node with one transport.
+        corr = []
+        for i in range(n):
+            r = _mrot(self._F2l[i], self._Tl[i], self._Tl[i + 1])
+            t1, f2b = self._Tl[i + 1], self._F2l[i + 1]
+            c = r[0] * f2b[0] + r[1] * f2b[1] + r[2] * f2b[2]
+            x = (r[1] * f2b[2] - r[2] * f2b[1], r[2] * f2b[0] - r[0] * f2b[2], r[0] * f2b[1] - r[1] * f2b[0])
+            corr.append(math.atan2(x[0] * t1[0] + x[1] * t1[1] + x[2] * t1[2], c))
+        self._C = corr
 
     # ------------------------------------------------------------------ evaluation
     def eval(self, s: float) -> tuple[Tuple3, Tuple3, Tuple3, Tuple3, float, float]:
@@ -201,22 +211,18 @@ class TabulatedPath:
         dz = g00 * pa[2] + g10 * ta[2] + g01 * pb[2] + g11 * tb[2]
         nn = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
         f1 = (dx * nn, dy * nn, dz * nn)
-        ra = _mrot(self._F2l[i], ta, f1)
-        rb = _mrot(self._F2l[i + 1], tb, f1)
-        vx = (1 - w) * ra[0] + w * rb[0]
-        vy = (1 - w) * ra[1] + w * rb[1]
-        vz = (1 - w) * ra[2] + w * rb[2]
-        d = vx * f1[0] + vy * f1[1] + vz * f1[2]
-        vx -= d * f1[0]
-        vy -= d * f1[1]
-        vz -= d * f1[2]
-        nn = 1.0 / math.sqrt(vx * vx + vy * vy + vz * vz)
-        f2 = (vx * nn, vy * nn, vz * nn)
-        f3 = (
-            f1[1] * f2[2] - f1[2] * f2[1],
-            f1[2] * f2[0] - f1[0] * f2[2],
-            f1[0] * f2[1] - f1[1] * f2[0],
+        r = _mrot(self._F2l[i], ta, f1)
+        nr = 1.0 / math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+        r = (r[0] * nr, r[1] * nr, r[2] * nr)
+        q = (
+            f1[1] * r[2] - f1[2] * r[1],
+            f1[2] * r[0] - f1[0] * r[2],
+            f1[0] * r[1] - f1[1] * r[0],
         )
+        ang = w * self._C[i]
+        ca, sa = math.cos(ang), math.sin(ang)
+        f2 = (ca * r[0] + sa * q[0], ca * r[1] + sa * q[1], ca * r[2] + sa * q[2])
+        f3 = (ca * q[0] - sa * r[0], ca * q[1] - sa * r[1], ca * q[2] - sa * r[2])
         k1 = (1 - w) * self._K1l[i] + w * self._K1l[i + 1]
         k2 = (1 - w) * self._K2l[i] + w * self._K2l[i + 1]
         return p, f1, f2, f3, k1, k2

@@ -1,0 +1,94 @@
+"""MAVLink I/O boundary: the only package of mpf_mavlink that imports pymavlink.
+
+Wire protocol and dialect
+-------------------------
+pymavlink picks its wire protocol when a dialect is loaded: ``MAVLINK20`` in the environment
+selects ``pymavlink.dialects.v20`` (MAVLink 2: signing, 24-bit message ids, trimmed payloads).
+We set it here, before the first import of ``pymavlink.mavutil`` from this package, and load the
+dialect explicitly with ``mavutil.set_dialect`` (which reads the variable at call time, so this
+also works when another module imported mavutil first).
+
+Dialect: ``ardupilotmega``. It is a superset of ``common`` (PX4 only needs ``common``) and adds
+ArduPilot's WIND (#168), SIMSTATE, AHRS2... that the SITL recordings and ArduPlane stream. Both
+MAVLink 1 (0xFE) and MAVLink 2 (0xFD) frames are parsed; we always *send* MAVLink 2.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ["MAVLINK20"] = "1"
+
+from pymavlink import mavutil  # noqa: E402  (the environment must be set first)
+
+DIALECT_NAME = "ardupilotmega"
+
+
+def _load_dialect():  # -> module
+    mavutil.set_dialect(DIALECT_NAME)
+    mod = mavutil.mavlink
+    if mod is None or mod.WIRE_PROTOCOL_VERSION != "2.0":  # pragma: no cover - env sabotage
+        raise ImportError(f"pymavlink did not load the MAVLink 2 {DIALECT_NAME} dialect")
+    return mod
+
+
+#: the generated pymavlink dialect module (message classes, enums, ``MAVLink`` parser class)
+dialect = _load_dialect()
+
+from .codec import (  # noqa: E402
+    AttitudeSample,
+    CommandAckSample,
+    FollowTargetSample,
+    GlobalPositionSample,
+    HeartbeatSample,
+    HomeSample,
+    LocalPositionSample,
+    VfrHudSample,
+    WindSample,
+    decode,
+    encode_arm,
+    encode_companion_heartbeat,
+    encode_set_attitude_target_quat,
+    encode_set_attitude_target_rates,
+    encode_set_mode,
+)
+from .link import Link, LinkCounters, open_link, parse_url, wait_heartbeat  # noqa: E402
+from .modes import Flavour, flavour_from_heartbeat, is_offboard, mode_name  # noqa: E402
+from .signing import enable_signing, load_signing_key  # noqa: E402
+from .tlog import TlogReadResult, TlogWriter, iter_tlog, read_tlog  # noqa: E402
+
+__all__ = [
+    "DIALECT_NAME",
+    "dialect",
+    "mavutil",
+    "AttitudeSample",
+    "CommandAckSample",
+    "FollowTargetSample",
+    "GlobalPositionSample",
+    "HeartbeatSample",
+    "HomeSample",
+    "LocalPositionSample",
+    "VfrHudSample",
+    "WindSample",
+    "decode",
+    "encode_arm",
+    "encode_companion_heartbeat",
+    "encode_set_attitude_target_quat",
+    "encode_set_attitude_target_rates",
+    "encode_set_mode",
+    "Link",
+    "LinkCounters",
+    "open_link",
+    "parse_url",
+    "wait_heartbeat",
+    "Flavour",
+    "flavour_from_heartbeat",
+    "is_offboard",
+    "mode_name",
+    "enable_signing",
+    "load_signing_key",
+    "TlogReadResult",
+    "TlogWriter",
+    "iter_tlog",
+    "read_tlog",
+]

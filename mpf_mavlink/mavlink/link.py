@@ -1,0 +1,519 @@
+"""A MAVLink 2 link to one vehicle: URL validation, source filtering, counters, tlog hook.
+
+Connection strings (pymavlink's syntax):
+  ``udpin:HOST:PORT``   listen (bind) and reply to whoever sent last; PX4 SITL offboard 14540
+  ``udpout:HOST:PORT``  send to HOST:PORT, receive the replies on the same socket
+  ``udp:HOST:PORT``     pymavlink's legacy form, same as ``udpin``
+  ``tcp:HOST:PORT``     connect (ArduPilot SITL: tcp:127.0.0.1:5760)
+  ``tcpin:HOST:PORT``   listen for one TCP client
+  ``/dev/ttyUSB0``, ``/dev/ttyACM0:921600``, ``/dev/ttyS1,57600``  serial device [:baud]
+
+Serial ports are driven through POSIX termios directly (pyserial, which pymavlink's mavserial
+needs, is not a dependency of this project); a pseudo-terminal works like a real port.
+"""
+
+from __future__ import annotations
+
+import errno
+import ipaddress
+import os
+import re
+import select
+import socket
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..errors import MpfError
+from . import DIALECT_NAME, dialect, mavutil
+from .codec import encode_companion_heartbeat
+from .tlog import TlogWriter
+
+SCHEMES = ("udpin", "udpout", "udp", "tcp", "tcpin")
+STANDARD_BAUDS = (
+    9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000, 576000, 921600,
+    1000000, 1500000, 2000000, 3000000,
+)  # fmt: skip
+MAV_COMP_ID_ONBOARD_COMPUTER = 191
+_HOSTNAME_RE = re.compile(
+    r"^(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*$"
+)
+
+
+@dataclass(frozen=True)
+class ParsedUrl:
+    kind: str  # "udpin" | "udpout" | "tcp" | "tcpin" | "serial"
+    host: str = ""
+    port: int = 0
+    device: str = ""
+    baud: int = 0
+
+    @property
+    def pymavlink_device(self) -> str:
+        if self.kind == "serial":
+            return self.device
+        return f"{self.kind}:{self.host}:{self.port}"
+
+
+def _parse_host_port(url: str, scheme: str, rest: str) -> tuple[str, int]:
+    form = f"expected {scheme}:HOST:PORT, e.g. {scheme}:127.0.0.1:14550"
+    parts = rest.rsplit(":", 1)
+    if len(parts) != 2 or not parts[0]:
+        raise MpfError(f"bad MAVLink URL {url!r}: {form}")
+    host, port_s = parts
+    if not re.fullmatch(r"\d{1,5}", port_s):
+        raise MpfError(f"bad MAVLink URL {url!r}: port {port_s!r} is not a number ({form})")
+    port = int(port_s)
+    if not 1 <= port <= 65535:
+        raise MpfError(f"bad MAVLink URL {url!r}: port {port} is outside 1..65535")
+    try:
+        ipaddress.IPv4Address(host)
+    except ValueError:
+        if re.fullmatch(r"[\d.]+", host) or not _HOSTNAME_RE.match(host):
+            raise MpfError(
+                f"bad MAVLink URL {url!r}: {host!r} is not an IPv4 address or host name"
+            ) from None
+    return host, port
+
+
+def parse_url(url: str, baud: int | None = None) -> ParsedUrl:
+    """Validate a connection string; raise MpfError with one line naming the culprit."""
+    if not isinstance(url, str) or not url.strip():
+        raise MpfError("empty MAVLink URL: use e.g. udpin:0.0.0.0:14540 or /dev/ttyUSB0:57600")
+    url = url.strip()
+    if url.startswith("/") or re.match(r"^COM\d+", url, re.I):
+        device, b = url, baud
+        if not os.path.exists(url):
+            m = re.fullmatch(r"(.+)[:,]([^:,/]*)", url)
+            if m:
+                device, tail = m.group(1), m.group(2)
+                if not tail.isdigit():
+                    raise MpfError(f"bad MAVLink URL {url!r}: baud rate {tail!r} is not a number")
+                b = int(tail)
+        b = 57600 if b is None else int(b)
+        if b not in STANDARD_BAUDS:
+            raise MpfError(
+                f"bad MAVLink URL {url!r}: unsupported baud rate {b} (use one of {STANDARD_BAUDS})"
+            )
+        return ParsedUrl("serial", device=device, baud=b)
+    if ":" not in url:
+        raise MpfError(
+            f"bad MAVLink URL {url!r}: expected SCHEME:HOST:PORT with SCHEME one of "
+            f"{', '.join(SCHEMES)}, or a serial device path"
+        )
+    scheme, rest = url.split(":", 1)
+    if scheme.lower() not in SCHEMES:
+        raise MpfError(
+            f"bad MAVLink URL {url!r}: unknown scheme {scheme!r} (use one of {', '.join(SCHEMES)}, "
+            "or a serial device path)"
+        )
+    scheme = scheme.lower()
+    host, port = _parse_host_port(url, scheme, rest)
+    kind = "udpin" if scheme == "udp" else scheme
+    return ParsedUrl(kind, host=host, port=port)
+
+
+# ---------------------------------------------------------------------------------------------
+# Transports that pymavlink's own classes do not cover the way we need
+# ---------------------------------------------------------------------------------------------
+class _PosixSerial(mavutil.mavfile):
+    """Raw 8N1 serial port via termios (no pyserial). Non-blocking reads, blocking-ish writes."""
+
+    def __init__(self, device: str, baud: int, source_system: int, source_component: int) -> None:
+        import termios
+        import tty
+
+        speed = getattr(termios, f"B{baud}", None)
+        if speed is None:
+            raise MpfError(f"serial {device}: baud rate {baud} is not supported by this OS")
+        fd = os.open(device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        try:
+            tty.setraw(fd)
+            attrs = termios.tcgetattr(fd)
+            attrs[2] &= ~(termios.CSTOPB | termios.PARENB | getattr(termios, "CRTSCTS", 0))
+            attrs[2] |= termios.CLOCAL | termios.CREAD | termios.CS8
+            attrs[4] = attrs[5] = speed
+            attrs[6][termios.VMIN] = 0
+            attrs[6][termios.VTIME] = 0
+            termios.tcsetattr(fd, termios.TCSANOW, attrs)
+        except (termios.error, OSError) as e:
+            os.close(fd)
+            raise MpfError(f"serial {device}: cannot configure the port ({e})") from None
+        self.port_fd = fd
+        self.device = device
+        self.baud = baud
+        mavutil.mavfile.__init__(
+            self, fd, device, source_system=source_system, source_component=source_component
+        )
+
+    def recv(self, n: int | None = None) -> bytes:
+        if n is None:
+            n = self.mav.bytes_needed()
+        try:
+            return os.read(self.port_fd, max(n, 256))
+        except BlockingIOError:
+            return b""
+        except OSError as e:
+            if e.errno in (errno.EIO, errno.ENXIO):  # other end of a pty closed, USB unplugged
+                self.portdead = True
+                return b""
+            raise
+
+    def write(self, buf: bytes) -> int:
+        data = memoryview(bytes(buf))
+        deadline = time.monotonic() + 0.5
+        sent = 0
+        while sent < len(data):
+            try:
+                sent += os.write(self.port_fd, data[sent:])
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    return sent  # the port is stuck: drop the rest rather than hang the loop
+                select.select([], [self.port_fd], [], 0.01)
+        return sent
+
+    def close(self) -> None:
+        if self.port_fd >= 0:
+            os.close(self.port_fd)
+            self.port_fd = -1
+
+
+class _TcpClient(mavutil.mavtcp):
+    """pymavlink's TCP client with one connection attempt bounded by a timeout (no retries,
+    no sleeps, no prints)."""
+
+    def __init__(self, device: str, connect_timeout_s: float, **kw: Any) -> None:
+        self._connect_timeout_s = connect_timeout_s
+        super().__init__(device, retries=0, autoreconnect=False, **kw)
+
+    def do_connect(self) -> None:
+        self.port = socket.create_connection(self.destination_addr, timeout=self._connect_timeout_s)
+        self.port.setblocking(False)
+        mavutil.set_close_on_exec(self.port.fileno())
+        self.port.setsockopt(socket.SOL_TCP, socket.TCP_NODELAY, 1)
+
+    def handle_eof(self) -> None:
+        self.portdead = True
+
+    def handle_disconnect(self) -> None:
+        self.portdead = True
+
+
+# ---------------------------------------------------------------------------------------------
+# Link
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class LinkCounters:
+    rx_packets: int = 0  # frames with a good CRC (before filtering)
+    rx_by_type: Counter = field(default_factory=Counter)  # accepted messages by type
+    tx_packets: int = 0
+    tx_by_type: Counter = field(default_factory=Counter)
+    bad_data: int = 0  # framing / CRC / length errors (pymavlink BAD_DATA)
+    rejected_sysid: int = 0  # from a system/component we were not told to trust ("spoofed ids")
+    rejected_by_source: Counter = field(default_factory=Counter)  # (sysid, compid) -> count
+    rejected_unsigned: int = 0  # unsigned while signing is on
+    rejected_bad_signature: int = 0  # signed, but wrong key / forged
+    rejected_replay: int = 0  # right key, timestamp not newer than the stream's last one
+    unknown_msgid: int = 0  # ids this dialect does not know (CRC cannot be checked)
+    io_errors: int = 0
+
+    def as_dict(self) -> dict[str, Any]:
+        d = dict(self.__dict__)
+        d["rx_by_type"] = dict(self.rx_by_type)
+        d["tx_by_type"] = dict(self.tx_by_type)
+        d["rejected_by_source"] = {f"{s}/{c}": n for (s, c), n in self.rejected_by_source.items()}
+        return d
+
+
+class Link:
+    """One MAVLink connection, filtered to the vehicle (and the other sources we trust).
+
+    ``vehicle_sysid``: the autopilot's system id; None accepts every source (replay tools only).
+    ``vehicle_compid``: None accepts any component of that system (autopilot, camera, ...).
+    ``allowed_sysids``: other systems whose messages we take (a FOLLOW_TARGET / GLOBAL_POSITION_INT
+    target, a GCS). Everything else is dropped and counted in ``counters.rejected_sysid``.
+    """
+
+    def __init__(
+        self,
+        conn: Any,
+        *,
+        url: str,
+        vehicle_sysid: int | None = 1,
+        vehicle_compid: int | None = None,
+        allowed_sysids: Iterable[int] = (),
+        tlog: TlogWriter | None = None,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
+        self.conn = conn
+        self.url = url
+        self.vehicle_sysid = vehicle_sysid
+        self.vehicle_compid = vehicle_compid
+        self.allowed_sysids = frozenset(int(s) for s in allowed_sysids)
+        self.tlog = tlog
+        self._clock = clock
+        self.counters = LinkCounters()
+        self.signing_enabled = False
+        self._signing_counts_itself = False  # set by signing.enable_signing(hardened=True)
+        self._closed = False
+
+    # -- identity ---------------------------------------------------------------------------
+    @property
+    def mav(self) -> Any:
+        """The pymavlink ``MAVLink`` object (encoders take it; it owns seq and signing)."""
+        return self.conn.mav
+
+    @property
+    def source_system(self) -> int:
+        return int(self.conn.mav.srcSystem)
+
+    @property
+    def source_component(self) -> int:
+        return int(self.conn.mav.srcComponent)
+
+    def expect_vehicle(self, sysid: int | None, compid: int | None = None) -> None:
+        self.vehicle_sysid, self.vehicle_compid = sysid, compid
+
+    def allow_sysid(self, sysid: int) -> None:
+        self.allowed_sysids = self.allowed_sysids | {int(sysid)}
+
+    def accepts(self, sysid: int, compid: int) -> bool:
+        if sysid == self.source_system and compid == self.source_component:
+            return False  # our own packets echoed by a router
+        if self.vehicle_sysid is None:
+            return True
+        if sysid == self.vehicle_sysid:
+            return self.vehicle_compid is None or compid == self.vehicle_compid
+        return sysid in self.allowed_sysids
+
+    # -- receive ----------------------------------------------------------------------------
+    def _read_one(self) -> tuple[bool, Any]:
+        """(more, msg): msg is an accepted message or None; more=False when no data is left."""
+        try:
+            msg = self.conn.recv_msg()
+        except OSError:
+            self.counters.io_errors += 1
+            return False, None
+        except Exception:  # noqa: BLE001 - a pymavlink parse bug must not take the loop down
+            self.counters.bad_data += 1
+            return True, None
+        if msg is None:
+            return False, None
+        c = self.counters
+        mtype = msg.get_type()
+        if mtype == "BAD_DATA":
+            reason = str(getattr(msg, "reason", ""))
+            if reason == "Invalid signature":
+                data = bytes(getattr(msg, "data", b"") or b"")
+                signed = len(data) > 2 and data[0] == 0xFD and bool(data[2] & 0x01)
+                if not signed:
+                    c.rejected_unsigned += 1
+                elif not self._signing_counts_itself:
+                    c.rejected_bad_signature += 1
+            else:
+                c.bad_data += 1
+            return True, None
+        c.rx_packets += 1
+        if self.tlog is not None:
+            try:
+                self.tlog.write(msg.get_msgbuf(), self._clock())
+            except (OSError, ValueError):
+                c.io_errors += 1
+        if mtype.startswith("UNKNOWN_"):
+            c.unknown_msgid += 1
+            return True, None
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        if not self.accepts(*src):
+            c.rejected_sysid += 1
+            c.rejected_by_source[src] += 1
+            return True, None
+        c.rx_by_type[mtype] += 1
+        return True, msg
+
+    def recv(self, timeout_s: float = 0.0) -> Any:
+        """Next accepted message, waiting at most ``timeout_s`` (0 = poll). Never raises on
+        malformed input: bad frames, spoofed ids and rejected signatures are counted instead."""
+        if self._closed:
+            return None
+        deadline = time.monotonic() + max(0.0, float(timeout_s))
+        while True:
+            more, msg = self._read_one()
+            if msg is not None:
+                return msg
+            if more:
+                continue
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return None
+            self._wait_readable(min(remaining, 0.05))
+
+    def recv_all(self, timeout_s: float = 0.0) -> list[Any]:
+        """Every accepted message available now (waiting up to timeout_s for the first)."""
+        out = []
+        m = self.recv(timeout_s)
+        while m is not None:
+            out.append(m)
+            m = self.recv(0.0)
+        return out
+
+    def _wait_readable(self, timeout_s: float) -> None:
+        fd = getattr(self.conn, "fd", None)
+        if fd is None or getattr(self.conn, "portdead", False):
+            time.sleep(timeout_s)
+            return
+        try:
+            select.select([fd], [], [], timeout_s)
+        except (OSError, ValueError):
+            time.sleep(timeout_s)
+
+    # -- send -------------------------------------------------------------------------------
+    def send(self, msg: Any) -> None:
+        """Pack (MAVLink 2, signed if signing is on), write and log one message."""
+        if self._closed:
+            raise MpfError(f"link {self.url} is closed")
+        mav = self.conn.mav
+        if self.signing_enabled:
+            # MAVLink signing timestamps are 10 us ticks since 2015-01-01 and must follow the
+            # wall clock: pymavlink only adds 1 per packet, so a long session would fall behind
+            # and a rebooted autopilot would reject us as a stale stream (> 60 s old).
+            now_ticks = int((time.time() - 1420070400) * 100_000)
+            mav.signing.timestamp = max(mav.signing.timestamp, now_ticks)
+        try:
+            mav.send(msg)
+        except OSError:
+            self.counters.io_errors += 1
+            return
+        self.counters.tx_packets += 1
+        self.counters.tx_by_type[msg.get_type()] += 1
+        if self.tlog is not None:
+            try:
+                self.tlog.write(msg.get_msgbuf(), self._clock())
+            except (OSError, ValueError):
+                self.counters.io_errors += 1
+
+    def send_heartbeat(self) -> None:
+        """Companion heartbeat (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID), ~1 Hz."""
+        self.send(encode_companion_heartbeat(self.conn.mav))
+
+    # -- lifetime ---------------------------------------------------------------------------
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self.conn.close()
+        except Exception:  # noqa: BLE001 - closing must not fail the caller's cleanup
+            pass
+        if self.tlog is not None:
+            self.tlog.close()
+
+    def __enter__(self) -> Link:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"Link({self.url!r}, vehicle={self.vehicle_sysid}/{self.vehicle_compid})"
+
+
+def open_link(
+    url: str,
+    *,
+    source_system: int = 1,
+    source_component: int = MAV_COMP_ID_ONBOARD_COMPUTER,
+    baud: int | None = None,
+    timeout_s: float = 3.0,
+    vehicle_sysid: int | None = 1,
+    vehicle_compid: int | None = None,
+    allowed_sysids: Iterable[int] = (),
+    tlog_path: str | os.PathLike[str] | None = None,
+    tlog_fsync_every_s: float | None = None,
+) -> Link:
+    """Open a MAVLink 2 link; raise MpfError (one line) for any bad URL or failure to open.
+
+    Default identity: system 1 (the vehicle's own id, as a companion computer on the vehicle
+    uses; PX4 and ArduPilot check ``target_system`` of setpoints, not the sender) and component
+    191 MAV_COMP_ID_ONBOARD_COMPUTER. ``timeout_s`` bounds the TCP connect.
+    ``baud`` (serial only) defaults to 57600 unless the URL carries one.
+    """
+    if not (1 <= int(source_system) <= 255 and 0 <= int(source_component) <= 255):
+        raise MpfError(
+            f"source ids out of range: system {source_system}, component {source_component}"
+        )
+    parsed = parse_url(url, baud)
+    mavutil.set_dialect(DIALECT_NAME)  # another module may have switched pymavlink's global
+    kw = dict(source_system=int(source_system), source_component=int(source_component))
+    try:
+        if parsed.kind == "serial":
+            if not os.path.exists(parsed.device):
+                raise MpfError(f"serial device {parsed.device} does not exist")
+            conn = _PosixSerial(parsed.device, parsed.baud, **kw)
+        elif parsed.kind == "tcp":
+            conn = _TcpClient(f"{parsed.host}:{parsed.port}", float(timeout_s), **kw)
+        else:
+            conn = mavutil.mavlink_connection(parsed.pymavlink_device, **kw)
+    except MpfError:
+        raise
+    except socket.gaierror:
+        raise MpfError(f"MAVLink URL {url!r}: cannot resolve host {parsed.host!r}") from None
+    except ConnectionRefusedError:
+        raise MpfError(
+            f"MAVLink URL {url!r}: connection refused (is the autopilot/SITL running?)"
+        ) from None
+    except TimeoutError:
+        raise MpfError(f"MAVLink URL {url!r}: no TCP connection within {timeout_s:g} s") from None
+    except PermissionError:
+        what = parsed.device or f"{parsed.host}:{parsed.port}"
+        raise MpfError(f"MAVLink URL {url!r}: permission denied for {what}") from None
+    except OSError as e:
+        what = parsed.device or f"{parsed.host}:{parsed.port}"
+        raise MpfError(f"MAVLink URL {url!r}: cannot open {what}: {e.strerror or e}") from None
+    except ValueError as e:
+        raise MpfError(f"MAVLink URL {url!r}: {e}") from None
+    if type(conn.mav).__module__ != dialect.__name__:  # pragma: no cover - defensive
+        conn.mav = dialect.MAVLink(
+            conn, srcSystem=kw["source_system"], srcComponent=kw["source_component"]
+        )
+        conn.mav.robust_parsing = True
+    tlog = None
+    if tlog_path is not None:
+        try:
+            tlog = TlogWriter(tlog_path, fsync_every_s=tlog_fsync_every_s)
+        except MpfError:
+            conn.close()
+            raise
+    return Link(
+        conn,
+        url=url,
+        vehicle_sysid=vehicle_sysid,
+        vehicle_compid=vehicle_compid,
+        allowed_sysids=allowed_sysids,
+        tlog=tlog,
+    )
+
+
+def wait_heartbeat(link: Link, timeout_s: float = 5.0) -> Any:
+    """First HEARTBEAT from an autopilot of the expected vehicle (companions and GCSs, whose
+    autopilot field is MAV_AUTOPILOT_INVALID, are skipped). MpfError after ``timeout_s``."""
+    deadline = time.monotonic() + float(timeout_s)
+    while True:
+        remaining = deadline - time.monotonic()
+        if remaining <= 0:
+            who = "any vehicle" if link.vehicle_sysid is None else f"system {link.vehicle_sysid}"
+            c = link.counters
+            raise MpfError(
+                f"no HEARTBEAT from {who} on {link.url} within {float(timeout_s):g} s "
+                f"({c.rx_packets} packets received, {c.rejected_sysid} from other ids, "
+                f"{c.bad_data} bad)"
+            )
+        msg = link.recv(remaining)
+        if (
+            msg is not None
+            and msg.get_type() == "HEARTBEAT"
+            and msg.autopilot != dialect.MAV_AUTOPILOT_INVALID
+            and (link.vehicle_sysid is None or msg.get_srcSystem() == link.vehicle_sysid)
+        ):
+            return msg

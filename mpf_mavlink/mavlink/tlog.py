@@ -1,0 +1,306 @@
+"""Telemetry logs (.tlog): a writer that survives SIGKILL and a reader that survives corruption.
+
+Format (MAVProxy / Mission Planner / QGroundControl): a sequence of records, each an 8-byte
+big-endian unsigned count of microseconds since the Unix epoch (wall-clock time of the event,
+some writers put a link number in the low 2 bits) followed by one raw MAVLink v1 (0xFE) or v2
+(0xFD) packet. There is no file header and no index, so a reader must find record boundaries
+from the packet headers themselves.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import struct
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+from pymavlink.generator.mavcrc import x25crc
+
+from ..errors import MpfError
+from . import dialect as _d
+
+STX_V1 = 0xFE
+STX_V2 = 0xFD
+_TS = struct.Struct(">Q")
+# plausible record timestamps: 2000-01-01 .. 2100-01-01 (us since the Unix epoch)
+TS_MIN_US = 946_684_800_000_000
+TS_MAX_US = 4_102_444_800_000_000
+_SIGNED = 0x01  # MAVLINK_IFLAG_SIGNED
+
+
+class TlogWriter:
+    """Append MAVLink packets to a tlog, one ``os.write`` per record.
+
+    The file is opened unbuffered, so a record is in the kernel's page cache as soon as
+    :meth:`write` returns: a SIGKILL of this process cannot lose or half-write it (a power cut
+    can; use ``fsync_every_s`` = 0 for fsync after every record, > 0 to fsync at most that often
+    in log time, None (default) to leave it to the OS).
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        append: bool = False,
+        fsync_every_s: float | None = None,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
+        self.path = os.fspath(path)
+        self._clock = clock
+        self._fsync_every_s = fsync_every_s
+        self._last_fsync_t = -math.inf
+        flags = os.O_WRONLY | os.O_CREAT | (os.O_APPEND if append else os.O_TRUNC)
+        try:
+            self._fd: int | None = os.open(self.path, flags, 0o644)
+        except OSError as e:
+            raise MpfError(f"cannot open tlog {self.path} for writing: {e.strerror}") from None
+        self.records = 0
+        self.bytes = 0
+
+    def write(self, packet: bytes | bytearray, t_unix_s: float | None = None) -> None:
+        """Log one raw packet. ``t_unix_s``: wall-clock time of the event (s since the epoch);
+        None takes it from the writer's clock."""
+        if self._fd is None:
+            raise MpfError(f"tlog {self.path} is closed")
+        t = self._clock() if t_unix_s is None else float(t_unix_s)
+        if not math.isfinite(t) or t < 0:
+            raise ValueError(f"tlog timestamp must be a finite time >= 0, got {t_unix_s!r}")
+        rec = _TS.pack(int(round(t * 1e6))) + bytes(packet)
+        n = os.write(self._fd, rec)
+        while n < len(rec):  # regular files write fully; loop only on exotic filesystems
+            n += os.write(self._fd, rec[n:])
+        self.records += 1
+        self.bytes += len(rec)
+        if self._fsync_every_s is not None and t - self._last_fsync_t >= self._fsync_every_s:
+            os.fsync(self._fd)
+            self._last_fsync_t = t
+
+    def flush(self) -> None:
+        """Nothing is buffered in user space; kept so the writer looks like a file."""
+
+    def fsync(self) -> None:
+        if self._fd is not None:
+            os.fsync(self._fd)
+
+    def close(self) -> None:
+        if self._fd is not None:
+            try:
+                os.fsync(self._fd)
+            except OSError:
+                pass
+            os.close(self._fd)
+            self._fd = None
+
+    def __enter__(self) -> TlogWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# Reader
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class TlogStats:
+    records: int = 0  # good records yielded or counted
+    skipped_regions: int = 0  # corrupt stretches skipped (each ends at a resync point)
+    skipped_bytes: int = 0  # bytes inside those stretches, the truncated tail included
+    truncated_tail_bytes: int = 0  # bytes at the end too short to hold the record they start
+    unknown_msgids: int = 0  # records whose message id this dialect does not know (no CRC check)
+    counts: Counter = field(default_factory=Counter)  # message type -> good records
+    t_first_s: float | None = None
+    t_last_s: float | None = None
+
+
+@dataclass
+class TlogReadResult:
+    path: str
+    messages: list[tuple[float, Any]]  # (timestamp s since the epoch, pymavlink message)
+    counts: dict[str, int]  # message type -> good records (all types, even if not in messages)
+    records: int  # good records
+    skipped_regions: int  # corrupt stretches skipped ("skipped records")
+    skipped_bytes: int
+    truncated_tail_bytes: int
+    unknown_msgids: int
+    t_first_s: float | None
+    t_last_s: float | None
+    elapsed_s: float  # wall time the read took
+
+    def __iter__(self) -> Iterator[tuple[float, Any]]:
+        return iter(self.messages)
+
+    def __len__(self) -> int:
+        return len(self.messages)
+
+    @property
+    def duration_s(self) -> float:
+        if self.t_first_s is None or self.t_last_s is None:
+            return 0.0
+        return self.t_last_s - self.t_first_s
+
+
+def _packet_len(data: bytes | memoryview, p: int) -> int:
+    """Length of the MAVLink packet whose STX is at p (caller checked that 3 bytes exist)."""
+    if data[p] == STX_V1:
+        return 6 + data[p + 1] + 2
+    return 10 + data[p + 1] + 2 + (13 if data[p + 2] & _SIGNED else 0)
+
+
+def _msgid(pkt: bytes) -> int:
+    if pkt[0] == STX_V1:
+        return pkt[5]
+    return pkt[7] | (pkt[8] << 8) | (pkt[9] << 16)
+
+
+def _crc_ok(pkt: bytes, msgid: int) -> bool | None:
+    """True/False for known ids; None when the id is unknown (no CRC_EXTRA to check with)."""
+    cls = _d.mavlink_map.get(msgid)
+    if cls is None:
+        return None
+    sig = 13 if (pkt[0] == STX_V2 and pkt[2] & _SIGNED) else 0
+    end = len(pkt) - 2 - sig
+    crc = x25crc(pkt[1:end])
+    crc.accumulate(bytes((cls.crc_extra,)))
+    return crc.crc == (pkt[end] | (pkt[end + 1] << 8))
+
+
+def _valid_header(data: bytes, i: int, n: int) -> tuple[int, int] | None:
+    """(timestamp_us, packet_len) if a record plausibly starts at i, else None."""
+    if i + 8 + 3 > n:
+        return None
+    stx = data[i + 8]
+    if stx != STX_V1 and stx != STX_V2:
+        return None
+    ts = _TS.unpack_from(data, i)[0]
+    if not TS_MIN_US <= ts <= TS_MAX_US:
+        return None
+    # an unknown incompat flag: not MAVLink 2 as we know it
+    if stx == STX_V2 and data[i + 10] & ~_SIGNED:
+        return None
+    return ts, _packet_len(data, i + 8)
+
+
+def _resync(data: bytes, start: int, n: int) -> int:
+    """First offset >= start where a complete record with a known id and a good CRC begins
+    (n if none). Candidates are found by scanning for the STX bytes with bytes.find."""
+    p = start + 8
+    while True:
+        a = data.find(b"\xfe", p)
+        b = data.find(b"\xfd", p)
+        cands = [x for x in (a, b) if x >= 0]
+        if not cands:
+            return n
+        s = min(cands)
+        i = s - 8
+        hdr = _valid_header(data, i, n)
+        if hdr is not None:
+            plen = hdr[1]
+            if i + 8 + plen <= n:
+                pkt = data[s : s + plen]
+                if _crc_ok(pkt, _msgid(pkt)):
+                    return i
+        p = s + 1
+
+
+def iter_tlog(
+    path: str | os.PathLike[str],
+    *,
+    types: Iterable[str] | None = None,
+    stats: TlogStats | None = None,
+) -> Iterator[tuple[float, Any]]:
+    """Yield ``(timestamp_s, msg)`` for every good record (``msg._timestamp`` is set too).
+
+    ``types``: only decode (and yield) these message types; the others are still framed and
+    CRC-checked and appear in ``stats.counts``, which is much faster for replay.
+    Corrupt stretches are skipped and counted in ``stats``; never raises on content.
+    """
+    p = os.fspath(path)
+    try:
+        with open(p, "rb") as f:
+            data = f.read()
+    except OSError as e:
+        raise MpfError(f"cannot read tlog {p}: {e.strerror}") from None
+    st = stats if stats is not None else TlogStats()
+    want: set[int] | None = None
+    if types is not None:
+        names = {t.upper() for t in types}
+        want = {mid for mid, cls in _d.mavlink_map.items() if cls.msgname in names}
+    mav = _d.MAVLink(None)
+    mmap = _d.mavlink_map
+    counts = st.counts
+    n = len(data)
+    i = 0
+
+    def skip_to(j: int) -> None:
+        st.skipped_regions += 1
+        st.skipped_bytes += j - i
+        if j >= n:  # nothing decodable after i: a cut-off or garbled end of file
+            st.truncated_tail_bytes += n - i
+
+    while i < n:
+        hdr = _valid_header(data, i, n)
+        end = i + 8 + hdr[1] if hdr is not None else n + 1
+        if hdr is None or end > n:
+            j = _resync(data, i + 1, n)
+            skip_to(j)
+            i = j
+            continue
+        pkt = data[i + 8 : end]
+        mid = _msgid(pkt)
+        ok = _crc_ok(pkt, mid)
+        if ok is None:
+            # unknown id: no CRC to trust, so accept the framing only if the next record
+            # starts where this one ends (or the file ends there)
+            if end == n or _valid_header(data, end, n) is not None:
+                st.unknown_msgids += 1
+                counts[f"UNKNOWN_{mid}"] += 1
+                i = end
+                continue
+            ok = False
+        if not ok:
+            j = _resync(data, i + 1, n)
+            skip_to(j)
+            i = j
+            continue
+        t = hdr[0] * 1e-6
+        counts[mmap[mid].msgname] += 1
+        st.records += 1
+        if st.t_first_s is None:
+            st.t_first_s = t
+        st.t_last_s = t
+        i = end
+        if want is not None and mid not in want:
+            continue
+        try:
+            msg = mav.decode(bytearray(pkt))
+        except Exception:  # noqa: BLE001 - CRC passed but the payload is unusable
+            continue
+        msg._timestamp = t
+        yield t, msg
+
+
+def read_tlog(
+    path: str | os.PathLike[str], *, types: Iterable[str] | None = None
+) -> TlogReadResult:
+    """Read a whole tlog; see :func:`iter_tlog`. Raises MpfError only if the file cannot be read."""
+    t0 = time.perf_counter()
+    st = TlogStats()
+    msgs = list(iter_tlog(path, types=types, stats=st))
+    return TlogReadResult(
+        path=os.fspath(path),
+        messages=msgs,
+        counts=dict(st.counts),
+        records=st.records,
+        skipped_regions=st.skipped_regions,
+        skipped_bytes=st.skipped_bytes,
+        truncated_tail_bytes=st.truncated_tail_bytes,
+        unknown_msgids=st.unknown_msgids,
+        t_first_s=st.t_first_s,
+        t_last_s=st.t_last_s,
+        elapsed_s=time.perf_counter() - t0,
+    )

@@ -1,0 +1,85 @@
+"""Run the pre-flight checks for a configuration (Assumption 1, gain condition, feasibility)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .config import Config
+from .frames import euler_to_matrix
+from .guidance.checks import CheckResult, assumption1, feasibility, gain_condition
+from .guidance.law import VehicleState, mpf_law
+from .scenario import build_extensions, build_gains, build_path, build_target
+
+
+def initial_errors(cfg: Config) -> tuple[float, float, float]:
+    """(|pt(0)| m, Psi(0), s(0) m) for the kinematic initial state of the config."""
+    path, target = build_path(cfg.path), build_target(cfg.target)
+    k = cfg.kinematic
+    p0 = np.asarray(k.initial_position_ned_m, float)
+    st = target.state(0.0)
+    s0 = cfg.guidance.initial_s_m
+    if s0 is None:
+        s0 = path.closest(st.R_T_I.T @ (p0 - st.position))
+    veh = VehicleState(0.0, p0, euler_to_matrix(*k.initial_attitude_rpy_rad), cfg.vehicle.airspeed_m_s)
+    _, d = mpf_law(s0, veh, st, path, build_gains(cfg), build_extensions(cfg))
+    assert d is not None
+    return d.pt_norm, d.psi, s0
+
+
+def auto_c1(cfg: Config, pt0: float, c2: float) -> float:
+    """Smallest c1 >= |pt(0)| (on a 5 % geometric grid) for which the gain condition holds.
+
+    The theorem holds for any c1 that satisfies it; a larger c1 weakens K but relaxes the
+    bound, so we report the first certificate found (or |pt(0)| when none exists).
+    """
+    g = build_gains(cfg)
+    c1 = max(pt0, 1e-3)
+    for _ in range(200):
+        r = gain_condition(g, cfg.vehicle.v_min, cfg.vehicle.v_max, c1, c2)
+        if r.ok:
+            return c1
+        c1 *= 1.05
+    return max(pt0, 1e-3)
+
+
+def run_checks(cfg: Config, scripted_target: bool = True) -> list[CheckResult]:
+    """All checks for a config. With a live target only the gain condition can be checked."""
+    results: list[CheckResult] = []
+    ch = cfg.checks
+    horizon = ch.horizon_s if ch.horizon_s is not None else cfg.sim.duration_s
+    path = build_path(cfg.path)
+    wind = cfg.kinematic.wind
+    gust = max((float(np.linalg.norm(g.velocity_ned_m_s)) for g in wind.gusts), default=0.0)
+    if scripted_target and cfg.target.type != "mavlink":
+        target = build_target(cfg.target)
+        results.append(
+            assumption1(path, target, cfg.vehicle.v_min, horizon, wind.steady_ned_m_s, gust, ch.assumption1_margin_m_s)
+        )
+        pt0, psi0, s0 = initial_errors(cfg)
+        c2 = ch.c2
+        c1 = ch.c1_m if ch.c1_m is not None else auto_c1(cfg, pt0, c2)
+        results.append(gain_condition(build_gains(cfg), cfg.vehicle.v_min, cfg.vehicle.v_max, c1, c2, pt0, psi0))
+        results.append(
+            feasibility(
+                path, target, cfg.vehicle.airspeed_m_s, horizon, cfg.vehicle.max_bank_rad,
+                cfg.vehicle.max_turn_rate_rad_s, s0, wind.steady_ned_m_s,
+            )  # fmt: skip
+        )
+    else:
+        c1 = ch.c1_m if ch.c1_m is not None else 50.0
+        results.append(gain_condition(build_gains(cfg), cfg.vehicle.v_min, cfg.vehicle.v_max, c1, ch.c2))
+    return results
+
+
+def format_checks(results: list[CheckResult]) -> str:
+    lines = []
+    for r in results:
+        mark = {"pass": "PASS", "warn": "WARN", "fail": "FAIL"}[r.status]
+        lines.append(f"[{mark}] {r.name}: {r.summary}")
+    return "\n".join(lines)
+
+
+def _finite(x: float) -> bool:
+    return isinstance(x, float) and math.isfinite(x)
