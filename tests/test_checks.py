@@ -1,0 +1,63 @@
+"""Pre-flight checks: the gain condition by hand, Assumption 1, feasibility."""
+
+import math
+
+import pytest
+
+from mpf_mavlink.guidance import Gains
+from mpf_mavlink.guidance.checks import assumption1, feasibility, gain_condition
+from mpf_mavlink.paths import circle, lemniscate
+from mpf_mavlink.target import ConstantTurn, Stationary
+
+
+def test_gain_condition_by_hand():
+    # K_p = 0.5, alpha = 3, c1 = 4, v = 10, c2 = 0.25:
+    # sqrt(alpha^2 + c1^2) = 5, v/5 = 2, so K = min(0.5, 2) = 0.5;
+    # needed K_R > v^2 / (c1^2 (1 - 2 c2)^2 K) = 100 / (16 * 0.25 * 0.5) = 50.
+    # k1 = 1/64; W = [[2 k1 K, -2 k1 v/(1-2c2)], [., K_R/2]] = [[1/64, -0.625], [-0.625, 30]]
+    # for K_R = 60: trace 30.015625, det 30/64 - 0.390625 = 0.078125,
+    # lambda_min = (30.015625 - sqrt(30.015625^2 - 0.3125)) / 2 = 0.0026030368;
+    # M2 = diag(1/64, 1/0.75): lambda_max = 4/3, so lambda_MPF = 0.0019522776.
+    r = gain_condition(Gains(0.5, 60.0, 3.0), 10.0, 10.0, 4.0, 0.25)
+    assert r.figures["K"] == pytest.approx(0.5)
+    assert r.figures["K_R_needed"] == pytest.approx(50.0)
+    assert r.figures["lambda_mpf"] == pytest.approx(0.0019522776, rel=1e-6)
+    assert r.status == "pass"
+    assert gain_condition(Gains(0.5, 49.0, 3.0), 10.0, 10.0, 4.0, 0.25).status == "fail"
+
+
+def test_initial_state_outside_region_is_a_warning():
+    r = gain_condition(Gains(0.5, 60.0, 3.0), 10.0, 10.0, 4.0, 0.25, pt0=5.0, psi0=0.1)
+    assert r.status == "warn" and r.figures["initial_inside_region"] is False
+
+
+def test_assumption1_fails_when_the_target_outruns_the_vehicle():
+    path = circle((0, 0, 0), 50.0)
+    slow = assumption1(path, ConstantTurn((0, 0, 0), 5.0), 15.0, 10.0)
+    fast = assumption1(path, ConstantTurn((0, 0, 0), 16.0), 15.0, 10.0)
+    # Straight-moving target: the worst path point moves at exactly the target speed.
+    assert slow.figures["max_path_point_speed_m_s"] == pytest.approx(5.0, abs=1e-6)
+    assert slow.ok and not fast.ok
+    # A turning target adds omega x p_d: 0.1 rad/s at 50 m radius = 5 m/s more at most.
+    turning = assumption1(path, ConstantTurn((0, 0, 0), 5.0, 0.0, 0.1), 15.0, 10.0)
+    assert turning.figures["max_path_point_speed_m_s"] == pytest.approx(10.0, abs=0.05)
+
+
+def test_feasibility_of_a_circle_about_a_stationary_target():
+    # Circle of radius R at v: turn rate v/R, bank atan(v^2 / (g R)).
+    v, R = 15.0, 40.0
+    r = feasibility(circle((0, 0, 0), R), Stationary(), v, 20.0, math.radians(45))
+    assert r.figures["peak_turn_rate_rad_s"] == pytest.approx(v / R, rel=0.01)
+    assert r.figures["peak_bank_rad"] == pytest.approx(math.atan(v * v / (9.80665 * R)), rel=0.01)
+    assert r.ok
+    tight = feasibility(circle((0, 0, 0), 15.0), Stationary(), v, 20.0, math.radians(45))
+    assert not tight.ok  # needs 57 deg of bank
+
+
+def test_feasibility_of_the_paper_scenario_needs_steep_bank():
+    from mpf_mavlink.target import PaperProfile
+
+    r = feasibility(lemniscate(50.0), PaperProfile(), 15.0, 100.0, math.radians(45))
+    # The lemniscate's lobes at 15 m/s ask for more than 45 deg: fine for the paper's
+    # kinematic vehicle, infeasible for a real small UAV.
+    assert not r.ok and r.figures["peak_bank_rad"] > math.radians(45)

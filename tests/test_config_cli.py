@@ -1,0 +1,74 @@
+"""Strict configuration: every class of bad input is one line naming the key and the file."""
+
+import pytest
+
+from mpf_mavlink.cli import main
+
+CFG = "configs/paper_lemniscate.yaml"
+
+BAD_SETS = [
+    ("guidance.K_p=-1", "guidance.K_p", "> 0"),
+    ("guidance.K_R=0", "guidance.K_R", "> 0"),
+    ("guidance.alpha_m=-2", "guidance.alpha_m", "> 0"),
+    ("guidance.bogus=1", "guidance.bogus", "unknown key"),
+    ("nonsense.key=1", "nonsense", "unknown key"),
+    ("vehicle.airspeed_m_s=0", "vehicle.airspeed_m_s", "> 0"),
+    ("vehicle.airspeed_m_s=-15", "vehicle.airspeed_m_s", "> 0"),
+    ("path.size_m=0", "path.size_m", "> 0"),
+    ("kinematic.dt_s=fast", "kinematic.dt_s", "number"),
+    ("guidance.psi_turn=maybe", "guidance.psi_turn", "true or false"),
+    ("path.type=zigzag", "path.type", "one of"),
+    ("path.radius_m=3", "path.radius_m", "not used"),
+    ("kinematic.initial_position_ned_m=[1,2]", "kinematic.initial_position_ned_m", "3 numbers"),
+    ("checks.c2=0.7", "checks.c2", "(0, 0.5)"),
+]
+
+
+@pytest.mark.parametrize("override,key,words", BAD_SETS)
+def test_bad_values_are_one_line_naming_key_and_file(override, key, words, capsys):
+    rc = main(["check", CFG, "--set", override])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert len(err.splitlines()) == 1
+    assert CFG in err and key in err and words in err
+
+
+def _write(tmp_path, text):
+    p = tmp_path / "c.yaml"
+    p.write_text(text)
+    return str(p)
+
+
+@pytest.mark.parametrize(
+    "text,words",
+    [
+        ("path: {type: line, start_m: [0, 0, 0], end_m: [0, 0, 0]}\n", "zero length"),
+        ("path: {type: circle}\n", "path.radius_m: required"),
+        ("path: [1, 2\n", "not valid YAML"),
+        ("- just\n- a list\n", "top level must be a mapping"),
+        ("guidance: 3\n", "guidance: must be a mapping"),
+        ("path: {type: spline, waypoints_m: [[0, 0, 0]], closed: false}\n", "at least 2 waypoints"),
+    ],
+)
+def test_bad_files(tmp_path, text, words, capsys):
+    f = _write(tmp_path, text)
+    rc = main(["check", f])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and f in err and words in err and len(err.splitlines()) == 1
+
+
+def test_missing_file_and_bad_set_syntax(capsys):
+    assert main(["check", "does/not/exist.yaml"]) == 2
+    assert "cannot read" in capsys.readouterr().err
+    assert main(["check", CFG, "--set", "novalue"]) == 2
+    assert "dotted.key=value" in capsys.readouterr().err
+
+
+def test_check_passes_on_the_paper_and_fails_on_a_real_bank_limit(capsys):
+    assert main(["check", CFG]) == 0
+    out = capsys.readouterr().out
+    assert out.count("[PASS]") == 3
+    # 45 deg of bank cannot fly the paper's lemniscate at 15 m/s: exit 3, and why.
+    assert main(["check", CFG, "--set", "vehicle.max_bank_rad=0.785"]) == 3
+    captured = capsys.readouterr()
+    assert "[FAIL] feasibility" in captured.out and "feasibility" in captured.err

@@ -1,0 +1,161 @@
+"""The MPF law: the paper's identities, the extensions, wind compensation."""
+
+import math
+
+import numpy as np
+import pytest
+
+from mpf_mavlink import so3
+from mpf_mavlink.guidance import Extensions, Gains, VehicleState, mpf_law
+from mpf_mavlink.paths import circle, lemniscate
+from mpf_mavlink.target import ConstantTurn, PaperProfile
+from sim.kinematic import ClosedLoop, KinematicState, initial_state
+
+
+def _trajectory(loop, x, dt, n):
+    """Integrate and record (t, psi, |e|^2, pt, pt_x-term) from the law's diagnostics."""
+    rows = []
+    for _ in range(n):
+        (cmd, d), _ = loop.law(x.t, x.p, x.R, x.s, True)
+        st = loop.target_state(x.t)
+        # v_t t1 + v_d: the velocity of the path point carried by the target (NED).
+        vtd = st.velocity + np.cross(st.R_T_I @ st.omega_T, np.array(d.p_f) - st.position)
+        pt = np.array(d.pt)
+        f1 = np.array(d.f1)
+        ptx = pt - (pt @ f1) * f1
+        rhs = -loop.gains.K_p * (pt @ f1) ** 2 + (loop.v_w * x.R[:, 0] - vtd) @ ptx
+        rows.append((x.t, d.psi, d.e[0] ** 2 + d.e[1] ** 2, 0.5 * pt @ pt, rhs))
+        x = loop.step(x, dt)
+    return np.array(rows)
+
+
+@pytest.mark.parametrize(
+    "target,path",
+    [
+        (PaperProfile(), lemniscate(50.0)),
+        (ConstantTurn((0, 0, 0), 4.0, 0.3, 0.05, 0.5), circle((0, 0, 0), 40.0)),
+    ],
+    ids=["paper", "turning_climbing_target"],
+)
+def test_psi_decays_at_minus_KR_e_squared_with_perfect_tracking(target, path):
+    # Theorem 1 with perfect rate tracking: dPsi/dt = -K_R |e|^2 exactly, because the
+    # feedforward cancels omega_DI. A wrong or approximate feedforward breaks this at once.
+    gains = Gains(4.0, 2.0, 5.0)
+    loop = ClosedLoop(path, target, gains, Extensions(), 15.0, None)
+    x = initial_state(path, target, np.array([-30.0, 20.0, -10.0]), so3.rot_z(2.0), None)
+    dt = 1e-3
+    T = _trajectory(loop, x, dt, 3000)
+    t, psi, e2 = T[:, 0], T[:, 1], T[:, 2]
+    dpsi = (psi[2:] - psi[:-2]) / (2 * dt)
+    expect = -gains.K_R * e2[1:-1]
+    assert np.max(e2) > 0.01  # the run really has an attitude transient to test
+    resid = np.max(np.abs(dpsi - expect)) / np.max(np.abs(expect))
+    assert resid <= 1e-3, resid
+    # And pt . pt_dot = -K_p (pt.f1)^2 + (v_w w1 - v_t t1 - v_d) . pt_x (the proof's identity).
+    half = T[:, 3]
+    dhalf = (half[2:] - half[:-2]) / (2 * dt)
+    rhs = T[1:-1, 4]
+    r2 = np.max(np.abs(dhalf - rhs)) / np.max(np.abs(rhs))
+    assert r2 <= 1e-3, r2
+
+
+def _state():
+    path = lemniscate(50.0)
+    tgt = PaperProfile().state(3.0)
+    veh = VehicleState(3.0, np.array([-40.0, 10.0, -3.0]), so3.rot_z(1.0) @ so3.rot_y(0.1), 15.0)
+    return path, tgt, veh
+
+
+def test_extensions_off_is_the_paper_law_bit_for_bit():
+    path, tgt, veh = _state()
+    a, da = mpf_law(12.0, veh, tgt, path, Gains())
+    ext = Extensions(rate_limit=None, psi_turn=False, wind_compensation=False)
+    b, db = mpf_law(12.0, veh, tgt, path, Gains(), ext)
+    assert (a.w2, a.w3, a.sdot) == (b.w2, b.w3, b.sdot)
+    assert (a.w2, a.w3) == da.w_cmd_law and da.mode == "law"
+
+
+def test_coordinate_free_form():
+    # The command equals (K_R/2)(w1 x d1) + omega_DI projected orthogonal to w1, whatever the
+    # roll of {W} about w1 (the spec's check); rolling {W} must not change omega_w1_I.
+    path, tgt, veh = _state()
+    g = Gains(4.0, 2.0, 1.0)
+    c, d = mpf_law(12.0, veh, tgt, path, g)
+    w1 = veh.R_W_I[:, 0]
+    om = np.array(d.omega_DI)
+    expect = 0.5 * g.K_R * np.cross(w1, d.d1) + om - (om @ w1) * w1
+    assert np.allclose(c.omega_w1_I, expect, atol=1e-9)
+    rolled = VehicleState(veh.t, veh.position, veh.R_W_I @ so3.rot_x(0.7), veh.airspeed)
+    c2, _ = mpf_law(12.0, rolled, tgt, path, g)
+    assert np.allclose(c.omega_w1_I, c2.omega_w1_I, atol=1e-9)
+
+
+def test_rate_limit_scales_along_the_command():
+    path, tgt, veh = _state()
+    free, _ = mpf_law(12.0, veh, tgt, path, Gains())
+    mag = math.hypot(free.w2, free.w3)
+    lim, d = mpf_law(12.0, veh, tgt, path, Gains(), Extensions(rate_limit=0.5 * mag))
+    # Half the magnitude, same direction, flagged.
+    assert math.isclose(math.hypot(lim.w2, lim.w3), 0.5 * mag, rel_tol=1e-12)
+    assert math.isclose(lim.w2 * free.w3 - lim.w3 * free.w2, 0.0, abs_tol=1e-12)
+    assert d.mode.endswith("+sat")
+
+
+def test_psi_turn_defined_at_the_antipode_and_continuous_at_one_half():
+    path = circle((0, 0, 0), 1000.0)  # nearly straight: d1 ~ f1 = north near s = 0
+    tgt = ConstantTurn((0, 0, 0), 0.0).state(0.0)
+    p = np.array([1000.0, 0.0, 0.0])  # a point of the circle
+    s = path.closest(p)
+    f1 = path.sample(s).f1
+    yaw = math.atan2(-f1[1], -f1[0])  # flying exactly backwards: Psi = 1
+    veh = VehicleState(0.0, path.sample(s).position, so3.rot_z(yaw), 15.0)
+    g = Gains(1.0, 2.0, 10.0)
+    plain, dp = mpf_law(s, veh, tgt, path, g)
+    assert dp.psi > 0.999
+    # The paper's feedback vanishes at the antipode (only the small feedforward remains) ...
+    assert math.hypot(plain.w2, plain.w3) < 0.05
+    turn, dt_ = mpf_law(s, veh, tgt, path, g, Extensions(psi_turn=True))
+    # ... the extension turns at K_R/2 = 1 rad/s; level flight, so about the vertical (w3).
+    assert dt_.mode == "psi_turn"
+    assert abs(math.hypot(turn.w2, turn.w3) - 1.0) < 0.05 and abs(turn.w3) > 0.95
+    # At Psi = 1/2 both give the same command (|e| = 1/2, so |K_R e| = K_R/2).
+    veh90 = VehicleState(0.0, veh.position, so3.rot_z(math.atan2(f1[1], f1[0]) + math.pi / 2), 15.0)
+    a, da = mpf_law(s, veh90, tgt, path, g)
+    b, _ = mpf_law(s, veh90, tgt, path, g, Extensions(psi_turn=True, psi_turn_threshold=da.psi))
+    assert abs(da.psi - 0.5) < 0.01
+    assert math.hypot(a.w2 - b.w2, a.w3 - b.w3) < 0.02
+
+
+def _steady_error(wind_comp: bool) -> float:
+    path = circle((0, 0, 0), 60.0)
+    tgt = ConstantTurn((0, 0, 0), 3.0, 0.0, 0.0)
+
+    def wind(t, p):
+        return np.array([0.0, 4.0, 0.0])
+
+    loop = ClosedLoop(path, tgt, Gains(1.0, 2.0, 10.0), Extensions(wind_compensation=wind_comp), 15.0, 10.0, wind)
+    x = initial_state(path, tgt, np.array([0.0, -60.0, 0.0]), so3.rot_z(0.0), None)
+    errs = []
+    for i in range(6000):
+        x = loop.step(x, 0.02)
+        if i > 4000:
+            (_, d), _ = loop.law(x.t, x.p, x.R, x.s, True)
+            errs.append(d.pt_norm)
+    return float(np.sqrt(np.mean(np.square(errs))))
+
+
+def test_wind_compensation_removes_the_wind_error():
+    # A 4 m/s crosswind with eta_hat = eta: the Remark's compensation leaves only the autopilot
+    # lag error; without it the path point is chased with a wind-sized bias.
+    with_comp, without = _steady_error(True), _steady_error(False)
+    assert with_comp < 0.05
+    assert without > 3 * with_comp
+
+
+def test_kinematic_state_is_rotation():
+    path = lemniscate(50.0)
+    loop = ClosedLoop(path, PaperProfile(), Gains(), Extensions(), 15.0, 10.0)
+    x = KinematicState(0.0, np.array([-50.0, 0, 0]), so3.rot_z(math.pi / 2), np.zeros(2), 235.0)
+    for _ in range(200):
+        x = loop.step(x, 0.02)
+    assert so3.is_rotation(x.R, 1e-12)
