@@ -81,7 +81,9 @@ def plot_run(d: str | Path) -> list[Path]:
     axs[0].grid(alpha=0.3, which="both")
     rms = metrics.get("steady_rms_m")
     if rms is not None:
-        axs[0].set_title(f"steady RMS {rms:.3g} m, convergence {metrics.get('convergence_time_s')} s")
+        conv = metrics.get("convergence_time_s")
+        conv_txt = "never" if conv is None else f"{conv:.3g} s"
+        axs[0].set_title(f"steady RMS {rms:.3g} m, convergence {conv_txt}")
     axs[1].plot(t, cols["psi"])
     axs[1].set_ylabel("Psi(R~)")
     axs[1].set_xlabel("t [s]")
