@@ -1,0 +1,921 @@
+"""A simulated fixed-wing MAVLink vehicle (PX4 or ArduPlane flavour) for software-in-the-loop runs.
+
+:class:`SimVehicle` owns a plant (:class:`sim.plant_jsbsim.JSBSimPlant` by default, or the cheap
+:class:`sim.plant_kinematic_mav.KinematicMavPlant`), the simulated autopilot
+(:class:`sim.inner_loop.FixedWingAutopilot`) and ONE pymavlink connection (``udpin:`` - it listens
+and answers whoever wrote last, ``udpout:`` or ``tcpin:``). It is a separate MAVLink peer and does
+not use :mod:`mpf_mavlink.mavlink`.
+
+Identity: system 1 / component 1, HEARTBEAT type MAV_TYPE_FIXED_WING, autopilot PX4 (12) or
+ARDUPILOTMEGA (3), base_mode CUSTOM_MODE_ENABLED (+ SAFETY_ARMED when armed, + STABILIZE /
+GUIDED / AUTO flags by mode), custom_mode PX4 ``(main << 16) | (sub << 24)`` or the ArduPlane
+mode number. Power-on: armed, trimmed level flight (``fly_to_trim``), in Hold (PX4 AUTO.LOITER)
+or LOITER (ArduPlane 12), circling about the position where the mode was entered.
+
+Sim time: ``t`` (s) is 0 when :class:`SimVehicle` is ready (after the trim flight); the MAVLink
+boot clock ``time_boot_ms`` counts the trim flight too (``time_boot_s = t + t_trim``), so it never
+reads 0. ``time_usec`` fields use the same boot clock; SYSTEM_TIME's ``time_unix_usec`` is the
+wall time at construction plus the boot clock. The moving target's motion is evaluated at ``t``.
+
+Rules honoured (see /work/shared/spec/mavlink-interfaces.md):
+
+* PX4: OFFBOARD is accepted (COMMAND_ACK ACCEPTED) only if SET_ATTITUDE_TARGET has been
+  streaming with gaps <= 0.5 s (> 2 Hz) for >= 1 s, else TEMPORARILY_REJECTED (what PX4's
+  commander answers to a refused mode change). type_mask 128 = body rates + thrust; with
+  "throttle ignore" (64) the thrust is ZERO; per-axis rate-ignore bits give a zero rate setpoint
+  on that axis; a used non-finite field drops the message (not counted as signal). With bit 128
+  clear the quaternion's roll/pitch go to the attitude controller (PX4 FW attitude offboard).
+  No setpoint for ``com_of_loss_t`` (1.0 s) of sim time in OFFBOARD -> Hold (AUTO.LOITER about
+  the current position) and a STATUSTEXT "Failsafe: no offboard signal, switching to Hold".
+* ArduPlane: SET_ATTITUDE_TARGET only in GUIDED (15); dropped silently otherwise. Only the
+  quaternion is used; per ArduPlane's handler (inverted mask ``m = ~type_mask & 0x87``): roll is
+  taken if ``m & 0x81``, pitch if ``m & 0x82``, yaw if ``m & 0x84`` (so whenever the attitude is
+  used all three angles are taken; type_mask 134 takes roll alone). The yaw Euler angle goes
+  straight to the rudder as ArduPlane does: rudder = clip(yaw_deg / 45, -1, 1) (ArduPlane
+  constrains the forced yaw in centidegrees to +-4500 = full rudder). Thrust (0..1) is used when
+  "throttle ignore" is clear. Each forced axis times out after ``guided_timeout`` (3 s); then that
+  axis goes back to ArduPlane's own guidance: loiter about the position where GUIDED was entered,
+  TECS pitch/throttle, rudder from the yaw damper - the mode stays GUIDED.
+* Modes without external setpoints: AUTO.* / LOITER / CIRCLE / RTL / AUTO / TAKEOFF -> loiter
+  circle (radius ``loiter_radius``) at the entry altitude and cruise airspeed; POSCTL / ALTCTL /
+  FBWB / CRUISE -> course + altitude hold; MANUAL / STABILIZED / ACRO / FBWA / ... -> wings level
+  at trim pitch and trim throttle (no pilot sticks in the simulation).
+
+Telemetry (rates configurable, :class:`TelemetryRates`): ATTITUDE, LOCAL_POSITION_NED (50 Hz),
+GLOBAL_POSITION_INT, VFR_HUD (10 Hz), WIND (ArduPilot: direction the wind comes FROM, 3-D speed,
+speed_z = down component, as ArduPilot) or WIND_COV (PX4: wind_x/y north/east, wind_z = 0 as PX4)
+at 2 Hz, HOME_POSITION and SYS_STATUS and SYSTEM_TIME at 1 Hz, HEARTBEAT 1 Hz. Latency: outgoing
+and incoming messages can be delayed by a fixed amount of SIM time (delay queues).
+
+The target is its own MAVLink system (default 2/1): HEARTBEAT (MAV_TYPE_GROUND_ROVER or
+SURFACE_BOAT, autopilot MAV_AUTOPILOT_INVALID) at 1 Hz, FOLLOW_TARGET (est_capabilities 15) and
+GLOBAL_POSITION_INT at ``target_rate_hz``; position from ``target.state(t)`` in NED about the
+vehicle's geodetic origin.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+os.environ.setdefault("MAVLINK20", "1")
+os.environ.setdefault("JSBSIM_DEBUG", "0")
+
+from pymavlink import mavutil  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
+
+from mpf_mavlink.frames import matrix_to_quat_wxyz  # noqa: E402
+
+from .clock import Clock, make_clock  # noqa: E402
+from .inner_loop import FixedWingAutopilot, fly_to_trim  # noqa: E402
+from .plant_kinematic_mav import KinematicMavPlant, ned_to_geodetic_fast  # noqa: E402
+
+M = mavlink2
+G = 9.80665
+
+# --------------------------------------------------------------------------- mode tables
+PX4_MAIN = {"MANUAL": 1, "ALTCTL": 2, "POSCTL": 3, "AUTO": 4, "ACRO": 5, "OFFBOARD": 6, "STABILIZED": 7}
+PX4_AUTO_SUB = {"READY": 1, "TAKEOFF": 2, "LOITER": 3, "MISSION": 4, "RTL": 5, "LAND": 6}
+PX4_MAIN_NAMES = {v: k for k, v in PX4_MAIN.items()}
+PX4_SUB_NAMES = {v: k for k, v in PX4_AUTO_SUB.items()}
+
+ARDUPLANE_MODES = {
+    0: "MANUAL", 1: "CIRCLE", 2: "STABILIZE", 3: "TRAINING", 4: "ACRO", 5: "FBWA", 6: "FBWB",
+    7: "CRUISE", 8: "AUTOTUNE", 10: "AUTO", 11: "RTL", 12: "LOITER", 13: "TAKEOFF", 15: "GUIDED",
+}  # fmt: skip
+ARDUPLANE_NUMBERS = {v: k for k, v in ARDUPLANE_MODES.items()}
+
+# behaviours
+LOITER, CRUISE, LEVEL, OFFBOARD, GUIDED = "loiter", "cruise", "level", "offboard", "guided"
+_AP_BEHAVIOUR = {
+    0: LEVEL, 1: LOITER, 2: LEVEL, 3: LEVEL, 4: LEVEL, 5: LEVEL, 6: CRUISE, 7: CRUISE,
+    8: LEVEL, 10: LOITER, 11: LOITER, 12: LOITER, 13: LOITER, 15: GUIDED,
+}  # fmt: skip
+_PX4_BEHAVIOUR = {1: LEVEL, 2: CRUISE, 3: CRUISE, 4: LOITER, 5: LEVEL, 6: OFFBOARD, 7: LEVEL}
+
+PX4_OFFBOARD_MIN_STREAM_S = 1.0  # setpoints must have been streaming this long
+PX4_OFFBOARD_MAX_GAP_S = 0.5  # ... at more than 2 Hz
+ARDUPILOT_FORCE_DISARM = 21196.0  # param2 magic of MAV_CMD_COMPONENT_ARM_DISARM
+
+
+def px4_custom_mode(main: int, sub: int = 0) -> int:
+    """PX4 HEARTBEAT.custom_mode = (main << 16) | (sub << 24)."""
+    return (int(main) << 16) | (int(sub) << 24)
+
+
+def px4_decode_custom_mode(custom_mode: int) -> tuple[int, int]:
+    """(main, sub) from a PX4 custom_mode."""
+    return (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+
+
+@dataclass
+class TelemetryRates:
+    """Stream rates in Hz (0 disables a stream)."""
+
+    attitude: float = 50.0
+    local_position: float = 50.0
+    global_position: float = 10.0
+    vfr_hud: float = 10.0
+    wind: float = 2.0
+    home_position: float = 1.0
+    sys_status: float = 1.0
+    system_time: float = 1.0
+    heartbeat: float = 1.0
+
+
+# message id -> stream name (for MAV_CMD_SET_MESSAGE_INTERVAL / REQUEST_MESSAGE)
+_STREAM_IDS = {
+    M.MAVLINK_MSG_ID_ATTITUDE: "attitude",
+    M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: "local_position",
+    M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: "global_position",
+    M.MAVLINK_MSG_ID_VFR_HUD: "vfr_hud",
+    M.MAVLINK_MSG_ID_WIND: "wind",
+    M.MAVLINK_MSG_ID_WIND_COV: "wind",
+    M.MAVLINK_MSG_ID_HOME_POSITION: "home_position",
+    M.MAVLINK_MSG_ID_SYS_STATUS: "sys_status",
+    M.MAVLINK_MSG_ID_SYSTEM_TIME: "system_time",
+    M.MAVLINK_MSG_ID_HEARTBEAT: "heartbeat",
+}
+
+
+class _QueueWriter:
+    """File-like sink for a pymavlink encoder: packets go to the vehicle's outgoing delay queue."""
+
+    def __init__(self, vehicle: SimVehicle):
+        self.v = vehicle
+
+    def write(self, buf: bytes) -> None:
+        self.v._out.append((self.v._boot_t + self.v.telemetry_latency_s, bytes(buf)))
+
+
+def _finite(*vals: float) -> bool:
+    return all(math.isfinite(v) for v in vals)
+
+
+def _clip(x: float, lo: float, hi: float) -> float:
+    return lo if x < lo else hi if x > hi else x
+
+
+# --------------------------------------------------------------------------- the vehicle
+class SimVehicle:
+    """A fixed-wing MAVLink vehicle around a plant and the simulated autopilot (module docstring).
+
+    Drive it with :meth:`run` (clock-paced), :meth:`step_once` (one frame, no waiting; call
+    :meth:`poll` in between if you like) or :meth:`start_in_thread` / :meth:`stop`.
+    """
+
+    def __init__(
+        self,
+        flavour: str = "px4",
+        url: str = "udpin:127.0.0.1:14540",
+        *,
+        plant: str | Any = "jsbsim",
+        clock: str | Clock = "lockstep",
+        position_ned=(0.0, 0.0, -100.0),
+        heading: float = 0.0,
+        airspeed: float = 16.0,
+        lat0_deg: float = 47.397742,
+        lon0_deg: float = 8.545594,
+        alt0_m: float = 488.0,
+        target=None,
+        target_system: int = 2,
+        target_component: int = 1,
+        target_type: str = "rover",
+        target_rate_hz: float = 10.0,
+        rates: TelemetryRates | dict | None = None,
+        frame_period: float = 0.02,
+        telemetry_latency_s: float = 0.0,
+        command_latency_s: float = 0.0,
+        answer_timeout_s: float = 0.05,
+        realtime_speed: float = 1.0,
+        com_of_loss_t: float = 1.0,
+        guided_timeout: float = 3.0,
+        loiter_radius: float = 80.0,
+        loiter_direction: int = 1,
+        trim_seconds: float = 12.0,
+        wind_ned=(0.0, 0.0, 0.0),
+        turbulence: str = "none",
+        seed: int = 0,
+        system_id: int = 1,
+        component_id: int = 1,
+        autopilot: FixedWingAutopilot | None = None,
+        px4_require_thrust: bool = False,
+        record_truth: bool = True,
+    ):
+        if flavour not in ("px4", "ardupilot"):
+            raise ValueError("flavour must be 'px4' or 'ardupilot'")
+        self.flavour = flavour
+        self.px4 = flavour == "px4"
+        self.sysid, self.compid = int(system_id), int(component_id)
+        self.cruise_airspeed = float(airspeed)
+        self.telemetry_latency_s = float(telemetry_latency_s)
+        self.command_latency_s = float(command_latency_s)
+        self.com_of_loss_t = float(com_of_loss_t)
+        self.guided_timeout = float(guided_timeout)
+        self.loiter_radius = float(loiter_radius)
+        self.loiter_direction = 1 if loiter_direction >= 0 else -1
+        self.px4_require_thrust = bool(px4_require_thrust)
+        self.record = bool(record_truth)
+        if isinstance(rates, dict):
+            rates = TelemetryRates(**rates)
+        self.rates = rates or TelemetryRates()
+
+        # ---- plant: start behind the requested point so the trim flight ends about there
+        heading = float(heading)
+        pos = np.asarray(position_ned, float)
+        wind = np.asarray(wind_ned, float)
+        ground_dir = np.array([math.cos(heading), math.sin(heading), 0.0])
+        shift = (self.cruise_airspeed * ground_dir + np.array([wind[0], wind[1], 0.0])) * trim_seconds
+        start = pos - shift
+        if isinstance(plant, str):
+            n_sub = max(1, math.ceil(frame_period * 120.0 - 1e-9))  # physics near 120 Hz
+            dt = frame_period / n_sub
+            kw = dict(
+                dt=dt, lat0_deg=lat0_deg, lon0_deg=lon0_deg, alt0_m=alt0_m,
+                position_ned=tuple(start), heading=heading, airspeed=self.cruise_airspeed,
+            )  # fmt: skip
+            if plant == "jsbsim":
+                from .plant_jsbsim import JSBSimPlant
+
+                plant = JSBSimPlant(**kw)
+            elif plant == "kinematic":
+                plant = KinematicMavPlant(**kw)
+            else:
+                raise ValueError("plant must be 'jsbsim', 'kinematic' or a plant object")
+        self.plant = plant
+        self.dt = float(plant.dt)
+        self.n_sub = max(1, int(round(frame_period / self.dt)))
+        self.frame_period = self.n_sub * self.dt
+        self.origin = plant.origin
+        self.home_lla = (self.origin.lat0_deg, self.origin.lon0_deg, self.origin.alt0_m)
+        if np.any(wind != 0.0):
+            plant.set_wind(wind)
+        if turbulence != "none":
+            plant.set_turbulence(turbulence, seed)
+
+        # ---- autopilot, trim flight
+        self.ap = autopilot or FixedWingAutopilot()
+        if isinstance(plant, KinematicMavPlant):
+            self.ap.hold.gains.pitch_trim = 0.0  # no angle of attack in the kinematic model
+        self.trim = None
+        if trim_seconds > 0:
+            self.trim = fly_to_trim(plant, self.ap, self.cruise_airspeed, float(-pos[2]), seconds=trim_seconds)
+        self._k = int(round(plant.t / self.dt))  # physics steps since boot (incl. trim)
+        self._k0 = self._k
+        self._st = plant.state()
+
+        # ---- mode state
+        self.armed = True
+        self._mode_t = 0.0
+        self.mode_changes: list[tuple[float, str]] = []
+        self.statustexts: list[tuple[float, str]] = []
+        # PX4 offboard stream bookkeeping (sim boot time, s)
+        self._sp_last: float | None = None
+        self._sp_stream_start: float | None = None
+        self._sp: tuple | None = None  # ("rates", (p, q, r), thrust) | ("att", (roll, pitch), thrust)
+        # ArduPlane guided forced axes: values and times (boot s)
+        self._forced = [0.0, 0.0, 0.0, 0.0]  # roll, pitch, yaw (rad), throttle (0..1)
+        self._forced_t: list[float | None] = [None, None, None, None]
+        self.dropped: dict[str, int] = {"nonfinite": 0, "not_guided": 0, "wrong_target": 0, "no_axes": 0}
+        if self.px4:
+            self._set_px4_mode(PX4_MAIN["AUTO"], PX4_AUTO_SUB["LOITER"], announce=False)
+        else:
+            self._set_ap_mode(ARDUPLANE_NUMBERS["LOITER"], announce=False)
+
+        # ---- MAVLink
+        self.url = url
+        self.conn = mavutil.mavlink_connection(
+            url, source_system=self.sysid, source_component=self.compid, dialect="ardupilotmega",
+            autoreconnect=True,
+        )  # fmt: skip
+        self._out: deque[tuple[float, bytes]] = deque()
+        self._in: deque[tuple[float, Any]] = deque()
+        self._mav = M.MAVLink(_QueueWriter(self), srcSystem=self.sysid, srcComponent=self.compid)
+        self.target = target
+        self.target_system = int(target_system)
+        self.target_rate_hz = float(target_rate_hz)
+        self._tmav = M.MAVLink(_QueueWriter(self), srcSystem=self.target_system, srcComponent=int(target_component))
+        self._target_type = M.MAV_TYPE_SURFACE_BOAT if target_type == "boat" else M.MAV_TYPE_GROUND_ROVER
+        self._answered = False
+        self.answers = 0  # SET_ATTITUDE_TARGET messages received
+        self.rx_count = 0
+        self.unix0_us = int(time.time() * 1e6)
+        self._next: dict[str, float] = {}
+        self._sent: dict[str, int] = {}
+
+        # ---- clock, truth, threading
+        self.clock = make_clock(clock, answer_timeout_s=answer_timeout_s, speed=realtime_speed)
+        self._truth: dict[str, list] = {
+            k: [] for k in ("t", "time_boot_s", "position_ned", "velocity_ned", "euler", "airspeed",
+                            "wind_ned", "throttle", "mode", "target_position", "target_velocity")
+        }  # fmt: skip
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self.wall_time_running = 0.0  # wall seconds spent in run()
+        self.sim_time_running = 0.0  # sim seconds advanced in run()
+        self._record()
+
+    # ------------------------------------------------------------------ time
+    @property
+    def _boot_t(self) -> float:
+        return self._k * self.dt
+
+    @property
+    def time_boot_s(self) -> float:
+        """The MAVLink boot clock (s): includes the trim flight."""
+        return self._k * self.dt
+
+    @property
+    def t(self) -> float:
+        """Simulated time (s) since the vehicle was ready (0 after the trim flight)."""
+        return (self._k - self._k0) * self.dt
+
+    def _ms(self) -> int:
+        return int(round(self._k * self.dt * 1000.0))
+
+    def _us(self) -> int:
+        return int(round(self._k * self.dt * 1e6))
+
+    # ------------------------------------------------------------------ modes
+    @property
+    def mode_name(self) -> str:
+        return self._mode_name
+
+    @property
+    def custom_mode(self) -> int:
+        return self._custom_mode
+
+    def _enter(self, behaviour: str, name: str, custom_mode: int, announce: bool) -> None:
+        st = self._st if hasattr(self, "_st") else self.plant.state()
+        self._behaviour = behaviour
+        self._mode_name = name
+        self._custom_mode = custom_mode
+        self._center = (float(st.position_ned[0]), float(st.position_ned[1]))
+        self._alt_sp = -float(st.position_ned[2])
+        self._course = math.atan2(float(st.velocity_ned[1]), float(st.velocity_ned[0]))
+        self._mode_t = self._boot_t
+        self.mode_changes.append((self.t if hasattr(self, "_k0") else 0.0, name))
+        if behaviour == GUIDED:
+            self._forced_t = [None, None, None, None]
+        if announce:
+            self._statustext(M.MAV_SEVERITY_INFO, f"Mode {name}")
+
+    def _set_px4_mode(self, main: int, sub: int = 0, announce: bool = True) -> None:
+        if main == PX4_MAIN["AUTO"] and sub == 0:
+            sub = PX4_AUTO_SUB["MISSION"]  # PX4: AUTO without a sub mode is MISSION
+        name = PX4_MAIN_NAMES[main] + (f".{PX4_SUB_NAMES.get(sub, sub)}" if main == PX4_MAIN["AUTO"] else "")
+        if main != PX4_MAIN["AUTO"]:
+            sub = 0
+        self._enter(_PX4_BEHAVIOUR[main], name, px4_custom_mode(main, sub), announce)
+
+    def _set_ap_mode(self, number: int, announce: bool = True) -> None:
+        self._enter(_AP_BEHAVIOUR[number], ARDUPLANE_MODES[number], int(number), announce)
+
+    def _offboard_available(self) -> bool:
+        t = self._boot_t
+        return (
+            self._sp_last is not None
+            and t - self._sp_last <= PX4_OFFBOARD_MAX_GAP_S
+            and t - self._sp_stream_start >= PX4_OFFBOARD_MIN_STREAM_S - 1e-9
+        )
+
+    def _base_mode(self) -> int:
+        b = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        if self.armed:
+            b |= M.MAV_MODE_FLAG_SAFETY_ARMED
+        if self._behaviour != LEVEL or self._mode_name not in ("MANUAL", "ACRO"):
+            b |= M.MAV_MODE_FLAG_STABILIZE_ENABLED
+        if self._behaviour in (OFFBOARD, GUIDED, LOITER):
+            b |= M.MAV_MODE_FLAG_GUIDED_ENABLED
+        if self._behaviour == LOITER:
+            b |= M.MAV_MODE_FLAG_AUTO_ENABLED
+        return b
+
+    # ------------------------------------------------------------------ control (one physics step)
+    def _control(self, st) -> tuple[float, float, float, float]:
+        dt, ap, t = self.dt, self.ap, self._boot_t
+        beh = self._behaviour
+        if beh == OFFBOARD:
+            if self._sp_last is None or t - self._sp_last > self.com_of_loss_t:
+                self._statustext(M.MAV_SEVERITY_CRITICAL, "Failsafe: no offboard signal, switching to Hold")
+                self._set_px4_mode(PX4_MAIN["AUTO"], PX4_AUTO_SUB["LOITER"])
+                beh = self._behaviour
+            else:
+                kind, vals, thrust = self._sp
+                if kind == "rates":
+                    a, e, r = ap.rates_to_surfaces(dt, vals, tuple(st.pqr), st.airspeed)
+                else:
+                    a, e, r = ap.attitude_to_surfaces(dt, vals[0], vals[1], st)
+                return a, e, r, (thrust if self.armed else 0.0)
+        if beh == GUIDED:
+            return self._guided_control(st)
+        if beh == LOITER:
+            out = ap.loiter_step(dt, st, self._center, self.cruise_airspeed, self._alt_sp,
+                                 self.loiter_radius, self.loiter_direction)  # fmt: skip
+        elif beh == CRUISE:
+            roll = ap.hold.heading_roll(self._course, (st.velocity_ned[0], st.velocity_ned[1]))
+            out = ap.hold_step(dt, st, self.cruise_airspeed, self._alt_sp, roll)
+        else:  # LEVEL: wings level, trim pitch, trim throttle
+            a, e, r = ap.attitude_to_surfaces(dt, 0.0, ap.hold.gains.pitch_trim, st)
+            out = (a, e, r, ap.hold.trim_throttle)
+        a, e, r, thr = out
+        return a, e, r, (thr if self.armed else 0.0)
+
+    def _guided_control(self, st) -> tuple[float, float, float, float]:
+        dt, ap, t = self.dt, self.ap, self._boot_t
+        ft, fv, to = self._forced_t, self._forced, self.guided_timeout
+        fresh = [x is not None and t - x < to for x in ft]
+        if fresh[0]:
+            roll_sp = fv[0]
+        else:
+            pos, vel = st.position_ned, st.velocity_ned
+            roll_sp = ap.hold.loiter_roll(self._center, (float(pos[0]), float(pos[1])),
+                                          (float(vel[0]), float(vel[1])), self.loiter_radius,
+                                          self.loiter_direction)  # fmt: skip
+        climb = -float(st.velocity_ned[2])
+        _, pitch_tecs, thr_tecs = ap.hold.update(
+            dt, self.cruise_airspeed, self._alt_sp, st.airspeed, -float(st.position_ned[2]), climb, roll_sp
+        )
+        pitch_sp = fv[1] if fresh[1] else pitch_tecs
+        a, e, r = ap.attitude_to_surfaces(dt, roll_sp, pitch_sp, st)
+        if fresh[2]:
+            r = _clip(math.degrees(fv[2]) / 45.0, -1.0, 1.0)  # ArduPlane: +-4500 cdeg = full rudder
+        thr = fv[3] if fresh[3] else thr_tecs
+        return a, e, r, (thr if self.armed else 0.0)
+
+    # ------------------------------------------------------------------ stepping
+    def step_once(self) -> float:
+        """One frame: read pending input (no waiting), apply due commands, ``n_sub`` physics
+        steps, due telemetry, truth. Returns the sim time ``t``."""
+        self.poll(0.0)
+        self._apply_due()
+        plant, ctl = self.plant, self._control
+        for _ in range(self.n_sub):
+            st = self._st
+            a, e, r, thr = ctl(st)
+            plant.step(a, e, r, thr)
+            self._k += 1
+            self._st = plant.state()
+            self._apply_due()
+        self._telemetry()
+        self._flush()
+        self._record()
+        return self.t
+
+    def run(self, duration_s: float) -> None:
+        """Advance ``duration_s`` of sim time, paced by the clock (lockstep or realtime)."""
+        end_k = self._k + int(round(duration_s / self.dt)) if math.isfinite(duration_s) else None
+        w0, k0 = time.perf_counter(), self._k
+        self.clock.start(self._boot_t)
+        try:
+            while not self._stop.is_set() and (end_k is None or self._k < end_k):
+                self.step_once()
+                self.clock.wait(self._boot_t, self.poll, self.has_peer)
+        finally:
+            self.wall_time_running += time.perf_counter() - w0
+            self.sim_time_running += (self._k - k0) * self.dt
+
+    def start_in_thread(self, duration_s: float = math.inf) -> threading.Thread:
+        """Run in a daemon thread until :meth:`stop` (or ``duration_s`` of sim time)."""
+        if self._thread is not None and self._thread.is_alive():
+            raise RuntimeError("already running")
+        self._stop.clear()
+        self._thread = threading.Thread(target=self.run, args=(duration_s,), daemon=True, name="SimVehicle")
+        self._thread.start()
+        return self._thread
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            self._thread = None
+
+    def close(self) -> None:
+        self.stop()
+        try:
+            self.conn.close()
+        except Exception:  # pragma: no cover - closing is best effort
+            pass
+
+    def __enter__(self) -> SimVehicle:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def real_time_factor(self) -> float:
+        """Sim seconds per wall second spent in :meth:`run` so far."""
+        return self.sim_time_running / self.wall_time_running if self.wall_time_running > 0 else float("nan")
+
+    # ------------------------------------------------------------------ input
+    def has_peer(self) -> bool:
+        c = self.conn
+        if getattr(c, "udp_server", False):  # pymavlink >= 2.4.4x keeps a set of clients
+            return bool(getattr(c, "clients", None)) or getattr(c, "last_address", None) is not None
+        if hasattr(c, "listen"):  # tcpin
+            return getattr(c, "port", None) is not None
+        return True
+
+    def poll(self, timeout: float = 0.0) -> bool:
+        """Read incoming MAVLink (waiting up to ``timeout`` wall s for the first byte).
+
+        Returns True when a SET_ATTITUDE_TARGET arrived after the last telemetry was written.
+        """
+        if self._answered:
+            self._drain()
+            return True
+        if timeout > 0.0:
+            try:
+                self.conn.select(timeout)
+            except Exception:  # pragma: no cover
+                time.sleep(min(timeout, 0.001))
+        self._drain()
+        return self._answered
+
+    def _drain(self) -> None:
+        recv = self.conn.recv_msg
+        for _ in range(10000):
+            try:
+                msg = recv()
+            except (ConnectionError, OSError):
+                return
+            if msg is None:
+                return
+            mt = msg.get_type()
+            if mt == "BAD_DATA":
+                continue
+            self.rx_count += 1
+            if mt == "SET_ATTITUDE_TARGET":
+                self._answered = True
+                self.answers += 1
+            if mt in ("SET_ATTITUDE_TARGET", "COMMAND_LONG", "COMMAND_INT", "SET_MODE", "TIMESYNC"):
+                self._in.append((self._boot_t + self.command_latency_s, msg))
+
+    def _apply_due(self) -> None:
+        q, t = self._in, self._boot_t + 1e-9
+        while q and q[0][0] <= t:
+            _, msg = q.popleft()
+            self._handle(msg)
+
+    def _handle(self, msg) -> None:
+        mt = msg.get_type()
+        if mt == "SET_ATTITUDE_TARGET":
+            if msg.target_system not in (0, self.sysid):
+                self.dropped["wrong_target"] += 1
+                return
+            (self._sat_px4 if self.px4 else self._sat_ardupilot)(msg)
+        elif mt in ("COMMAND_LONG", "COMMAND_INT"):
+            if msg.target_system not in (0, self.sysid):
+                return
+            self._command(msg)
+        elif mt == "SET_MODE":
+            if msg.target_system not in (0, self.sysid):
+                return
+            if self.px4:
+                main, sub = px4_decode_custom_mode(msg.custom_mode)
+                res = self._do_set_mode(float(msg.base_mode), float(main), float(sub))
+                self._ack(M.MAV_CMD_DO_SET_MODE, res, msg)  # PX4 turns SET_MODE into DO_SET_MODE
+            else:
+                res = self._do_set_mode(float(msg.base_mode), float(msg.custom_mode), 0.0)
+                self._ack(M.MAVLINK_MSG_ID_SET_MODE, res, msg)  # ArduPilot acks with command 11
+        elif mt == "TIMESYNC" and msg.tc1 == 0:
+            self._mav.send(self._mav.timesync_encode(int(self._boot_t * 1e9), msg.ts1))
+
+    # PX4 offboard setpoint
+    def _sat_px4(self, msg) -> None:
+        tm = msg.type_mask
+        att_ignore, thr_ignore = bool(tm & 128), bool(tm & 64)
+        rates = (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate)
+        used = [] if thr_ignore else [msg.thrust]
+        if att_ignore:
+            if tm & 7 == 7:
+                self.dropped["no_axes"] += 1
+                return
+            used += [rates[i] for i in range(3) if not tm & (1 << i)]
+        else:
+            used += list(msg.q)
+        if not _finite(*used):
+            self.dropped["nonfinite"] += 1
+            return
+        thrust = 0.0 if thr_ignore else _clip(float(msg.thrust), 0.0, 1.0)
+        if att_ignore:
+            sp = ("rates", tuple(0.0 if tm & (1 << i) else float(rates[i]) for i in range(3)), thrust)
+        else:
+            from mpf_mavlink.frames import matrix_to_euler, quat_wxyz_to_matrix
+
+            try:
+                roll, pitch, _ = matrix_to_euler(quat_wxyz_to_matrix(msg.q))
+            except ValueError:
+                self.dropped["nonfinite"] += 1
+                return
+            sp = ("att", (roll, pitch), thrust)
+        self._sp = sp
+        if thr_ignore and self.px4_require_thrust:
+            return  # applied if already offboard, but not counted as an offboard signal
+        t = self._boot_t
+        if self._sp_last is None or t - self._sp_last > PX4_OFFBOARD_MAX_GAP_S:
+            self._sp_stream_start = t
+        self._sp_last = t
+
+    # ArduPlane guided attitude
+    def _sat_ardupilot(self, msg) -> None:
+        if self._behaviour != GUIDED:
+            self.dropped["not_guided"] += 1
+            return
+        q = list(msg.q)
+        if not _finite(*q) or (not (msg.type_mask & 64) and not _finite(msg.thrust)):
+            self.dropped["nonfinite"] += 1
+            return
+        from mpf_mavlink.frames import matrix_to_euler, quat_wxyz_to_matrix
+
+        inv = (~msg.type_mask) & 0xFF
+        am = inv & 0x87
+        t = self._boot_t
+        try:
+            euler = matrix_to_euler(quat_wxyz_to_matrix(q)) if am else (0.0, 0.0, 0.0)
+        except ValueError:
+            self.dropped["nonfinite"] += 1
+            return
+        for i, bit in enumerate((0x81, 0x82, 0x84)):
+            if am & bit:
+                self._forced[i] = float(euler[i])
+                self._forced_t[i] = t
+        if inv & 0x40:
+            self._forced[3] = _clip(float(msg.thrust), 0.0, 1.0)
+            self._forced_t[3] = t
+
+    # commands
+    def _ack(self, command: int, result: int, msg, reason: str | None = None) -> None:
+        self._mav.send(
+            self._mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent())
+        )
+        if reason:
+            self._statustext(M.MAV_SEVERITY_WARNING if result != M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_INFO, reason)
+
+    def _command(self, msg) -> None:
+        cmd = msg.command
+        p1, p2, p3 = msg.param1, msg.param2, msg.param3
+        if cmd == M.MAV_CMD_DO_SET_MODE:
+            res = self._do_set_mode(p1, p2, p3)
+            reason = getattr(self, "_reject_reason", None)
+            self._reject_reason = None
+            self._ack(cmd, res, msg, reason)
+        elif cmd == M.MAV_CMD_COMPONENT_ARM_DISARM:
+            if p1 >= 0.5:
+                self.armed = True
+                self._ack(cmd, M.MAV_RESULT_ACCEPTED, msg)
+            elif abs(p2 - ARDUPILOT_FORCE_DISARM) < 0.5:
+                self.armed = False
+                self._ack(cmd, M.MAV_RESULT_ACCEPTED, msg)
+            else:  # in the air: both autopilots refuse a disarm unless forced
+                res = M.MAV_RESULT_TEMPORARILY_REJECTED if self.px4 else M.MAV_RESULT_FAILED
+                self._ack(cmd, res, msg, "Disarm refused: vehicle is flying (use force 21196)")
+        elif cmd == M.MAV_CMD_GET_HOME_POSITION:
+            self._ack(cmd, M.MAV_RESULT_ACCEPTED, msg)
+            self._send_stream("home_position")
+        elif cmd == M.MAV_CMD_REQUEST_MESSAGE:
+            name = _STREAM_IDS.get(int(p1))
+            if name is None:
+                self._ack(cmd, M.MAV_RESULT_UNSUPPORTED, msg)
+            else:
+                self._ack(cmd, M.MAV_RESULT_ACCEPTED, msg)
+                self._send_stream(name)
+        elif cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
+            name = _STREAM_IDS.get(int(p1))
+            if name is None:
+                self._ack(cmd, M.MAV_RESULT_UNSUPPORTED, msg)
+                return
+            if p2 < 0:
+                hz = 0.0
+            elif p2 == 0:
+                hz = getattr(TelemetryRates(), name)
+            else:
+                hz = 1e6 / p2
+            setattr(self.rates, name, hz)
+            self._next.pop(name, None)
+            self._ack(cmd, M.MAV_RESULT_ACCEPTED, msg)
+        else:
+            self._ack(cmd, M.MAV_RESULT_UNSUPPORTED, msg)
+
+    def _do_set_mode(self, p1: float, p2: float, p3: float) -> int:
+        self._reject_reason = None
+        if not (int(p1) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED):
+            self._reject_reason = "Mode change refused: custom mode flag (param1 = 1) not set"
+            return M.MAV_RESULT_UNSUPPORTED if not self.px4 else M.MAV_RESULT_DENIED
+        if self.px4:
+            main, sub = int(round(p2)), int(round(p3))
+            if main not in PX4_MAIN_NAMES or (main == PX4_MAIN["AUTO"] and sub not in PX4_SUB_NAMES and sub != 0):
+                self._reject_reason = f"Mode change refused: unknown PX4 mode {main}/{sub}"
+                return M.MAV_RESULT_TEMPORARILY_REJECTED
+            if main == PX4_MAIN["OFFBOARD"] and self._behaviour != OFFBOARD and not self._offboard_available():
+                self._reject_reason = "Mode change refused: offboard setpoints not streaming (> 2 Hz for 1 s)"
+                return M.MAV_RESULT_TEMPORARILY_REJECTED
+            if main == PX4_MAIN["AUTO"] and sub == 0:
+                sub = PX4_AUTO_SUB["MISSION"]  # PX4: AUTO without a sub mode is MISSION
+            if px4_custom_mode(main, sub if main == PX4_MAIN["AUTO"] else 0) != self._custom_mode:
+                self._set_px4_mode(main, sub)  # re-selecting the current mode changes nothing
+            return M.MAV_RESULT_ACCEPTED
+        number = int(round(p2))
+        if number not in ARDUPLANE_MODES:
+            self._reject_reason = f"Mode change refused: unknown ArduPlane mode {number}"
+            return M.MAV_RESULT_FAILED
+        if number != self._custom_mode:
+            self._set_ap_mode(number)
+        return M.MAV_RESULT_ACCEPTED
+
+    # ------------------------------------------------------------------ output
+    def _statustext(self, severity: int, text: str) -> None:
+        self.statustexts.append((self.t if hasattr(self, "_k0") else 0.0, text))
+        if hasattr(self, "_mav"):
+            self._mav.send(self._mav.statustext_encode(severity, text.encode()[:50]))
+
+    def _due(self, name: str, hz: float) -> bool:
+        if hz <= 0:
+            return False
+        t = self._boot_t
+        nxt = self._next.get(name)
+        if nxt is None or t + 1e-9 >= nxt:
+            period = 1.0 / hz
+            nxt = t + period if nxt is None or t - nxt > period else nxt + period
+            self._next[name] = nxt
+            return True
+        return False
+
+    def _telemetry(self) -> None:
+        r = self.rates
+        for name in ("heartbeat", "attitude", "local_position", "global_position", "vfr_hud", "wind",
+                     "home_position", "sys_status", "system_time"):  # fmt: skip
+            if self._due(name, getattr(r, name)):
+                self._send_stream(name)
+        if self.target is not None:
+            if self._due("target_heartbeat", 1.0):
+                self._tmav.send(self._tmav.heartbeat_encode(
+                    self._target_type, M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE))  # fmt: skip
+            if self._due("target", self.target_rate_hz):
+                self._send_target()
+
+    def _send_stream(self, name: str) -> None:
+        st, mav, ms = self._st, self._mav, self._ms()
+        self._sent[name] = self._sent.get(name, 0) + 1
+        if name == "heartbeat":
+            ap = M.MAV_AUTOPILOT_PX4 if self.px4 else M.MAV_AUTOPILOT_ARDUPILOTMEGA
+            mav.send(mav.heartbeat_encode(M.MAV_TYPE_FIXED_WING, ap, self._base_mode(), self._custom_mode,
+                                          M.MAV_STATE_ACTIVE))  # fmt: skip
+        elif name == "attitude":
+            roll, pitch, yaw = st.euler
+            p, q, rr = (float(v) for v in st.pqr)
+            mav.send(mav.attitude_encode(ms, roll, pitch, yaw, p, q, rr))
+        elif name == "local_position":
+            x, y, z = (float(v) for v in st.position_ned)
+            vx, vy, vz = (float(v) for v in st.velocity_ned)
+            mav.send(mav.local_position_ned_encode(ms, x, y, z, vx, vy, vz))
+        elif name == "global_position":
+            vx, vy, vz = (float(v) for v in st.velocity_ned)
+            hdg = int(round(math.degrees(st.euler[2]) * 100.0)) % 36000
+            mav.send(mav.global_position_int_encode(
+                ms, int(round(st.lat_deg * 1e7)), int(round(st.lon_deg * 1e7)), int(round(st.alt_m * 1000.0)),
+                int(round((st.alt_m - self.home_lla[2]) * 1000.0)),
+                int(round(vx * 100)), int(round(vy * 100)), int(round(vz * 100)), hdg))  # fmt: skip
+        elif name == "vfr_hud":
+            v = st.velocity_ned
+            hdg = int(round(math.degrees(st.euler[2]))) % 360
+            mav.send(mav.vfr_hud_encode(st.airspeed, math.hypot(v[0], v[1]), hdg,
+                                        int(round(100 * st.throttle)), st.alt_m, -float(v[2])))  # fmt: skip
+        elif name == "wind":
+            wn, we, wd = (float(v) for v in st.wind_ned)
+            if self.px4:
+                mav.send(mav.wind_cov_encode(self._us(), wn, we, 0.0, 0.0, 0.0, st.alt_m, 0.0, 0.0))
+            else:
+                direction = math.degrees(math.atan2(-we, -wn)) % 360.0
+                mav.send(mav.wind_encode(direction, math.sqrt(wn * wn + we * we + wd * wd), wd))
+        elif name == "home_position":
+            lat, lon, alt = self.home_lla
+            mav.send(mav.home_position_encode(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
+                                              0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, self._us()))  # fmt: skip
+        elif name == "sys_status":
+            s = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+                 | M.MAV_SYS_STATUS_SENSOR_GPS | M.MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE)  # fmt: skip
+            mav.send(mav.sys_status_encode(s, s, s, 100, 12600, 500, 90, 0, 0, 0, 0, 0, 0))
+        elif name == "system_time":
+            mav.send(mav.system_time_encode(self.unix0_us + self._us(), ms))
+
+    def _send_target(self) -> None:
+        ts = self.target.state(self.t)
+        n, e, d = (float(v) for v in ts.position)
+        lat, lon, alt = ned_to_geodetic_fast(self.origin, n, e, d)
+        q = matrix_to_quat_wxyz(ts.R_T_I)
+        vel = [float(v) for v in ts.velocity]
+        acc = [float(v) for v in ts.acceleration]
+        rates = [float(v) for v in ts.omega_T]
+        tm, ms = self._tmav, self._ms()
+        lat7, lon7 = int(round(lat * 1e7)), int(round(lon * 1e7))
+        tm.send(tm.follow_target_encode(ms, 15, lat7, lon7, alt, vel, acc, list(q), rates, [0.0, 0.0, 0.0], 0))
+        yaw = math.atan2(ts.R_T_I[1, 0], ts.R_T_I[0, 0])
+        tm.send(tm.global_position_int_encode(
+            ms, lat7, lon7, int(round(alt * 1000)), int(round((alt - self.home_lla[2]) * 1000)),
+            int(round(vel[0] * 100)), int(round(vel[1] * 100)), int(round(vel[2] * 100)),
+            int(round(math.degrees(yaw) * 100)) % 36000))  # fmt: skip
+
+    def _flush(self) -> None:
+        q, t = self._out, self._boot_t + 1e-9
+        wrote = False
+        while q and q[0][0] <= t:
+            _, buf = q.popleft()
+            try:
+                self.conn.write(buf)
+                wrote = True
+            except OSError:
+                pass
+        if wrote and self.has_peer():
+            self._answered = False
+
+    # ------------------------------------------------------------------ truth
+    def _record(self) -> None:
+        if not self.record:
+            return
+        st = self._st
+        tr = self._truth
+        with self._lock:
+            tr["t"].append(self.t)
+            tr["time_boot_s"].append(self._boot_t)
+            tr["position_ned"].append(st.position_ned.copy())
+            tr["velocity_ned"].append(st.velocity_ned.copy())
+            tr["euler"].append(st.euler)
+            tr["airspeed"].append(st.airspeed)
+            tr["wind_ned"].append(st.wind_ned.copy())
+            tr["throttle"].append(st.throttle)
+            tr["mode"].append(self._custom_mode)
+            if self.target is not None:
+                ts = self.target.state(self.t)
+                tr["target_position"].append(np.asarray(ts.position, float))
+                tr["target_velocity"].append(np.asarray(ts.velocity, float))
+
+    def truth(self) -> dict[str, np.ndarray]:
+        """Plant truth at frame (telemetry) rate: t (s since ready), time_boot_s, position_ned (N,3),
+        velocity_ned (N,3), euler (N,3: roll, pitch, yaw rad), airspeed (N), wind_ned (N,3),
+        throttle (N), mode (N, custom_mode), and target_position / target_velocity (N,3) with a target."""
+        with self._lock:
+            out = {}
+            for k, v in self._truth.items():
+                if not v:
+                    out[k] = np.zeros((0, 3)) if k.startswith("target") else np.zeros(0)
+                else:
+                    out[k] = np.array(v, dtype=float if k != "mode" else np.int64)
+            return out
+
+    def sent_counts(self) -> dict[str, int]:
+        """Messages produced per stream so far (for tests and diagnostics)."""
+        return dict(self._sent)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m sim.vehicle --flavour px4 --url udpin:127.0.0.1:14540 --duration 600``."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description="Simulated fixed-wing MAVLink vehicle (SIL)")
+    ap.add_argument("--flavour", choices=("px4", "ardupilot"), default="px4")
+    ap.add_argument("--url", default="udpin:127.0.0.1:14540")
+    ap.add_argument("--plant", choices=("jsbsim", "kinematic"), default="jsbsim")
+    ap.add_argument("--clock", choices=("lockstep", "realtime"), default="lockstep")
+    ap.add_argument("--duration", type=float, default=math.inf, help="sim seconds (default: forever)")
+    ap.add_argument("--target", choices=("none", "paper", "stationary"), default="none")
+    a = ap.parse_args(argv)
+    target = None
+    if a.target != "none":
+        from mpf_mavlink.target import PaperProfile, Stationary
+
+        target = PaperProfile() if a.target == "paper" else Stationary()
+    v = SimVehicle(a.flavour, a.url, plant=a.plant, clock=a.clock, target=target)
+    print(f"SimVehicle {a.flavour} on {a.url} ({a.plant}, {a.clock}) in {v.mode_name}", flush=True)
+    try:
+        v.run(a.duration)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        v.close()
+    print(f"sim {v.t:.1f} s, real-time factor {v.real_time_factor:.1f}", flush=True)
+    return 0
+
+
+__all__ = [
+    "SimVehicle",
+    "TelemetryRates",
+    "PX4_MAIN",
+    "PX4_AUTO_SUB",
+    "ARDUPLANE_MODES",
+    "px4_custom_mode",
+    "px4_decode_custom_mode",
+]
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
