@@ -8,6 +8,8 @@ in NED), of which the part normal to w1 is lift; the bank is the angle of the li
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Any
 
 from .frames import GRAVITY_M_S2
 
@@ -39,3 +41,169 @@ def bank_and_load_factor(w1: Vec, accel: Vec, g: float = GRAVITY_M_S2) -> tuple[
     bank = math.atan2(fx * rx + fy * ry + fz * rz, -(fx * nx + fy * ny + fz * nz))
     load = math.sqrt(fx * fx + fy * fy + fz * fz) / g
     return bank, load
+
+
+# ----------------------------------------------------------------------------- setpoints
+# Everything below turns the law's command into what an autopilot accepts. Pure: the only
+# memory (the airspeed integrator) is passed in and returned as an explicit AdapterState.
+
+
+
+@dataclass(frozen=True)
+class AdapterParams:
+    """Limits and gains of the setpoint adapter (SI units, radians).
+
+    tau_roll_s: first-order time constant to reach the bank set-point (PX4 roll rate);
+    tau_pitch_s: look-ahead on the flight-path-angle rate (ArduPlane pitch);
+    trim_pitch_rad: angle of attack at trim (pitch = flight-path angle + trim_pitch);
+    airspeed hold: thrust = trim_thrust + kp e + ki integral(e) + k_n (n - 1), e = v_sp - v.
+    """
+
+    max_bank_rad: float = 0.785398
+    tau_roll_s: float = 0.5
+    tau_pitch_s: float = 1.0
+    max_roll_rate_rad_s: float = 1.2217  # 70 deg/s (PX4 FW_R_RMAX)
+    max_pitch_rate_rad_s: float = 1.0472  # 60 deg/s
+    max_yaw_rate_rad_s: float = 0.8727  # 50 deg/s
+    min_pitch_rad: float = -0.35
+    max_pitch_rad: float = 0.35
+    trim_pitch_rad: float = 0.03
+    airspeed_sp_m_s: float = 15.0
+    trim_thrust: float = 0.5
+    thrust_min: float = 0.1
+    thrust_max: float = 1.0
+    airspeed_kp: float = 0.05  # thrust per m/s
+    airspeed_ki: float = 0.02  # thrust per (m/s s)
+    integrator_limit: float = 0.3  # |ki integral(e)| <= this (thrust units)
+    load_factor_ff: float = 0.2  # thrust per g of extra load (n - 1)
+
+
+@dataclass(frozen=True)
+class AdapterState:
+    """Memory of the airspeed hold: the integrator term (thrust units)."""
+
+    integ: float = 0.0
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    """What is sent, for either flavour.
+
+    body_rates_frd: (p, q, r) rad/s (PX4 type_mask 128; carried for logs with ArduPlane);
+    q_wxyz: attitude quaternion (w, x, y, z), roll = bank, yaw = 0 (ArduPlane GUIDED);
+    thrust: 0..1; bank_rad, pitch_rad: the attitude set-point; load_factor: n (g);
+    safe: True when a non-finite input forced the wings-level, trim-thrust set-point.
+    """
+
+    body_rates_frd: tuple[float, float, float]
+    q_wxyz: tuple[float, float, float, float]
+    thrust: float
+    bank_rad: float
+    pitch_rad: float
+    load_factor: float
+    safe: bool = False
+
+
+def _clip(x: float, lo: float, hi: float) -> float:
+    return lo if x < lo else hi if x > hi else x
+
+
+def _euler_to_quat_wxyz(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    # ZYX, the same convention as frames.euler_to_quat_wxyz (kept scalar for the hot path).
+    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
+    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
+    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+    return (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
+
+
+def heading_and_path_angle_rates(w1: Vec, omega: Vec) -> tuple[float, float]:
+    """(chi_dot, gamma_dot) rad/s of the direction w1 = [cos g cos c, cos g sin c, -sin g]
+    turning at omega (NED, rad/s): w1_dot = omega x w1. Vertical w1 gives (0, gamma_dot)."""
+    dx = omega[1] * w1[2] - omega[2] * w1[1]
+    dy = omega[2] * w1[0] - omega[0] * w1[2]
+    dz = omega[0] * w1[1] - omega[1] * w1[0]
+    h2 = w1[0] * w1[0] + w1[1] * w1[1]
+    h = math.sqrt(h2)
+    if h < 1e-6:
+        return 0.0, 0.0
+    return (w1[0] * dy - w1[1] * dx) / h2, -dz / h
+
+
+def safe_setpoint(p: AdapterParams, roll: float = 0.0) -> Setpoint:
+    """Wings level, trim pitch, trim thrust; the roll rate levels the wings when roll is known."""
+    rr = -roll / p.tau_roll_s if math.isfinite(roll) else 0.0
+    rr = _clip(rr, -p.max_roll_rate_rad_s, p.max_roll_rate_rad_s)
+    pitch = _clip(p.trim_pitch_rad, p.min_pitch_rad, p.max_pitch_rad)
+    thr = _clip(p.trim_thrust, p.thrust_min, p.thrust_max)
+    return Setpoint((rr, 0.0, 0.0), _euler_to_quat_wxyz(0.0, pitch, 0.0), thr, 0.0, pitch, 1.0, True)
+
+
+def adapt(
+    omega_w1_I: Vec,
+    airspeed: float,
+    R_B_N: list[list[float]] | Any,
+    w1: Vec,
+    dt: float,
+    params: AdapterParams,
+    state: AdapterState = AdapterState(),
+    g: float = GRAVITY_M_S2,
+) -> tuple[Setpoint, AdapterState]:
+    """The law's command -> body rates (PX4), quaternion (ArduPlane) and thrust.
+
+    omega_w1_I: angular velocity of w1 (NED, rad/s); airspeed (m/s); R_B_N: current attitude
+    (body FRD -> NED, 3x3); w1: current unit air-relative velocity (NED); dt (s): time since
+    the previous call (for the integrator; 0 freezes it).
+    Bank: from the specific force of a = v (omega x w1) (gravity included), clipped to
+    +-max_bank. Body rates: p = phid - sin(theta) psid, q = cos(phi) thetad + cos(theta)
+    sin(phi) psid, r = -sin(phi) thetad + cos(phi) cos(theta) psid with phid =
+    (bank_sp - phi) / tau_roll and psid, thetad the heading and flight-path-angle rates of w1.
+    Any non-finite value gives :func:`safe_setpoint` (flag ``safe``) and keeps the integrator.
+    """
+    R = R_B_N.tolist() if hasattr(R_B_N, "tolist") else R_B_N
+    try:
+        roll = math.atan2(R[2][1], R[2][2])
+        pitch = math.asin(_clip(-R[2][0], -1.0, 1.0))
+        vals = (*omega_w1_I, airspeed, *w1, dt, roll, pitch)
+        if not all(math.isfinite(v) for v in vals) or airspeed <= 0.0:
+            return safe_setpoint(params, roll), state
+    except (TypeError, ValueError, IndexError):
+        return safe_setpoint(params), state
+    v = airspeed
+    ox, oy, oz = omega_w1_I
+    accel = (
+        v * (oy * w1[2] - oz * w1[1]),
+        v * (oz * w1[0] - ox * w1[2]),
+        v * (ox * w1[1] - oy * w1[0]),
+    )
+    bank, n = bank_and_load_factor(w1, accel, g)
+    bank = _clip(bank, -params.max_bank_rad, params.max_bank_rad)
+    chid, gamd = heading_and_path_angle_rates(w1, omega_w1_I)
+    sphi, cphi = math.sin(roll), math.cos(roll)
+    sth, cth = math.sin(pitch), math.cos(pitch)
+    phid = (bank - roll) / params.tau_roll_s
+    p = _clip(phid - sth * chid, -params.max_roll_rate_rad_s, params.max_roll_rate_rad_s)
+    q = _clip(cphi * gamd + cth * sphi * chid, -params.max_pitch_rate_rad_s, params.max_pitch_rate_rad_s)
+    r = _clip(-sphi * gamd + cphi * cth * chid, -params.max_yaw_rate_rad_s, params.max_yaw_rate_rad_s)
+    # Pitch: the flight-path angle of w1 (= theta - alpha) advanced by tau_pitch, plus the trim
+    # angle of attack. (Adding the trim to the *measured* pitch would integrate it each cycle.)
+    gamma = math.asin(_clip(-w1[2], -1.0, 1.0))
+    pitch_sp = _clip(gamma + gamd * params.tau_pitch_s + params.trim_pitch_rad, params.min_pitch_rad, params.max_pitch_rad)
+    # Airspeed hold with conditional integration (anti-windup): the integrator moves only when
+    # the output is not saturated in the direction the error pushes.
+    e = params.airspeed_sp_m_s - v
+    ff = params.load_factor_ff * (n - 1.0)
+    base = params.trim_thrust + params.airspeed_kp * e + ff
+    raw = base + state.integ
+    integ = state.integ
+    if dt > 0.0 and not ((raw >= params.thrust_max and e > 0) or (raw <= params.thrust_min and e < 0)):
+        integ = _clip(integ + params.airspeed_ki * e * dt, -params.integrator_limit, params.integrator_limit)
+    thrust = _clip(base + integ, params.thrust_min, params.thrust_max)
+    sp = Setpoint((p, q, r), _euler_to_quat_wxyz(bank, pitch_sp, 0.0), thrust, bank, pitch_sp, n)
+    if not all(math.isfinite(x) for x in (p, q, r, thrust, bank, pitch_sp, *sp.q_wxyz)):
+        return safe_setpoint(params, roll), state
+    return sp, AdapterState(integ)

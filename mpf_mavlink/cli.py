@@ -126,6 +126,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl = sub.add_parser("plot", help="re-draw the figures of a run directory", description="Re-draw the PNG figures of a run directory (sim, run or replay).")
     pl.add_argument("run_dir", metavar="RUN_DIR", type=Path)
     pl.set_defaults(func=cmd_plot)
+    from .bridge_cli import add_run_parser
+
+    add_run_parser(sub)
     return p
 
 

@@ -1,0 +1,768 @@
+"""The MAVLink bridge: telemetry -> VehicleState -> MPF law -> adapter -> SET_ATTITUDE_TARGET,
+wrapped in the offboard life cycle.
+
+States (``BridgeResult.state_reached`` is the furthest one):
+  CONNECTING -> WAIT_HEARTBEAT -> CHECKS -> INIT -> PRESTREAM -> ENGAGE -> TRACKING -> HANDBACK -> DONE
+
+- CHECKS runs :func:`mpf_mavlink.preflight.run_checks` from the vehicle's first estimate; a
+  failure refuses to engage (no mode request is ever sent) and exits 3.
+- PRESTREAM streams setpoints (one per ATTITUDE sample, re-sent when telemetry is slower than
+  ``mavlink.min_setpoint_rate_hz``) for ``mavlink.prestream_s`` at that rate before asking for
+  OFFBOARD (PX4 main 6) / GUIDED (ArduPlane 15).
+- ENGAGE is confirmed only by an accepted COMMAND_ACK AND a HEARTBEAT in that mode.
+- TRACKING: one law evaluation and one setpoint per ATTITUDE sample; s integrates sdot over
+  the autopilot's time stamps (never the wall clock).
+- Exits: mission duration, Ctrl-C / SIGTERM / exception (hand back to the hold mode while
+  streaming wings-level setpoints, confirm with ACK + HEARTBEAT); telemetry or live target
+  stale (stop commanding at once, then request the hold mode); someone else changed the mode
+  (stop commanding, no mode request: never fight the pilot).
+
+The wall clock (time.monotonic) is used only for link timeouts, rates and the resend timer.
+Records: ``mavlink.tlog`` (both directions), ``timeseries.csv`` (TRACKING rows, what the law
+saw), ``setpoints.csv``, ``metrics.json`` (figures, counters, exit) and the plots.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+import signal
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import (
+    bridge_config,  # noqa: F401  (registers the mavlink/adapter sections)
+    so3,
+)
+from .adapter import AdapterParams, AdapterState, Setpoint, adapt, safe_setpoint
+from .config import Config
+from .errors import MpfError
+from .estimator import Estimate, Estimator, EstimatorParams
+from .frames import matrix_to_euler
+from .guidance.law import MpfCommand, MpfDiagnostics, mpf_law
+from .mavlink import (
+    Flavour,
+    decode,
+    dialect,
+    enable_signing,
+    encode_arm,
+    encode_set_attitude_target_quat,
+    encode_set_attitude_target_rates,
+    encode_set_mode,
+    flavour_from_heartbeat,
+    is_offboard,
+    load_signing_key,
+    mode_name,
+    open_link,
+    wait_heartbeat,
+)
+from .mavlink.modes import arduplane_mode_from_name, px4_decode_custom_mode, px4_mode_from_name
+from .rundir import COLUMNS, RunTable, compute_metrics, prepare_out_dir, row_from, write_run
+from .scenario import build_extensions, build_gains, build_path, build_target
+from .target import TargetState
+
+MAV_CMD_DO_SET_MODE = 176
+MAV_CMD_COMPONENT_ARM_DISARM = 400
+
+
+class State(enum.IntEnum):
+    CONNECTING = 0
+    WAIT_HEARTBEAT = 1
+    CHECKS = 2
+    INIT = 3
+    PRESTREAM = 4
+    ENGAGE = 5
+    TRACKING = 6
+    HANDBACK = 7
+    DONE = 8
+
+
+# Exit codes (the CLI returns them): 0 mission flown and handed back; 3 a check failed;
+# 4 a safety exit (telemetry/target lost, pilot took over, engage refused, hand-back not
+# confirmed); 130 Ctrl-C; 143 SIGTERM; 1 an unexpected exception (re-raised after hand-back).
+EXIT_OK, EXIT_CHECK, EXIT_SAFETY, EXIT_SIGINT, EXIT_SIGTERM = 0, 3, 4, 130, 143
+
+
+class _Stop(Exception):
+    """A planned exit of the streaming phases."""
+
+    def __init__(self, reason: str, kind: str) -> None:
+        super().__init__(reason)
+        self.reason, self.kind = reason, kind  # kind: duration|telemetry|target|pilot|engage
+
+
+class _Terminated(BaseException):
+    """SIGTERM, delivered like KeyboardInterrupt."""
+
+
+@dataclass(frozen=True)
+class BridgeOptions:
+    """What the command line adds to the config."""
+
+    url: str
+    out_dir: Path
+    flavour: str | None = None  # None: mavlink.flavour
+    duration_s: float | None = None  # None: mavlink.mission_duration_s
+    heartbeat_timeout_s: float | None = None
+    arm: bool | None = None
+    plots: bool | None = None
+
+
+@dataclass
+class BridgeResult:
+    state_reached: str  # furthest life-cycle state (CONNECTING .. TRACKING)
+    exit_reason: str
+    exit_code: int
+    flavour: str = "unknown"
+    tracked_s: float = 0.0
+    engaged: bool = False
+    handback_requested: bool = False
+    handback_confirmed: bool = False
+    checks: list[str] = field(default_factory=list)
+    counters: dict[str, Any] = field(default_factory=dict)
+    metrics: dict[str, Any] = field(default_factory=dict)
+    out_dir: Path | None = None
+    final_state: str = "CONNECTING"  # DONE after a stop or hand-back
+
+    def summary(self) -> str:
+        c = self.counters
+        lines = [
+            "",
+            f"state reached     {self.state_reached} (final: {self.final_state})",
+            f"exit              {self.exit_reason} (code {self.exit_code})",
+            f"autopilot         {self.flavour}",
+            f"tracked           {self.tracked_s:.2f} s",
+            f"hand-back         {'confirmed' if self.handback_confirmed else ('requested, not confirmed' if self.handback_requested else 'not requested')}",
+            f"setpoints sent    {c.get('setpoints_sent', 0)} (re-sent {c.get('setpoints_resent', 0)}, safe {c.get('safe_setpoints', 0)})",
+            f"law evaluations   {c.get('law_evals', 0)}",
+            f"rx/tx packets     {c.get('rx_packets', 0)}/{c.get('tx_packets', 0)}; rejected: "
+            f"{c.get('rejected_sysid', 0)} foreign ids, {c.get('rejected_unsigned', 0)} unsigned, "
+            f"{c.get('rejected_bad_signature', 0)} bad signatures, {c.get('bad_data', 0)} bad frames",
+        ]
+        m = self.metrics
+        for k, label, unit in (
+            ("convergence_time_s", "convergence time", "s"),
+            ("steady_rms_m", "steady RMS |pt|", "m"),
+            ("max_rate_cmd_rad_s", "peak rate command", "rad/s"),
+            ("final_pt_m", "final |pt|", "m"),
+        ):
+            v = m.get(k)
+            lines.append(f"{label:<17} {'n/a' if v is None else f'{v:.4g}'} {unit}")
+        if self.out_dir is not None:
+            lines.append(f"run directory     {self.out_dir}  (mavlink.tlog, timeseries.csv, metrics.json)")
+        return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- targets
+class ScriptedTarget:
+    """The config's target motion, at mission time t (s)."""
+
+    def __init__(self, motion: Any) -> None:
+        self.motion = motion
+
+    def update(self, sample: Any, t_mission: float | None) -> None:  # pragma: no cover - nothing to take
+        return None
+
+    def state(self, t: float) -> TargetState | str:
+        return self.motion.state(t)
+
+
+def _heading_frame(vel: np.ndarray, acc: np.ndarray, fallback_yaw: float) -> tuple[np.ndarray, np.ndarray]:
+    """Level heading frame of a target (x along the horizontal velocity) and its turn rate."""
+    vh2 = float(vel[0] ** 2 + vel[1] ** 2)
+    if vh2 > 0.25:  # > 0.5 m/s: the velocity defines the heading
+        yaw = math.atan2(vel[1], vel[0])
+        chid = float(vel[0] * acc[1] - vel[1] * acc[0]) / vh2
+    else:
+        yaw, chid = fallback_yaw, 0.0
+    return so3.rot_z(yaw), np.array([0.0, 0.0, chid])
+
+
+class LiveTarget:
+    """A target over MAVLink: FOLLOW_TARGET, or GLOBAL_POSITION_INT (+ ATTITUDE) from one id.
+
+    Samples are stamped with the vehicle's mission time at receipt (the sender's clock is not
+    the autopilot's) and extrapolated to the control time; older than ``timeout_s``: stale.
+    """
+
+    def __init__(self, est: Estimator, timeout_s: float) -> None:
+        self.est = est
+        self.timeout_s = timeout_s
+        self.base: TargetState | None = None
+        self.att: Any = None
+        self.att_stamp = -math.inf
+        self.samples = 0
+
+    def update(self, sample: Any, t_mission: float | None) -> None:
+        if t_mission is None:
+            return
+        name = type(sample).__name__
+        if name == "AttitudeSample":
+            self.att, self.att_stamp = sample, t_mission
+            return
+        if name not in ("FollowTargetSample", "GlobalPositionSample"):
+            return
+        pos = self.est.to_local(sample.lat_deg, sample.lon_deg, sample.alt_amsl_m)
+        if pos is None:
+            return
+        vel = np.asarray(sample.vel_ned if sample.vel_ned is not None else np.zeros(3), float)
+        acc = np.zeros(3)
+        R = omega = None
+        if name == "FollowTargetSample":
+            if sample.acc_ned is not None:
+                acc = np.asarray(sample.acc_ned, float)
+            if sample.R_B_N is not None:
+                R = np.asarray(sample.R_B_N, float)
+                omega = np.asarray(sample.rates_frd, float) if sample.rates_frd is not None else np.zeros(3)
+            fallback = 0.0
+        else:
+            fallback = sample.heading_rad if sample.heading_rad is not None else 0.0
+            if self.att is not None and t_mission - self.att_stamp <= self.timeout_s:
+                R = np.asarray(self.att.R_B_N, float)
+                omega = np.asarray(self.att.rates_frd, float)
+        if R is None:
+            if self.base is not None and name == "GlobalPositionSample":
+                # acceleration from successive velocities keeps the heading frame's turn rate
+                dt = t_mission - self.base.t
+                if 0.02 < dt < 1.0:
+                    acc = (vel - self.base.velocity) / dt
+            R, omega = _heading_frame(vel, acc, fallback)
+        self.base = TargetState(t_mission, pos, vel, acc, R, omega, np.zeros(3))
+        self.samples += 1
+
+    def state(self, t: float) -> TargetState | str:
+        if self.base is None:
+            return "no live target yet"
+        age = t - self.base.t
+        if age > self.timeout_s:
+            return f"live target stale ({age:.2f} s old)"
+        return self.base.extrapolate(t)
+
+
+# ----------------------------------------------------------------------------- the bridge
+class Bridge:
+    """One run against one vehicle. Use :func:`run_bridge`."""
+
+    def __init__(self, cfg: Config, opts: BridgeOptions, log: Callable[[str], None] = print) -> None:
+        self.cfg = cfg
+        self.opts = opts
+        self.log = log
+        m = cfg.section("mavlink")
+        if opts.flavour is not None:
+            m = dataclasses.replace(m, flavour=opts.flavour)
+        if opts.duration_s is not None:
+            m = dataclasses.replace(m, mission_duration_s=float(opts.duration_s))
+        if opts.heartbeat_timeout_s is not None:
+            m = dataclasses.replace(m, heartbeat_timeout_s=float(opts.heartbeat_timeout_s))
+        if opts.arm is not None:
+            m = dataclasses.replace(m, arm=bool(opts.arm))
+        if opts.plots is not None:
+            m = dataclasses.replace(m, plots=bool(opts.plots))
+        self.m = m
+        a = cfg.section("adapter")
+        v = cfg.vehicle
+        self.ad_params = AdapterParams(
+            max_bank_rad=v.max_bank_rad, airspeed_sp_m_s=v.airspeed_m_s,
+            **{f.name: getattr(a, f.name) for f in dataclasses.fields(a)},
+        )  # fmt: skip
+        origin = None
+        if m.origin_lat_deg is not None and m.origin_lon_deg is not None:
+            origin = (m.origin_lat_deg, m.origin_lon_deg, m.origin_alt_m or 0.0)
+        self.est = Estimator(
+            EstimatorParams(m.attitude_stale_s, m.position_stale_s, m.airspeed_stale_s, m.wind_stale_s, m.wind_filter_tau_s, origin=origin)
+        )  # fmt: skip
+        self.live = cfg.target.type == "mavlink"
+        if self.live and m.target_sysid is None:
+            raise MpfError(f"{cfg.source}: target.type mavlink needs mavlink.target_sysid")
+        self.target: Any = LiveTarget(self.est, m.target_timeout_s) if self.live else ScriptedTarget(build_target(cfg.target))
+        self.path = build_path(cfg.path)
+        self.gains = build_gains(cfg)
+        self.ext = build_extensions(cfg)
+
+        self.link: Any = None
+        self.state = State.CONNECTING
+        self.furthest = State.CONNECTING  # furthest life-cycle state before HANDBACK/DONE
+        self.flavour = Flavour.UNKNOWN
+        self.vehicle_compid = 1
+        self.hb: Any = None  # latest autopilot HeartbeatSample
+        self.acks: list[Any] = []
+        self.streaming = False
+        self.engaged = False
+        self.s = 0.0
+        self.t_prev: float | None = None
+        self.sdot_prev = 0.0
+        self.w1_prev: np.ndarray | None = None
+        self.ad_state = AdapterState()
+        self.last_sp: Setpoint | None = None
+        self.last_time_boot_ms = 0
+        self.last_att_mono = -math.inf
+        self.last_good_mono = -math.inf
+        self.last_send_mono = -math.inf
+        self.last_hb_tx_mono = -math.inf
+        self.first_send_mono: float | None = None
+        self.prestream_sends = 0
+        self.why_not = ""
+        self.t_engage: float | None = None
+        self.t_last: float | None = None
+        self.table = RunTable()
+        self.sp_rows: list[list[float]] = []
+        self.n = {"setpoints_sent": 0, "setpoints_resent": 0, "safe_setpoints": 0, "law_evals": 0, "mode_requests": 0}
+
+    # -- I/O helpers -------------------------------------------------------------------------
+    def _dispatch(self, msg: Any) -> None:
+        src = msg.get_srcSystem()
+        sample = decode(msg)
+        if sample is None:
+            return
+        name = type(sample).__name__
+        rx = getattr(msg, "_timestamp", None)
+        if src == self.m.vehicle_sysid:
+            if name == "HeartbeatSample":
+                if sample.autopilot == dialect.MAV_AUTOPILOT_INVALID:
+                    return  # a GCS or companion on the same system id
+                self.hb = sample
+                if self.engaged and not is_offboard(self.flavour, sample):
+                    raise _Stop(f"mode changed to {mode_name(self.flavour, sample)} by someone else: stopped commanding, not fighting it", "pilot")
+                return
+            if name == "CommandAckSample":
+                self.acks.append(sample)
+                return
+            if self.est.update(sample, rx):
+                self.last_att_mono = time.monotonic()
+                if self.streaming and self.state < State.HANDBACK:
+                    self._control_step(sample)
+        elif self.live and src == self.m.target_sysid:
+            self.target.update(sample, self._mission_time_at(rx))
+
+    def _mission_time_at(self, rx: float | None) -> float | None:
+        a = self.est.att
+        if a is None or rx is None or self.est.att_rx is None:
+            return None
+        return a.t_boot_s + (rx - self.est.att_rx) - self.est.t0
+
+    def _send(self, msg: Any) -> None:
+        self.link.send(msg)
+
+    def _periodic(self) -> None:
+        now = time.monotonic()
+        if now - self.last_hb_tx_mono >= 1.0:
+            self.last_hb_tx_mono = now
+            self.link.send_heartbeat()
+        if not self.streaming:
+            return
+        period = 1.0 / self.m.min_setpoint_rate_hz
+        # re-send only while the last ATTITUDE is young enough that the last re-send still
+        # falls within telemetry_timeout_s of it: commands never outlive the telemetry by more
+        fresh = now - self.last_att_mono + period <= self.m.telemetry_timeout_s
+        if self.state == State.HANDBACK:  # wings-level setpoints until the hold mode is confirmed
+            if fresh and self.last_sp is not None and now - self.last_send_mono >= period:
+                self._send_setpoint(self.last_sp, self.last_time_boot_ms)
+                self.n["setpoints_resent"] += 1
+            return
+        if now - self.last_att_mono > self.m.telemetry_timeout_s:
+            raise _Stop(f"telemetry lost: no ATTITUDE for {now - self.last_att_mono:.2f} s; stopped commanding", "telemetry")
+        if now - self.last_good_mono > self.m.telemetry_timeout_s:
+            kind = "target" if "target" in self.why_not else "telemetry"
+            raise _Stop(f"{self.why_not}; stopped commanding", kind)
+        if fresh and self.last_sp is not None and now - self.last_send_mono >= period:
+            self._send_setpoint(self.last_sp, self.last_time_boot_ms)
+            self.n["setpoints_resent"] += 1
+
+    def _spin(self, timeout_s: float, until: Callable[[], bool] | None = None) -> bool:
+        """Pump messages (streaming setpoints when on) until ``until()`` or the timeout."""
+        t_end = time.monotonic() + timeout_s
+        while True:
+            if until is not None and until():
+                return True
+            now = time.monotonic()
+            if now >= t_end:
+                return False
+            wait = min(t_end - now, 0.01)
+            if self.streaming:
+                wait = min(wait, max(0.0, self.last_send_mono + 1.0 / self.m.min_setpoint_rate_hz - now))
+            msg = self.link.recv(wait)
+            if msg is not None:
+                self._dispatch(msg)
+            self._periodic()
+
+    # -- control -----------------------------------------------------------------------------
+    def _control_step(self, att: Any) -> None:
+        est, why = self.est.estimate()
+        if est is None:
+            self.why_not = why
+            return
+        vs = est.vehicle
+        t = vs.t
+        tgt = self.target.state(t)
+        if isinstance(tgt, str):
+            self.why_not = tgt
+            return
+        dt = 0.0
+        if self.t_prev is not None:
+            dt = t - self.t_prev
+            if dt <= 0.0:
+                return  # duplicate or out-of-order sample: already acted on that instant
+            self.s += self.sdot_prev * dt
+        cmd, diag = mpf_law(self.s, vs, tgt, self.path, self.gains, self.ext, diagnostics=True)
+        self.n["law_evals"] += 1
+        w1 = vs.R_W_I[:, 0]
+        sp, self.ad_state = adapt(cmd.omega_w1_I, vs.airspeed, est.R_B_N, (float(w1[0]), float(w1[1]), float(w1[2])), dt, self.ad_params, self.ad_state)
+        if not math.isfinite(cmd.sdot):
+            sp = safe_setpoint(self.ad_params)
+        self.t_prev = t
+        self.sdot_prev = cmd.sdot if math.isfinite(cmd.sdot) else 0.0
+        self.t_last = t
+        tb_ms = int(round(att.t_boot_s * 1000.0))
+        self._send_setpoint(sp, tb_ms)
+        self.last_sp, self.last_time_boot_ms = sp, tb_ms
+        self.last_good_mono = time.monotonic()
+        if self.state == State.TRACKING and diag is not None:
+            self._record(est, tgt, cmd, diag, w1, dt, sp)
+            if self.t_engage is not None and t - self.t_engage >= self.m.mission_duration_s:
+                raise _Stop(f"mission duration {self.m.mission_duration_s:g} s reached", "duration")
+        self.w1_prev = np.array(w1)
+
+    def _record(self, est: Estimate, tgt: TargetState, cmd: MpfCommand, diag: MpfDiagnostics, w1: np.ndarray, dt: float, sp: Setpoint) -> None:
+        vs = est.vehicle
+        w_act = (0.0, 0.0)
+        if self.w1_prev is not None and dt > 0:
+            w1d = (w1 - self.w1_prev) / dt  # logging only: the law never sees this difference
+            w_act = (-float(w1d @ vs.R_W_I[:, 2]), float(w1d @ vs.R_W_I[:, 1]))
+        self.table.append(row_from(diag, vs.position, (cmd.w2, cmd.w3), w_act, cmd.sdot, tgt.position, tgt.R_T_I, vs.wind))
+        self.sp_rows.append([vs.t, *sp.body_rates_frd, *sp.q_wxyz, sp.thrust, sp.bank_rad, sp.pitch_rad, sp.load_factor, 1.0 if sp.safe else 0.0])
+
+    def _send_setpoint(self, sp: Setpoint, time_boot_ms: int) -> None:
+        if sp.safe:
+            self.n["safe_setpoints"] += 1
+        try:
+            if self.flavour is Flavour.PX4:
+                msg = encode_set_attitude_target_rates(self.link.mav, time_boot_ms, self.m.vehicle_sysid, self.vehicle_compid, *sp.body_rates_frd, sp.thrust)
+            else:
+                msg = encode_set_attitude_target_quat(self.link.mav, time_boot_ms, self.m.vehicle_sysid, self.vehicle_compid, sp.q_wxyz, sp.thrust, sp.body_rates_frd)
+        except ValueError:  # the adapter already guarantees finite values; belt and braces
+            sp = safe_setpoint(self.ad_params)
+            self.n["safe_setpoints"] += 1
+            return self._send_setpoint(sp, time_boot_ms)
+        self._send(msg)
+        now = time.monotonic()
+        self.last_send_mono = now
+        self.n["setpoints_sent"] += 1
+        if self.state == State.PRESTREAM:
+            if self.first_send_mono is None:
+                self.first_send_mono = now
+            self.prestream_sends += 1
+
+    # -- modes -------------------------------------------------------------------------------
+    def _mode_is(self, name: str) -> bool:
+        hb = self.hb
+        if hb is None or not (hb.base_mode & 1):
+            return False
+        if self.flavour is Flavour.PX4:
+            main, sub = px4_mode_from_name(name)
+            got = px4_decode_custom_mode(hb.custom_mode)
+            return got[0] == main and (main != 4 or got[1] == sub)
+        return hb.custom_mode == arduplane_mode_from_name(name)
+
+    def _request_mode(self, name: str, confirm: Callable[[], bool]) -> tuple[bool, str]:
+        """DO_SET_MODE with retries; confirmed by an accepted ACK and ``confirm()`` (heartbeat)."""
+        last = "no COMMAND_ACK"
+        for attempt in range(self.m.mode_retries):
+            self.acks.clear()
+            self._send(encode_set_mode(self.link.mav, self.m.vehicle_sysid, self.vehicle_compid, self.flavour, name))
+            self.n["mode_requests"] += 1
+            acked: list[bool] = []
+
+            def done(acked: list[bool] = acked) -> bool:
+                for a in self.acks:
+                    if a.command == MAV_CMD_DO_SET_MODE:
+                        acked.append(a.accepted)
+                        nonlocal last
+                        last = a.result_name
+                self.acks.clear()
+                return any(acked) and confirm()
+
+            if self._spin(self.m.mode_timeout_s, done):
+                return True, "confirmed"
+            if any(acked) and not confirm():
+                last = f"accepted but the HEARTBEAT still reports {self._mode_str()}"
+            self.log(f"mode {name}: attempt {attempt + 1} not confirmed ({last})")
+        return False, last
+
+    def _mode_str(self) -> str:
+        return mode_name(self.flavour, self.hb) if self.hb is not None else "no heartbeat"
+
+    def _hold_mode(self) -> str:
+        if self.m.hold_mode:
+            return self.m.hold_mode
+        return "AUTO.LOITER" if self.flavour is Flavour.PX4 else "LOITER"
+
+    def _offboard_mode(self) -> str:
+        return "OFFBOARD" if self.flavour is Flavour.PX4 else "GUIDED"
+
+    # -- life cycle --------------------------------------------------------------------------
+    def run(self) -> BridgeResult:
+        out = Path(self.opts.out_dir)
+        res = BridgeResult("CONNECTING", "", EXIT_SAFETY, out_dir=out)
+        pending: BaseException | None = None
+        m = self.m
+        try:
+            prepare_out_dir(out)
+            signing_key = load_signing_key(m.signing_key_file) if m.signing_key_file else None
+            allowed = [m.target_sysid] if (self.live and m.target_sysid is not None) else []
+            self.link = open_link(
+                self.opts.url, source_system=m.source_system, source_component=m.source_component,
+                vehicle_sysid=m.vehicle_sysid, allowed_sysids=allowed, tlog_path=out / "mavlink.tlog",
+                tlog_fsync_every_s=m.tlog_fsync_every_s, timeout_s=m.heartbeat_timeout_s,
+            )  # fmt: skip
+            if signing_key is not None:
+                enable_signing(self.link, signing_key, m.signing_link_id)
+            self._set_state(State.WAIT_HEARTBEAT)
+            hb = wait_heartbeat(self.link, m.heartbeat_timeout_s)
+            self.vehicle_compid = hb.get_srcComponent()
+            self._dispatch(hb)
+            seen = flavour_from_heartbeat(hb)
+            want = Flavour(m.flavour) if m.flavour != "auto" else seen
+            if want is Flavour.UNKNOWN:
+                raise MpfError(f"unknown autopilot (HEARTBEAT.autopilot = {hb.autopilot}); use --flavour px4|ardupilot")
+            if m.flavour != "auto" and seen is not Flavour.UNKNOWN and seen is not want:
+                raise MpfError(f"--flavour {m.flavour} but the vehicle's HEARTBEAT says {seen.value}")
+            self.flavour = want
+            res.flavour = want.value
+            self.log(f"heartbeat from system {m.vehicle_sysid}: {want.value}, mode {self._mode_str()}")
+            # wait for a complete state (and the live target) before checking anything
+            ok = self._spin(m.heartbeat_timeout_s, self._ready)
+            if not ok:
+                raise MpfError(f"no usable telemetry within {m.heartbeat_timeout_s:g} s: {self.why_not or 'no attitude'}")
+            self._set_state(State.CHECKS)
+            failed = self._checks(res)
+            if failed:
+                res.exit_reason = f"refused to engage: check failed: {', '.join(failed)}"
+                res.exit_code = EXIT_CHECK
+                return self._finish(res)
+            self._set_state(State.INIT)
+            self._init_s()
+            self._set_state(State.PRESTREAM)
+            # the checks may take a while without pumping: take the backlog in (state only, no
+            # setpoints for old samples), then start the staleness clocks afresh
+            while (msg := self.link.recv(0.0)) is not None:
+                self._dispatch(msg)
+            self.streaming = True
+            self.last_good_mono = self.last_att_mono = time.monotonic()
+            rate = m.min_setpoint_rate_hz
+
+            def prestreamed() -> bool:
+                if self.first_send_mono is None:
+                    return False
+                span = self.last_send_mono - self.first_send_mono  # first to last setpoint sent
+                return span >= m.prestream_s and (self.prestream_sends - 1) / span >= rate
+
+            if not self._spin(m.prestream_s + 3.0, prestreamed):
+                raise _Stop(f"could not stream setpoints at {rate:g} Hz for {m.prestream_s:g} s", "engage")
+            self.log(f"pre-streamed {self.prestream_sends} setpoints in {self.last_send_mono - self.first_send_mono:.2f} s")
+            if m.arm and not (self.hb is not None and self.hb.armed):
+                self._send(encode_arm(self.link.mav, m.vehicle_sysid, self.vehicle_compid, True))
+                if not self._spin(m.mode_timeout_s * m.mode_retries, lambda: self.hb is not None and self.hb.armed):
+                    raise _Stop("vehicle did not arm", "engage")
+            self._set_state(State.ENGAGE)
+            mode = self._offboard_mode()
+            ok, why = self._request_mode(mode, lambda: self.hb is not None and is_offboard(self.flavour, self.hb))
+            if not ok:
+                raise _Stop(f"vehicle did not enter {mode}: {why}", "engage")
+            self.engaged = True
+            res.engaged = True
+            self.t_engage = self.t_last if self.t_last is not None else 0.0
+            self._set_state(State.TRACKING)
+            self.log(f"{mode} confirmed: tracking for {m.mission_duration_s:g} s")
+            self._spin(math.inf)
+        except _Stop as e:
+            res.exit_reason = e.reason
+            res.exit_code = EXIT_OK if e.kind == "duration" else EXIT_SAFETY
+            self._handback(res, e.kind)
+        except MpfError:
+            self._close()
+            raise
+        except KeyboardInterrupt:
+            res.exit_reason, res.exit_code = "interrupted (Ctrl-C)", EXIT_SIGINT
+            self._handback(res, "interrupt")
+        except _Terminated:
+            res.exit_reason, res.exit_code = "terminated (SIGTERM)", EXIT_SIGTERM
+            self._handback(res, "interrupt")
+        except Exception as e:  # noqa: BLE001 - hand back first, then let the bug be seen
+            res.exit_reason, res.exit_code = f"error: {type(e).__name__}: {e}", 1
+            pending = e
+            self._handback(res, "interrupt")
+        out_res = self._finish(res)
+        if pending is not None:
+            raise pending
+        return out_res
+
+    def _set_state(self, s: State) -> None:
+        self.state = s
+        if s <= State.TRACKING:
+            self.furthest = max(self.furthest, s)
+        self.log(f"[{s.name}]")
+
+    def _ready(self) -> bool:
+        est, why = self.est.estimate()
+        if est is None:
+            self.why_not = why
+            return False
+        if self.live:
+            t = est.vehicle.t
+            st = self.target.state(t)
+            if isinstance(st, str):
+                self.why_not = st
+                return False
+        return True
+
+    def _checks(self, res: BridgeResult) -> list[str]:
+        from .preflight import format_checks, run_checks
+
+        est, _ = self.est.estimate()
+        assert est is not None
+        self.est.t0 = est.t_boot_s  # mission time 0: the checks' and the scripted target's origin
+        if self.live:  # re-stamp the live target into the new time base
+            if self.target.base is not None:
+                self.target.base = dataclasses.replace(self.target.base, t=self.target.base.t - est.t_boot_s)
+        vs = self.est.estimate()[0].vehicle  # type: ignore[union-attr]
+        cfg = self.cfg
+        cfg = dataclasses.replace(
+            cfg,
+            sim=dataclasses.replace(cfg.sim, duration_s=self.m.mission_duration_s),
+            kinematic=dataclasses.replace(
+                cfg.kinematic,
+                initial_position_ned_m=tuple(float(x) for x in vs.position),
+                initial_attitude_rpy_rad=tuple(float(x) for x in matrix_to_euler(vs.R_W_I)),
+            ),
+        )
+        results = run_checks(cfg, scripted_target=not self.live)
+        text = format_checks(results)
+        res.checks = text.splitlines()
+        self.log(text)
+        return [r.name for r in results if not r.ok]
+
+    def _init_s(self) -> None:
+        est, _ = self.est.estimate()
+        assert est is not None
+        vs = est.vehicle
+        if self.cfg.guidance.initial_s_m is not None:
+            self.s = self.cfg.guidance.initial_s_m
+        else:
+            tgt = self.target.state(vs.t)
+            assert not isinstance(tgt, str)
+            self.s = self.path.closest(tgt.R_T_I.T @ (vs.position - tgt.position))
+        self.log(f"virtual point initialised at s = {self.s:.2f} m")
+
+    def _handback(self, res: BridgeResult, kind: str) -> None:
+        """Stop or hand back according to why we stop; never raises."""
+        self.streaming = False
+        if self.link is None:
+            return
+        if self.state < State.PRESTREAM:
+            return
+        prev = signal.getsignal(signal.SIGTERM) if threading.current_thread() is threading.main_thread() else None
+        try:
+            if prev is not None:
+                signal.signal(signal.SIGTERM, signal.SIG_IGN)  # finish the hand-back first
+            in_offboard = self.hb is not None and is_offboard(self.flavour, self.hb)
+            if kind == "pilot" or (not self.engaged and not in_offboard):
+                self._set_state(State.DONE)
+                return
+            self._set_state(State.HANDBACK)
+            self.engaged = False
+            hold = self._hold_mode()
+            res.handback_requested = True
+            if kind not in ("telemetry", "target") and self.last_sp is not None:
+                # keep a wings-level setpoint flowing until the mode change is confirmed, so the
+                # autopilot's offboard-loss failsafe does not fire in between
+                self.last_sp = safe_setpoint(self.ad_params, self._roll())
+                self.streaming = True
+            try:
+                ok, why = self._request_mode(hold, lambda: self._mode_is(hold))
+            except _Stop:
+                ok, why = False, "interrupted"
+            self.streaming = False
+            res.handback_confirmed = ok
+            self.log(f"hand-back to {hold}: {'confirmed' if ok else 'NOT confirmed (' + why + ')'}")
+            if not ok and res.exit_code == EXIT_OK:
+                res.exit_code = EXIT_SAFETY
+                res.exit_reason += f"; hand-back to {hold} not confirmed"
+            self._set_state(State.DONE)
+        except Exception as e:  # noqa: BLE001 - the summary must still be written
+            self.log(f"hand-back failed: {type(e).__name__}: {e}")
+        finally:
+            self.streaming = False
+            if prev is not None:
+                signal.signal(signal.SIGTERM, prev)
+
+    def _roll(self) -> float:
+        a = self.est.att
+        if a is None:
+            return 0.0
+        R = a.R_B_N
+        return math.atan2(R[2][1], R[2][2])
+
+    def _close(self) -> None:
+        if self.link is not None:
+            self.link.close()
+
+    def _finish(self, res: BridgeResult) -> BridgeResult:
+        res.state_reached = self.furthest.name
+        res.final_state = self.state.name
+        if self.t_engage is not None and self.t_last is not None:
+            res.tracked_s = max(0.0, self.t_last - self.t_engage)
+        counters = dict(self.n)
+        if self.link is not None:
+            counters.update({k: v for k, v in self.link.counters.as_dict().items()})
+        res.counters = counters
+        self._close()
+        cols = self.table.arrays()
+        metrics = compute_metrics(cols, self.cfg.metrics.steady_after_s, self.cfg.metrics.converge_threshold_m)
+        if len(cols["t"]):
+            metrics["final_pt_m"] = float(cols["pt_norm"][-1])
+        metrics.update(
+            state_reached=res.state_reached, exit_reason=res.exit_reason, exit_code=res.exit_code,
+            flavour=res.flavour, tracked_s=res.tracked_s, handback_requested=res.handback_requested,
+            handback_confirmed=res.handback_confirmed, checks=res.checks, counters=counters,
+            url=self.opts.url,
+        )  # fmt: skip
+        res.metrics = metrics
+        out = Path(self.opts.out_dir)
+        try:
+            write_run(out, cols, metrics, self.path.positions(), plots=self.m.plots and len(cols["t"]) >= 2)
+            hdr = "t,p,q,r,qw,qx,qy,qz,thrust,bank,pitch,load_factor,safe"
+            np.savetxt(out / "setpoints.csv", np.array(self.sp_rows, float).reshape(-1, 13), delimiter=",", header=hdr, comments="", fmt="%.9g")
+        except Exception as e:  # noqa: BLE001 - records must not hide the flight's outcome
+            self.log(f"could not write the run directory: {e}")
+        return res
+
+
+def run_bridge(cfg: Config, opts: BridgeOptions, log: Callable[[str], None] = print) -> BridgeResult:
+    """Fly one run. SIGTERM is turned into a hand-back (when called from the main thread).
+
+    Raises MpfError (one line) for a bad URL, no vehicle, a bad key file, an unknown autopilot.
+    """
+    bridge = Bridge(cfg, opts, log)
+    main = threading.current_thread() is threading.main_thread()
+    prev = None
+    if main:
+
+        def on_term(signum: int, frame: Any) -> None:
+            raise _Terminated()
+
+        prev = signal.signal(signal.SIGTERM, on_term)
+    try:
+        return bridge.run()
+    finally:
+        if main and prev is not None:
+            signal.signal(signal.SIGTERM, prev)
+
+
+__all__ = ["Bridge", "BridgeOptions", "BridgeResult", "LiveTarget", "ScriptedTarget", "State", "run_bridge", "COLUMNS"]

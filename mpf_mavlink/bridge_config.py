@@ -1,0 +1,83 @@
+"""Configuration sections of the MAVLink bridge: ``mavlink`` and ``adapter``.
+
+Importing this module registers both in :data:`mpf_mavlink.config.EXTRA_SECTIONS`, so every
+config loaded afterwards validates them strictly (unknown keys, wrong types and impossible
+values are one-line errors naming the key and the file). Units are in the key names.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+from .config import EXTRA_SECTIONS, _nonneg, _pos
+
+
+@dataclass(frozen=True)
+class MavlinkConfig:
+    """Link, identities, timeouts and the offboard life cycle.
+
+    Identities: we speak as ``source_system``/``source_component`` (a companion computer on the
+    vehicle: same system id, component 191) to the autopilot ``vehicle_sysid``.
+    ``target_sysid``: the system id that sends a live target (``target.type: mavlink``);
+    FOLLOW_TARGET, or GLOBAL_POSITION_INT (+ ATTITUDE when present), from that id.
+    Local frame: LOCAL_POSITION_NED when the autopilot streams it; otherwise GLOBAL_POSITION_INT
+    about ``origin_*`` when given, else about HOME_POSITION. A live target needs a geodetic
+    origin (``origin_*`` or HOME_POSITION).
+    """
+
+    flavour: Literal["auto", "px4", "ardupilot"] = "auto"
+    vehicle_sysid: int = field(default=1, metadata={"check": ("range", 1, 255)})
+    source_system: int = field(default=1, metadata={"check": ("range", 1, 255)})
+    source_component: int = field(default=191, metadata={"check": ("range", 0, 255)})
+    target_sysid: int | None = field(default=None, metadata={"check": ("range", 1, 255)})
+    heartbeat_timeout_s: float = field(default=10.0, metadata=_pos())
+    telemetry_timeout_s: float = field(default=0.5, metadata=_pos())  # no ATTITUDE for this long: stop
+    attitude_stale_s: float = field(default=0.5, metadata=_pos())
+    position_stale_s: float = field(default=0.5, metadata=_pos())
+    airspeed_stale_s: float = field(default=0.5, metadata=_pos())
+    # Wind streams are slow (ArduPilot WIND ~1-4 Hz) and a stale one only switches to our own
+    # estimate, so its default is longer.
+    wind_stale_s: float = field(default=2.0, metadata=_pos())
+    wind_filter_tau_s: float = field(default=5.0, metadata=_pos())
+    target_timeout_s: float = field(default=1.0, metadata=_pos())
+    min_setpoint_rate_hz: float = field(default=20.0, metadata={"check": ("ge", 2.0)})
+    prestream_s: float = field(default=1.0, metadata={"check": ("ge", 1.0)})
+    mode_timeout_s: float = field(default=1.5, metadata=_pos())
+    mode_retries: int = field(default=3, metadata={"check": ("ge", 1)})
+    hold_mode: str | None = None  # None: AUTO.LOITER (PX4), LOITER (ArduPlane)
+    arm: bool = False
+    mission_duration_s: float = field(default=120.0, metadata=_pos())
+    signing_key_file: str | None = None
+    signing_link_id: int = field(default=0, metadata={"check": ("range", 0, 255)})
+    origin_lat_deg: float | None = field(default=None, metadata={"check": ("range", -90.0, 90.0)})
+    origin_lon_deg: float | None = field(default=None, metadata={"check": ("range", -180.0, 180.0)})
+    origin_alt_m: float | None = None
+    tlog_fsync_every_s: float | None = field(default=1.0, metadata=_nonneg())
+    plots: bool = True
+
+
+@dataclass(frozen=True)
+class AdapterSection:
+    """Setpoint adapter (see :class:`mpf_mavlink.adapter.AdapterParams`). The bank limit is
+    ``vehicle.max_bank_rad`` and the airspeed set-point ``vehicle.airspeed_m_s``."""
+
+    tau_roll_s: float = field(default=0.5, metadata=_pos())
+    tau_pitch_s: float = field(default=1.0, metadata=_nonneg())
+    max_roll_rate_rad_s: float = field(default=1.2217, metadata=_pos())
+    max_pitch_rate_rad_s: float = field(default=1.0472, metadata=_pos())
+    max_yaw_rate_rad_s: float = field(default=0.8727, metadata=_pos())
+    min_pitch_rad: float = field(default=-0.35, metadata={"check": ("range", -1.5, 0.0)})
+    max_pitch_rad: float = field(default=0.35, metadata={"check": ("range", 0.0, 1.5)})
+    trim_pitch_rad: float = field(default=0.03, metadata={"check": ("range", -0.5, 0.5)})
+    trim_thrust: float = field(default=0.5, metadata={"check": ("range", 0.0, 1.0)})
+    thrust_min: float = field(default=0.1, metadata={"check": ("range", 0.0, 1.0)})
+    thrust_max: float = field(default=1.0, metadata={"check": ("range", 0.0, 1.0)})
+    airspeed_kp: float = field(default=0.05, metadata=_nonneg())
+    airspeed_ki: float = field(default=0.02, metadata=_nonneg())
+    integrator_limit: float = field(default=0.3, metadata=_nonneg())
+    load_factor_ff: float = field(default=0.2, metadata=_nonneg())
+
+
+EXTRA_SECTIONS["mavlink"] = MavlinkConfig
+EXTRA_SECTIONS["adapter"] = AdapterSection

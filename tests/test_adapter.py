@@ -1,0 +1,132 @@
+"""The setpoint adapter: the law's angular velocity of w1 -> bank, body rates, quaternion, thrust."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from mpf_mavlink.adapter import (
+    AdapterParams,
+    AdapterState,
+    adapt,
+    bank_and_load_factor,
+    safe_setpoint,
+)
+from mpf_mavlink.frames import GRAVITY_M_S2, euler_to_matrix, quat_wxyz_to_matrix
+
+P = AdapterParams()
+LEVEL = np.eye(3)
+NORTH = (1.0, 0.0, 0.0)
+
+
+def test_level_flight_gives_zero_rates_and_trim_thrust():
+    # omega = 0 at the set airspeed: no turn, no load beyond 1 g, zero airspeed error
+    sp, st_ = adapt((0.0, 0.0, 0.0), 15.0, LEVEL, NORTH, 0.02, P)
+    assert sp.body_rates_frd == (0.0, 0.0, 0.0)
+    assert sp.bank_rad == 0.0 and sp.load_factor == pytest.approx(1.0)
+    assert sp.thrust == pytest.approx(P.trim_thrust)  # trim + 0 * kp + 0 integrator + 0 * k_n
+    assert st_.integ == 0.0
+    # ArduPlane quaternion: roll 0, pitch = flight-path angle 0 + trim alpha, yaw 0
+    a = P.trim_pitch_rad / 2
+    assert sp.q_wxyz == pytest.approx((math.cos(a), 0.0, math.sin(a), 0.0), abs=1e-12)
+    assert not sp.safe
+
+
+def test_right_turn_gives_positive_bank_and_yaw_rate():
+    # heading rate 0.3 rad/s at 15 m/s: centripetal 4.5 m/s^2 -> bank atan(4.5/g) = 24.6 deg,
+    # n = sqrt(1 + (4.5/g)^2) = 1.100; wings still level so r = cos(0) cos(0) psid = 0.3 and
+    # p = (bank - 0) / tau_roll = 0.860 rad/s (under the 1.22 rad/s limit)
+    sp, _ = adapt((0.0, 0.0, 0.3), 15.0, LEVEL, NORTH, 0.02, P)
+    bank = math.atan(4.5 / GRAVITY_M_S2)
+    assert sp.bank_rad == pytest.approx(bank, rel=1e-9)
+    assert sp.load_factor == pytest.approx(math.hypot(1.0, 4.5 / GRAVITY_M_S2), rel=1e-9)
+    p, q, r = sp.body_rates_frd
+    assert p == pytest.approx(bank / P.tau_roll_s) and r == pytest.approx(0.3) and q == 0.0
+    # the quaternion's roll is the bank, yaw 0 (ArduPlane writes yaw to the rudder)
+    R = quat_wxyz_to_matrix(sp.q_wxyz)
+    assert math.atan2(R[2, 1], R[2, 2]) == pytest.approx(bank)
+    assert math.atan2(R[1, 0], R[0, 0]) == pytest.approx(0.0, abs=1e-12)
+    # extra load -> more thrust: (n - 1) k_n = 0.1003 * 0.2
+    assert sp.thrust == pytest.approx(P.trim_thrust + P.load_factor_ff * (sp.load_factor - 1.0))
+
+
+def test_coordinated_turn_in_body_axes():
+    # Banked at phi = 30 deg in a steady level turn psid = g tan(phi)/V: the bank set-point
+    # equals phi, so p = 0; q = sin(phi) psid, r = cos(phi) psid (sil-vehicle.md formulas)
+    phi = math.radians(30.0)
+    psid = GRAVITY_M_S2 * math.tan(phi) / 15.0
+    sp, _ = adapt((0.0, 0.0, psid), 15.0, euler_to_matrix(phi, 0.0, 0.0), NORTH, 0.02, P)
+    p, q, r = sp.body_rates_frd
+    assert p == pytest.approx(0.0, abs=1e-9)
+    assert q == pytest.approx(math.sin(phi) * psid) and r == pytest.approx(math.cos(phi) * psid)
+
+
+def test_bank_is_clipped_and_climb_raises_pitch():
+    sp, _ = adapt((0.0, 0.0, 3.0), 15.0, LEVEL, NORTH, 0.02, P)  # asks for ~78 deg
+    assert sp.bank_rad == pytest.approx(P.max_bank_rad)
+    # pull-up: omega = +0.1 about east turns w1 = north upward ((0,0.1,0) x (1,0,0) = (0,0,-0.1),
+    # i.e. up in NED): gamma_dot = +0.1 rad/s; pitch = 0 + 0.1 * tau_pitch + trim
+    sp, _ = adapt((0.0, 0.1, 0.0), 15.0, LEVEL, NORTH, 0.02, P)
+    assert sp.pitch_rad == pytest.approx(0.1 * P.tau_pitch_s + P.trim_pitch_rad)
+    assert sp.body_rates_frd[1] == pytest.approx(0.1)  # q = cos(0) thetad
+
+
+def test_airspeed_hold_integrates_and_anti_windup():
+    # 2 m/s slow: kp e = 0.1, integrator +ki e dt each call
+    sp, s1 = adapt((0.0, 0.0, 0.0), 13.0, LEVEL, NORTH, 0.5, P)
+    assert s1.integ == pytest.approx(P.airspeed_ki * 2.0 * 0.5)
+    assert sp.thrust == pytest.approx(P.trim_thrust + 0.1 + s1.integ)
+    # 20 m/s slow for a long time: output saturates at thrust_max and the integrator freezes
+    s = AdapterState()
+    for _ in range(200):
+        sp, s = adapt((0.0, 0.0, 0.0), 1.0, LEVEL, NORTH, 0.1, P, s)
+    assert sp.thrust == P.thrust_max
+    assert s.integ < P.integrator_limit  # frozen as soon as the output saturated (0.5 + 0.7 > 1)
+
+
+finite = st.floats(-1e6, 1e6)
+anyf = st.one_of(finite, st.sampled_from([math.nan, math.inf, -math.inf]))
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    om=st.tuples(anyf, anyf, anyf), v=anyf, rpy=st.tuples(anyf, anyf, anyf),
+    w1=st.tuples(anyf, anyf, anyf), dt=anyf, integ=st.floats(-0.3, 0.3),
+)  # fmt: skip
+def test_limits_never_exceeded(om, v, rpy, w1, dt, integ):
+    with np.errstate(all="ignore"):
+        try:
+            R = euler_to_matrix(*rpy)
+        except ValueError:  # cos(inf): an attitude that is all NaN
+            R = np.full((3, 3), math.nan)
+        n = math.sqrt(sum(x * x for x in w1)) if all(math.isfinite(x) for x in w1) else 1.0
+    w1n = tuple(x / n for x in w1) if n > 1e-9 and math.isfinite(n) else w1
+    sp, s = adapt(om, v, R, w1n, dt, P, AdapterState(integ))
+    vals = (*sp.body_rates_frd, *sp.q_wxyz, sp.thrust, sp.bank_rad, sp.pitch_rad)
+    assert all(math.isfinite(x) for x in vals)
+    assert abs(sp.body_rates_frd[0]) <= P.max_roll_rate_rad_s
+    assert abs(sp.body_rates_frd[1]) <= P.max_pitch_rate_rad_s
+    assert abs(sp.body_rates_frd[2]) <= P.max_yaw_rate_rad_s
+    assert P.thrust_min <= sp.thrust <= P.thrust_max
+    assert abs(sp.bank_rad) <= P.max_bank_rad
+    assert P.min_pitch_rad <= sp.pitch_rad <= P.max_pitch_rad
+    assert abs(s.integ) <= P.integrator_limit
+    assert math.isclose(sum(x * x for x in sp.q_wxyz), 1.0, rel_tol=1e-9)
+    # roll and pitch come from R's last row (yaw does not enter it, nor the adapter)
+    bad = not all(math.isfinite(x) for x in (*om, v, *w1n, dt, *R[2]))
+    if bad:
+        assert sp.safe and sp.bank_rad == 0.0 and sp.thrust == P.trim_thrust
+
+
+def test_safe_setpoint_levels_the_wings():
+    sp = safe_setpoint(P, roll=0.3)
+    assert sp.safe and sp.body_rates_frd == (pytest.approx(-0.6), 0.0, 0.0)  # -0.3 / tau 0.5
+    assert sp.thrust == P.trim_thrust
+
+
+def test_bank_and_load_factor_unchanged():
+    assert bank_and_load_factor((1.0, 0.0, 0.0), (0.0, 0.0, 0.0)) == (0.0, 1.0)
