@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from .config import Config
@@ -79,7 +77,3 @@ def format_checks(results: list[CheckResult]) -> str:
         mark = {"pass": "PASS", "warn": "WARN", "fail": "FAIL"}[r.status]
         lines.append(f"[{mark}] {r.name}: {r.summary}")
     return "\n".join(lines)
-
-
-def _finite(x: float) -> bool:
-    return isinstance(x, float) and math.isfinite(x)

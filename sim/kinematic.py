@@ -10,14 +10,12 @@ closed loop is the paper's continuous-time system (no sample-and-hold).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from mpf_mavlink import so3
 from mpf_mavlink.guidance.law import (
     Extensions,
     Gains,
@@ -191,7 +189,3 @@ def initial_state(
         st = target.state(0.0)
         s0 = path.closest(st.R_T_I.T @ (p0 - st.position))
     return KinematicState(0.0, np.asarray(p0, float), np.asarray(R0, float), np.zeros(2), float(s0))
-
-
-def wrap_angle(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
