@@ -9,13 +9,19 @@ Streams and their times
   The position is extrapolated by its velocity to the attitude time.
 - airspeed: VFR_HUD (no timestamp: staleness from receive times).
 - wind: WIND (ArduPilot) / WIND_COV (PX4), receive-time staleness. Without one, a simple
-  estimator: a first-order low-pass (time constant ``wind_tau_s``) of
-  ``ground velocity - airspeed * body x-axis`` (assumes zero sideslip and angle of attack,
-  good to a few tenths of m/s for a trimmed fixed-wing).
+  estimator: a first-order low-pass (time constant ``wind_tau_s``, started at the first
+  measurement) of ``ground velocity - airspeed * body x-axis`` (assumes zero sideslip and angle
+  of attack, good to a few tenths of m/s for a trimmed fixed-wing).
 
 Staleness: a stream is stale when it lags the attitude sample by more than its limit (boot
-time for timestamped streams, receive time otherwise). A stale attitude/position/airspeed
-makes :meth:`Estimator.estimate` return None with the reason.
+time for timestamped streams, receive time otherwise); the attitude is stale when the other
+streams have gone on for more than ``attitude_stale_s`` after it (receive times; position boot
+times when no receive times are given). A stale attitude/position/airspeed makes
+:meth:`Estimator.estimate` return None with a reason that starts with the stream's name.
+
+Samples that are non-finite or implausible (a NaN, a speed beyond 200 m/s, a matrix that is not
+a rotation, ...) are ignored by :meth:`Estimator.update`: the decoders already drop them, this
+guards samples built elsewhere (replay tools, tests). An estimate is never non-finite.
 
 Wind frame: w1 along the air-relative velocity (ground velocity - wind); when that is tiny
 (< ``min_air_speed``), along the body x-axis. v_w = VFR_HUD airspeed, else |air velocity|.
@@ -25,6 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,6 +53,88 @@ def wind_frame(vx: float, vy: float, vz: float) -> NDArray[np.float64]:
     else:
         e, f, g = -b / h, a / h, 0.0
     return np.array([[a, e, b * g - c * f], [b, f, c * e - a * g], [c, g, a * f - b * e]])
+
+
+# Plausibility bounds of a sample (the decoders' bounds, kept here so this module stays pure)
+_MAX_SPEED_M_S = 200.0
+_MAX_RATE_RAD_S = 50.0
+_MAX_LOCAL_POS_M = 1.0e6
+_MIN_ALT_M, _MAX_ALT_M = -1000.0, 50000.0
+_ROTATION_TOL = 1e-6
+
+
+def _arr_ok(a: object, shape: tuple[int, ...], bound: float) -> bool:
+    """Finite, of that shape, every |element| <= bound (NaN fails the comparison)."""
+    try:
+        v = np.asarray(a, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return v.shape == shape and all(abs(x) <= bound for x in v.ravel().tolist())
+
+
+def _num_ok(x: object, lo: float, hi: float) -> bool:
+    try:
+        f = float(x)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return False
+    return math.isfinite(f) and lo <= f <= hi
+
+
+def _geodetic_ok(s: object) -> bool:
+    return (
+        _num_ok(getattr(s, "lat_deg", None), -90.0, 90.0)
+        and _num_ok(getattr(s, "lon_deg", None), -180.0, 180.0)
+        and _num_ok(getattr(s, "alt_amsl_m", None), _MIN_ALT_M, _MAX_ALT_M)
+    )
+
+
+def _time_ok(s: object) -> bool:
+    return _num_ok(getattr(s, "t_boot_s", None), -math.inf, math.inf)
+
+
+def _rotation_ok(a: object) -> bool:
+    """A 3x3 rotation: finite, orthonormal columns (to _ROTATION_TOL), determinant +1."""
+    if not _arr_ok(a, (3, 3), 1.0 + _ROTATION_TOL):
+        return False
+    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = np.asarray(a, dtype=float).tolist()
+    x, y, z = (a0, b0, c0), (a1, b1, c1), (a2, b2, c2)  # the columns
+    dots = (
+        x[0] * x[0] + x[1] * x[1] + x[2] * x[2] - 1.0,
+        y[0] * y[0] + y[1] * y[1] + y[2] * y[2] - 1.0,
+        z[0] * z[0] + z[1] * z[1] + z[2] * z[2] - 1.0,
+        x[0] * y[0] + x[1] * y[1] + x[2] * y[2],
+        x[0] * z[0] + x[1] * z[1] + x[2] * z[2],
+        y[0] * z[0] + y[1] * z[1] + y[2] * z[2],
+    )
+    if max(abs(d) for d in dots) > _ROTATION_TOL:
+        return False
+    det = (
+        x[0] * (y[1] * z[2] - y[2] * z[1])
+        - x[1] * (y[0] * z[2] - y[2] * z[0])
+        + x[2] * (y[0] * z[1] - y[1] * z[0])
+    )
+    return det > 0.0
+
+
+def _plausible(name: str, s: object) -> bool:
+    """Whether a decoded sample can be taken into the state (finite and within bounds)."""
+    g = getattr
+    if name == "AttitudeSample":
+        rates_ok = _arr_ok(g(s, "rates_frd", None), (3,), _MAX_RATE_RAD_S)
+        return _time_ok(s) and rates_ok and _rotation_ok(g(s, "R_B_N", None))
+    if name == "LocalPositionSample":
+        pos_ok = _arr_ok(g(s, "pos_ned", None), (3,), _MAX_LOCAL_POS_M)
+        return _time_ok(s) and pos_ok and _arr_ok(g(s, "vel_ned", None), (3,), _MAX_SPEED_M_S)
+    if name == "GlobalPositionSample":
+        vel_ok = _arr_ok(g(s, "vel_ned", None), (3,), _MAX_SPEED_M_S)
+        return _time_ok(s) and _geodetic_ok(s) and vel_ok
+    if name == "HomeSample":
+        return _geodetic_ok(s) and _arr_ok(g(s, "pos_ned", None), (3,), _MAX_LOCAL_POS_M)
+    if name == "VfrHudSample":
+        return _num_ok(g(s, "airspeed_m_s", None), 0.0, _MAX_SPEED_M_S)
+    if name == "WindSample":
+        return _arr_ok(g(s, "wind_ned", None), (3,), _MAX_SPEED_M_S)
+    return True
 
 
 @dataclass(frozen=True)
@@ -80,14 +169,16 @@ class Estimator:
 
     def __init__(self, params: EstimatorParams = EstimatorParams()) -> None:
         self.p = params
-        self.att = None  # AttitudeSample
+        self.att: Any = None  # AttitudeSample (decoded samples: mavlink.codec)
         self.att_rx: float | None = None
-        self.local = None  # LocalPositionSample
-        self.glob = None  # GlobalPositionSample
-        self.home = None  # HomeSample
-        self.vfr = None
+        self.local: Any = None  # LocalPositionSample
+        self.local_rx: float | None = None
+        self.glob: Any = None  # GlobalPositionSample
+        self.glob_rx: float | None = None
+        self.home: Any = None  # HomeSample
+        self.vfr: Any = None  # VfrHudSample
         self.vfr_rx: float | None = None
-        self.wind = None
+        self.wind: Any = None  # WindSample
         self.wind_rx: float | None = None
         self._wind_lp: NDArray[np.float64] | None = None
         self._wind_lp_t: float | None = None
@@ -96,15 +187,20 @@ class Estimator:
     # -- feeding ------------------------------------------------------------------------------
     def update(self, sample: object, t_rx: float | None) -> bool:
         """Store a decoded sample (t_rx: receive time, s, any monotonic-ish clock of the link).
-        Returns True when it was an attitude sample (a control instant)."""
+        Returns True when it was an attitude sample (a control instant). A non-finite or
+        implausible sample, or a non-finite ``t_rx``, is ignored (returns False)."""
         name = type(sample).__name__
+        if t_rx is not None and not _num_ok(t_rx, -math.inf, math.inf):
+            return False
+        if not _plausible(name, sample):
+            return False
         if name == "AttitudeSample":
             self.att, self.att_rx = sample, t_rx
             return True
         if name == "LocalPositionSample":
-            self.local = sample
+            self.local, self.local_rx = sample, t_rx
         elif name == "GlobalPositionSample":
-            self.glob = sample
+            self.glob, self.glob_rx = sample, t_rx
         elif name == "HomeSample":
             self.home = sample
         elif name == "VfrHudSample":
@@ -134,12 +230,18 @@ class Estimator:
         loc = self.local
         if loc is not None and abs(t - loc.t_boot_s) <= p.position_stale_s:
             dt = t - loc.t_boot_s
-            return np.asarray(loc.pos_ned) + dt * np.asarray(loc.vel_ned), np.asarray(loc.vel_ned, float), "local"
+            return (
+                np.asarray(loc.pos_ned) + dt * np.asarray(loc.vel_ned),
+                np.asarray(loc.vel_ned, float),
+                "local",
+            )
         g = self.glob
         if g is not None and abs(t - g.t_boot_s) <= p.position_stale_s:
             q = self.to_local(g.lat_deg, g.lon_deg, g.alt_amsl_m)
             if q is None:
-                return "GLOBAL_POSITION_INT without an origin (no HOME_POSITION, no mavlink.origin_*)"
+                return (
+                    "GLOBAL_POSITION_INT without an origin (no HOME_POSITION, no mavlink.origin_*)"
+                )
             dt = t - g.t_boot_s
             return q + dt * np.asarray(g.vel_ned), np.asarray(g.vel_ned, float), "global"
         if loc is None and g is None:
@@ -147,11 +249,30 @@ class Estimator:
         last = max(x.t_boot_s for x in (loc, g) if x is not None)
         return f"position stale ({t - last:.2f} s behind the attitude)"
 
+    def _attitude_lag(self) -> float:
+        """How far (s) the other telemetry has gone on since the attitude sample, 0 if not at all:
+        by receive time (one clock for every stream; a sample that stopped coming cannot hold
+        the attitude hostage), or by the position's boot time when there are no receive times."""
+        a = self.att
+        lag = 0.0
+        if self.att_rx is not None:
+            for rx in (self.local_rx, self.glob_rx, self.vfr_rx, self.wind_rx):
+                if rx is not None:
+                    lag = max(lag, rx - self.att_rx)
+        else:
+            for x in (self.local, self.glob):
+                if x is not None:
+                    lag = max(lag, x.t_boot_s - a.t_boot_s)
+        return lag
+
     def estimate(self) -> tuple[Estimate | None, str]:
         """The state at the latest attitude sample, or (None, reason)."""
         a = self.att
         if a is None:
             return None, "no attitude yet"
+        lag = self._attitude_lag()
+        if lag > self.p.attitude_stale_s:
+            return None, f"attitude stale ({lag:.2f} s behind the other telemetry)"
         t = a.t_boot_s
         pos = self._position(t)
         if isinstance(pos, str):
@@ -162,25 +283,37 @@ class Estimator:
         p = self.p
         airspeed: float | None = None
         if self.vfr is not None and (
-            self.vfr_rx is None or self.att_rx is None or abs(self.att_rx - self.vfr_rx) <= p.airspeed_stale_s
+            self.vfr_rx is None
+            or self.att_rx is None
+            or abs(self.att_rx - self.vfr_rx) <= p.airspeed_stale_s
         ):
             airspeed = float(self.vfr.airspeed_m_s)
         elif self.vfr is not None:
             return None, f"airspeed stale ({self.att_rx - self.vfr_rx:.2f} s behind the attitude)"  # type: ignore[operator]
-        # wind: the autopilot's when fresh, else our low-pass of vg - v_air x_b
-        if self._wind_lp is None or self._wind_lp_t is None or t < self._wind_lp_t:
-            self._wind_lp, self._wind_lp_t = np.zeros(3), t
+        # wind: the autopilot's when fresh, else our low-pass of vg - v_air x_b, started at the
+        # first measurement (not at zero: a calm start would bias w1 by the drift angle for
+        # several tau) and restarted when the autopilot's clock goes back (a reboot)
+        if self._wind_lp_t is not None and t < self._wind_lp_t:
+            self._wind_lp = self._wind_lp_t = None
         if airspeed is not None:
             inst = vg - airspeed * x_b
             inst[2] = 0.0  # vertical wind is not observable this way (angle of attack)
-            k = min(1.0, max(0.0, t - self._wind_lp_t) / p.wind_tau_s)
-            self._wind_lp = self._wind_lp + k * (inst - self._wind_lp)
-        self._wind_lp_t = t
+            if self._wind_lp is None or self._wind_lp_t is None:
+                self._wind_lp = inst
+            else:
+                k = 1.0 - math.exp(-max(0.0, t - self._wind_lp_t) / p.wind_tau_s)
+                self._wind_lp = self._wind_lp + k * (inst - self._wind_lp)
+            self._wind_lp_t = t
         w = self.wind
-        if w is not None and (self.wind_rx is None or self.att_rx is None or abs(self.att_rx - self.wind_rx) <= p.wind_stale_s):
+        if w is not None and (
+            self.wind_rx is None
+            or self.att_rx is None
+            or abs(self.att_rx - self.wind_rx) <= p.wind_stale_s
+        ):
             wind, wsrc = np.asarray(w.wind_ned, float), w.source
         else:
-            wind, wsrc = self._wind_lp.copy(), "estimated"
+            lp = self._wind_lp
+            wind, wsrc = (np.zeros(3) if lp is None else lp.copy()), "estimated"
         v_air = (float(vg[0] - wind[0]), float(vg[1] - wind[1]), float(vg[2] - wind[2]))
         n_air = math.sqrt(v_air[0] ** 2 + v_air[1] ** 2 + v_air[2] ** 2)
         if n_air < p.min_air_speed:
@@ -193,5 +326,10 @@ class Estimator:
             v_w, asrc = max(n_air, 0.0), "air_velocity"
         if not v_w > 0.0:
             return None, "airspeed is zero"
+        rates = np.asarray(a.rates_frd, float)
+        # belt and braces (update() already filters): one sum is NaN/inf if any element is
+        check = float(p_ned.sum() + R_W_I.sum() + wind.sum() + vg.sum() + R.sum() + rates.sum())
+        if not math.isfinite(check + t - self.t0 + v_w):
+            return None, "non-finite estimate (rejected)"
         vs = VehicleState(t - self.t0, p_ned, R_W_I, v_w, wind)
-        return Estimate(vs, t, R, np.asarray(a.rates_frd, float), vg, psrc, asrc, wsrc), ""
+        return Estimate(vs, t, R, rates, vg, psrc, asrc, wsrc), ""

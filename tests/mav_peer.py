@@ -2,10 +2,11 @@
 (or the master side of a pty pair, i.e. a serial link), in a background thread.
 
 It plays PX4 (autopilot 12, custom_mode = main << 16 | sub << 24) or ArduPlane (autopilot 3,
-mode numbers): HEARTBEAT, COMMAND_ACK to DO_SET_MODE / ARM, and telemetry (ATTITUDE,
-LOCAL_POSITION_NED, VFR_HUD, optionally GLOBAL_POSITION_INT + HOME_POSITION, WIND) of a crude
-kinematic plane at constant airspeed: in its offboard mode it integrates the commanded roll
-rate (PX4) or follows the commanded roll (ArduPlane); the heading turns at g tan(roll) / V.
+mode numbers): HEARTBEAT, COMMAND_ACK to DO_SET_MODE / ARM, and telemetry (ATTITUDE or
+ATTITUDE_QUATERNION, LOCAL_POSITION_NED, VFR_HUD, optionally GLOBAL_POSITION_INT +
+HOME_POSITION, WIND) of a crude kinematic plane at constant airspeed: in its offboard mode it
+integrates the commanded roll rate (PX4) or follows the commanded roll (ArduPlane); the heading
+turns at g tan(roll) / V. ``truth`` keeps what each telemetry tick reported.
 
 Like PX4 it refuses OFFBOARD unless setpoints have streamed for >= 1 s (and the last is
 < 0.5 s old). Everything it receives is recorded with the monotonic time of arrival.
@@ -120,6 +121,9 @@ class PeerOptions:
     signing_key: bytes | None = None
     ack_result: int | None = None  # force this MAV_RESULT for DO_SET_MODE (None: behave)
     boot_time_s: float = 100.0  # time_boot_ms starts here (s)
+    start_armed: bool = True  # False: disarmed until an ARM command is accepted
+    arm_result: int | None = None  # force this MAV_RESULT for ARM_DISARM, stay as is (None: obey)
+    attitude_quaternion: bool = False  # send ATTITUDE_QUATERNION instead of ATTITUDE
 
 
 class MavPeer:
@@ -139,7 +143,9 @@ class MavPeer:
         px4 = opts.flavour == "px4"
         start = opts.start_mode or ("POSCTL" if px4 else "FBWA")
         self.custom_mode = self._mode_num(start)
-        self.armed = True
+        self.armed = opts.start_armed
+        # what each telemetry tick reported: (time_boot_ms, NED position, (roll, pitch, yaw))
+        self.truth: list[tuple[int, tuple[float, float, float], tuple[float, float, float]]] = []
         self.setpoints: list[Rx] = []
         self.commands: list[Rx] = []
         self.heartbeats_rx: list[Rx] = []
@@ -236,9 +242,12 @@ class MavPeer:
             if m.command == 176:
                 self._set_mode(m, now)
             elif m.command == 400:
-                self.armed = m.param1 == 1.0
-                self.mav.command_ack_send(400, 0)
-                self._hb_now = True
+                if self.o.arm_result is None:
+                    self.armed = m.param1 == 1.0
+                    self.mav.command_ack_send(400, 0)
+                    self._hb_now = True
+                else:
+                    self.mav.command_ack_send(400, self.o.arm_result)
         elif t == "HEARTBEAT":
             self.heartbeats_rx.append(rx)
 
@@ -299,8 +308,15 @@ class MavPeer:
         if self.o.send_wind and k % 10 == 0:
             wn, we, wd = self.o.wind_ned
             self.mav.wind_send(math.degrees(math.atan2(-we, -wn)) % 360, math.sqrt(wn * wn + we * we + wd * wd), wd)
+        self.truth.append((tb, (self.pos[0], self.pos[1], self.pos[2]), (self.roll, self.pitch, self.yaw)))
         # ATTITUDE last: the bridge acts on it, with the position of the same instant in hand
-        self.mav.attitude_send(tb, self.roll, self.pitch, self.yaw, self.p, 0.0, getattr(self, "_r", 0.0))
+        if self.o.attitude_quaternion:
+            from mpf_mavlink.frames import euler_to_quat_wxyz
+
+            q = euler_to_quat_wxyz(self.roll, self.pitch, self.yaw)  # (w, x, y, z) = q1..q4
+            self.mav.attitude_quaternion_send(tb, *q, self.p, 0.0, getattr(self, "_r", 0.0), [0.0, 0.0, 0.0, 0.0])
+        else:
+            self.mav.attitude_send(tb, self.roll, self.pitch, self.yaw, self.p, 0.0, getattr(self, "_r", 0.0))
 
     def _run(self) -> None:
         period = 1.0 / self.o.telemetry_hz
