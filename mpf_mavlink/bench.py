@@ -59,11 +59,16 @@ GROUPS = {
 
 def _optional_groups() -> None:
     try:
-        from .bench_bridge import bridge_latency_ms
+        from .bench_bridge import bridge_latency_ms, replay_s
 
         GROUPS["bridge_latency_ms"] = bridge_latency_ms
+        GROUPS["replay_s"] = replay_s
     except ImportError:
         pass
+    from .bench_sil import sil_real_time_factor, sil_tracking
+
+    GROUPS["sil_real_time_factor"] = sil_real_time_factor
+    GROUPS["sil_tracking"] = sil_tracking
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,4 +1,5 @@
-"""Latency of the bridge: a telemetry datagram in -> the SET_ATTITUDE_TARGET datagram out.
+"""Benchmarks of the bridge side: latency (a telemetry datagram in -> the SET_ATTITUDE_TARGET
+datagram out) and the wall time of a replay of the real tlog.
 
 A minimal PX4-like peer (this process) talks to the real bridge (run_bridge in a forked
 process, so that the two never wait for each other's GIL) over UDP loopback. Each control cycle it sends LOCAL_POSITION_NED (+ VFR_HUD), then
@@ -26,10 +27,23 @@ _CFG = {
     "name": "bench",
     "path": {"type": "circle", "radius_m": 150.0},
     "target": {"type": "stationary", "position_ned_m": [0.0, 0.0, -100.0]},
-    "guidance": {"K_p": 1.0, "K_R": 0.5, "alpha_m": 40.0, "rate_limit_rad_s": 0.5, "psi_turn": True},
+    "guidance": {
+        "K_p": 1.0,
+        "K_R": 0.5,
+        "alpha_m": 40.0,
+        "rate_limit_rad_s": 0.5,
+        "psi_turn": True,
+    },
     "vehicle": {"airspeed_m_s": 15.0, "max_bank_rad": 0.61},
     "checks": {"c2": 0.25, "c1_m": 300.0},
-    "mavlink": {"flavour": "px4", "plots": False, "heartbeat_timeout_s": 5.0, "tlog_fsync_every_s": None, "mode_retries": 1, "mode_timeout_s": 0.5},
+    "mavlink": {
+        "flavour": "px4",
+        "plots": False,
+        "heartbeat_timeout_s": 5.0,
+        "tlog_fsync_every_s": None,
+        "mode_retries": 1,
+        "mode_timeout_s": 0.5,
+    },
 }
 
 
@@ -71,7 +85,9 @@ def bridge_latency_ms(n_samples: int = 300, rate_hz: float = 50.0) -> dict[str, 
     try:
 
         def heartbeat() -> None:
-            mav.heartbeat_send(mavlink.MAV_TYPE_FIXED_WING, mavlink.MAV_AUTOPILOT_PX4, 129, mode[0], 4)
+            mav.heartbeat_send(
+                mavlink.MAV_TYPE_FIXED_WING, mavlink.MAV_AUTOPILOT_PX4, 129, mode[0], 4
+            )
 
         def handle(data: bytes, want_ms: int | None) -> bool:
             got = False
@@ -123,7 +139,41 @@ def bridge_latency_ms(n_samples: int = 300, rate_hz: float = 50.0) -> dict[str, 
     a = np.array(lat[20:] if len(lat) > 40 else lat)
     if a.size == 0:
         return {"p50": math.nan, "p99": math.nan, "n": 0, "max": math.nan}
-    return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)), "n": int(a.size), "max": float(a.max())}
+    return {
+        "p50": float(np.percentile(a, 50)),
+        "p99": float(np.percentile(a, 99)),
+        "n": int(a.size),
+        "max": float(a.max()),
+    }
+
+
+SHARED_TLOG = Path("/work/shared/data/arduplane-quadplane-sitl-vtol.tlog")
+
+
+def replay_s(runs: int = 3) -> dict[str, float | int | str]:
+    """Wall time (s) of ``mpf-mavlink replay`` on the real ArduPlane SITL tlog (208 s of flight,
+    23,894 records) with configs/replay_arduplane_sitl.yaml: ``s`` with the run directory and
+    its plots (what a user waits for), ``no_plots_s`` without the PNGs. Best of ``runs``
+    (the machine is shared: the best run is the one least disturbed)."""
+    from .config import load_config
+    from .replay import replay
+
+    if not SHARED_TLOG.is_file():
+        return {"s": math.nan, "no_plots_s": math.nan, "note": f"{SHARED_TLOG} not found"}
+    cfg = load_config(
+        Path(__file__).resolve().parents[1] / "configs" / "replay_arduplane_sitl.yaml"
+    )
+    full, bare = [], []
+    steps = 0
+    for _ in range(runs):
+        with tempfile.TemporaryDirectory(prefix="mpf-bench-replay-") as d:
+            t0 = time.perf_counter()
+            replay(SHARED_TLOG, cfg, out_dir=Path(d) / "run", plots=True)
+            full.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            steps = replay(SHARED_TLOG, cfg, out_dir=Path(d) / "bare", plots=False).steps
+            bare.append(time.perf_counter() - t0)
+    return {"s": min(full), "no_plots_s": min(bare), "steps": steps}
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -17,7 +17,13 @@ States (``BridgeResult.state_reached`` is the furthest one):
   stale (stop commanding at once, then request the hold mode); someone else changed the mode
   (stop commanding, no mode request: never fight the pilot).
 
-The wall clock (time.monotonic) is used only for link timeouts, rates and the resend timer.
+The per-sample computation (estimator, target, s, law, adapter, safe setpoints) lives in
+:class:`mpf_mavlink.controller.Controller`, which replay drives the same way. The wall clock
+(time.monotonic) is used only for link timeouts, rates and the resend timer; the receive time
+the estimator and a live target see is the message's tlog record time (microseconds), and the
+decisions taken from the wall clock are written to the tlog as STATUSTEXT: ``MPF t0=``,
+``MPF s0=`` after INIT and ``MPF stream`` when setpoints start (see controller.py), so a replay
+of the tlog reproduces every setpoint.
 Records: ``mavlink.tlog`` (both directions), ``timeseries.csv`` (TRACKING rows, what the law
 saw), ``setpoints.csv``, ``metrics.json`` (figures, counters, exit) and the plots.
 """
@@ -26,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import gc
 import math
 import signal
 import threading
@@ -37,16 +44,21 @@ from typing import Any
 
 import numpy as np
 
-from . import (
-    bridge_config,  # noqa: F401  (registers the mavlink/adapter sections)
-    so3,
-)
-from .adapter import AdapterParams, AdapterState, Setpoint, adapt, safe_setpoint
+from . import bridge_config  # noqa: F401  (registers the mavlink/adapter sections)
+from .adapter import Setpoint, safe_setpoint
+from .bridge_config import hold_mode_error
 from .config import Config
+from .controller import (
+    SETPOINT_COLUMNS,
+    STREAM_TEXT,
+    Controller,
+    LiveTarget,
+    ScriptedTarget,
+    Step,
+    origin_texts,
+)
 from .errors import MpfError
-from .estimator import Estimate, Estimator, EstimatorParams
 from .frames import matrix_to_euler
-from .guidance.law import MpfCommand, MpfDiagnostics, mpf_law
 from .mavlink import (
     Flavour,
     decode,
@@ -64,9 +76,7 @@ from .mavlink import (
     wait_heartbeat,
 )
 from .mavlink.modes import arduplane_mode_from_name, px4_decode_custom_mode, px4_mode_from_name
-from .rundir import COLUMNS, RunTable, compute_metrics, prepare_out_dir, row_from, write_run
-from .scenario import build_extensions, build_gains, build_path, build_target
-from .target import TargetState
+from .rundir import COLUMNS, RunTable, compute_metrics, prepare_out_dir, write_run
 
 MAV_CMD_DO_SET_MODE = 176
 MAV_CMD_COMPONENT_ARM_DISARM = 400
@@ -130,6 +140,7 @@ class BridgeResult:
     metrics: dict[str, Any] = field(default_factory=dict)
     out_dir: Path | None = None
     final_state: str = "CONNECTING"  # DONE after a stop or hand-back
+    records_error: str | None = None  # why the run directory could not be written
 
     def summary(self) -> str:
         c = self.counters
@@ -156,101 +167,23 @@ class BridgeResult:
             v = m.get(k)
             lines.append(f"{label:<17} {'n/a' if v is None else f'{v:.4g}'} {unit}")
         if self.out_dir is not None:
-            lines.append(f"run directory     {self.out_dir}  (mavlink.tlog, timeseries.csv, metrics.json)")
+            lines.append(
+                f"run directory     {self.out_dir}  (mavlink.tlog, timeseries.csv, metrics.json)"
+            )
+        lost = c.get("tlog_write_errors", 0)
+        if lost or self.records_error:  # a full disk must not end a flight, nor pass unnoticed
+            what = self.records_error or "run directory written"
+            lines.append(f"RECORDS LOST      {lost} tlog records not written; {what}")
         return "\n".join(lines)
-
-
-# ----------------------------------------------------------------------------- targets
-class ScriptedTarget:
-    """The config's target motion, at mission time t (s)."""
-
-    def __init__(self, motion: Any) -> None:
-        self.motion = motion
-
-    def update(self, sample: Any, t_mission: float | None) -> None:  # pragma: no cover - nothing to take
-        return None
-
-    def state(self, t: float) -> TargetState | str:
-        return self.motion.state(t)
-
-
-def _heading_frame(vel: np.ndarray, acc: np.ndarray, fallback_yaw: float) -> tuple[np.ndarray, np.ndarray]:
-    """Level heading frame of a target (x along the horizontal velocity) and its turn rate."""
-    vh2 = float(vel[0] ** 2 + vel[1] ** 2)
-    if vh2 > 0.25:  # > 0.5 m/s: the velocity defines the heading
-        yaw = math.atan2(vel[1], vel[0])
-        chid = float(vel[0] * acc[1] - vel[1] * acc[0]) / vh2
-    else:
-        yaw, chid = fallback_yaw, 0.0
-    return so3.rot_z(yaw), np.array([0.0, 0.0, chid])
-
-
-class LiveTarget:
-    """A target over MAVLink: FOLLOW_TARGET, or GLOBAL_POSITION_INT (+ ATTITUDE) from one id.
-
-    Samples are stamped with the vehicle's mission time at receipt (the sender's clock is not
-    the autopilot's) and extrapolated to the control time; older than ``timeout_s``: stale.
-    """
-
-    def __init__(self, est: Estimator, timeout_s: float) -> None:
-        self.est = est
-        self.timeout_s = timeout_s
-        self.base: TargetState | None = None
-        self.att: Any = None
-        self.att_stamp = -math.inf
-        self.samples = 0
-
-    def update(self, sample: Any, t_mission: float | None) -> None:
-        if t_mission is None:
-            return
-        name = type(sample).__name__
-        if name == "AttitudeSample":
-            self.att, self.att_stamp = sample, t_mission
-            return
-        if name not in ("FollowTargetSample", "GlobalPositionSample"):
-            return
-        pos = self.est.to_local(sample.lat_deg, sample.lon_deg, sample.alt_amsl_m)
-        if pos is None:
-            return
-        vel = np.asarray(sample.vel_ned if sample.vel_ned is not None else np.zeros(3), float)
-        acc = np.zeros(3)
-        R = omega = None
-        if name == "FollowTargetSample":
-            if sample.acc_ned is not None:
-                acc = np.asarray(sample.acc_ned, float)
-            if sample.R_B_N is not None:
-                R = np.asarray(sample.R_B_N, float)
-                omega = np.asarray(sample.rates_frd, float) if sample.rates_frd is not None else np.zeros(3)
-            fallback = 0.0
-        else:
-            fallback = sample.heading_rad if sample.heading_rad is not None else 0.0
-            if self.att is not None and t_mission - self.att_stamp <= self.timeout_s:
-                R = np.asarray(self.att.R_B_N, float)
-                omega = np.asarray(self.att.rates_frd, float)
-        if R is None:
-            if self.base is not None and name == "GlobalPositionSample":
-                # acceleration from successive velocities keeps the heading frame's turn rate
-                dt = t_mission - self.base.t
-                if 0.02 < dt < 1.0:
-                    acc = (vel - self.base.velocity) / dt
-            R, omega = _heading_frame(vel, acc, fallback)
-        self.base = TargetState(t_mission, pos, vel, acc, R, omega, np.zeros(3))
-        self.samples += 1
-
-    def state(self, t: float) -> TargetState | str:
-        if self.base is None:
-            return "no live target yet"
-        age = t - self.base.t
-        if age > self.timeout_s:
-            return f"live target stale ({age:.2f} s old)"
-        return self.base.extrapolate(t)
 
 
 # ----------------------------------------------------------------------------- the bridge
 class Bridge:
     """One run against one vehicle. Use :func:`run_bridge`."""
 
-    def __init__(self, cfg: Config, opts: BridgeOptions, log: Callable[[str], None] = print) -> None:
+    def __init__(
+        self, cfg: Config, opts: BridgeOptions, log: Callable[[str], None] = print
+    ) -> None:
         self.cfg = cfg
         self.opts = opts
         self.log = log
@@ -266,25 +199,12 @@ class Bridge:
         if opts.plots is not None:
             m = dataclasses.replace(m, plots=bool(opts.plots))
         self.m = m
-        a = cfg.section("adapter")
-        v = cfg.vehicle
-        self.ad_params = AdapterParams(
-            max_bank_rad=v.max_bank_rad, airspeed_sp_m_s=v.airspeed_m_s,
-            **{f.name: getattr(a, f.name) for f in dataclasses.fields(a)},
-        )  # fmt: skip
-        origin = None
-        if m.origin_lat_deg is not None and m.origin_lon_deg is not None:
-            origin = (m.origin_lat_deg, m.origin_lon_deg, m.origin_alt_m or 0.0)
-        self.est = Estimator(
-            EstimatorParams(m.attitude_stale_s, m.position_stale_s, m.airspeed_stale_s, m.wind_stale_s, m.wind_filter_tau_s, origin=origin)
-        )  # fmt: skip
-        self.live = cfg.target.type == "mavlink"
-        if self.live and m.target_sysid is None:
-            raise MpfError(f"{cfg.source}: target.type mavlink needs mavlink.target_sysid")
-        self.target: Any = LiveTarget(self.est, m.target_timeout_s) if self.live else ScriptedTarget(build_target(cfg.target))
-        self.path = build_path(cfg.path)
-        self.gains = build_gains(cfg)
-        self.ext = build_extensions(cfg)
+        self.ctl = Controller(cfg, m)
+        self.ad_params = self.ctl.ad_params
+        self.est = self.ctl.est
+        self.live = self.ctl.live
+        self.target: Any = self.ctl.target
+        self.path = self.ctl.path
 
         self.link: Any = None
         self.state = State.CONNECTING
@@ -295,11 +215,6 @@ class Bridge:
         self.acks: list[Any] = []
         self.streaming = False
         self.engaged = False
-        self.s = 0.0
-        self.t_prev: float | None = None
-        self.sdot_prev = 0.0
-        self.w1_prev: np.ndarray | None = None
-        self.ad_state = AdapterState()
         self.last_sp: Setpoint | None = None
         self.last_time_boot_ms = 0
         self.last_att_mono = -math.inf
@@ -308,44 +223,66 @@ class Bridge:
         self.last_hb_tx_mono = -math.inf
         self.first_send_mono: float | None = None
         self.prestream_sends = 0
-        self.why_not = ""
         self.t_engage: float | None = None
         self.t_last: float | None = None
         self.table = RunTable()
-        self.sp_rows: list[list[float]] = []
-        self.n = {"setpoints_sent": 0, "setpoints_resent": 0, "safe_setpoints": 0, "law_evals": 0, "mode_requests": 0}
+        self.sp_rows: list[tuple[float, ...]] = []
+        self.n = {
+            "setpoints_sent": 0,
+            "setpoints_resent": 0,
+            "safe_setpoints": 0,
+            "law_evals": 0,
+            "mode_requests": 0,
+        }
+
+    @property
+    def why_not(self) -> str:
+        """Why the last control step (or the wait for a state) did not produce a setpoint."""
+        return self.ctl.why_not
 
     # -- I/O helpers -------------------------------------------------------------------------
+    def _rx_time(self, msg: Any) -> float | None:
+        """The receive time (s since the epoch) as the tlog recorded it: the link logs each
+        message just before handing it over, so the last record is this one. The same float
+        as a tlog reader computes (us * 1e-6), so replay sees exactly what we saw."""
+        tl = self.link.tlog if self.link is not None else None
+        if tl is not None and tl.last_packet is msg.get_msgbuf() and tl.last_us is not None:
+            return tl.last_us * 1e-6
+        t = getattr(msg, "_timestamp", None)  # no tlog record for it: quantise alike
+        return None if t is None else round(t * 1e6) * 1e-6
+
     def _dispatch(self, msg: Any) -> None:
         src = msg.get_srcSystem()
+        rx = self._rx_time(msg)
+        msg._timestamp = rx  # decoders copy it into the samples (VFR_HUD, WIND, HEARTBEAT)
         sample = decode(msg)
         if sample is None:
             return
         name = type(sample).__name__
-        rx = getattr(msg, "_timestamp", None)
         if src == self.m.vehicle_sysid:
             if name == "HeartbeatSample":
                 if sample.autopilot == dialect.MAV_AUTOPILOT_INVALID:
                     return  # a GCS or companion on the same system id
                 self.hb = sample
                 if self.engaged and not is_offboard(self.flavour, sample):
-                    raise _Stop(f"mode changed to {mode_name(self.flavour, sample)} by someone else: stopped commanding, not fighting it", "pilot")
+                    raise _Stop(
+                        f"mode changed to {mode_name(self.flavour, sample)} by someone else: stopped commanding, not fighting it",
+                        "pilot",
+                    )
                 return
             if name == "CommandAckSample":
                 self.acks.append(sample)
                 return
-            if self.est.update(sample, rx):
+            if self.ctl.feed_vehicle(sample, rx):
                 self.last_att_mono = time.monotonic()
                 if self.streaming and self.state < State.HANDBACK:
-                    self._control_step(sample)
+                    self._control_step()
         elif self.live and src == self.m.target_sysid:
-            self.target.update(sample, self._mission_time_at(rx))
+            self.ctl.feed_target(sample, rx)
 
-    def _mission_time_at(self, rx: float | None) -> float | None:
-        a = self.est.att
-        if a is None or rx is None or self.est.att_rx is None:
-            return None
-        return a.t_boot_s + (rx - self.est.att_rx) - self.est.t0
+    def _send_text(self, text: str) -> None:
+        """A STATUSTEXT (severity INFO) from us: the tlog's record of a decision."""
+        self._send(self.link.mav.statustext_encode(dialect.MAV_SEVERITY_INFO, text.encode("ascii")))
 
     def _send(self, msg: Any) -> None:
         self.link.send(msg)
@@ -367,7 +304,10 @@ class Bridge:
                 self.n["setpoints_resent"] += 1
             return
         if now - self.last_att_mono > self.m.telemetry_timeout_s:
-            raise _Stop(f"telemetry lost: no ATTITUDE for {now - self.last_att_mono:.2f} s; stopped commanding", "telemetry")
+            raise _Stop(
+                f"telemetry lost: no ATTITUDE for {now - self.last_att_mono:.2f} s; stopped commanding",
+                "telemetry",
+            )
         if now - self.last_good_mono > self.m.telemetry_timeout_s:
             kind = "target" if "target" in self.why_not else "telemetry"
             raise _Stop(f"{self.why_not}; stopped commanding", kind)
@@ -386,66 +326,56 @@ class Bridge:
                 return False
             wait = min(t_end - now, 0.01)
             if self.streaming:
-                wait = min(wait, max(0.0, self.last_send_mono + 1.0 / self.m.min_setpoint_rate_hz - now))
+                wait = min(
+                    wait, max(0.0, self.last_send_mono + 1.0 / self.m.min_setpoint_rate_hz - now)
+                )
             msg = self.link.recv(wait)
             if msg is not None:
                 self._dispatch(msg)
             self._periodic()
 
     # -- control -----------------------------------------------------------------------------
-    def _control_step(self, att: Any) -> None:
-        est, why = self.est.estimate()
-        if est is None:
-            self.why_not = why
+    def _control_step(self) -> None:
+        st = self.ctl.step()
+        if st is None:
             return
-        vs = est.vehicle
-        t = vs.t
-        tgt = self.target.state(t)
-        if isinstance(tgt, str):
-            self.why_not = tgt
-            return
-        dt = 0.0
-        if self.t_prev is not None:
-            dt = t - self.t_prev
-            if dt <= 0.0:
-                return  # duplicate or out-of-order sample: already acted on that instant
-            self.s += self.sdot_prev * dt
-        cmd, diag = mpf_law(self.s, vs, tgt, self.path, self.gains, self.ext, diagnostics=True)
         self.n["law_evals"] += 1
-        w1 = vs.R_W_I[:, 0]
-        sp, self.ad_state = adapt(cmd.omega_w1_I, vs.airspeed, est.R_B_N, (float(w1[0]), float(w1[1]), float(w1[2])), dt, self.ad_params, self.ad_state)
-        if not math.isfinite(cmd.sdot):
-            sp = safe_setpoint(self.ad_params)
-        self.t_prev = t
-        self.sdot_prev = cmd.sdot if math.isfinite(cmd.sdot) else 0.0
-        self.t_last = t
-        tb_ms = int(round(att.t_boot_s * 1000.0))
-        self._send_setpoint(sp, tb_ms)
-        self.last_sp, self.last_time_boot_ms = sp, tb_ms
+        self.t_last = st.t
+        self._send_setpoint(st.setpoint, st.time_boot_ms)
+        self.last_sp, self.last_time_boot_ms = st.setpoint, st.time_boot_ms
         self.last_good_mono = time.monotonic()
-        if self.state == State.TRACKING and diag is not None:
-            self._record(est, tgt, cmd, diag, w1, dt, sp)
-            if self.t_engage is not None and t - self.t_engage >= self.m.mission_duration_s:
+        if self.state == State.TRACKING:
+            self._record(st)
+            if self.t_engage is not None and st.t - self.t_engage >= self.m.mission_duration_s:
                 raise _Stop(f"mission duration {self.m.mission_duration_s:g} s reached", "duration")
-        self.w1_prev = np.array(w1)
 
-    def _record(self, est: Estimate, tgt: TargetState, cmd: MpfCommand, diag: MpfDiagnostics, w1: np.ndarray, dt: float, sp: Setpoint) -> None:
-        vs = est.vehicle
-        w_act = (0.0, 0.0)
-        if self.w1_prev is not None and dt > 0:
-            w1d = (w1 - self.w1_prev) / dt  # logging only: the law never sees this difference
-            w_act = (-float(w1d @ vs.R_W_I[:, 2]), float(w1d @ vs.R_W_I[:, 1]))
-        self.table.append(row_from(diag, vs.position, (cmd.w2, cmd.w3), w_act, cmd.sdot, tgt.position, tgt.R_T_I, vs.wind))
-        self.sp_rows.append([vs.t, *sp.body_rates_frd, *sp.q_wxyz, sp.thrust, sp.bank_rad, sp.pitch_rad, sp.load_factor, 1.0 if sp.safe else 0.0])
+    def _record(self, st: Step) -> None:
+        self.table.append(st.row())
+        self.sp_rows.append(tuple(st.setpoint_row()))
 
     def _send_setpoint(self, sp: Setpoint, time_boot_ms: int) -> None:
         if sp.safe:
             self.n["safe_setpoints"] += 1
         try:
             if self.flavour is Flavour.PX4:
-                msg = encode_set_attitude_target_rates(self.link.mav, time_boot_ms, self.m.vehicle_sysid, self.vehicle_compid, *sp.body_rates_frd, sp.thrust)
+                msg = encode_set_attitude_target_rates(
+                    self.link.mav,
+                    time_boot_ms,
+                    self.m.vehicle_sysid,
+                    self.vehicle_compid,
+                    *sp.body_rates_frd,
+                    sp.thrust,
+                )
             else:
-                msg = encode_set_attitude_target_quat(self.link.mav, time_boot_ms, self.m.vehicle_sysid, self.vehicle_compid, sp.q_wxyz, sp.thrust, sp.body_rates_frd)
+                msg = encode_set_attitude_target_quat(
+                    self.link.mav,
+                    time_boot_ms,
+                    self.m.vehicle_sysid,
+                    self.vehicle_compid,
+                    sp.q_wxyz,
+                    sp.thrust,
+                    sp.body_rates_frd,
+                )
         except ValueError:  # the adapter already guarantees finite values; belt and braces
             sp = safe_setpoint(self.ad_params)
             self.n["safe_setpoints"] += 1
@@ -473,11 +403,17 @@ class Bridge:
     def _request_mode(self, name: str, confirm: Callable[[], bool]) -> tuple[bool, str]:
         """DO_SET_MODE with retries; confirmed by an accepted ACK and ``confirm()`` (heartbeat)."""
         last = "no COMMAND_ACK"
+        # ACKs of earlier attempts still count: on a lossy link an attempt's ACK and the 1 Hz
+        # HEARTBEAT in the new mode often do not both arrive within one mode_timeout_s
+        acked: list[bool] = []
         for attempt in range(self.m.mode_retries):
             self.acks.clear()
-            self._send(encode_set_mode(self.link.mav, self.m.vehicle_sysid, self.vehicle_compid, self.flavour, name))
+            self._send(
+                encode_set_mode(
+                    self.link.mav, self.m.vehicle_sysid, self.vehicle_compid, self.flavour, name
+                )
+            )
             self.n["mode_requests"] += 1
-            acked: list[bool] = []
 
             def done(acked: list[bool] = acked) -> bool:
                 for a in self.acks:
@@ -530,16 +466,28 @@ class Bridge:
             seen = flavour_from_heartbeat(hb)
             want = Flavour(m.flavour) if m.flavour != "auto" else seen
             if want is Flavour.UNKNOWN:
-                raise MpfError(f"unknown autopilot (HEARTBEAT.autopilot = {hb.autopilot}); use --flavour px4|ardupilot")
+                raise MpfError(
+                    f"unknown autopilot (HEARTBEAT.autopilot = {hb.autopilot}); use --flavour px4|ardupilot"
+                )
             if m.flavour != "auto" and seen is not Flavour.UNKNOWN and seen is not want:
-                raise MpfError(f"--flavour {m.flavour} but the vehicle's HEARTBEAT says {seen.value}")
+                raise MpfError(
+                    f"--flavour {m.flavour} but the vehicle's HEARTBEAT says {seen.value}"
+                )
+            if m.hold_mode and (
+                why := hold_mode_error(m.hold_mode, want.value)
+            ):  # before anything is sent
+                raise MpfError(f"{self.cfg.source}: mavlink.hold_mode: {why}")
             self.flavour = want
             res.flavour = want.value
-            self.log(f"heartbeat from system {m.vehicle_sysid}: {want.value}, mode {self._mode_str()}")
+            self.log(
+                f"heartbeat from system {m.vehicle_sysid}: {want.value}, mode {self._mode_str()}"
+            )
             # wait for a complete state (and the live target) before checking anything
             ok = self._spin(m.heartbeat_timeout_s, self._ready)
             if not ok:
-                raise MpfError(f"no usable telemetry within {m.heartbeat_timeout_s:g} s: {self.why_not or 'no attitude'}")
+                raise MpfError(
+                    f"no usable telemetry within {m.heartbeat_timeout_s:g} s: {self.why_not or 'no attitude'}"
+                )
             self._set_state(State.CHECKS)
             failed = self._checks(res)
             if failed:
@@ -549,10 +497,16 @@ class Bridge:
             self._set_state(State.INIT)
             self._init_s()
             self._set_state(State.PRESTREAM)
-            # the checks may take a while without pumping: take the backlog in (state only, no
-            # setpoints for old samples), then start the staleness clocks afresh
+            # Everything allocated so far (modules, the dialect, the path tables) goes to the
+            # collector's permanent generation: a full collection of it takes ~25 ms, which
+            # would otherwise land inside a control step now and then.
+            gc.collect()
+            gc.freeze()
+            # the checks (and that collection) take a while without pumping: take the backlog in
+            # (state only, no setpoints for old samples), then start the staleness clocks afresh
             while (msg := self.link.recv(0.0)) is not None:
                 self._dispatch(msg)
+            self._send_text(STREAM_TEXT)  # for replay: control steps start after this record
             self.streaming = True
             self.last_good_mono = self.last_att_mono = time.monotonic()
             rate = m.min_setpoint_rate_hz
@@ -564,15 +518,23 @@ class Bridge:
                 return span >= m.prestream_s and (self.prestream_sends - 1) / span >= rate
 
             if not self._spin(m.prestream_s + 3.0, prestreamed):
-                raise _Stop(f"could not stream setpoints at {rate:g} Hz for {m.prestream_s:g} s", "engage")
-            self.log(f"pre-streamed {self.prestream_sends} setpoints in {self.last_send_mono - self.first_send_mono:.2f} s")
+                raise _Stop(
+                    f"could not stream setpoints at {rate:g} Hz for {m.prestream_s:g} s", "engage"
+                )
+            self.log(
+                f"pre-streamed {self.prestream_sends} setpoints in {self.last_send_mono - self.first_send_mono:.2f} s"
+            )
             if m.arm and not (self.hb is not None and self.hb.armed):
                 self._send(encode_arm(self.link.mav, m.vehicle_sysid, self.vehicle_compid, True))
-                if not self._spin(m.mode_timeout_s * m.mode_retries, lambda: self.hb is not None and self.hb.armed):
+                if not self._spin(
+                    m.mode_timeout_s * m.mode_retries, lambda: self.hb is not None and self.hb.armed
+                ):
                     raise _Stop("vehicle did not arm", "engage")
             self._set_state(State.ENGAGE)
             mode = self._offboard_mode()
-            ok, why = self._request_mode(mode, lambda: self.hb is not None and is_offboard(self.flavour, self.hb))
+            ok, why = self._request_mode(
+                mode, lambda: self.hb is not None and is_offboard(self.flavour, self.hb)
+            )
             if not ok:
                 raise _Stop(f"vehicle did not enter {mode}: {why}", "engage")
             self.engaged = True
@@ -610,36 +572,23 @@ class Bridge:
         self.log(f"[{s.name}]")
 
     def _ready(self) -> bool:
-        est, why = self.est.estimate()
-        if est is None:
-            self.why_not = why
-            return False
-        if self.live:
-            t = est.vehicle.t
-            st = self.target.state(t)
-            if isinstance(st, str):
-                self.why_not = st
-                return False
-        return True
+        return self.ctl.ready()
 
     def _checks(self, res: BridgeResult) -> list[str]:
         from .preflight import format_checks, run_checks
 
-        est, _ = self.est.estimate()
-        assert est is not None
-        self.est.t0 = est.t_boot_s  # mission time 0: the checks' and the scripted target's origin
-        if self.live:  # re-stamp the live target into the new time base
-            if self.target.base is not None:
-                self.target.base = dataclasses.replace(self.target.base, t=self.target.base.t - est.t_boot_s)
-        vs = self.est.estimate()[0].vehicle  # type: ignore[union-attr]
+        self.ctl.set_origin()  # mission time 0: the checks' and the scripted target's origin
+        init = self.ctl.initial_state()
+        assert init is not None
+        pos, R_W_I = init
         cfg = self.cfg
         cfg = dataclasses.replace(
             cfg,
             sim=dataclasses.replace(cfg.sim, duration_s=self.m.mission_duration_s),
             kinematic=dataclasses.replace(
                 cfg.kinematic,
-                initial_position_ned_m=tuple(float(x) for x in vs.position),
-                initial_attitude_rpy_rad=tuple(float(x) for x in matrix_to_euler(vs.R_W_I)),
+                initial_position_ned_m=(float(pos[0]), float(pos[1]), float(pos[2])),
+                initial_attitude_rpy_rad=matrix_to_euler(R_W_I),
             ),
         )
         results = run_checks(cfg, scripted_target=not self.live)
@@ -649,16 +598,12 @@ class Bridge:
         return [r.name for r in results if not r.ok]
 
     def _init_s(self) -> None:
-        est, _ = self.est.estimate()
-        assert est is not None
-        vs = est.vehicle
-        if self.cfg.guidance.initial_s_m is not None:
-            self.s = self.cfg.guidance.initial_s_m
-        else:
-            tgt = self.target.state(vs.t)
-            assert not isinstance(tgt, str)
-            self.s = self.path.closest(tgt.R_T_I.T @ (vs.position - tgt.position))
-        self.log(f"virtual point initialised at s = {self.s:.2f} m")
+        s0 = self.ctl.init_s()
+        assert self.ctl.t0 is not None
+        # no message is processed between CHECKS and here: the records mark that instant
+        for text in origin_texts(self.ctl.t0, s0):
+            self._send_text(text)
+        self.log(f"virtual point initialised at s = {s0:.2f} m")
 
     def _handback(self, res: BridgeResult, kind: str) -> None:
         """Stop or hand back according to why we stop; never raises."""
@@ -667,7 +612,11 @@ class Bridge:
             return
         if self.state < State.PRESTREAM:
             return
-        prev = signal.getsignal(signal.SIGTERM) if threading.current_thread() is threading.main_thread() else None
+        prev = (
+            signal.getsignal(signal.SIGTERM)
+            if threading.current_thread() is threading.main_thread()
+            else None
+        )
         try:
             if prev is not None:
                 signal.signal(signal.SIGTERM, signal.SIG_IGN)  # finish the hand-back first
@@ -682,7 +631,7 @@ class Bridge:
             if kind not in ("telemetry", "target") and self.last_sp is not None:
                 # keep a wings-level setpoint flowing until the mode change is confirmed, so the
                 # autopilot's offboard-loss failsafe does not fire in between
-                self.last_sp = safe_setpoint(self.ad_params, self._roll())
+                self.last_sp = safe_setpoint(self.ad_params, self.ctl.roll())
                 self.streaming = True
             try:
                 ok, why = self._request_mode(hold, lambda: self._mode_is(hold))
@@ -702,18 +651,12 @@ class Bridge:
             if prev is not None:
                 signal.signal(signal.SIGTERM, prev)
 
-    def _roll(self) -> float:
-        a = self.est.att
-        if a is None:
-            return 0.0
-        R = a.R_B_N
-        return math.atan2(R[2][1], R[2][2])
-
     def _close(self) -> None:
         if self.link is not None:
             self.link.close()
 
     def _finish(self, res: BridgeResult) -> BridgeResult:
+        gc.unfreeze()  # run_bridge may be called again in this process (tests, SIL)
         res.state_reached = self.furthest.name
         res.final_state = self.state.name
         if self.t_engage is not None and self.t_last is not None:
@@ -724,7 +667,9 @@ class Bridge:
         res.counters = counters
         self._close()
         cols = self.table.arrays()
-        metrics = compute_metrics(cols, self.cfg.metrics.steady_after_s, self.cfg.metrics.converge_threshold_m)
+        metrics = compute_metrics(
+            cols, self.cfg.metrics.steady_after_s, self.cfg.metrics.converge_threshold_m
+        )
         if len(cols["t"]):
             metrics["final_pt_m"] = float(cols["pt_norm"][-1])
         metrics.update(
@@ -736,15 +681,31 @@ class Bridge:
         res.metrics = metrics
         out = Path(self.opts.out_dir)
         try:
-            write_run(out, cols, metrics, self.path.positions(), plots=self.m.plots and len(cols["t"]) >= 2)
-            hdr = "t,p,q,r,qw,qx,qy,qz,thrust,bank,pitch,load_factor,safe"
-            np.savetxt(out / "setpoints.csv", np.array(self.sp_rows, float).reshape(-1, 13), delimiter=",", header=hdr, comments="", fmt="%.9g")
+            # setpoints first: the plots draw them too
+            np.savetxt(
+                out / "setpoints.csv",
+                np.array(self.sp_rows, float).reshape(-1, 13),
+                delimiter=",",
+                header=SETPOINT_COLUMNS,
+                comments="",
+                fmt="%.9g",
+            )
+            write_run(
+                out,
+                cols,
+                metrics,
+                self.path.positions(),
+                plots=self.m.plots and len(cols["t"]) >= 2,
+            )
         except Exception as e:  # noqa: BLE001 - records must not hide the flight's outcome
+            res.records_error = f"run directory not written: {e}"
             self.log(f"could not write the run directory: {e}")
         return res
 
 
-def run_bridge(cfg: Config, opts: BridgeOptions, log: Callable[[str], None] = print) -> BridgeResult:
+def run_bridge(
+    cfg: Config, opts: BridgeOptions, log: Callable[[str], None] = print
+) -> BridgeResult:
     """Fly one run. SIGTERM is turned into a hand-back (when called from the main thread).
 
     Raises MpfError (one line) for a bad URL, no vehicle, a bad key file, an unknown autopilot.
@@ -765,4 +726,13 @@ def run_bridge(cfg: Config, opts: BridgeOptions, log: Callable[[str], None] = pr
             signal.signal(signal.SIGTERM, prev)
 
 
-__all__ = ["Bridge", "BridgeOptions", "BridgeResult", "LiveTarget", "ScriptedTarget", "State", "run_bridge", "COLUMNS"]
+__all__ = [
+    "Bridge",
+    "BridgeOptions",
+    "BridgeResult",
+    "LiveTarget",
+    "ScriptedTarget",
+    "State",
+    "run_bridge",
+    "COLUMNS",
+]

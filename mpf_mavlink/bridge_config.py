@@ -8,9 +8,38 @@ values are one-line errors naming the key and the file). Units are in the key na
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 from .config import EXTRA_SECTIONS, _nonneg, _pos
+from .errors import ConfigError
+
+MAV_COMP_ID_AUTOPILOT1 = 1  # PX4's and ArduPilot's autopilot component id
+
+
+def hold_mode_error(mode: str, flavour: str) -> str | None:
+    """Why ``mode`` cannot be the hold mode of a ``flavour`` ("px4", "ardupilot", "auto")
+    autopilot, or None. The offboard mode itself is refused: handing back to it would leave the
+    vehicle waiting for setpoints that no longer come."""
+    from .mavlink.modes import arduplane_mode_from_name, px4_mode_from_name
+
+    ok = []
+    for fl, parse, offboard in (
+        ("px4", px4_mode_from_name, (6, 0)),
+        ("ardupilot", arduplane_mode_from_name, 15),
+    ):
+        if flavour in (fl, "auto"):
+            try:
+                ok.append(parse(mode) != offboard)
+            except ValueError:
+                ok.append(None)
+    if any(ok):
+        return None
+    if False in ok:
+        return (
+            f"{mode!r} is the offboard mode itself; hand back to a mode the autopilot flies alone"
+        )
+    who = {"px4": "a PX4 mode (e.g. AUTO.LOITER)", "ardupilot": "an ArduPlane mode (e.g. LOITER)"}
+    return f"{mode!r} is not {who.get(flavour, 'a PX4 or ArduPlane mode')}"
 
 
 @dataclass(frozen=True)
@@ -32,7 +61,9 @@ class MavlinkConfig:
     source_component: int = field(default=191, metadata={"check": ("range", 0, 255)})
     target_sysid: int | None = field(default=None, metadata={"check": ("range", 1, 255)})
     heartbeat_timeout_s: float = field(default=10.0, metadata=_pos())
-    telemetry_timeout_s: float = field(default=0.5, metadata=_pos())  # no ATTITUDE for this long: stop
+    telemetry_timeout_s: float = field(
+        default=0.5, metadata=_pos()
+    )  # no ATTITUDE for this long: stop
     attitude_stale_s: float = field(default=0.5, metadata=_pos())
     position_stale_s: float = field(default=0.5, metadata=_pos())
     airspeed_stale_s: float = field(default=0.5, metadata=_pos())
@@ -42,7 +73,9 @@ class MavlinkConfig:
     wind_filter_tau_s: float = field(default=5.0, metadata=_pos())
     target_timeout_s: float = field(default=1.0, metadata=_pos())
     min_setpoint_rate_hz: float = field(default=20.0, metadata={"check": ("ge", 2.0)})
-    prestream_s: float = field(default=1.0, metadata={"check": ("ge", 1.0)})
+    # PX4 wants >= 1 s of stream before OFFBOARD; it counts from the first setpoint it RECEIVED,
+    # so exactly 1 s of sending is refused whenever the first ones arrived late (link jitter)
+    prestream_s: float = field(default=1.5, metadata={"check": ("ge", 1.0)})
     mode_timeout_s: float = field(default=1.5, metadata=_pos())
     mode_retries: int = field(default=3, metadata={"check": ("ge", 1)})
     hold_mode: str | None = None  # None: AUTO.LOITER (PX4), LOITER (ArduPlane)
@@ -55,6 +88,34 @@ class MavlinkConfig:
     origin_alt_m: float | None = None
     tlog_fsync_every_s: float | None = field(default=1.0, metadata=_nonneg())
     plots: bool = True
+
+    def validate(self, cfg: Any, src: str) -> None:
+        """Contradictions between keys, found before anything is opened or sent."""
+
+        def fail(key: str, msg: str) -> ConfigError:
+            return ConfigError(f"{src}: mavlink.{key}: {msg}")
+
+        if self.hold_mode is not None and (why := hold_mode_error(self.hold_mode, self.flavour)):
+            raise fail("hold_mode", why)
+        if cfg.target.type == "mavlink" and self.target_sysid is None:
+            raise fail(
+                "target_sysid",
+                "required by target.type mavlink (the system id that sends the target)",
+            )
+        if self.target_sysid is not None and self.target_sysid == self.vehicle_sysid:
+            raise fail(
+                "target_sysid",
+                f"{self.target_sysid} is the vehicle's own system id (mavlink.vehicle_sysid)",
+            )
+        if (self.source_system, self.source_component) == (
+            self.vehicle_sysid,
+            MAV_COMP_ID_AUTOPILOT1,
+        ):
+            raise fail(
+                "source_component",
+                f"{self.source_component} on system {self.source_system} is the autopilot's own id: we would "
+                "impersonate it and drop its messages as our echo (a companion computer uses 191)",
+            )
 
 
 @dataclass(frozen=True)
@@ -77,6 +138,16 @@ class AdapterSection:
     airspeed_ki: float = field(default=0.02, metadata=_nonneg())
     integrator_limit: float = field(default=0.3, metadata=_nonneg())
     load_factor_ff: float = field(default=0.2, metadata=_nonneg())
+
+    def validate(self, cfg: Any, src: str) -> None:
+        if self.thrust_min > self.thrust_max:
+            raise ConfigError(
+                f"{src}: adapter.thrust_min: {self.thrust_min:g} is above adapter.thrust_max {self.thrust_max:g}"
+            )
+        if not self.thrust_min <= self.trim_thrust <= self.thrust_max:
+            raise ConfigError(
+                f"{src}: adapter.trim_thrust: {self.trim_thrust:g} is outside [thrust_min, thrust_max]"
+            )
 
 
 EXTRA_SECTIONS["mavlink"] = MavlinkConfig

@@ -76,6 +76,11 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from .rundir import prepare_out_dir, write_run
 
     cfg = _load(args)
+    if cfg.section("sil").link != "none":  # the SIL vehicle and the bridge over MAVLink
+        from .sil_cli import cmd_sim_sil
+
+        out = prepare_out_dir(args.out or _default_out(cfg, "sil"))
+        return cmd_sim_sil(cfg, out, args.quiet, args.no_plots)
     out = prepare_out_dir(args.out or _default_out(cfg, "sim"))
     from sim.runner import run_kinematic
 
@@ -94,8 +99,16 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+class _OneLineErrors(argparse.ArgumentParser):
+    """Command-line errors as one line naming the culprit, like every other error of the CLI
+    (argparse prints the whole usage first). Sub-commands inherit the class."""
+
+    def error(self, message: str) -> Any:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _OneLineErrors(
         prog="mpf-mavlink",
         description="3D moving-path-following guidance for fixed-wing vehicles over MAVLink.",
     )
@@ -114,21 +127,30 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser(
         "sim",
         help="simulate a scenario and write a run directory",
-        description="Simulate a scenario (kinematic plant of the paper) and write a run "
-        "directory: timeseries.csv, metrics.json and the paper's figures as PNG.",
+        description="Simulate a scenario and write a run directory: timeseries.csv, metrics.json "
+        "and the paper's figures as PNG. With sil.link: none (the default) the paper's kinematic "
+        "closed loop runs in-process; with sil.link: udp the simulated vehicle (JSBSim aircraft or "
+        "kinematic plant behind a PX4 / ArduPlane MAVLink endpoint) and the bridge fly the mission "
+        "as two processes over UDP loopback, the metrics come from the plant's truth and the "
+        "bridge's tlog is kept (see configs/default.yaml).",
     )
     _add_config(s)
     s.add_argument("--out", type=Path, help="run directory (default: runs/<time>-sim-<name>)")
     s.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
-    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     s.set_defaults(func=cmd_sim)
 
     pl = sub.add_parser("plot", help="re-draw the figures of a run directory", description="Re-draw the PNG figures of a run directory (sim, run or replay).")
     pl.add_argument("run_dir", metavar="RUN_DIR", type=Path)
     pl.set_defaults(func=cmd_plot)
     from .bridge_cli import add_run_parser
+    from .sil_cli import add_vehicle_parser
 
     add_run_parser(sub)
+    from .replay_cli import add_replay_parser
+
+    add_replay_parser(sub)
+    add_vehicle_parser(sub, _add_config)
     return p
 
 

@@ -273,6 +273,8 @@ def _check(meta: Any, v: Any, src: str, key: str) -> None:
         raise _fail(src, key, f"must be in [{chk[1]:g}, {chk[2]:g}], got {v!r}")
     if kind == "range_open" and not chk[1] < v < chk[2]:
         raise _fail(src, key, f"must be in ({chk[1]:g}, {chk[2]:g}), got {v!r}")
+    if kind == "sign" and v not in (-1.0, 1.0):
+        raise _fail(src, key, f"must be 1 or -1, got {v!r}")
 
 
 def _build(cls: type, data: dict[str, Any], src: str, prefix: str) -> Any:
@@ -360,8 +362,18 @@ def apply_override(raw: dict[str, Any], spec: str, src: str = "--set") -> None:
     node[parts[-1]] = value
 
 
+def _register_sections() -> None:
+    """Import the modules that register the bridge's and the SIL vehicle's sections, so every
+    configuration accepts (and strictly checks) them whoever loads it."""
+    from . import bridge_config, sil_config  # noqa: F401
+
+
 def config_from_dict(raw: dict[str, Any], src: str = "<config>") -> Any:
-    """Validate a raw mapping into a :class:`Config` (plus registered extra sections)."""
+    """Validate a raw mapping into a :class:`Config` (plus registered extra sections).
+
+    A section class may define ``validate(cfg, src)`` for checks across sections; it runs once
+    the whole configuration is built and raises ConfigError like the rest."""
+    _register_sections()
     base = {k: v for k, v in raw.items() if k not in EXTRA_SECTIONS}
     cfg = _build(Config, base, src, "")
     cfg = dataclasses.replace(cfg, source=src)
@@ -374,4 +386,9 @@ def config_from_dict(raw: dict[str, Any], src: str = "<config>") -> Any:
             raise _fail(src, name, "must be a mapping")
         extra[name] = _build(cls, data, src, name)
     _validate_cross(cfg, extra)
-    return dataclasses.replace(cfg, extra=extra)
+    cfg = dataclasses.replace(cfg, extra=extra)
+    for section in extra.values():
+        validate = getattr(section, "validate", None)
+        if validate is not None:
+            validate(cfg, src)
+    return cfg

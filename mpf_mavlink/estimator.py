@@ -256,7 +256,8 @@ class Estimator:
         a = self.att
         lag = 0.0
         if self.att_rx is not None:
-            for rx in (self.local_rx, self.glob_rx, self.vfr_rx, self.wind_rx):
+            # not the wind: it is optional, and a single odd wind sample must not stall control
+            for rx in (self.local_rx, self.glob_rx, self.vfr_rx):
                 if rx is not None:
                     lag = max(lag, rx - self.att_rx)
         else:

@@ -28,18 +28,25 @@ COLUMNS = [
     "pt_n", "pt_e", "pt_d", "pt_norm", "psi", "e2", "e3", "y_w", "z_w",
     "w2_cmd", "w3_cmd", "w2", "w3", "margin", "saturated", "psi_turn",
     "wind_n", "wind_e", "wind_d",
+    "tgt_roll", "tgt_pitch", "tgt_yaw",
 ]  # fmt: skip
+# Units: t (s), s (m), sdot (m/s); positions, errors (m, NED); psi, e (-); rates (rad/s);
+# margin (m/s, Assumption 1); saturated, psi_turn (0/1); wind (m/s, NED); tgt_roll/pitch/yaw:
+# ZYX Euler angles of R_T^I (rad), so that the path can be drawn where the target carried it.
 
 
 @dataclass
 class RunTable:
     """Columns of a run, appended row by row (floats only)."""
 
-    rows: list[list[float]] = field(default_factory=list)
+    rows: list[tuple[float, ...]] = field(default_factory=list)
     extra: dict[str, list[float]] = field(default_factory=dict)
 
-    def append(self, row: list[float]) -> None:
-        self.rows.append(row)
+    def append(self, row: list[float] | tuple[float, ...]) -> None:
+        # Stored as tuples: a tuple of floats drops out of the cyclic garbage collector, a list
+        # never does, and a long flight's rows would make every full collection (tens of ms,
+        # inside a control loop) longer and longer.
+        self.rows.append(tuple(row))
 
     def arrays(self) -> dict[str, NDArray[np.float64]]:
         A = np.array(self.rows, dtype=float).reshape(-1, len(COLUMNS))
@@ -57,7 +64,11 @@ def row_from(
     wind: Any,
 ) -> list[float]:
     """One CSV row from the law's diagnostics and the vehicle/target state (NED)."""
-    rel = np.asarray(target_R).T @ (np.asarray(p) - np.asarray(target_p))
+    R = np.asarray(target_R)
+    rel = R.T @ (np.asarray(p) - np.asarray(target_p))
+    t_roll = math.atan2(float(R[2, 1]), float(R[2, 2]))
+    t_pitch = -math.asin(max(-1.0, min(1.0, float(R[2, 0]))))
+    t_yaw = math.atan2(float(R[1, 0]), float(R[0, 0]))
     return [
         diag.t, diag.s, sdot,
         float(p[0]), float(p[1]), float(p[2]), *diag.p_f,
@@ -67,6 +78,7 @@ def row_from(
         w_cmd[0], w_cmd[1], float(w_act[0]), float(w_act[1]), diag.path_speed_margin,
         1.0 if "sat" in diag.mode else 0.0, 1.0 if "psi_turn" in diag.mode else 0.0,
         float(wind[0]), float(wind[1]), float(wind[2]),
+        t_roll, t_pitch, t_yaw,
     ]  # fmt: skip
 
 
@@ -142,10 +154,18 @@ def write_run(
 ) -> list[Path]:
     """Write timeseries.csv, path_T.csv, metrics.json and (optionally) the plots."""
     out.mkdir(parents=True, exist_ok=True)
-    A = np.column_stack([cols[c] for c in COLUMNS]) if len(cols["t"]) else np.zeros((0, len(COLUMNS)))
-    np.savetxt(out / "timeseries.csv", A, delimiter=",", header=",".join(COLUMNS), comments="", fmt="%.9g")
+    A = (
+        np.column_stack([cols[c] for c in COLUMNS])
+        if len(cols["t"])
+        else np.zeros((0, len(COLUMNS)))
+    )
+    np.savetxt(
+        out / "timeseries.csv", A, delimiter=",", header=",".join(COLUMNS), comments="", fmt="%.9g"
+    )
     if path_T is not None:
-        np.savetxt(out / "path_T.csv", path_T, delimiter=",", header="x,y,z", comments="", fmt="%.6f")
+        np.savetxt(
+            out / "path_T.csv", path_T, delimiter=",", header="x,y,z", comments="", fmt="%.6f"
+        )
     (out / "metrics.json").write_text(json.dumps(_clean(metrics), indent=2) + "\n")
     written = [out / "timeseries.csv", out / "metrics.json"]
     if plots:
@@ -155,7 +175,9 @@ def write_run(
     return written
 
 
-def read_run(d: str | Path) -> tuple[dict[str, NDArray[np.float64]], NDArray[np.float64] | None, dict[str, Any]]:
+def read_run(
+    d: str | Path,
+) -> tuple[dict[str, NDArray[np.float64]], NDArray[np.float64] | None, dict[str, Any]]:
     """Read a run directory back (for ``mpf-mavlink plot``)."""
     d = Path(d)
     f = d / "timeseries.csv"

@@ -72,7 +72,11 @@ class RealtimeClock:
             if remaining <= 0.0:
                 poll(0.0)
                 return
-            poll(remaining)
+            if poll(remaining):
+                # poll() returns at once after the frame's answer (the lockstep clock's cue):
+                # realtime pacing must still wait, so read again at most every 2 ms instead of
+                # spinning a core for the rest of the frame
+                time.sleep(min(remaining, 0.002))
 
 
 class LockstepClock:

@@ -441,20 +441,22 @@ def fly_to_trim(
     seconds: float = 15.0,
     average_last: float = 3.0,
     apply: bool = True,
+    course: float | None = None,
 ) -> TrimResult:
     """Fly wings-level at ``airspeed`` / ``altitude`` (m above the plant origin) with the loops.
 
     JSBSim's built-in trim fails for electric-motor models, so trim is found by flying:
     after ``seconds`` of simulated flight the commands averaged over the last ``average_last``
     seconds are the trim. With ``apply`` the autopilot's trims (throttle, elevator, aileron) are
-    set to them (the rate-loop integrators are then reset).
+    set to them (the rate-loop integrators are then reset). ``course`` (rad from north): the
+    ground course to hold (None: the course of the first state, which is the heading when a
+    wind was set after the initial conditions, not the track over the ground).
     ``plant`` needs ``dt``, ``step(a, e, r, t)`` and ``state()`` (see sim.plant_jsbsim).
     """
     dt = plant.dt
     n = int(round(seconds / dt))
     n_avg = max(1, int(round(min(average_last, seconds) / dt)))
     sums = [0.0] * 7
-    course = None
     for k in range(n):
         st = plant.state()
         if course is None:

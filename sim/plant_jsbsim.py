@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,6 +31,14 @@ import jsbsim  # noqa: E402
 FT = 0.3048  # m per ft
 KTS_PER_MS = 1.0 / 0.514444
 DEFAULT_ROOT = Path(__file__).resolve().parent / "jsbsim_root"
+# Command channel -> (JSBSim property, sign). The FlightGear/JSBSim convention: aileron > 0 rolls
+# right, elevator > 0 is trailing edge down (nose down), rudder > 0 yaws right, throttle 0..1.
+DEFAULT_CONTROLS: dict[str, tuple[str, float]] = {
+    "aileron": ("fcs/aileron-cmd-norm", 1.0),
+    "elevator": ("fcs/elevator-cmd-norm", 1.0),
+    "rudder": ("fcs/rudder-cmd-norm", 1.0),
+    "throttle": ("fcs/throttle-cmd-norm", 1.0),
+}
 
 # WGS-84
 _WGS84_A = 6378137.0
@@ -108,6 +118,48 @@ class PlantState:
         return -float(self.position_ned[2])
 
 
+class _QuietStderr:
+    """Catch what JSBSim prints while a model loads and initialises (the jsbsim module routes
+    its C++ std::cout / std::cerr to Python's sys.stdout / sys.stderr).
+
+    Models may carry <output> directives (the jsbsim package's c172x writes a CSV) and every
+    run_ic after the first reports that it cannot re-open that file: those lines are dropped;
+    anything else goes on to stderr (and stays in ``text`` for error messages)."""
+
+    _DROP = ("unable to open the file", "Output to this file is disabled")
+
+    def __enter__(self) -> _QuietStderr:
+        import contextlib
+        import io
+
+        self._buf = io.StringIO()
+        self._stack = contextlib.ExitStack()
+        self._stack.enter_context(contextlib.redirect_stdout(self._buf))
+        self._stack.enter_context(contextlib.redirect_stderr(self._buf))
+        self.text = ""
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        import sys
+
+        self._stack.close()
+        raw = self._buf.getvalue()
+        keep = [
+            ln for ln in raw.splitlines() if ln.strip() and not any(d in ln for d in self._DROP)
+        ]
+        self.text = "\n".join(keep)
+        if keep and exc[0] is None:
+            sys.stderr.write(self.text + "\n")
+
+
+def make_state(**fields: object) -> PlantState:
+    """A PlantState without the frozen dataclass's per-field ``object.__setattr__`` (8 us of the
+    ~25 us a snapshot costs, once per lockstep frame); same fields, same type."""
+    st = object.__new__(PlantState)
+    st.__dict__.update(fields)
+    return st
+
+
 @dataclass
 class PlantConfig:
     """Constructor arguments of :class:`JSBSimPlant` (dataclass-friendly for configs)."""
@@ -143,6 +195,7 @@ class JSBSimPlant:
         ground_alt_m: float | None = None,
         extra: dict[str, float] | None = None,
         throttle: float = 0.3,
+        controls: dict[str, tuple[str, float]] | None = None,
     ):
         self.root_dir = Path(root_dir) if root_dir is not None else DEFAULT_ROOT
         self.model = model
@@ -152,8 +205,19 @@ class JSBSimPlant:
 
         fdm = jsbsim.FGFDMExec(str(self.root_dir))
         fdm.set_debug_level(0)
-        if not fdm.load_model(model):
-            raise RuntimeError(f"JSBSim could not load model {model!r} from {self.root_dir}")
+        # Output files a model asks for go to a private directory removed after start-up, never
+        # into the aircraft's (often the installed package's) directory.
+        self._outdir = tempfile.mkdtemp(prefix="mpf-jsbsim-")
+        fdm.set_output_path(self._outdir)
+        quiet = _QuietStderr()
+        with quiet:
+            ok = fdm.load_model(model)
+            if ok:
+                fdm.disable_output()  # a plant writes no files
+        if not ok:
+            raise RuntimeError(
+                f"JSBSim could not load model {model!r} from {self.root_dir}: {quiet.text}"
+            )
         fdm.set_dt(self.dt)
         self.fdm = fdm
         pm = fdm.get_property_manager()
@@ -176,7 +240,9 @@ class JSBSimPlant:
         self._set("ic/theta-deg", 0.0)
         for k, v in (extra or {}).items():
             self._set(k, v)
-        if not fdm.run_ic():
+        with _QuietStderr():  # run_ic opens the model's output files
+            ok = fdm.run_ic()
+        if not ok:
             raise RuntimeError("JSBSim run_ic() failed")
         if pm.hasNode("fcs/mixture-cmd-norm"):
             self._set("fcs/mixture-cmd-norm", 1.0)  # piston models (c172x) need fuel mixture
@@ -186,22 +252,38 @@ class JSBSimPlant:
         # run here). So: one step at 1 % throttle (-> ~1500 RPM for the X8), 0.5 s at the initial
         # throttle (propeller at its equilibrium RPM), then run_ic() again, which restores the
         # initial position/attitude/velocity but keeps the propeller RPM; the clock is reset to 0.
+        thr_prop, thr_sign = dict(DEFAULT_CONTROLS, **(controls or {}))["throttle"]
         self._set("propulsion/set-running", -1)
-        self._set("fcs/throttle-cmd-norm", 0.01)
+        self._set(thr_prop, 0.01 * thr_sign)
         fdm.run()
-        self._set("fcs/throttle-cmd-norm", throttle)
+        self._set(thr_prop, throttle * thr_sign)
         for _ in range(int(round(0.5 / self.dt))):
             fdm.run()
-        if not fdm.run_ic():
+        with _QuietStderr():  # every run_ic re-opens the model's output files
+            ok = fdm.run_ic()
+        shutil.rmtree(self._outdir, ignore_errors=True)
+        if not ok:
             raise RuntimeError("JSBSim run_ic() failed")
         fdm.set_sim_time(0.0)
 
         n = self._node
-        # command nodes
-        self._n_ail = n("fcs/aileron-cmd-norm")
-        self._n_ele = n("fcs/elevator-cmd-norm")
-        self._n_rud = n("fcs/rudder-cmd-norm")
-        self._n_thr = n("fcs/throttle-cmd-norm")
+        # command nodes and signs: the autopilot's convention (aileron > 0 rolls right, elevator
+        # > 0 nose down, rudder > 0 yaws right, throttle 0..1) times the aircraft's sign
+        ctl = dict(DEFAULT_CONTROLS)
+        ctl.update(controls or {})
+        unknown = set(ctl) - set(DEFAULT_CONTROLS)
+        if unknown:
+            raise KeyError(
+                f"unknown control channel(s) {sorted(unknown)}: use {sorted(DEFAULT_CONTROLS)}"
+            )
+        for name, (prop, _) in ctl.items():
+            if not pm.hasNode(prop):
+                raise KeyError(f"JSBSim model {model!r} has no property {prop!r} ({name} command)")
+        self.controls = ctl
+        self._n_ail, self._s_ail = n(ctl["aileron"][0]), float(ctl["aileron"][1])
+        self._n_ele, self._s_ele = n(ctl["elevator"][0]), float(ctl["elevator"][1])
+        self._n_rud, self._s_rud = n(ctl["rudder"][0]), float(ctl["rudder"][1])
+        self._n_thr, self._s_thr = n(ctl["throttle"][0]), float(ctl["throttle"][1])
         # state nodes
         self._n_t = n("simulation/sim-time-sec")
         self._n_lat = n("position/lat-geod-deg")
@@ -308,21 +390,43 @@ class JSBSimPlant:
     # ------------------------------------------------------------------ stepping
     def step(self, aileron: float, elevator: float, rudder: float, throttle: float) -> None:
         """Apply normalized commands (surfaces -1..1, throttle 0..1) and advance one ``dt``."""
-        self._n_ail.set_double_value(aileron)
-        self._n_ele.set_double_value(elevator)
-        self._n_rud.set_double_value(rudder)
-        self._n_thr.set_double_value(throttle)
+        self._n_ail.set_double_value(aileron * self._s_ail)
+        self._n_ele.set_double_value(elevator * self._s_ele)
+        self._n_rud.set_double_value(rudder * self._s_rud)
+        self._n_thr.set_double_value(throttle * self._s_thr)
         self._run()
 
     def run(self, n: int, aileron: float, elevator: float, rudder: float, throttle: float) -> None:
         """Hold the commands for ``n`` steps."""
-        self._n_ail.set_double_value(aileron)
-        self._n_ele.set_double_value(elevator)
-        self._n_rud.set_double_value(rudder)
-        self._n_thr.set_double_value(throttle)
+        self._n_ail.set_double_value(aileron * self._s_ail)
+        self._n_ele.set_double_value(elevator * self._s_ele)
+        self._n_rud.set_double_value(rudder * self._s_rud)
+        self._n_thr.set_double_value(throttle * self._s_thr)
         r = self._run
         for _ in range(n):
             r()
+
+    def rates_airspeed(self) -> tuple[float, float, float, float]:
+        """(p, q, r) rad/s (FRD body rates) and the true airspeed (m/s): all a rate loop needs,
+        for a few property reads instead of a whole :meth:`state`."""
+        return (
+            self._n_p.get_double_value(),
+            self._n_q.get_double_value(),
+            self._n_r.get_double_value(),
+            self._n_vt.get_double_value() * FT,
+        )
+
+    def attitude_rates(self) -> tuple[float, float, float, float, float, float]:
+        """(roll, pitch, yaw) rad as in :meth:`state` and (p, q, r) rad/s: what ATTITUDE carries."""
+        psi = self._n_psi.get_double_value()
+        return (
+            self._n_phi.get_double_value(),
+            self._n_theta.get_double_value(),
+            psi if psi <= math.pi else psi - 2.0 * math.pi,
+            self._n_p.get_double_value(),
+            self._n_q.get_double_value(),
+            self._n_r.get_double_value(),
+        )
 
     @property
     def t(self) -> float:
@@ -340,13 +444,13 @@ class JSBSimPlant:
         ct, st = math.cos(th), math.sin(th)
         cp, sp = math.cos(psi), math.sin(psi)
         R = np.array(
-            [
-                [ct * cp, sf * st * cp - cf * sp, cf * st * cp + sf * sp],
-                [ct * sp, sf * st * sp + cf * cp, cf * st * sp - sf * cp],
-                [-st, sf * ct, cf * ct],
-            ]
-        )
-        return PlantState(
+            (
+                ct * cp, sf * st * cp - cf * sp, cf * st * cp + sf * sp,
+                ct * sp, sf * st * sp + cf * cp, cf * st * sp - sf * cp,
+                -st, sf * ct, cf * ct,
+            )
+        ).reshape(3, 3)  # fmt: skip
+        return make_state(
             t=self._n_t.get_double_value(),
             position_ned=np.array(self.origin.ned(lat, lon, alt)),
             velocity_ned=np.array(

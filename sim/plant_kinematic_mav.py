@@ -33,7 +33,9 @@ from .plant_jsbsim import _WGS84_A, _WGS84_E2, LocalNED, PlantState
 G = 9.80665
 
 
-def ned_to_geodetic_fast(origin: LocalNED, n: float, e: float, d: float) -> tuple[float, float, float]:
+def ned_to_geodetic_fast(
+    origin: LocalNED, n: float, e: float, d: float
+) -> tuple[float, float, float]:
     """Local NED (m) about ``origin`` -> WGS-84 (lat deg, lon deg, alt m); exact (iterated)."""
     rn, re, rd = origin._rn, origin._re, origin._rd
     x = origin._o[0] + rn[0] * n + re[0] * e + rd[0] * d
@@ -130,6 +132,14 @@ class KinematicMavPlant:
     def run(self, n: int, aileron: float, elevator: float, rudder: float, throttle: float) -> None:
         for _ in range(n):
             self.step(aileron, elevator, rudder, throttle)
+
+    def rates_airspeed(self) -> tuple[float, float, float, float]:
+        """(p, q, r) rad/s and the airspeed (m/s), as in :meth:`state`."""
+        return (self._p, self._q, self._r, self.V)
+
+    def attitude_rates(self) -> tuple[float, float, float, float, float, float]:
+        """(roll, pitch, yaw) rad and (p, q, r) rad/s, as in :meth:`state`."""
+        return (self._phi, self._gam, self._psi, self._p, self._q, self._r)
 
     def state(self) -> PlantState:
         phi, th, psi = self._phi, self._gam, self._psi

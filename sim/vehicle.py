@@ -75,13 +75,22 @@ from mpf_mavlink.frames import matrix_to_quat_wxyz  # noqa: E402
 
 from .clock import Clock, make_clock  # noqa: E402
 from .inner_loop import FixedWingAutopilot, fly_to_trim  # noqa: E402
+from .mavfast import FastPacker, MsgSpec, decode_set_attitude_target  # noqa: E402
 from .plant_kinematic_mav import KinematicMavPlant, ned_to_geodetic_fast  # noqa: E402
 
 M = mavlink2
 G = 9.80665
 
 # --------------------------------------------------------------------------- mode tables
-PX4_MAIN = {"MANUAL": 1, "ALTCTL": 2, "POSCTL": 3, "AUTO": 4, "ACRO": 5, "OFFBOARD": 6, "STABILIZED": 7}
+PX4_MAIN = {
+    "MANUAL": 1,
+    "ALTCTL": 2,
+    "POSCTL": 3,
+    "AUTO": 4,
+    "ACRO": 5,
+    "OFFBOARD": 6,
+    "STABILIZED": 7,
+}
 PX4_AUTO_SUB = {"READY": 1, "TAKEOFF": 2, "LOITER": 3, "MISSION": 4, "RTL": 5, "LAND": 6}
 PX4_MAIN_NAMES = {v: k for k, v in PX4_MAIN.items()}
 PX4_SUB_NAMES = {v: k for k, v in PX4_AUTO_SUB.items()}
@@ -130,6 +139,18 @@ class TelemetryRates:
     heartbeat: float = 1.0
 
 
+# Wire formats of the messages the vehicle streams (framed by sim.mavfast, byte-identical to pymavlink).
+_SPEC = {
+    name: MsgSpec(getattr(M, f"MAVLink_{name}_message"))
+    for name in ("heartbeat", "attitude", "local_position_ned", "global_position_int", "vfr_hud", "wind",
+                 "wind_cov", "home_position", "sys_status", "system_time", "follow_target")
+}  # fmt: skip
+# A UDP datagram carries several packets (as PX4 does), up to this many bytes.
+_DATAGRAM_MAX = 1400
+# Streams after ATTITUDE within a frame (see SimVehicle._telemetry).
+_STREAM_ORDER = ("heartbeat", "local_position", "global_position", "vfr_hud", "wind", "home_position",
+                 "sys_status", "system_time")  # fmt: skip
+
 # message id -> stream name (for MAV_CMD_SET_MESSAGE_INTERVAL / REQUEST_MESSAGE)
 _STREAM_IDS = {
     M.MAVLINK_MSG_ID_ATTITUDE: "attitude",
@@ -152,7 +173,7 @@ class _QueueWriter:
         self.v = vehicle
 
     def write(self, buf: bytes) -> None:
-        self.v._out.append((self.v._boot_t + self.v.telemetry_latency_s, bytes(buf)))
+        self.v._put(bytes(buf))
 
 
 def _finite(*vals: float) -> bool:
@@ -208,6 +229,11 @@ class SimVehicle:
         autopilot: FixedWingAutopilot | None = None,
         px4_require_thrust: bool = False,
         record_truth: bool = True,
+        plant_options: dict | None = None,
+        physics_rate_hz: float = 120.0,
+        gusts: list[dict] | None = None,
+        realtime_until_engaged: bool = False,
+        initial_mode: str = "hold",
     ):
         if flavour not in ("px4", "ardupilot"):
             raise ValueError("flavour must be 'px4' or 'ardupilot'")
@@ -232,14 +258,19 @@ class SimVehicle:
         pos = np.asarray(position_ned, float)
         wind = np.asarray(wind_ned, float)
         ground_dir = np.array([math.cos(heading), math.sin(heading), 0.0])
-        shift = (self.cruise_airspeed * ground_dir + np.array([wind[0], wind[1], 0.0])) * trim_seconds
+        shift = (
+            self.cruise_airspeed * ground_dir + np.array([wind[0], wind[1], 0.0])
+        ) * trim_seconds
         start = pos - shift
         if isinstance(plant, str):
-            n_sub = max(1, math.ceil(frame_period * 120.0 - 1e-9))  # physics near 120 Hz
+            n_sub = max(
+                1, math.ceil(frame_period * physics_rate_hz - 1e-9)
+            )  # physics at >= the rate
             dt = frame_period / n_sub
             kw = dict(
                 dt=dt, lat0_deg=lat0_deg, lon0_deg=lon0_deg, alt0_m=alt0_m,
                 position_ned=tuple(start), heading=heading, airspeed=self.cruise_airspeed,
+                **(plant_options or {}),
             )  # fmt: skip
             if plant == "jsbsim":
                 from .plant_jsbsim import JSBSimPlant
@@ -259,6 +290,10 @@ class SimVehicle:
             plant.set_wind(wind)
         if turbulence != "none":
             plant.set_turbulence(turbulence, seed)
+        # one-minus-cosine gusts: (t_start, trigger_gust kwargs), t in sim s after ready
+        self._gusts = sorted(((float(g["start_s"]), {k: v for k, v in g.items() if k != "start_s"}) for g in gusts or ()),
+                             key=lambda g: g[0])  # fmt: skip
+        self.realtime_until_engaged = bool(realtime_until_engaged)
 
         # ---- autopilot, trim flight
         self.ap = autopilot or FixedWingAutopilot()
@@ -266,25 +301,65 @@ class SimVehicle:
             self.ap.hold.gains.pitch_trim = 0.0  # no angle of attack in the kinematic model
         self.trim = None
         if trim_seconds > 0:
-            self.trim = fly_to_trim(plant, self.ap, self.cruise_airspeed, float(-pos[2]), seconds=trim_seconds)
+            # hold the ground track the start point was shifted along (heading + wind), so the
+            # trim flight ends at the requested point whatever the wind
+            track = (
+                math.atan2(float(shift[1]), float(shift[0]))
+                if np.hypot(shift[0], shift[1]) > 0
+                else heading
+            )
+            self.trim = fly_to_trim(
+                plant,
+                self.ap,
+                self.cruise_airspeed,
+                float(-pos[2]),
+                seconds=trim_seconds,
+                course=track,
+            )
         self._k = int(round(plant.t / self.dt))  # physics steps since boot (incl. trim)
         self._k0 = self._k
         self._st = plant.state()
+        rates_fn = getattr(plant, "rates_airspeed", None)
+        self._rates_fn = (
+            rates_fn
+            if rates_fn is not None
+            else lambda: (*plant.state().pqr, plant.state().airspeed)
+        )
+        self._rates = self._rates_fn()  # (p, q, r) rad/s, airspeed m/s: what the rate loops read
+        att_fn = getattr(plant, "attitude_rates", None)
+        self._att_fn = (
+            att_fn if att_fn is not None else lambda: (*plant.state().euler, *plant.state().pqr)
+        )
 
         # ---- mode state
         self.armed = True
         self._mode_t = 0.0
         self.mode_changes: list[tuple[float, str]] = []
+        self.mode_log: list[tuple[float, float, str]] = []  # (t, wall perf_counter s, mode name)
         self.statustexts: list[tuple[float, str]] = []
         # PX4 offboard stream bookkeeping (sim boot time, s)
         self._sp_last: float | None = None
         self._sp_stream_start: float | None = None
-        self._sp: tuple | None = None  # ("rates", (p, q, r), thrust) | ("att", (roll, pitch), thrust)
+        self._sp: tuple | None = (
+            None  # ("rates", (p, q, r), thrust) | ("att", (roll, pitch), thrust)
+        )
         # ArduPlane guided forced axes: values and times (boot s)
         self._forced = [0.0, 0.0, 0.0, 0.0]  # roll, pitch, yaw (rad), throttle (0..1)
         self._forced_t: list[float | None] = [None, None, None, None]
-        self.dropped: dict[str, int] = {"nonfinite": 0, "not_guided": 0, "wrong_target": 0, "no_axes": 0}
-        if self.px4:
+        self.dropped: dict[str, int] = {
+            "nonfinite": 0,
+            "not_guided": 0,
+            "wrong_target": 0,
+            "no_axes": 0,
+        }
+        if initial_mode not in ("hold", "cruise"):
+            raise ValueError("initial_mode must be 'hold' or 'cruise'")
+        if initial_mode == "cruise":  # course + altitude hold along the start heading
+            if self.px4:
+                self._set_px4_mode(PX4_MAIN["POSCTL"], announce=False)
+            else:
+                self._set_ap_mode(ARDUPLANE_NUMBERS["CRUISE"], announce=False)
+        elif self.px4:
             self._set_px4_mode(PX4_MAIN["AUTO"], PX4_AUTO_SUB["LOITER"], announce=False)
         else:
             self._set_ap_mode(ARDUPLANE_NUMBERS["LOITER"], announce=False)
@@ -301,8 +376,15 @@ class SimVehicle:
         self.target = target
         self.target_system = int(target_system)
         self.target_rate_hz = float(target_rate_hz)
-        self._tmav = M.MAVLink(_QueueWriter(self), srcSystem=self.target_system, srcComponent=int(target_component))
-        self._target_type = M.MAV_TYPE_SURFACE_BOAT if target_type == "boat" else M.MAV_TYPE_GROUND_ROVER
+        self._tmav = M.MAVLink(
+            _QueueWriter(self), srcSystem=self.target_system, srcComponent=int(target_component)
+        )
+        self._fp, self._ftp = FastPacker(self._mav), FastPacker(self._tmav)
+        # plain UDP links are read datagram by datagram (setpoints decoded without pymavlink)
+        self._udp = type(self.conn).__name__ == "mavudp"
+        self._target_type = (
+            M.MAV_TYPE_SURFACE_BOAT if target_type == "boat" else M.MAV_TYPE_GROUND_ROVER
+        )
         self._answered = False
         self.answers = 0  # SET_ATTITUDE_TARGET messages received
         self.rx_count = 0
@@ -312,10 +394,8 @@ class SimVehicle:
 
         # ---- clock, truth, threading
         self.clock = make_clock(clock, answer_timeout_s=answer_timeout_s, speed=realtime_speed)
-        self._truth: dict[str, list] = {
-            k: [] for k in ("t", "time_boot_s", "position_ned", "velocity_ned", "euler", "airspeed",
-                            "wind_ned", "throttle", "mode", "target_position", "target_velocity")
-        }  # fmt: skip
+        self._rows: list[tuple] = []  # truth, one row per frame (see _record / truth())
+        self._tgt_rows: list[tuple] = []  # target position, velocity for the rows so far
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -354,7 +434,7 @@ class SimVehicle:
         return self._custom_mode
 
     def _enter(self, behaviour: str, name: str, custom_mode: int, announce: bool) -> None:
-        st = self._st if hasattr(self, "_st") else self.plant.state()
+        st = self.plant.state()  # now, not the frame's start (a mode change can come mid-frame)
         self._behaviour = behaviour
         self._mode_name = name
         self._custom_mode = custom_mode
@@ -363,6 +443,7 @@ class SimVehicle:
         self._course = math.atan2(float(st.velocity_ned[1]), float(st.velocity_ned[0]))
         self._mode_t = self._boot_t
         self.mode_changes.append((self.t if hasattr(self, "_k0") else 0.0, name))
+        self.mode_log.append((self.t if hasattr(self, "_k0") else 0.0, time.perf_counter(), name))
         if behaviour == GUIDED:
             self._forced_t = [None, None, None, None]
         if announce:
@@ -371,7 +452,9 @@ class SimVehicle:
     def _set_px4_mode(self, main: int, sub: int = 0, announce: bool = True) -> None:
         if main == PX4_MAIN["AUTO"] and sub == 0:
             sub = PX4_AUTO_SUB["MISSION"]  # PX4: AUTO without a sub mode is MISSION
-        name = PX4_MAIN_NAMES[main] + (f".{PX4_SUB_NAMES.get(sub, sub)}" if main == PX4_MAIN["AUTO"] else "")
+        name = PX4_MAIN_NAMES[main] + (
+            f".{PX4_SUB_NAMES.get(sub, sub)}" if main == PX4_MAIN["AUTO"] else ""
+        )
         if main != PX4_MAIN["AUTO"]:
             sub = 0
         self._enter(_PX4_BEHAVIOUR[main], name, px4_custom_mode(main, sub), announce)
@@ -405,7 +488,9 @@ class SimVehicle:
         beh = self._behaviour
         if beh == OFFBOARD:
             if self._sp_last is None or t - self._sp_last > self.com_of_loss_t:
-                self._statustext(M.MAV_SEVERITY_CRITICAL, "Failsafe: no offboard signal, switching to Hold")
+                self._statustext(
+                    M.MAV_SEVERITY_CRITICAL, "Failsafe: no offboard signal, switching to Hold"
+                )
                 self._set_px4_mode(PX4_MAIN["AUTO"], PX4_AUTO_SUB["LOITER"])
                 beh = self._behaviour
             else:
@@ -442,7 +527,13 @@ class SimVehicle:
                                           self.loiter_direction)  # fmt: skip
         climb = -float(st.velocity_ned[2])
         _, pitch_tecs, thr_tecs = ap.hold.update(
-            dt, self.cruise_airspeed, self._alt_sp, st.airspeed, -float(st.position_ned[2]), climb, roll_sp
+            dt,
+            self.cruise_airspeed,
+            self._alt_sp,
+            st.airspeed,
+            -float(st.position_ned[2]),
+            climb,
+            roll_sp,
         )
         pitch_sp = fv[1] if fresh[1] else pitch_tecs
         a, e, r = ap.attitude_to_surfaces(dt, roll_sp, pitch_sp, st)
@@ -457,14 +548,38 @@ class SimVehicle:
         steps, due telemetry, truth. Returns the sim time ``t``."""
         self.poll(0.0)
         self._apply_due()
-        plant, ctl = self.plant, self._control
+        plant, ap, dt = self.plant, self.ap, self.dt
+        rates, fresh = self._rates, True  # fresh: self._st is the state now
         for _ in range(self.n_sub):
-            st = self._st
-            a, e, r, thr = ctl(st)
-            plant.step(a, e, r, thr)
+            sp = self._sp
+            if (
+                self._behaviour == OFFBOARD
+                and sp is not None
+                and sp[0] == "rates"
+                and self._k * dt - self._sp_last <= self.com_of_loss_t
+            ):
+                # Hot path (PX4 offboard body rates): the rate loops read only p, q, r and the
+                # airspeed, so the full state (geodetic conversion, matrices) is not needed here.
+                a, e, r = ap.rates_to_surfaces(dt, sp[1], rates, rates[3])
+                cmd = (a, e, r, sp[2] if self.armed else 0.0)
+            else:
+                if not fresh:
+                    self._st = plant.state()
+                cmd = self._control(self._st)
+            plant.step(*cmd)
             self._k += 1
-            self._st = plant.state()
-            self._apply_due()
+            rates, fresh = self._rates_fn(), False
+            if self._in:
+                self._apply_due()
+        self._rates = rates
+        if self._due("attitude", self.rates.attitude):
+            # ATTITUDE first, alone in its datagram (see _telemetry), from a handful of property
+            # reads: the whole state (geodetic conversion, matrices) is built after it is sent
+            self._send_attitude(self._att_fn())
+            self._flush()
+        self._st = plant.state()
+        if self._gusts and self.t + 1e-9 >= self._gusts[0][0]:
+            plant.trigger_gust(**self._gusts.pop(0)[1])
         self._telemetry()
         self._flush()
         self._record()
@@ -476,9 +591,10 @@ class SimVehicle:
         w0, k0 = time.perf_counter(), self._k
         self.clock.start(self._boot_t)
         try:
+            peer = self._lockstep_peer if self.realtime_until_engaged else self.has_peer
             while not self._stop.is_set() and (end_k is None or self._k < end_k):
                 self.step_once()
-                self.clock.wait(self._boot_t, self.poll, self.has_peer)
+                self.clock.wait(self._boot_t, self.poll, peer)
         finally:
             self.wall_time_running += time.perf_counter() - w0
             self.sim_time_running += (self._k - k0) * self.dt
@@ -488,7 +604,9 @@ class SimVehicle:
         if self._thread is not None and self._thread.is_alive():
             raise RuntimeError("already running")
         self._stop.clear()
-        self._thread = threading.Thread(target=self.run, args=(duration_s,), daemon=True, name="SimVehicle")
+        self._thread = threading.Thread(
+            target=self.run, args=(duration_s,), daemon=True, name="SimVehicle"
+        )
         self._thread.start()
         return self._thread
 
@@ -514,7 +632,20 @@ class SimVehicle:
     @property
     def real_time_factor(self) -> float:
         """Sim seconds per wall second spent in :meth:`run` so far."""
-        return self.sim_time_running / self.wall_time_running if self.wall_time_running > 0 else float("nan")
+        return (
+            self.sim_time_running / self.wall_time_running
+            if self.wall_time_running > 0
+            else float("nan")
+        )
+
+    def _lockstep_peer(self) -> bool:
+        """With ``realtime_until_engaged``: the lockstep clock treats the peer as present only
+        while it commands the vehicle (OFFBOARD / GUIDED). Until the bridge has taken control its
+        hand-over rules run on wall-clock timers (>= 1 s of setpoints at >= 20 Hz before the mode
+        request) while the autopilot's run on vehicle time; pacing that phase at real time keeps
+        both in one time base, so the engagement happens after the same simulated time whatever
+        the clock (lockstep and realtime runs start tracking from the same state)."""
+        return self._behaviour in (OFFBOARD, GUIDED) and self.has_peer()
 
     # ------------------------------------------------------------------ input
     def has_peer(self) -> bool:
@@ -542,6 +673,9 @@ class SimVehicle:
         return self._answered
 
     def _drain(self) -> None:
+        if self._udp:
+            self._drain_udp()
+            return
         recv = self.conn.recv_msg
         for _ in range(10000):
             try:
@@ -550,15 +684,42 @@ class SimVehicle:
                 return
             if msg is None:
                 return
-            mt = msg.get_type()
-            if mt == "BAD_DATA":
+            self._on_msg(msg)
+
+    def _drain_udp(self) -> None:
+        """Read whole datagrams; a datagram that is one SET_ATTITUDE_TARGET (the bridge's answer,
+        50 per simulated second) is decoded without pymavlink, anything else goes to pymavlink."""
+        conn = self.conn
+        port, server, parse = conn.port, conn.udp_server, conn.mav.parse_buffer
+        for _ in range(10000):
+            try:
+                data, addr = port.recvfrom(65535)
+            except (BlockingIOError, InterruptedError):
+                return
+            except ConnectionRefusedError:  # ICMP for an earlier send (peer not up yet): cleared
                 continue
-            self.rx_count += 1
-            if mt == "SET_ATTITUDE_TARGET":
-                self._answered = True
-                self.answers += 1
-            if mt in ("SET_ATTITUDE_TARGET", "COMMAND_LONG", "COMMAND_INT", "SET_MODE", "TIMESYNC"):
-                self._in.append((self._boot_t + self.command_latency_s, msg))
+            except OSError:
+                return
+            if server:  # what pymavlink's mavudp.recv does: remember the peer to answer it
+                conn.clients.add(addr)
+                conn.clients_last_alive[addr] = time.time()
+            msg = decode_set_attitude_target(data)
+            if msg is not None:
+                self._on_msg(msg)
+                continue
+            for msg in parse(data) or ():
+                self._on_msg(msg)
+
+    def _on_msg(self, msg: Any) -> None:
+        mt = msg.get_type()
+        if mt == "BAD_DATA":
+            return
+        self.rx_count += 1
+        if mt == "SET_ATTITUDE_TARGET":
+            self._answered = True
+            self.answers += 1
+        if mt in ("SET_ATTITUDE_TARGET", "COMMAND_LONG", "COMMAND_INT", "SET_MODE", "TIMESYNC"):
+            self._in.append((self._boot_t + self.command_latency_s, msg))
 
     def _apply_due(self) -> None:
         q, t = self._in, self._boot_t + 1e-9
@@ -608,7 +769,11 @@ class SimVehicle:
             return
         thrust = 0.0 if thr_ignore else _clip(float(msg.thrust), 0.0, 1.0)
         if att_ignore:
-            sp = ("rates", tuple(0.0 if tm & (1 << i) else float(rates[i]) for i in range(3)), thrust)
+            sp = (
+                "rates",
+                tuple(0.0 if tm & (1 << i) else float(rates[i]) for i in range(3)),
+                thrust,
+            )
         else:
             from mpf_mavlink.frames import matrix_to_euler, quat_wxyz_to_matrix
 
@@ -656,10 +821,15 @@ class SimVehicle:
     # commands
     def _ack(self, command: int, result: int, msg, reason: str | None = None) -> None:
         self._mav.send(
-            self._mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent())
+            self._mav.command_ack_encode(
+                command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
+            )
         )
         if reason:
-            self._statustext(M.MAV_SEVERITY_WARNING if result != M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_INFO, reason)
+            self._statustext(
+                M.MAV_SEVERITY_WARNING if result != M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_INFO,
+                reason,
+            )
 
     def _command(self, msg) -> None:
         cmd = msg.command
@@ -713,11 +883,19 @@ class SimVehicle:
             return M.MAV_RESULT_UNSUPPORTED if not self.px4 else M.MAV_RESULT_DENIED
         if self.px4:
             main, sub = int(round(p2)), int(round(p3))
-            if main not in PX4_MAIN_NAMES or (main == PX4_MAIN["AUTO"] and sub not in PX4_SUB_NAMES and sub != 0):
+            if main not in PX4_MAIN_NAMES or (
+                main == PX4_MAIN["AUTO"] and sub not in PX4_SUB_NAMES and sub != 0
+            ):
                 self._reject_reason = f"Mode change refused: unknown PX4 mode {main}/{sub}"
                 return M.MAV_RESULT_TEMPORARILY_REJECTED
-            if main == PX4_MAIN["OFFBOARD"] and self._behaviour != OFFBOARD and not self._offboard_available():
-                self._reject_reason = "Mode change refused: offboard setpoints not streaming (> 2 Hz for 1 s)"
+            if (
+                main == PX4_MAIN["OFFBOARD"]
+                and self._behaviour != OFFBOARD
+                and not self._offboard_available()
+            ):
+                self._reject_reason = (
+                    "Mode change refused: offboard setpoints not streaming (> 2 Hz for 1 s)"
+                )
                 return M.MAV_RESULT_TEMPORARILY_REJECTED
             if main == PX4_MAIN["AUTO"] and sub == 0:
                 sub = PX4_AUTO_SUB["MISSION"]  # PX4: AUTO without a sub mode is MISSION
@@ -751,62 +929,79 @@ class SimVehicle:
         return False
 
     def _telemetry(self) -> None:
-        r = self.rates
-        for name in ("heartbeat", "attitude", "local_position", "global_position", "vfr_hud", "wind",
-                     "home_position", "sys_status", "system_time"):  # fmt: skip
+        """Queue the streams that are due. ATTITUDE goes first, alone in its datagram: a peer
+        that acts on ATTITUDE (the bridge answers each one with a setpoint) starts on it at once,
+        and the rest of the frame (encoded after it, parsed by the peer after its answer) stays
+        off the lockstep path telemetry -> answer -> next frame. The peer's other streams are
+        then those of the previous frame at most 20 ms older, as the phases of independent
+        autopilot streams are anyway (the bridge extrapolates positions to the ATTITUDE time)."""
+        r, nxt, t = self.rates, self._next, self._k * self.dt + 1e-9
+        for name in _STREAM_ORDER:
+            n = nxt.get(name)
+            if n is not None and t < n:
+                continue  # not due (the common case: a cheap test before _due's bookkeeping)
             if self._due(name, getattr(r, name)):
                 self._send_stream(name)
         if self.target is not None:
             if self._due("target_heartbeat", 1.0):
-                self._tmav.send(self._tmav.heartbeat_encode(
-                    self._target_type, M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE))  # fmt: skip
+                self._put(self._ftp.pack(_SPEC["heartbeat"], self._target_type, M.MAV_AUTOPILOT_INVALID, 0, 0,
+                                         M.MAV_STATE_ACTIVE, 3))  # fmt: skip
             if self._due("target", self.target_rate_hz):
                 self._send_target()
 
+    def _send_attitude(self, att: tuple[float, float, float, float, float, float]) -> None:
+        """ATTITUDE from (roll, pitch, yaw, p, q, r) (rad, rad/s)."""
+        self._sent["attitude"] = self._sent.get("attitude", 0) + 1
+        self._put(self._fp.pack(_SPEC["attitude"], self._ms(), *att))
+
+    def _put(self, buf: bytes) -> None:
+        """Queue one framed packet; it leaves ``telemetry_latency_s`` of sim time from now."""
+        self._out.append((self._k * self.dt + self.telemetry_latency_s, buf))
+
     def _send_stream(self, name: str) -> None:
-        st, mav, ms = self._st, self._mav, self._ms()
+        st, ms, S = self._st, self._ms(), _SPEC
+        pack, put = self._fp.pack, self._put
         self._sent[name] = self._sent.get(name, 0) + 1
         if name == "heartbeat":
             ap = M.MAV_AUTOPILOT_PX4 if self.px4 else M.MAV_AUTOPILOT_ARDUPILOTMEGA
-            mav.send(mav.heartbeat_encode(M.MAV_TYPE_FIXED_WING, ap, self._base_mode(), self._custom_mode,
-                                          M.MAV_STATE_ACTIVE))  # fmt: skip
+            put(pack(S["heartbeat"], M.MAV_TYPE_FIXED_WING, ap, self._base_mode(), self._custom_mode,
+                     M.MAV_STATE_ACTIVE, 3))  # fmt: skip
         elif name == "attitude":
-            roll, pitch, yaw = st.euler
-            p, q, rr = (float(v) for v in st.pqr)
-            mav.send(mav.attitude_encode(ms, roll, pitch, yaw, p, q, rr))
+            self._sent[name] -= 1  # counted by _send_attitude
+            self._send_attitude((*st.euler, *st.pqr))
         elif name == "local_position":
-            x, y, z = (float(v) for v in st.position_ned)
-            vx, vy, vz = (float(v) for v in st.velocity_ned)
-            mav.send(mav.local_position_ned_encode(ms, x, y, z, vx, vy, vz))
+            x, y, z = st.position_ned
+            vx, vy, vz = st.velocity_ned
+            put(pack(S["local_position_ned"], ms, x, y, z, vx, vy, vz))
         elif name == "global_position":
-            vx, vy, vz = (float(v) for v in st.velocity_ned)
+            vx, vy, vz = st.velocity_ned
             hdg = int(round(math.degrees(st.euler[2]) * 100.0)) % 36000
-            mav.send(mav.global_position_int_encode(
+            put(pack(S["global_position_int"],
                 ms, int(round(st.lat_deg * 1e7)), int(round(st.lon_deg * 1e7)), int(round(st.alt_m * 1000.0)),
                 int(round((st.alt_m - self.home_lla[2]) * 1000.0)),
                 int(round(vx * 100)), int(round(vy * 100)), int(round(vz * 100)), hdg))  # fmt: skip
         elif name == "vfr_hud":
             v = st.velocity_ned
             hdg = int(round(math.degrees(st.euler[2]))) % 360
-            mav.send(mav.vfr_hud_encode(st.airspeed, math.hypot(v[0], v[1]), hdg,
-                                        int(round(100 * st.throttle)), st.alt_m, -float(v[2])))  # fmt: skip
+            put(pack(S["vfr_hud"], st.airspeed, math.hypot(v[0], v[1]), hdg, int(round(100 * st.throttle)),
+                     st.alt_m, -float(v[2])))  # fmt: skip
         elif name == "wind":
             wn, we, wd = (float(v) for v in st.wind_ned)
             if self.px4:
-                mav.send(mav.wind_cov_encode(self._us(), wn, we, 0.0, 0.0, 0.0, st.alt_m, 0.0, 0.0))
+                put(pack(S["wind_cov"], self._us(), wn, we, 0.0, 0.0, 0.0, st.alt_m, 0.0, 0.0))
             else:
                 direction = math.degrees(math.atan2(-we, -wn)) % 360.0
-                mav.send(mav.wind_encode(direction, math.sqrt(wn * wn + we * we + wd * wd), wd))
+                put(pack(S["wind"], direction, math.sqrt(wn * wn + we * we + wd * wd), wd))
         elif name == "home_position":
             lat, lon, alt = self.home_lla
-            mav.send(mav.home_position_encode(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
-                                              0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, self._us()))  # fmt: skip
+            put(pack(S["home_position"], int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
+                     0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, self._us()))  # fmt: skip
         elif name == "sys_status":
             s = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
                  | M.MAV_SYS_STATUS_SENSOR_GPS | M.MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE)  # fmt: skip
-            mav.send(mav.sys_status_encode(s, s, s, 100, 12600, 500, 90, 0, 0, 0, 0, 0, 0))
+            put(pack(S["sys_status"], s, s, s, 100, 12600, 500, 90, 0, 0, 0, 0, 0, 0, 0, 0, 0))
         elif name == "system_time":
-            mav.send(mav.system_time_encode(self.unix0_us + self._us(), ms))
+            put(pack(S["system_time"], self.unix0_us + self._us(), ms))
 
     def _send_target(self) -> None:
         ts = self.target.state(self.t)
@@ -816,61 +1011,87 @@ class SimVehicle:
         vel = [float(v) for v in ts.velocity]
         acc = [float(v) for v in ts.acceleration]
         rates = [float(v) for v in ts.omega_T]
-        tm, ms = self._tmav, self._ms()
+        pack, ms = self._ftp.pack, self._ms()
         lat7, lon7 = int(round(lat * 1e7)), int(round(lon * 1e7))
-        tm.send(tm.follow_target_encode(ms, 15, lat7, lon7, alt, vel, acc, list(q), rates, [0.0, 0.0, 0.0], 0))
+        self._put(
+            pack(
+                _SPEC["follow_target"],
+                ms,
+                15,
+                lat7,
+                lon7,
+                alt,
+                vel,
+                acc,
+                list(q),
+                rates,
+                [0.0, 0.0, 0.0],
+                0,
+            )
+        )
         yaw = math.atan2(ts.R_T_I[1, 0], ts.R_T_I[0, 0])
-        tm.send(tm.global_position_int_encode(
+        self._put(pack(_SPEC["global_position_int"],
             ms, lat7, lon7, int(round(alt * 1000)), int(round((alt - self.home_lla[2]) * 1000)),
             int(round(vel[0] * 100)), int(round(vel[1] * 100)), int(round(vel[2] * 100)),
             int(round(math.degrees(yaw) * 100)) % 36000))  # fmt: skip
 
     def _flush(self) -> None:
+        """Send the packets that are due, bundled into as few datagrams as fit (PX4 does the same:
+        one datagram per send cycle), so the peer wakes up once per frame, not once per packet."""
         q, t = self._out, self._boot_t + 1e-9
+        if not q or q[0][0] > t:
+            return
         wrote = False
+        chunk: list[bytes] = []
+        size = 0
         while q and q[0][0] <= t:
-            _, buf = q.popleft()
-            try:
-                self.conn.write(buf)
-                wrote = True
-            except OSError:
-                pass
+            buf = q.popleft()[1]
+            if chunk and size + len(buf) > _DATAGRAM_MAX:
+                wrote |= self._write(b"".join(chunk))
+                chunk, size = [], 0
+            chunk.append(buf)
+            size += len(buf)
+        if chunk:
+            wrote |= self._write(b"".join(chunk))
         if wrote and self.has_peer():
             self._answered = False
+
+    def _write(self, data: bytes) -> bool:
+        try:
+            self.conn.write(data)
+            return True
+        except OSError:
+            return False
 
     # ------------------------------------------------------------------ truth
     def _record(self) -> None:
         if not self.record:
             return
+        # One flat row per frame (the target's state is a pure function of t: computed in
+        # truth(), off the lockstep frame's critical path).
         st = self._st
-        tr = self._truth
+        row = (self.t, self._k * self.dt, *st.position_ned, *st.velocity_ned, *st.euler, st.airspeed,
+               *st.wind_ned, st.throttle, self._custom_mode)  # fmt: skip
         with self._lock:
-            tr["t"].append(self.t)
-            tr["time_boot_s"].append(self._boot_t)
-            tr["position_ned"].append(st.position_ned.copy())
-            tr["velocity_ned"].append(st.velocity_ned.copy())
-            tr["euler"].append(st.euler)
-            tr["airspeed"].append(st.airspeed)
-            tr["wind_ned"].append(st.wind_ned.copy())
-            tr["throttle"].append(st.throttle)
-            tr["mode"].append(self._custom_mode)
-            if self.target is not None:
-                ts = self.target.state(self.t)
-                tr["target_position"].append(np.asarray(ts.position, float))
-                tr["target_velocity"].append(np.asarray(ts.velocity, float))
+            self._rows.append(row)
 
     def truth(self) -> dict[str, np.ndarray]:
         """Plant truth at frame (telemetry) rate: t (s since ready), time_boot_s, position_ned (N,3),
         velocity_ned (N,3), euler (N,3: roll, pitch, yaw rad), airspeed (N), wind_ned (N,3),
         throttle (N), mode (N, custom_mode), and target_position / target_velocity (N,3) with a target."""
         with self._lock:
-            out = {}
-            for k, v in self._truth.items():
-                if not v:
-                    out[k] = np.zeros((0, 3)) if k.startswith("target") else np.zeros(0)
-                else:
-                    out[k] = np.array(v, dtype=float if k != "mode" else np.int64)
-            return out
+            A = np.array(self._rows, dtype=float).reshape(-1, 17)
+            tgt = self._tgt_rows
+            if self.target is not None:
+                for t in A[len(tgt) :, 0]:
+                    ts = self.target.state(float(t))
+                    tgt.append((*ts.position, *ts.velocity))
+            T = np.array(tgt, dtype=float).reshape(-1, 6)
+        return {
+            "t": A[:, 0], "time_boot_s": A[:, 1], "position_ned": A[:, 2:5], "velocity_ned": A[:, 5:8],
+            "euler": A[:, 8:11], "airspeed": A[:, 11], "wind_ned": A[:, 12:15], "throttle": A[:, 15],
+            "mode": A[:, 16].astype(np.int64), "target_position": T[:, 0:3], "target_velocity": T[:, 3:6],
+        }  # fmt: skip
 
     def sent_counts(self) -> dict[str, int]:
         """Messages produced per stream so far (for tests and diagnostics)."""
@@ -886,7 +1107,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--url", default="udpin:127.0.0.1:14540")
     ap.add_argument("--plant", choices=("jsbsim", "kinematic"), default="jsbsim")
     ap.add_argument("--clock", choices=("lockstep", "realtime"), default="lockstep")
-    ap.add_argument("--duration", type=float, default=math.inf, help="sim seconds (default: forever)")
+    ap.add_argument(
+        "--duration", type=float, default=math.inf, help="sim seconds (default: forever)"
+    )
     ap.add_argument("--target", choices=("none", "paper", "stationary"), default="none")
     a = ap.parse_args(argv)
     target = None

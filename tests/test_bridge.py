@@ -49,7 +49,9 @@ def fly(cfg, url: str, out: Path, duration: float, during=None):
     if during is not None:
         th = threading.Thread(target=during, daemon=True)
         th.start()
-    res = run_bridge(cfg, BridgeOptions(url=url, out_dir=out, duration_s=duration), log=lambda s: None)
+    res = run_bridge(
+        cfg, BridgeOptions(url=url, out_dir=out, duration_s=duration), log=lambda s: None
+    )
     return res  # the helper is a daemon thread; tests stop their own loops
 
 
@@ -68,7 +70,10 @@ def test_px4_full_lifecycle_udp(tmp_path):
     assert (res.state_reached, res.exit_code, res.handback_confirmed) == ("TRACKING", 0, True)
     reqs = mode_requests(peer)
     # first OFFBOARD (main 6), then AUTO.LOITER (main 4, sub 3), nothing else
-    assert [(r.msg.param1, r.msg.param2, r.msg.param3) for r in reqs] == [(1.0, 6.0, 0.0), (1.0, 4.0, 3.0)]
+    assert [(r.msg.param1, r.msg.param2, r.msg.param3) for r in reqs] == [
+        (1.0, 6.0, 0.0),
+        (1.0, 4.0, 3.0),
+    ]
     assert peer.mode_is("AUTO.LOITER")
     # pre-stream: >= 1 s of setpoints at >= 20 Hz before the OFFBOARD request
     before = [s.t for s in peer.setpoints if s.t < reqs[0].t]
@@ -104,7 +109,10 @@ def test_px4_full_lifecycle_udp(tmp_path):
 
 def test_arduplane_full_lifecycle_over_pty_with_global_position(tmp_path):
     # serial link (pty), no LOCAL_POSITION_NED: GLOBAL_POSITION_INT about HOME_POSITION
-    peer = MavPeer(PeerOptions(flavour="ardupilot", send_local=False, send_global=True, send_wind=True), pty=True).start()
+    peer = MavPeer(
+        PeerOptions(flavour="ardupilot", send_local=False, send_global=True, send_wind=True),
+        pty=True,
+    ).start()
     try:
         res = fly(cfg_for("ardupilot"), f"{peer.device}:115200", tmp_path, 1.0)
     finally:
@@ -151,9 +159,13 @@ def test_refuses_to_engage_when_a_check_fails(tmp_path):
 
 def test_engage_refused_by_vehicle_stops_streaming(tmp_path):
     port = free_port()
-    peer = MavPeer(PeerOptions(flavour="px4", ack_result=mavlink.MAV_RESULT_DENIED), port=port).start()
+    peer = MavPeer(
+        PeerOptions(flavour="px4", ack_result=mavlink.MAV_RESULT_DENIED), port=port
+    ).start()
     try:
-        res = fly(cfg_for("px4", "mavlink.mode_retries=2"), f"udpin:127.0.0.1:{port}", tmp_path, 1.0)
+        res = fly(
+            cfg_for("px4", "mavlink.mode_retries=2"), f"udpin:127.0.0.1:{port}", tmp_path, 1.0
+        )
         n = len(peer.setpoints)
         time.sleep(0.3)
         assert len(peer.setpoints) == n  # nothing more after giving up
@@ -177,7 +189,13 @@ def test_telemetry_loss_stops_commands_within_half_a_second(tmp_path):
     port = free_port()
     peer = MavPeer(PeerOptions(flavour="px4"), port=port).start()
     try:
-        res = fly(cfg_for("px4"), f"udpin:127.0.0.1:{port}", tmp_path, 30.0, _when_offboard_then(peer, peer.stop_telemetry))
+        res = fly(
+            cfg_for("px4"),
+            f"udpin:127.0.0.1:{port}",
+            tmp_path,
+            30.0,
+            _when_offboard_then(peer, peer.stop_telemetry),
+        )
     finally:
         peer.stop()
     assert res.exit_code == 4 and "telemetry lost" in res.exit_reason
@@ -200,7 +218,13 @@ def test_pilot_mode_change_stops_commanding_without_fighting(tmp_path):
         peer.pilot_sets_mode("POSCTL")
 
     try:
-        res = fly(cfg_for("px4"), f"udpin:127.0.0.1:{port}", tmp_path, 30.0, _when_offboard_then(peer, take_over))
+        res = fly(
+            cfg_for("px4"),
+            f"udpin:127.0.0.1:{port}",
+            tmp_path,
+            30.0,
+            _when_offboard_then(peer, take_over),
+        )
         time.sleep(0.3)
     finally:
         peer.stop()
@@ -223,7 +247,9 @@ def test_sigterm_hands_back_and_reports_exit_code(tmp_path):
     peer = MavPeer(PeerOptions(flavour="px4"), port=port).start()
     cmd = [PY, "-m", "mpf_mavlink.cli", "run", str(ROOT / "configs/bridge_px4.yaml"), "--connect",
            f"udpin:127.0.0.1:{port}", "--out", str(tmp_path), "--duration", "60", "--no-plots", "-q"]  # fmt: skip
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
     try:
         if not _wait_for_port_ready(peer):
             proc.kill()
@@ -278,7 +304,9 @@ def test_signing_accepts_signed_and_signs_everything(tmp_path):
     port = free_port()
     peer = MavPeer(PeerOptions(flavour="px4", signing_key=key), port=port).start()
     try:
-        cfg = cfg_for("px4", f"mavlink.signing_key_file={tmp_path / 'key'}", "mavlink.signing_link_id=7")
+        cfg = cfg_for(
+            "px4", f"mavlink.signing_key_file={tmp_path / 'key'}", "mavlink.signing_link_id=7"
+        )
         res = fly(cfg, f"udpin:127.0.0.1:{port}", tmp_path / "run", 0.5)
     finally:
         peer.stop()
@@ -294,7 +322,9 @@ def test_signing_rejects_unsigned_vehicle(tmp_path):
     port = free_port()
     peer = MavPeer(PeerOptions(flavour="px4"), port=port).start()  # does not sign
     try:
-        cfg = cfg_for("px4", f"mavlink.signing_key_file={tmp_path / 'key'}", "mavlink.heartbeat_timeout_s=0.8")
+        cfg = cfg_for(
+            "px4", f"mavlink.signing_key_file={tmp_path / 'key'}", "mavlink.heartbeat_timeout_s=0.8"
+        )
         with pytest.raises(MpfError, match="no HEARTBEAT"):
             fly(cfg, f"udpin:127.0.0.1:{port}", tmp_path / "run", 0.5)
     finally:
@@ -311,7 +341,12 @@ def test_spoofed_system_ids_do_not_move_the_state(tmp_path):
         # from system 99: an attitude/position 5 km away and a HEARTBEAT in MANUAL
         while not stop.is_set():
             tb = peer.time_boot_ms()
-            peer.send_as(99, mavlink.MAVLink_local_position_ned_message(tb, 5000.0, 5000.0, -900.0, 0.0, 30.0, 0.0))
+            peer.send_as(
+                99,
+                mavlink.MAVLink_local_position_ned_message(
+                    tb, 5000.0, 5000.0, -900.0, 0.0, 30.0, 0.0
+                ),
+            )
             peer.send_as(99, mavlink.MAVLink_attitude_message(tb, 1.0, 0.5, 2.0, 0.0, 0.0, 0.0))
             peer.send_as(99, mavlink.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3))
             time.sleep(0.02)
@@ -325,7 +360,9 @@ def test_spoofed_system_ids_do_not_move_the_state(tmp_path):
     assert res.counters["rejected_sysid"] > 50
     ts = np.genfromtxt(tmp_path / "timeseries.csv", delimiter=",", names=True)
     # the real vehicle is within ~250 m of the origin; the spoofed one at 5 km never appears
-    assert np.max(np.hypot(ts["p_n"], ts["p_e"])) < 300.0 and np.all(np.abs(ts["p_d"] + 100.0) < 1.0)
+    assert np.max(np.hypot(ts["p_n"], ts["p_e"])) < 300.0 and np.all(
+        np.abs(ts["p_d"] + 100.0) < 1.0
+    )
 
 
 # ----------------------------------------------------------------------------- live target
@@ -369,14 +406,34 @@ def test_absent_vehicle_is_one_line_and_nonzero(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "no HEARTBEAT" in err[0]
     assert 0.5 <= time.monotonic() - t < 3.0  # after the configured timeout, not before
-    rc = main(["run", str(ROOT / "configs/bridge_px4.yaml"), "--connect", "udpin:nonsense", "--out", str(tmp_path)])
+    rc = main(
+        [
+            "run",
+            str(ROOT / "configs/bridge_px4.yaml"),
+            "--connect",
+            "udpin:nonsense",
+            "--out",
+            str(tmp_path),
+        ]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "bad MAVLink URL" in err[0]
 
 
 def test_run_help_explains_every_option():
-    out = subprocess.run([PY, "-m", "mpf_mavlink.cli", "run", "--help"], cwd=ROOT, capture_output=True, text=True).stdout
-    for opt in ("--connect", "--flavour", "--out", "--duration", "--heartbeat-timeout", "--arm", "--set", "exit codes"):
+    out = subprocess.run(
+        [PY, "-m", "mpf_mavlink.cli", "run", "--help"], cwd=ROOT, capture_output=True, text=True
+    ).stdout
+    for opt in (
+        "--connect",
+        "--flavour",
+        "--out",
+        "--duration",
+        "--heartbeat-timeout",
+        "--arm",
+        "--set",
+        "exit codes",
+    ):
         assert opt in out
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from mpf_mavlink import so3
 from mpf_mavlink.guidance import Extensions, Gains, VehicleState, mpf_law
-from mpf_mavlink.paths import circle, lemniscate
+from mpf_mavlink.paths import circle, helix, lemniscate
 from mpf_mavlink.target import ConstantTurn, PaperProfile
 from sim.kinematic import ClosedLoop, KinematicState, initial_state
 
@@ -45,7 +45,7 @@ def test_psi_decays_at_minus_KR_e_squared_with_perfect_tracking(target, path):
     x = initial_state(path, target, np.array([-30.0, 20.0, -10.0]), so3.rot_z(2.0), None)
     dt = 1e-3
     T = _trajectory(loop, x, dt, 3000)
-    t, psi, e2 = T[:, 0], T[:, 1], T[:, 2]
+    psi, e2 = T[:, 1], T[:, 2]
     dpsi = (psi[2:] - psi[:-2]) / (2 * dt)
     expect = -gains.K_R * e2[1:-1]
     assert np.max(e2) > 0.01  # the run really has an attitude transient to test
@@ -133,7 +133,9 @@ def _steady_error(wind_comp: bool) -> float:
     def wind(t, p):
         return np.array([0.0, 4.0, 0.0])
 
-    loop = ClosedLoop(path, tgt, Gains(1.0, 2.0, 10.0), Extensions(wind_compensation=wind_comp), 15.0, 10.0, wind)
+    loop = ClosedLoop(
+        path, tgt, Gains(1.0, 2.0, 10.0), Extensions(wind_compensation=wind_comp), 15.0, 10.0, wind
+    )
     x = initial_state(path, tgt, np.array([0.0, -60.0, 0.0]), so3.rot_z(0.0), None)
     errs = []
     for i in range(6000):
@@ -159,3 +161,87 @@ def test_kinematic_state_is_rotation():
     for _ in range(200):
         x = loop.step(x, 0.02)
     assert so3.is_rotation(x.R, 1e-12)
+
+
+# Outputs of the law as implemented before it was rewritten for speed (commit 9cf34ea: numpy
+# inputs, tuple arithmetic, a frozen dataclass per evaluation). The rewrite performs the same
+# floating-point operations in the same order; side by side on 12000 random states (all
+# extension combinations) it agreed bit for bit. Compared to 1e-12 relative here so that a
+# different libm (sin/cos/sqrt in the last bit) cannot fail the test on another machine.
+GOLDEN = [
+    (
+        "paper",
+        lambda: (
+            lemniscate(50.0),
+            PaperProfile().state(3.0),
+            VehicleState(3.0, np.array([-40.0, 10.0, -3.0]), so3.rot_z(1.0) @ so3.rot_y(0.1), 15.0),
+            12.0,
+            Gains(),
+            Extensions(),
+        ),  # fmt: skip
+        (
+            -0.8518116963339603,
+            5.385124059357547,
+            -127.84618083887457,
+            (1.0072496315681243, -0.007848119219344196, 5.35822086959967),
+        ),
+        (
+            0.21194677923806898,
+            54.05784261255774,
+            (0.924833172427153, 0.33039999983918844, 4.552703202846298),
+            "law",
+        ),
+    ),
+    (
+        "turning_climbing_target_wind_all_extensions",
+        lambda: (
+            helix((0, 0, 0), 80.0, 20.0, 3, False),
+            ConstantTurn((0, 0, 0), 4.0, 0.3, 0.05, 0.5).state(7.5),
+            VehicleState(
+                7.5,
+                np.array([30.0, -70.0, 12.0]),
+                so3.rot_z(-2.0) @ so3.rot_x(0.3),
+                18.0,
+                np.array([1.0, -2.0, 0.2]),
+            ),
+            40.0,
+            Gains(1.0, 0.5, 40.0),
+            Extensions(rate_limit=0.5, psi_turn=True, wind_compensation=True),
+        ),  # fmt: skip
+        (
+            -0.16731430283045673,
+            -0.4711750461010835,
+            105.38702534372692,
+            (-0.018731264795867286, 0.008572504836551531, -0.4995754716556592),
+        ),
+        (
+            0.6744404937206427,
+            124.6372053988011,
+            (-0.011196006856180052, 0.28544578204243115, -1.8906653175977992),
+            "psi_turn+sat",
+        ),
+    ),
+    (
+        "far_off_the_path_flying_backwards",
+        lambda: (
+            circle((0, 0, 0), 1000.0),
+            ConstantTurn((0, 0, 0), 0.0).state(0.0),
+            VehicleState(0.0, np.array([1000.0, 0.0, 0.0]), so3.rot_z(-math.pi / 2), 15.0),
+            1570.7963267948965,
+            Gains(1.0, 2.0, 10.0),
+            Extensions(psi_turn=True),
+        ),  # fmt: skip
+        (0.0, -1.9901509838016906, -999.9999999852319, (0.0, 0.0, -1.9901509838016906)),
+        (0.9999750018697302, 1414.2135631041078, (0.0, 0.0, -0.9901509838016905), "psi_turn"),
+    ),
+]
+
+
+@pytest.mark.parametrize("name,build,cmd_ref,diag_ref", GOLDEN, ids=[g[0] for g in GOLDEN])
+def test_law_gives_the_reference_implementations_numbers(name, build, cmd_ref, diag_ref):
+    path, tgt, veh, s, gains, ext = build()
+    c, d = mpf_law(s, veh, tgt, path, gains, ext)
+    got = [c.w2, c.w3, c.sdot, *c.omega_w1_I, d.psi, d.pt_norm, *d.omega_DI]
+    ref = [*cmd_ref[:3], *cmd_ref[3], diag_ref[0], diag_ref[1], *diag_ref[2]]
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-15)
+    assert d.mode == diag_ref[3]

@@ -22,6 +22,14 @@ OTHER_KEY = bytes(range(1, 33))
 NOW_TICKS = int((time.time() - SIGNING_EPOCH_UNIX_S) * 100_000)  # 10 us ticks since 2015
 
 
+@pytest.fixture(autouse=True)
+def _now_ticks():
+    """'Now' per test, not at import: in a whole suite this file runs minutes after it was
+    imported, and packets stamped then are older than the 60 s a new stream may lag."""
+    global NOW_TICKS
+    NOW_TICKS = int((time.time() - SIGNING_EPOCH_UNIX_S) * 100_000)
+
+
 def free_udp_port() -> int:
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     s.bind(("127.0.0.1", 0))

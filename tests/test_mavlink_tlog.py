@@ -210,3 +210,48 @@ def test_tlog_survives_sigkill_of_the_writing_link(tmp_path):
         n += 1
     ref.close()
     assert n == res.records  # pymavlink's own reader agrees
+
+
+def test_writer_fsyncs_in_the_background_not_in_write(tmp_path, monkeypatch):
+    # fsync_every_s > 0: write() never calls fsync (a control loop that logs must not wait for
+    # the disk); a background thread does, at most that often, and only after new records
+    calls: list[tuple[str, int]] = []
+    real_fsync = os.fsync
+
+    def spy(fd: int) -> None:
+        import threading
+
+        calls.append((threading.current_thread().name, fd))
+        real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", spy)
+    from mpf_mavlink.mavlink import dialect as mavlink
+
+    pkt = mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3).pack(mavlink.MAVLink(None, 1, 191))
+    w = TlogWriter(tmp_path / "bg.tlog", fsync_every_s=0.05)
+    for k in range(20):
+        w.write(pkt, 1_700_000_000.0 + k)
+    assert calls == []  # nothing on the writer's thread
+    t_end = time.monotonic() + 2.0
+    while not calls and time.monotonic() < t_end:
+        time.sleep(0.01)
+    assert calls and all(name == "tlog-fsync" for name, _ in calls)
+    n = len(calls)
+    time.sleep(0.2)  # no new records: no new fsync
+    assert len(calls) == n
+    # the exact timestamp of the last record, as a reader computes it (us * 1e-6)
+    w.write(pkt, 1_700_000_123.4567891)
+    assert w.last_us == 1_700_000_123_456_789 and w.last_packet is pkt
+    w.close()  # joins the thread, then one last fsync of its own
+    assert calls[-1][0] == "MainThread"
+    assert read_tlog(tmp_path / "bg.tlog").t_last_s == w.last_us * 1e-6
+
+
+def test_writer_fsync_every_record_when_asked(tmp_path):
+    from mpf_mavlink.mavlink import dialect as mavlink
+
+    pkt = mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3).pack(mavlink.MAVLink(None, 1, 191))
+    with TlogWriter(tmp_path / "each.tlog", fsync_every_s=0) as w:
+        for k in range(5):
+            w.write(pkt, 1_700_000_000.0 + k)
+        assert w.fsyncs == 5 and w._syncer is None

@@ -202,6 +202,86 @@ class _TcpClient(mavutil.mavtcp):
 
 
 # ---------------------------------------------------------------------------------------------
+# The vehicle's boot clock
+# ---------------------------------------------------------------------------------------------
+class BootClockGate:
+    """Accepts a vehicle's ``time_boot_ms`` only when it is consistent with its clock so far.
+
+    Everything downstream (the estimator, the law's integration of s, the mission duration, the
+    setpoints' time stamps) runs on the autopilot's clock, so ONE frame with a valid CRC and an
+    absurd time (2^31 ms, an hour ahead) must not become "now". With ``t_rx`` our receive time
+    (the tlog's record time, so that a replay can take the same decisions), the offset
+    ``off = t_boot - t_rx`` of a sample is the vehicle's clock minus its latency. Hence:
+
+    - AHEAD: no sample can be ahead of the least-delayed one seen, ``hi`` (the largest offset,
+      let down by ``drift_s_per_s`` to follow a clock slower than ours), by more than
+      ``fwd_tol_s``. The bound is NOT the last accepted sample: that one may have waited in a
+      full socket buffer (the bridge reads nothing during its checks) and the next one, after
+      the datagrams the kernel dropped, is legitimately far ahead of it;
+    - BEHIND: a sample more than ``back_tol_s`` behind the last accepted one is not the same
+      clock (a lockstep simulation at 0.4x..5x of the wall clock moves the offset by a few
+      tens of ms per sample, not seconds);
+    - STALE: a consistent sample not newer than the last one of its message type (reordered or
+      duplicated by the link; a timestamp in the past lands here too).
+
+    A rebooted vehicle (or any real clock jump) starts a new, self-consistent clock: rejected
+    samples that agree with each other (``off`` within ``fwd_tol_s + 0.25`` s of the previous
+    one) for ``reset_confirm_s`` and at least ``reset_count`` samples become the new reference,
+    counted in ``resets``. Junk in between does not reset that candidate; any accepted sample
+    clears it. Until then the new clock is rejected, so a reboot in flight looks like a
+    telemetry loss to the bridge (it stops commanding), never like a jump of its clock.
+    """
+
+    def __init__(
+        self,
+        fwd_tol_s: float = 0.25,
+        back_tol_s: float = 2.0,
+        reset_count: int = 5,
+        reset_confirm_s: float = 0.5,
+        drift_s_per_s: float = 1e-3,
+    ) -> None:
+        self.fwd_tol_s, self.back_tol_s = fwd_tol_s, back_tol_s
+        self.reset_count, self.reset_confirm_s = reset_count, reset_confirm_s
+        self.drift_s_per_s = drift_s_per_s  # 1000 ppm: any crystal, not an attacker's seconds
+        self.off: float | None = None  # offset of the last accepted sample (s)
+        self.hi = 0.0  # the least-delayed offset (s), as of ``hi_t``
+        self.hi_t = 0.0
+        self.resets = 0
+        self._cand: list[float] | None = None  # [offset, first t_rx, count, last t_rx]
+        self._last: dict[str, float] = {}  # message type -> newest accepted t_boot (s)
+
+    def _adopt(self, mtype: str, t_boot_s: float, off: float, t_rx: float) -> None:
+        self.off, self.hi, self.hi_t, self._cand = off, off, t_rx, None
+        self._last = {mtype: t_boot_s}
+
+    def check(self, mtype: str, t_boot_s: float, t_rx: float) -> str | None:
+        """None to accept the sample; "time" (inconsistent clock) or "stale" to reject it."""
+        off = t_boot_s - t_rx
+        if self.off is None:
+            self._adopt(mtype, t_boot_s, off, t_rx)
+            return None
+        hi = self.hi - self.drift_s_per_s * max(0.0, t_rx - self.hi_t)
+        if off - hi <= self.fwd_tol_s and off - self.off >= -self.back_tol_s:
+            last = self._last.get(mtype)
+            if last is not None and t_boot_s <= last:
+                return "stale"
+            self.off, self._cand = off, None
+            self.hi, self.hi_t = max(hi, off), t_rx
+            self._last[mtype] = t_boot_s
+            return None
+        c = self._cand
+        if c is not None and abs(off - c[0]) <= self.fwd_tol_s + 0.25:
+            c[0], c[2], c[3] = off, c[2] + 1, t_rx
+        elif c is None or t_rx - c[3] > 0.2:  # a lone outlier cannot displace a live candidate
+            self._cand = c = [off, t_rx, 1.0, t_rx]
+        if c[2] >= self.reset_count and t_rx - c[1] >= self.reset_confirm_s:
+            self._adopt(mtype, t_boot_s, off, t_rx)
+            self.resets += 1
+            return None
+        return "time"
+
+
+# ---------------------------------------------------------------------------------------------
 # Link
 # ---------------------------------------------------------------------------------------------
 @dataclass
@@ -216,8 +296,15 @@ class LinkCounters:
     rejected_unsigned: int = 0  # unsigned while signing is on
     rejected_bad_signature: int = 0  # signed, but wrong key / forged
     rejected_replay: int = 0  # right key, timestamp not newer than the stream's last one
+    rejected_identity: int = 0  # HEARTBEAT from the autopilot's ids claiming another autopilot type
+    rejected_time: int = 0  # vehicle time_boot_ms inconsistent with its clock (absurd, or a reboot)
+    rejected_stale: int = (
+        0  # vehicle sample not newer than the last of its type (reordered, duplicate)
+    )
+    clock_resets: int = 0  # the vehicle's boot clock restarted (a reboot) and was adopted
     unknown_msgid: int = 0  # ids this dialect does not know (CRC cannot be checked)
     io_errors: int = 0
+    tlog_write_errors: int = 0  # records the tlog could not take (disk full, I/O error): lost
 
     def as_dict(self) -> dict[str, Any]:
         d = dict(self.__dict__)
@@ -234,6 +321,11 @@ class Link:
     ``vehicle_compid``: None accepts any component of that system (autopilot, camera, ...).
     ``allowed_sysids``: other systems whose messages we take (a FOLLOW_TARGET / GLOBAL_POSITION_INT
     target, a GCS). Everything else is dropped and counted in ``counters.rejected_sysid``.
+    ``vehicle_autopilot``: once known (:func:`wait_heartbeat` pins it), a HEARTBEAT from the
+    vehicle's ids with another MAV_AUTOPILOT value is dropped (``counters.rejected_identity``):
+    an autopilot does not change its type in flight, so that is corruption or an impostor.
+    The vehicle's ``time_boot_ms`` passes a :class:`BootClockGate` (``counters.rejected_time``,
+    ``rejected_stale``, ``clock_resets``).
     """
 
     def __init__(
@@ -251,6 +343,8 @@ class Link:
         self.url = url
         self.vehicle_sysid = vehicle_sysid
         self.vehicle_compid = vehicle_compid
+        self.vehicle_autopilot: int | None = None
+        self.clock_gate = BootClockGate()
         self.allowed_sysids = frozenset(int(s) for s in allowed_sysids)
         self.tlog = tlog
         self._clock = clock
@@ -258,6 +352,7 @@ class Link:
         self.signing_enabled = False
         self._signing_counts_itself = False  # set by signing.enable_signing(hardened=True)
         self._closed = False
+        self._udp = isinstance(conn, mavutil.mavudp)  # read datagram by datagram (_recv_udp)
 
     # -- identity ---------------------------------------------------------------------------
     @property
@@ -273,8 +368,10 @@ class Link:
     def source_component(self) -> int:
         return int(self.conn.mav.srcComponent)
 
-    def expect_vehicle(self, sysid: int | None, compid: int | None = None) -> None:
-        self.vehicle_sysid, self.vehicle_compid = sysid, compid
+    def expect_vehicle(
+        self, sysid: int | None, compid: int | None = None, autopilot: int | None = None
+    ) -> None:
+        self.vehicle_sysid, self.vehicle_compid, self.vehicle_autopilot = sysid, compid, autopilot
 
     def allow_sysid(self, sysid: int) -> None:
         self.allowed_sysids = self.allowed_sysids | {int(sysid)}
@@ -289,10 +386,37 @@ class Link:
         return sysid in self.allowed_sysids
 
     # -- receive ----------------------------------------------------------------------------
+    def _recv_udp(self) -> Any:
+        """The next message of the current datagram, else of the next datagram.
+
+        MAVLink over UDP never splits a frame across datagrams, but pymavlink parses a UDP link
+        as one byte stream: a frame whose length byte points past the end of its datagram (a
+        truncated or corrupted packet) would be completed with the NEXT datagram's packets, and
+        when its CRC then fails, that whole stretch (up to 280 bytes of good telemetry, a
+        COMMAND_ACK) is thrown away. Here such a leftover is dropped (counted in ``bad_data``)
+        before the next datagram is parsed."""
+        conn, mav = self.conn, self.conn.mav
+        conn.pre_message()
+        msg = mav.parse_char(b"")
+        if msg is None:
+            if mav.buf_len() > 0:
+                self.counters.bad_data += 1
+                mav.buf, mav.buf_index = bytearray(), 0
+                mav.expected_length = dialect.HEADER_LEN_V1 + 2
+            data = conn.recv()
+            if not data:
+                return None
+            if conn.first_byte:
+                conn.auto_mavlink_version(data)
+            msg = mav.parse_char(data)
+        if msg is not None:
+            conn.post_message(msg)
+        return msg
+
     def _read_one(self) -> tuple[bool, Any]:
         """(more, msg): msg is an accepted message or None; more=False when no data is left."""
         try:
-            msg = self.conn.recv_msg()
+            msg = self._recv_udp() if self._udp else self.conn.recv_msg()
         except OSError:
             self.counters.io_errors += 1
             return False, None
@@ -316,11 +440,15 @@ class Link:
                 c.bad_data += 1
             return True, None
         c.rx_packets += 1
+        # one receive time for the record and the clock gate, quantised as the tlog stores it
+        # (us): a replay of the tlog can then take exactly the gate's decisions
+        t_rec = round(self._clock() * 1e6) * 1e-6
         if self.tlog is not None:
             try:
-                self.tlog.write(msg.get_msgbuf(), self._clock())
+                self.tlog.write(msg.get_msgbuf(), t_rec)
             except (OSError, ValueError):
                 c.io_errors += 1
+                c.tlog_write_errors += 1
         if mtype.startswith("UNKNOWN_"):
             c.unknown_msgid += 1
             return True, None
@@ -329,6 +457,25 @@ class Link:
             c.rejected_sysid += 1
             c.rejected_by_source[src] += 1
             return True, None
+        if (
+            mtype == "HEARTBEAT"
+            and self.vehicle_autopilot is not None
+            and src[0] == self.vehicle_sysid
+            and getattr(msg, "autopilot", None) != self.vehicle_autopilot
+        ):
+            c.rejected_identity += 1
+            return True, None
+        if src[0] == self.vehicle_sysid and self.vehicle_sysid is not None:
+            tb = getattr(msg, "time_boot_ms", None)
+            if isinstance(tb, int):
+                why = self.clock_gate.check(mtype, tb * 1e-3, t_rec)
+                c.clock_resets = self.clock_gate.resets
+                if why is not None:
+                    if why == "time":
+                        c.rejected_time += 1
+                    else:
+                        c.rejected_stale += 1
+                    return True, None
         c.rx_by_type[mtype] += 1
         return True, msg
 
@@ -392,6 +539,7 @@ class Link:
                 self.tlog.write(msg.get_msgbuf(), self._clock())
             except (OSError, ValueError):
                 self.counters.io_errors += 1
+                self.counters.tlog_write_errors += 1
 
     def send_heartbeat(self) -> None:
         """Companion heartbeat (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID), ~1 Hz."""
@@ -495,25 +643,67 @@ def open_link(
     )
 
 
-def wait_heartbeat(link: Link, timeout_s: float = 5.0) -> Any:
-    """First HEARTBEAT from an autopilot of the expected vehicle (companions and GCSs, whose
-    autopilot field is MAV_AUTOPILOT_INVALID, are skipped). MpfError after ``timeout_s``."""
+AUTOPILOTS = (dialect.MAV_AUTOPILOT_PX4, dialect.MAV_AUTOPILOT_ARDUPILOTMEGA)
+MAV_COMP_ID_AUTOPILOT1 = 1
+
+
+def wait_heartbeat(
+    link: Link,
+    timeout_s: float = 5.0,
+    *,
+    pin: bool = True,
+    compid: int | None = None,
+    autopilots: Iterable[int] | None = AUTOPILOTS,
+) -> Any:
+    """First HEARTBEAT of the vehicle's autopilot. MpfError after ``timeout_s``.
+
+    Only from component ``compid`` (default: the link's ``vehicle_compid``, else 1, the id of
+    PX4's and ArduPilot's autopilot) and with a MAV_AUTOPILOT in ``autopilots`` (None: any but
+    MAV_AUTOPILOT_INVALID, which GCSs and companions send): the identity is pinned from this
+    one message, so a camera's, a companion's or a corrupted HEARTBEAT must not be the one.
+    The others are counted and named in the timeout error.
+
+    ``pin``: from then on the link takes the vehicle's messages only from that component (a
+    camera or gimbal of the same system may send its own ATTITUDE; another component's
+    HEARTBEAT is not the autopilot's mode) and only HEARTBEATs with that MAV_AUTOPILOT value.
+    """
+    want_comp = compid if compid is not None else link.vehicle_compid
+    want_comp = MAV_COMP_ID_AUTOPILOT1 if want_comp is None else want_comp
+    allowed = None if autopilots is None else frozenset(int(a) for a in autopilots)
+    ignored: Counter = Counter()  # (compid, autopilot) of HEARTBEATs from the vehicle not taken
     deadline = time.monotonic() + float(timeout_s)
     while True:
         remaining = deadline - time.monotonic()
         if remaining <= 0:
             who = "any vehicle" if link.vehicle_sysid is None else f"system {link.vehicle_sysid}"
             c = link.counters
+            seen = ", ".join(
+                f"component {k[0]} autopilot {k[1]} x{n}" for k, n in ignored.most_common(3)
+            )
             raise MpfError(
                 f"no HEARTBEAT from {who} on {link.url} within {float(timeout_s):g} s "
                 f"({c.rx_packets} packets received, {c.rejected_sysid} from other ids, "
-                f"{c.bad_data} bad)"
+                f"{c.bad_data} bad"
+                + (
+                    f"; ignored, not a PX4/ArduPilot autopilot on component {want_comp}: {seen}"
+                    if seen
+                    else ""
+                )
+                + ")"
             )
         msg = link.recv(remaining)
         if (
-            msg is not None
-            and msg.get_type() == "HEARTBEAT"
-            and msg.autopilot != dialect.MAV_AUTOPILOT_INVALID
-            and (link.vehicle_sysid is None or msg.get_srcSystem() == link.vehicle_sysid)
+            msg is None
+            or msg.get_type() != "HEARTBEAT"
+            or msg.autopilot == dialect.MAV_AUTOPILOT_INVALID
+            or (link.vehicle_sysid is not None and msg.get_srcSystem() != link.vehicle_sysid)
         ):
-            return msg
+            continue
+        if msg.get_srcComponent() != want_comp or (
+            allowed is not None and msg.autopilot not in allowed
+        ):
+            ignored[(msg.get_srcComponent(), int(msg.autopilot))] += 1
+            continue
+        if pin and link.vehicle_sysid is not None:
+            link.expect_vehicle(link.vehicle_sysid, want_comp, int(msg.autopilot))
+        return msg

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import os
 import struct
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator
@@ -36,9 +37,14 @@ class TlogWriter:
     """Append MAVLink packets to a tlog, one ``os.write`` per record.
 
     The file is opened unbuffered, so a record is in the kernel's page cache as soon as
-    :meth:`write` returns: a SIGKILL of this process cannot lose or half-write it (a power cut
-    can; use ``fsync_every_s`` = 0 for fsync after every record, > 0 to fsync at most that often
-    in log time, None (default) to leave it to the OS).
+    :meth:`write` returns: a SIGKILL of this process cannot lose or half-write it. A power cut
+    can; ``fsync_every_s`` decides how much: 0 fsyncs after every record (on the caller's
+    thread, so its latency), > 0 fsyncs at most that often (wall time) from a background
+    thread when records were written since the last one, so a control loop that logs never
+    waits for the disk; None (default) leaves it to the OS.
+
+    ``last_us`` / ``last_packet``: timestamp (us) and packet of the latest record, so that a
+    caller can use the exact time a reader will see (``last_us * 1e-6`` s).
     """
 
     def __init__(
@@ -52,7 +58,6 @@ class TlogWriter:
         self.path = os.fspath(path)
         self._clock = clock
         self._fsync_every_s = fsync_every_s
-        self._last_fsync_t = -math.inf
         flags = os.O_WRONLY | os.O_CREAT | (os.O_APPEND if append else os.O_TRUNC)
         try:
             self._fd: int | None = os.open(self.path, flags, 0o644)
@@ -60,6 +65,15 @@ class TlogWriter:
             raise MpfError(f"cannot open tlog {self.path} for writing: {e.strerror}") from None
         self.records = 0
         self.bytes = 0
+        self.fsyncs = 0
+        self.last_us: int | None = None
+        self.last_packet: bytes | bytearray | None = None
+        self._dirty = False
+        self._stop = threading.Event()
+        self._syncer: threading.Thread | None = None
+        if fsync_every_s is not None and fsync_every_s > 0:
+            self._syncer = threading.Thread(target=self._sync_loop, name="tlog-fsync", daemon=True)
+            self._syncer.start()
 
     def write(self, packet: bytes | bytearray, t_unix_s: float | None = None) -> None:
         """Log one raw packet. ``t_unix_s``: wall-clock time of the event (s since the epoch);
@@ -69,15 +83,35 @@ class TlogWriter:
         t = self._clock() if t_unix_s is None else float(t_unix_s)
         if not math.isfinite(t) or t < 0:
             raise ValueError(f"tlog timestamp must be a finite time >= 0, got {t_unix_s!r}")
-        rec = _TS.pack(int(round(t * 1e6))) + bytes(packet)
+        us = int(round(t * 1e6))
+        rec = _TS.pack(us) + bytes(packet)
         n = os.write(self._fd, rec)
         while n < len(rec):  # regular files write fully; loop only on exotic filesystems
             n += os.write(self._fd, rec[n:])
         self.records += 1
         self.bytes += len(rec)
-        if self._fsync_every_s is not None and t - self._last_fsync_t >= self._fsync_every_s:
+        self.last_us, self.last_packet = us, packet
+        if self._fsync_every_s == 0:
             os.fsync(self._fd)
-            self._last_fsync_t = t
+            self.fsyncs += 1
+        else:
+            self._dirty = True
+
+    def _sync_loop(self) -> None:
+        """Background fsync: os.fsync releases the GIL, so the writer thread runs meanwhile."""
+        period = float(self._fsync_every_s or 1.0)
+        while not self._stop.wait(period):
+            if not self._dirty:
+                continue
+            self._dirty = False
+            fd = self._fd
+            if fd is None:
+                return
+            try:
+                os.fsync(fd)
+                self.fsyncs += 1
+            except OSError:  # a full or vanished disk: the records are still in the page cache
+                pass
 
     def flush(self) -> None:
         """Nothing is buffered in user space; kept so the writer looks like a file."""
@@ -85,8 +119,14 @@ class TlogWriter:
     def fsync(self) -> None:
         if self._fd is not None:
             os.fsync(self._fd)
+            self.fsyncs += 1
 
     def close(self) -> None:
+        # stop the syncer before the fd goes: it must never fsync a closed (or reused) fd
+        self._stop.set()
+        if self._syncer is not None:
+            self._syncer.join()
+            self._syncer = None
         if self._fd is not None:
             try:
                 os.fsync(self._fd)

@@ -1,0 +1,74 @@
+"""Software-in-the-loop benchmarks (``scripts/bench --only sil_real_time_factor|sil_tracking``).
+
+Both fly the default demo (configs/default.yaml) with the SIL vehicle and the bridge as two
+processes over UDP loopback (sim/sil.py), measured on the plant's truth.
+
+sil_real_time_factor: the demo as shipped (JSBSim X8, PX4 flavour, lockstep clock). ``tracking``
+is simulated seconds per wall second while the bridge commands the vehicle (OFFBOARD: every
+20 ms frame waits for the bridge's answer); ``overall`` includes start-up, the real-time-paced
+hand-over and the hand-back. ``cpu_us_per_frame_*``: CPU time of each peer per frame while
+tracking, a figure that depends less on what else the machine runs. Bar: tracking >= 30.
+
+sil_tracking: steady RMS |pt| (t >= 120 s after engagement, 360 s of tracking) in three
+atmospheres, the demo otherwise unchanged. Bars: <= 2 m without wind, <= 3 m in 5 m/s wind
+with light turbulence (the 5 m/s steady case has no bar of its own; 3 m is quoted).
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import Any
+
+DEMO = "configs/default.yaml"
+
+CONDITIONS: dict[str, tuple[list[str], float]] = {
+    "no_wind": (["sil.wind_ned_m_s=[0,0,0]", "sil.turbulence=none"], 2.0),
+    "wind_5_m_s": (["sil.wind_ned_m_s=[0,5,0]", "sil.turbulence=none"], 3.0),
+    "wind_5_m_s_light_turbulence": (["sil.wind_ned_m_s=[0,5,0]", "sil.turbulence=light"], 3.0),
+}
+
+
+def _fly(overrides: list[str], out: Path) -> dict[str, Any]:
+    from sim.sil import run_sil
+
+    from .config import load_config
+
+    cfg = load_config(DEMO, overrides)
+    return run_sil(cfg, out, progress=False, plots=False, log=lambda _s: None).metrics
+
+
+def sil_real_time_factor() -> dict[str, Any]:
+    with tempfile.TemporaryDirectory(prefix="mpf-bench-sil-") as d:
+        m = _fly([], Path(d))
+    rtf = m.get("real_time_factor_tracking")
+    return {
+        "tracking": rtf,
+        "overall": m.get("real_time_factor_overall"),
+        "bar": 30.0,
+        "pass": rtf is not None and rtf >= 30.0,
+        "tracked_sim_s": m.get("sim_time_s"),
+        "vehicle_sim_s": m.get("vehicle_sim_time_s"),
+        "wall_s": m.get("wall_time_s"),
+        "cpu_us_per_frame_vehicle": m.get("cpu_us_per_frame_vehicle"),
+        "cpu_us_per_frame_bridge": m.get("cpu_us_per_frame_bridge"),
+        "steady_rms_m": m.get("steady_rms_m"),
+    }
+
+
+def sil_tracking(duration_s: float = 360.0) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for name, (sets, bar) in CONDITIONS.items():
+        with tempfile.TemporaryDirectory(prefix="mpf-bench-sil-") as d:
+            m = _fly([*sets, f"sim.duration_s={duration_s}", "metrics.steady_after_s=120"], Path(d))
+        rms = m.get("steady_rms_m")
+        out[name] = {
+            "steady_rms_m": rms,
+            "steady_max_m": m.get("steady_max_m"),
+            "steady_rms_cross_track_m": m.get("steady_rms_cross_track_m"),
+            "convergence_time_s": m.get("convergence_time_s"),
+            "bar_m": bar,
+            "pass": rms is not None and rms <= bar,
+            "real_time_factor": m.get("real_time_factor_tracking"),
+        }
+    return out

@@ -1,0 +1,423 @@
+"""The bridge's per-sample computation, shared by the live bridge and tlog replay.
+
+:class:`Controller` holds everything between a decoded telemetry sample and the setpoint sent
+for it: the estimator, the target (scripted or live), the virtual point s, the law, the
+adapter with its airspeed-hold integrator and the safe-setpoint rule. It does no I/O and reads
+no clock: time comes from the samples (autopilot boot time) and from the receive times the
+caller passes in, which the bridge takes from its tlog records (microseconds), so a replay of
+that tlog hands it the very same numbers. Driving it with the same samples in the same order
+therefore gives the same setpoints, bit for bit.
+
+The call sequence, identical in :mod:`mpf_mavlink.bridge` and :mod:`mpf_mavlink.replay`:
+
+1. ``feed_vehicle(sample, rx)`` / ``feed_target(sample, rx)`` for every decoded message of the
+   vehicle (after its first autopilot HEARTBEAT) or of the live target.
+2. ``ready()`` after each such message until the origin is set: the bridge's wait for a
+   complete state. (It calls :meth:`Estimator.estimate`, whose wind low-pass advances with
+   each new attitude time, so the calls must be the same in both.)
+3. ``set_origin()`` (CHECKS: mission time 0 = the attitude time then) and ``init_s()`` (INIT:
+   the virtual point at the closest point of the moving path).
+4. ``step()`` for every ATTITUDE sample once setpoints stream: s += sdot_prev dt, the law,
+   the adapter; a duplicate or out-of-order sample (dt <= 0) is skipped.
+
+What the bridge decides from the wall clock (t0, s0, the moment streaming starts) it writes to
+the tlog as STATUSTEXT (:func:`origin_texts`, :data:`STREAM_TEXT`) for replay to pick up.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from . import (
+    bridge_config,  # noqa: F401  (registers the mavlink/adapter sections)
+    so3,
+)
+from .adapter import AdapterParams, AdapterState, Setpoint, adapt, safe_setpoint
+from .config import Config
+from .errors import MpfError
+from .estimator import Estimate, Estimator, EstimatorParams
+from .guidance.law import MpfCommand, MpfDiagnostics, mpf_law
+from .rundir import row_from
+from .scenario import build_extensions, build_gains, build_path, build_target
+from .target import TargetState
+
+# ----------------------------------------------------------------------------- tlog markers
+#: STATUSTEXT texts (MAVLink 2, <= 50 characters, severity INFO) the bridge sends, from its own
+#: system/component ids, so that a tlog carries the decisions the telemetry cannot tell:
+#: ``MPF t0=<float>`` and ``MPF s0=<float>`` right after INIT (no message is processed between
+#: CHECKS and them), then ``MPF stream`` when setpoints start to stream (after the backlog that
+#: piled up during the checks has been taken into the state). Floats are ``repr``: exact.
+T0_PREFIX = "MPF t0="
+S0_PREFIX = "MPF s0="
+STREAM_TEXT = "MPF stream"
+
+
+def origin_texts(t0: float, s0: float) -> list[str]:
+    """The two STATUSTEXT texts that record the mission-time origin t0 (s, autopilot boot time)
+    and the initial arc length s0 (m). Each is at most 31 characters."""
+    return [f"{T0_PREFIX}{float(t0)!r}", f"{S0_PREFIX}{float(s0)!r}"]
+
+
+def parse_marker(text: str) -> tuple[str, float | None] | None:
+    """('t0', value), ('s0', value), ('stream', None), or None for any other text."""
+    text = text.rstrip("\x00").strip()
+    for key, prefix in (("t0", T0_PREFIX), ("s0", S0_PREFIX)):
+        if text.startswith(prefix):
+            try:
+                v = float(text[len(prefix) :])
+            except ValueError:
+                return None
+            return (key, v) if math.isfinite(v) else None
+    if text == STREAM_TEXT:
+        return ("stream", None)
+    return None
+
+
+# ----------------------------------------------------------------------------- targets
+class ScriptedTarget:
+    """The config's target motion, at mission time t (s)."""
+
+    live = False
+
+    def __init__(self, motion: Any) -> None:
+        self.motion = motion
+
+    def update(
+        self, sample: Any, t_mission: float | None
+    ) -> None:  # pragma: no cover - nothing to take
+        return None
+
+    def restamp(self, t0: float) -> None:
+        return None
+
+    def state(self, t: float) -> TargetState | str:
+        return self.motion.state(t)
+
+
+def _heading_frame(
+    vel: np.ndarray, acc: np.ndarray, fallback_yaw: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Level heading frame of a target (x along the horizontal velocity) and its turn rate."""
+    vh2 = float(vel[0] ** 2 + vel[1] ** 2)
+    if vh2 > 0.25:  # > 0.5 m/s: the velocity defines the heading
+        yaw = math.atan2(vel[1], vel[0])
+        chid = float(vel[0] * acc[1] - vel[1] * acc[0]) / vh2
+    else:
+        yaw, chid = fallback_yaw, 0.0
+    return so3.rot_z(yaw), np.array([0.0, 0.0, chid])
+
+
+class LiveTarget:
+    """A target over MAVLink: FOLLOW_TARGET, or GLOBAL_POSITION_INT (+ ATTITUDE) from one id.
+
+    Samples are stamped with the vehicle's mission time at receipt (the sender's clock is not
+    the autopilot's) and extrapolated to the control time; older than ``timeout_s``: stale.
+    """
+
+    live = True
+
+    def __init__(self, est: Estimator, timeout_s: float) -> None:
+        self.est = est
+        self.timeout_s = timeout_s
+        self.base: TargetState | None = None
+        self.att: Any = None
+        self.att_stamp = -math.inf
+        self.samples = 0
+
+    def update(self, sample: Any, t_mission: float | None) -> None:
+        if t_mission is None:
+            return
+        name = type(sample).__name__
+        if name == "AttitudeSample":
+            self.att, self.att_stamp = sample, t_mission
+            return
+        if name not in ("FollowTargetSample", "GlobalPositionSample"):
+            return
+        pos = self.est.to_local(sample.lat_deg, sample.lon_deg, sample.alt_amsl_m)
+        if pos is None:
+            return
+        vel = np.asarray(sample.vel_ned if sample.vel_ned is not None else np.zeros(3), float)
+        acc = np.zeros(3)
+        R = omega = None
+        if name == "FollowTargetSample":
+            if sample.acc_ned is not None:
+                acc = np.asarray(sample.acc_ned, float)
+            if sample.R_B_N is not None:
+                R = np.asarray(sample.R_B_N, float)
+                omega = (
+                    np.asarray(sample.rates_frd, float)
+                    if sample.rates_frd is not None
+                    else np.zeros(3)
+                )
+            fallback = 0.0
+        else:
+            fallback = sample.heading_rad if sample.heading_rad is not None else 0.0
+            if self.att is not None and t_mission - self.att_stamp <= self.timeout_s:
+                R = np.asarray(self.att.R_B_N, float)
+                omega = np.asarray(self.att.rates_frd, float)
+        if R is None:
+            if self.base is not None and name == "GlobalPositionSample":
+                # acceleration from successive velocities keeps the heading frame's turn rate
+                dt = t_mission - self.base.t
+                if 0.02 < dt < 1.0:
+                    acc = (vel - self.base.velocity) / dt
+            R, omega = _heading_frame(vel, acc, fallback)
+        assert omega is not None  # set together with R above
+        self.base = TargetState(t_mission, pos, vel, acc, R, omega, np.zeros(3))
+        self.samples += 1
+
+    def restamp(self, t0: float) -> None:
+        """Move the stamps into the mission time base that starts at boot time t0 (s)."""
+        if self.base is not None:
+            self.base = dataclasses.replace(self.base, t=self.base.t - t0)
+        # the target's ATTITUDE stamp too: left in the old base it would look fresh for ever
+        self.att_stamp -= t0
+
+    def state(self, t: float) -> TargetState | str:
+        if self.base is None:
+            return "no live target yet"
+        age = t - self.base.t
+        if age > self.timeout_s:
+            return f"live target stale ({age:.2f} s old)"
+        return self.base.extrapolate(t)
+
+
+# ----------------------------------------------------------------------------- one step
+class Step(NamedTuple):
+    """One control step: what the law saw and the setpoint it produced.
+
+    t: mission time (s); t_boot_s: the ATTITUDE sample's autopilot time (s);
+    time_boot_ms: what the setpoint carries; dt: time since the previous step (s, 0 first);
+    w1_prev: w1 (NED) of the previous step, for the achieved-rate column of the logs.
+    """
+
+    t: float
+    t_boot_s: float
+    time_boot_ms: int
+    dt: float
+    estimate: Estimate
+    target: TargetState
+    cmd: MpfCommand
+    diag: MpfDiagnostics
+    setpoint: Setpoint
+    w1: tuple[float, float, float]
+    w1_prev: tuple[float, float, float] | None
+
+    def row(self) -> list[float]:
+        """The run directory's timeseries row (:data:`mpf_mavlink.rundir.COLUMNS`)."""
+        vs = self.estimate.vehicle
+        w_act = (0.0, 0.0)
+        wp = self.w1_prev
+        if wp is not None and self.dt > 0.0:
+            # logging only: the law never sees this difference of telemetry
+            R = vs.R_W_I
+            w = self.w1
+            d0, d1, d2 = (
+                (w[0] - wp[0]) / self.dt,
+                (w[1] - wp[1]) / self.dt,
+                (w[2] - wp[2]) / self.dt,
+            )
+            w_act = (
+                -(d0 * float(R[0, 2]) + d1 * float(R[1, 2]) + d2 * float(R[2, 2])),
+                d0 * float(R[0, 1]) + d1 * float(R[1, 1]) + d2 * float(R[2, 1]),
+            )
+        tg = self.target
+        c = self.cmd
+        return row_from(
+            self.diag, vs.position, (c.w2, c.w3), w_act, c.sdot, tg.position, tg.R_T_I, vs.wind
+        )
+
+    def setpoint_row(self) -> list[float]:
+        """The row of setpoints.csv (:data:`SETPOINT_COLUMNS`)."""
+        sp = self.setpoint
+        return [
+            self.t,
+            *sp.body_rates_frd,
+            *sp.q_wxyz,
+            sp.thrust,
+            sp.bank_rad,
+            sp.pitch_rad,
+            sp.load_factor,
+            1.0 if sp.safe else 0.0,
+        ]
+
+
+SETPOINT_COLUMNS = "t,p,q,r,qw,qx,qy,qz,thrust,bank,pitch,load_factor,safe"
+
+
+def adapter_params(cfg: Config) -> AdapterParams:
+    """The adapter's limits and gains from the ``vehicle`` and ``adapter`` sections."""
+    a = cfg.section("adapter")
+    v = cfg.vehicle
+    return AdapterParams(
+        max_bank_rad=v.max_bank_rad, airspeed_sp_m_s=v.airspeed_m_s,
+        **{f.name: getattr(a, f.name) for f in dataclasses.fields(a)},
+    )  # fmt: skip
+
+
+def estimator_params(m: Any) -> EstimatorParams:
+    """The estimator's staleness limits and origin from the ``mavlink`` section."""
+    origin = None
+    if m.origin_lat_deg is not None and m.origin_lon_deg is not None:
+        origin = (m.origin_lat_deg, m.origin_lon_deg, m.origin_alt_m or 0.0)
+    return EstimatorParams(m.attitude_stale_s, m.position_stale_s, m.airspeed_stale_s, m.wind_stale_s, m.wind_filter_tau_s, origin=origin)  # fmt: skip
+
+
+class Controller:
+    """Estimator + target + s + law + adapter for one run (see the module docstring).
+
+    ``m``: the (possibly command-line adjusted) ``mavlink`` section; default: the config's.
+    """
+
+    def __init__(self, cfg: Config, m: Any = None) -> None:
+        self.cfg = cfg
+        self.m = m = cfg.section("mavlink") if m is None else m
+        self.ad_params = adapter_params(cfg)
+        self.est = Estimator(estimator_params(m))
+        self.live = cfg.target.type == "mavlink"
+        if self.live and m.target_sysid is None:
+            raise MpfError(f"{cfg.source}: target.type mavlink needs mavlink.target_sysid")
+        self.target: Any = (
+            LiveTarget(self.est, m.target_timeout_s)
+            if self.live
+            else ScriptedTarget(build_target(cfg.target))
+        )
+        self.path = build_path(cfg.path)
+        self.gains = build_gains(cfg)
+        self.ext = build_extensions(cfg)
+        self.s = 0.0
+        self.t0: float | None = None  # mission-time origin (autopilot boot time, s)
+        self.t_prev: float | None = None
+        self.sdot_prev = 0.0
+        self.w1_prev: tuple[float, float, float] | None = None
+        self.ad_state = AdapterState()
+        self.why_not = ""
+        self.law_evals = 0
+
+    # -- feeding ----------------------------------------------------------------------------
+    def feed_vehicle(self, sample: Any, rx: float | None) -> bool:
+        """A decoded sample of the vehicle; True when it is an ATTITUDE (a control instant)."""
+        return self.est.update(sample, rx)
+
+    def feed_target(self, sample: Any, rx: float | None) -> None:
+        """A decoded sample of the live target (ignored with a scripted target)."""
+        if self.live:
+            self.target.update(sample, self.mission_time_at(rx))
+
+    def mission_time_at(self, rx: float | None) -> float | None:
+        """The vehicle's mission time (s) at receive time rx (s), from the latest ATTITUDE."""
+        a = self.est.att
+        if a is None or rx is None or self.est.att_rx is None:
+            return None
+        return a.t_boot_s + (rx - self.est.att_rx) - self.est.t0
+
+    # -- initialisation -----------------------------------------------------------------------
+    def ready(self) -> bool:
+        """A complete state (and a live target) exists; else ``why_not`` says what is missing."""
+        est, why = self.est.estimate()
+        if est is None:
+            self.why_not = why
+            return False
+        if self.live:
+            st = self.target.state(est.vehicle.t)
+            if isinstance(st, str):
+                self.why_not = st
+                return False
+        return True
+
+    def set_origin(self, t0: float | None = None) -> float:
+        """Mission time 0 (the checks' and the scripted target's origin): the latest attitude
+        time, or ``t0`` (s, autopilot boot time) as recorded by a bridge."""
+        est, why = self.est.estimate()
+        if t0 is None:
+            if est is None:
+                raise MpfError(f"no state to start from: {why}")
+            t0 = est.t_boot_s
+        self.t0 = float(t0)
+        self.est.t0 = self.t0
+        self.target.restamp(self.t0)
+        return self.t0
+
+    def init_s(self, s0: float | None = None) -> float:
+        """The virtual point: ``s0`` (m) if given, else ``guidance.initial_s_m``, else the
+        closest point of the moving path to the vehicle now."""
+        if s0 is None:
+            s0 = self.cfg.guidance.initial_s_m
+        if s0 is None:
+            est, why = self.est.estimate()
+            if est is None:
+                raise MpfError(f"no state to start from: {why}")
+            vs = est.vehicle
+            tgt = self.target.state(vs.t)
+            if isinstance(tgt, str):
+                raise MpfError(f"no target to start from: {tgt}")
+            s0 = self.path.closest(tgt.R_T_I.T @ (vs.position - tgt.position))
+        self.s = float(s0)
+        return self.s
+
+    def initial_state(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(position NED m, R_W^I) of the latest estimate, for the pre-flight checks."""
+        est, _ = self.est.estimate()
+        return None if est is None else (est.vehicle.position, est.vehicle.R_W_I)
+
+    # -- control ------------------------------------------------------------------------------
+    def step(self) -> Step | None:
+        """One control step at the latest ATTITUDE; None (``why_not`` set) when the state or
+        the target is not usable, or when the sample is not newer than the previous step."""
+        est, why = self.est.estimate()
+        if est is None:
+            self.why_not = why
+            return None
+        vs = est.vehicle
+        t = vs.t
+        tgt = self.target.state(t)
+        if isinstance(tgt, str):
+            self.why_not = tgt
+            return None
+        dt = 0.0
+        if self.t_prev is not None:
+            dt = t - self.t_prev
+            if dt <= 0.0:
+                return None  # duplicate or out-of-order sample: already acted on that instant
+            self.s += self.sdot_prev * dt
+        cmd, diag = mpf_law(self.s, vs, tgt, self.path, self.gains, self.ext, diagnostics=True)
+        assert diag is not None
+        self.law_evals += 1
+        R = vs.R_W_I
+        w1 = (float(R[0, 0]), float(R[1, 0]), float(R[2, 0]))
+        sp, self.ad_state = adapt(
+            cmd.omega_w1_I, vs.airspeed, est.R_B_N, w1, dt, self.ad_params, self.ad_state
+        )
+        if not math.isfinite(cmd.sdot):
+            sp = safe_setpoint(self.ad_params)
+        self.t_prev = t
+        self.sdot_prev = cmd.sdot if math.isfinite(cmd.sdot) else 0.0
+        w1_prev, self.w1_prev = self.w1_prev, w1
+        tb_ms = int(round(est.t_boot_s * 1000.0))
+        return Step(t, est.t_boot_s, tb_ms, dt, est, tgt, cmd, diag, sp, w1, w1_prev)
+
+    def roll(self) -> float:
+        """Roll (rad) of the latest ATTITUDE, 0 without one (for the wings-level setpoint)."""
+        a = self.est.att
+        if a is None:
+            return 0.0
+        R = a.R_B_N
+        return math.atan2(R[2][1], R[2][2])
+
+
+__all__ = [
+    "Controller",
+    "LiveTarget",
+    "ScriptedTarget",
+    "Step",
+    "SETPOINT_COLUMNS",
+    "STREAM_TEXT",
+    "origin_texts",
+    "parse_marker",
+    "adapter_params",
+    "estimator_params",
+]

@@ -1,0 +1,655 @@
+"""Software-in-the-loop runs: the simulated vehicle and the bridge as two MAVLink peers.
+
+:func:`run_sil` is what ``mpf-mavlink sim CONFIG`` does when ``sil.link: udp``: the vehicle
+(:class:`sim.vehicle.SimVehicle`: the JSBSim aircraft or the kinematic plant, the simulated
+autopilot, PX4 or ArduPlane rules) and the bridge (:func:`mpf_mavlink.bridge.run_bridge`, the
+same code that flies a real autopilot) run in two processes - two interpreters, so neither
+waits for the other's GIL - and talk MAVLink over UDP loopback (the vehicle sends to the
+bridge's ``udpin`` port, as PX4 SITL does to an offboard API). This process watches, shows the
+progress, and then measures the tracking on the plant's TRUTH.
+
+Truth metrics: the MPF error is ``pt = p - p_f(s)`` with the virtual point ``s`` the bridge
+actually flew (its ``timeseries.csv``), the TRUE vehicle position and the TRUE target, i.e. the
+paper's error, including what the bridge's estimates (telemetry, live target) get wrong. The
+closest point of the moving path would hide the along-track part of the error that the law's
+``sdot`` is there to remove, so it is reported only as ``steady_rms_cross_track_m``. The bridge's
+mission clock (autopilot boot time minus its start) is matched to the vehicle's by the
+positions the bridge logged, which are the vehicle's LOCAL_POSITION_NED of the same instant.
+
+Run directory: ``timeseries.csv`` / ``metrics.json`` / plots from the truth (``t`` = seconds
+since the bridge took control), ``truth.csv`` (the plant at telemetry rate) and ``bridge/``: the
+bridge's own run directory with ``mavlink.tlog`` (both directions), what the law saw, the
+setpoints.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import multiprocessing
+import os
+import re
+import signal
+import socket
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mpf_mavlink.config import Config
+from mpf_mavlink.estimator import wind_frame
+from mpf_mavlink.guidance.law import VehicleState, mpf_law
+from mpf_mavlink.rundir import (
+    RunTable,
+    compute_metrics,
+    prepare_out_dir,
+    read_run,
+    row_from,
+    write_run,
+)
+from mpf_mavlink.scenario import build_extensions, build_gains, build_path, build_target
+
+# custom modes in which the bridge commands the vehicle (PX4 OFFBOARD, ArduPlane GUIDED)
+_ENGAGED_MODES = ("OFFBOARD", "GUIDED")
+# the bridge's life-cycle lines ("[TRACKING]"), as opposed to its check results ("[PASS] ...")
+_STATE_MARK = re.compile(r"^\[[A-Z_]+\]$")
+# MPF_SIL_PROFILE=DIR: each peer process writes cProfile statistics to DIR/{vehicle,bridge}.prof
+_PROFILE_ENV = "MPF_SIL_PROFILE"
+
+
+def _profiled(name: str, fn: Any, *args: Any) -> None:
+    d = os.environ.get(_PROFILE_ENV)
+    if not d:
+        fn(*args)
+        return
+    import cProfile
+
+    pr = cProfile.Profile()
+    pr.enable()
+    try:
+        fn(*args)
+    finally:
+        pr.disable()
+        Path(d).mkdir(parents=True, exist_ok=True)
+        pr.dump_stats(str(Path(d) / f"{name}.prof"))
+
+
+def _vehicle_main(*args: Any) -> None:
+    _profiled("vehicle", _vehicle_run, *args)
+
+
+def _bridge_main(*args: Any) -> None:
+    _profiled("bridge", _bridge_run, *args)
+
+
+# --------------------------------------------------------------------------- the vehicle
+def build_autopilot(cfg: Config) -> Any:
+    """The simulated autopilot for the config's aircraft (rate loops, attitude loop, hold)."""
+    from .inner_loop import AttitudeGains, FixedWingAutopilot, HoldGains, RateLoopGains
+
+    ac, sil = cfg.section("aircraft"), cfg.section("sil")
+    base = RateLoopGains()
+    over = {k: v for k, v in dataclasses.asdict(ac.rate_loop).items() if v is not None}
+    v_trim = ac.trim_airspeed_m_s
+    # The rate loops' airspeed scaling is s = V_trim / V, limited below by V_min: defaults keep
+    # the X8's margins (10 / 16 / 22 m/s) in proportion for another trim airspeed.
+    gains = dataclasses.replace(
+        base, **over, trim_throttle=ac.trim_throttle, airspeed_trim=v_trim,
+        airspeed_min=ac.airspeed_min_m_s or v_trim * base.airspeed_min / base.airspeed_trim,
+        airspeed_max=ac.airspeed_max_m_s or v_trim * base.airspeed_max / base.airspeed_trim,
+    )  # fmt: skip
+    al = ac.attitude_loop
+    att = AttitudeGains()
+    att_over = {
+        "roll_tc": al.roll_tc_s, "pitch_tc": al.pitch_tc_s, "roll_rate_max": al.roll_rate_max_rad_s,
+        "pitch_rate_max": al.pitch_rate_max_rad_s, "yaw_rate_max": al.yaw_rate_max_rad_s,
+        "bank_max": al.bank_max_rad,
+    }  # fmt: skip
+    att = dataclasses.replace(
+        att, airspeed_min=gains.airspeed_min, **{k: v for k, v in att_over.items() if v is not None}
+    )
+    hold = HoldGains(loiter_radius=sil.loiter_radius_m)
+    if al.pitch_trim_rad is not None:
+        hold = dataclasses.replace(hold, pitch_trim=al.pitch_trim_rad)
+    if al.bank_max_rad is not None:
+        hold = dataclasses.replace(hold, bank_max=al.bank_max_rad)
+    return FixedWingAutopilot(gains, att, hold)
+
+
+def vehicle_options(cfg: Config, url: str, clock: str | None = None, **over: Any) -> dict[str, Any]:
+    """Keyword arguments of :class:`sim.vehicle.SimVehicle` for a config (``over`` wins)."""
+    sil, ac, k = cfg.section("sil"), cfg.section("aircraft"), cfg.kinematic
+    pos = (
+        sil.initial_position_ned_m
+        if sil.initial_position_ned_m is not None
+        else k.initial_position_ned_m
+    )
+    heading = (
+        sil.initial_heading_rad
+        if sil.initial_heading_rad is not None
+        else k.initial_attitude_rpy_rad[2]
+    )
+    tel = sil.telemetry
+    rates = {f.name[: -len("_hz")]: getattr(tel, f.name) for f in dataclasses.fields(tel)}
+    plant_options: dict[str, Any] = {}
+    if sil.plant == "jsbsim":
+        root = ac.resolved_root(cfg.source)
+        plant_options = {
+            "model": ac.model,
+            "controls": ac.controls.mapping(),
+            "throttle": ac.trim_throttle,
+        }
+        if root is not None:
+            plant_options["root_dir"] = str(root)
+    opts: dict[str, Any] = dict(
+        flavour=sil.flavour, url=url, plant=sil.plant, clock=clock or sil.clock,
+        position_ned=tuple(pos), heading=float(heading), airspeed=ac.trim_airspeed_m_s,
+        lat0_deg=sil.home_lat_deg, lon0_deg=sil.home_lon_deg, alt0_m=sil.home_alt_m,
+        target=build_target(cfg.target), target_system=sil.target_system, target_rate_hz=sil.target_rate_hz, target_type=sil.target_type,
+        rates=rates, frame_period=sil.frame_period_s, physics_rate_hz=sil.physics_rate_hz,
+        telemetry_latency_s=sil.telemetry_latency_s, command_latency_s=sil.command_latency_s,
+        answer_timeout_s=sil.answer_timeout_s, realtime_speed=sil.realtime_speed,
+        com_of_loss_t=sil.offboard_loss_timeout_s, guided_timeout=sil.guided_timeout_s,
+        loiter_radius=sil.loiter_radius_m, trim_seconds=sil.trim_s, initial_mode=sil.initial_mode, wind_ned=tuple(sil.wind_ned_m_s),
+        turbulence=sil.turbulence, seed=sil.seed, gusts=[dataclasses.asdict(g) for g in sil.gusts],
+        plant_options=plant_options, autopilot=build_autopilot(cfg), realtime_until_engaged=True,
+    )  # fmt: skip
+    opts.update(over)
+    return opts
+
+
+def build_vehicle(cfg: Config, url: str, clock: str | None = None, **over: Any) -> Any:
+    """The config's simulated vehicle on ``url`` (trimmed, in the hold mode, ready to serve)."""
+    from .vehicle import SimVehicle
+
+    opts = vehicle_options(cfg, url, clock, **over)
+    flavour = opts.pop("flavour")
+    return SimVehicle(flavour, opts.pop("url"), **opts)
+
+
+def bridge_config(cfg: Config) -> Config:
+    """The bridge's view of a SIL config: flavour from ``sil``, the live target when asked."""
+    sil = cfg.section("sil")
+    m = dataclasses.replace(cfg.section("mavlink"), flavour=sil.flavour)
+    target = cfg.target
+    if sil.target_live:
+        target = dataclasses.replace(cfg.target, type="mavlink")
+        m = dataclasses.replace(m, target_sysid=sil.target_system)
+    extra = dict(cfg.extra, mavlink=m)
+    return dataclasses.replace(cfg, target=target, extra=extra)
+
+
+# --------------------------------------------------------------------------- processes
+def _free_port() -> int:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = int(s.getsockname()[1])
+    s.close()
+    return port
+
+
+def _vehicle_run(
+    cfg: Config, url: str, clock: str | None, conn: Any, stop: Any, status: Any, parent: int
+) -> None:
+    """Child process: build the vehicle, run it until ``stop`` (or the parent is gone), then send
+    its truth. Ctrl-C is ignored here: the bridge must be able to hand back to a live vehicle."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        v = build_vehicle(cfg, url, clock)
+    except Exception as e:  # noqa: BLE001 - reported to the parent as one line
+        conn.send(("error", f"{type(e).__name__}: {e}"))
+        return
+    conn.send(
+        (
+            "ready",
+            {
+                "trim": dataclasses.asdict(v.trim) if v.trim is not None else None,
+                "mode": v.mode_name,
+            },
+        )
+    )
+
+    def watch() -> None:
+        while not stop.wait(0.2):
+            status[0] = v.t
+            if os.getppid() != parent:  # orphaned (parent killed): do not run forever
+                break
+        v._stop.set()
+
+    threading.Thread(target=watch, daemon=True).start()
+    try:
+        v.run(math.inf)
+    finally:
+        info = {
+            "mode_log": v.mode_log, "statustexts": v.statustexts, "dropped": v.dropped, "answers": v.answers,
+            "frames": v.clock.frames if hasattr(v.clock, "frames") else None,
+            "answered_frames": getattr(v.clock, "answered_frames", None),
+            "sim_time_s": v.t, "wall_time_s": v.wall_time_running, "flavour": v.flavour,
+        }  # fmt: skip
+        conn.send(("truth", v.truth(), info))
+        v.close()
+
+
+def _bridge_run(cfg: Config, url: str, out: str, duration: float, q: Any) -> None:
+    """Child process: fly the bridge; results and log lines go to ``q``."""
+    from mpf_mavlink.bridge import BridgeOptions, run_bridge
+    from mpf_mavlink.errors import MpfError
+
+    def on_int(signum: int, frame: Any) -> None:
+        # the first Ctrl-C hands back; more (the parent forwards one) must not abort that
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, on_int)
+    try:
+        res = run_bridge(
+            cfg,
+            BridgeOptions(url=url, out_dir=Path(out), duration_s=duration),
+            log=lambda s: q.put(("log", s)),
+        )
+        q.put(("result", res))
+    except MpfError as e:
+        q.put(("error", str(e)))
+    except KeyboardInterrupt:
+        q.put(("error", "interrupted before the bridge was flying"))
+    except Exception as e:  # noqa: BLE001 - the parent reports it
+        q.put(("error", f"{type(e).__name__}: {e}"))
+
+
+@dataclass
+class SilResult:
+    """A SIL run: the truth table and metrics, where things are, what the bridge said."""
+
+    cols: dict[str, np.ndarray]
+    metrics: dict[str, Any]
+    path_T: np.ndarray
+    out_dir: Path
+    bridge_dir: Path
+    tlog: Path
+    exit_code: int
+    exit_reason: str
+    truth: dict[str, np.ndarray] = field(default_factory=dict)
+    bridge: Any = None
+    t_vehicle: np.ndarray = field(
+        default_factory=lambda: np.zeros(0)
+    )  # vehicle time of each row (s)
+
+
+def _context() -> Any:
+    # fork: the children start at once without re-importing numpy/scipy/pymavlink (nothing here
+    # holds threads or JSBSim before the fork); spawn where fork is unsafe (macOS, Windows).
+    methods = multiprocessing.get_all_start_methods()
+    return multiprocessing.get_context(
+        "fork" if sys.platform.startswith("linux") and "fork" in methods else "spawn"
+    )
+
+
+def run_sil(
+    cfg: Config,
+    out: str | Path,
+    *,
+    progress: bool = True,
+    plots: bool = True,
+    clock: str | None = None,
+    duration_s: float | None = None,
+    log: Any = print,
+) -> SilResult:
+    """Fly the config's mission with the SIL vehicle and the bridge over UDP loopback.
+
+    ``duration_s`` (default ``sim.duration_s``): seconds of tracking, after the bridge has taken
+    control; ``clock`` overrides ``sil.clock``. Raises MpfError when a peer fails to start and
+    KeyboardInterrupt after a Ctrl-C (once the bridge has handed back and the records are written).
+    """
+    from mpf_mavlink.errors import MpfError
+
+    out = prepare_out_dir(out)
+    bridge_dir = out / "bridge"
+    sil = cfg.section("sil")
+    duration = float(duration_s if duration_s is not None else cfg.sim.duration_s)
+    port = sil.port or _free_port()
+    bcfg = bridge_config(cfg)
+    bcfg = dataclasses.replace(
+        bcfg,
+        extra=dict(bcfg.extra, mavlink=dataclasses.replace(bcfg.section("mavlink"), plots=plots)),
+    )
+    ctx = _context()
+    rx, tx = ctx.Pipe(duplex=False)
+    stop = ctx.Event()
+    status = ctx.RawArray("d", 1)
+    q = ctx.Queue()
+    wall0 = time.perf_counter()
+    pb = ctx.Process(
+        target=_bridge_main,
+        args=(bcfg, f"udpin:127.0.0.1:{port}", str(bridge_dir), duration, q),
+        name="mpf-bridge",
+        daemon=True,
+    )
+    pv = ctx.Process(
+        target=_vehicle_main,
+        args=(cfg, f"udpout:127.0.0.1:{port}", clock, tx, stop, status, os.getpid()),
+        name="mpf-sil-vehicle",
+        daemon=True,
+    )
+    pb.start()
+    pv.start()
+    tx.close()
+    bar = _Progress(duration, progress, log, (pv.pid, pb.pid))
+    bres: Any = None
+    berr: str | None = None
+    interrupted = False
+    truth_msg: Any = None
+    try:
+        try:
+            ready = rx.poll(120.0) and rx.recv()
+            if not ready or ready[0] != "ready":
+                raise MpfError(
+                    f"the SIL vehicle did not start: {ready[1] if ready else 'no answer in 120 s'}"
+                )
+            bar.note(
+                f"vehicle ready ({sil.plant}, {sil.flavour}, {clock or sil.clock} clock) in {ready[1]['mode']}"
+            )
+            while bres is None and berr is None:
+                try:
+                    kind, payload = q.get(timeout=0.25)
+                except Exception:  # noqa: BLE001 - queue.Empty
+                    if not pb.is_alive() and q.empty():
+                        berr = f"the bridge process exited (code {pb.exitcode})"
+                    bar.update(status[0])
+                    continue
+                if kind == "log":
+                    bar.event(payload, status[0])
+                elif kind == "result":
+                    bres = payload
+                else:
+                    berr = payload
+        except KeyboardInterrupt:
+            interrupted = True
+            bar.note("interrupted: the bridge hands back, then the records are written")
+            if pb.is_alive():
+                os.kill(pb.pid, signal.SIGINT)  # in case the Ctrl-C came only to this process
+            deadline = time.monotonic() + 20.0
+            while bres is None and berr is None and time.monotonic() < deadline:
+                try:
+                    kind, payload = q.get(timeout=0.5)
+                except Exception:  # noqa: BLE001
+                    if not pb.is_alive():
+                        break
+                    continue
+                if kind == "result":
+                    bres = payload
+                elif kind == "error":
+                    berr = payload
+        stop.set()
+        if rx.poll(60.0):
+            truth_msg = rx.recv()
+    finally:
+        stop.set()
+        bar.close()
+        for p in (pb, pv):
+            p.join(10.0)
+            if p.is_alive():
+                p.terminate()
+                p.join(5.0)
+    wall = time.perf_counter() - wall0
+    if bres is None:
+        if interrupted:
+            raise KeyboardInterrupt
+        raise MpfError(f"SIL run failed: {berr or 'no result from the bridge'}")
+    if truth_msg is None or truth_msg[0] != "truth":
+        raise MpfError("SIL run failed: the vehicle sent no truth")
+    truth, vinfo = truth_msg[1], truth_msg[2]
+    res = _measure(cfg, truth, vinfo, bres, bridge_dir, wall)
+    if None not in bar.cpu0 + bar.cpu1 and bar.t_end is not None and bar.t_track is not None:
+        frames = max(1.0, (bar.t_end - bar.t_track) / cfg.section("sil").frame_period_s)
+        res.metrics["cpu_us_per_frame_vehicle"] = (bar.cpu1[0] - bar.cpu0[0]) / frames * 1e6  # type: ignore[operator]
+        res.metrics["cpu_us_per_frame_bridge"] = (bar.cpu1[1] - bar.cpu0[1]) / frames * 1e6  # type: ignore[operator]
+    res.metrics["clock"] = clock or sil.clock
+    res.out_dir = out
+    _write(out, res, truth, plots)
+    if interrupted:
+        raise KeyboardInterrupt
+    return res
+
+
+def _cpu_s(pid: int) -> float | None:
+    """CPU seconds (user + system) a process has used so far (Linux /proc), else None."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+class _Progress:
+    """Progress for long runs: a bar over the tracking seconds, the bridge's events above it.
+    Also samples the peers' CPU time over the tracking phase (a load-independent cost figure)."""
+
+    def __init__(self, duration: float, enabled: bool, log: Any, pids: tuple[int, int] = (0, 0)):
+        self.duration, self.enabled, self.log = duration, enabled, log
+        self.pids = pids
+        self.cpu0: list[float | None] = [None, None]
+        self.cpu1: list[float | None] = [None, None]
+        self.t_end: float | None = None
+        self.next_line = 0.1
+        self.t_track: float | None = None
+        self.bar: Any = None
+        self.wall_track = 0.0
+
+    def note(self, text: str) -> None:
+        if self.enabled:
+            self._write(text)
+
+    def _write(self, text: str) -> None:
+        if self.bar is not None:
+            self.bar.write(text, file=sys.stderr)
+        else:
+            self.log(text)
+
+    def event(self, text: str, t: float) -> None:
+        if text.startswith("[TRACKING]"):
+            self.t_track, self.wall_track = t, time.perf_counter()
+            self.cpu0 = [_cpu_s(p) for p in self.pids]
+            self.next_line = 0.1
+            if self.enabled and sys.stderr.isatty():
+                from tqdm import tqdm
+
+                self.bar = tqdm(total=round(self.duration), desc="tracking", unit="s", file=sys.stderr,
+                                mininterval=0.5, bar_format="{desc} {n}/{total} s sim |{bar:24}| {elapsed} wall{postfix}")  # fmt: skip
+        elif text.startswith("[HANDBACK]") or text.startswith("[DONE]"):
+            if self.t_end is None and self.t_track is not None:
+                self.cpu1 = [_cpu_s(p) for p in self.pids]
+                self.t_end = t
+            self.update(t)
+        if self.enabled and not _STATE_MARK.match(text):  # states are shown by the bar
+            self._write(f"bridge: {text}")
+
+    def update(self, t: float) -> None:
+        if self.t_track is None or not self.enabled:
+            return
+        if self.bar is None:  # not a terminal (a log, CI): a plain line every 10 %
+            done = (t - self.t_track) / self.duration
+            if done + 1e-9 >= self.next_line and self.t_end is None:
+                wall = time.perf_counter() - self.wall_track
+                rtf = (t - self.t_track) / max(wall, 1e-9)
+                self.log(
+                    f"tracking {t - self.t_track:6.0f} / {self.duration:g} s simulated, {rtf:.0f}x real time"
+                )
+                self.next_line = math.floor(done * 10 + 1e-9) / 10 + 0.1
+            return
+        n = min(round(self.duration), max(0, int(t - self.t_track)))
+        if n > self.bar.n:
+            wall = time.perf_counter() - self.wall_track
+            self.bar.set_postfix_str(
+                f"{(t - self.t_track) / max(wall, 1e-9):.0f}x real time", refresh=False
+            )
+            self.bar.update(n - self.bar.n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+# --------------------------------------------------------------------------- truth
+def _align(truth: dict[str, np.ndarray], bc: dict[str, np.ndarray]) -> tuple[float, float]:
+    """Offset ``t0`` (s) with vehicle boot time = bridge mission time + t0, and the RMS position
+    mismatch (m) at that offset. The bridge logs the vehicle's LOCAL_POSITION_NED of the
+    ATTITUDE instant it acted on, so the right offset matches to float32 rounding."""
+    tb, P = truth["time_boot_s"], truth["position_ned"]
+    bt = bc["t"]
+    bp = np.column_stack([bc["p_n"], bc["p_e"], bc["p_d"]])
+    n = min(len(bt), 300)
+    d0 = np.linalg.norm(P - bp[0], axis=1)
+    best = (math.inf, 0.0)
+    for k in np.argsort(d0)[:5]:
+        t0 = round(float(tb[k] - bt[0]), 3)  # the boot clock is in ms
+        ts = bt[:n] + t0
+        Pi = np.column_stack([np.interp(ts, tb, P[:, i]) for i in range(3)])
+        rms = float(np.sqrt(np.mean(np.sum((Pi - bp[:n]) ** 2, axis=1))))
+        best = min(best, (rms, t0))
+    return best[1], best[0]
+
+
+def _distance_to_polyline(nodes: np.ndarray, q: np.ndarray, closed: bool) -> np.ndarray:
+    """Distance (m) from each point of q (N, 3) to the polyline through ``nodes`` (the path's
+    tabulation, node spacing well under a metre): nearest node (k-d tree), then the exact
+    distance to the two segments that meet there."""
+    from scipy.spatial import cKDTree
+
+    n = len(nodes)
+    _, i = cKDTree(nodes).query(q)
+    best = np.full(len(q), np.inf)
+    for a, b in ((i - 1, i), (i, i + 1)):
+        if closed:
+            a, b = a % n, b % n
+        else:
+            a, b = np.clip(a, 0, n - 1), np.clip(b, 0, n - 1)
+        A, B = nodes[a], nodes[b]
+        d = B - A
+        L2 = np.maximum(np.sum(d * d, axis=1), 1e-12)
+        u = np.clip(np.sum((q - A) * d, axis=1) / L2, 0.0, 1.0)
+        best = np.minimum(best, np.linalg.norm(q - (A + u[:, None] * d), axis=1))
+    return best
+
+
+def truth_table(
+    cfg: Config, truth: dict[str, np.ndarray], bc: dict[str, np.ndarray]
+) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """The run table from the plant's truth (see module docstring); ``t`` = s since engagement."""
+    path, target = build_path(cfg.path), build_target(cfg.target)
+    gains, ext = build_gains(cfg), build_extensions(cfg)
+    t0, resid = _align(truth, bc)
+    bt, bs = bc["t"], bc["s"]
+    tb = truth["time_boot_s"]
+    tm = tb - t0  # bridge mission time of each truth frame
+    sel = np.nonzero((tm >= bt[0] - 1e-6) & (tm <= bt[-1] + 1e-6))[0]
+    s_at = np.interp(tm[sel], bt, bs)
+    P, V, W = truth["position_ned"], truth["velocity_ned"], truth["wind_ned"]
+    tv = truth["t"]
+    table = RunTable()
+    w1_prev: np.ndarray | None = None
+    t_prev = 0.0
+    t_engage = float(bt[0])
+    rel_all = np.empty((len(sel), 3))
+    for j, k in enumerate(sel):
+        va = V[k] - W[k]
+        R_W = wind_frame(float(va[0]), float(va[1]), float(va[2]))
+        t = float(tm[k]) - t_engage
+        veh = VehicleState(t, P[k], R_W, float(np.linalg.norm(va)), W[k])
+        tgt = target.state(float(tv[k]))
+        cmd, diag = mpf_law(float(s_at[j]), veh, tgt, path, gains, ext, diagnostics=True)
+        w1 = R_W[:, 0]
+        w_act = (0.0, 0.0)
+        if w1_prev is not None and t > t_prev:
+            w1d = (w1 - w1_prev) / (t - t_prev)
+            w_act = (-float(w1d @ R_W[:, 2]), float(w1d @ R_W[:, 1]))
+        w1_prev, t_prev = w1, t
+        table.append(
+            row_from(diag, P[k], (cmd.w2, cmd.w3), w_act, cmd.sdot, tgt.position, tgt.R_T_I, W[k])
+        )
+        rel_all[j] = tgt.R_T_I.T @ (P[k] - tgt.position)
+    cols = table.arrays()
+    cross = _distance_to_polyline(path.positions(), rel_all, bool(getattr(path, "closed", False)))
+    info = {
+        "alignment_t0_s": t0,
+        "alignment_residual_m": resid,
+        "cross_track_m": cross,
+        "t_vehicle": tv[sel],
+    }
+    return cols, info
+
+
+def _measure(
+    cfg: Config,
+    truth: dict[str, np.ndarray],
+    vinfo: dict[str, Any],
+    bres: Any,
+    bridge_dir: Path,
+    wall: float,
+) -> SilResult:
+    from mpf_mavlink.errors import MpfError
+
+    try:
+        bc, _, _ = read_run(bridge_dir)
+    except MpfError:
+        bc = {"t": np.zeros(0)}
+    path = build_path(cfg.path)
+    if len(bc["t"]) < 2:
+        cols = RunTable().arrays()
+        metrics: dict[str, Any] = compute_metrics(
+            cols, cfg.metrics.steady_after_s, cfg.metrics.converge_threshold_m
+        )
+        info: dict[str, Any] = {}
+    else:
+        cols, info = truth_table(cfg, truth, bc)
+        metrics = compute_metrics(
+            cols, cfg.metrics.steady_after_s, cfg.metrics.converge_threshold_m
+        )
+        m = cols["t"] >= cfg.metrics.steady_after_s
+        ct = info["cross_track_m"]
+        metrics["steady_rms_cross_track_m"] = (
+            float(np.sqrt(np.mean(ct[m] ** 2))) if m.any() else None
+        )
+        metrics["alignment_residual_m"] = info["alignment_residual_m"]
+        bm = bres.metrics
+        metrics["bridge_steady_rms_m"] = bm.get("steady_rms_m")
+    # real-time factor while the bridge was in control (the lockstep figure) and overall
+    ml = vinfo["mode_log"]
+    rtf_track = None
+    for i, (t_in, w_in, name) in enumerate(ml):
+        if name in _ENGAGED_MODES:
+            t_out, w_out = (
+                (ml[i + 1][0], ml[i + 1][1]) if i + 1 < len(ml) else (vinfo["sim_time_s"], None)
+            )
+            if w_out is not None and w_out > w_in:
+                rtf_track = (t_out - t_in) / (w_out - w_in)
+            break
+    sim_total = float(vinfo["sim_time_s"])
+    metrics.update(
+        sim_time_s=float(cols["t"][-1]) if len(cols["t"]) else 0.0, wall_time_s=wall,
+        vehicle_sim_time_s=sim_total, real_time_factor_tracking=rtf_track,
+        real_time_factor_overall=sim_total / wall if wall > 0 else None,
+        plant=cfg.section("sil").plant, flavour=cfg.section("sil").flavour,
+        bridge_exit_code=bres.exit_code, bridge_exit_reason=bres.exit_reason, bridge_state_reached=bres.state_reached,
+        handback_confirmed=bres.handback_confirmed, vehicle_answered_frames=vinfo.get("answered_frames"),
+        vehicle_frames=vinfo.get("frames"), statustexts=[t for _, t in vinfo["statustexts"]],
+        vehicle_modes=[[round(t, 3), name] for t, _, name in ml],
+    )  # fmt: skip
+    return SilResult(
+        cols, metrics, path.positions(), Path("."), bridge_dir, bridge_dir / "mavlink.tlog",
+        bres.exit_code, bres.exit_reason, truth, bres, info.get("t_vehicle", np.zeros(0)),
+    )  # fmt: skip
+
+
+def _write(out: Path, res: SilResult, truth: dict[str, np.ndarray], plots: bool) -> None:
+    write_run(out, res.cols, res.metrics, res.path_T, plots=plots and len(res.cols["t"]) >= 2)
+    cols = [truth["t"], truth["time_boot_s"], *truth["position_ned"].T, *truth["velocity_ned"].T, *truth["euler"].T,
+            truth["airspeed"], *truth["wind_ned"].T, truth["throttle"], truth["mode"]]  # fmt: skip
+    hdr = "t,time_boot_s,p_n,p_e,p_d,v_n,v_e,v_d,roll,pitch,yaw,airspeed,wind_n,wind_e,wind_d,throttle,custom_mode"
+    np.savetxt(
+        out / "truth.csv", np.column_stack(cols), delimiter=",", header=hdr, comments="", fmt="%.9g"
+    )
