@@ -48,7 +48,6 @@ def bank_and_load_factor(w1: Vec, accel: Vec, g: float = GRAVITY_M_S2) -> tuple[
 # memory (the airspeed integrator) is passed in and returned as an explicit AdapterState.
 
 
-
 @dataclass(frozen=True)
 class AdapterParams:
     """Limits and gains of the setpoint adapter (SI units, radians).
@@ -140,7 +139,9 @@ def safe_setpoint(p: AdapterParams, roll: float = 0.0) -> Setpoint:
     rr = _clip(rr, -p.max_roll_rate_rad_s, p.max_roll_rate_rad_s)
     pitch = _clip(p.trim_pitch_rad, p.min_pitch_rad, p.max_pitch_rad)
     thr = _clip(p.trim_thrust, p.thrust_min, p.thrust_max)
-    return Setpoint((rr, 0.0, 0.0), _euler_to_quat_wxyz(0.0, pitch, 0.0), thr, 0.0, pitch, 1.0, True)
+    return Setpoint(
+        (rr, 0.0, 0.0), _euler_to_quat_wxyz(0.0, pitch, 0.0), thr, 0.0, pitch, 1.0, True
+    )
 
 
 def adapt(
@@ -164,17 +165,20 @@ def adapt(
     (bank_sp - phi) / tau_roll and psid, thetad the heading and flight-path-angle rates of w1.
     Any non-finite value gives :func:`safe_setpoint` (flag ``safe``) and keeps the integrator.
     """
-    R = R_B_N.tolist() if hasattr(R_B_N, "tolist") else R_B_N
+    isf = math.isfinite
     try:
-        roll = math.atan2(R[2][1], R[2][2])
-        pitch = math.asin(_clip(-R[2][0], -1.0, 1.0))
-        vals = (*omega_w1_I, airspeed, *w1, dt, roll, pitch)
-        if not all(math.isfinite(v) for v in vals) or airspeed <= 0.0:
+        R2 = R_B_N[2].tolist() if hasattr(R_B_N, "tolist") else R_B_N[2]  # only row 2 is used
+        roll = math.atan2(R2[1], R2[2])
+        pitch = math.asin(_clip(-R2[0], -1.0, 1.0))
+        ox, oy, oz = omega_w1_I
+        if not (
+            isf(ox) and isf(oy) and isf(oz) and isf(airspeed) and isf(w1[0]) and isf(w1[1])
+            and isf(w1[2]) and isf(dt) and isf(roll) and isf(pitch) and airspeed > 0.0
+        ):  # fmt: skip
             return safe_setpoint(params, roll), state
     except (TypeError, ValueError, IndexError):
         return safe_setpoint(params), state
     v = airspeed
-    ox, oy, oz = omega_w1_I
     accel = (
         v * (oy * w1[2] - oz * w1[1]),
         v * (oz * w1[0] - ox * w1[2]),
@@ -187,12 +191,20 @@ def adapt(
     sth, cth = math.sin(pitch), math.cos(pitch)
     phid = (bank - roll) / params.tau_roll_s
     p = _clip(phid - sth * chid, -params.max_roll_rate_rad_s, params.max_roll_rate_rad_s)
-    q = _clip(cphi * gamd + cth * sphi * chid, -params.max_pitch_rate_rad_s, params.max_pitch_rate_rad_s)
-    r = _clip(-sphi * gamd + cphi * cth * chid, -params.max_yaw_rate_rad_s, params.max_yaw_rate_rad_s)
+    q = _clip(
+        cphi * gamd + cth * sphi * chid, -params.max_pitch_rate_rad_s, params.max_pitch_rate_rad_s
+    )
+    r = _clip(
+        -sphi * gamd + cphi * cth * chid, -params.max_yaw_rate_rad_s, params.max_yaw_rate_rad_s
+    )
     # Pitch: the flight-path angle of w1 (= theta - alpha) advanced by tau_pitch, plus the trim
     # angle of attack. (Adding the trim to the *measured* pitch would integrate it each cycle.)
     gamma = math.asin(_clip(-w1[2], -1.0, 1.0))
-    pitch_sp = _clip(gamma + gamd * params.tau_pitch_s + params.trim_pitch_rad, params.min_pitch_rad, params.max_pitch_rad)
+    pitch_sp = _clip(
+        gamma + gamd * params.tau_pitch_s + params.trim_pitch_rad,
+        params.min_pitch_rad,
+        params.max_pitch_rad,
+    )
     # Airspeed hold with conditional integration (anti-windup): the integrator moves only when
     # the output is not saturated in the direction the error pushes.
     e = params.airspeed_sp_m_s - v
@@ -200,10 +212,17 @@ def adapt(
     base = params.trim_thrust + params.airspeed_kp * e + ff
     raw = base + state.integ
     integ = state.integ
-    if dt > 0.0 and not ((raw >= params.thrust_max and e > 0) or (raw <= params.thrust_min and e < 0)):
-        integ = _clip(integ + params.airspeed_ki * e * dt, -params.integrator_limit, params.integrator_limit)
+    if dt > 0.0 and not (
+        (raw >= params.thrust_max and e > 0) or (raw <= params.thrust_min and e < 0)
+    ):
+        integ = _clip(
+            integ + params.airspeed_ki * e * dt, -params.integrator_limit, params.integrator_limit
+        )
     thrust = _clip(base + integ, params.thrust_min, params.thrust_max)
-    sp = Setpoint((p, q, r), _euler_to_quat_wxyz(bank, pitch_sp, 0.0), thrust, bank, pitch_sp, n)
-    if not all(math.isfinite(x) for x in (p, q, r, thrust, bank, pitch_sp, *sp.q_wxyz)):
+    qw, qx, qy, qz = quat = _euler_to_quat_wxyz(bank, pitch_sp, 0.0)
+    if not (
+        isf(p) and isf(q) and isf(r) and isf(thrust) and isf(bank) and isf(pitch_sp)
+        and isf(qw) and isf(qx) and isf(qy) and isf(qz)
+    ):  # fmt: skip
         return safe_setpoint(params, roll), state
-    return sp, AdapterState(integ)
+    return Setpoint((p, q, r), quat, thrust, bank, pitch_sp, n), AdapterState(integ)

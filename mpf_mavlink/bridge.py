@@ -525,11 +525,21 @@ class Bridge:
                 f"pre-streamed {self.prestream_sends} setpoints in {self.last_send_mono - self.first_send_mono:.2f} s"
             )
             if m.arm and not (self.hb is not None and self.hb.armed):
+                self.acks.clear()
                 self._send(encode_arm(self.link.mav, m.vehicle_sysid, self.vehicle_compid, True))
-                if not self._spin(
-                    m.mode_timeout_s * m.mode_retries, lambda: self.hb is not None and self.hb.armed
-                ):
-                    raise _Stop("vehicle did not arm", "engage")
+                refused: list[str] = []
+
+                def armed_or_refused() -> bool:
+                    # a rejected ARM (pre-arm checks failed) ends the wait at once, with its reason
+                    for a in self.acks:
+                        if a.command == 400 and not a.accepted and a.result != 5:  # 5: MAV_RESULT_IN_PROGRESS
+                            refused.append(a.result_name)
+                    self.acks.clear()
+                    return bool(refused) or (self.hb is not None and self.hb.armed)
+
+                if not self._spin(m.mode_timeout_s * m.mode_retries, armed_or_refused) or refused:
+                    why = f"ARM refused ({refused[0]})" if refused else "no armed HEARTBEAT"
+                    raise _Stop(f"vehicle did not arm: {why}", "engage")
             self._set_state(State.ENGAGE)
             mode = self._offboard_mode()
             ok, why = self._request_mode(

@@ -387,8 +387,8 @@ class Controller:
         cmd, diag = mpf_law(self.s, vs, tgt, self.path, self.gains, self.ext, diagnostics=True)
         assert diag is not None
         self.law_evals += 1
-        R = vs.R_W_I
-        w1 = (float(R[0, 0]), float(R[1, 0]), float(R[2, 0]))
+        w10, w11, w12 = vs.R_W_I[:, 0].tolist()
+        w1 = (w10, w11, w12)
         sp, self.ad_state = adapt(
             cmd.omega_w1_I, vs.airspeed, est.R_B_N, w1, dt, self.ad_params, self.ad_state
         )

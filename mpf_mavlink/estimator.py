@@ -40,19 +40,24 @@ from .frames import geodetic_to_ned, wind_frame_from_velocity
 from .guidance.law import VehicleState
 
 
-def wind_frame(vx: float, vy: float, vz: float) -> NDArray[np.float64]:
-    """Scalar twin of :func:`frames.wind_frame_from_velocity` (roll_ref = 0), ~10x faster:
-    w1 = v/|v|, w2 = down x w1 normalised (horizontal, to the right), w3 = w1 x w2."""
+def _wind_frame_rows(vx: float, vy: float, vz: float) -> tuple[tuple[float, float, float], ...]:
+    """The rows of :func:`wind_frame` as tuples (no numpy: the estimator's hot path)."""
     n = math.sqrt(vx * vx + vy * vy + vz * vz)
     if n < 1e-6:
-        return wind_frame_from_velocity((vx, vy, vz))  # raises the documented ValueError
+        wind_frame_from_velocity((vx, vy, vz))  # raises the documented ValueError
     a, b, c = vx / n, vy / n, vz / n
     h = math.sqrt(a * a + b * b)
     if h < 1e-9:
         e, f, g = 0.0, 1.0, 0.0
     else:
         e, f, g = -b / h, a / h, 0.0
-    return np.array([[a, e, b * g - c * f], [b, f, c * e - a * g], [c, g, a * f - b * e]])
+    return ((a, e, b * g - c * f), (b, f, c * e - a * g), (c, g, a * f - b * e))
+
+
+def wind_frame(vx: float, vy: float, vz: float) -> NDArray[np.float64]:
+    """Scalar twin of :func:`frames.wind_frame_from_velocity` (roll_ref = 0), ~10x faster:
+    w1 = v/|v|, w2 = down x w1 normalised (horizontal, to the right), w3 = w1 x w2."""
+    return np.array(_wind_frame_rows(vx, vy, vz))
 
 
 # Plausibility bounds of a sample (the decoders' bounds, kept here so this module stays pure)
@@ -63,8 +68,30 @@ _MIN_ALT_M, _MAX_ALT_M = -1000.0, 50000.0
 _ROTATION_TOL = 1e-6
 
 
+def _arr_list(a: object, shape: tuple[int, ...]) -> list | None:
+    """``a`` as a (nested) list of floats if it has that shape, else None."""
+    if type(a) is np.ndarray and a.dtype.char == "d":  # the decoders' arrays: no conversion
+        return a.tolist() if a.shape == shape else None
+    try:
+        v = np.asarray(a, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return v.tolist() if v.shape == shape else None
+
+
+def _vec3_ok(a: object, bound: float) -> bool:
+    """A finite 3-vector, every |element| <= bound (NaN fails the comparison)."""
+    v = _arr_list(a, (3,))
+    if v is None:
+        return False
+    x, y, z = v
+    return -bound <= x <= bound and -bound <= y <= bound and -bound <= z <= bound
+
+
 def _arr_ok(a: object, shape: tuple[int, ...], bound: float) -> bool:
     """Finite, of that shape, every |element| <= bound (NaN fails the comparison)."""
+    if shape == (3,):
+        return _vec3_ok(a, bound)
     try:
         v = np.asarray(a, dtype=float)
     except (TypeError, ValueError):
@@ -89,30 +116,36 @@ def _geodetic_ok(s: object) -> bool:
 
 
 def _time_ok(s: object) -> bool:
-    return _num_ok(getattr(s, "t_boot_s", None), -math.inf, math.inf)
+    t = getattr(s, "t_boot_s", None)
+    if type(t) is float:
+        return math.isfinite(t)
+    return _num_ok(t, -math.inf, math.inf)
 
 
 def _rotation_ok(a: object) -> bool:
     """A 3x3 rotation: finite, orthonormal columns (to _ROTATION_TOL), determinant +1."""
-    if not _arr_ok(a, (3, 3), 1.0 + _ROTATION_TOL):
+    rows = _arr_list(a, (3, 3))
+    if rows is None:
         return False
-    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = np.asarray(a, dtype=float).tolist()
-    x, y, z = (a0, b0, c0), (a1, b1, c1), (a2, b2, c2)  # the columns
-    dots = (
-        x[0] * x[0] + x[1] * x[1] + x[2] * x[2] - 1.0,
-        y[0] * y[0] + y[1] * y[1] + y[2] * y[2] - 1.0,
-        z[0] * z[0] + z[1] * z[1] + z[2] * z[2] - 1.0,
-        x[0] * y[0] + x[1] * y[1] + x[2] * y[2],
-        x[0] * z[0] + x[1] * z[1] + x[2] * z[2],
-        y[0] * z[0] + y[1] * z[1] + y[2] * z[2],
-    )
-    if max(abs(d) for d in dots) > _ROTATION_TOL:
+    (x0, y0, z0), (x1, y1, z1), (x2, y2, z2) = rows  # x, y, z: the columns
+    b = 1.0 + _ROTATION_TOL  # a NaN fails the comparisons
+    if not (
+        -b <= x0 <= b and -b <= y0 <= b and -b <= z0 <= b
+        and -b <= x1 <= b and -b <= y1 <= b and -b <= z1 <= b
+        and -b <= x2 <= b and -b <= y2 <= b and -b <= z2 <= b
+    ):  # fmt: skip
         return False
-    det = (
-        x[0] * (y[1] * z[2] - y[2] * z[1])
-        - x[1] * (y[0] * z[2] - y[2] * z[0])
-        + x[2] * (y[0] * z[1] - y[1] * z[0])
-    )
+    tol = _ROTATION_TOL
+    if not (
+        abs(x0 * x0 + x1 * x1 + x2 * x2 - 1.0) <= tol
+        and abs(y0 * y0 + y1 * y1 + y2 * y2 - 1.0) <= tol
+        and abs(z0 * z0 + z1 * z1 + z2 * z2 - 1.0) <= tol
+        and abs(x0 * y0 + x1 * y1 + x2 * y2) <= tol
+        and abs(x0 * z0 + x1 * z1 + x2 * z2) <= tol
+        and abs(y0 * z0 + y1 * z1 + y2 * z2) <= tol
+    ):
+        return False
+    det = x0 * (y1 * z2 - y2 * z1) - x1 * (y0 * z2 - y2 * z0) + x2 * (y0 * z1 - y1 * z0)
     return det > 0.0
 
 
@@ -120,20 +153,26 @@ def _plausible(name: str, s: object) -> bool:
     """Whether a decoded sample can be taken into the state (finite and within bounds)."""
     g = getattr
     if name == "AttitudeSample":
-        rates_ok = _arr_ok(g(s, "rates_frd", None), (3,), _MAX_RATE_RAD_S)
-        return _time_ok(s) and rates_ok and _rotation_ok(g(s, "R_B_N", None))
+        return (
+            _time_ok(s)
+            and _vec3_ok(g(s, "rates_frd", None), _MAX_RATE_RAD_S)
+            and _rotation_ok(g(s, "R_B_N", None))
+        )
     if name == "LocalPositionSample":
-        pos_ok = _arr_ok(g(s, "pos_ned", None), (3,), _MAX_LOCAL_POS_M)
-        return _time_ok(s) and pos_ok and _arr_ok(g(s, "vel_ned", None), (3,), _MAX_SPEED_M_S)
+        return (
+            _time_ok(s)
+            and _vec3_ok(g(s, "pos_ned", None), _MAX_LOCAL_POS_M)
+            and _vec3_ok(g(s, "vel_ned", None), _MAX_SPEED_M_S)
+        )
     if name == "GlobalPositionSample":
-        vel_ok = _arr_ok(g(s, "vel_ned", None), (3,), _MAX_SPEED_M_S)
+        vel_ok = _vec3_ok(g(s, "vel_ned", None), _MAX_SPEED_M_S)
         return _time_ok(s) and _geodetic_ok(s) and vel_ok
     if name == "HomeSample":
-        return _geodetic_ok(s) and _arr_ok(g(s, "pos_ned", None), (3,), _MAX_LOCAL_POS_M)
+        return _geodetic_ok(s) and _vec3_ok(g(s, "pos_ned", None), _MAX_LOCAL_POS_M)
     if name == "VfrHudSample":
         return _num_ok(g(s, "airspeed_m_s", None), 0.0, _MAX_SPEED_M_S)
     if name == "WindSample":
-        return _arr_ok(g(s, "wind_ned", None), (3,), _MAX_SPEED_M_S)
+        return _vec3_ok(g(s, "wind_ned", None), _MAX_SPEED_M_S)
     return True
 
 
@@ -190,7 +229,9 @@ class Estimator:
         Returns True when it was an attitude sample (a control instant). A non-finite or
         implausible sample, or a non-finite ``t_rx``, is ignored (returns False)."""
         name = type(sample).__name__
-        if t_rx is not None and not _num_ok(t_rx, -math.inf, math.inf):
+        if t_rx is not None and not (
+            math.isfinite(t_rx) if type(t_rx) is float else _num_ok(t_rx, -math.inf, math.inf)
+        ):
             return False
         if not _plausible(name, sample):
             return False
@@ -225,16 +266,17 @@ class Estimator:
         return geodetic_to_ned(lat, lon, alt, o[0], o[1], o[2]) + o[3]
 
     # -- fusing -------------------------------------------------------------------------------
-    def _position(self, t: float) -> tuple[NDArray[np.float64], NDArray[np.float64], str] | str:
+    def _position(
+        self, t: float
+    ) -> tuple[tuple[float, float, float], NDArray[np.float64], str] | str:
+        """((x, y, z) NED at time t, ground velocity array, source) or the reason why not."""
         p = self.p
         loc = self.local
         if loc is not None and abs(t - loc.t_boot_s) <= p.position_stale_s:
             dt = t - loc.t_boot_s
-            return (
-                np.asarray(loc.pos_ned) + dt * np.asarray(loc.vel_ned),
-                np.asarray(loc.vel_ned, float),
-                "local",
-            )
+            vel = np.asarray(loc.vel_ned, float)
+            (x, y, z), (vx, vy, vz) = np.asarray(loc.pos_ned).tolist(), vel.tolist()
+            return (x + dt * vx, y + dt * vy, z + dt * vz), vel, "local"
         g = self.glob
         if g is not None and abs(t - g.t_boot_s) <= p.position_stale_s:
             q = self.to_local(g.lat_deg, g.lon_deg, g.alt_amsl_m)
@@ -243,7 +285,9 @@ class Estimator:
                     "GLOBAL_POSITION_INT without an origin (no HOME_POSITION, no mavlink.origin_*)"
                 )
             dt = t - g.t_boot_s
-            return q + dt * np.asarray(g.vel_ned), np.asarray(g.vel_ned, float), "global"
+            vel = np.asarray(g.vel_ned, float)
+            (x, y, z), (vx, vy, vz) = q.tolist(), np.asarray(g.vel_ned).tolist()
+            return (x + dt * vx, y + dt * vy, z + dt * vz), vel, "global"
         if loc is None and g is None:
             return "no position yet (LOCAL_POSITION_NED or GLOBAL_POSITION_INT)"
         last = max(x.t_boot_s for x in (loc, g) if x is not None)
@@ -278,9 +322,13 @@ class Estimator:
         pos = self._position(t)
         if isinstance(pos, str):
             return None, pos
-        p_ned, vg, psrc = pos
+        (px, py, pz), vg, psrc = pos
+        # Scalar arithmetic throughout (a numpy call on a 3-vector costs more than the
+        # arithmetic): the same operations, in the same order, as the array form.
+        gx, gy, gz = vg.tolist()
         R = np.asarray(a.R_B_N, float)
-        x_b = R[:, 0]
+        R_rows = R.tolist()
+        xb0, xb1, xb2 = R_rows[0][0], R_rows[1][0], R_rows[2][0]  # body x-axis (NED)
         p = self.p
         airspeed: float | None = None
         if self.vfr is not None and (
@@ -297,13 +345,15 @@ class Estimator:
         if self._wind_lp_t is not None and t < self._wind_lp_t:
             self._wind_lp = self._wind_lp_t = None
         if airspeed is not None:
-            inst = vg - airspeed * x_b
-            inst[2] = 0.0  # vertical wind is not observable this way (angle of attack)
-            if self._wind_lp is None or self._wind_lp_t is None:
-                self._wind_lp = inst
+            # vertical wind is not observable this way (angle of attack): 0
+            ix, iy = gx - airspeed * xb0, gy - airspeed * xb1
+            lp = self._wind_lp
+            if lp is None or self._wind_lp_t is None:
+                self._wind_lp = (ix, iy, 0.0)
             else:
                 k = 1.0 - math.exp(-max(0.0, t - self._wind_lp_t) / p.wind_tau_s)
-                self._wind_lp = self._wind_lp + k * (inst - self._wind_lp)
+                lx, ly, lz = lp
+                self._wind_lp = (lx + k * (ix - lx), ly + k * (iy - ly), lz + k * (0.0 - lz))
             self._wind_lp_t = t
         w = self.wind
         if w is not None and (
@@ -312,15 +362,17 @@ class Estimator:
             or abs(self.att_rx - self.wind_rx) <= p.wind_stale_s
         ):
             wind, wsrc = np.asarray(w.wind_ned, float), w.source
+            ex, ey, ez = wind.tolist()
         else:
             lp = self._wind_lp
-            wind, wsrc = (np.zeros(3) if lp is None else lp.copy()), "estimated"
-        v_air = (float(vg[0] - wind[0]), float(vg[1] - wind[1]), float(vg[2] - wind[2]))
+            ex, ey, ez = (0.0, 0.0, 0.0) if lp is None else lp
+            wind, wsrc = np.array((ex, ey, ez)), "estimated"
+        v_air = (gx - ex, gy - ey, gz - ez)
         n_air = math.sqrt(v_air[0] ** 2 + v_air[1] ** 2 + v_air[2] ** 2)
         if n_air < p.min_air_speed:
-            R_W_I = wind_frame(float(x_b[0]), float(x_b[1]), float(x_b[2]))
+            W = _wind_frame_rows(xb0, xb1, xb2)
         else:
-            R_W_I = wind_frame(*v_air)
+            W = _wind_frame_rows(*v_air)
         if airspeed is not None and airspeed > 0.0:
             v_w, asrc = airspeed, "vfr_hud"
         else:
@@ -329,8 +381,12 @@ class Estimator:
             return None, "airspeed is zero"
         rates = np.asarray(a.rates_frd, float)
         # belt and braces (update() already filters): one sum is NaN/inf if any element is
-        check = float(p_ned.sum() + R_W_I.sum() + wind.sum() + vg.sum() + R.sum() + rates.sum())
+        (r0, r1, r2), (w0, w1, w2) = R_rows, W
+        check = (
+            px + py + pz + sum(w0) + sum(w1) + sum(w2) + ex + ey + ez + gx + gy + gz
+            + sum(r0) + sum(r1) + sum(r2) + sum(rates.tolist())
+        )  # fmt: skip
         if not math.isfinite(check + t - self.t0 + v_w):
             return None, "non-finite estimate (rejected)"
-        vs = VehicleState(t - self.t0, p_ned, R_W_I, v_w, wind)
+        vs = VehicleState(t - self.t0, np.array((px, py, pz)), np.array(W), v_w, wind)
         return Estimate(vs, t, R, rates, vg, psrc, asrc, wsrc), ""

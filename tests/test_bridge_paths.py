@@ -142,9 +142,10 @@ def test_cli_arm_arms_after_prestream_and_before_the_mode_request(tmp_path, caps
     assert kinds.index("arm") < kinds.index("armed") < kinds.index("mode")
 
 
-def test_vehicle_that_never_arms_is_refused_without_a_mode_request(tmp_path):
+@pytest.mark.parametrize("arm_result", ["MAV_RESULT_DENIED", "MAV_RESULT_ACCEPTED"])
+def test_vehicle_that_never_arms_is_refused_without_a_mode_request(tmp_path, arm_result):
     port = free_port()
-    opts = PeerOptions(flavour="px4", start_armed=False, arm_result=mavlink.MAV_RESULT_DENIED)
+    opts = PeerOptions(flavour="px4", start_armed=False, arm_result=getattr(mavlink, arm_result))
     peer = MavPeer(opts, port=port).start()
     try:
         cfg = cfg_for("px4", "mavlink.mode_timeout_s=0.3")  # waits mode_timeout * retries
@@ -159,9 +160,15 @@ def test_vehicle_that_never_arms_is_refused_without_a_mode_request(tmp_path):
     assert len(commands(peer, ARM)) == 1 and commands(peer, SET_MODE) == []
     assert not res.handback_requested  # never took control: nothing to hand back
     assert not peer.armed and peer.mode_is("POSCTL")
-    # it waited for the armed HEARTBEAT as configured (3 x 0.3 s), streaming, then stopped
     waited = max(s.t for s in peer.setpoints) - commands(peer, ARM)[0].t
-    assert 0.9 - 0.1 <= waited <= 0.9 + 0.15
+    if arm_result == "MAV_RESULT_DENIED":
+        # a refusal ends the wait at once and names the autopilot's answer
+        assert "ARM refused (MAV_RESULT_DENIED)" in res.exit_reason, res.exit_reason
+        assert waited <= 0.3
+    else:
+        # accepted but never armed: it waited for the armed HEARTBEAT as configured (3 x 0.3 s)
+        assert "no armed HEARTBEAT" in res.exit_reason, res.exit_reason
+        assert 0.9 - 0.1 <= waited <= 0.9 + 0.15
 
 
 def test_no_arming_by_default(tmp_path):

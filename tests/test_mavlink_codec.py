@@ -44,6 +44,29 @@ def test_attitude_euler_to_matrix_and_rates():
     assert not s.R_B_N.flags.writeable  # frozen sample, frozen arrays
 
 
+@settings(max_examples=300, deadline=None)
+@given(
+    st.floats(-math.pi, math.pi), st.floats(-1.5, 1.5), st.floats(-math.pi, math.pi),
+    st.floats(-1.0, 1.0), st.floats(-1.0, 1.0), st.floats(-1.0, 1.0), st.floats(-1.0, 1.0),
+)  # fmt: skip
+def test_scalar_attitude_decoders_match_frames(r, p, y, qw, qx, qy, qz):
+    """The decoders' scalar matrices are frames' (Euler: to rounding; quaternion: bit for bit)."""
+    m = SimpleNamespace(roll=r, pitch=p, yaw=y, rollspeed=0.1, pitchspeed=-0.2, yawspeed=0.3,
+                        time_boot_ms=7)  # fmt: skip
+    s = codec.decode_attitude(m)
+    np.testing.assert_allclose(s.R_B_N, frames.euler_to_matrix(r, p, y), rtol=0, atol=1e-15)
+    assert s.rates_frd.tolist() == [0.1, -0.2, 0.3] and not s.rates_frd.flags.writeable
+    n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    if n < 0.5:
+        return
+    q = (qw / n, qx / n, qy / n, qz / n)
+    m = SimpleNamespace(q1=q[0], q2=q[1], q3=q[2], q4=q[3], rollspeed=0.0, pitchspeed=0.0,
+                        yawspeed=0.0, time_boot_ms=7)  # fmt: skip
+    s = codec.decode_attitude_quaternion(m)
+    assert np.array_equal(s.R_B_N, frames.quat_wxyz_to_matrix(q))
+    assert not s.R_B_N.flags.writeable
+
+
 def test_attitude_quaternion_w_first():
     # yaw +90 deg: q = (cos 45, 0, 0, sin 45); body x (nose) points East in NED
     c = math.cos(math.pi / 4)

@@ -4,7 +4,9 @@ Decoders never raise: a message with a non-finite or absurd field returns ``None
 malformed MAVLink can neither crash the loop nor put a NaN into the state. Encoders refuse
 (``ValueError``) to put a non-finite number on the wire.
 
-Quaternions are converted to/from matrices only through :mod:`mpf_mavlink.frames`.
+The attitude decoders (one per control step) compute the matrices of
+:func:`mpf_mavlink.frames.euler_to_matrix` / :func:`~mpf_mavlink.frames.quat_wxyz_to_matrix` in
+scalar arithmetic (same conventions; tests hold them to those functions).
 """
 
 from __future__ import annotations
@@ -16,7 +18,6 @@ from typing import Any
 
 import numpy as np
 
-from .. import frames
 from . import dialect as _d
 from .modes import (
     MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
@@ -172,61 +173,100 @@ class FollowTargetSample:
 # ---------------------------------------------------------------------------------------------
 # Decoders (return None on anything non-finite or absurd)
 # ---------------------------------------------------------------------------------------------
+def _ro3(a: float, b: float, c: float) -> np.ndarray:
+    arr = np.array((a, b, c))
+    arr.setflags(write=False)
+    return arr
+
+
+def _ro33(rows: tuple) -> np.ndarray:
+    arr = np.array(rows)
+    arr.setflags(write=False)
+    return arr
+
+
 def decode_attitude(msg: Any) -> AttitudeSample | None:
+    # Hot path (one per control step): scalar arithmetic only. A NaN fails every comparison,
+    # so the bound checks also reject non-finite values.
     try:
         r, p, y = float(msg.roll), float(msg.pitch), float(msg.yaw)
-        w = (float(msg.rollspeed), float(msg.pitchspeed), float(msg.yawspeed))
+        wx, wy, wz = float(msg.rollspeed), float(msg.pitchspeed), float(msg.yawspeed)
         t = float(msg.time_boot_ms) * 1e-3
     except (AttributeError, TypeError, ValueError):
         return None
-    if not _finite(r, p, y, *w) or max(abs(r), abs(p), abs(y)) > MAX_ANGLE_RAD:
+    A, W = MAX_ANGLE_RAD, MAX_RATE_RAD_S
+    if not (-A <= r <= A and -A <= p <= A and -A <= y <= A):
         return None
-    if max(abs(v) for v in w) > MAX_RATE_RAD_S:
+    if not (-W <= wx <= W and -W <= wy <= W and -W <= wz <= W):
         return None
-    R = frames.euler_to_matrix(r, p, y)
-    R.setflags(write=False)
-    return AttitudeSample(t, R, _ro(w), "ATTITUDE")
+    # R = Rz(yaw) Ry(pitch) Rx(roll) (frames.euler_to_matrix), products grouped as that
+    # matrix product rounds them: (Rz Ry) first, then times Rx.
+    cr, sr = math.cos(r), math.sin(r)
+    cp, sp = math.cos(p), math.sin(p)
+    cy, sy = math.cos(y), math.sin(y)
+    a00, a02 = cy * cp, cy * sp  # Rz Ry = [[cy cp, -sy, cy sp], [sy cp, cy, sy sp], [-sp, 0, cp]]
+    a10, a12 = sy * cp, sy * sp
+    R = _ro33(
+        (
+            (a00, a02 * sr - sy * cr, a02 * cr + sy * sr),
+            (a10, a12 * sr + cy * cr, a12 * cr - cy * sr),
+            (-sp, cp * sr, cp * cr),
+        )
+    )
+    return AttitudeSample(t, R, _ro3(wx, wy, wz), "ATTITUDE")
 
 
 def _quat_to_matrix(q: Sequence[float]) -> np.ndarray | None:
-    if len(q) != 4 or not _finite(*q):
-        return None
-    n = math.sqrt(sum(float(v) * float(v) for v in q))
-    if abs(n - 1.0) > QUAT_NORM_TOL:
+    if len(q) != 4:
         return None
     try:
-        R = frames.quat_wxyz_to_matrix(q)
-    except ValueError:
+        w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+    except (TypeError, ValueError):
         return None
-    R.setflags(write=False)
-    return R
+    n2 = w * w + x * x + y * y + z * z  # NaN/inf: the bound below fails
+    n = math.sqrt(n2) if n2 < math.inf else math.inf
+    if not abs(n - 1.0) <= QUAT_NORM_TOL:
+        return None
+    # frames.quat_wxyz_to_matrix, scalar (same operations, same rounding)
+    w, x, y, z = w / n, x / n, y / n, z / n
+    return _ro33(
+        (
+            (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+            (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+            (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
+        )
+    )
 
 
 def decode_attitude_quaternion(msg: Any) -> AttitudeSample | None:
     try:
         q = (float(msg.q1), float(msg.q2), float(msg.q3), float(msg.q4))  # w, x, y, z
-        w = (float(msg.rollspeed), float(msg.pitchspeed), float(msg.yawspeed))
+        wx, wy, wz = float(msg.rollspeed), float(msg.pitchspeed), float(msg.yawspeed)
         t = float(msg.time_boot_ms) * 1e-3
     except (AttributeError, TypeError, ValueError):
         return None
-    R = _quat_to_matrix(q)
-    if R is None or not _finite(*w) or max(abs(v) for v in w) > MAX_RATE_RAD_S:
+    W = MAX_RATE_RAD_S
+    if not (-W <= wx <= W and -W <= wy <= W and -W <= wz <= W):
         return None
-    return AttitudeSample(t, R, _ro(w), "ATTITUDE_QUATERNION")
+    R = _quat_to_matrix(q)
+    if R is None:
+        return None
+    return AttitudeSample(t, R, _ro3(wx, wy, wz), "ATTITUDE_QUATERNION")
 
 
 def decode_local_position_ned(msg: Any) -> LocalPositionSample | None:
     try:
-        pos = (float(msg.x), float(msg.y), float(msg.z))
-        vel = (float(msg.vx), float(msg.vy), float(msg.vz))
+        x, y, z = float(msg.x), float(msg.y), float(msg.z)
+        vx, vy, vz = float(msg.vx), float(msg.vy), float(msg.vz)
         t = float(msg.time_boot_ms) * 1e-3
     except (AttributeError, TypeError, ValueError):
         return None
-    if not _finite(*pos, *vel) or max(abs(v) for v in pos) > MAX_LOCAL_POS_M:
+    P = MAX_LOCAL_POS_M  # a NaN fails the comparisons, an inf exceeds the bounds
+    if not (-P <= x <= P and -P <= y <= P and -P <= z <= P):
         return None
-    if math.hypot(*vel) > MAX_SPEED_M_S:
+    if not math.hypot(vx, vy, vz) <= MAX_SPEED_M_S:
         return None
-    return LocalPositionSample(t, _ro(pos), _ro(vel))
+    return LocalPositionSample(t, _ro3(x, y, z), _ro3(vx, vy, vz))
 
 
 def _geodetic_ok(lat: float, lon: float, alt: float) -> bool:
@@ -466,10 +506,14 @@ def encode_set_attitude_target_rates(
     (w, x, y, z) = (1, 0, 0, 0) because a NaN there could be taken for a real value by others.
     """
     t_ms = _check_ids(time_boot_ms, target_sys, target_comp)
-    rates = _check_finite("body rates", (p, q, r), MAX_RATE_RAD_S)
-    thr = _check_thrust(thrust)
+    pf, qf, rf, thr = float(p), float(q), float(r), float(thrust)
+    W = MAX_RATE_RAD_S  # a NaN fails the comparisons; the checkers then say what is wrong
+    if not (-W <= pf <= W and -W <= qf <= W and -W <= rf <= W):
+        _check_finite("body rates", (p, q, r), MAX_RATE_RAD_S)
+    if not -1.0 <= thr <= 1.0:
+        _check_thrust(thrust)
     return mav.set_attitude_target_encode(
-        t_ms, target_sys, target_comp, TYPE_MASK_PX4_RATES, [1.0, 0.0, 0.0, 0.0], *rates, thr
+        t_ms, target_sys, target_comp, TYPE_MASK_PX4_RATES, [1.0, 0.0, 0.0, 0.0], pf, qf, rf, thr
     )
 
 

@@ -166,7 +166,11 @@ class TabulatedPath:
             r = _mrot(self._F2l[i], self._Tl[i], self._Tl[i + 1])
             t1, f2b = self._Tl[i + 1], self._F2l[i + 1]
             c = r[0] * f2b[0] + r[1] * f2b[1] + r[2] * f2b[2]
-            x = (r[1] * f2b[2] - r[2] * f2b[1], r[2] * f2b[0] - r[0] * f2b[2], r[0] * f2b[1] - r[1] * f2b[0])
+            x = (
+                r[1] * f2b[2] - r[2] * f2b[1],
+                r[2] * f2b[0] - r[0] * f2b[2],
+                r[0] * f2b[1] - r[1] * f2b[0],
+            )
             corr.append(math.atan2(x[0] * t1[0] + x[1] * t1[1] + x[2] * t1[2], c))
         self._C = corr
 
@@ -181,7 +185,11 @@ class TabulatedPath:
             j = 0 if s <= 0.0 else self.n
             p, t, f2 = self._Pl[j], self._Tl[j], self._F2l[j]
             ds = s if j == 0 else s - L
-            f3 = (t[1] * f2[2] - t[2] * f2[1], t[2] * f2[0] - t[0] * f2[2], t[0] * f2[1] - t[1] * f2[0])
+            f3 = (
+                t[1] * f2[2] - t[2] * f2[1],
+                t[2] * f2[0] - t[0] * f2[2],
+                t[0] * f2[1] - t[1] * f2[0],
+            )
             return (p[0] + ds * t[0], p[1] + ds * t[1], p[2] + ds * t[2]), t, f2, f3, 0.0, 0.0
         h = self.ds
         x = s / h
@@ -189,8 +197,11 @@ class TabulatedPath:
         if i >= self.n:
             i = self.n - 1
         w = x - i
-        pa, pb = self._Pl[i], self._Pl[i + 1]
-        ta, tb = self._Tl[i], self._Tl[i + 1]
+        Pl, Tl = self._Pl, self._Tl
+        pa0, pa1, pa2 = Pl[i]
+        pb0, pb1, pb2 = Pl[i + 1]
+        ta0, ta1, ta2 = Tl[i]
+        tb0, tb1, tb2 = Tl[i + 1]
         w2 = w * w
         w3 = w2 * w
         h00 = 2 * w3 - 3 * w2 + 1
@@ -202,30 +213,41 @@ class TabulatedPath:
         g01 = (-6 * w2 + 6 * w) / h
         g11 = 3 * w2 - 2 * w
         p = (
-            h00 * pa[0] + h10 * ta[0] + h01 * pb[0] + h11 * tb[0],
-            h00 * pa[1] + h10 * ta[1] + h01 * pb[1] + h11 * tb[1],
-            h00 * pa[2] + h10 * ta[2] + h01 * pb[2] + h11 * tb[2],
+            h00 * pa0 + h10 * ta0 + h01 * pb0 + h11 * tb0,
+            h00 * pa1 + h10 * ta1 + h01 * pb1 + h11 * tb1,
+            h00 * pa2 + h10 * ta2 + h01 * pb2 + h11 * tb2,
         )
-        dx = g00 * pa[0] + g10 * ta[0] + g01 * pb[0] + g11 * tb[0]
-        dy = g00 * pa[1] + g10 * ta[1] + g01 * pb[1] + g11 * tb[1]
-        dz = g00 * pa[2] + g10 * ta[2] + g01 * pb[2] + g11 * tb[2]
+        dx = g00 * pa0 + g10 * ta0 + g01 * pb0 + g11 * tb0
+        dy = g00 * pa1 + g10 * ta1 + g01 * pb1 + g11 * tb1
+        dz = g00 * pa2 + g10 * ta2 + g01 * pb2 + g11 * tb2
         nn = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
-        f1 = (dx * nn, dy * nn, dz * nn)
-        r = _mrot(self._F2l[i], ta, f1)
-        nr = 1.0 / math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
-        r = (r[0] * nr, r[1] * nr, r[2] * nr)
-        q = (
-            f1[1] * r[2] - f1[2] * r[1],
-            f1[2] * r[0] - f1[0] * r[2],
-            f1[0] * r[1] - f1[1] * r[0],
-        )
+        a0, a1, a2 = dx * nn, dy * nn, dz * nn  # f1
+        # _mrot(F2[i], ta, f1) inlined: f2_i carried by the minimal rotation ta -> f1
+        v0, v1, v2 = self._F2l[i]
+        cx = ta1 * a2 - ta2 * a1
+        cy = ta2 * a0 - ta0 * a2
+        cz = ta0 * a1 - ta1 * a0
+        d = ta0 * a0 + ta1 * a1 + ta2 * a2
+        ux = cy * v2 - cz * v1
+        uy = cz * v0 - cx * v2
+        uz = cx * v1 - cy * v0
+        k = 1.0 / (1.0 + d) if d > -0.999999 else 0.0
+        r0 = v0 + ux + k * (cy * uz - cz * uy)
+        r1 = v1 + uy + k * (cz * ux - cx * uz)
+        r2 = v2 + uz + k * (cx * uy - cy * ux)
+        nr = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        r0, r1, r2 = r0 * nr, r1 * nr, r2 * nr
+        q0 = a1 * r2 - a2 * r1
+        q1 = a2 * r0 - a0 * r2
+        q2 = a0 * r1 - a1 * r0
         ang = w * self._C[i]
         ca, sa = math.cos(ang), math.sin(ang)
-        f2 = (ca * r[0] + sa * q[0], ca * r[1] + sa * q[1], ca * r[2] + sa * q[2])
-        f3 = (ca * q[0] - sa * r[0], ca * q[1] - sa * r[1], ca * q[2] - sa * r[2])
-        k1 = (1 - w) * self._K1l[i] + w * self._K1l[i + 1]
-        k2 = (1 - w) * self._K2l[i] + w * self._K2l[i + 1]
-        return p, f1, f2, f3, k1, k2
+        f2 = (ca * r0 + sa * q0, ca * r1 + sa * q1, ca * r2 + sa * q2)
+        f3 = (ca * q0 - sa * r0, ca * q1 - sa * r1, ca * q2 - sa * r2)
+        K1, K2 = self._K1l, self._K2l
+        k1 = (1 - w) * K1[i] + w * K1[i + 1]
+        k2 = (1 - w) * K2[i] + w * K2[i + 1]
+        return p, (a0, a1, a2), f2, f3, k1, k2
 
     def sample(self, s: float) -> PathSample:
         """The path at arc length s (m) as a :class:`PathSample` (numpy, for callers and tests)."""
@@ -234,7 +256,9 @@ class TabulatedPath:
         return PathSample(float(s), np.array(p), np.column_stack([f1, f2, f3]), k1, k2, tau)
 
     # ------------------------------------------------------------------ closest point
-    def closest(self, q_T: NDArray[np.float64], s_guess: float | None = None, window: float | None = None) -> float:
+    def closest(
+        self, q_T: NDArray[np.float64], s_guess: float | None = None, window: float | None = None
+    ) -> float:
         """Arc length of the point of the path closest to q_T (m, in {T}).
 
         Global search over all nodes, or over ``s_guess +- window`` when both are given;
