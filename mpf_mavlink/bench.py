@@ -73,7 +73,9 @@ def _optional_groups() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     _optional_groups()
-    p = argparse.ArgumentParser(prog="scripts/bench", description="Print benchmark figures as JSON.")
+    p = argparse.ArgumentParser(
+        prog="scripts/bench", description="Print benchmark figures as JSON."
+    )
     p.add_argument("--only", choices=sorted(GROUPS), action="append", help="run only these groups")
     args = p.parse_args(argv)
     out: dict[str, Any] = {}

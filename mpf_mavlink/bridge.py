@@ -532,7 +532,9 @@ class Bridge:
                 def armed_or_refused() -> bool:
                     # a rejected ARM (pre-arm checks failed) ends the wait at once, with its reason
                     for a in self.acks:
-                        if a.command == 400 and not a.accepted and a.result != 5:  # 5: MAV_RESULT_IN_PROGRESS
+                        if (
+                            a.command == 400 and not a.accepted and a.result != 5
+                        ):  # 5: MAV_RESULT_IN_PROGRESS
                             refused.append(a.result_name)
                     self.acks.clear()
                     return bool(refused) or (self.hb is not None and self.hb.armed)

@@ -76,27 +76,47 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
         description=RUN_DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    r.add_argument("config", metavar="CONFIG", help="scenario YAML with mavlink and adapter sections (see configs/bridge_*.yaml)")
+    r.add_argument(
+        "config",
+        metavar="CONFIG",
+        help="scenario YAML with mavlink and adapter sections (see configs/bridge_*.yaml)",
+    )
     r.add_argument("--connect", required=True, metavar="URL", help=CONNECT_HELP)
     r.add_argument(
         "--flavour", choices=["px4", "ardupilot", "auto"], default=None,
         help="autopilot family; auto (the default, or mavlink.flavour) reads it from the HEARTBEAT. "
         "A value that contradicts the HEARTBEAT is an error",
     )  # fmt: skip
-    r.add_argument("--out", type=Path, metavar="DIR", help="run directory (default: runs/<time>-run-<name>); checked writable before connecting")
-    r.add_argument("--duration", type=_positive, metavar="S", help="seconds of TRACKING before handing back (default: mavlink.mission_duration_s)")
+    r.add_argument(
+        "--out",
+        type=Path,
+        metavar="DIR",
+        help="run directory (default: runs/<time>-run-<name>); checked writable before connecting",
+    )
+    r.add_argument(
+        "--duration",
+        type=_positive,
+        metavar="S",
+        help="seconds of TRACKING before handing back (default: mavlink.mission_duration_s)",
+    )
     r.add_argument(
         "--heartbeat-timeout", type=_positive, metavar="S",
         help="give up with one line and exit 2 when no autopilot HEARTBEAT (or no usable telemetry) "
         "arrives within S seconds (default: mavlink.heartbeat_timeout_s)",
     )  # fmt: skip
-    r.add_argument("--arm", action="store_true", help="arm the vehicle after pre-streaming if it is disarmed (off by default: arm it yourself)")
+    r.add_argument(
+        "--arm",
+        action="store_true",
+        help="arm the vehicle after pre-streaming if it is disarmed (off by default: arm it yourself)",
+    )
     r.add_argument(
         "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
         help="override one configuration key, e.g. --set mavlink.vehicle_sysid=2 or "
         "--set guidance.K_R=1.5 (repeatable; validated like the file)",
     )  # fmt: skip
-    r.add_argument("--no-plots", action="store_true", help="skip the PNG figures in the run directory")
+    r.add_argument(
+        "--no-plots", action="store_true", help="skip the PNG figures in the run directory"
+    )
     r.add_argument("-q", "--quiet", action="store_true", help="print only the final summary")
     r.set_defaults(func=cmd_run)
     return r

@@ -24,7 +24,9 @@ SET_HELP = (
 
 def _add_config(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", metavar="CONFIG", help="scenario YAML file (see configs/)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help=SET_HELP)
+    p.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help=SET_HELP
+    )
 
 
 def _load(args: argparse.Namespace) -> Any:
@@ -40,7 +42,13 @@ def cmd_check(args: argparse.Namespace) -> int:
     results = run_checks(cfg)
     print(format_checks(results))
     if args.json:
-        print(json.dumps({r.name: {"status": r.status, **r.figures} for r in results}, indent=2, default=float))
+        print(
+            json.dumps(
+                {r.name: {"status": r.status, **r.figures} for r in results},
+                indent=2,
+                default=float,
+            )
+        )
     failed = [r.name for r in results if not r.ok]
     if failed:
         raise CheckFailed(f"{cfg.source}: check failed: {', '.join(failed)}")
@@ -140,7 +148,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     s.set_defaults(func=cmd_sim)
 
-    pl = sub.add_parser("plot", help="re-draw the figures of a run directory", description="Re-draw the PNG figures of a run directory (sim, run or replay).")
+    pl = sub.add_parser(
+        "plot",
+        help="re-draw the figures of a run directory",
+        description="Re-draw the PNG figures of a run directory (sim, run or replay).",
+    )
     pl.add_argument("run_dir", metavar="RUN_DIR", type=Path)
     pl.set_defaults(func=cmd_plot)
     from .bridge_cli import add_run_parser

@@ -251,7 +251,10 @@ def _convert(tp: Any, value: Any, src: str, key: str) -> Any:
         args = typing.get_args(tp)
         if not isinstance(value, list | tuple) or len(value) != len(args):
             raise _fail(src, key, f"must be {_describe(tp)}, got {value!r}")
-        return tuple(_convert(a, v, src, f"{key}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True)))
+        return tuple(
+            _convert(a, v, src, f"{key}[{i}]")
+            for i, (a, v) in enumerate(zip(args, value, strict=True))
+        )
     if origin is list:
         (a,) = typing.get_args(tp)
         if not isinstance(value, list):
@@ -308,11 +311,17 @@ def _validate_cross(cfg: Config, extra: dict[str, Any]) -> None:
     if p.type == "line" and p.start_m is not None and p.end_m is not None:
         if math.dist(p.start_m, p.end_m) < 1e-6:
             raise _fail(src, "path.end_m", "equals path.start_m: the path has zero length")
-    if p.type == "spline" and p.waypoints_m is not None and len(p.waypoints_m) < (3 if p.closed else 2):
+    if (
+        p.type == "spline"
+        and p.waypoints_m is not None
+        and len(p.waypoints_m) < (3 if p.closed else 2)
+    ):
         raise _fail(src, "path.waypoints_m", f"needs at least {3 if p.closed else 2} waypoints")
     v = cfg.vehicle
     if v.v_min > v.airspeed_m_s or v.v_max < v.airspeed_m_s:
-        raise _fail(src, "vehicle.airspeed_m_s", "must lie within [airspeed_min_m_s, airspeed_max_m_s]")
+        raise _fail(
+            src, "vehicle.airspeed_m_s", "must lie within [airspeed_min_m_s, airspeed_max_m_s]"
+        )
 
 
 def load_config(path: str | Path, overrides: list[str] | None = None) -> Any:

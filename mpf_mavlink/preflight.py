@@ -20,7 +20,9 @@ def initial_errors(cfg: Config) -> tuple[float, float, float]:
     s0 = cfg.guidance.initial_s_m
     if s0 is None:
         s0 = path.closest(st.R_T_I.T @ (p0 - st.position))
-    veh = VehicleState(0.0, p0, euler_to_matrix(*k.initial_attitude_rpy_rad), cfg.vehicle.airspeed_m_s)
+    veh = VehicleState(
+        0.0, p0, euler_to_matrix(*k.initial_attitude_rpy_rad), cfg.vehicle.airspeed_m_s
+    )
     _, d = mpf_law(s0, veh, st, path, build_gains(cfg), build_extensions(cfg))
     assert d is not None
     return d.pt_norm, d.psi, s0
@@ -52,7 +54,10 @@ def scenario_wind(cfg: Config) -> tuple[tuple[float, float, float], float]:
     vehicle's atmosphere when ``sil.link`` is on, else the kinematic plant's."""
     sil = cfg.extra.get("sil")
     if sil is not None and sil.link != "none":
-        gust = max((g.magnitude_m_s for g in sil.gusts), default=0.0) + TURBULENCE_ALLOWANCE_M_S[sil.turbulence]
+        gust = (
+            max((g.magnitude_m_s for g in sil.gusts), default=0.0)
+            + TURBULENCE_ALLOWANCE_M_S[sil.turbulence]
+        )
         return tuple(sil.wind_ned_m_s), gust  # type: ignore[return-value]
     wind = cfg.kinematic.wind
     gust = max((float(np.linalg.norm(g.velocity_ned_m_s)) for g in wind.gusts), default=0.0)
@@ -69,21 +74,35 @@ def run_checks(cfg: Config, scripted_target: bool = True) -> list[CheckResult]:
     if scripted_target and cfg.target.type != "mavlink":
         target = build_target(cfg.target)
         results.append(
-            assumption1(path, target, cfg.vehicle.v_min, horizon, steady, gust, ch.assumption1_margin_m_s)
+            assumption1(
+                path, target, cfg.vehicle.v_min, horizon, steady, gust, ch.assumption1_margin_m_s
+            )
         )
         pt0, psi0, s0 = initial_errors(cfg)
         c2 = ch.c2
         c1 = ch.c1_m if ch.c1_m is not None else auto_c1(cfg, pt0, c2)
-        results.append(gain_condition(build_gains(cfg), cfg.vehicle.v_min, cfg.vehicle.v_max, c1, c2, pt0, psi0))
+        results.append(
+            gain_condition(
+                build_gains(cfg), cfg.vehicle.v_min, cfg.vehicle.v_max, c1, c2, pt0, psi0
+            )
+        )
         results.append(
             feasibility(
-                path, target, cfg.vehicle.airspeed_m_s, horizon, cfg.vehicle.max_bank_rad,
-                cfg.vehicle.max_turn_rate_rad_s, s0, steady,
+                path,
+                target,
+                cfg.vehicle.airspeed_m_s,
+                horizon,
+                cfg.vehicle.max_bank_rad,
+                cfg.vehicle.max_turn_rate_rad_s,
+                s0,
+                steady,
             )  # fmt: skip
         )
     else:
         c1 = ch.c1_m if ch.c1_m is not None else 50.0
-        results.append(gain_condition(build_gains(cfg), cfg.vehicle.v_min, cfg.vehicle.v_max, c1, ch.c2))
+        results.append(
+            gain_condition(build_gains(cfg), cfg.vehicle.v_min, cfg.vehicle.v_max, c1, ch.c2)
+        )
     return results
 
 

@@ -40,7 +40,9 @@ def build_target(t: TargetConfig) -> TargetMotion:
     if t.type == "stationary":
         return Stationary(t.position_ned_m, t.yaw_rad)
     if t.type == "constant_turn":
-        return ConstantTurn(t.position_ned_m, t.speed_m_s, t.heading_rad, t.turn_rate_rad_s, t.climb_rate_m_s)
+        return ConstantTurn(
+            t.position_ned_m, t.speed_m_s, t.heading_rad, t.turn_rate_rad_s, t.climb_rate_m_s
+        )
     if t.type == "paper":
         return PaperProfile(t.position_ned_m, t.yaw_rad)
     raise ValueError("a live MAVLink target has no scripted motion")

@@ -142,7 +142,9 @@ class PaperProfile:
             Rd += [r1 * wz - r2 * wy, -r0 * wz, r0 * wy]
         return pd, Rd
 
-    def _rk4(self, t: float, p: list[float], R: list[float], h: float) -> tuple[list[float], list[float]]:
+    def _rk4(
+        self, t: float, p: list[float], R: list[float], h: float
+    ) -> tuple[list[float], list[float]]:
         k1p, k1R = self._f(t, R)
         k2p, k2R = self._f(t + h / 2, [R[i] + h / 2 * k1R[i] for i in range(9)])
         k3p, k3R = self._f(t + h / 2, [R[i] + h / 2 * k2R[i] for i in range(9)])

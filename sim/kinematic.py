@@ -44,7 +44,10 @@ class KinematicState:
     s: float
 
 
-def region_wind(steady: tuple[float, float, float], gusts: list[tuple[NDArray[np.float64], float, NDArray[np.float64]]]) -> WindFn:
+def region_wind(
+    steady: tuple[float, float, float],
+    gusts: list[tuple[NDArray[np.float64], float, NDArray[np.float64]]],
+) -> WindFn:
     """Steady wind plus gust regions (centre NED m, radius m, extra velocity NED m/s)."""
     base = np.asarray(steady, float)
 
@@ -134,14 +137,21 @@ class ClosedLoop:
 
         k1 = self.deriv(t, p, R, w, s, keep=True)
         h2 = dt / 2
-        k2 = self.deriv(t + h2, add(p, k1[0], h2), add(R, k1[1], h2), add(w, k1[2], h2), s + h2 * k1[3])
-        k3 = self.deriv(t + h2, add(p, k2[0], h2), add(R, k2[1], h2), add(w, k2[2], h2), s + h2 * k2[3])
-        k4 = self.deriv(t + dt, add(p, k3[0], dt), add(R, k3[1], dt), add(w, k3[2], dt), s + dt * k3[3])
+        k2 = self.deriv(
+            t + h2, add(p, k1[0], h2), add(R, k1[1], h2), add(w, k1[2], h2), s + h2 * k1[3]
+        )
+        k3 = self.deriv(
+            t + h2, add(p, k2[0], h2), add(R, k2[1], h2), add(w, k2[2], h2), s + h2 * k2[3]
+        )
+        k4 = self.deriv(
+            t + dt, add(p, k3[0], dt), add(R, k3[1], dt), add(w, k3[2], dt), s + dt * k3[3]
+        )
         c = dt / 6
 
         def comb(a: list[float], j: int) -> list[float]:
             return [
-                a[i] + c * (k1[j][i] + 2 * k2[j][i] + 2 * k3[j][i] + k4[j][i]) for i in range(len(a))
+                a[i] + c * (k1[j][i] + 2 * k2[j][i] + 2 * k3[j][i] + k4[j][i])
+                for i in range(len(a))
             ]
 
         p2 = np.array(comb(p, 0))
@@ -182,7 +192,11 @@ def record(loop: ClosedLoop, x: KinematicState) -> Sample:
 
 
 def initial_state(
-    path: TabulatedPath, target: TargetMotion, p0: NDArray[np.float64], R0: NDArray[np.float64], s0: float | None
+    path: TabulatedPath,
+    target: TargetMotion,
+    p0: NDArray[np.float64],
+    R0: NDArray[np.float64],
+    s0: float | None,
 ) -> KinematicState:
     """Start at rest rates; s at the closest point of the moving path unless given."""
     if s0 is None:

@@ -43,7 +43,9 @@ def kinematic_loop(cfg: Config) -> tuple[ClosedLoop, Any]:
         region_wind(k.wind.steady_ned_m_s, gusts),
     )
     R0 = euler_to_matrix(*k.initial_attitude_rpy_rad)
-    x0 = initial_state(path, target, np.asarray(k.initial_position_ned_m, float), R0, cfg.guidance.initial_s_m)
+    x0 = initial_state(
+        path, target, np.asarray(k.initial_position_ned_m, float), R0, cfg.guidance.initial_s_m
+    )
     return loop, x0
 
 
@@ -61,8 +63,13 @@ def run_kinematic(cfg: Config, progress: bool = True) -> SimResult:
         total=n, desc="sim", unit="step", disable=not progress, delay=2.0, file=sys.stderr,
         mininterval=0.5, leave=False,
     )  # fmt: skip
+
     def rec(smp: Any) -> None:
-        table.append(row_from(smp.diag, smp.p, smp.w_cmd, smp.w, smp.sdot, smp.target_p, smp.target_R, smp.wind))
+        table.append(
+            row_from(
+                smp.diag, smp.p, smp.w_cmd, smp.w, smp.sdot, smp.target_p, smp.target_R, smp.wind
+            )
+        )
 
     for i in range(n):
         x = loop.step(x, dt)

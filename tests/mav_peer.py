@@ -218,9 +218,17 @@ class MavPeer:
 
     # -- loop --------------------------------------------------------------------------------
     def _heartbeat(self) -> None:
-        base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0)
-        ap = mavlink.MAV_AUTOPILOT_PX4 if self.o.flavour == "px4" else mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
-        self.mav.heartbeat_send(mavlink.MAV_TYPE_FIXED_WING, ap, base, self.custom_mode, mavlink.MAV_STATE_ACTIVE)
+        base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (
+            mavlink.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0
+        )
+        ap = (
+            mavlink.MAV_AUTOPILOT_PX4
+            if self.o.flavour == "px4"
+            else mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+        )
+        self.mav.heartbeat_send(
+            mavlink.MAV_TYPE_FIXED_WING, ap, base, self.custom_mode, mavlink.MAV_STATE_ACTIVE
+        )
 
     def _handle(self, m: Any, now: float) -> None:
         t = m.get_type()
@@ -299,24 +307,46 @@ class MavPeer:
 
             lat, lon, alt = ned_to_geodetic(self.pos, *self.o.home)
             hdg = int(math.degrees(self.yaw) % 360 * 100)
-            self.mav.global_position_int_send(tb, int(lat * 1e7), int(lon * 1e7), int(alt * 1000), int(-self.pos[2] * 1000), int(vn * 100), int(ve * 100), 0, hdg)
+            self.mav.global_position_int_send(
+                tb,
+                int(lat * 1e7),
+                int(lon * 1e7),
+                int(alt * 1000),
+                int(-self.pos[2] * 1000),
+                int(vn * 100),
+                int(ve * 100),
+                0,
+                hdg,
+            )
         if self.o.send_global and k % 25 == 0:
             h = self.o.home
-            self.mav.home_position_send(int(h[0] * 1e7), int(h[1] * 1e7), int(h[2] * 1000), 0, 0, 0, [1, 0, 0, 0], 0, 0, 0)
+            self.mav.home_position_send(
+                int(h[0] * 1e7), int(h[1] * 1e7), int(h[2] * 1000), 0, 0, 0, [1, 0, 0, 0], 0, 0, 0
+            )
         if k % 5 == 0:
-            self.mav.vfr_hud_send(V, math.hypot(vn, ve), int(math.degrees(self.yaw) % 360), 50, -self.pos[2], 0.0)
+            self.mav.vfr_hud_send(
+                V, math.hypot(vn, ve), int(math.degrees(self.yaw) % 360), 50, -self.pos[2], 0.0
+            )
         if self.o.send_wind and k % 10 == 0:
             wn, we, wd = self.o.wind_ned
-            self.mav.wind_send(math.degrees(math.atan2(-we, -wn)) % 360, math.sqrt(wn * wn + we * we + wd * wd), wd)
-        self.truth.append((tb, (self.pos[0], self.pos[1], self.pos[2]), (self.roll, self.pitch, self.yaw)))
+            self.mav.wind_send(
+                math.degrees(math.atan2(-we, -wn)) % 360, math.sqrt(wn * wn + we * we + wd * wd), wd
+            )
+        self.truth.append(
+            (tb, (self.pos[0], self.pos[1], self.pos[2]), (self.roll, self.pitch, self.yaw))
+        )
         # ATTITUDE last: the bridge acts on it, with the position of the same instant in hand
         if self.o.attitude_quaternion:
             from mpf_mavlink.frames import euler_to_quat_wxyz
 
             q = euler_to_quat_wxyz(self.roll, self.pitch, self.yaw)  # (w, x, y, z) = q1..q4
-            self.mav.attitude_quaternion_send(tb, *q, self.p, 0.0, getattr(self, "_r", 0.0), [0.0, 0.0, 0.0, 0.0])
+            self.mav.attitude_quaternion_send(
+                tb, *q, self.p, 0.0, getattr(self, "_r", 0.0), [0.0, 0.0, 0.0, 0.0]
+            )
         else:
-            self.mav.attitude_send(tb, self.roll, self.pitch, self.yaw, self.p, 0.0, getattr(self, "_r", 0.0))
+            self.mav.attitude_send(
+                tb, self.roll, self.pitch, self.yaw, self.p, 0.0, getattr(self, "_r", 0.0)
+            )
 
     def _run(self) -> None:
         period = 1.0 / self.o.telemetry_hz

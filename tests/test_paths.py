@@ -24,8 +24,12 @@ PATHS = {
     "circle": lambda: circle((0, 0, -10), 30.0),
     "helix": lambda: helix((0, 0, 0), 30.0, 20.0, 2.0),
     "line": lambda: line((0, 0, 0), (30, 40, -5)),
-    "spline_open": lambda: spline([[0, 0, 0], [40, 10, -5], [80, -20, 5], [120, 0, 0]], closed=False),
-    "spline_closed": lambda: spline([[0, 0, 0], [60, 0, -30], [60, 60, 0], [0, 60, 30]], closed=True),
+    "spline_open": lambda: spline(
+        [[0, 0, 0], [40, 10, -5], [80, -20, 5], [120, 0, 0]], closed=False
+    ),
+    "spline_closed": lambda: spline(
+        [[0, 0, 0], [60, 0, -30], [60, 60, 0], [0, 60, 30]], closed=True
+    ),
     # A closed space curve whose transported frame comes back rotated (holonomy ~0.12 rad).
     "space_closed": lambda: TabulatedPath(_tennis, 0.0, 2 * math.pi, closed=True, name="space"),
 }

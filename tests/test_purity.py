@@ -13,7 +13,17 @@ PURE = [
     "mpf_mavlink/guidance/checks.py",
     "mpf_mavlink/adapter.py",
 ]
-FORBIDDEN = {"socket", "time", "pymavlink", "serial", "select", "threading", "asyncio", "subprocess", "os"}
+FORBIDDEN = {
+    "socket",
+    "time",
+    "pymavlink",
+    "serial",
+    "select",
+    "threading",
+    "asyncio",
+    "subprocess",
+    "os",
+}
 
 
 def test_pure_modules_import_no_io():

@@ -12,7 +12,9 @@ CFG = "configs/paper_lemniscate.yaml"
 
 
 def _run(lam: float, duration: float = 160.0):
-    cfg = load_config(CFG, [f"kinematic.autopilot_bandwidth_rad_s={lam}", f"sim.duration_s={duration}"])
+    cfg = load_config(
+        CFG, [f"kinematic.autopilot_bandwidth_rad_s={lam}", f"sim.duration_s={duration}"]
+    )
     return run_kinematic(cfg, progress=False).metrics
 
 
@@ -38,13 +40,41 @@ def test_errors_grow_as_the_autopilot_bandwidth_falls(metrics):
 
 def test_cli_sim_writes_a_complete_run_directory(tmp_path):
     out = tmp_path / "run"
-    rc = main(["sim", CFG, "--set", "sim.duration_s=12", "--set", "metrics.steady_after_s=8", "--out", str(out), "-q"])
+    rc = main(
+        [
+            "sim",
+            CFG,
+            "--set",
+            "sim.duration_s=12",
+            "--set",
+            "metrics.steady_after_s=8",
+            "--out",
+            str(out),
+            "-q",
+        ]
+    )
     assert rc == 0
     m = json.loads((out / "metrics.json").read_text())
-    for k in ("convergence_time_s", "steady_rms_m", "steady_max_m", "steady_psi_max", "max_rate_cmd_rad_s", "sim_time_s", "wall_time_s"):
+    for k in (
+        "convergence_time_s",
+        "steady_rms_m",
+        "steady_max_m",
+        "steady_psi_max",
+        "max_rate_cmd_rad_s",
+        "sim_time_s",
+        "wall_time_s",
+    ):
         assert k in m
     assert m["sim_time_s"] == pytest.approx(12.0)
-    for f in ("timeseries.csv", "path_T.csv", "trajectory_3d.png", "planar.png", "target_relative.png", "errors.png", "sdot_rates.png"):
+    for f in (
+        "timeseries.csv",
+        "path_T.csv",
+        "trajectory_3d.png",
+        "planar.png",
+        "target_relative.png",
+        "errors.png",
+        "sdot_rates.png",
+    ):
         assert (out / f).stat().st_size > 0
     # 12 s at dt = 0.02 s recorded every step: 601 rows plus the header.
     assert len((out / "timeseries.csv").read_text().splitlines()) == 602

@@ -69,15 +69,28 @@ class Gcs:
         return new
 
     def of(self, mtype: str, src: int | None = 1) -> list:
-        return [m for m in self.msgs if m.get_type() == mtype and (src is None or m.get_srcSystem() == src)]
+        return [
+            m
+            for m in self.msgs
+            if m.get_type() == mtype and (src is None or m.get_srcSystem() == src)
+        ]
 
     def set_mode(self, p2: float, p3: float = 0.0) -> None:
         self.c.mav.command_long_send(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 1, p2, p3, 0, 0, 0, 0)
 
-    def rates(self, p: float, q: float = 0.0, r: float = 0.0, thrust: float = 0.25, mask: int = RATES_THRUST):
+    def rates(
+        self,
+        p: float,
+        q: float = 0.0,
+        r: float = 0.0,
+        thrust: float = 0.25,
+        mask: int = RATES_THRUST,
+    ):
         self.c.mav.set_attitude_target_send(0, 1, 1, mask, [1.0, 0.0, 0.0, 0.0], p, q, r, thrust)
 
-    def attitude(self, roll: float, pitch: float, yaw: float = 0.0, thrust: float = 0.3, mask: int = 0):
+    def attitude(
+        self, roll: float, pitch: float, yaw: float = 0.0, thrust: float = 0.3, mask: int = 0
+    ):
         q = list(euler_to_quat_wxyz(roll, pitch, yaw))
         self.c.mav.set_attitude_target_send(0, 1, 1, mask, q, 0.0, 0.0, 0.0, thrust)
 
@@ -227,7 +240,9 @@ def test_px4_offboard_rules_rates_and_loss(px4):
     frames(v, g, 15)  # 1.2 s in all
     assert v.custom_mode == PX4_LOITER
     t_switch = [t for t, name in v.mode_changes if name == "AUTO.LOITER"][-1]
-    assert 1.0 - 0.02 <= t_switch - t_last <= 1.0 + 0.03  # within one 20 ms frame of the 1 s timeout
+    assert (
+        1.0 - 0.02 <= t_switch - t_last <= 1.0 + 0.03
+    )  # within one 20 ms frame of the 1 s timeout
     assert any("offboard" in m.text.lower() for m in g.of("STATUSTEXT"))
     frames(v, g, 50)
     assert g.of("HEARTBEAT")[-1].custom_mode == PX4_LOITER
@@ -248,7 +263,9 @@ def test_ardupilot_guided_attitude_timeout_and_loiter(ardu):
     tr = v.truth()
     t, roll = tr["t"] - t0, tr["euler"][:, 0]
     hit = t[np.abs(roll - roll_cmd) < 2 * DEG]
-    assert hit.size and hit[0] < 1.5  # 30 deg reached (within 2 deg) in < 1.5 s (ArduPlane SITL ~1 s)
+    assert (
+        hit.size and hit[0] < 1.5
+    )  # 30 deg reached (within 2 deg) in < 1.5 s (ArduPlane SITL ~1 s)
     held = roll[(t > 1.5) & (t <= 3.0)]
     assert np.all(np.abs(held - roll_cmd) < 1.5 * DEG)
     # commands stop: the attitude is held GUIDED_TIMEOUT = 3 s, then ArduPlane's own guidance
@@ -345,7 +362,9 @@ def test_telemetry_timestamps_monotonic_in_sim_time(px4):
 
 def test_telemetry_latency_in_sim_time():
     port = free_port()
-    with SimVehicle("px4", f"udpin:127.0.0.1:{port}", plant="kinematic", telemetry_latency_s=0.1) as v:
+    with SimVehicle(
+        "px4", f"udpin:127.0.0.1:{port}", plant="kinematic", telemetry_latency_s=0.1
+    ) as v:
         g = Gcs(port)
         frames(v, g, 6)  # the queue fills: nothing was sampled 100 ms before the vehicle was ready
         for _ in range(20):
@@ -406,7 +425,9 @@ def test_lockstep_silent_bridge_still_advances_and_realtime_is_paced():
     assert 0.2 < v.t < 0.5
     v.close()
     g.close()
-    v = SimVehicle("ardupilot", f"udpin:127.0.0.1:{free_port()}", plant="kinematic", clock="realtime")
+    v = SimVehicle(
+        "ardupilot", f"udpin:127.0.0.1:{free_port()}", plant="kinematic", clock="realtime"
+    )
     w0 = time.perf_counter()
     v.run(0.5)
     wall = time.perf_counter() - w0
@@ -435,7 +456,9 @@ def test_kinematic_plant_geodetic_and_turn():
 def test_tcpin_link():
     port = free_port()
     with SimVehicle("px4", f"tcpin:127.0.0.1:{port}", plant="kinematic") as v:
-        c = mavutil.mavlink_connection(f"tcp:127.0.0.1:{port}", source_system=255, dialect="ardupilotmega")
+        c = mavutil.mavlink_connection(
+            f"tcp:127.0.0.1:{port}", source_system=255, dialect="ardupilotmega"
+        )
         hb = None
         for _ in range(100):
             v.step_once()

@@ -71,7 +71,9 @@ def lemniscate(size: float, center: ArrayLike = (0.0, 0.0, 0.0)) -> TabulatedPat
     def c(u: NDArray[np.float64]) -> NDArray[np.float64]:
         su, cu = np.sin(u), np.cos(u)
         den = su * su + 1.0
-        return c0[None, :] + np.column_stack([size * su * cu / den, size * cu / den, np.zeros_like(u)])
+        return c0[None, :] + np.column_stack(
+            [size * su * cu / den, size * cu / den, np.zeros_like(u)]
+        )
 
     return TabulatedPath(c, 0.0, 2 * math.pi, closed=True, name="lemniscate")
 
