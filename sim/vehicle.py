@@ -366,7 +366,7 @@ class SimVehicle:
             url, source_system=self.sysid, source_component=self.compid, dialect="ardupilotmega",
             autoreconnect=True,
         )  # fmt: skip
-        self._out: deque[tuple[float, bytes]] = deque()
+        self._out: deque[tuple[float, bytes, int]] = deque()  # (due, packet, ATTITUDE ms or -1)
         self._in: deque[tuple[float, Any]] = deque()
         self._mav = M.MAVLink(_QueueWriter(self), srcSystem=self.sysid, srcComponent=self.compid)
         self.target = target
@@ -381,7 +381,12 @@ class SimVehicle:
         self._target_type = (
             M.MAV_TYPE_SURFACE_BOAT if target_type == "boat" else M.MAV_TYPE_GROUND_ROVER
         )
+        # Lockstep: a frame is answered by a SET_ATTITUDE_TARGET stamped with (at least) the
+        # time_boot_ms of the last ATTITUDE written (the bridge stamps its setpoints with the
+        # ATTITUDE they answer); a late answer to an earlier frame must not count, or one slow
+        # answer would leave every later command one frame late for the rest of the run.
         self._answered = False
+        self._await_ms = -1  # time_boot_ms of the last ATTITUDE written
         self.answers = 0  # SET_ATTITUDE_TARGET messages received
         self.rx_count = 0
         self.unix0_us = int(time.time() * 1e6)
@@ -713,7 +718,9 @@ class SimVehicle:
             return
         self.rx_count += 1
         if mt == "SET_ATTITUDE_TARGET":
-            self._answered = True
+            # 0: a peer that does not stamp its setpoints (any answer counts, as before)
+            if msg.time_boot_ms >= self._await_ms or msg.time_boot_ms == 0:
+                self._answered = True
             self.answers += 1
         if mt in ("SET_ATTITUDE_TARGET", "COMMAND_LONG", "COMMAND_INT", "SET_MODE", "TIMESYNC"):
             self._in.append((self._boot_t + self.command_latency_s, msg))
@@ -952,11 +959,13 @@ class SimVehicle:
     def _send_attitude(self, att: tuple[float, float, float, float, float, float]) -> None:
         """ATTITUDE from (roll, pitch, yaw, p, q, r) (rad, rad/s)."""
         self._sent["attitude"] = self._sent.get("attitude", 0) + 1
-        self._put(self._fp.pack(_SPEC["attitude"], self._ms(), *att))
+        ms = self._ms()
+        self._put(self._fp.pack(_SPEC["attitude"], ms, *att), ms)
 
-    def _put(self, buf: bytes) -> None:
-        """Queue one framed packet; it leaves ``telemetry_latency_s`` of sim time from now."""
-        self._out.append((self._k * self.dt + self.telemetry_latency_s, buf))
+    def _put(self, buf: bytes, attitude_ms: int = -1) -> None:
+        """Queue one framed packet; it leaves ``telemetry_latency_s`` of sim time from now.
+        ``attitude_ms``: the time_boot_ms of an ATTITUDE packet (the bridge answers those)."""
+        self._out.append((self._k * self.dt + self.telemetry_latency_s, buf, attitude_ms))
 
     def _send_stream(self, name: str) -> None:
         st, ms, S = self._st, self._ms(), _SPEC
@@ -1044,8 +1053,10 @@ class SimVehicle:
         wrote = False
         chunk: list[bytes] = []
         size = 0
+        att_ms = -1
         while q and q[0][0] <= t:
-            buf = q.popleft()[1]
+            _, buf, ms = q.popleft()
+            att_ms = max(att_ms, ms)
             if chunk and size + len(buf) > _DATAGRAM_MAX:
                 wrote |= self._write(b"".join(chunk))
                 chunk, size = [], 0
@@ -1053,7 +1064,8 @@ class SimVehicle:
             size += len(buf)
         if chunk:
             wrote |= self._write(b"".join(chunk))
-        if wrote and self.has_peer():
+        if wrote and att_ms >= 0 and self.has_peer():
+            self._await_ms = att_ms
             self._answered = False
 
     def _write(self, data: bytes) -> bool:

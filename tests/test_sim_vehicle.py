@@ -469,3 +469,29 @@ def test_tcpin_link():
             time.sleep(0.001)
         c.close()
         assert hb is not None and hb.autopilot == M.MAV_AUTOPILOT_PX4
+
+
+def test_lockstep_counts_only_the_answer_to_the_last_attitude():
+    # A setpoint stamped with an earlier frame's ATTITUDE time (a late answer) must not release
+    # the lockstep frame: counting it would keep every later command one frame late.
+    port = free_port()
+    v = SimVehicle("px4", f"udpin:127.0.0.1:{port}", plant="kinematic", clock="lockstep")
+    g = Gcs(port)
+    try:
+        att_ms = []
+        for _ in range(20):
+            v.step_once()
+            att_ms += [m.time_boot_ms for m in g.read() if m.get_type() == "ATTITUDE"]
+            if len(att_ms) >= 2:
+                break
+        assert len(att_ms) >= 2, "no ATTITUDE from the vehicle"
+        v.step_once()  # the next frame's telemetry goes out: the vehicle awaits its answer
+        last = max(m.time_boot_ms for m in g.read() if m.get_type() == "ATTITUDE")
+        assert not v.poll(0.0)
+        g.c.mav.set_attitude_target_send(last - 20, 1, 1, RATES_THRUST, [1, 0, 0, 0], 0, 0, 0, 0.3)
+        assert not v.poll(0.2), "a late answer to an earlier ATTITUDE released the frame"
+        g.c.mav.set_attitude_target_send(last, 1, 1, RATES_THRUST, [1, 0, 0, 0], 0, 0, 0, 0.3)
+        assert v.poll(0.2)
+    finally:
+        v.close()
+        g.close()
