@@ -91,6 +91,7 @@ class LockstepClock:
         self._rt = RealtimeClock()  # used while nobody is connected
         self.frames = 0
         self.answered_frames = 0  # frames that ended with an answer (not the timeout)
+        self.timeouts = 0  # frames a connected peer left unanswered for answer_timeout_s
 
     def start(self, sim_t: float) -> None:
         self._rt.start(sim_t)
@@ -108,6 +109,7 @@ class LockstepClock:
                 self.answered_frames += 1
                 return
             if remaining <= 0.0:
+                self.timeouts += 1
                 return
 
 

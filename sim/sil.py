@@ -228,6 +228,7 @@ def _vehicle_run(
             "mode_log": v.mode_log, "statustexts": v.statustexts, "dropped": v.dropped, "answers": v.answers,
             "frames": v.clock.frames if hasattr(v.clock, "frames") else None,
             "answered_frames": getattr(v.clock, "answered_frames", None),
+            "lockstep_timeouts": getattr(v.clock, "timeouts", None),
             "sim_time_s": v.t, "wall_time_s": v.wall_time_running, "flavour": v.flavour,
         }  # fmt: skip
         conn.send(("truth", v.truth(), info))
@@ -636,7 +637,7 @@ def _measure(
         plant=cfg.section("sil").plant, flavour=cfg.section("sil").flavour,
         bridge_exit_code=bres.exit_code, bridge_exit_reason=bres.exit_reason, bridge_state_reached=bres.state_reached,
         handback_confirmed=bres.handback_confirmed, vehicle_answered_frames=vinfo.get("answered_frames"),
-        vehicle_frames=vinfo.get("frames"), statustexts=[t for _, t in vinfo["statustexts"]],
+        vehicle_frames=vinfo.get("frames"), vehicle_lockstep_timeouts=vinfo.get("lockstep_timeouts"), statustexts=[t for _, t in vinfo["statustexts"]],
         vehicle_modes=[[round(t, 3), name] for t, _, name in ml],
     )  # fmt: skip
     return SilResult(
