@@ -64,16 +64,21 @@ def row_from(
     wind: Any,
 ) -> list[float]:
     """One CSV row from the law's diagnostics and the vehicle/target state (NED)."""
-    R = np.asarray(target_R)
-    rel = R.T @ (np.asarray(p) - np.asarray(target_p))
-    t_roll = math.atan2(float(R[2, 1]), float(R[2, 2]))
-    t_pitch = -math.asin(max(-1.0, min(1.0, float(R[2, 0]))))
-    t_yaw = math.atan2(float(R[1, 0]), float(R[0, 0]))
+    # scalar arithmetic: called at every control step, where numpy's per-call cost dominates
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = np.asarray(target_R, float).tolist()
+    p0, p1, p2 = np.asarray(p, float).tolist()
+    q0, q1, q2 = np.asarray(target_p, float).tolist()
+    d0, d1, d2 = p0 - q0, p1 - q1, p2 - q2
+    rel = (r00 * d0 + r10 * d1 + r20 * d2, r01 * d0 + r11 * d1 + r21 * d2,
+           r02 * d0 + r12 * d1 + r22 * d2)  # fmt: skip
+    t_roll = math.atan2(r21, r22)
+    t_pitch = -math.asin(max(-1.0, min(1.0, r20)))
+    t_yaw = math.atan2(r10, r00)
     return [
         diag.t, diag.s, sdot,
-        float(p[0]), float(p[1]), float(p[2]), *diag.p_f,
-        float(target_p[0]), float(target_p[1]), float(target_p[2]),
-        float(rel[0]), float(rel[1]), float(rel[2]),
+        p0, p1, p2, *diag.p_f,
+        q0, q1, q2,
+        rel[0], rel[1], rel[2],
         *diag.pt, diag.pt_norm, diag.psi, diag.e[0], diag.e[1], diag.y_w, diag.z_w,
         w_cmd[0], w_cmd[1], float(w_act[0]), float(w_act[1]), diag.path_speed_margin,
         1.0 if "sat" in diag.mode else 0.0, 1.0 if "psi_turn" in diag.mode else 0.0,

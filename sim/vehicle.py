@@ -381,12 +381,18 @@ class SimVehicle:
         self._target_type = (
             M.MAV_TYPE_SURFACE_BOAT if target_type == "boat" else M.MAV_TYPE_GROUND_ROVER
         )
-        # Lockstep: a frame is answered by a SET_ATTITUDE_TARGET stamped with (at least) the
-        # time_boot_ms of the last ATTITUDE written (the bridge stamps its setpoints with the
-        # ATTITUDE they answer); a late answer to an earlier frame must not count, or one slow
-        # answer would leave every later command one frame late for the rest of the run.
-        self._answered = False
-        self._await_ms = -1  # time_boot_ms of the last ATTITUDE written
+        # Lockstep: a frame waits for the SET_ATTITUDE_TARGET stamped with (at least) the
+        # time_boot_ms of the ATTITUDE it answers (the bridge stamps its setpoints so); a late
+        # answer to an earlier frame must not count, or one slow answer would leave every later
+        # command one frame late for the rest of the run. The ATTITUDE awaited is the latest
+        # one whose answer would act within the next frame: with a command latency of a frame
+        # or more, that is an earlier frame's, and the bridge computes while the vehicle steps
+        # (the latency is the lookahead that lets the two peers run in parallel).
+        self._await_ms = -1  # time_boot_ms of the ATTITUDE awaited
+        self._answer_ms = -1  # the highest stamp of the setpoints received
+        self._unstamped = False  # a setpoint stamped 0 since the last ATTITUDE was written
+        self._att_written: deque[tuple[int, float]] = deque(maxlen=512)  # (ms, vehicle time)
+        self._att_t: dict[int, float] = {}  # the same, by ms
         self.answers = 0  # SET_ATTITUDE_TARGET messages received
         self.rx_count = 0
         self.unix0_us = int(time.time() * 1e6)
@@ -395,6 +401,7 @@ class SimVehicle:
 
         # ---- clock, truth, threading
         self.clock = make_clock(clock, answer_timeout_s=answer_timeout_s, speed=realtime_speed)
+        self._lockstep_clock = self.clock.mode == "lockstep"
         self._rows: list[tuple] = []  # truth, one row per frame (see _record / truth())
         self._tgt_rows: list[tuple] = []  # target position, velocity for the rows so far
         self._lock = threading.Lock()
@@ -551,7 +558,8 @@ class SimVehicle:
         self._apply_due()
         plant, ap, dt = self.plant, self.ap, self.dt
         rates, fresh = self._rates, True  # fresh: self._st is the state now
-        for _ in range(self.n_sub):
+        last = self.n_sub - 1
+        for i in range(self.n_sub):
             sp = self._sp
             if (
                 self._behaviour == OFFBOARD
@@ -570,7 +578,9 @@ class SimVehicle:
             plant.step(*cmd)
             self._k += 1
             rates, fresh = self._rates_fn(), False
-            if self._in:
+            # what falls due at the frame's end acts from the next frame's start (the same
+            # physics), whether it was read before this frame or during the lockstep wait
+            if self._in and i < last:
                 self._apply_due()
         self._rates = rates
         self._st = plant.state()
@@ -717,13 +727,26 @@ class SimVehicle:
         if mt == "BAD_DATA":
             return
         self.rx_count += 1
+        due = self._boot_t + self.command_latency_s
         if mt == "SET_ATTITUDE_TARGET":
-            # 0: a peer that does not stamp its setpoints (any answer counts, as before)
-            if msg.time_boot_ms >= self._await_ms or msg.time_boot_ms == 0:
-                self._answered = True
+            tb = msg.time_boot_ms
+            if tb == 0:  # a peer that does not stamp its setpoints: any answer counts
+                self._unstamped = True
+            elif tb > self._answer_ms:
+                self._answer_ms = tb
             self.answers += 1
-        if mt in ("SET_ATTITUDE_TARGET", "COMMAND_LONG", "COMMAND_INT", "SET_MODE", "TIMESYNC"):
-            self._in.append((self._boot_t + self.command_latency_s, msg))
+            tw = self._att_t.get(tb) if self._lockstep_clock else None
+            if tw is not None:
+                # lockstep: the bridge answered at once in vehicle time, the latency runs
+                # from the ATTITUDE it answers (not from when this process got to read it)
+                due = max(self._boot_t, tw + self.command_latency_s)
+        elif mt not in ("COMMAND_LONG", "COMMAND_INT", "SET_MODE", "TIMESYNC"):
+            return
+        q = self._in
+        i = len(q)
+        while i > 0 and q[i - 1][0] > due:  # kept in order of due time
+            i -= 1
+        q.insert(i, (due, msg))
 
     def _apply_due(self) -> None:
         q, t = self._in, self._boot_t + 1e-9
@@ -1064,9 +1087,29 @@ class SimVehicle:
             size += len(buf)
         if chunk:
             wrote |= self._write(b"".join(chunk))
-        if wrote and att_ms >= 0 and self.has_peer():
-            self._await_ms = att_ms
-            self._answered = False
+        if wrote and att_ms >= 0:
+            self._attitude_written(att_ms, t - 1e-9)
+
+    def _attitude_written(self, ms: int, t: float) -> None:
+        """An ATTITUDE stamped ``ms`` left at vehicle time ``t`` (s): choose the one to await."""
+        w = self._att_written
+        if len(w) == w.maxlen:
+            self._att_t.pop(w[0][0], None)
+        w.append((ms, t))
+        self._att_t[ms] = t
+        self._unstamped = False
+        # the answer to an ATTITUDE written at tw acts at tw + latency: await the latest one
+        # that acts before the end of the next frame
+        horizon = t + self.frame_period - self.command_latency_s - 1e-6
+        for m, tw in reversed(w):
+            if tw < horizon:
+                self._await_ms = m
+                return
+        self._await_ms = -1
+
+    @property
+    def _answered(self) -> bool:
+        return self._answer_ms >= self._await_ms or self._unstamped
 
     def _write(self, data: bytes) -> bool:
         try:
