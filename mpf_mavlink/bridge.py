@@ -554,6 +554,11 @@ class Bridge:
             self.t_engage = self.t_last if self.t_last is not None else 0.0
             self._set_state(State.TRACKING)
             self.log(f"{mode} confirmed: tracking for {m.mission_duration_s:g} s")
+            # what exists now (modules, config, path tables) lives for the whole flight: keep
+            # it out of the cyclic collector, whose full passes would otherwise walk it inside
+            # the control loop
+            gc.collect()
+            gc.freeze()
             self._spin(math.inf)
         except _Stop as e:
             res.exit_reason = e.reason

@@ -31,15 +31,39 @@ class TargetState:
 
     def extrapolate(self, t: float) -> TargetState:
         """Constant-acceleration, constant-angular-acceleration prediction to time t (s)."""
+        # Scalar arithmetic (called at every control step, where numpy's per-call cost
+        # dominates): the same formulas as p + h v + h^2/2 a and R exp(h w + h^2/2 w').
         h = t - self.t
-        phi = h * self.omega_T + 0.5 * h * h * self.omega_dot_T
+        hh = 0.5 * h * h
+        p0, p1, p2 = self.position.tolist()
+        v0, v1, v2 = self.velocity.tolist()
+        a0, a1, a2 = self.acceleration.tolist()
+        w0, w1, w2 = self.omega_T.tolist()
+        d0, d1, d2 = self.omega_dot_T.tolist()
+        x, y, z = h * w0 + hh * d0, h * w1 + hh * d1, h * w2 + hh * d2
+        th2 = x * x + y * y + z * z
+        th = math.sqrt(th2)
+        if th < 1e-8:
+            c1, c2 = 1.0, 0.5
+        else:
+            c1, c2 = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+        # exp(phi) = I + c1 K + c2 K^2, K = hat(phi); K^2 = phi phi^T - |phi|^2 I
+        E = (
+            (1.0 + c2 * (x * x - th2), -c1 * z + c2 * x * y, c1 * y + c2 * x * z),
+            (c1 * z + c2 * x * y, 1.0 + c2 * (y * y - th2), -c1 * x + c2 * y * z),
+            (-c1 * y + c2 * x * z, c1 * x + c2 * y * z, 1.0 + c2 * (z * z - th2)),
+        )
+        R = [
+            [r[0] * E[0][j] + r[1] * E[1][j] + r[2] * E[2][j] for j in range(3)]
+            for r in self.R_T_I.tolist()
+        ]
         return TargetState(
             t,
-            self.position + h * self.velocity + 0.5 * h * h * self.acceleration,
-            self.velocity + h * self.acceleration,
+            np.array((p0 + h * v0 + hh * a0, p1 + h * v1 + hh * a1, p2 + h * v2 + hh * a2)),
+            np.array((v0 + h * a0, v1 + h * a1, v2 + h * a2)),
             self.acceleration,
-            self.R_T_I @ so3.exp(phi),
-            self.omega_T + h * self.omega_dot_T,
+            np.array(R),
+            np.array((w0 + h * d0, w1 + h * d1, w2 + h * d2)),
             self.omega_dot_T,
         )
 

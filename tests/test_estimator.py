@@ -550,3 +550,29 @@ def test_real_arduplane_log_gives_finite_estimates_and_a_sane_own_wind():
             own.append(float(np.linalg.norm(est._wind_lp)))
     assert n_att > 800 and n_est > n_att // 2 and n_wind >= 0.95 * n_est
     assert len(own) > 100 and max(own) < 1.5
+
+
+def test_target_extrapolation_matches_the_matrix_formulas():
+    # TargetState.extrapolate is written in scalars for speed: it must equal
+    # p + h v + h^2/2 a, v + h a, R exp(h w + h^2/2 w'), w + h w' (tiny angles included).
+    from mpf_mavlink import so3
+    from mpf_mavlink.target import TargetState
+
+    rng = np.random.default_rng(1)
+    for i in range(2000):
+        ts = TargetState(
+            float(rng.normal() * 100), rng.normal(size=3) * 100, rng.normal(size=3) * 10,
+            rng.normal(size=3), so3.exp(rng.normal(size=3) * 2),
+            rng.normal(size=3) * (0.5 if i % 2 else 1e-10), rng.normal(size=3) * 0.1,
+        )  # fmt: skip
+        t = ts.t + float(rng.normal()) * (1.0 if i % 3 else 1e-6)
+        h = t - ts.t
+        e = ts.extrapolate(t)
+        R = ts.R_T_I @ so3.exp(h * ts.omega_T + 0.5 * h * h * ts.omega_dot_T)
+        np.testing.assert_allclose(
+            e.position, ts.position + h * ts.velocity + 0.5 * h * h * ts.acceleration, atol=1e-9
+        )
+        np.testing.assert_allclose(e.velocity, ts.velocity + h * ts.acceleration, atol=1e-12)
+        np.testing.assert_allclose(e.R_T_I, R, atol=1e-13)
+        np.testing.assert_allclose(e.omega_T, ts.omega_T + h * ts.omega_dot_T, atol=1e-13)
+        assert e.t == t
