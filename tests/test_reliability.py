@@ -40,9 +40,35 @@ def stream(
     return [gate.check(mtype, t_boot0 + k * dt_boot, rx0 + k * dt_rx) for k in range(n)]
 
 
+SETTLE = ["settling"] * 4  # the first clock is adopted at its 5th sample
+
+
+def test_gate_establishes_the_genuine_clock_whatever_comes_first():
+    # A fuzzer's frames come before the vehicle's first sample: a forged first time must not
+    # become the clock (the genuine stream would then be refused for seconds), nor may repeated
+    # constants (0, 2^32-1) or random times form one; the genuine 50 Hz pair does within 50 ms.
+    import random
+
+    rnd = random.Random(3)
+    g = BootClockGate()
+    forged = [0.0, 2**32 * 1e-3 - 1e-3, 2**31 * 1e-3, 0.0, 0.0, 0.0, 0.0, 0.0, 3600.0 + 20.0]
+    forged += [rnd.uniform(0, 4e6) for _ in range(40)]
+    assert {g.check("ATTITUDE", tb, 100.0 + 0.001 * i) for i, tb in enumerate(forged)} == {
+        "settling"
+    }
+    res = []
+    for k in range(50):  # genuine: boot 20 s, LOCAL_POSITION_NED and ATTITUDE, junk between
+        res.append(g.check("LOCAL_POSITION_NED", 20.0 + 0.02 * k, 100.1 + 0.02 * k))
+        res.append(g.check("ATTITUDE", 20.0 + 0.02 * k, 100.1 + 0.02 * k + 1e-4))
+        assert g.check("ATTITUDE", rnd.choice(forged), 100.1 + 0.02 * k + 2e-4) != None  # noqa: E711
+    assert res[:4] == SETTLE and res[4:] == [None] * 96
+    assert g.resets == 0
+
+
 def test_gate_accepts_a_healthy_stream_and_rejects_absurd_times():
     g = BootClockGate()
-    assert stream(g, 100.0, 5000.0, 50) == [None] * 50  # 1 s of 50 Hz: all taken
+    # 1 s of 50 Hz: all taken once 5 samples have established the clock
+    assert stream(g, 100.0, 5000.0, 50) == SETTLE + [None] * 46
     # then, at rx 5001.0 (boot ~101.0): an hour ahead, 2^31 ms, and a time in the past
     assert g.check("ATTITUDE", 101.0 + 3600.0, 5001.0) == "time"
     assert g.check("ATTITUDE", 2**31 * 1e-3, 5001.0) == "time"
@@ -67,7 +93,7 @@ def test_gate_tolerates_jitter_and_clocks_at_other_rates():
     # a lockstep simulation at 0.4x and at 5x real time: 20 ms of sim per 50 ms / 4 ms of wall
     for dt_rx in (0.05, 0.004):
         g = BootClockGate()
-        assert stream(g, 12.0, 0.0, 2000, dt_boot=0.02, dt_rx=dt_rx) == [None] * 2000
+        assert stream(g, 12.0, 0.0, 2000, dt_boot=0.02, dt_rx=dt_rx) == SETTLE + [None] * 1996
 
 
 def test_gate_takes_a_backlog_with_a_hole_after_a_pause():
@@ -76,7 +102,7 @@ def test_gate_takes_a_backlog_with_a_hole_after_a_pause():
     first sample after the hole is 0.46 s newer than the one read 1 ms before it, yet no
     sample is ahead of the vehicle's real clock: all are taken."""
     g = BootClockGate()
-    assert stream(g, 13.0, 100.0, 10) == [None] * 10  # up to boot 13.18 at rx 100.18
+    assert stream(g, 13.0, 100.0, 10) == SETTLE + [None] * 6  # up to boot 13.18 at rx 100.18
     burst = [13.20 + 0.02 * k for k in range(3)] + [13.70 + 0.02 * k for k in range(10)]  # the hole
     res = [g.check("ATTITUDE", tb, 100.80 + 0.001 * i) for i, tb in enumerate(burst)]
     assert res == [None] * len(burst)
@@ -160,9 +186,11 @@ def test_link_pins_the_autopilot_and_gates_its_clock():
             camera.close()
         c = link.counters
     times = [m.time_boot_ms for m in got if m.get_type() == "ATTITUDE"]
-    assert times == [t0 + 20 * k for k in range(10)] + [t0 + 400]
+    # the first 4 establish the clock (counted as settling), then the stream is taken
+    assert times == [t0 + 20 * k for k in range(4, 10)] + [t0 + 400]
     assert not [m for m in got if m.get_type() == "HEARTBEAT"]
     assert (c.rejected_time, c.rejected_stale, c.rejected_identity) == (1, 1, 1)
+    assert c.clock_settling == 4
     assert c.rejected_by_source[(1, 100)] == 2  # the camera's heartbeat and attitude
 
 
@@ -174,15 +202,16 @@ def test_a_truncated_frame_does_not_eat_the_next_datagram():
         tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         mav = dialect.MAVLink(None, srcSystem=1, srcComponent=1)
         hb = mav.heartbeat_encode(1, 12, 129, 3 << 16, 4).pack(mav)
-        att = mav.attitude_encode(10_000, 0.1, 0.0, 0.0, 0.0, 0.0, 0.0).pack(mav)
+        # VFR_HUD: no time_boot_ms, so no boot clock to establish first
+        vfr = mav.vfr_hud_encode(16.0, 16.5, 90, 40, 100.0, 0.0).pack(mav)
         try:
-            # a good frame, then the first 12 bytes of one that claims 28 bytes of payload
-            tx.sendto(att + att[:12], ("127.0.0.1", port))
+            # a good frame, then the first 12 bytes of one that claims 20 bytes of payload
+            tx.sendto(vfr + vfr[:12], ("127.0.0.1", port))
             tx.sendto(hb, ("127.0.0.1", port))  # the next datagram: must not be swallowed
             got = [link.recv(1.0), link.recv(1.0)]
         finally:
             tx.close()
-        assert [m.get_type() for m in got if m is not None] == ["ATTITUDE", "HEARTBEAT"]
+        assert [m.get_type() for m in got if m is not None] == ["VFR_HUD", "HEARTBEAT"]
         assert link.counters.bad_data == 1
 
 

@@ -204,6 +204,17 @@ class _TcpClient(mavutil.mavtcp):
 # ---------------------------------------------------------------------------------------------
 # The vehicle's boot clock
 # ---------------------------------------------------------------------------------------------
+@dataclass
+class _Candidate:
+    """A clock the gate has heard but not adopted: its offset (s), last receive time (s), the
+    newest t_boot per message type (each must increase) and how many samples it has."""
+
+    off: float
+    t_rx: float
+    last: dict[str, float]
+    count: int = 1
+
+
 class BootClockGate:
     """Accepts a vehicle's ``time_boot_ms`` only when it is consistent with its clock so far.
 
@@ -223,6 +234,13 @@ class BootClockGate:
       tens of ms per sample, not seconds);
     - STALE: a consistent sample not newer than the last one of its message type (reordered or
       duplicated by the link; a timestamp in the past lands here too).
+
+    The FIRST clock is not simply the first sample's: a forged frame that happens to come first
+    would become the reference and every genuine sample after it would be rejected. Until a
+    clock is established, samples are sorted into candidate clocks (offsets within
+    ``fwd_tol_s + 0.25`` s, ``t_boot`` increasing per message type); the first to gather ``reset_count``
+    samples is adopted (50 ms of a 50 Hz ATTITUDE + LOCAL_POSITION_NED stream). A repeated
+    constant or a random time never forms one. Samples dropped meanwhile return "settling".
 
     A rebooted vehicle (or any real clock jump) starts a new, self-consistent clock: rejected
     samples that agree with each other (``off`` within ``fwd_tol_s + 0.25`` s of the previous
@@ -249,17 +267,39 @@ class BootClockGate:
         self.resets = 0
         self._cand: list[float] | None = None  # [offset, first t_rx, count, last t_rx]
         self._last: dict[str, float] = {}  # message type -> newest accepted t_boot (s)
+        self._first: list[_Candidate] = []  # candidate first clocks
 
     def _adopt(self, mtype: str, t_boot_s: float, off: float, t_rx: float) -> None:
         self.off, self.hi, self.hi_t, self._cand = off, off, t_rx, None
         self._last = {mtype: t_boot_s}
 
+    def _settle(self, mtype: str, t_boot_s: float, off: float, t_rx: float) -> str | None:
+        """Before any clock is established: vote for a candidate clock, adopt the first that
+        has ``reset_count`` samples."""
+        tol = self.fwd_tol_s + 0.25
+        for c in self._first:
+            last = c.last.get(mtype)
+            if abs(off - c.off) <= tol and (last is None or t_boot_s > last):
+                c.off, c.t_rx = off, t_rx
+                c.last[mtype] = t_boot_s
+                c.count += 1
+                if c.count >= self.reset_count:
+                    self._first = []
+                    self._adopt(mtype, t_boot_s, off, t_rx)
+                    self._last = c.last
+                    return None
+                return "settling"
+        self._first.append(_Candidate(off, t_rx, {mtype: t_boot_s}))
+        if len(self._first) > 32:  # forget the candidate heard from longest ago
+            self._first.remove(min(self._first, key=lambda c: c.t_rx))
+        return "settling"
+
     def check(self, mtype: str, t_boot_s: float, t_rx: float) -> str | None:
-        """None to accept the sample; "time" (inconsistent clock) or "stale" to reject it."""
+        """None to accept the sample; "time" (inconsistent clock), "stale" or "settling" (no
+        clock established yet) to reject it."""
         off = t_boot_s - t_rx
         if self.off is None:
-            self._adopt(mtype, t_boot_s, off, t_rx)
-            return None
+            return self._settle(mtype, t_boot_s, off, t_rx)
         hi = self.hi - self.drift_s_per_s * max(0.0, t_rx - self.hi_t)
         if off - hi <= self.fwd_tol_s and off - self.off >= -self.back_tol_s:
             last = self._last.get(mtype)
@@ -302,6 +342,7 @@ class LinkCounters:
         0  # vehicle sample not newer than the last of its type (reordered, duplicate)
     )
     clock_resets: int = 0  # the vehicle's boot clock restarted (a reboot) and was adopted
+    clock_settling: int = 0  # samples dropped before the vehicle's clock was established
     unknown_msgid: int = 0  # ids this dialect does not know (CRC cannot be checked)
     io_errors: int = 0
     tlog_write_errors: int = 0  # records the tlog could not take (disk full, I/O error): lost
@@ -473,6 +514,8 @@ class Link:
                 if why is not None:
                     if why == "time":
                         c.rejected_time += 1
+                    elif why == "settling":
+                        c.clock_settling += 1
                     else:
                         c.rejected_stale += 1
                     return True, None
