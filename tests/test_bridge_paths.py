@@ -298,11 +298,12 @@ def test_stale_live_target_stops_the_mission_and_says_so(tmp_path):
     assert [c.msg.param2 for c in commands(peer, SET_MODE)] == [6.0, 4.0]
     assert res.handback_requested and res.handback_confirmed and peer.mode_is("AUTO.LOITER")
     # timing: commands went on while the target was fresh (target_timeout_s = 1.0) and none
-    # outlived its staleness by more than telemetry_timeout_s (0.5)
+    # outlived its staleness by more than telemetry_timeout_s (0.5), give or take a scheduling
+    # stall of the test's own peer thread (0.15 s seen on a loaded CI box)
     last_target = sent[-1]
     offboard_sp = [s.t for s in peer.setpoints if (s.mode >> 16) & 0xFF == 6]
     assert max(offboard_sp) >= last_target + 0.9
-    assert max(s.t for s in peer.setpoints) <= last_target + 1.0 + 0.5 + 0.1
+    assert max(s.t for s in peer.setpoints) <= last_target + 1.0 + 0.5 + 0.3
     # and the vehicle's telemetry never stopped: it was the target that went stale
     assert peer.last_telemetry_t > max(s.t for s in peer.setpoints)
 
@@ -349,11 +350,13 @@ def test_global_position_int_only_about_home_position(tmp_path):
     assert "LOCAL_POSITION_NED" not in types and {"GLOBAL_POSITION_INT", "HOME_POSITION"} <= types
     # every control step saw the peer's position of that instant: GLOBAL_POSITION_INT comes at
     # 25 Hz, ATTITUDE at 50 Hz, so every other step is extrapolated by 20 ms (0.3 m at 15 m/s
-    # if it were not); degE7 and mm quantisation are ~1 cm
+    # if it were not); degE7 and mm quantisation are ~1 cm. The max allows for a stall of the
+    # peer's thread between its samples (5 cm seen on a loaded CI box); the median cannot hide
+    # a missing extrapolation
     ts = table(tmp_path / "timeseries.csv")
     assert len(ts) >= 40
     _, _, err = align_to_truth(ts, peer.truth)
-    assert np.max(err) < 0.05
+    assert np.median(err) < 0.03 and np.max(err) < 0.15
 
 
 def test_own_wind_estimate_without_wind_messages(tmp_path):
