@@ -339,7 +339,9 @@ def test_soak_output_dir_refused_before_connecting(tmp_path, probe):
 
 def test_soak_fuzzed_mission_short(tmp_path, probe):
     row = _row("fuzz", tmp_path, probe, n_frames=8000, dur=8.0)
-    assert row.figures["frames_injected"] == 8000 and row.figures["setpoints_out_of_limits"] == 0
+    # a datagram may carry several frames, so the last one can overshoot the count a little
+    assert 8000 <= row.figures["frames_injected"] < 8020
+    assert row.figures["setpoints_out_of_limits"] == 0
 
 
 # ----------------------------------------------------------------------------- the campaign, whole
