@@ -265,8 +265,16 @@ class Bridge:
                     return  # a GCS or companion on the same system id
                 self.hb = sample
                 if self.engaged and not is_offboard(self.flavour, sample):
+                    mode = mode_name(self.flavour, sample)
+                    if rx is not None and self.link.clock_gate.restarting(rx):
+                        # a vehicle that reboots faster than the telemetry timeout comes back
+                        # in its start-up mode: that is no pilot, and the log should say so
+                        raise _Stop(
+                            f"the vehicle rebooted (its boot clock restarted) and came back in {mode}: stopped commanding",
+                            "pilot",
+                        )
                     raise _Stop(
-                        f"mode changed to {mode_name(self.flavour, sample)} by someone else: stopped commanding, not fighting it",
+                        f"mode changed to {mode} by someone else: stopped commanding, not fighting it",
                         "pilot",
                     )
                 return

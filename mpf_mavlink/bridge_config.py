@@ -102,6 +102,21 @@ class MavlinkConfig:
                 "target_sysid",
                 "required by target.type mavlink (the system id that sends the target)",
             )
+        origin = {
+            "origin_lat_deg": self.origin_lat_deg,
+            "origin_lon_deg": self.origin_lon_deg,
+            "origin_alt_m": self.origin_alt_m,
+        }
+        given = [k for k, v in origin.items() if v is not None]
+        if given and len(given) < 3:
+            # GLOBAL_POSITION_INT.alt is AMSL: an origin altitude left at 0 would put the
+            # vehicle its whole AMSL altitude below the path in NED, so all three or none
+            missing = ", ".join(k for k in origin if k not in given)
+            raise fail(
+                missing.split(",")[0],
+                f"required with {', '.join(given)} (the NED origin is lat, lon and AMSL "
+                "altitude; leave all three out to use the vehicle's HOME_POSITION)",
+            )
         if self.target_sysid is not None and self.target_sysid == self.vehicle_sysid:
             raise fail(
                 "target_sysid",

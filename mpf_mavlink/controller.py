@@ -262,8 +262,8 @@ def adapter_params(cfg: Config) -> AdapterParams:
 def estimator_params(m: Any) -> EstimatorParams:
     """The estimator's staleness limits and origin from the ``mavlink`` section."""
     origin = None
-    if m.origin_lat_deg is not None and m.origin_lon_deg is not None:
-        origin = (m.origin_lat_deg, m.origin_lon_deg, m.origin_alt_m or 0.0)
+    if m.origin_lat_deg is not None and m.origin_lon_deg is not None and m.origin_alt_m is not None:
+        origin = (m.origin_lat_deg, m.origin_lon_deg, m.origin_alt_m)
     return EstimatorParams(m.attitude_stale_s, m.position_stale_s, m.airspeed_stale_s, m.wind_stale_s, m.wind_filter_tau_s, origin=origin)  # fmt: skip
 
 

@@ -1041,6 +1041,9 @@ def _reboot(o: Opts, name: str, fast: bool) -> Row:
     row.check(not bad, f"{len(bad)} setpoints computed on the new boot clock")
     row.check(not row.figures["new_boot_offboard"], "the rebooted vehicle was put back in OFFBOARD")
     row.check(out.rc == 4, f"exit {out.rc}: {out.exit_reason}")
+    row.check(
+        "someone else" not in out.exit_reason, f"a reboot blamed on a pilot: {out.exit_reason}"
+    )
     return row
 
 

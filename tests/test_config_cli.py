@@ -21,6 +21,8 @@ BAD_SETS = [
     ("path.radius_m=3", "path.radius_m", "not used"),
     ("kinematic.initial_position_ned_m=[1,2]", "kinematic.initial_position_ned_m", "3 numbers"),
     ("checks.c2=0.7", "checks.c2", "(0, 0.5)"),
+    # an origin without its AMSL altitude would put the vehicle far below the path in NED
+    ("mavlink.origin_lat_deg=47.4", "mavlink.origin_lon_deg", "required with origin_lat_deg"),
 ]
 
 

@@ -113,12 +113,17 @@ def test_gate_takes_a_backlog_with_a_hole_after_a_pause():
 def test_gate_adopts_a_rebooted_clock_only_after_it_proves_itself():
     g = BootClockGate()
     stream(g, 300.0, 1000.0, 50)  # the old boot, up to boot 301 at rx 1001
+    assert not g.restarting(1001.0)
     # the vehicle reboots: boot time 12 s at rx 1001.1, 50 Hz, with absurd junk interleaved
-    res = []
+    res, restarting = [], []
     for k in range(60):
         res.append(g.check("ATTITUDE", 12.0 + 0.02 * k, 1001.1 + 0.02 * k))
+        restarting.append(g.restarting(1001.1 + 0.02 * k))
         assert g.check("ATTITUDE", 9e6, 1001.1 + 0.02 * k + 0.001) in ("time", None)
     first = res.index(None)
+    # from its 2nd sample until adopted, the new clock is reported as a restart (the bridge
+    # then tells a reboot from a pilot's mode change); junk ahead of the clock never is
+    assert restarting[0] is False and all(restarting[1:first]) and not any(restarting[first:])
     # adopted after >= reset_confirm_s (0.5 s) and >= 5 samples, not before; then all taken
     assert 0.5 <= first * 0.02 <= 0.6 and all(r is None for r in res[first:])
     assert g.resets == 1 and g.check("ATTITUDE", 9e6, 1003.0) == "time"
@@ -133,6 +138,7 @@ def test_gate_never_adopts_scattered_junk():
     # 5 s with no real samples, 50 junk samples per second at random times
     res = [g.check("ATTITUDE", rnd.uniform(0, 4e6), 0.2 + k * 0.02) for k in range(250)]
     assert set(res) == {"time"} and g.resets == 0
+    assert not g.restarting(5.2)
 
 
 # ----------------------------------------------------------------------------- the link

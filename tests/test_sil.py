@@ -407,7 +407,7 @@ target: {type: stationary}
 guidance: {K_p: 2.0, K_R: 3.0, alpha_m: 5.0, rate_limit_rad_s: 0.6, psi_turn: true, wind_compensation: true}
 vehicle: {airspeed_m_s: 16.0, airspeed_min_m_s: 14.0, airspeed_max_m_s: 18.0, max_bank_rad: 0.785398}
 kinematic: {initial_position_ned_m: [0.0, 0.0, -100.0], initial_attitude_rpy_rad: [0.0, 0.0, 0.0]}
-metrics: {steady_after_s: 20.0}
+metrics: {steady_after_s: 30.0}
 checks: {c1_m: 300.0, c2: 0.25}
 sil: {link: udp, physics_rate_hz: 100.0, wind_ned_m_s: [0.0, 4.0, 0.0], turbulence: light, seed: 7,
       initial_mode: cruise, home_alt_m: 0.0}
@@ -426,12 +426,14 @@ def test_lockstep_and_realtime_track_alike(tmp_path):
     # (applied one frame late). The atmosphere is a function of simulated time (seeded
     # turbulence: the same gusts in both runs). What differs is the state at engagement (the
     # bridge's wall-clock start-up, and the real-time-paced hand-over in which setpoints land
-    # wherever the wall clock puts them): the capture transient (4.6 m at engagement, up to 6 m
-    # on the way) then ends anywhere between 9 and 18 s, also between two lockstep runs, more so
-    # on a loaded machine. So tracking is compared once captured, from t = 20 s: steady RMS |pt|
-    # measured 0.1-0.3 m in both clocks. Tolerances: 0.15 m on the RMS and 0.2 m RMS between the
-    # |pt| series on the vehicle's clock; a setpoint delayed by one frame throughout, or
-    # dropped ones, would double the error.
+    # wherever the wall clock puts them). The capture is rate-limited (0.6 rad/s) and lightly
+    # damped, so a 2 cm difference at engagement changes its course: measured quiet, it ends at
+    # ~10 s; under 3 CPU hogs (as on the CI host) the same lockstep config bounced back to 3.7 m
+    # at 10 s and was still at 0.5-0.8 m RMS over 20-25 s, converging by ~28 s to the same
+    # steady state (0.15-0.30 m RMS per 5 s window from 30 s, within 0.03 m of the quiet run).
+    # So the runs last 60 s and are compared from t = 30 s. Tolerances: 0.15 m on the RMS and
+    # 0.2 m RMS between the |pt| series on the vehicle's clock; a setpoint delayed by one frame
+    # throughout, or dropped ones, would double the error.
     f = tmp_path / "circle.yaml"
     f.write_text(CIRCLE)
     res = {}
@@ -443,7 +445,7 @@ def test_lockstep_and_realtime_track_alike(tmp_path):
             progress=False,
             plots=False,
             clock=clock,
-            duration_s=45.0,
+            duration_s=60.0,
             log=lambda s: None,
         )
         assert r.exit_code == 0, r.exit_reason
@@ -451,7 +453,7 @@ def test_lockstep_and_realtime_track_alike(tmp_path):
     a, b = (res[c].metrics["steady_rms_m"] for c in ("lockstep", "realtime"))
     # the series compared on the vehicle's clock, where both runs meet the same gusts
     ra, rb = res["lockstep"], res["realtime"]
-    t0 = max(ra.t_vehicle[ra.cols["t"] >= 20.0][0], rb.t_vehicle[rb.cols["t"] >= 20.0][0])
+    t0 = max(ra.t_vehicle[ra.cols["t"] >= 30.0][0], rb.t_vehicle[rb.cols["t"] >= 30.0][0])
     tt = np.arange(t0, min(ra.t_vehicle[-1], rb.t_vehicle[-1]), 0.1)
     diff = np.interp(tt, ra.t_vehicle, ra.cols["pt_norm"]) - np.interp(
         tt, rb.t_vehicle, rb.cols["pt_norm"]
@@ -460,6 +462,12 @@ def test_lockstep_and_realtime_track_alike(tmp_path):
     print(
         f"steady RMS |pt|: lockstep {a:.3f} m, realtime {b:.3f} m; series differ by {rms_diff:.3f} m RMS"
     )
+    for c in ("lockstep", "realtime"):
+        m = res[c].metrics
+        print(
+            f"{c}: convergence {m['convergence_time_s']} s, steady max {m['steady_max_m']:.3f} m, "
+            f"lockstep timeouts {m.get('vehicle_lockstep_timeouts')}"
+        )
     assert a < 1.0 and b < 1.0  # both in steady tracking
     assert abs(a - b) < 0.15
     assert rms_diff < 0.2
@@ -467,4 +475,4 @@ def test_lockstep_and_realtime_track_alike(tmp_path):
     assert (
         res["lockstep"].metrics["real_time_factor_tracking"] > 2.0
     )  # and lockstep faster than that
-    assert res["lockstep"].metrics["vehicle_answered_frames"] > 0.9 * 45 / 0.02  # in lockstep
+    assert res["lockstep"].metrics["vehicle_answered_frames"] > 0.9 * 60 / 0.02  # in lockstep

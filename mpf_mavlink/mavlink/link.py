@@ -294,6 +294,18 @@ class BootClockGate:
             self._first.remove(min(self._first, key=lambda c: c.t_rx))
         return "settling"
 
+    def restarting(self, t_rx: float, within_s: float = 1.0) -> bool:
+        """Whether a new clock BEHIND the established one has been heard within ``within_s``
+        (s) of ``t_rx``: the vehicle's boot clock restarted (a reboot) and is being confirmed."""
+        c = self._cand
+        return (
+            self.off is not None
+            and c is not None
+            and c[2] >= 2
+            and t_rx - c[3] <= within_s
+            and c[0] < self.off - self.back_tol_s
+        )
+
     def check(self, mtype: str, t_boot_s: float, t_rx: float) -> str | None:
         """None to accept the sample; "time" (inconsistent clock), "stale" or "settling" (no
         clock established yet) to reject it."""
