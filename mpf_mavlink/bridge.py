@@ -16,6 +16,11 @@ States (``BridgeResult.state_reached`` is the furthest one):
   streaming wings-level setpoints, confirm with ACK + HEARTBEAT); telemetry or live target
   stale (stop commanding at once, then request the hold mode); someone else changed the mode
   (stop commanding, no mode request: never fight the pilot).
+- Re-engagement (``mavlink.reengage_max`` > 0, off by default): after a telemetry or target
+  loss and its hand-back, wait up to ``reengage_wait_s`` for the stream to be back for
+  ``reengage_settle_s`` with the vehicle in the hold mode (or PX4's failsafe Hold), then
+  INIT -> PRESTREAM -> ENGAGE -> TRACKING again until the mission's original end. A vehicle
+  in any other mode has a pilot: the run ends, saying so.
 
 The per-sample computation (estimator, target, s, law, adapter, safe setpoints) lives in
 :class:`mpf_mavlink.controller.Controller`, which replay drives the same way. The wall clock
@@ -49,6 +54,7 @@ from .adapter import Setpoint, safe_setpoint
 from .bridge_config import hold_mode_error
 from .config import Config
 from .controller import (
+    HALT_TEXT,
     SETPOINT_COLUMNS,
     STREAM_TEXT,
     Controller,
@@ -123,6 +129,7 @@ class BridgeOptions:
     heartbeat_timeout_s: float | None = None
     arm: bool | None = None
     plots: bool | None = None
+    reengage: int | None = None  # None: mavlink.reengage_max
 
 
 @dataclass
@@ -153,6 +160,7 @@ class BridgeResult:
             f"hand-back         {'confirmed' if self.handback_confirmed else ('requested, not confirmed' if self.handback_requested else 'not requested')}",
             f"setpoints sent    {c.get('setpoints_sent', 0)} (re-sent {c.get('setpoints_resent', 0)}, safe {c.get('safe_setpoints', 0)})",
             f"law evaluations   {c.get('law_evals', 0)}",
+            f"re-engagements    {c.get('reengagements', 0)}",
             f"rx/tx packets     {c.get('rx_packets', 0)}/{c.get('tx_packets', 0)}; rejected: "
             f"{c.get('rejected_sysid', 0)} foreign ids, {c.get('rejected_unsigned', 0)} unsigned, "
             f"{c.get('rejected_bad_signature', 0)} bad signatures, {c.get('bad_data', 0)} bad frames",
@@ -198,6 +206,8 @@ class Bridge:
             m = dataclasses.replace(m, arm=bool(opts.arm))
         if opts.plots is not None:
             m = dataclasses.replace(m, plots=bool(opts.plots))
+        if opts.reengage is not None:
+            m = dataclasses.replace(m, reengage_max=int(opts.reengage))
         self.m = m
         self.ctl = Controller(cfg, m)
         self.ad_params = self.ctl.ad_params
@@ -233,6 +243,7 @@ class Bridge:
             "safe_setpoints": 0,
             "law_evals": 0,
             "mode_requests": 0,
+            "reengagements": 0,
         }
 
     @property
@@ -414,26 +425,42 @@ class Bridge:
         # ACKs of earlier attempts still count: on a lossy link an attempt's ACK and the 1 Hz
         # HEARTBEAT in the new mode often do not both arrive within one mode_timeout_s
         acked: list[bool] = []
-        for attempt in range(self.m.mode_retries):
+        asks_left = 8  # extra requests for an ACK that was lost (see below)
+
+        def done() -> bool:
+            nonlocal last
+            for a in self.acks:
+                if a.command == MAV_CMD_DO_SET_MODE:
+                    acked.append(a.accepted)
+                    last = a.result_name
             self.acks.clear()
+            return any(acked) and confirm()
+
+        def send() -> float:
             self._send(
                 encode_set_mode(
                     self.link.mav, self.m.vehicle_sysid, self.vehicle_compid, self.flavour, name
                 )
             )
             self.n["mode_requests"] += 1
+            return time.monotonic()
 
-            def done(acked: list[bool] = acked) -> bool:
-                for a in self.acks:
-                    if a.command == MAV_CMD_DO_SET_MODE:
-                        acked.append(a.accepted)
-                        nonlocal last
-                        last = a.result_name
-                self.acks.clear()
-                return any(acked) and confirm()
-
-            if self._spin(self.m.mode_timeout_s, done):
-                return True, "confirmed"
+        for attempt in range(self.m.mode_retries):
+            self.acks.clear()
+            t_sent = send()
+            t_end = t_sent + self.m.mode_timeout_s
+            while True:
+                left = t_end - time.monotonic()
+                if self._spin(max(0.0, min(left, 0.1)), done):
+                    return True, "confirmed"
+                if left <= 0.1:
+                    break
+                if confirm() and not any(acked) and asks_left and time.monotonic() - t_sent >= 0.3:
+                    # the HEARTBEAT already reports the mode but the ACK was lost (a lossy
+                    # radio): asking again is harmless (the autopilot ACKs the mode it is in)
+                    # and brings the confirmation the life cycle requires
+                    asks_left -= 1
+                    t_sent = send()
             if any(acked) and not confirm():
                 last = f"accepted but the HEARTBEAT still reports {self._mode_str()}"
             self.log(f"mode {name}: attempt {attempt + 1} not confirmed ({last})")
@@ -502,72 +529,18 @@ class Bridge:
                 res.exit_reason = f"refused to engage: check failed: {', '.join(failed)}"
                 res.exit_code = EXIT_CHECK
                 return self._finish(res)
-            self._set_state(State.INIT)
-            self._init_s()
-            self._set_state(State.PRESTREAM)
-            # Everything allocated so far (modules, the dialect, the path tables) goes to the
-            # collector's permanent generation: a full collection of it takes ~25 ms, which
-            # would otherwise land inside a control step now and then.
-            gc.collect()
-            gc.freeze()
-            # the checks (and that collection) take a while without pumping: take the backlog in
-            # (state only, no setpoints for old samples), then start the staleness clocks afresh
-            while (msg := self.link.recv(0.0)) is not None:
-                self._dispatch(msg)
-            self._send_text(STREAM_TEXT)  # for replay: control steps start after this record
-            self.streaming = True
-            self.last_good_mono = self.last_att_mono = time.monotonic()
-            rate = m.min_setpoint_rate_hz
-
-            def prestreamed() -> bool:
-                if self.first_send_mono is None:
-                    return False
-                span = self.last_send_mono - self.first_send_mono  # first to last setpoint sent
-                return span >= m.prestream_s and (self.prestream_sends - 1) / span >= rate
-
-            if not self._spin(m.prestream_s + 3.0, prestreamed):
-                raise _Stop(
-                    f"could not stream setpoints at {rate:g} Hz for {m.prestream_s:g} s", "engage"
-                )
-            self.log(
-                f"pre-streamed {self.prestream_sends} setpoints in {self.last_send_mono - self.first_send_mono:.2f} s"
-            )
-            if m.arm and not (self.hb is not None and self.hb.armed):
-                self.acks.clear()
-                self._send(encode_arm(self.link.mav, m.vehicle_sysid, self.vehicle_compid, True))
-                refused: list[str] = []
-
-                def armed_or_refused() -> bool:
-                    # a rejected ARM (pre-arm checks failed) ends the wait at once, with its reason
-                    for a in self.acks:
-                        if (
-                            a.command == 400 and not a.accepted and a.result != 5
-                        ):  # 5: MAV_RESULT_IN_PROGRESS
-                            refused.append(a.result_name)
-                    self.acks.clear()
-                    return bool(refused) or (self.hb is not None and self.hb.armed)
-
-                if not self._spin(m.mode_timeout_s * m.mode_retries, armed_or_refused) or refused:
-                    why = f"ARM refused ({refused[0]})" if refused else "no armed HEARTBEAT"
-                    raise _Stop(f"vehicle did not arm: {why}", "engage")
-            self._set_state(State.ENGAGE)
-            mode = self._offboard_mode()
-            ok, why = self._request_mode(
-                mode, lambda: self.hb is not None and is_offboard(self.flavour, self.hb)
-            )
-            if not ok:
-                raise _Stop(f"vehicle did not enter {mode}: {why}", "engage")
-            self.engaged = True
-            res.engaged = True
-            self.t_engage = self.t_last if self.t_last is not None else 0.0
-            self._set_state(State.TRACKING)
-            self.log(f"{mode} confirmed: tracking for {m.mission_duration_s:g} s")
-            # what exists now (modules, config, path tables) lives for the whole flight: keep
-            # it out of the cyclic collector, whose full passes would otherwise walk it inside
-            # the control loop
-            gc.collect()
-            gc.freeze()
-            self._spin(math.inf)
+            while True:
+                try:
+                    self._fly(res)
+                except _Stop as e:
+                    if not self._may_reengage(e):
+                        raise
+                    self._send_text(HALT_TEXT)  # for replay: control steps stop here
+                    res.exit_reason = e.reason
+                    self._handback(res, e.kind)
+                    why_not = self._await_reengage(res, e)
+                    if why_not is not None:
+                        raise _Stop(f"{e.reason}; not re-engaged: {why_not}", e.kind) from None
         except _Stop as e:
             res.exit_reason = e.reason
             res.exit_code = EXIT_OK if e.kind == "duration" else EXIT_SAFETY
@@ -589,6 +562,83 @@ class Bridge:
         if pending is not None:
             raise pending
         return out_res
+
+    def _fly(self, res: BridgeResult) -> None:
+        """INIT -> PRESTREAM -> ENGAGE -> TRACKING; ends only by raising (_Stop and others).
+        Called again for a re-engagement: s starts afresh at the closest point, the mission
+        time origin t0 and the mission's end (``t_engage`` + duration) stay."""
+        m = self.m
+        self.first_send_mono, self.prestream_sends = None, 0
+        self._set_state(State.INIT)
+        self._init_s()
+        self._set_state(State.PRESTREAM)
+        # Everything allocated so far (modules, the dialect, the path tables) goes to the
+        # collector's permanent generation: a full collection of it takes ~25 ms, which
+        # would otherwise land inside a control step now and then.
+        gc.collect()
+        gc.freeze()
+        # the checks (and that collection) take a while without pumping: take the backlog in
+        # (state only, no setpoints for old samples), then start the staleness clocks afresh
+        while (msg := self.link.recv(0.0)) is not None:
+            self._dispatch(msg)
+        self._send_text(STREAM_TEXT)  # for replay: control steps start after this record
+        self.streaming = True
+        self.last_good_mono = self.last_att_mono = time.monotonic()
+        rate = m.min_setpoint_rate_hz
+
+        def prestreamed() -> bool:
+            if self.first_send_mono is None:
+                return False
+            span = self.last_send_mono - self.first_send_mono  # first to last setpoint sent
+            return span >= m.prestream_s and (self.prestream_sends - 1) / span >= rate
+
+        if not self._spin(m.prestream_s + 3.0, prestreamed):
+            raise _Stop(
+                f"could not stream setpoints at {rate:g} Hz for {m.prestream_s:g} s", "engage"
+            )
+        self.log(
+            f"pre-streamed {self.prestream_sends} setpoints in {self.last_send_mono - self.first_send_mono:.2f} s"
+        )
+        if m.arm and not (self.hb is not None and self.hb.armed):
+            self.acks.clear()
+            self._send(encode_arm(self.link.mav, m.vehicle_sysid, self.vehicle_compid, True))
+            refused: list[str] = []
+
+            def armed_or_refused() -> bool:
+                # a rejected ARM (pre-arm checks failed) ends the wait at once, with its reason
+                for a in self.acks:
+                    if (
+                        a.command == 400 and not a.accepted and a.result != 5
+                    ):  # 5: MAV_RESULT_IN_PROGRESS
+                        refused.append(a.result_name)
+                self.acks.clear()
+                return bool(refused) or (self.hb is not None and self.hb.armed)
+
+            if not self._spin(m.mode_timeout_s * m.mode_retries, armed_or_refused) or refused:
+                why = f"ARM refused ({refused[0]})" if refused else "no armed HEARTBEAT"
+                raise _Stop(f"vehicle did not arm: {why}", "engage")
+        self._set_state(State.ENGAGE)
+        mode = self._offboard_mode()
+        ok, why = self._request_mode(
+            mode, lambda: self.hb is not None and is_offboard(self.flavour, self.hb)
+        )
+        if not ok:
+            raise _Stop(f"vehicle did not enter {mode}: {why}", "engage")
+        self.engaged = True
+        res.engaged = True
+        if self.t_engage is None:  # a re-engagement keeps the mission's end
+            self.t_engage = self.t_last if self.t_last is not None else 0.0
+        self._set_state(State.TRACKING)
+        if self.n["reengagements"]:
+            self.log(f"{mode} confirmed: tracking again until the mission's end")
+        else:
+            self.log(f"{mode} confirmed: tracking for {m.mission_duration_s:g} s")
+        # what exists now (modules, config, path tables) lives for the whole flight: keep
+        # it out of the cyclic collector, whose full passes would otherwise walk it inside
+        # the control loop
+        gc.collect()
+        gc.freeze()
+        self._spin(math.inf)
 
     def _set_state(self, s: State) -> None:
         self.state = s
@@ -626,9 +676,73 @@ class Bridge:
         s0 = self.ctl.init_s()
         assert self.ctl.t0 is not None
         # no message is processed between CHECKS and here: the records mark that instant
-        for text in origin_texts(self.ctl.t0, s0):
+        texts = origin_texts(self.ctl.t0, s0)
+        # a re-engagement keeps the mission-time origin: only the new s0 is recorded
+        for text in texts if self.t_engage is None else texts[1:]:
             self._send_text(text)
         self.log(f"virtual point initialised at s = {s0:.2f} m")
+
+    def _may_reengage(self, stop: _Stop) -> bool:
+        """Whether a stop may be followed by a re-engagement (configured, loss of telemetry or
+        of the live target, after the mission was engaged once, attempts left)."""
+        return (
+            stop.kind in ("telemetry", "target")
+            and self.t_engage is not None
+            and self.n["reengagements"] < self.m.reengage_max
+        )
+
+    def _await_reengage(self, res: BridgeResult, stop: _Stop) -> str | None:
+        """After the hand-back that followed a loss: wait for telemetry (and the live target)
+        to be back for ``reengage_settle_s`` with the vehicle in the hold mode. None when the
+        mission may be flown again, else why not (one clause)."""
+        m = self.m
+        hold = self._hold_mode()
+        # PX4's own offboard-loss failsafe is Hold (AUTO.LOITER): that is no pilot either
+        ours = {hold, "AUTO.LOITER"} if self.flavour is Flavour.PX4 else {hold}
+        k = self.n["reengagements"] + 1
+        self.log(
+            f"{stop.reason}; re-engagement {k} of {m.reengage_max}: waiting up to "
+            f"{m.reengage_wait_s:g} s for it to come back"
+        )
+        t_lost = time.monotonic()
+        t_end = t_lost + m.reengage_wait_s
+        back_since: float | None = None
+        asked_hold = res.handback_confirmed
+        while True:
+            now = time.monotonic()
+            if now >= t_end:
+                what = self.why_not or f"no ATTITUDE for {now - self.last_att_mono:.1f} s"
+                return f"not back for {m.reengage_settle_s:g} s within {m.reengage_wait_s:g} s ({what})"
+            self._spin(min(0.05, t_end - now))
+            now = time.monotonic()
+            if now - self.last_att_mono > m.telemetry_timeout_s or not self.ctl.ready():
+                back_since = None
+                continue
+            if back_since is None:
+                back_since = now
+            if now - back_since < m.reengage_settle_s:
+                continue
+            est, _ = self.ctl.est.estimate()
+            if (
+                est is not None
+                and self.t_engage is not None
+                and est.vehicle.t - self.t_engage >= m.mission_duration_s
+            ):
+                return f"the mission's {m.mission_duration_s:g} s ran out meanwhile"
+            if any(self._mode_is(name) for name in ours):
+                self.n["reengagements"] = k
+                self.log(f"back after {now - t_lost:.2f} s in {self._mode_str()}: re-engaging")
+                res.handback_requested = res.handback_confirmed = False
+                return None
+            if self.hb is not None and is_offboard(self.flavour, self.hb) and not asked_hold:
+                # the hand-back could not get through the outage: ask again now the link is back
+                asked_hold = True
+                ok, why = self._request_mode(hold, lambda: self._mode_is(hold))
+                res.handback_requested, res.handback_confirmed = True, ok
+                if not ok:
+                    return f"hand-back to {hold} not confirmed ({why})"
+                continue
+            return f"the vehicle is in {self._mode_str()}, not {hold}: someone else has it"
 
     def _handback(self, res: BridgeResult, kind: str) -> None:
         """Stop or hand back according to why we stop; never raises."""

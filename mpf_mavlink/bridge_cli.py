@@ -19,8 +19,10 @@ take control in its offboard mode (PX4 OFFBOARD, ArduPlane GUIDED), fly the 3D m
 following law and hand control back to the hold mode (PX4 AUTO.LOITER, ArduPlane LOITER).
 
 It stops commanding at once if telemetry or a live target goes stale (> 0.5 s by default) or if
-someone else changes the flight mode (it never fights the pilot). Ctrl-C, SIGTERM, the mission
-duration or an error hand control back. Everything is recorded in the run directory:
+someone else changes the flight mode (it never fights the pilot). After a telemetry or target
+loss it ends the run, or with --reengage N flies again (N times at most) once the stream is
+back and the vehicle is in the hold mode. Ctrl-C, SIGTERM, the mission duration or an error
+hand control back. Everything is recorded in the run directory:
 mavlink.tlog (all traffic), timeseries.csv, setpoints.csv, metrics.json and plots.
 
 exit codes: 0 flown and handed back; 2 bad configuration / URL / no vehicle; 3 a pre-flight check
@@ -51,6 +53,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         heartbeat_timeout_s=args.heartbeat_timeout,
         arm=True if args.arm else None,
         plots=False if args.no_plots else None,
+        reengage=args.reengage,
     )
     log: Any = (lambda s: None) if args.quiet else (lambda s: print(s, flush=True))
     res = run_bridge(cfg, opts, log=log)
@@ -65,6 +68,16 @@ def _positive(text: str) -> float:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
     if not v > 0:
         raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return v
+
+
+def _count(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
     return v
 
 
@@ -109,6 +122,12 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
         action="store_true",
         help="arm the vehicle after pre-streaming if it is disarmed (off by default: arm it yourself)",
     )
+    r.add_argument(
+        "--reengage", type=_count, metavar="N",
+        help="after telemetry or the live target is lost and control handed back, fly again up "
+        "to N times when it is back (mavlink.reengage_wait_s, reengage_settle_s) and the vehicle "
+        "is in the hold mode; 0 ends the run at the first loss (default: mavlink.reengage_max, 0)",
+    )  # fmt: skip
     r.add_argument(
         "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
         help="override one configuration key, e.g. --set mavlink.vehicle_sysid=2 or "

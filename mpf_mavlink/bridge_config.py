@@ -53,6 +53,9 @@ class MavlinkConfig:
     Local frame: LOCAL_POSITION_NED when the autopilot streams it; otherwise GLOBAL_POSITION_INT
     about ``origin_*`` when given, else about HOME_POSITION. A live target needs a geodetic
     origin (``origin_*`` or HOME_POSITION).
+    Re-engagement after a loss: at most ``reengage_max`` times, when telemetry (and the live
+    target) come back within ``reengage_wait_s`` (s) of the hand-back and stay for
+    ``reengage_settle_s`` (s), with the vehicle in the hold mode.
     """
 
     flavour: Literal["auto", "px4", "ardupilot"] = "auto"
@@ -80,6 +83,12 @@ class MavlinkConfig:
     mode_retries: int = field(default=3, metadata={"check": ("ge", 1)})
     hold_mode: str | None = None  # None: AUTO.LOITER (PX4), LOITER (ArduPlane)
     arm: bool = False
+    # After telemetry (or the live target) was lost and control handed back: 0 ends the run;
+    # N > 0 flies again, up to N times, once the stream is back for reengage_settle_s and the
+    # vehicle sits in the hold mode (a pilot's mode is never taken back)
+    reengage_max: int = field(default=0, metadata={"check": ("ge", 0)})
+    reengage_wait_s: float = field(default=30.0, metadata=_pos())
+    reengage_settle_s: float = field(default=1.0, metadata=_pos())
     mission_duration_s: float = field(default=120.0, metadata=_pos())
     signing_key_file: str | None = None
     signing_link_id: int = field(default=0, metadata={"check": ("range", 0, 255)})

@@ -51,9 +51,12 @@ from .target import TargetState
 #: ``MPF t0=<float>`` and ``MPF s0=<float>`` right after INIT (no message is processed between
 #: CHECKS and them), then ``MPF stream`` when setpoints start to stream (after the backlog that
 #: piled up during the checks has been taken into the state). Floats are ``repr``: exact.
+#: ``MPF halt`` when control steps stop without ending the run (telemetry or target lost with
+#: re-engagement configured); a re-engagement then records ``MPF s0=`` and ``MPF stream`` again.
 T0_PREFIX = "MPF t0="
 S0_PREFIX = "MPF s0="
 STREAM_TEXT = "MPF stream"
+HALT_TEXT = "MPF halt"
 
 
 def origin_texts(t0: float, s0: float) -> list[str]:
@@ -63,7 +66,8 @@ def origin_texts(t0: float, s0: float) -> list[str]:
 
 
 def parse_marker(text: str) -> tuple[str, float | None] | None:
-    """('t0', value), ('s0', value), ('stream', None), or None for any other text."""
+    """('t0', value), ('s0', value), ('stream', None), ('halt', None), or None for any other
+    text."""
     text = text.rstrip("\x00").strip()
     for key, prefix in (("t0", T0_PREFIX), ("s0", S0_PREFIX)):
         if text.startswith(prefix):
@@ -74,6 +78,8 @@ def parse_marker(text: str) -> tuple[str, float | None] | None:
             return (key, v) if math.isfinite(v) else None
     if text == STREAM_TEXT:
         return ("stream", None)
+    if text == HALT_TEXT:
+        return ("halt", None)
     return None
 
 
@@ -344,7 +350,9 @@ class Controller:
 
     def init_s(self, s0: float | None = None) -> float:
         """The virtual point: ``s0`` (m) if given, else ``guidance.initial_s_m``, else the
-        closest point of the moving path to the vehicle now."""
+        closest point of the moving path to the vehicle now. The step state (previous instant,
+        sdot, the adapter's integrator) starts afresh, as on a re-engagement it must: s is not
+        integrated across the time the law was not flying the vehicle."""
         if s0 is None:
             s0 = self.cfg.guidance.initial_s_m
         if s0 is None:
@@ -357,6 +365,10 @@ class Controller:
                 raise MpfError(f"no target to start from: {tgt}")
             s0 = self.path.closest(tgt.R_T_I.T @ (vs.position - tgt.position))
         self.s = float(s0)
+        self.t_prev = None
+        self.sdot_prev = 0.0
+        self.w1_prev = None
+        self.ad_state = AdapterState()
         return self.s
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -416,6 +428,7 @@ __all__ = [
     "Step",
     "SETPOINT_COLUMNS",
     "STREAM_TEXT",
+    "HALT_TEXT",
     "origin_texts",
     "parse_marker",
     "adapter_params",

@@ -13,7 +13,9 @@ Origin and start of control
 ---------------------------
 - A tlog of this project's bridge carries STATUSTEXT markers from our ids: ``MPF t0=``,
   ``MPF s0=`` (CHECKS/INIT) and ``MPF stream`` (setpoints start). The replay sets the mission
-  origin and s at those records and steps from the ``MPF stream`` record on, like the bridge.
+  origin and s at those records and steps from the ``MPF stream`` record on, like the bridge;
+  ``MPF halt`` (a loss with re-engagement configured) stops the steps until the next
+  ``MPF s0=`` and ``MPF stream`` of the re-engagement.
 - Any other tlog (MAVProxy, QGroundControl, an autopilot's SITL): the origin is taken the way
   the bridge takes it at CHECKS, at the first complete state at or after ``--from``: t0 = that
   ATTITUDE's time, s0 = ``guidance.initial_s_m`` or the closest point of the moving path; the
@@ -321,7 +323,7 @@ class _Replayer:
         self.t_first = t_first
         self.win = (t_first + t_from, t_first + t_to)
         self.markers = markers
-        self.phase = "wait_heartbeat"  # -> before_origin -> origin -> streaming
+        self.phase = "wait_heartbeat"  # -> before_origin -> origin -> streaming (<-> halted)
         self.flavour = Flavour.UNKNOWN
         self.vehicle_compid = 1
         self.origin = "never"
@@ -481,6 +483,11 @@ class _Replayer:
                 self.s0 = self.ctl.init_s(value)
             elif key == "stream":
                 self.phase = "streaming"
+            elif key == "halt":
+                # the bridge stopped stepping (a loss with re-engagement configured): so does
+                # the replay, and what it computed since the last command was never to be sent
+                self.phase = "halted"
+                self._pending, self._pending_since_match = None, 0
             return
         if mtype != _SAT:
             return

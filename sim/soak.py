@@ -838,14 +838,16 @@ def _pick(d: dict[str, int]) -> dict[str, int]:
     return {k: d[k] for k in keys if d.get(k)}
 
 
-def _blackout(o: Opts, name: str, direction: str | None) -> Row:
+def _blackout(o: Opts, name: str, direction: str | None, reengage: bool = False) -> Row:
     """A 2 s blackout during TRACKING: ``direction`` None cuts the whole link, DOWN the
-    telemetry only (commands still reach the vehicle)."""
+    telemetry only (commands still reach the vehicle). ``reengage``: the bridge is configured
+    to fly again once telemetry is back (``mavlink.reengage_max=1``), else it ends."""
     row = Row(name)
-    dur = 20.0 if o.quick else 30.0
+    dur = (30.0 if o.quick else 40.0) if reengage else (20.0 if o.quick else 30.0)
     lim = Limits.for_config("px4")
     b: Blackout | None = None
-    with Mission(MissionSpec.make(o, dur), o.workdir / name) as m:
+    sets = ("mavlink.reengage_max=1",) if reengage else ()
+    with Mission(MissionSpec.make(o, dur, sets=sets), o.workdir / name) as m:
         if row.check(m.wait_engaged(30.0), "never engaged"):
             _track(m, 4.0)
             b = m.relay.blackout(2.0, direction)
@@ -860,24 +862,20 @@ def _blackout(o: Opts, name: str, direction: str | None) -> Row:
     fs = [e.t for e in tap.failsafes() if e.t >= t0]
     reengaged = [e for e in tap.mode_requests() if e.t > t0 and int(e.msg.param2) == 6]
     stop_s = None if last_sent is None else last_sent - t0
+    mt = out.metrics
     row.figures.update(
         blackout_s=2.0, direction="both" if direction is None else "telemetry (vehicle -> bridge)",
         commands_stop_after_s=_r(stop_s), vehicle_failsafe_after_last_command_s=_r(fs[0] - last_deliv if fs and last_deliv else None),
         vehicle_left_offboard_after_last_command_s=_r(t_out - last_deliv if t_out and last_deliv else None),
-        vehicle_mode_after=tap.mode(), handback_confirmed=out.metrics.get("handback_confirmed"),
-        bridge_after_blackout="re-engaged" if reengaged else "ended (hand-back requested; there is no re-engage option)",
+        vehicle_mode_after=tap.mode(), handback_confirmed=mt.get("handback_confirmed"),
+        configured="re-engage (mavlink.reengage_max=1)" if reengage else "end (mavlink.reengage_max=0)",
+        bridge_after_blackout=(f"re-engaged {reengaged[0].t - b.end_s:.2f} s after the blackout" if reengaged
+                               else "ended (hand-back requested)"),
         setpoints_after_blackout=len(_after(tap.bridge_setpoints, b.end_s)),
     )  # fmt: skip
     row.check(
         stop_s is not None and stop_s <= 0.5 + 0.03,
         f"commands went on {stop_s} s into the blackout",
-    )
-    row.check(
-        out.rc == 4 and "telemetry lost" in out.exit_reason, f"exit {out.rc}: {out.exit_reason}"
-    )
-    row.check(
-        not reengaged and not _after(tap.bridge_setpoints, b.end_s),
-        "the bridge commanded again after the blackout",
     )
     row.check(t_out is not None and last_deliv is not None and t_out - last_deliv <= 1.0 + 0.25,
               "the vehicle did not leave offboard within its 1 s loss timeout")  # fmt: skip
@@ -886,14 +884,52 @@ def _blackout(o: Opts, name: str, direction: str | None) -> Row:
                   "the vehicle's own offboard-loss failsafe did not take over on time")  # fmt: skip
     row.check(tap.mode() == "AUTO.LOITER", f"vehicle ended in {tap.mode()}")
     row.check(
-        out.metrics.get("handback_confirmed") is True,
+        mt.get("handback_confirmed") is True,
         "hand-back to AUTO.LOITER not confirmed after the blackout",
+    )
+    if not reengage:
+        row.check(
+            out.rc == 4 and "telemetry lost" in out.exit_reason, f"exit {out.rc}: {out.exit_reason}"
+        )
+        row.check(
+            not reengaged and not _after(tap.bridge_setpoints, b.end_s),
+            "the bridge commanded again after the blackout",
+        )
+        return row
+    # re-engaged: the mission flies on to its original end and tracks again
+    n_re = (mt.get("counters") or {}).get("reengagements")
+    ts = _timeseries(m.out_dir)
+    last5 = None
+    if ts is not None and ts.size:
+        pt = ts["pt_norm"][ts["t"] >= ts["t"][-1] - 5.0]
+        last5 = math.sqrt(sum(float(v) ** 2 for v in pt) / len(pt))
+    row.figures.update(
+        reengagements=n_re, rms_last_5s_m=_r(last5), final_pt_m=_r(mt.get("final_pt_m"))
+    )
+    row.check(
+        out.rc == 0 and "mission duration" in out.exit_reason, f"exit {out.rc}: {out.exit_reason}"
+    )
+    row.check(
+        n_re == 1 and len(reengaged) == 1, f"{len(reengaged)} OFFBOARD requests after the blackout"
+    )
+    row.check(
+        bool(reengaged) and reengaged[0].t - b.end_s <= 10.0,
+        "not re-engaged within 10 s of the blackout's end",
+    )
+    # the vehicle loitered meanwhile: the re-capture starts tens of metres off, like the first
+    row.check(
+        (mt.get("final_pt_m") or math.inf) < 10.0,
+        f"not tracking after the re-engagement (final |pt| {mt.get('final_pt_m')})",
     )
     return row
 
 
 def scenario_blackout_link(o: Opts) -> Row:
     return _blackout(o, "blackout_link_2s", None)
+
+
+def scenario_blackout_link_reengage(o: Opts) -> Row:
+    return _blackout(o, "blackout_link_2s_reengage", None, reengage=True)
 
 
 def scenario_blackout_telemetry(o: Opts) -> Row:
@@ -1582,6 +1618,7 @@ SCENARIOS: dict[str, Callable[..., Row]] = {
     "loss20_jitter50": scenario_loss_jitter,
     "corrupt5_dup5_reorder5": scenario_corrupt_dup_reorder,
     "blackout_link_2s": scenario_blackout_link,
+    "blackout_link_2s_reengage": scenario_blackout_link_reengage,
     "blackout_telemetry_2s": scenario_blackout_telemetry,
     "target_feed_loss": scenario_target_loss,
     "pilot_mode_change": scenario_pilot,

@@ -201,6 +201,10 @@ class MavPeer:
         with self.lock:
             self.telemetry = False
 
+    def resume_telemetry(self) -> None:
+        with self.lock:
+            self.telemetry = True
+
     def send_as(self, sysid: int, msg: Any) -> None:
         """Send ``msg`` from another system id (a spoofer, or a target)."""
         other = mavlink.MAVLink(self.tr, srcSystem=sysid, srcComponent=1)

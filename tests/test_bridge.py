@@ -208,6 +208,46 @@ def test_telemetry_loss_stops_commands_within_half_a_second(tmp_path):
     assert res.handback_requested
 
 
+def test_reengages_once_telemetry_is_back_and_replays_identically(tmp_path):
+    from mpf_mavlink.replay import TOLERANCE, replay
+
+    port = free_port()
+    peer = MavPeer(PeerOptions(flavour="px4"), port=port).start()
+    cfg = cfg_for("px4", "mavlink.reengage_max=1", "mavlink.reengage_settle_s=0.5")
+    marks: dict[str, float] = {}
+
+    def outage():
+        peer.stop_telemetry()
+        marks["lost"] = time.monotonic()
+        time.sleep(1.5)
+        marks["back"] = time.monotonic()
+        peer.resume_telemetry()
+
+    try:
+        res = fly(cfg, f"udpin:127.0.0.1:{port}", tmp_path, 6.0, _when_offboard_then(peer, outage))
+    finally:
+        peer.stop()
+    assert res.exit_code == 0 and "mission duration" in res.exit_reason, res.exit_reason
+    assert res.counters["reengagements"] == 1 and res.handback_confirmed
+    # OFFBOARD, hand-back to Hold at the loss, OFFBOARD again, hand-back at the mission's end
+    assert [r.msg.param2 for r in mode_requests(peer)] == [6.0, 4.0, 6.0, 4.0]
+    # nothing was commanded from 0.5 s after the loss until telemetry was back
+    gap = [s for s in peer.setpoints if marks["lost"] + 0.52 < s.t < marks["back"]]
+    assert gap == []
+    # the re-engagement pre-streamed >= 1 s before asking for OFFBOARD again
+    again = mode_requests(peer)[2].t
+    pre = [s.t for s in peer.setpoints if marks["back"] < s.t < again]
+    assert pre and pre[-1] - pre[0] >= 1.0
+    # tracking after the re-engagement, until the mission's original end
+    late = [s for s in peer.setpoints if s.t > again and (s.mode >> 16) & 0xFF == 6]
+    assert len(late) >= 25
+    # the tlog replays to the same commands across the halt and the second engagement
+    rp = replay(tmp_path / "mavlink.tlog", cfg, plots=False)
+    c = rp.check
+    assert c.differing == c.unexplained == c.unsent_steps == 0 and c.identical, c.first_difference
+    assert c.compared == res.counters["law_evals"] and c.max_diff <= TOLERANCE
+
+
 def test_pilot_mode_change_stops_commanding_without_fighting(tmp_path):
     port = free_port()
     peer = MavPeer(PeerOptions(flavour="px4"), port=port).start()

@@ -286,6 +286,9 @@ def test_vehicle_serve_answers_a_pymavlink_client():
     proc = subprocess.Popen(
         [sys.executable, "-m", "mpf_mavlink.cli", "vehicle", DEMO, "--serve", f"udpin:127.0.0.1:{port}"],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        # as in a terminal's foreground: a runner started in the background (`cmd &`) passes
+        # SIGINT down ignored, and Python then never turns it into KeyboardInterrupt
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )  # fmt: skip
     c = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255, source_component=190,
                                    dialect="ardupilotmega")  # fmt: skip
