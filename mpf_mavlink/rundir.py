@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -127,12 +128,15 @@ def prepare_out_dir(out: str | Path) -> Path:
     d = Path(out)
     try:
         d.mkdir(parents=True, exist_ok=True)
-        probe = d / ".write-test"
-        with open(probe, "wb") as f:
-            f.write(b"0" * 4096)
-            f.flush()
-            os.fsync(f.fileno())
-        probe.unlink()
+        # a name of its own: another process probing the same directory must not unlink ours
+        fd, probe = tempfile.mkstemp(prefix=".write-test-", dir=d)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(b"0" * 4096)
+                f.flush()
+                os.fsync(f.fileno())
+        finally:
+            os.unlink(probe)
     except OSError as e:
         raise MpfError(f"{d}: output directory is not writable ({e.strerror})") from None
     return d
