@@ -536,7 +536,6 @@ class Bridge:
                     if not self._may_reengage(e):
                         raise
                     self._send_text(HALT_TEXT)  # for replay: control steps stop here
-                    res.exit_reason = e.reason
                     self._handback(res, e.kind)
                     why_not = self._await_reengage(res, e)
                     if why_not is not None:

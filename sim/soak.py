@@ -902,7 +902,7 @@ def _blackout(o: Opts, name: str, direction: str | None, reengage: bool = False)
     last5 = None
     if ts is not None and ts.size:
         pt = ts["pt_norm"][ts["t"] >= ts["t"][-1] - 5.0]
-        last5 = math.sqrt(sum(float(v) ** 2 for v in pt) / len(pt))
+        last5 = math.sqrt(float((pt**2).mean()))
     row.figures.update(
         reengagements=n_re, rms_last_5s_m=_r(last5), final_pt_m=_r(mt.get("final_pt_m"))
     )
