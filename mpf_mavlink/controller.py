@@ -122,6 +122,11 @@ class LiveTarget:
 
     Samples are stamped with the vehicle's mission time at receipt (the sender's clock is not
     the autopilot's) and extrapolated to the control time; older than ``timeout_s``: stale.
+
+    A target that sends both (the SIL boat, PX4's follow-me peers) sends the same instant twice;
+    GLOBAL_POSITION_INT carries no acceleration nor turn rate, so while a FOLLOW_TARGET that
+    carries them is fresh (younger than ``timeout_s``) a GLOBAL_POSITION_INT is ignored: taken,
+    it replaced the state and zeroed the turn rate the feedforward needs.
     """
 
     live = True
@@ -132,6 +137,7 @@ class LiveTarget:
         self.base: TargetState | None = None
         self.att: Any = None
         self.att_stamp = -math.inf
+        self.rich_stamp = -math.inf  # the last FOLLOW_TARGET with acceleration or attitude
         self.samples = 0
 
     def update(self, sample: Any, t_mission: float | None) -> None:
@@ -143,6 +149,8 @@ class LiveTarget:
             return
         if name not in ("FollowTargetSample", "GlobalPositionSample"):
             return
+        if name == "GlobalPositionSample" and t_mission - self.rich_stamp <= self.timeout_s:
+            return  # the richer FOLLOW_TARGET state stands (see the class docstring)
         pos = self.est.to_local(sample.lat_deg, sample.lon_deg, sample.alt_amsl_m)
         if pos is None:
             return
@@ -160,6 +168,8 @@ class LiveTarget:
                     else np.zeros(3)
                 )
             fallback = 0.0
+            if sample.acc_ned is not None or sample.R_B_N is not None:
+                self.rich_stamp = t_mission
         else:
             fallback = sample.heading_rad if sample.heading_rad is not None else 0.0
             if self.att is not None and t_mission - self.att_stamp <= self.timeout_s:
@@ -182,6 +192,7 @@ class LiveTarget:
             self.base = dataclasses.replace(self.base, t=self.base.t - t0)
         # the target's ATTITUDE stamp too: left in the old base it would look fresh for ever
         self.att_stamp -= t0
+        self.rich_stamp -= t0
 
     def state(self, t: float) -> TargetState | str:
         if self.base is None:

@@ -157,6 +157,8 @@ def vehicle_options(cfg: Config, url: str, clock: str | None = None, **over: Any
         loiter_radius=sil.loiter_radius_m, trim_seconds=sil.trim_s, initial_mode=sil.initial_mode, wind_ned=tuple(sil.wind_ned_m_s),
         turbulence=sil.turbulence, seed=sil.seed, gusts=[dataclasses.asdict(g) for g in sil.gusts],
         plant_options=plant_options, autopilot=build_autopilot(cfg), realtime_until_engaged=True,
+        # the bridge's own scripted target counts from its mission origin: so must the world's
+        target_epoch="ready" if sil.target_live else "bridge",
     )  # fmt: skip
     opts.update(over)
     return opts
@@ -551,6 +553,7 @@ def truth_table(
     s_at = np.interp(tm[sel], bt, bs)
     P, V, W = truth["position_ned"], truth["velocity_ned"], truth["wind_ned"]
     tv = truth["t"]
+    tt = truth.get("target_t", tv)  # the target's clock (see SimVehicle target_epoch)
     table = RunTable()
     w1_prev: np.ndarray | None = None
     t_prev = 0.0
@@ -561,7 +564,7 @@ def truth_table(
         R_W = wind_frame(float(va[0]), float(va[1]), float(va[2]))
         t = float(tm[k]) - t_engage
         veh = VehicleState(t, P[k], R_W, float(np.linalg.norm(va)), W[k])
-        tgt = target.state(float(tv[k]))
+        tgt = target.state(float(tt[k]))
         cmd, diag = mpf_law(float(s_at[j]), veh, tgt, path, gains, ext, diagnostics=True)
         w1 = R_W[:, 0]
         w_act = (0.0, 0.0)

@@ -50,7 +50,12 @@ and incoming messages can be delayed by a fixed amount of SIM time (delay queues
 The target is its own MAVLink system (default 2/1): HEARTBEAT (MAV_TYPE_GROUND_ROVER or
 SURFACE_BOAT, autopilot MAV_AUTOPILOT_INVALID) at 1 Hz, FOLLOW_TARGET (est_capabilities 15) and
 GLOBAL_POSITION_INT at ``target_rate_hz``; position from ``target.state(t)`` in NED about the
-vehicle's geodetic origin.
+vehicle's geodetic origin. The target's clock starts when the vehicle is ready
+(``target_epoch="ready"``), or, with ``target_epoch="bridge"``, at the mission origin the bridge
+announces (STATUSTEXT ``MPF t0=<autopilot boot time, s>``): a bridge that flies its own copy of
+a scripted target counts that target's time from its origin, and only that epoch puts the
+simulated target where the bridge believes it is (from the vehicle's readiness it ran ~1 s
+ahead: the bridge takes its origin when its checks pass).
 """
 
 from __future__ import annotations
@@ -234,6 +239,7 @@ class SimVehicle:
         gusts: list[dict] | None = None,
         realtime_until_engaged: bool = False,
         initial_mode: str = "hold",
+        target_epoch: str = "ready",
     ):
         if flavour not in ("px4", "ardupilot"):
             raise ValueError("flavour must be 'px4' or 'ardupilot'")
@@ -318,6 +324,7 @@ class SimVehicle:
             )
         self._k = int(round(plant.t / self.dt))  # physics steps since boot (incl. trim)
         self._k0 = self._k
+        self.target_epoch_boot_s = self._k0 * self.dt
         self._st = plant.state()
         rates_fn = getattr(plant, "rates_airspeed", None)
         self._rates_fn = (
@@ -370,6 +377,10 @@ class SimVehicle:
         self._in: deque[tuple[float, Any]] = deque()
         self._mav = M.MAVLink(_QueueWriter(self), srcSystem=self.sysid, srcComponent=self.compid)
         self.target = target
+        if target_epoch not in ("ready", "bridge"):
+            raise ValueError("target_epoch must be 'ready' or 'bridge'")
+        self._epoch_from_bridge = target_epoch == "bridge"
+        self.target_epoch_boot_s: float | None = None  # boot time (s) of the target's t = 0
         self.target_system = int(target_system)
         self.target_rate_hz = float(target_rate_hz)
         self._tmav = M.MAVLink(
@@ -740,6 +751,10 @@ class SimVehicle:
                 # lockstep: the bridge answered at once in vehicle time, the latency runs
                 # from the ATTITUDE it answers (not from when this process got to read it)
                 due = max(self._boot_t, tw + self.command_latency_s)
+        elif mt == "STATUSTEXT":
+            if self._epoch_from_bridge:
+                self._take_epoch(msg)
+            return
         elif mt not in ("COMMAND_LONG", "COMMAND_INT", "SET_MODE", "TIMESYNC"):
             return
         q = self._in
@@ -747,6 +762,22 @@ class SimVehicle:
         while i > 0 and q[i - 1][0] > due:  # kept in order of due time
             i -= 1
         q.insert(i, (due, msg))
+
+    def _take_epoch(self, msg: Any) -> None:
+        """The bridge's mission origin (``MPF t0=``, autopilot boot s) as the target's t = 0."""
+        from mpf_mavlink.controller import parse_marker
+
+        text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode("ascii", "replace")
+        mk = parse_marker(text)
+        if mk is not None and mk[0] == "t0" and mk[1] is not None:
+            with self._lock:
+                self.target_epoch_boot_s = float(mk[1])
+                self._tgt_rows.clear()  # truth() recomputes them on the new clock
+
+    @property
+    def target_t(self) -> float:
+        """The target's time (s): boot time minus its epoch."""
+        return self._k * self.dt - (self.target_epoch_boot_s or 0.0)
 
     def _apply_due(self) -> None:
         q, t = self._in, self._boot_t + 1e-9
@@ -1036,7 +1067,7 @@ class SimVehicle:
             put(pack(S["system_time"], self.unix0_us + self._us(), ms))
 
     def _send_target(self) -> None:
-        ts = self.target.state(self.t)
+        ts = self.target.state(self.target_t)
         n, e, d = (float(v) for v in ts.position)
         lat, lon, alt = ned_to_geodetic_fast(self.origin, n, e, d)
         q = matrix_to_quat_wxyz(ts.R_T_I)
@@ -1133,19 +1164,22 @@ class SimVehicle:
     def truth(self) -> dict[str, np.ndarray]:
         """Plant truth at frame (telemetry) rate: t (s since ready), time_boot_s, position_ned (N,3),
         velocity_ned (N,3), euler (N,3: roll, pitch, yaw rad), airspeed (N), wind_ned (N,3),
-        throttle (N), mode (N, custom_mode), and target_position / target_velocity (N,3) with a target."""
+        throttle (N), mode (N, custom_mode), target_t (N: the target's clock, s) and
+        target_position / target_velocity (N,3) with a target."""
         with self._lock:
             A = np.array(self._rows, dtype=float).reshape(-1, 17)
             tgt = self._tgt_rows
+            epoch = self.target_epoch_boot_s or 0.0
             if self.target is not None:
-                for t in A[len(tgt) :, 0]:
-                    ts = self.target.state(float(t))
+                for tb in A[len(tgt) :, 1]:
+                    ts = self.target.state(float(tb) - epoch)
                     tgt.append((*ts.position, *ts.velocity))
             T = np.array(tgt, dtype=float).reshape(-1, 6)
         return {
             "t": A[:, 0], "time_boot_s": A[:, 1], "position_ned": A[:, 2:5], "velocity_ned": A[:, 5:8],
             "euler": A[:, 8:11], "airspeed": A[:, 11], "wind_ned": A[:, 12:15], "throttle": A[:, 15],
             "mode": A[:, 16].astype(np.int64), "target_position": T[:, 0:3], "target_velocity": T[:, 3:6],
+            "target_t": A[:, 1] - epoch,
         }  # fmt: skip
 
     def sent_counts(self) -> dict[str, int]:

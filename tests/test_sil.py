@@ -479,3 +479,28 @@ def test_lockstep_and_realtime_track_alike(tmp_path):
         res["lockstep"].metrics["real_time_factor_tracking"] > 2.0
     )  # and lockstep faster than that
     assert res["lockstep"].metrics["vehicle_answered_frames"] > 0.9 * 60 / 0.02  # in lockstep
+
+
+def test_scripted_target_runs_on_the_bridge_clock(tmp_path):
+    # sil.target_live=false: the bridge flies its own copy of the scripted boat, counted from
+    # its mission origin; the simulated boat must be at the same place at the same instant.
+    # Counted from the vehicle's readiness instead, it ran ~1 s (the bridge's start-up and
+    # checks) ahead: ~3 m at the boat's 3 m/s, an error the bridge could not see. Kinematic
+    # plant and 20 s: only the clocks are tested. Both evaluate the same ConstantTurn at times
+    # stamped in ms: 3 m/s x 0.5 ms = 1.5 mm, plus float32 positions in the logs.
+    cfg = load_config(
+        DEMO,
+        [
+            "sil.target_live=false", "sil.plant=kinematic", "sil.turbulence=none",
+            "sim.duration_s=20", "metrics.steady_after_s=5",
+        ],
+    )  # fmt: skip
+    r = run_sil(cfg, tmp_path / "run", progress=False, plots=False, log=lambda s: None)
+    assert r.exit_code == 0, r.exit_reason
+    from mpf_mavlink.rundir import read_run
+
+    bc, _, _ = read_run(r.bridge_dir)
+    t = r.cols["t"] + bc["t"][0]  # truth rows on the bridge's mission clock
+    for c in ("tgt_n", "tgt_e"):
+        b = np.interp(t, bc["t"], bc[c])
+        assert np.max(np.abs(b - r.cols[c])) < 0.01, c
