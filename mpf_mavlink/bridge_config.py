@@ -97,6 +97,13 @@ class MavlinkConfig:
     origin_alt_m: float | None = None
     tlog_fsync_every_s: float | None = field(default=1.0, metadata=_nonneg())
     plots: bool = True
+    # Delay compensation (mpf_mavlink/guidance/predict.py): the law acts on the state predicted
+    # to when its setpoint acts. known_delay_s: the delay (s) from an ATTITUDE sample's time to
+    # the autopilot's receipt of the setpoint that answers it, as known beforehand (serial link,
+    # companion scheduling); the delay measured from the autopilot's ATTITUDE_TARGET echo
+    # replaces it once measured. delay_compensation: false = the law acts on the measured state.
+    delay_compensation: bool = True
+    known_delay_s: float = field(default=0.0, metadata={"check": ("range", 0.0, 0.2)})
 
     def validate(self, cfg: Any, src: str) -> None:
         """Contradictions between keys, found before anything is opened or sent."""

@@ -26,6 +26,7 @@ the tlog as STATUSTEXT (:func:`origin_texts`, :data:`STREAM_TEXT`) for replay to
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import math
 from typing import Any, NamedTuple
@@ -40,7 +41,8 @@ from .adapter import AdapterParams, AdapterState, Setpoint, adapt, safe_setpoint
 from .config import Config
 from .errors import MpfError
 from .estimator import Estimate, Estimator, EstimatorParams
-from .guidance.law import MpfCommand, MpfDiagnostics, mpf_law
+from .guidance.law import MpfCommand, MpfDiagnostics, VehicleState, mpf_law
+from .guidance.predict import predict_segments, prediction_horizon
 from .rundir import row_from
 from .scenario import build_extensions, build_gains, build_path, build_target
 from .target import TargetState
@@ -314,11 +316,48 @@ class Controller:
         self.ad_state = AdapterState()
         self.why_not = ""
         self.law_evals = 0
+        # delay compensation: the ATTITUDE period (s, filtered) and the loop delay (s) in use
+        self.period_s = 0.0
+        self.delay_s = float(getattr(m, "known_delay_s", 0.0))
+        self.tau_s = 0.0  # the prediction horizon of the latest step
+        # body rates sent (PX4 rate setpoints): (mission time of the ATTITUDE answered, p, q, r)
+        self.sent: collections.deque[tuple[float, tuple[float, float, float]]] = collections.deque(
+            maxlen=64
+        )
+        self.rates_pipeline = getattr(m, "flavour", "auto") == "px4"
+        self.delays: collections.deque[float] = collections.deque(maxlen=9)  # measured (s)
 
     # -- feeding ----------------------------------------------------------------------------
     def feed_vehicle(self, sample: Any, rx: float | None) -> bool:
         """A decoded sample of the vehicle; True when it is an ATTITUDE (a control instant)."""
+        if type(sample).__name__ == "AttitudeTargetSample":
+            self._echo(sample)
+            return False
         return self.est.update(sample, rx)
+
+    def _echo(self, sample: Any) -> None:
+        """The autopilot's ATTITUDE_TARGET: when our setpoint reached it. The setpoint is found
+        by its body rates (float32 on the wire) among those sent; the loop delay is the echo's
+        time minus the time of the ATTITUDE that setpoint answered, both on the autopilot's
+        clock. The delay in use is the median of the last 9 (one late echo does not move it)."""
+        t0 = self.est.t0
+        if not self.sent or not math.isfinite(t0):
+            return
+        te = sample.t_boot_s - t0
+        a, b, c = sample.rates_frd
+        for ts, (p, q, r) in reversed(self.sent):
+            if ts > te:
+                continue
+            if (
+                abs(p - a) <= 1e-6 * max(1.0, abs(p))
+                and abs(q - b) <= 1e-6 * max(1.0, abs(q))
+                and abs(r - c) <= 1e-6 * max(1.0, abs(r))
+            ):
+                d = te - ts
+                if 0.0 <= d <= 0.5:  # beyond: not this setpoint's echo, or not a link to mend
+                    self.delays.append(d)
+                    self.delay_s = sorted(self.delays)[len(self.delays) // 2]
+                return
 
     def feed_target(self, sample: Any, rx: float | None) -> None:
         """A decoded sample of the live target (ignored with a scripted target)."""
@@ -407,21 +446,69 @@ class Controller:
             if dt <= 0.0:
                 return None  # duplicate or out-of-order sample: already acted on that instant
             self.s += self.sdot_prev * dt
-        cmd, diag = mpf_law(self.s, vs, tgt, self.path, self.gains, self.ext, diagnostics=True)
+            if dt < 1.0:  # the ATTITUDE period, filtered over ~10 samples (gaps excluded)
+                self.period_s = (
+                    dt if self.period_s == 0.0 else self.period_s + 0.1 * (dt - self.period_s)
+                )
+        # The law acts on the state when its setpoint acts (guidance/predict.py)
+        vl: VehicleState = vs
+        R_B_N = est.R_B_N
+        s_law = self.s
+        tgt_law = tgt
+        tau = 0.0
+        if getattr(self.m, "delay_compensation", False):
+            tau = prediction_horizon(self.delay_s, self.period_s)
+            if tau > 0.0:
+                vl, R_B_N = predict_segments(vs, est.R_B_N, self._segments(t, tau))
+                tp = self.target.state(t + tau)
+                if not isinstance(tp, str):
+                    tgt_law = tp
+                s_law = self.s + self.sdot_prev * tau
+        self.tau_s = tau
+        cmd, diag = mpf_law(s_law, vl, tgt_law, self.path, self.gains, self.ext, diagnostics=True)
         assert diag is not None
+        if tau > 0.0:  # the logs keep the time and virtual point of the sample's own instant
+            diag = diag._replace(t=t, s=self.s)
         self.law_evals += 1
         w10, w11, w12 = vs.R_W_I[:, 0].tolist()
-        w1 = (w10, w11, w12)
+        w1 = (w10, w11, w12)  # measured: the logs' achieved rate
+        w1l = w1 if vl is vs else tuple(vl.R_W_I[:, 0].tolist())
         sp, self.ad_state = adapt(
-            cmd.omega_w1_I, vs.airspeed, est.R_B_N, w1, dt, self.ad_params, self.ad_state
+            cmd.omega_w1_I, vl.airspeed, R_B_N, w1l, dt, self.ad_params, self.ad_state
         )
         if not math.isfinite(cmd.sdot):
             sp = safe_setpoint(self.ad_params)
+        if self.rates_pipeline:
+            self.sent.append((t, sp.body_rates_frd))
         self.t_prev = t
         self.sdot_prev = cmd.sdot if math.isfinite(cmd.sdot) else 0.0
         w1_prev, self.w1_prev = self.w1_prev, w1
         tb_ms = int(round(est.t_boot_s * 1000.0))
         return Step(t, est.t_boot_s, tb_ms, dt, est, tgt, cmd, diag, sp, w1, w1_prev)
+
+    def _segments(self, t: float, tau: float) -> list[tuple[float, Any]]:
+        """The body rates over [t, t + tau]: the PX4 rate setpoints already sent act from
+        their ATTITUDE's time + the loop delay, one period each (the rate loop tracks them);
+        before the first of them and for ArduPlane (attitude setpoints) the measured rates."""
+        est = self.est
+        rates = est.att.rates_frd if est.att is not None else (0.0, 0.0, 0.0)
+        if not self.rates_pipeline or not self.sent:
+            return [(tau, rates)]
+        d = self.delay_s
+        segs: list[tuple[float, Any]] = []
+        now = t
+        end = t + tau
+        for ts, r in self.sent:
+            a = ts + d  # when that setpoint starts acting
+            if a <= now:
+                rates = r  # acting now (the latest that started)
+                continue
+            if a >= end:
+                break
+            segs.append((a - now, rates))
+            now, rates = a, r
+        segs.append((end - now, rates))
+        return segs
 
     def roll(self) -> float:
         """Roll (rad) of the latest ATTITUDE, 0 without one (for the wings-level setpoint)."""

@@ -37,6 +37,7 @@ class TelemetryConfig:
     sys_status_hz: float = field(default=1.0, metadata=_rate())
     system_time_hz: float = field(default=1.0, metadata=_rate())
     heartbeat_hz: float = field(default=1.0, metadata=_rate())
+    attitude_target_hz: float = field(default=10.0, metadata=_rate())  # PX4 flavour only
 
 
 @dataclass(frozen=True)

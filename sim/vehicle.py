@@ -142,19 +142,20 @@ class TelemetryRates:
     sys_status: float = 1.0
     system_time: float = 1.0
     heartbeat: float = 1.0
+    attitude_target: float = 10.0  # PX4 only (its onboard link); ArduPlane does not stream it
 
 
 # Wire formats of the messages the vehicle streams (framed by sim.mavfast, byte-identical to pymavlink).
 _SPEC = {
     name: MsgSpec(getattr(M, f"MAVLink_{name}_message"))
     for name in ("heartbeat", "attitude", "local_position_ned", "global_position_int", "vfr_hud", "wind",
-                 "wind_cov", "home_position", "sys_status", "system_time", "follow_target")
+                 "wind_cov", "home_position", "sys_status", "system_time", "follow_target", "attitude_target")
 }  # fmt: skip
 # A UDP datagram carries several packets (as PX4 does), up to this many bytes.
 _DATAGRAM_MAX = 1400
 # Streams after ATTITUDE within a frame (see SimVehicle._telemetry).
 _STREAM_ORDER = ("heartbeat", "local_position", "global_position", "vfr_hud", "wind", "home_position",
-                 "sys_status", "system_time")  # fmt: skip
+                 "sys_status", "system_time", "attitude_target")  # fmt: skip
 
 # message id -> stream name (for MAV_CMD_SET_MESSAGE_INTERVAL / REQUEST_MESSAGE)
 _STREAM_IDS = {
@@ -842,6 +843,8 @@ class SimVehicle:
                 return
             sp = ("att", (roll, pitch), thrust)
         self._sp = sp
+        # what ATTITUDE_TARGET echoes: PX4 stamps the setpoint when its receiver publishes it
+        self._sp_echo = (self._ms(), msg.type_mask, tuple(msg.q), rates, float(msg.thrust))
         if thr_ignore and self.px4_require_thrust:
             return  # applied if already offboard, but not counted as an offboard signal
         t = self._boot_t
@@ -1065,6 +1068,13 @@ class SimVehicle:
             put(pack(S["sys_status"], s, s, s, 100, 12600, 500, 90, 0, 0, 0, 0, 0, 0, 0, 0, 0))
         elif name == "system_time":
             put(pack(S["system_time"], self.unix0_us + self._us(), ms))
+        elif name == "attitude_target":
+            # PX4's ATTITUDE_TARGET: the setpoint in use, stamped when it was received (a
+            # companion measures its loop delay from it); nothing before the first setpoint
+            echo = getattr(self, "_sp_echo", None)
+            if self.px4 and echo is not None:
+                t_ms, tm, q, rates, thrust = echo
+                put(pack(S["attitude_target"], t_ms, tm, list(q), *rates, thrust))
 
     def _send_target(self) -> None:
         ts = self.target.state(self.target_t)

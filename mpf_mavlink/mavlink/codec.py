@@ -170,6 +170,17 @@ class FollowTargetSample:
     src_system: int = 0
 
 
+@dataclass(frozen=True)
+class AttitudeTargetSample:
+    """ATTITUDE_TARGET (#83): the setpoint the autopilot is using, stamped (PX4) when it
+    received it. The bridge finds its own setpoint in it to measure its loop delay."""
+
+    t_boot_s: float  # s, autopilot time since boot (time_boot_ms / 1000)
+    rates_frd: tuple[float, float, float]  # rad/s, body rate setpoint (p, q, r)
+    thrust: float  # 0..1
+    type_mask: int
+
+
 # ---------------------------------------------------------------------------------------------
 # Decoders (return None on anything non-finite or absurd)
 # ---------------------------------------------------------------------------------------------
@@ -439,6 +450,18 @@ def decode_follow_target(msg: Any) -> FollowTargetSample | None:
     return FollowTargetSample(t, lat, lon, alt, vel_a, acc_a, R, rates_a, _ro(cov), caps, src)
 
 
+def decode_attitude_target(msg: Any) -> AttitudeTargetSample | None:
+    try:
+        t = float(msg.time_boot_ms) * 1e-3
+        rates = (float(msg.body_roll_rate), float(msg.body_pitch_rate), float(msg.body_yaw_rate))
+        thrust, tm = float(msg.thrust), int(msg.type_mask)
+    except (AttributeError, TypeError, ValueError):
+        return None
+    if not _finite(t, thrust, *rates) or max(abs(v) for v in rates) > MAX_RATE_RAD_S:
+        return None
+    return AttitudeTargetSample(t, rates, thrust, tm)
+
+
 _DECODERS: dict[str, Callable[[Any], Any]] = {
     "ATTITUDE": decode_attitude,
     "ATTITUDE_QUATERNION": decode_attitude_quaternion,
@@ -451,6 +474,7 @@ _DECODERS: dict[str, Callable[[Any], Any]] = {
     "HEARTBEAT": decode_heartbeat,
     "COMMAND_ACK": decode_command_ack,
     "FOLLOW_TARGET": decode_follow_target,
+    "ATTITUDE_TARGET": decode_attitude_target,
 }
 DECODED_TYPES = frozenset(_DECODERS)
 

@@ -1,0 +1,81 @@
+"""Delay compensation: the prediction (guidance/predict.py) and the delay the controller measures
+from the autopilot's ATTITUDE_TARGET echo (controller.py)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mpf_mavlink.config import load_config
+from mpf_mavlink.controller import Controller
+from mpf_mavlink.guidance.law import VehicleState
+from mpf_mavlink.guidance.predict import (
+    MAX_PREDICTION_S,
+    predict,
+    predict_segments,
+    prediction_horizon,
+)
+from mpf_mavlink.mavlink.codec import AttitudeTargetSample
+
+DEMO = Path(__file__).resolve().parents[1] / "configs" / "default.yaml"
+
+
+def _level(yaw: float, V: float = 16.0, wind=(0.0, 0.0, 0.0)) -> VehicleState:
+    c, s = math.cos(yaw), math.sin(yaw)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return VehicleState(3.0, np.array([10.0, -5.0, -100.0]), R, V, np.array(wind, float))
+
+
+def test_horizon_is_delay_plus_half_the_period_and_bounded():
+    assert prediction_horizon(0.06, 0.02) == pytest.approx(0.07)
+    assert prediction_horizon(0.02, 0.1) == pytest.approx(0.07)
+    assert prediction_horizon(float("nan"), float("inf")) == 0.0
+    assert prediction_horizon(1.0, 0.02) == MAX_PREDICTION_S
+
+
+def test_level_turn_is_predicted_on_its_arc():
+    """A level turn at yaw rate r: the exact position after tau is on the circle of radius V/r;
+    the midpoint rule's error is V tau (r tau)^2 / 24 (< 1 mm here); heading advances r tau."""
+    V, r, tau = 16.0, 0.5, 0.1
+    vs = _level(0.3, V, wind=(0.0, 4.0, 0.0))
+    vp, R = predict(vs, vs.R_W_I, (0.0, 0.0, r), tau)
+    chord = 2.0 * V / r * math.sin(0.5 * r * tau)
+    h = 0.3 + 0.5 * r * tau
+    want = vs.position + np.array([chord * math.cos(h), chord * math.sin(h), 0.0])
+    want[1] += 4.0 * tau  # the wind carries it
+    assert np.linalg.norm(vp.position - want) < V * tau * (r * tau) ** 2 / 24 + 1e-9
+    assert math.atan2(vp.R_W_I[1, 0], vp.R_W_I[0, 0]) == pytest.approx(0.3 + r * tau, abs=1e-12)
+    assert math.atan2(R[1, 0], R[0, 0]) == pytest.approx(0.3 + r * tau, abs=1e-12)
+    assert vp.t == pytest.approx(vs.t + tau)
+
+
+def test_segments_compose_like_one_turn():
+    """Two segments at the same rates give the single segment's prediction."""
+    vs = _level(-1.0)
+    a = predict(vs, vs.R_W_I, (0.2, 0.1, 0.4), 0.08)
+    b = predict_segments(vs, vs.R_W_I, [(0.03, (0.2, 0.1, 0.4)), (0.05, (0.2, 0.1, 0.4))])
+    np.testing.assert_allclose(a[1], b[1], atol=1e-12)
+    np.testing.assert_allclose(a[0].R_W_I, b[0].R_W_I, atol=1e-12)
+    # positions differ only by the midpoint rule's second-order term
+    assert np.linalg.norm(a[0].position - b[0].position) < 1e-3
+
+
+def test_loop_delay_is_measured_from_the_attitude_target_echo():
+    """The echo carries our body rates as float32 and the autopilot's receive time: the delay is
+    that time minus the ATTITUDE time the setpoint answered (median of the last 9)."""
+    ctl = Controller(load_config(DEMO))
+    assert ctl.delay_s == 0.0  # mavlink.known_delay_s until measured
+    ctl.est.t0 = 100.0
+    for k in range(12):
+        ctl.sent.append((1.0 + 0.02 * k, (0.1 + 0.01 * k, -0.2, 0.3)))
+    for k in range(12):
+        rates = tuple(float(np.float32(v)) for v in (0.1 + 0.01 * k, -0.2, 0.3))
+        late = 0.065 if k != 5 else 0.4  # one late echo does not move the median
+        ctl.feed_vehicle(AttitudeTargetSample(101.0 + 0.02 * k + late, rates, 0.3, 128), None)
+    assert ctl.delay_s == pytest.approx(0.065, abs=1e-9)
+    # an echo of rates never sent is no measurement
+    ctl.feed_vehicle(AttitudeTargetSample(102.0, (9.0, 9.0, 9.0), 0.3, 128), None)
+    assert ctl.delay_s == pytest.approx(0.065, abs=1e-9)
