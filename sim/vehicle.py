@@ -198,6 +198,9 @@ class SimVehicle:
     :meth:`poll` in between if you like) or :meth:`start_in_thread` / :meth:`stop`.
     """
 
+    #: boot time (s) of the target's t = 0: the vehicle's readiness, or the bridge's origin
+    target_epoch_boot_s: float | None = None
+
     def __init__(
         self,
         flavour: str = "px4",
@@ -381,7 +384,6 @@ class SimVehicle:
         if target_epoch not in ("ready", "bridge"):
             raise ValueError("target_epoch must be 'ready' or 'bridge'")
         self._epoch_from_bridge = target_epoch == "bridge"
-        self.target_epoch_boot_s: float | None = None  # boot time (s) of the target's t = 0
         self.target_system = int(target_system)
         self.target_rate_hz = float(target_rate_hz)
         self._tmav = M.MAVLink(
