@@ -374,7 +374,7 @@ def apply_override(raw: dict[str, Any], spec: str, src: str = "--set") -> None:
 def _register_sections() -> None:
     """Import the modules that register the bridge's and the SIL vehicle's sections, so every
     configuration accepts (and strictly checks) them whoever loads it."""
-    from . import bridge_config, sil_config  # noqa: F401
+    from . import bridge_config, sil_config, target_config  # noqa: F401
 
 
 def config_from_dict(raw: dict[str, Any], src: str = "<config>") -> Any:

@@ -36,6 +36,7 @@ import numpy as np
 from . import (
     bridge_config,  # noqa: F401  (registers the mavlink/adapter sections)
     so3,
+    target_config,  # noqa: F401  (registers the target_estimator section)
 )
 from .adapter import AdapterParams, AdapterState, Setpoint, adapt, safe_setpoint
 from .config import Config
@@ -46,6 +47,7 @@ from .guidance.predict import predict_segments, prediction_horizon
 from .rundir import row_from
 from .scenario import build_extensions, build_gains, build_path, build_target
 from .target import TargetState
+from .target_filter import Report, TargetEstimator, TargetFilterParams
 
 # ----------------------------------------------------------------------------- tlog markers
 #: STATUSTEXT texts (MAVLink 2, <= 50 characters, severity INFO) the bridge sends, from its own
@@ -119,8 +121,9 @@ def _heading_frame(
     return so3.rot_z(yaw), np.array([0.0, 0.0, chid])
 
 
-class LiveTarget:
-    """A target over MAVLink: FOLLOW_TARGET, or GLOBAL_POSITION_INT (+ ATTITUDE) from one id.
+class ExtrapolatedTarget:
+    """The live target before the estimator (``target_estimator.mode: last_sample``): the latest
+    FOLLOW_TARGET, or GLOBAL_POSITION_INT (+ ATTITUDE), from one id, extrapolated.
 
     Samples are stamped with the vehicle's mission time at receipt (the sender's clock is not
     the autopilot's) and extrapolated to the control time; older than ``timeout_s``: stale.
@@ -203,6 +206,70 @@ class LiveTarget:
         if age > self.timeout_s:
             return f"live target stale ({age:.2f} s old)"
         return self.base.extrapolate(t)
+
+
+def _turn_and_yaw(R: Any, rates: Any) -> tuple[float, float]:
+    """Turn rate (rad/s, about down: the NED z component of the body angular velocity) and
+    yaw (rad) of an attitude R_B^N with body rates (FRD, rad/s)."""
+    Ra = np.asarray(R, float)
+    w = Ra @ np.asarray(rates, float)
+    return float(w[2]), math.atan2(float(Ra[1, 0]), float(Ra[0, 0]))
+
+
+class LiveTarget:
+    """A target over MAVLink through the target estimator (:mod:`mpf_mavlink.target_filter`).
+
+    FOLLOW_TARGET, GLOBAL_POSITION_INT and ATTITUDE from the target's system become reports
+    stamped with their own timestamps (the sender's clock); ``update`` passes the receive time
+    in mission time for the clock offset. Positions about the estimator's geodetic origin; a
+    FOLLOW_TARGET's ``position_cov`` (m^2) replaces the configured position noise when all three
+    are > 0; its acceleration is not used. The estimate's staleness comes from its uncertainty.
+    """
+
+    live = True
+
+    def __init__(self, est: Estimator, params: TargetFilterParams) -> None:
+        self.est = est
+        self.kf = TargetEstimator(params)
+        self.samples = 0
+        self.last_outcome = ""
+
+    def report(self, sample: Any) -> Report | None:
+        """The estimator's report of a decoded sample (None: nothing it can use)."""
+        name = type(sample).__name__
+        if name == "AttitudeSample":
+            turn, yaw = _turn_and_yaw(sample.R_B_N, sample.rates_frd)
+            return Report(float(sample.t_boot_s), turn_rate=turn, yaw=yaw)
+        if name not in ("FollowTargetSample", "GlobalPositionSample"):
+            return None
+        pos = self.est.to_local(sample.lat_deg, sample.lon_deg, sample.alt_amsl_m)
+        if pos is None:
+            return None
+        vel = None if sample.vel_ned is None else np.asarray(sample.vel_ned, float)
+        if name == "GlobalPositionSample":
+            return Report(float(sample.t_boot_s), pos, vel, yaw=sample.heading_rad)
+        turn_yaw: tuple[float | None, float | None] = (None, None)
+        if sample.R_B_N is not None and sample.rates_frd is not None:
+            turn_yaw = _turn_and_yaw(sample.R_B_N, sample.rates_frd)
+        cov = np.asarray(sample.position_cov, float)
+        pos_var = cov if cov.shape == (3,) and bool(np.all(cov > 0.0)) else None
+        return Report(float(sample.t_s), pos, vel, turn_yaw[0], turn_yaw[1], pos_var)
+
+    def update(self, sample: Any, t_mission: float | None) -> None:
+        if t_mission is None:
+            return
+        r = self.report(sample)
+        if r is None:
+            return
+        self.samples += 1
+        self.last_outcome = self.kf.add(r, t_mission)
+
+    def restamp(self, t0: float) -> None:
+        """Move the receive times into the mission time base that starts at boot time t0 (s)."""
+        self.kf.shift_time_base(t0)
+
+    def state(self, t: float) -> TargetState | str:
+        return self.kf.state(t)
 
 
 # ----------------------------------------------------------------------------- one step
@@ -300,10 +367,13 @@ class Controller:
         self.live = cfg.target.type == "mavlink"
         if self.live and m.target_sysid is None:
             raise MpfError(f"{cfg.source}: target.type mavlink needs mavlink.target_sysid")
+        te = cfg.section("target_estimator")
         self.target: Any = (
-            LiveTarget(self.est, m.target_timeout_s)
-            if self.live
-            else ScriptedTarget(build_target(cfg.target))
+            ScriptedTarget(build_target(cfg.target))
+            if not self.live
+            else LiveTarget(self.est, te.params())
+            if te.mode == "filter"
+            else ExtrapolatedTarget(self.est, m.target_timeout_s)
         )
         self.path = build_path(cfg.path)
         self.gains = build_gains(cfg)
@@ -521,6 +591,7 @@ class Controller:
 
 __all__ = [
     "Controller",
+    "ExtrapolatedTarget",
     "LiveTarget",
     "ScriptedTarget",
     "Step",

@@ -55,6 +55,41 @@ class GustEventConfig:
 
 
 @dataclass(frozen=True)
+class OutageConfig:
+    """A window of the target feed with no report: ``start_s`` (target time, s), ``duration_s``."""
+
+    start_s: float = field(default=0.0, metadata=_nonneg())
+    duration_s: float = field(default=5.0, metadata=_pos())
+
+
+@dataclass(frozen=True)
+class TargetFeedConfig:
+    """The simulated target reports itself as a real one does (``sim/target_feed.py``): every
+    ``1 / rate_hz`` s, white noise on the position (``position_noise_m`` per horizontal axis,
+    ``vertical_noise_m``, None: the same), the velocity and the turn rate, stamped with its own
+    clock (the vehicle's boot clock + ``clock_offset_s``), lost with probability ``dropout`` in
+    bursts of ``dropout_burst`` reports on average (and during ``outages``), delivered
+    ``latency_s + U(0, latency_jitter_s)`` later (a jitter above the period reorders reports).
+    ``attitude``: FOLLOW_TARGET carries attitude and rates (and ATTITUDE follows each
+    GLOBAL_POSITION_INT); ``messages``: which messages carry the fix. ``seed``: the feed's own."""
+
+    rate_hz: float = field(default=1.0, metadata={"check": ("range", 0.05, 50.0)})
+    position_noise_m: float = field(default=0.0, metadata=_nonneg())
+    vertical_noise_m: float | None = field(default=None, metadata=_nonneg())
+    velocity_noise_m_s: float = field(default=0.0, metadata=_nonneg())
+    turn_rate_noise_rad_s: float = field(default=0.0, metadata=_nonneg())
+    latency_s: float = field(default=0.0, metadata=_nonneg())
+    latency_jitter_s: float = field(default=0.0, metadata=_nonneg())
+    dropout: float = field(default=0.0, metadata={"check": ("range", 0.0, 0.95)})
+    dropout_burst: float = field(default=1.0, metadata={"check": ("ge", 1.0)})
+    outages: list[OutageConfig] = field(default_factory=list)
+    attitude: bool = False
+    messages: Literal["both", "follow_target", "global_position_int"] = "both"
+    clock_offset_s: float = field(default=0.0, metadata=_nonneg())
+    seed: int = 0
+
+
+@dataclass(frozen=True)
 class SilConfig:
     """The simulated vehicle behind its MAVLink endpoint, and how ``mpf-mavlink sim`` links it.
 
@@ -67,7 +102,8 @@ class SilConfig:
       control) or ``realtime`` (paced to ``realtime_speed`` x the wall clock).
     target_live: the bridge takes the moving target from the vehicle's MAVLink stream (the
       target is its own system ``target_system``: FOLLOW_TARGET + GLOBAL_POSITION_INT at
-      ``target_rate_hz``) instead of its own copy of the scripted motion.
+      ``target_rate_hz``) instead of its own copy of the scripted motion; ``target_feed``: a
+      realistic feed instead (rate, noise, latency, drop-outs; :class:`TargetFeedConfig`).
     Starting state: trimmed level flight at ``initial_position_ned_m`` with heading
     ``initial_heading_rad`` (None: ``kinematic.initial_position_ned_m`` and the yaw of
     ``kinematic.initial_attitude_rpy_rad``, the state ``check`` uses), after ``trim_s`` of flight,
@@ -94,6 +130,7 @@ class SilConfig:
     target_live: bool = True
     target_system: int = field(default=2, metadata={"check": ("range", 2, 255)})
     target_rate_hz: float = field(default=10.0, metadata=_pos())
+    target_feed: TargetFeedConfig | None = None
     target_type: Literal["rover", "boat"] = (
         "rover"  # its HEARTBEAT type (ground rover / surface boat)
     )
@@ -128,6 +165,8 @@ class SilConfig:
                 "target.type",
                 "the SIL vehicle publishes the scripted target: use stationary, constant_turn or paper",
             )
+        if self.target_feed is not None and not self.target_live:
+            raise _fail(src, "sil.target_feed", "needs sil.target_live: true")
         m = cfg.extra.get("mavlink")
         if m is not None and m.flavour not in ("auto", self.flavour):
             raise _fail(

@@ -159,6 +159,7 @@ def vehicle_options(cfg: Config, url: str, clock: str | None = None, **over: Any
         plant_options=plant_options, autopilot=build_autopilot(cfg), realtime_until_engaged=True,
         # the bridge's own scripted target counts from its mission origin: so must the world's
         target_epoch="ready" if sil.target_live else "bridge",
+        target_feed=None if sil.target_feed is None else dataclasses.asdict(sil.target_feed),
     )  # fmt: skip
     opts.update(over)
     return opts

@@ -244,6 +244,7 @@ class SimVehicle:
         realtime_until_engaged: bool = False,
         initial_mode: str = "hold",
         target_epoch: str = "ready",
+        target_feed: dict | None = None,
     ):
         if flavour not in ("px4", "ardupilot"):
             raise ValueError("flavour must be 'px4' or 'ardupilot'")
@@ -390,6 +391,14 @@ class SimVehicle:
             _QueueWriter(self), srcSystem=self.target_system, srcComponent=int(target_component)
         )
         self._fp, self._ftp = FastPacker(self._mav), FastPacker(self._tmav)
+        # a realistic feed (sim/target_feed.py) instead of the exact state at target_rate_hz
+        self.target_feed = None
+        if target_feed is not None and target is not None:
+            from .target_feed import feed_from_options
+
+            self.target_feed = feed_from_options(
+                target, self._tmav, ned_to_geodetic_fast, plant.origin, target_feed
+            )
         # plain UDP links are read datagram by datagram (setpoints decoded without pymavlink)
         self._udp = type(self.conn).__name__ == "mavudp"
         self._target_type = (
@@ -1012,7 +1021,10 @@ class SimVehicle:
             if self._due("target_heartbeat", 1.0):
                 self._put(self._ftp.pack(_SPEC["heartbeat"], self._target_type, M.MAV_AUTOPILOT_INVALID, 0, 0,
                                          M.MAV_STATE_ACTIVE, 3))  # fmt: skip
-            if self._due("target", self.target_rate_hz):
+            if self.target_feed is not None:
+                for buf in self.target_feed.poll(self._k * self.dt, self.target_t):
+                    self._put(buf)
+            elif self._due("target", self.target_rate_hz):
                 self._send_target()
 
     def _send_attitude(self, att: tuple[float, float, float, float, float, float]) -> None:

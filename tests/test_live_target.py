@@ -1,4 +1,4 @@
-"""The bridge's live target (FOLLOW_TARGET / GLOBAL_POSITION_INT from one system).
+"""The bridge's live target before the estimator (target_estimator.mode: last_sample: FOLLOW_TARGET / GLOBAL_POSITION_INT from one system, extrapolated).
 
 The messages are real MAVLink frames (pymavlink's encoder, the bridge's decoder), built from the
 scripted boat of the demo as the SIL vehicle sends them.
@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from mpf_mavlink.controller import LiveTarget
+from mpf_mavlink.controller import ExtrapolatedTarget as LiveTarget
 from mpf_mavlink.estimator import Estimator, EstimatorParams
 from mpf_mavlink.frames import matrix_to_quat_wxyz, ned_to_geodetic
 from mpf_mavlink.mavlink import dialect
