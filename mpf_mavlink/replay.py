@@ -663,6 +663,9 @@ def replay(
             "first_difference": c.first_difference,
         },
     }  # fmt: skip
+    kf = getattr(rp.ctl.target, "kf", None)  # the live target's estimator: what became of reports
+    if kf is not None:
+        metrics["replay"]["target_estimator"] = dict(kf.counts)
     if out is not None:
         # setpoints first: the plots draw them too
         np.savetxt(

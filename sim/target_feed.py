@@ -131,7 +131,9 @@ class TargetFeed:
             bufs.append(mav.global_position_int_encode(
                 ms, lat7, lon7, int(round(alt * 1000)), int(round((alt - alt0) * 1000)),
                 int(round(vel[0] * 100)), int(round(vel[1] * 100)), int(round(vel[2] * 100)),
-                int(round(math.degrees(yaw) * 100)) % 36000).pack(mav))  # fmt: skip
+                # a GPS-only reporter has no heading: UINT16_MAX (unknown)
+                int(round(math.degrees(yaw) * 100)) % 36000 if self.attitude else 65535,
+            ).pack(mav))  # fmt: skip
             if self.attitude:
                 roll = math.atan2(R[2, 1], R[2, 2])
                 pitch = -math.asin(max(-1.0, min(1.0, R[2, 0])))
