@@ -42,6 +42,7 @@ import math
 import signal
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -71,8 +72,13 @@ from .mavlink import (
     dialect,
     enable_signing,
     encode_arm,
+    encode_do_reposition,
+    encode_get_home_position,
+    encode_request_data_stream,
+    encode_request_message,
     encode_set_attitude_target_quat,
     encode_set_attitude_target_rates,
+    encode_set_message_interval,
     encode_set_mode,
     flavour_from_heartbeat,
     is_offboard,
@@ -86,6 +92,17 @@ from .rundir import COLUMNS, RunTable, compute_metrics, prepare_out_dir, write_r
 
 MAV_CMD_DO_SET_MODE = 176
 MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_CMD_DO_REPOSITION = 192
+# ArduPilot's REQUEST_DATA_STREAM groups (MAV_DATA_STREAM_*) holding the messages we need
+# (libraries/GCS_MAVLink/GCS_MAVLink_Parameters.cpp, STREAM_*_msgs)
+_AP_STREAM_POSITION, _AP_STREAM_EXTRA1, _AP_STREAM_EXTRA2, _AP_STREAM_EXTRA3 = 6, 10, 11, 12
+# PX4 parameters that say what happens when our setpoints stop (read and printed before engaging)
+_PX4_FALLBACK_PARAMS = ("COM_OF_LOSS_T", "COM_OBL_RC_ACT")
+_PX4_OBL_ACTIONS = {
+    0: "Position (loiter at the current position)", 1: "Altitude", 2: "Stabilized",
+    3: "Return", 4: "Land", 5: "Hold (loiter)", 6: "Terminate", 7: "Disarm",
+}  # fmt: skip
 
 
 class State(enum.IntEnum):
@@ -147,6 +164,8 @@ class BridgeResult:
     metrics: dict[str, Any] = field(default_factory=dict)
     out_dir: Path | None = None
     final_state: str = "CONNECTING"  # DONE after a stop or hand-back
+    streams: dict[str, Any] = field(default_factory=dict)  # requested / measured rates (Hz)
+    fallback: str = ""  # what the autopilot does if our setpoints stop
     records_error: str | None = None  # why the run directory could not be written
 
     def summary(self) -> str:
@@ -161,13 +180,16 @@ class BridgeResult:
             f"setpoints sent    {c.get('setpoints_sent', 0)} (re-sent {c.get('setpoints_resent', 0)}, safe {c.get('safe_setpoints', 0)})",
             f"law evaluations   {c.get('law_evals', 0)}",
             f"re-engagements    {c.get('reengagements', 0)}",
+            f"stream rates      {self._streams_line()}",
+            f"fallback          {self.fallback or 'not set'}",
             f"rx/tx packets     {c.get('rx_packets', 0)}/{c.get('tx_packets', 0)}; rejected: "
             f"{c.get('rejected_sysid', 0)} foreign ids, {c.get('rejected_unsigned', 0)} unsigned, "
             f"{c.get('rejected_bad_signature', 0)} bad signatures, {c.get('bad_data', 0)} bad frames",
         ]
         m = self.metrics
         for k, label, unit in (
-            ("convergence_time_s", "convergence time", "s"),
+            ("first_within_s", "first within", "s"),
+            ("convergence_time_s", "stays within", "s"),
             ("steady_rms_m", "steady RMS |pt|", "m"),
             ("max_rate_cmd_rad_s", "peak rate command", "rad/s"),
             ("final_pt_m", "final |pt|", "m"),
@@ -183,6 +205,16 @@ class BridgeResult:
             what = self.records_error or "run directory written"
             lines.append(f"RECORDS LOST      {lost} tlog records not written; {what}")
         return "\n".join(lines)
+
+    def _streams_line(self) -> str:
+        st = self.streams
+        if not st:
+            return "not requested"
+        parts = [
+            f"{k} {v['requested_hz']:g}->{v['measured_hz']:.1f}"
+            for k, v in st.get("messages", {}).items()
+        ]
+        return f"asked ({st.get('method', '?')}): " + ", ".join(parts) + " Hz"
 
 
 # ----------------------------------------------------------------------------- the bridge
@@ -237,6 +269,9 @@ class Bridge:
         self.t_last: float | None = None
         self.table = RunTable()
         self.sp_rows: list[tuple[float, ...]] = []
+        # arrival times (monotonic s) per message type while the stream rates are measured
+        self._arrivals: dict[str, deque[float]] | None = None
+        self.params: dict[str, float] = {}  # PARAM_VALUE answers (name -> value)
         self.n = {
             "setpoints_sent": 0,
             "setpoints_resent": 0,
@@ -264,6 +299,16 @@ class Bridge:
 
     def _dispatch(self, msg: Any) -> None:
         src = msg.get_srcSystem()
+        if src == self.m.vehicle_sysid:
+            if self._arrivals is not None:
+                self._arrivals.setdefault(msg.get_type(), deque(maxlen=400)).append(
+                    time.monotonic()
+                )
+            if msg.get_type() == "PARAM_VALUE":
+                name = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else ""
+                if math.isfinite(msg.param_value):
+                    self.params[name] = float(msg.param_value)
+                return
         rx = self._rx_time(msg)
         msg._timestamp = rx  # decoders copy it into the samples (VFR_HUD, WIND, HEARTBEAT)
         sample = decode(msg)
@@ -517,6 +562,26 @@ class Bridge:
             self.log(
                 f"heartbeat from system {m.vehicle_sysid}: {want.value}, mode {self._mode_str()}"
             )
+            if m.request_streams:
+                why = self._negotiate_streams(res)
+                if why is not None:
+                    res.exit_reason = f"refused to engage: {why}"
+                    res.exit_code = EXIT_CHECK
+                    self.log(res.exit_reason)
+                    return self._finish(res)
+            need_home = self.live or (self.flavour is Flavour.ARDUPILOT and m.set_fallback)
+            if need_home and self.est.geodetic_origin() is None:
+                if not self._await_home() and self.live:
+                    res.exit_reason = (
+                        f"refused to engage: no HOME_POSITION within {m.home_timeout_s:g} s "
+                        "(the live target is placed about it; or set mavlink.origin_*)"
+                    )
+                    res.exit_code = EXIT_CHECK
+                    self.log(res.exit_reason)
+                    return self._finish(res)
+            if self.flavour is Flavour.PX4 and m.set_fallback:
+                res.fallback = self._px4_fallback()
+                self.log(f"fallback if the bridge dies: {res.fallback}")
             # wait for a complete state (and the live target) before checking anything
             ok = self._spin(m.heartbeat_timeout_s, self._ready)
             if not ok:
@@ -625,6 +690,8 @@ class Bridge:
             raise _Stop(f"vehicle did not enter {mode}: {why}", "engage")
         self.engaged = True
         res.engaged = True
+        if self.flavour is Flavour.ARDUPILOT and m.set_fallback and not self.n["reengagements"]:
+            self._set_set_fallback(res)
         if self.t_engage is None:  # a re-engagement keeps the mission's end
             self.t_engage = self.t_last if self.t_last is not None else 0.0
         self._set_state(State.TRACKING)
@@ -638,6 +705,205 @@ class Bridge:
         gc.collect()
         gc.freeze()
         self._spin(math.inf)
+
+    # -- streams, home, fallback ----------------------------------------------------------------
+    def _stream_plan(self) -> list[tuple[str, int, float, float]]:
+        """(message, id, requested Hz, minimum Hz) of what the loop needs."""
+        m = self.m
+        d = dialect
+        wind = ("WIND", d.MAVLINK_MSG_ID_WIND) if self.flavour is Flavour.ARDUPILOT else (
+            "WIND_COV", d.MAVLINK_MSG_ID_WIND_COV)  # fmt: skip
+        plan = [
+            ("ATTITUDE", d.MAVLINK_MSG_ID_ATTITUDE, m.attitude_rate_hz, m.attitude_min_hz),
+            ("LOCAL_POSITION_NED", d.MAVLINK_MSG_ID_LOCAL_POSITION_NED, m.position_rate_hz, m.position_min_hz),
+            # the geodetic anchor (and the position when LOCAL_POSITION_NED is not streamed)
+            ("GLOBAL_POSITION_INT", d.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, min(m.position_rate_hz, 10.0), 0.0),
+            ("VFR_HUD", d.MAVLINK_MSG_ID_VFR_HUD, m.airspeed_rate_hz, m.airspeed_min_hz),
+        ]  # fmt: skip
+        if m.wind_rate_hz > 0:
+            plan.append((wind[0], wind[1], m.wind_rate_hz, 0.0))
+        return plan
+
+    def _measured(self, name: str, window: float, now: float) -> float:
+        q = (self._arrivals or {}).get(name)
+        if not q:
+            return 0.0
+        return sum(1 for t in q if t > now - window) / window
+
+    def _negotiate_streams(self, res: BridgeResult) -> str | None:
+        """Ask for the stream rates the loop needs and verify them; None when reached, else why
+        not (one clause). ArduPlane streams 1 Hz per group on a stock link (SRn defaults), PX4's
+        onboard link streams fast already; both honour MAV_CMD_SET_MESSAGE_INTERVAL, ArduPilot
+        also REQUEST_DATA_STREAM (sent when an interval request is not accepted or not reached
+        within 1.5 s)."""
+        m, mav, sysid, comp = self.m, self.link.mav, self.m.vehicle_sysid, self.vehicle_compid
+        plan = self._stream_plan()
+        self._arrivals = {}
+        self.acks.clear()
+        for _name, mid, hz, _ in plan:
+            self._send(encode_set_message_interval(mav, sysid, comp, mid, hz))
+        method = "MAV_CMD_SET_MESSAGE_INTERVAL"
+        t_req = t0 = time.monotonic()
+        window = 1.0
+        fallback_sent = False
+        refused: list[str] = []
+
+        def short(now: float) -> list[str]:
+            out = []
+            for name, _mid, hz, lo in plan:
+                if lo <= 0:
+                    continue
+                got = self._measured(name, window, now)
+                if name == "LOCAL_POSITION_NED":
+                    # a vehicle without a local frame: the global position is the position
+                    got = max(got, self._measured("GLOBAL_POSITION_INT", window, now))
+                if got < lo:
+                    out.append(f"{name} at {got:.1f} Hz (asked {hz:g}, needs >= {lo:g})")
+            return out
+
+        try:
+            while True:
+                self._spin(0.1)
+                now = time.monotonic()
+                for a in self.acks:
+                    if a.command == MAV_CMD_SET_MESSAGE_INTERVAL and not a.accepted:
+                        refused.append(a.result_name)
+                self.acks.clear()
+                if (
+                    self.flavour is Flavour.ARDUPILOT
+                    and not fallback_sent
+                    and (refused or (now - t0 >= 1.5 and short(now)))
+                ):
+                    by_group = {_AP_STREAM_EXTRA1: m.attitude_rate_hz,
+                                _AP_STREAM_POSITION: m.position_rate_hz,
+                                _AP_STREAM_EXTRA2: m.airspeed_rate_hz}  # fmt: skip
+                    if m.wind_rate_hz > 0:
+                        by_group[_AP_STREAM_EXTRA3] = m.wind_rate_hz
+                    for sid, hz in by_group.items():
+                        self._send(
+                            encode_request_data_stream(mav, sysid, comp, sid, int(math.ceil(hz)))
+                        )
+                    method += " + REQUEST_DATA_STREAM"
+                    fallback_sent = True
+                    t_req = now
+                if now - t_req >= window + 0.2 and not short(now):
+                    break
+                if now - t0 >= m.stream_timeout_s:
+                    lacking = short(now)
+                    if lacking:
+                        extra = f"; refused: {', '.join(sorted(set(refused)))}" if refused else ""
+                        return (
+                            f"stream rates not reached within {m.stream_timeout_s:g} s: "
+                            f"{'; '.join(lacking)}{extra}"
+                        )
+                    break
+            now = time.monotonic()
+            res.streams = {
+                "method": method,
+                "messages": {
+                    name: {
+                        "requested_hz": hz,
+                        "min_hz": lo,
+                        "measured_hz": round(self._measured(name, window, now), 2),
+                    }
+                    for name, _mid, hz, lo in plan
+                },  # fmt: skip
+            }
+            self.log(f"stream rates asked ({method}): " + ", ".join(
+                f"{k} {v['requested_hz']:g} Hz (measured {v['measured_hz']:.1f})"
+                for k, v in res.streams["messages"].items()))  # fmt: skip
+            return None
+        finally:
+            self._arrivals = None
+
+    def _await_home(self) -> bool:
+        """Ask for HOME_POSITION (MAV_CMD_REQUEST_MESSAGE, then MAV_CMD_GET_HOME_POSITION for
+        older autopilots) and wait for it; ArduPlane never streams it on its own."""
+        mav, sysid, comp = self.link.mav, self.m.vehicle_sysid, self.vehicle_compid
+        t_end = time.monotonic() + self.m.home_timeout_s
+        k = 0
+        while time.monotonic() < t_end:
+            if k % 2 == 0:
+                self._send(
+                    encode_request_message(mav, sysid, comp, dialect.MAVLINK_MSG_ID_HOME_POSITION)
+                )
+            else:
+                self._send(encode_get_home_position(mav, sysid, comp))
+            k += 1
+            if self._spin(min(1.0, max(0.0, t_end - time.monotonic())),
+                          lambda: self.est.home is not None):  # fmt: skip
+                h = self.est.home
+                self.log(f"home: {h.lat_deg:.7f}, {h.lon_deg:.7f}, {h.alt_amsl_m:.2f} m AMSL")
+                return True
+        self.log(f"no HOME_POSITION within {self.m.home_timeout_s:g} s")
+        return False
+
+    def _px4_fallback(self) -> str:
+        """Read PX4's offboard-loss timeout and action (PARAM_REQUEST_READ) and say what they do."""
+        mav, sysid, comp = self.link.mav, self.m.vehicle_sysid, self.vehicle_compid
+        for name in _PX4_FALLBACK_PARAMS:
+            self._send(mav.param_request_read_encode(sysid, comp, name.encode("ascii"), -1))
+        self._spin(2.0, lambda: all(n in self.params for n in _PX4_FALLBACK_PARAMS))
+        t, act = self.params.get("COM_OF_LOSS_T"), self.params.get("COM_OBL_RC_ACT")
+        if t is None or act is None:
+            return (
+                "PX4 offboard-loss failsafe: COM_OF_LOSS_T / COM_OBL_RC_ACT not answered (unknown)"
+            )
+        what = _PX4_OBL_ACTIONS.get(int(act), f"action {int(act)}")
+        return f"PX4 offboard-loss failsafe after COM_OF_LOSS_T = {t:g} s: COM_OBL_RC_ACT = {int(act)}, {what}"
+
+    def _set_set_fallback(self, res: BridgeResult) -> None:
+        """ArduPlane in GUIDED: make its guided target a loiter about the path's centre at the
+        path's altitude (radius and direction of the path when it is a circle), so that the
+        aircraft circles where the mission was when our setpoints stop (GUIDED_TIMEOUT)."""
+        from .frames import ned_to_geodetic
+
+        o = self.est.geodetic_origin()
+        est, _ = self.est.estimate()
+        if o is None or est is None:
+            res.fallback = "ArduPlane's own GUIDED loiter (no HOME_POSITION: none set by us)"
+            self.log(f"fallback if the bridge dies: {res.fallback}")
+            return
+        tgt = self.target.state(est.vehicle.t)
+        if isinstance(tgt, str):
+            res.fallback = f"ArduPlane's own GUIDED loiter ({tgt})"
+            return
+        pts = self.path.positions()  # in the target frame
+        centre_T = np.asarray(pts, float).mean(axis=0)
+        centre = tgt.position + tgt.R_T_I @ centre_T
+        radius = float(np.max(np.linalg.norm((np.asarray(pts, float) - centre_T)[:, :2], axis=1)))
+        radius = min(max(radius, 50.0), 1000.0)
+        p = self.cfg.path
+        ccw = p.type in ("circle", "helix") and not p.clockwise
+        lat0, lon0, alt0, off = o
+        rel = centre - np.asarray(off, float)
+        lat, lon, alt = ned_to_geodetic(rel, lat0, lon0, alt0)
+        self.acks.clear()
+        try:
+            self._send(encode_do_reposition(
+                self.link.mav, self.m.vehicle_sysid, self.vehicle_compid, lat, lon, alt, radius, ccw))  # fmt: skip
+        except ValueError as e:
+            res.fallback = f"ArduPlane's own GUIDED loiter (reposition not sent: {e})"
+            self.log(f"fallback if the bridge dies: {res.fallback}")
+            return
+        acks: list[Any] = []
+
+        def acked() -> bool:
+            acks.extend(a for a in self.acks if a.command == MAV_CMD_DO_REPOSITION)
+            self.acks.clear()
+            return bool(acks)
+
+        self._spin(1.5, acked)
+        what = (
+            f"ArduPlane GUIDED loiter r = {radius:.0f} m {'CCW' if ccw else 'CW'} about "
+            f"{lat:.7f}, {lon:.7f} at {alt:.1f} m AMSL (the path's centre)"
+        )
+        if acks and acks[0].accepted:
+            res.fallback = what
+        else:
+            why = acks[0].result_name if acks else "no COMMAND_ACK"
+            res.fallback = f"NOT set ({why}): ArduPlane's own GUIDED loiter; asked for {what}"
+        self.log(f"fallback if the bridge dies: {res.fallback}")
 
     def _set_state(self, s: State) -> None:
         self.state = s
@@ -811,6 +1077,7 @@ class Bridge:
         if len(cols["t"]):
             metrics["final_pt_m"] = float(cols["pt_norm"][-1])
         metrics.update(
+            streams=res.streams, fallback=res.fallback,
             state_reached=res.state_reached, exit_reason=res.exit_reason, exit_code=res.exit_code,
             flavour=res.flavour, tracked_s=res.tracked_s, handback_requested=res.handback_requested,
             handback_confirmed=res.handback_confirmed, checks=res.checks, counters=counters,

@@ -104,6 +104,33 @@ class MavlinkConfig:
     # replaces it once measured. delay_compensation: false = the law acts on the measured state.
     delay_compensation: bool = True
     known_delay_s: float = field(default=0.0, metadata={"check": ("range", 0.0, 0.2)})
+    # Stream-rate negotiation before the checks: autopilots stream slowly on most links by
+    # default (ArduPlane: 1 Hz per SRn group), so the bridge asks for what the loop needs
+    # (MAV_CMD_SET_MESSAGE_INTERVAL per message; REQUEST_DATA_STREAM as ArduPilot's fallback),
+    # measures the rates over 1 s and refuses to engage if a *_min_hz is not reached within
+    # stream_timeout_s. Position: LOCAL_POSITION_NED (GLOBAL_POSITION_INT at up to 10 Hz as the
+    # geodetic anchor); airspeed: VFR_HUD; wind: WIND (ArduPilot) / WIND_COV (PX4), optional.
+    request_streams: bool = True
+    # VFR_HUD.airspeed is an equivalent airspeed (ArduPilot EAS, PX4 calibrated): the speed
+    # along w1 is true airspeed, EAS * sqrt(rho0 / rho) at VFR_HUD.alt (ISA)
+    airspeed_is_eas: bool = True
+    attitude_rate_hz: float = field(default=50.0, metadata=_pos())
+    attitude_min_hz: float = field(default=20.0, metadata=_nonneg())
+    position_rate_hz: float = field(default=50.0, metadata=_pos())
+    position_min_hz: float = field(default=10.0, metadata=_nonneg())
+    airspeed_rate_hz: float = field(default=10.0, metadata=_pos())
+    airspeed_min_hz: float = field(default=4.0, metadata=_nonneg())
+    wind_rate_hz: float = field(default=2.0, metadata=_nonneg())
+    stream_timeout_s: float = field(default=5.0, metadata=_pos())
+    # HOME_POSITION is asked for (MAV_CMD_REQUEST_MESSAGE, then MAV_CMD_GET_HOME_POSITION) and
+    # awaited up to this long when a live target or the ArduPlane fallback needs it
+    home_timeout_s: float = field(default=5.0, metadata=_pos())
+    # What the autopilot does if our setpoints stop (the bridge died), chosen and printed before
+    # tracking. ArduPlane: once GUIDED is confirmed, its guided target (MAV_CMD_DO_REPOSITION)
+    # becomes a loiter about the path's centre at the path's altitude, with the path's radius
+    # and direction (flown after GUIDED_TIMEOUT). PX4: COM_OF_LOSS_T and COM_OBL_RC_ACT are read
+    # and printed
+    set_fallback: bool = True
 
     def validate(self, cfg: Any, src: str) -> None:
         """Contradictions between keys, found before anything is opened or sent."""
@@ -133,6 +160,13 @@ class MavlinkConfig:
                 f"required with {', '.join(given)} (the NED origin is lat, lon and AMSL "
                 "altitude; leave all three out to use the vehicle's HOME_POSITION)",
             )
+        for k in ("attitude", "position", "airspeed"):
+            if getattr(self, f"{k}_min_hz") > getattr(self, f"{k}_rate_hz"):
+                raise fail(
+                    f"{k}_min_hz",
+                    f"{getattr(self, f'{k}_min_hz'):g} is above mavlink.{k}_rate_hz "
+                    f"{getattr(self, f'{k}_rate_hz'):g} (the rate asked for)",
+                )
         if self.target_sysid is not None and self.target_sysid == self.vehicle_sysid:
             raise fail(
                 "target_sysid",

@@ -40,6 +40,15 @@ from .frames import geodetic_to_ned, wind_frame_from_velocity
 from .guidance.law import VehicleState
 
 
+def eas_to_tas(alt_amsl_m: float) -> float:
+    """TAS / EAS = sqrt(rho0 / rho) in the ISA troposphere at ``alt_amsl_m`` (m), clamped to
+    [-500, 11000] m. Autopilots report VFR_HUD.airspeed as equivalent (ArduPilot: EAS; PX4:
+    calibrated/indicated, the same at UAV speeds); the law's v_w is the speed along w1, a true
+    airspeed: at 600 m AMSL they differ by 3 %."""
+    h = min(max(alt_amsl_m, -500.0), 11000.0) if math.isfinite(alt_amsl_m) else 0.0
+    return (1.0 - 2.25577e-5 * h) ** -2.127940
+
+
 def _wind_frame_rows(vx: float, vy: float, vz: float) -> tuple[tuple[float, float, float], ...]:
     """The rows of :func:`wind_frame` as tuples (no numpy: the estimator's hot path)."""
     n = math.sqrt(vx * vx + vy * vy + vz * vz)
@@ -185,6 +194,7 @@ class EstimatorParams:
     wind_tau_s: float = 5.0
     min_air_speed: float = 1.0  # m/s: below this w1 falls back to the body x-axis
     origin: tuple[float, float, float] | None = None  # lat deg, lon deg, alt m (AMSL)
+    airspeed_is_eas: bool = True  # VFR_HUD.airspeed is EAS: scaled to TAS (eas_to_tas)
 
 
 @dataclass(frozen=True, eq=False)
@@ -337,6 +347,8 @@ class Estimator:
             or abs(self.att_rx - self.vfr_rx) <= p.airspeed_stale_s
         ):
             airspeed = float(self.vfr.airspeed_m_s)
+            if p.airspeed_is_eas:
+                airspeed *= eas_to_tas(float(self.vfr.alt_amsl_m))
         elif self.vfr is not None:
             return None, f"airspeed stale ({self.att_rx - self.vfr_rx:.2f} s behind the attitude)"  # type: ignore[operator]
         # wind: the autopilot's when fresh, else our low-pass of vg - v_air x_b, started at the

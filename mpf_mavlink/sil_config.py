@@ -26,18 +26,22 @@ def _rate(**kw: Any) -> dict[str, Any]:
 
 @dataclass(frozen=True)
 class TelemetryConfig:
-    """Stream rates of the simulated autopilot (Hz; 0 disables a stream)."""
+    """Stream rates of the simulated autopilot at power-on (Hz; 0 disables a stream; left out:
+    the stock rate of ``sil.flavour`` on a companion's link, ``sim.vehicle.stock_rates``:
+    ArduPlane 1 Hz per stream group and no HOME_POSITION, PX4's onboard link fast). The bridge
+    asks for the rates it needs (MAV_CMD_SET_MESSAGE_INTERVAL / REQUEST_DATA_STREAM), which the
+    vehicle honours, as the real autopilots do."""
 
-    attitude_hz: float = field(default=50.0, metadata=_rate())
-    local_position_hz: float = field(default=50.0, metadata=_rate())
-    global_position_hz: float = field(default=10.0, metadata=_rate())
-    vfr_hud_hz: float = field(default=10.0, metadata=_rate())
-    wind_hz: float = field(default=2.0, metadata=_rate())
-    home_position_hz: float = field(default=1.0, metadata=_rate())
-    sys_status_hz: float = field(default=1.0, metadata=_rate())
-    system_time_hz: float = field(default=1.0, metadata=_rate())
-    heartbeat_hz: float = field(default=1.0, metadata=_rate())
-    attitude_target_hz: float = field(default=10.0, metadata=_rate())  # PX4 flavour only
+    attitude_hz: float | None = field(default=None, metadata=_rate())
+    local_position_hz: float | None = field(default=None, metadata=_rate())
+    global_position_hz: float | None = field(default=None, metadata=_rate())
+    vfr_hud_hz: float | None = field(default=None, metadata=_rate())
+    wind_hz: float | None = field(default=None, metadata=_rate())
+    home_position_hz: float | None = field(default=None, metadata=_rate())
+    sys_status_hz: float | None = field(default=None, metadata=_rate())
+    system_time_hz: float | None = field(default=None, metadata=_rate())
+    heartbeat_hz: float | None = field(default=None, metadata=_rate())
+    attitude_target_hz: float | None = field(default=None, metadata=_rate())  # PX4 flavour only
 
 
 @dataclass(frozen=True)

@@ -131,7 +131,8 @@ def px4_decode_custom_mode(custom_mode: int) -> tuple[int, int]:
 
 @dataclass
 class TelemetryRates:
-    """Stream rates in Hz (0 disables a stream)."""
+    """Stream rates in Hz (0 disables a stream). The defaults are a fast link; a vehicle starts
+    with :func:`stock_rates` of its flavour unless told otherwise."""
 
     attitude: float = 50.0
     local_position: float = 50.0
@@ -143,6 +144,40 @@ class TelemetryRates:
     system_time: float = 1.0
     heartbeat: float = 1.0
     attitude_target: float = 10.0  # PX4 only (its onboard link); ArduPlane does not stream it
+
+
+def stock_rates(flavour: str) -> TelemetryRates:
+    """What the stock autopilot streams on the link a companion computer uses, before anyone
+    asks for more (frames limit everything to 1 / frame_period).
+
+    ArduPlane: every SRn/MAVn stream group at 1 Hz (AP_MAV_DEFAULT_STREAM_RATE_* for Plane in
+    libraries/GCS_MAVLink/GCS_MAVLink_Parameters.cpp): ATTITUDE (EXTRA1), GLOBAL_POSITION_INT +
+    LOCAL_POSITION_NED (POSITION), VFR_HUD (EXTRA2), WIND + SYSTEM_TIME (EXTRA3), SYS_STATUS
+    (EXTENDED_STATUS); HOME_POSITION is not streamed (only sent when asked).
+    PX4: the onboard-mode instance (SITL's offboard link on 14540, ``mavlink start -m onboard``;
+    src/modules/mavlink/mavlink_main.cpp, MAVLINK_MODE_ONBOARD): ATTITUDE 100, LOCAL_POSITION_NED
+    30, GLOBAL_POSITION_INT 50, VFR_HUD 10, WIND_COV 10, HOME_POSITION 0.5, SYS_STATUS 5,
+    SYSTEM_TIME 1, ATTITUDE_TARGET 10 Hz."""
+    if flavour == "ardupilot":
+        return TelemetryRates(1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 0.0)
+    return TelemetryRates(100.0, 30.0, 50.0, 10.0, 10.0, 0.5, 5.0, 1.0, 1.0, 10.0)
+
+
+# ArduPilot's REQUEST_DATA_STREAM groups -> our streams (MAV_DATA_STREAM_*: 0 all, 2 extended
+# status, 6 position, 10 extra1, 11 extra2, 12 extra3)
+_AP_DATA_STREAMS = {
+    2: ("sys_status",),
+    6: ("global_position", "local_position"),
+    10: ("attitude",),
+    11: ("vfr_hud",),
+    12: ("wind", "system_time"),
+}
+
+
+def eas_factor(alt_amsl_m: float) -> float:
+    """EAS / TAS = sqrt(rho / rho0) in the ISA troposphere (what VFR_HUD.airspeed reports)."""
+    h = min(max(alt_amsl_m, -500.0), 11000.0)
+    return (1.0 - 2.25577e-5 * h) ** 2.127940
 
 
 # Wire formats of the messages the vehicle streams (framed by sim.mavfast, byte-identical to pymavlink).
@@ -260,9 +295,21 @@ class SimVehicle:
         self.loiter_direction = 1 if loiter_direction >= 0 else -1
         self.px4_require_thrust = bool(px4_require_thrust)
         self.record = bool(record_truth)
-        if isinstance(rates, dict):
-            rates = TelemetryRates(**rates)
-        self.rates = rates or TelemetryRates()
+        self.stock = stock_rates(flavour)
+        if isinstance(rates, dict):  # None entries: the flavour's stock rate
+            rates = TelemetryRates(
+                **{k: (getattr(self.stock, k) if v is None else v) for k, v in rates.items()}
+            )
+        self.rates = rates or stock_rates(flavour)
+        # ArduPlane's guided fallback (MAV_CMD_DO_REPOSITION in GUIDED): centre, altitude,
+        # radius and direction of the loiter it flies when the attitude setpoints stop
+        self._guided_loiter: tuple[tuple[float, float], float, float, int] | None = None
+        # parameters a companion may read (PX4's offboard-loss failsafe; ArduPlane's timeout)
+        self.params: dict[str, float] = (
+            {"COM_OF_LOSS_T": float(com_of_loss_t), "COM_OBL_RC_ACT": 0.0}
+            if flavour == "px4"
+            else {"GUIDED_TIMEOUT": float(guided_timeout)}
+        )
 
         # ---- plant: start behind the requested point so the trim flight ends about there
         heading = float(heading)
@@ -477,6 +524,7 @@ class SimVehicle:
         self.mode_log.append((self.t if hasattr(self, "_k0") else 0.0, time.perf_counter(), name))
         if behaviour == GUIDED:
             self._forced_t = [None, None, None, None]
+            self._guided_loiter = None  # a new GUIDED entry loiters where it was entered
         if announce:
             self._statustext(M.MAV_SEVERITY_INFO, f"Mode {name}")
 
@@ -549,18 +597,23 @@ class SimVehicle:
         dt, ap, t = self.dt, self.ap, self._boot_t
         ft, fv, to = self._forced_t, self._forced, self.guided_timeout
         fresh = [x is not None and t - x < to for x in ft]
+        gl = self._guided_loiter
+        center, alt_sp, radius, direction = (
+            gl if gl is not None
+            else (self._center, self._alt_sp, self.loiter_radius, self.loiter_direction)
+        )  # fmt: skip
         if fresh[0]:
             roll_sp = fv[0]
         else:
             pos, vel = st.position_ned, st.velocity_ned
-            roll_sp = ap.hold.loiter_roll(self._center, (float(pos[0]), float(pos[1])),
-                                          (float(vel[0]), float(vel[1])), self.loiter_radius,
-                                          self.loiter_direction)  # fmt: skip
+            roll_sp = ap.hold.loiter_roll(center, (float(pos[0]), float(pos[1])),
+                                          (float(vel[0]), float(vel[1])), radius,
+                                          direction)  # fmt: skip
         climb = -float(st.velocity_ned[2])
         _, pitch_tecs, thr_tecs = ap.hold.update(
             dt,
             self.cruise_airspeed,
-            self._alt_sp,
+            alt_sp,
             st.airspeed,
             -float(st.position_ned[2]),
             climb,
@@ -767,7 +820,8 @@ class SimVehicle:
             if self._epoch_from_bridge:
                 self._take_epoch(msg)
             return
-        elif mt not in ("COMMAND_LONG", "COMMAND_INT", "SET_MODE", "TIMESYNC"):
+        elif mt not in ("COMMAND_LONG", "COMMAND_INT", "SET_MODE", "TIMESYNC",
+                        "REQUEST_DATA_STREAM", "PARAM_REQUEST_READ"):  # fmt: skip
             return
         q = self._in
         i = len(q)
@@ -818,6 +872,29 @@ class SimVehicle:
             else:
                 res = self._do_set_mode(float(msg.base_mode), float(msg.custom_mode), 0.0)
                 self._ack(M.MAVLINK_MSG_ID_SET_MODE, res, msg)  # ArduPilot acks with command 11
+        elif mt == "REQUEST_DATA_STREAM":
+            if msg.target_system not in (0, self.sysid) or self.px4:
+                return  # PX4 ignores it (MAV_CMD_SET_MESSAGE_INTERVAL only)
+            hz = float(msg.req_message_rate) if msg.start_stop else 0.0
+            groups = _AP_DATA_STREAMS.values() if msg.req_stream_id == 0 else (
+                [_AP_DATA_STREAMS[msg.req_stream_id]] if msg.req_stream_id in _AP_DATA_STREAMS else [])  # fmt: skip
+            for names in groups:
+                for name in names:
+                    setattr(self.rates, name, hz)
+                    self._next.pop(name, None)
+        elif mt == "PARAM_REQUEST_READ":
+            if msg.target_system not in (0, self.sysid):
+                return
+            pid = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else ""
+            names = list(self.params)
+            if pid in self.params:
+                i = names.index(pid)
+            elif 0 <= msg.param_index < len(names) and not pid:
+                i, pid = msg.param_index, names[msg.param_index]
+            else:
+                return  # both autopilots stay silent about a parameter they do not have
+            self._mav.send(self._mav.param_value_encode(
+                pid.encode("ascii"), self.params[pid], M.MAV_PARAM_TYPE_REAL32, len(names), i))  # fmt: skip
         elif mt == "TIMESYNC" and msg.tc1 == 0:
             self._mav.send(self._mav.timesync_encode(int(self._boot_t * 1e9), msg.ts1))
 
@@ -921,6 +998,8 @@ class SimVehicle:
             else:  # in the air: both autopilots refuse a disarm unless forced
                 res = M.MAV_RESULT_TEMPORARILY_REJECTED if self.px4 else M.MAV_RESULT_FAILED
                 self._ack(cmd, res, msg, "Disarm refused: vehicle is flying (use force 21196)")
+        elif cmd == M.MAV_CMD_DO_REPOSITION and not self.px4 and msg.get_type() == "COMMAND_INT":
+            self._ack(cmd, self._reposition(msg), msg)
         elif cmd == M.MAV_CMD_GET_HOME_POSITION:
             self._ack(cmd, M.MAV_RESULT_ACCEPTED, msg)
             self._send_stream("home_position")
@@ -939,7 +1018,7 @@ class SimVehicle:
             if p2 < 0:
                 hz = 0.0
             elif p2 == 0:
-                hz = getattr(TelemetryRates(), name)
+                hz = getattr(self.stock, name)
             else:
                 hz = 1e6 / p2
             setattr(self.rates, name, hz)
@@ -947,6 +1026,34 @@ class SimVehicle:
             self._ack(cmd, M.MAV_RESULT_ACCEPTED, msg)
         else:
             self._ack(cmd, M.MAV_RESULT_UNSUPPORTED, msg)
+
+    def _reposition(self, msg) -> int:
+        """ArduPlane's MAV_CMD_DO_REPOSITION (COMMAND_INT): in GUIDED (or with the change-mode
+        flag) the guided target becomes a loiter of radius param3 (> 0; else the loiter radius)
+        about (x, y, z), counter-clockwise when param4 is non-zero; the forced attitude stays."""
+        from mpf_mavlink.frames import geodetic_to_ned
+
+        lat, lon = msg.x * 1e-7, msg.y * 1e-7
+        if not (abs(lat) <= 90.0 and abs(lon) <= 180.0) or (msg.x == 0 and msg.y == 0):
+            return M.MAV_RESULT_DENIED
+        alt = float(msg.z)
+        if msg.frame in (M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT):
+            alt += self.home_lla[2]
+        elif msg.frame not in (M.MAV_FRAME_GLOBAL, M.MAV_FRAME_GLOBAL_INT):
+            return M.MAV_RESULT_DENIED
+        if not (int(msg.param2) & 1) and self._behaviour != GUIDED:
+            return M.MAV_RESULT_FAILED
+        if self._behaviour != GUIDED:
+            self._set_ap_mode(ARDUPLANE_NUMBERS["GUIDED"])
+        n, e, d = (float(v) for v in geodetic_to_ned(lat, lon, alt, *self.home_lla))
+        r = (
+            float(msg.param3)
+            if math.isfinite(msg.param3) and msg.param3 > 0
+            else self.loiter_radius
+        )
+        ccw = math.isfinite(msg.param4) and msg.param4 != 0.0
+        self._guided_loiter = ((n, e), -d, r, -1 if ccw else 1)
+        return M.MAV_RESULT_ACCEPTED
 
     def _do_set_mode(self, p1: float, p2: float, p3: float) -> int:
         self._reject_reason = None
@@ -1063,7 +1170,9 @@ class SimVehicle:
         elif name == "vfr_hud":
             v = st.velocity_ned
             hdg = int(round(math.degrees(st.euler[2]))) % 360
-            put(pack(S["vfr_hud"], st.airspeed, math.hypot(v[0], v[1]), hdg, int(round(100 * st.throttle)),
+            # both autopilots report an equivalent airspeed (ArduPilot EAS, PX4 calibrated)
+            eas = st.airspeed * eas_factor(float(st.alt_m))
+            put(pack(S["vfr_hud"], eas, math.hypot(v[0], v[1]), hdg, int(round(100 * st.throttle)),
                      st.alt_m, -float(v[2])))  # fmt: skip
         elif name == "wind":
             wn, we, wd = (float(v) for v in st.wind_ned)

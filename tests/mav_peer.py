@@ -148,6 +148,7 @@ class MavPeer:
         self.truth: list[tuple[int, tuple[float, float, float], tuple[float, float, float]]] = []
         self.setpoints: list[Rx] = []
         self.commands: list[Rx] = []
+        self.data_stream_requests: list[Rx] = []  # REQUEST_DATA_STREAM (never honoured here)
         self.heartbeats_rx: list[Rx] = []
         self.rx_invalid_signature = 0
         self.telemetry = True
@@ -262,6 +263,8 @@ class MavPeer:
                     self.mav.command_ack_send(400, self.o.arm_result)
         elif t == "HEARTBEAT":
             self.heartbeats_rx.append(rx)
+        elif t == "REQUEST_DATA_STREAM":
+            self.data_stream_requests.append(rx)
 
     def _set_mode(self, m: Any, now: float) -> None:
         if self.o.flavour == "px4":

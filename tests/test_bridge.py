@@ -27,7 +27,10 @@ from mpf_mavlink.mavlink import mavutil  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PY = sys.executable
-FAST = ["mavlink.plots=false", "mavlink.heartbeat_timeout_s=3", "mavlink.mode_timeout_s=0.6"]
+# the scripted peer streams at fixed rates and answers no PARAM_REQUEST_READ: stream
+# negotiation and the fallback have tests of their own (test_stream_*, test_fallback_*)
+FAST = ["mavlink.plots=false", "mavlink.heartbeat_timeout_s=3", "mavlink.mode_timeout_s=0.6",
+        "mavlink.request_streams=false", "mavlink.set_fallback=false"]  # fmt: skip
 
 
 def free_port() -> int:
@@ -124,8 +127,8 @@ def test_arduplane_full_lifecycle_over_pty_with_global_position(tmp_path):
     guided = [s.msg for s in peer.setpoints if s.mode == 15]
     assert len(guided) >= 30
     for m in peer.setpoints:
-        # ArduPlane attitude: type_mask 7 (rates ignored; attitude and throttle used)
-        assert m.msg.type_mask == 7
+        # ArduPlane attitude: type_mask 132 (roll, pitch and throttle used; rudder left to ArduPlane)
+        assert m.msg.type_mask == 132
         w, x, y, z = m.msg.q  # MAVLink order (w, x, y, z), unit norm
         assert math.isclose(w * w + x * x + y * y + z * z, 1.0, rel_tol=1e-6)
         # yaw = 0 (rudder neutral): atan2(2(wz + xy), 1 - 2(y^2 + z^2)) == 0
@@ -155,6 +158,53 @@ def test_refuses_to_engage_when_a_check_fails(tmp_path):
     assert "assumption_1" in res.exit_reason
     assert peer.commands == [] and peer.setpoints == []  # never asked for OFFBOARD, never streamed
     assert peer.mode_is("POSCTL")
+
+
+@pytest.mark.parametrize("flavour", ["px4", "ardupilot"])
+def test_stream_rates_not_reached_refuse_to_engage_in_one_line(tmp_path, flavour):
+    """A vehicle that streams 5 Hz and ignores every rate request (the scripted peer): the bridge
+    asks (MAV_CMD_SET_MESSAGE_INTERVAL per message; ArduPilot also REQUEST_DATA_STREAM once the
+    intervals did not take within 1.5 s), measures, and refuses within stream_timeout_s without
+    a mode request. ATTITUDE is needed at >= 20 Hz (one setpoint per sample)."""
+    port = free_port()
+    peer = MavPeer(PeerOptions(flavour=flavour, telemetry_hz=5.0), port=port).start()
+    try:
+        cfg = cfg_for(flavour, "mavlink.request_streams=true", "mavlink.stream_timeout_s=2.5")
+        t0 = time.monotonic()
+        res = fly(cfg, f"udpin:127.0.0.1:{port}", tmp_path, 1.0)
+        took = time.monotonic() - t0
+    finally:
+        peer.stop()
+    assert res.exit_code == 3 and res.state_reached == "WAIT_HEARTBEAT"
+    assert res.exit_reason.startswith("refused to engage: stream rates not reached within 2.5 s")
+    assert "ATTITUDE at 5.0 Hz (asked 50, needs >= 20)" in res.exit_reason
+    assert "\n" not in res.exit_reason and took < 2.5 + 2.0
+    asked = [c.msg for c in peer.commands if c.msg.command == 511]
+    assert {int(c.param1) for c in asked} >= {30, 32, 33, 74}  # ATTITUDE, LOCAL, GLOBAL, VFR_HUD
+    att = next(c for c in asked if int(c.param1) == 30)
+    assert att.param2 == pytest.approx(1e6 / 50.0)  # interval in microseconds
+    if flavour == "ardupilot":
+        groups = {(r.msg.req_stream_id, r.msg.req_message_rate) for r in peer.data_stream_requests}
+        assert {(10, 50), (6, 50), (11, 10), (12, 2)} <= groups
+    else:
+        assert peer.data_stream_requests == []
+    assert not [c for c in peer.commands if c.msg.command == 176]  # never asked for a mode
+
+
+def test_stream_rates_already_fast_are_measured_and_reported(tmp_path):
+    port = free_port()
+    peer = MavPeer(PeerOptions(flavour="px4", telemetry_hz=50.0), port=port).start()
+    try:
+        cfg = cfg_for("px4", "mavlink.request_streams=true")
+        res = fly(cfg, f"udpin:127.0.0.1:{port}", tmp_path, 0.5)
+    finally:
+        peer.stop()
+    assert res.exit_code == 0, res.exit_reason
+    att = res.streams["messages"]["ATTITUDE"]
+    # the peer sends 50 Hz: measured over 1 s within one sample of it
+    assert att["requested_hz"] == 50.0 and 48.0 <= att["measured_hz"] <= 52.0
+    assert res.streams["method"] == "MAV_CMD_SET_MESSAGE_INTERVAL"
+    assert "stream rates      asked (MAV_CMD_SET_MESSAGE_INTERVAL): ATTITUDE 50->" in res.summary()
 
 
 def test_engage_refused_by_vehicle_stops_streaming(tmp_path):
@@ -330,8 +380,8 @@ def test_tlog_survives_sigkill(tmp_path):
     tl = mavutil.mavlink_connection(str(tmp_path / "mavlink.tlog"))
     n = {"SET_ATTITUDE_TARGET": 0, "ATTITUDE": 0, "COMMAND_LONG": 0}
     while (m := tl.recv_match()) is not None:
-        if m.get_type() in n:
-            n[m.get_type()] += 1
+        if m.get_type() in n and (m.get_type() != "COMMAND_LONG" or m.command == 176):
+            n[m.get_type()] += 1  # COMMAND_LONG: the mode requests (not the rate requests)
         assert m._timestamp > 1.6e9  # a real wall-clock record time (s since the epoch)
     # every setpoint the peer got before the kill is in the log (written before sending)
     assert n["SET_ATTITUDE_TARGET"] >= n_sent and n["COMMAND_LONG"] == 1 and n["ATTITUDE"] > 50

@@ -29,7 +29,8 @@ from mpf_mavlink.mavlink import dialect as mavlink  # noqa: E402
 from mpf_mavlink.mavlink import mavutil  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-FAST = ["mavlink.plots=false", "mavlink.heartbeat_timeout_s=3", "mavlink.mode_timeout_s=0.6"]
+FAST = ["mavlink.plots=false", "mavlink.heartbeat_timeout_s=3", "mavlink.mode_timeout_s=0.6",
+        "mavlink.request_streams=false", "mavlink.set_fallback=false"]  # fmt: skip
 ARM, SET_MODE = 400, 176
 
 

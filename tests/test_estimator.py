@@ -74,8 +74,9 @@ class Feed:
         )  # fmt: skip
         self._put(m, rx)
 
-    def vfr(self, airspeed, rx):
-        self._put(mavlink.MAVLink_vfr_hud_message(airspeed, airspeed, 0, 50, 100.0, 0.0), rx)
+    def vfr(self, airspeed, rx, alt=0.0):
+        # at sea level EAS = TAS: the airspeed goes through unscaled
+        self._put(mavlink.MAVLink_vfr_hud_message(airspeed, airspeed, 0, 50, alt, 0.0), rx)
 
     def wind(self, from_deg, speed, speed_z, rx):
         self._put(mavlink.MAVLink_wind_message(from_deg, speed, speed_z), rx)
@@ -576,3 +577,21 @@ def test_target_extrapolation_matches_the_matrix_formulas():
         np.testing.assert_allclose(e.R_T_I, R, atol=1e-13)
         np.testing.assert_allclose(e.omega_T, ts.omega_T + h * ts.omega_dot_T, atol=1e-13)
         assert e.t == t
+
+
+def test_vfr_hud_airspeed_is_equivalent_and_becomes_true_airspeed_aloft():
+    """VFR_HUD.airspeed is EAS (ArduPilot; PX4's calibrated airspeed is the same at UAV speeds);
+    the law's v_w is TAS = EAS sqrt(rho0 / rho). ISA at 1000 m: rho / rho0 = 0.9075 (ICAO
+    standard atmosphere table), so TAS = 20 / sqrt(0.9075) = 20.995 m/s; at sea level 20."""
+    from mpf_mavlink.estimator import eas_to_tas
+
+    assert eas_to_tas(0.0) == 1.0
+    assert eas_to_tas(1000.0) == pytest.approx(1.0 / math.sqrt(0.9075), rel=2e-4)
+    for alt, want, eas in ((1000.0, 20.0 / math.sqrt(0.9075), True), (1000.0, 20.0, False)):
+        f = Feed(EstimatorParams(airspeed_is_eas=eas))
+        f.local(10.0, (0.0, 0.0, -100.0), (20.0, 0.0, 0.0))
+        f.vfr(20.0, rx=10.0, alt=alt)
+        f.att(10.0, rx=10.0)
+        est, why = f.est.estimate()
+        assert est is not None, why
+        assert est.vehicle.airspeed == pytest.approx(want, rel=2e-4)

@@ -323,7 +323,9 @@ def test_encode_rates_refuses_bad_values(args):
 
 def test_encode_quat_normalises_and_refuses():
     m = wire(codec.encode_set_attitude_target_quat(MAV, 1, 1, 1, (2.0, 0.0, 0.0, 0.0), 0.3))
-    assert list(m.q) == [1.0, 0.0, 0.0, 0.0] and m.type_mask == 7
+    assert (
+        list(m.q) == [1.0, 0.0, 0.0, 0.0] and m.type_mask == 132
+    )  # roll+pitch, rudder left to ArduPlane
     for q in [(0, 0, 0, 0), (math.nan, 0, 0, 1), (1, 0, 0)]:
         with pytest.raises(ValueError):
             codec.encode_set_attitude_target_quat(MAV, 1, 1, 1, q, 0.3)

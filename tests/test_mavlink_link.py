@@ -111,9 +111,10 @@ def test_udp_quaternion_order_and_ardupilot_type_mask(udp_pair):
     assert sat.q[0] == pytest.approx(math.cos(math.radians(15)), abs=1e-7)  # 0.9659258 first
     assert sat.q[1] == pytest.approx(math.sin(math.radians(15)), abs=1e-7)  # 0.2588190
     assert sat.q[2] == pytest.approx(0.0, abs=1e-7) and sat.q[3] == pytest.approx(0.0, abs=1e-7)
-    # 7 = the three body-rate ignore bits; 64 (throttle ignore) and 128 (attitude ignore) clear,
-    # so ArduPlane takes roll, pitch, yaw from q and uses the thrust
-    assert sat.type_mask == TYPE_MASK_ARDUPLANE_ATTITUDE == 7
+    # 132 = attitude ignore + yaw-rate ignore, throttle ignore clear: ArduPlane takes roll and
+    # pitch from q (the rate bits pick the angles), leaves the rudder to its own coordinated-turn
+    # output and uses the thrust
+    assert sat.type_mask == TYPE_MASK_ARDUPLANE_ATTITUDE == 132
     assert sat.thrust == pytest.approx(0.45, rel=1e-6)
     # the peer's view of the attitude: roll back to 30 deg through the same frames helper
     roll, pitch, yaw = frames.matrix_to_euler(frames.quat_wxyz_to_matrix(sat.q))
@@ -270,7 +271,7 @@ def test_pty_serial_exchange(tmp_path):
                 if m.get_type() == "SET_ATTITUDE_TARGET":
                     msg = m
         assert msg is not None
-        assert msg.type_mask == 7 and msg.time_boot_ms == 77
+        assert msg.type_mask == 132 and msg.time_boot_ms == 77
         # pitch 5 deg -> q = (cos 2.5deg, 0, sin 2.5deg, 0)
         assert list(msg.q) == pytest.approx(
             [math.cos(math.radians(2.5)), 0.0, math.sin(math.radians(2.5)), 0.0], abs=1e-7

@@ -36,7 +36,8 @@ from mpf_mavlink.replay import TOLERANCE, replay  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_TLOG = Path("/work/shared/data/arduplane-quadplane-sitl-vtol.tlog")
 REPLAY_CFG = ROOT / "configs" / "replay_arduplane_sitl.yaml"
-FAST = ["mavlink.plots=false", "mavlink.heartbeat_timeout_s=3", "mavlink.mode_timeout_s=0.6"]
+FAST = ["mavlink.plots=false", "mavlink.heartbeat_timeout_s=3", "mavlink.mode_timeout_s=0.6",
+        "mavlink.request_streams=false", "mavlink.set_fallback=false"]  # fmt: skip
 RUN_FILES = ("timeseries.csv", "setpoints.csv", "path_T.csv", "metrics.json", "trajectory_3d.png",
              "planar.png", "target_relative.png", "errors.png", "sdot_rates.png", "setpoints.png")  # fmt: skip
 

@@ -346,18 +346,49 @@ def test_follow_target_from_system_2_matches_motion():
 
 # --------------------------------------------------------------------------- timestamps, latency
 def test_telemetry_timestamps_monotonic_in_sim_time(px4):
+    """PX4's onboard link at power-on (MAVLINK_MODE_ONBOARD defaults): ATTITUDE 100 Hz and
+    GLOBAL_POSITION_INT 50 Hz, both capped at one per 20 ms frame; WIND_COV 10 Hz."""
     v, g = px4
     frames(v, g, 100)
     att = [m.time_boot_ms for m in g.of("ATTITUDE")]
     gpi = [m.time_boot_ms for m in g.of("GLOBAL_POSITION_INT")]
     assert len(att) >= 98  # one per 20 ms frame (the first frame may precede the GCS hello)
     assert np.all(np.diff(att) == 20)  # 50 Hz exactly, in sim time
-    assert np.all(np.diff(gpi) == 100)  # 10 Hz
+    assert np.all(np.diff(gpi) == 20)  # 50 Hz
     assert att[-1] == round(v.time_boot_s * 1000)  # stamped with the sim boot clock
-    assert len(g.of("WIND_COV")) == 4  # PX4 streams WIND_COV at 2 Hz: 2 s -> 4
+    assert 19 <= len(g.of("WIND_COV")) <= 20  # 10 Hz: 2 s -> 20 (the first may precede the hello)
     assert len(g.of("WIND")) == 0
     usec = [m.time_usec for m in g.of("WIND_COV")]
-    assert np.all(np.diff(usec) == 500_000)
+    assert np.all(np.diff(usec) == 100_000)
+
+
+def test_arduplane_stock_rates_and_both_rate_requests(ardu):
+    """ArduPlane streams every group at 1 Hz and no HOME_POSITION until asked (SRn defaults);
+    MAV_CMD_SET_MESSAGE_INTERVAL sets one message, REQUEST_DATA_STREAM a group (EXTRA1 =
+    ATTITUDE, POSITION = GLOBAL_POSITION_INT + LOCAL_POSITION_NED), as ArduPilot does."""
+    v, g = ardu
+    frames(v, g, 100)  # 2 s
+    assert 1 <= len(g.of("ATTITUDE")) <= 3 and 1 <= len(g.of("VFR_HUD")) <= 3
+    assert len(g.of("HOME_POSITION")) == 0
+    g.msgs.clear()
+    g.c.mav.command_long_send(1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_VFR_HUD, 100_000, 0, 0, 0, 0, 0)  # fmt: skip
+    g.c.mav.request_data_stream_send(1, 1, 10, 25, 1)  # EXTRA1 at 25 Hz
+    g.c.mav.request_data_stream_send(1, 1, 6, 50, 1)  # POSITION at 50 Hz
+    g.c.mav.command_long_send(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0)  # fmt: skip
+    frames(v, g, 3)
+    assert len(g.of("HOME_POSITION")) == 1  # sent once, on request
+    g.msgs.clear()
+    frames(v, g, 100)  # 2 s at the new rates
+    assert 49 <= len(g.of("ATTITUDE")) <= 51  # 25 Hz
+    assert 99 <= len(g.of("LOCAL_POSITION_NED")) <= 101  # 50 Hz
+    assert 99 <= len(g.of("GLOBAL_POSITION_INT")) <= 101
+    assert 19 <= len(g.of("VFR_HUD")) <= 21  # 10 Hz
+    assert 1 <= len(g.of("WIND")) <= 3  # EXTRA3 untouched: 1 Hz
+    g.c.mav.request_data_stream_send(1, 1, 10, 0, 0)  # stop EXTRA1
+    frames(v, g, 3)
+    g.msgs.clear()
+    frames(v, g, 50)
+    assert len(g.of("ATTITUDE")) == 0
 
 
 def test_telemetry_latency_in_sim_time():

@@ -46,12 +46,21 @@ TM_ATTITUDE_IGNORE = 128
 
 #: PX4 offboard body rates: quaternion ignored, the three rates and thrust used.
 TYPE_MASK_PX4_RATES = TM_ATTITUDE_IGNORE  # 128
-#: ArduPlane GUIDED attitude: quaternion (roll, pitch AND yaw) and thrust used. ArduPlane
-#: inverts the mask and, whenever the attitude bit is clear, takes all three Euler angles;
-#: it never reads the body rates, so we mark them ignored to be honest to other receivers.
-TYPE_MASK_ARDUPLANE_ATTITUDE = (
-    TM_BODY_ROLL_RATE_IGNORE | TM_BODY_PITCH_RATE_IGNORE | TM_BODY_YAW_RATE_IGNORE
-)  # 7
+#: ArduPlane GUIDED attitude: roll and pitch from the quaternion, thrust used, yaw left to
+#: ArduPlane. ArduPlane's handler (ArduPlane/GCS_MAVLink_Plane.cpp,
+#: handle_set_attitude_target) inverts the mask and takes each Euler angle whose rate bit is
+#: clear, or all three when the attitude bit is clear; a forced yaw is written straight to the
+#: rudder (Attitude.cpp, calc_nav_yaw_coordinated), bypassing its yaw damper and rudder mix
+#: (KFF_RDDRMIX), so a yaw of 0 pins the rudder at neutral through every turn. With the
+#: attitude bit set and the yaw-rate bit set (132) roll and pitch are forced and the rudder
+#: stays ArduPlane's own coordinated-turn output, as in its other modes. ArduPlane never reads
+#: the body rates.
+TYPE_MASK_ARDUPLANE_ATTITUDE = TM_ATTITUDE_IGNORE | TM_BODY_YAW_RATE_IGNORE  # 132
+
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_CMD_REQUEST_MESSAGE = 512
+MAV_CMD_GET_HOME_POSITION = 410
+MAV_CMD_DO_REPOSITION = 192
 
 MAV_CMD_DO_SET_MODE = 176
 MAV_CMD_COMPONENT_ARM_DISARM = 400
@@ -550,12 +559,13 @@ def encode_set_attitude_target_quat(
     thrust: float,
     body_rates: Sequence[float] = (0.0, 0.0, 0.0),
 ) -> Any:
-    """ArduPlane GUIDED attitude: SET_ATTITUDE_TARGET, type_mask 7.
+    """ArduPlane GUIDED attitude: SET_ATTITUDE_TARGET, type_mask 132 (see
+    :data:`TYPE_MASK_ARDUPLANE_ATTITUDE`).
 
-    Bit 128 (attitude ignore) clear: ArduPlane takes roll, pitch AND yaw from q (the yaw Euler
-    angle goes straight to the rudder: use yaw = 0 unless you mean it). Bit 64 (throttle ignore)
-    clear: thrust 0..1 is used (only if TRIM_THROTTLE > 1). Bits 1|2|4 set: ArduPlane never reads
-    body rates; ``body_rates`` (rad/s) are carried for logs and other receivers only.
+    ArduPlane takes roll and pitch from q and leaves the rudder to its own coordinated-turn
+    output (the yaw of q is not used). Bit 64 (throttle ignore) clear: thrust 0..1 is used (only
+    if TRIM_THROTTLE > 1). ArduPlane never reads body rates; ``body_rates`` (rad/s) are carried
+    for logs and other receivers only.
     ``q_wxyz`` is (w, x, y, z), R_B^N; it is normalised, and zero/non-finite is refused.
     """
     t_ms = _check_ids(time_boot_ms, target_sys, target_comp)
@@ -627,3 +637,73 @@ def encode_companion_heartbeat(mav: Any, system_status: int | None = None) -> An
     return mav.heartbeat_encode(
         _d.MAV_TYPE_ONBOARD_CONTROLLER, _d.MAV_AUTOPILOT_INVALID, 0, 0, status
     )
+
+
+def encode_set_message_interval(
+    mav: Any, target_sys: int, target_comp: int, msg_id: int, rate_hz: float
+) -> Any:
+    """COMMAND_LONG MAV_CMD_SET_MESSAGE_INTERVAL: param1 message id, param2 interval (us);
+    ``rate_hz`` <= 0 stops the stream (interval -1)."""
+    _check_ids(0, target_sys, target_comp)
+    if not math.isfinite(rate_hz):
+        raise ValueError(f"message rate must be finite, got {rate_hz!r}")
+    interval = -1.0 if rate_hz <= 0 else 1e6 / rate_hz
+    return mav.command_long_encode(
+        target_sys, target_comp, MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+        float(msg_id), interval, 0.0, 0.0, 0.0, 0.0, 0.0,
+    )  # fmt: skip
+
+
+def encode_request_data_stream(
+    mav: Any, target_sys: int, target_comp: int, stream_id: int, rate_hz: int
+) -> Any:
+    """REQUEST_DATA_STREAM (deprecated in common, still ArduPilot's SRn mechanism): one stream
+    group (MAV_DATA_STREAM_*) at ``rate_hz`` (integer Hz, 0 stops it)."""
+    _check_ids(0, target_sys, target_comp)
+    hz = max(0, min(int(round(rate_hz)), 0xFFFF))
+    return mav.request_data_stream_encode(
+        target_sys, target_comp, int(stream_id), hz, 1 if hz else 0
+    )
+
+
+def encode_request_message(mav: Any, target_sys: int, target_comp: int, msg_id: int) -> Any:
+    """COMMAND_LONG MAV_CMD_REQUEST_MESSAGE: param1 the message id, sent once."""
+    _check_ids(0, target_sys, target_comp)
+    return mav.command_long_encode(
+        target_sys, target_comp, MAV_CMD_REQUEST_MESSAGE, 0,
+        float(msg_id), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+    )  # fmt: skip
+
+
+def encode_get_home_position(mav: Any, target_sys: int, target_comp: int) -> Any:
+    """COMMAND_LONG MAV_CMD_GET_HOME_POSITION (older autopilots' way to ask for HOME_POSITION)."""
+    _check_ids(0, target_sys, target_comp)
+    return mav.command_long_encode(
+        target_sys, target_comp, MAV_CMD_GET_HOME_POSITION, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    )
+
+
+def encode_do_reposition(
+    mav: Any,
+    target_sys: int,
+    target_comp: int,
+    lat_deg: float,
+    lon_deg: float,
+    alt_amsl_m: float,
+    radius_m: float,
+    counter_clockwise: bool,
+) -> Any:
+    """COMMAND_INT MAV_CMD_DO_REPOSITION (frame MAV_FRAME_GLOBAL, AMSL): ArduPlane in GUIDED
+    makes it its guided waypoint, a loiter of ``radius_m`` (param3) about it, counter-clockwise
+    when param4 is non-zero (ArduPlane/GCS_MAVLink_Plane.cpp, handle_command_int_do_reposition;
+    in GUIDED it leaves the forced attitude alone)."""
+    _check_ids(0, target_sys, target_comp)
+    if not _geodetic_ok(lat_deg, lon_deg, alt_amsl_m) or not (0.0 < radius_m < 1e5):
+        raise ValueError(
+            f"bad reposition target {lat_deg!r}, {lon_deg!r}, {alt_amsl_m!r} m, radius {radius_m!r} m"
+        )
+    return mav.command_int_encode(
+        target_sys, target_comp, _d.MAV_FRAME_GLOBAL, MAV_CMD_DO_REPOSITION, 0, 0,
+        -1.0, 0.0, float(radius_m), 1.0 if counter_clockwise else 0.0,
+        int(round(lat_deg * 1e7)), int(round(lon_deg * 1e7)), float(alt_amsl_m),
+    )  # fmt: skip
