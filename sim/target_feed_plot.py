@@ -3,7 +3,8 @@
 The demo's boat (configs/default.yaml) reports itself through the SIL's feed
 (:mod:`sim.target_feed`: 1 Hz, 2 m and 0.3 m/s noise, 0.3 s latency, 10 % drop-outs, its clock
 100 s off ours, seed 7 unless told otherwise); the frames go through the bridge's decoders into
-its live target (the estimator, ``mode: filter``) and, for comparison, the extrapolation of the
+its live target (the estimator, ``mode: filter``, with the acceptance's tuning
+:data:`mpf_mavlink.bench_target.ESTIMATOR`; ``--set`` overrides it) and, for comparison, the extrapolation of the
 last report (``mode: last_sample``), both queried every 20 ms as the control loop does. Writes
 a PNG with the north-east track over a window, and the position and {T}-yaw errors over time
 (a yaw error of d rad moves a path point r metres from the target by r d: the demo's
@@ -69,8 +70,8 @@ def simulate(cfg: Any, duration_s: float, feed_kw: dict[str, Any]) -> dict[str, 
 
 
 def figures(res: dict[str, Any], steady_s: float) -> dict[str, float]:
-    A = A0 = res["rows"]
-    A = A0[A0[:, 0] >= steady_s]
+    A = res["rows"]
+    A = A[A[:, 0] >= steady_s]
     out = {}
     for name, c in (("estimate", 5), ("last_sample", 9)):
         dp = np.linalg.norm(A[:, c : c + 3] - A[:, 1:4], axis=1)
@@ -79,8 +80,6 @@ def figures(res: dict[str, Any], steady_s: float) -> dict[str, float]:
         out[f"{name}_position_rms_m"] = float(np.sqrt(np.mean(dp[ok] ** 2)))
         out[f"{name}_yaw_rms_rad"] = float(np.sqrt(np.mean(dy[ok] ** 2)))
         out[f"{name}_usable_fraction"] = float(np.mean(ok))
-    R = res["reports"]
-    R = R[R[:, 0] >= steady_s]
     return out
 
 
@@ -136,14 +135,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", default="target_estimate.png")
     p.add_argument("--seed", type=int, default=7)
     a = p.parse_args(argv)
-    cfg = load_config(a.config, a.set)
+    from mpf_mavlink.bench_target import ESTIMATOR
+
+    cfg = load_config(a.config, [*ESTIMATOR, *a.set])
     kw = dict(rate_hz=1.0, position_noise_m=2.0, velocity_noise_m_s=0.3, latency_s=0.3,
               dropout=0.1, clock_offset_s=100.0, seed=a.seed)  # fmt: skip
     res = simulate(cfg, a.duration, kw)
     figs = figures(res, a.steady)
     for k, v in figs.items():
         print(f"{k:34s} {v:.4f}")
-    plot(res, a.out, (a.steady, a.steady + 120.0))
+    plot(res, a.out, (a.steady, a.steady + 40.0))
     print(f"plot: {a.out}")
     return 0
 

@@ -74,9 +74,12 @@ def test_boat_in_a_constant_turn_turn_rate_converges():
     pr = kf.predicted(t)
     assert pr is not None
     assert err < 4.0 * max(sigma_w, math.sqrt(pr[1][6, 6])), (err, sigma_w)
-    # the feedforward's acceleration is the turn's: w x v (0.03 m/s^2)
-    acc_true = BOAT.state(300.0).acceleration
-    assert np.linalg.norm(st.acceleration - acc_true) < 0.1 * np.linalg.norm(acc_true)
+    # the feedforward's acceleration is the turn's, w x v: its error is bounded by the turn
+    # rate's and the velocity's (triangle inequality on w v - w' v')
+    truth = BOAT.state(t)
+    dv = float(np.linalg.norm(st.velocity - truth.velocity))
+    bound = BOAT.speed * err + BOAT.turn_rate * dv + err * dv
+    assert np.linalg.norm(st.acceleration - truth.acceleration) <= bound + 1e-12
 
 
 def test_boat_position_is_better_than_one_fix():
@@ -241,3 +244,24 @@ def test_stationary_target_keeps_its_yaw():
     st = kf.state(60.0)
     assert not isinstance(st, str)
     assert math.atan2(st.R_T_I[1, 0], st.R_T_I[0, 0]) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_manoeuvring_target_is_followed_with_the_default_tuning():
+    """The paper's target (Section V): its speed swings between 3 and 6.7 m/s and its turn rate
+    reverses every ~30 s. With the default process noise (a general target, not the demo's
+    quiet boat) no report is taken for an outlier: at a 99.99 % gate a consistent filter gates
+    0.03 of 300 reports on average (at most 1 allowed), and none re-initialises it. The
+    position stays better than one fix (radial 1-sigma 3.5 m) in RMS."""
+    from mpf_mavlink.target import PaperProfile
+
+    motion = PaperProfile()
+    kf = TargetEstimator(params())
+    errs = []
+    for rx, r in reports(motion, 300.0, seed=10):
+        kf.add(r, rx)
+        if rx > 60.0:
+            st = kf.state(rx)
+            assert not isinstance(st, str)
+            errs.append(float(np.linalg.norm(st.position - motion.state(rx).position)))
+    assert kf.counts["gated"] <= 1 and kf.counts["reinit"] == 0, kf.counts
+    assert math.sqrt(float(np.mean(np.square(errs)))) < SIG_P * math.sqrt(3.0)
