@@ -18,7 +18,8 @@ Connect to a PX4 or ArduPlane autopilot, run the pre-flight checks, pre-stream s
 take control in its offboard mode (PX4 OFFBOARD, ArduPlane GUIDED), fly the 3D moving-path-
 following law and hand control back to the hold mode (PX4 AUTO.LOITER, ArduPlane LOITER).
 
-It stops commanding at once if telemetry or a live target goes stale (> 0.5 s by default) or if
+It stops commanding at once if telemetry goes stale (> 0.5 s by default), the live target can
+no longer be placed (target_estimator.max_position_sigma_m), or if
 someone else changes the flight mode (it never fights the pilot). After a telemetry or target
 loss it ends the run, or with --reengage N flies again (N times at most) once the stream is
 back and the vehicle is in the hold mode. Ctrl-C, SIGTERM, the mission duration or an error

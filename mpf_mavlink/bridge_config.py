@@ -74,6 +74,8 @@ class MavlinkConfig:
     # estimate, so its default is longer.
     wind_stale_s: float = field(default=2.0, metadata=_pos())
     wind_filter_tau_s: float = field(default=5.0, metadata=_pos())
+    # the live target's staleness with target_estimator.mode last_sample only (the estimator
+    # has its own, from its uncertainty: target_estimator.max_position_sigma_m)
     target_timeout_s: float = field(default=1.0, metadata=_pos())
     min_setpoint_rate_hz: float = field(default=20.0, metadata={"check": ("ge", 2.0)})
     # PX4 wants >= 1 s of stream before OFFBOARD; it counts from the first setpoint it RECEIVED,

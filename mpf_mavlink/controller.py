@@ -222,8 +222,8 @@ class LiveTarget:
     FOLLOW_TARGET, GLOBAL_POSITION_INT and ATTITUDE from the target's system become reports
     stamped with their own timestamps (the sender's clock); ``update`` passes the receive time
     in mission time for the clock offset. Positions about the estimator's geodetic origin; a
-    FOLLOW_TARGET's ``position_cov`` (m^2) replaces the configured position noise when all three
-    are > 0; its acceleration is not used. The estimate's staleness comes from its uncertainty.
+    FOLLOW_TARGET's ``position_cov`` (eph, epv: m, 1-sigma) replaces the configured position
+    noise when both are > 0; its acceleration is not used. The estimate's staleness comes from its uncertainty.
     """
 
     live = True
@@ -251,8 +251,12 @@ class LiveTarget:
         turn_yaw: tuple[float | None, float | None] = (None, None)
         if sample.R_B_N is not None and sample.rates_frd is not None:
             turn_yaw = _turn_and_yaw(sample.R_B_N, sample.rates_frd)
+        # position_cov is "eph epv" in the MAVLink definition: horizontal and vertical 1-sigma
+        # (m; the third value unused); taken per axis, the conservative reading of eph
         cov = np.asarray(sample.position_cov, float)
-        pos_var = cov if cov.shape == (3,) and bool(np.all(cov > 0.0)) else None
+        pos_var = None
+        if cov.shape == (3,) and cov[0] > 0.0 and cov[1] > 0.0:
+            pos_var = np.array((cov[0] ** 2, cov[0] ** 2, cov[1] ** 2))
         return Report(float(sample.t_s), pos, vel, turn_yaw[0], turn_yaw[1], pos_var)
 
     def update(self, sample: Any, t_mission: float | None) -> None:

@@ -416,16 +416,26 @@ class TargetEstimator:
 
     def state(self, t: float) -> TargetState | str:
         """The target at control time t (s), or why it cannot be placed."""
-        pr = self.predicted(t)
-        if pr is None:
-            return "no live target yet"
-        x, P, held = pr
         ts = self.to_sender(t)
-        assert ts is not None
+        post = self.latest()
+        if ts is None or post is None:
+            return "no live target yet"
         age = ts - self.t_last
         if age > self.p.max_age_s:
             return f"live target stale ({age:.2f} s since its last report)"
-        sig = self._sigma(P, age)
+        # every control step: the mean and only the trace of the predicted position covariance
+        # (trace(Fp P Fp') + trace(Q_pos), Fp the position rows of F), not the whole of P
+        T = ts - post.t
+        if T > 0.0:
+            x, F = transition(post.x, T)
+            Fp = F[:3]
+            q = 2.0 * self.p.accel_noise_m_s2**2 + self.p.vertical_accel_noise_m_s2**2
+            var = float(((Fp @ post.P) * Fp).sum()) + q * T**3 / 3.0
+        else:
+            x = transition(post.x, T)[0] if T < 0.0 else post.x
+            var = float(np.trace(post.P[_POS, _POS]))
+        held = post.yaw
+        sig = math.sqrt(max(0.0, var)) + 0.5 * self.p.manoeuvre_accel_m_s2 * max(0.0, age) ** 2
         if sig > self.p.max_position_sigma_m:
             return (
                 f"live target stale (position uncertainty {sig:.2f} m > "

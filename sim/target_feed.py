@@ -123,8 +123,10 @@ class TargetFeed:
             caps = 0b11 | (0b1000 if self.attitude else 0)
             q = list(matrix_to_quat_wxyz(R)) if self.attitude else [1.0, 0.0, 0.0, 0.0]
             rr = rates.tolist() if self.attitude else [0.0] * 3
+            # position_cov is "eph epv": the fix's 1-sigma accuracies, as a GPS reports them
+            cov = [sh, sv, 0.0]
             bufs.append(mav.follow_target_encode(ms, caps, lat7, lon7, float(alt), vel.tolist(),
-                                                 [0.0] * 3, q, rr, [0.0] * 3, 0).pack(mav))  # fmt: skip
+                                                 [0.0] * 3, q, rr, cov, 0).pack(mav))  # fmt: skip
         if self.messages in ("both", "global_position_int"):
             yaw = math.atan2(R[1, 0], R[0, 0])
             alt0 = float(self.origin.alt0_m)

@@ -265,3 +265,40 @@ def test_manoeuvring_target_is_followed_with_the_default_tuning():
             errs.append(float(np.linalg.norm(st.position - motion.state(rx).position)))
     assert kf.counts["gated"] <= 1 and kf.counts["reinit"] == 0, kf.counts
     assert math.sqrt(float(np.mean(np.square(errs)))) < SIG_P * math.sqrt(3.0)
+
+
+def test_control_step_prediction_matches_the_full_covariance():
+    """state() (every control step) predicts only the mean and the position variance's trace;
+    its staleness must equal the one from the full predicted covariance: the bound is crossed at
+    the same instant (compared just below and above the crossing found on the full one)."""
+    kf = TargetEstimator(params(max_position_sigma_m=3.0))
+    feed(kf, reports(BOAT, 60.0, seed=12))
+    t0 = 60.0 + LATENCY
+    lo, hi = t0, t0 + 10.0
+    for _ in range(60):  # bisection on the full covariance's uncertainty
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if kf.position_sigma(mid) <= 3.0 else (lo, mid)
+    assert not isinstance(kf.state(lo - 1e-6), str)
+    assert isinstance(kf.state(hi + 1e-6), str)
+
+
+def test_follow_target_accuracy_fields_set_the_fix_noise():
+    """FOLLOW_TARGET's position_cov is "eph epv" (m, 1-sigma): a fix reporting 0.5 m / 1.5 m
+    starts the filter with those variances (0.25, 0.25, 2.25 m^2), not the configured 2 m; a
+    report without them (zeros) gets the configured noise."""
+    from pymavlink.dialects.v20 import ardupilotmega as M
+
+    from mpf_mavlink.controller import LiveTarget
+    from mpf_mavlink.estimator import Estimator, EstimatorParams
+    from mpf_mavlink.mavlink.codec import decode_follow_target
+
+    origin = (41.185, -8.76, 0.0)
+    mav = M.MAVLink(None, srcSystem=2, srcComponent=1)
+    for cov, want in (([0.5, 1.5, 0.0], [0.25, 0.25, 2.25]), ([0.0] * 3, [SIG_P**2] * 3)):
+        lt = LiveTarget(Estimator(EstimatorParams(origin=origin)), params())
+        m = mav.follow_target_encode(10000, 3, 411850000, -87600000, 0.0, [3.0, 0.0, 0.0],
+                                     [0.0] * 3, [1.0, 0.0, 0.0, 0.0], [0.0] * 3, cov, 0)  # fmt: skip
+        lt.update(decode_follow_target(mav.decode(bytearray(m.pack(mav)))), 0.3)
+        post = lt.kf.latest()
+        assert post is not None
+        np.testing.assert_allclose(np.diag(post.P)[:3], want, rtol=1e-6)
