@@ -44,8 +44,25 @@ def bank_and_load_factor(w1: Vec, accel: Vec, g: float = GRAVITY_M_S2) -> tuple[
 
 
 # ----------------------------------------------------------------------------- setpoints
-# Everything below turns the law's command into what an autopilot accepts. Pure: the only
-# memory (the airspeed integrator) is passed in and returned as an explicit AdapterState.
+# Everything below turns the law's command into what an autopilot accepts. Pure: the memory
+# (airspeed integrator, learned pitch trim, learned turn gain) is passed in and returned as an
+# explicit AdapterState.
+#
+# Two loops the law leaves open are closed here, on an airframe we did not model:
+# - vertical: the pitch an autopilot must hold to fly a flight-path angle gamma is gamma plus
+#   an offset (angle of attack, cos(bank) in a turn, its pitch-loop bias) that no fixed trim
+#   gets right (real ArduPlane SITL flies level at -1.8 deg at 15 m/s; a fixed 0.03 rad trim
+#   left it 10.5 m above the path). The offset is learned: trim_hat low-passes the measured
+#   theta - gamma with time constant trim_tau_s. Since the pitch set-point is gamma + trim_hat
+#   + tau_pitch gamma_dot_cmd, trim_hat integrates tau_pitch gamma_dot_cmd / trim_tau_s while the
+#   autopilot holds it: integral action on the law's vertical demand, which it makes only while
+#   there is a vertical error, so no standing vertical offset remains.
+# - lateral: the bank for a turn rate is atan(V chi_dot / g) only in a coordinated turn; with
+#   the rudder elsewhere (ArduPlane's forced yaw, sideslip) the aircraft turns less per bank
+#   (0.69x measured on ArduPlane SITL: a wider circle). turn_gain learns the achieved heading
+#   rate psi_dot = (q sin(phi) + r cos(phi)) / cos(theta) per coordinated-turn rate
+#   g tan(phi) / V, over samples banked more than turn_learn_min_bank_rad, and the bank set-point
+#   becomes atan(tan(bank_ideal) / turn_gain).
 
 
 @dataclass(frozen=True)
@@ -73,15 +90,33 @@ class AdapterParams:
     thrust_max: float = 1.0
     airspeed_kp: float = 0.05  # thrust per m/s
     airspeed_ki: float = 0.02  # thrust per (m/s s)
-    integrator_limit: float = 0.3  # |ki integral(e)| <= this (thrust units)
+    # |ki integral(e)| <= this (thrust units); also never beyond what takes the output from
+    # trim to thrust_min / thrust_max, so a saturated output stops the integrator there
+    integrator_limit: float = 1.0
     load_factor_ff: float = 0.2  # thrust per g of extra load (n - 1)
+    adaptive: bool = True  # learn trim_hat and turn_gain (else the fixed trim, ideal turn)
+    trim_tau_s: float = 4.0
+    trim_limit_rad: float = 0.2  # |trim_hat| <= this
+    turn_gain_tau_s: float = 8.0
+    turn_gain_min: float = 0.5
+    turn_gain_max: float = 1.5
+    turn_learn_min_bank_rad: float = 0.0873  # 5 deg: below it the ratio is noise
 
 
 @dataclass(frozen=True)
 class AdapterState:
-    """Memory of the airspeed hold: the integrator term (thrust units)."""
+    """Memory of the adapter: the airspeed integrator (thrust units), the learned pitch offset
+    trim_hat (rad, None until the first measurement) and turn gain (achieved heading rate per
+    coordinated-turn rate, 1 = ideal)."""
 
     integ: float = 0.0
+    trim_hat: float | None = None
+    turn_gain: float = 1.0
+
+    def for_reengage(self) -> AdapterState:
+        """After a hand-back: the airspeed integrator starts afresh (the autopilot flew the
+        aircraft meanwhile), what was learned of the airframe stays."""
+        return AdapterState(0.0, self.trim_hat, self.turn_gain)
 
 
 @dataclass(frozen=True)
@@ -153,6 +188,7 @@ def adapt(
     params: AdapterParams,
     state: AdapterState = AdapterState(),
     g: float = GRAVITY_M_S2,
+    meas: tuple[Any, Any] | None = None,
 ) -> tuple[Setpoint, AdapterState]:
     """The law's command -> body rates (PX4), quaternion (ArduPlane) and thrust.
 
@@ -164,6 +200,8 @@ def adapt(
     sin(phi) psid, r = -sin(phi) thetad + cos(phi) cos(theta) psid with phid =
     (bank_sp - phi) / tau_roll and psid, thetad the heading and flight-path-angle rates of w1.
     Any non-finite value gives :func:`safe_setpoint` (flag ``safe``) and keeps the integrator.
+    ``meas``: (R_B_N, body rates FRD rad/s) as MEASURED (R_B_N may be a prediction), for
+    learning trim_hat and turn_gain (module comment); None learns nothing.
     """
     isf = math.isfinite
     try:
@@ -185,6 +223,12 @@ def adapt(
         v * (ox * w1[1] - oy * w1[0]),
     )
     bank, n = bank_and_load_factor(w1, accel, g)
+    trim_hat, k_turn = state.trim_hat, state.turn_gain
+    gamma = math.asin(_clip(-w1[2], -1.0, 1.0))
+    if params.adaptive and meas is not None and dt > 0.0:
+        trim_hat, k_turn = _learn(params, trim_hat, k_turn, meas, w1, v, dt, g)
+    if params.adaptive and k_turn != 1.0:
+        bank = math.atan(math.tan(_clip(bank, -1.4, 1.4)) / k_turn)
     bank = _clip(bank, -params.max_bank_rad, params.max_bank_rad)
     chid, gamd = heading_and_path_angle_rates(w1, omega_w1_I)
     sphi, cphi = math.sin(roll), math.cos(roll)
@@ -199,9 +243,9 @@ def adapt(
     )
     # Pitch: the flight-path angle of w1 (= theta - alpha) advanced by tau_pitch, plus the trim
     # angle of attack. (Adding the trim to the *measured* pitch would integrate it each cycle.)
-    gamma = math.asin(_clip(-w1[2], -1.0, 1.0))
+    trim = trim_hat if (params.adaptive and trim_hat is not None) else params.trim_pitch_rad
     pitch_sp = _clip(
-        gamma + gamd * params.tau_pitch_s + params.trim_pitch_rad,
+        gamma + gamd * params.tau_pitch_s + trim,
         params.min_pitch_rad,
         params.max_pitch_rad,
     )
@@ -215,9 +259,9 @@ def adapt(
     if dt > 0.0 and not (
         (raw >= params.thrust_max and e > 0) or (raw <= params.thrust_min and e < 0)
     ):
-        integ = _clip(
-            integ + params.airspeed_ki * e * dt, -params.integrator_limit, params.integrator_limit
-        )
+        lo = max(-params.integrator_limit, params.thrust_min - base)
+        hi = min(params.integrator_limit, params.thrust_max - base)
+        integ = _clip(integ + params.airspeed_ki * e * dt, min(lo, 0.0), max(hi, 0.0))
     thrust = _clip(base + integ, params.thrust_min, params.thrust_max)
     qw, qx, qy, qz = quat = _euler_to_quat_wxyz(bank, pitch_sp, 0.0)
     if not (
@@ -225,4 +269,49 @@ def adapt(
         and isf(qw) and isf(qx) and isf(qy) and isf(qz)
     ):  # fmt: skip
         return safe_setpoint(params, roll), state
-    return Setpoint((p, q, r), quat, thrust, bank, pitch_sp, n), AdapterState(integ)
+    return Setpoint((p, q, r), quat, thrust, bank, pitch_sp, n), AdapterState(
+        integ, trim_hat, k_turn
+    )
+
+
+def _learn(
+    params: AdapterParams,
+    trim_hat: float | None,
+    k_turn: float,
+    meas: tuple[Any, Any],
+    w1: Vec,
+    v: float,
+    dt: float,
+    g: float,
+) -> tuple[float | None, float]:
+    """One step of the two estimates (module comment) from the measured attitude and rates;
+    a non-finite or missing measurement changes nothing."""
+    try:
+        R, rates = meas
+        R2 = R[2].tolist() if hasattr(R, "tolist") else R[2]
+        phi = math.atan2(R2[1], R2[2])
+        theta = math.asin(_clip(-R2[0], -1.0, 1.0))
+        q_m, r_m = float(rates[1]), float(rates[2])
+    except (TypeError, ValueError, IndexError):
+        return trim_hat, k_turn
+    gamma = math.asin(_clip(-w1[2], -1.0, 1.0))
+    off = theta - gamma
+    if not (math.isfinite(off) and math.isfinite(q_m) and math.isfinite(r_m)):
+        return trim_hat, k_turn
+    lim = params.trim_limit_rad
+    if trim_hat is None:
+        trim_hat = _clip(off, -lim, lim)
+    else:
+        a = min(1.0, dt / params.trim_tau_s)
+        trim_hat = _clip(trim_hat + a * (off - trim_hat), -lim, lim)
+    if abs(phi) >= params.turn_learn_min_bank_rad and abs(phi) < 1.2 and v > 1.0:
+        ideal = g * math.tan(phi) / v
+        psid = (q_m * math.sin(phi) + r_m * math.cos(phi)) / max(math.cos(theta), 0.2)
+        ratio = psid / ideal
+        if math.isfinite(ratio):
+            ratio = _clip(ratio, params.turn_gain_min, params.turn_gain_max)
+            a = min(1.0, dt / params.turn_gain_tau_s)
+            k_turn = _clip(
+                k_turn + a * (ratio - k_turn), params.turn_gain_min, params.turn_gain_max
+            )
+    return trim_hat, k_turn

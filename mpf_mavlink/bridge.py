@@ -190,6 +190,9 @@ class BridgeResult:
         for k, label, unit in (
             ("first_within_s", "first within", "s"),
             ("convergence_time_s", "stays within", "s"),
+            ("steady_mean_vertical_m", "mean vertical", "m"),
+            ("steady_mean_radial_m", "mean radial", "m"),
+            ("thrust_saturated_fraction", "thrust at ceiling", "(fraction)"),
             ("steady_rms_m", "steady RMS |pt|", "m"),
             ("max_rate_cmd_rad_s", "peak rate command", "rad/s"),
             ("final_pt_m", "final |pt|", "m"),
@@ -1076,6 +1079,14 @@ class Bridge:
         )
         if len(cols["t"]):
             metrics["final_pt_m"] = float(cols["pt_norm"][-1])
+        if self.sp_rows:
+            # thrust pinned at its ceiling: the airspeed the law assumes is not being held
+            thr = np.array([r[8] for r in self.sp_rows], float)
+            metrics["thrust_saturated_fraction"] = float(
+                np.mean(thr >= self.ad_params.thrust_max - 0.005)
+            )
+        st = self.ctl.ad_state
+        metrics["adapter_learned"] = {"trim_pitch_rad": st.trim_hat, "turn_gain": st.turn_gain}
         metrics.update(
             streams=res.streams, fallback=res.fallback,
             state_reached=res.state_reached, exit_reason=res.exit_reason, exit_code=res.exit_code,

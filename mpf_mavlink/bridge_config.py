@@ -203,8 +203,13 @@ class AdapterSection:
     thrust_max: float = field(default=1.0, metadata={"check": ("range", 0.0, 1.0)})
     airspeed_kp: float = field(default=0.05, metadata=_nonneg())
     airspeed_ki: float = field(default=0.02, metadata=_nonneg())
-    integrator_limit: float = field(default=0.3, metadata=_nonneg())
+    integrator_limit: float = field(default=1.0, metadata=_nonneg())
     load_factor_ff: float = field(default=0.2, metadata=_nonneg())
+    # learned pitch offset (replaces trim_pitch_rad) and turn gain (replaces the ideal
+    # coordinated turn): see mpf_mavlink/adapter.py; false = the fixed trim and ideal turn
+    adaptive: bool = True
+    trim_tau_s: float = field(default=4.0, metadata=_pos())
+    turn_gain_tau_s: float = field(default=8.0, metadata=_pos())
 
     def validate(self, cfg: Any, src: str) -> None:
         if self.thrust_min > self.thrust_max:

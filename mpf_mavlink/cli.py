@@ -62,8 +62,11 @@ def _default_out(cfg: Any, kind: str) -> Path:
 
 def _summary(metrics: dict[str, Any], out: Path) -> str:
     keys = [
-        ("convergence_time_s", "convergence time", "s"),
+        ("first_within_s", "first within threshold", "s"),
+        ("convergence_time_s", "stays within threshold", "s"),
         ("steady_rms_m", "steady RMS |pt|", "m"),
+        ("steady_mean_vertical_m", "steady mean vertical", "m"),
+        ("steady_mean_radial_m", "steady mean radial", "m"),
         ("steady_max_m", "steady max |pt|", "m"),
         ("steady_psi_max", "steady max Psi", ""),
         ("max_rate_cmd_rad_s", "peak rate command", "rad/s"),

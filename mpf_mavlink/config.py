@@ -151,6 +151,9 @@ class ChecksConfig:
     c2: float = field(default=0.25, metadata={"check": ("range_open", 0.0, 0.5)})
     horizon_s: float | None = field(default=None, metadata=_pos())
     assumption1_margin_m_s: float = field(default=0.0, metadata=_nonneg())
+    # the vehicle may start at most this far (m) below the path's lowest point: further down
+    # (on the ground under a path 100 m up) the capture would be a climb the law never flies
+    max_start_below_m: float = field(default=30.0, metadata=_pos())
 
 
 @dataclass(frozen=True)

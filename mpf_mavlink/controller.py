@@ -492,7 +492,7 @@ class Controller:
         self.t_prev = None
         self.sdot_prev = 0.0
         self.w1_prev = None
-        self.ad_state = AdapterState()
+        self.ad_state = self.ad_state.for_reengage()  # the airframe's learned trim and turn stay
         return self.s
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -548,8 +548,9 @@ class Controller:
         w1 = (w10, w11, w12)  # measured: the logs' achieved rate
         w1l = w1 if vl is vs else tuple(vl.R_W_I[:, 0].tolist())
         sp, self.ad_state = adapt(
-            cmd.omega_w1_I, vl.airspeed, R_B_N, w1l, dt, self.ad_params, self.ad_state
-        )
+            cmd.omega_w1_I, vl.airspeed, R_B_N, w1l, dt, self.ad_params, self.ad_state,
+            meas=(est.R_B_N, est.rates_frd),
+        )  # fmt: skip
         if not math.isfinite(cmd.sdot):
             sp = safe_setpoint(self.ad_params)
         if self.rates_pipeline:

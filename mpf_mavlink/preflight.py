@@ -64,6 +64,34 @@ def scenario_wind(cfg: Config) -> tuple[tuple[float, float, float], float]:
     return wind.steady_ned_m_s, gust
 
 
+def start_altitude(cfg: Config) -> CheckResult:
+    """The start position against the path's altitude at t = 0: more than
+    ``checks.max_start_below_m`` below its lowest point is a failure (e.g. an aircraft on the
+    ground under a path 100 m up: take off first)."""
+    path, target = build_path(cfg.path), build_target(cfg.target)
+    p0 = np.asarray(cfg.kinematic.initial_position_ned_m, float)
+    sil = cfg.extra.get("sil")
+    if sil is not None and sil.link != "none" and sil.initial_position_ned_m is not None:
+        p0 = np.asarray(sil.initial_position_ned_m, float)
+    st = target.state(0.0)
+    pts = st.position + (st.R_T_I @ np.asarray(path.positions(), float).T).T
+    lowest_down = float(np.max(pts[:, 2]))  # NED: the lowest point has the largest "down"
+    below = float(p0[2]) - lowest_down
+    lim = cfg.checks.max_start_below_m
+    fig: dict[str, float | bool | None] = {"start_below_path_m": below, "limit_m": lim}
+    if below > lim:
+        return CheckResult(
+            "start_altitude", "fail",
+            f"the vehicle starts {below:.0f} m below the path's lowest point (start altitude "
+            f"{-p0[2] + 0.0:.0f} m, path from {-lowest_down + 0.0:.0f} m; limit "
+            f"checks.max_start_below_m = {lim:g}): take off and climb to the path first, or "
+            "give a start state in the air (kinematic/sil.initial_position_ned_m)", fig,
+        )  # fmt: skip
+    return CheckResult(
+        "start_altitude", "pass", f"start {max(below, 0.0):.1f} m below the path's lowest point (limit {lim:g} m)", fig
+    )  # fmt: skip
+
+
 def run_checks(cfg: Config, scripted_target: bool = True) -> list[CheckResult]:
     """All checks for a config. With a live target only the gain condition can be checked."""
     results: list[CheckResult] = []
@@ -78,6 +106,7 @@ def run_checks(cfg: Config, scripted_target: bool = True) -> list[CheckResult]:
                 path, target, cfg.vehicle.v_min, horizon, steady, gust, ch.assumption1_margin_m_s
             )
         )
+        results.append(start_altitude(cfg))
         pt0, psi0, s0 = initial_errors(cfg)
         c2 = ch.c2
         c1 = ch.c1_m if ch.c1_m is not None else auto_c1(cfg, pt0, c2)

@@ -93,8 +93,13 @@ def compute_metrics(
 ) -> dict[str, Any]:
     """Tracking figures.
 
-    convergence_time_s: first time after which |pt| stays below threshold (None if it never
-    does); steady_*: over t >= steady_after_s (None when the run is shorter);
+    first_within_s: first time |pt| is below threshold; convergence_time_s ("stays within"):
+    first time after which |pt| stays below threshold (None if it never does; one late
+    excursion moves it, first_within_s says when the capture was done);
+    steady_*: over t >= steady_after_s (None when the run is shorter); steady_mean_vertical_m:
+    mean height of the vehicle above the desired point (-pt_d, m); steady_mean_radial_m: mean
+    horizontal distance from the path's centre (the centroid of the desired points in the
+    target frame) of the vehicle minus that of the desired point (m, > 0: a wider circle);
     max_rate_cmd_rad_s: peak |[w2, w3]_cmd| over the whole run.
     """
     t = cols["t"]
@@ -109,10 +114,27 @@ def compute_metrics(
         conv = None
     else:
         conv = float(t[above[-1] + 1])
+    inside = np.nonzero(e < threshold_m)[0]
+    first = float(t[inside[0]]) if len(inside) else None
     m = t >= steady_after_s
     rate = np.hypot(cols["w2_cmd"], cols["w3_cmd"])
+    vert = rad = None
+    if m.any():
+        vert = float(np.mean(-cols["pt_d"][m]))
+        # horizontal, in the target's heading frame: the vehicle (rel) and the desired point
+        yaw = cols["tgt_yaw"]
+        c, sn = np.cos(yaw), np.sin(yaw)
+        pn, pe = cols["pt_n"], cols["pt_e"]
+        ptx, pty = c * pn + sn * pe, -sn * pn + c * pe
+        vx, vy = cols["rel_x"], cols["rel_y"]
+        dx, dy = vx - ptx, vy - pty
+        cx, cy = float(np.mean(dx)), float(np.mean(dy))
+        rad = float(np.mean((np.hypot(vx - cx, vy - cy) - np.hypot(dx - cx, dy - cy))[m]))
     out: dict[str, Any] = {
+        "first_within_s": first,
         "convergence_time_s": conv,
+        "steady_mean_vertical_m": vert,
+        "steady_mean_radial_m": rad,
         "steady_rms_m": float(np.sqrt(np.mean(e[m] ** 2))) if m.any() else None,
         "steady_max_m": float(np.max(e[m])) if m.any() else None,
         "steady_psi_max": float(np.max(cols["psi"][m])) if m.any() else None,

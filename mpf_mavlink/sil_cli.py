@@ -131,9 +131,13 @@ def sil_summary(res: Any) -> str:
     """The table printed at the end of a SIL ``sim``: figures, then where everything is."""
     m = res.metrics
     rows = [
-        ("convergence_time_s", "convergence time", "s"),
+        ("first_within_s", "first within threshold", "s"),
+        ("convergence_time_s", "stays within threshold", "s"),
         ("steady_rms_m", "steady RMS |pt|", "m"),
+        ("steady_mean_vertical_m", "steady mean vertical", "m"),
+        ("steady_mean_radial_m", "steady mean radial", "m"),
         ("steady_rms_cross_track_m", "steady RMS cross-track", "m"),
+        ("bridge_thrust_saturated_fraction", "thrust at ceiling", "frac"),
         ("steady_max_m", "steady max |pt|", "m"),
         ("steady_psi_max", "steady max Psi", ""),
         ("max_rate_cmd_rad_s", "peak rate command", "rad/s"),

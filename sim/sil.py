@@ -622,6 +622,8 @@ def _measure(
         metrics["alignment_residual_m"] = info["alignment_residual_m"]
         bm = bres.metrics
         metrics["bridge_steady_rms_m"] = bm.get("steady_rms_m")
+        metrics["bridge_thrust_saturated_fraction"] = bm.get("thrust_saturated_fraction")
+        metrics["bridge_adapter_learned"] = bm.get("adapter_learned")
     # real-time factor while the bridge was in control (the lockstep figure) and overall
     ml = vinfo["mode_log"]
     rtf_track = None

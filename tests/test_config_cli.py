@@ -66,10 +66,22 @@ def test_missing_file_and_bad_set_syntax(capsys):
     assert "dotted.key=value" in capsys.readouterr().err
 
 
+def test_check_fails_a_start_on_the_ground_far_below_the_path(capsys):
+    """configs/bridge_arduplane.yaml's path is 100 m up; starting on the ground (z = 0) is 100 m
+    below it, beyond checks.max_start_below_m = 30: exit 3 with the reason; 25 m below passes."""
+    bridge = "configs/bridge_arduplane.yaml"
+    assert main(["check", bridge, "--set", "kinematic.initial_position_ned_m=[-250,0,0]"]) == 3
+    c = capsys.readouterr()
+    assert "[FAIL] start_altitude: the vehicle starts 100 m below the path's lowest point" in c.out
+    assert "start_altitude" in c.err
+    assert main(["check", bridge, "--set", "kinematic.initial_position_ned_m=[-250,0,-75]"]) == 0
+    assert "[PASS] start_altitude: start 25.0 m below" in capsys.readouterr().out
+
+
 def test_check_passes_on_the_paper_and_fails_on_a_real_bank_limit(capsys):
     assert main(["check", CFG]) == 0
     out = capsys.readouterr().out
-    assert out.count("[PASS]") == 3
+    assert out.count("[PASS]") == 4  # assumption 1, start altitude, gain condition, feasibility
     # 45 deg of bank cannot fly the paper's lemniscate at 15 m/s: exit 3, and why.
     assert main(["check", CFG, "--set", "vehicle.max_bank_rad=0.785"]) == 3
     captured = capsys.readouterr()
