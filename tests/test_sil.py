@@ -181,7 +181,7 @@ def test_check_sees_the_sil_atmosphere(capsys):
     # 2 m/s allowance for light turbulence: |v_t t1 + v_d - eta| reaches ~10.5 m/s vs 14 m/s.
     assert main(["check", DEMO]) == 0
     out = capsys.readouterr().out
-    assert out.count("[PASS]") == 3
+    assert out.count("[PASS]") == 4  # assumption 1, start altitude, gain condition, feasibility
     calm = load_config(DEMO, ["sil.wind_ned_m_s=[0,0,0]", "sil.turbulence=none"])
     from mpf_mavlink.preflight import run_checks
 
