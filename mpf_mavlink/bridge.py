@@ -89,6 +89,7 @@ from .mavlink import (
 )
 from .mavlink.modes import arduplane_mode_from_name, px4_decode_custom_mode, px4_mode_from_name
 from .rundir import COLUMNS, RunTable, compute_metrics, prepare_out_dir, write_run
+from .verdict import EXIT_VERDICT, judge, verdict_line
 
 MAV_CMD_DO_SET_MODE = 176
 MAV_CMD_COMPONENT_ARM_DISARM = 400
@@ -147,6 +148,7 @@ class BridgeOptions:
     arm: bool | None = None
     plots: bool | None = None
     reengage: int | None = None  # None: mavlink.reengage_max
+    force: bool = False  # engage even when a pre-flight check fails
 
 
 @dataclass
@@ -167,6 +169,7 @@ class BridgeResult:
     streams: dict[str, Any] = field(default_factory=dict)  # requested / measured rates (Hz)
     fallback: str = ""  # what the autopilot does if our setpoints stop
     records_error: str | None = None  # why the run directory could not be written
+    verdict: str = ""  # the flight's one-line verdict (mpf_mavlink/verdict.py); "" = not flown
 
     def summary(self) -> str:
         c = self.counters
@@ -275,6 +278,7 @@ class Bridge:
         # arrival times (monotonic s) per message type while the stream rates are measured
         self._arrivals: dict[str, deque[float]] | None = None
         self.params: dict[str, float] = {}  # PARAM_VALUE answers (name -> value)
+        self.judge_rows: list[tuple[float, float, float, float]] = []  # alt, airspeed, roll, pitch
         self.n = {
             "setpoints_sent": 0,
             "setpoints_resent": 0,
@@ -419,6 +423,16 @@ class Bridge:
     def _record(self, st: Step) -> None:
         self.table.append(st.row())
         self.sp_rows.append(tuple(st.setpoint_row()))
+        e = st.estimate
+        R2 = e.R_B_N[2]
+        self.judge_rows.append(
+            (
+                -float(e.vehicle.position[2]),
+                float(e.vehicle.airspeed),
+                math.atan2(float(R2[1]), float(R2[2])),
+                math.asin(max(-1.0, min(1.0, -float(R2[0])))),
+            )
+        )
 
     def _send_setpoint(self, sp: Setpoint, time_boot_ms: int) -> None:
         if sp.safe:
@@ -593,6 +607,9 @@ class Bridge:
                 )
             self._set_state(State.CHECKS)
             failed = self._checks(res)
+            if failed and self.opts.force:
+                self.log(f"[FORCED] engaging despite the failed check: {', '.join(failed)}")
+                failed = []
             if failed:
                 res.exit_reason = f"refused to engage: check failed: {', '.join(failed)}"
                 res.exit_code = EXIT_CHECK
@@ -1079,6 +1096,21 @@ class Bridge:
         )
         if len(cols["t"]):
             metrics["final_pt_m"] = float(cols["pt_norm"][-1])
+            # the verdict on what the bridge saw (its estimates: the truth is not known here)
+            J = np.array(self.judge_rows, float).reshape(-1, 4)
+            fails = judge(
+                self.cfg,
+                cols["t"] - cols["t"][0],
+                cols["pt_norm"],
+                J[:, 0],
+                J[:, 1],
+                J[:, 2],
+                J[:, 3],
+            )
+            res.verdict = verdict_line(fails)
+            metrics["verdict"], metrics["verdict_failures"] = res.verdict, fails
+            if fails and res.exit_code == EXIT_OK:
+                res.exit_code = EXIT_VERDICT
         if self.sp_rows:
             # thrust pinned at its ceiling: the airspeed the law assumes is not being held
             thr = np.array([r[8] for r in self.sp_rows], float)

@@ -55,10 +55,13 @@ def cmd_run(args: argparse.Namespace) -> int:
         arm=True if args.arm else None,
         plots=False if args.no_plots else None,
         reengage=args.reengage,
+        force=args.force,
     )
     log: Any = (lambda s: None) if args.quiet else (lambda s: print(s, flush=True))
     res = run_bridge(cfg, opts, log=log)
     print(res.summary(), flush=True)
+    if res.verdict:
+        print(res.verdict, flush=True)
     return res.exit_code
 
 
@@ -138,5 +141,9 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
         "--no-plots", action="store_true", help="skip the PNG figures in the run directory"
     )
     r.add_argument("-q", "--quiet", action="store_true", help="print only the final summary")
+    r.add_argument(
+        "--force", action="store_true",
+        help="engage even when a pre-flight check fails (the flight's verdict still judges it)",
+    )  # fmt: skip
     r.set_defaults(func=cmd_run)
     return r

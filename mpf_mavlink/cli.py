@@ -83,15 +83,36 @@ def _summary(metrics: dict[str, Any], out: Path) -> str:
     return "\n".join(lines)
 
 
+def _gate(cfg: Any, force: bool) -> None:
+    """The pre-flight gate of ``check``: a failed check refuses the flight unless forced."""
+    from .preflight import format_checks, run_checks
+
+    results = run_checks(cfg)
+    failed = [r for r in results if not r.ok]
+    if not failed:
+        return
+    if force:
+        print(format_checks(failed), file=sys.stderr)
+        print(f"mpf-mavlink: --force: flying despite the failed check: {', '.join(r.name for r in failed)}",
+              file=sys.stderr)  # fmt: skip
+        return
+    raise CheckFailed(
+        f"{cfg.source}: refused to fly: check failed: "
+        + "; ".join(f"{r.name} ({r.summary})" for r in failed)
+        + " (--force flies it anyway)"
+    )
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
     from .rundir import prepare_out_dir, write_run
 
     cfg = _load(args)
+    _gate(cfg, args.force)
     if cfg.section("sil").link != "none":  # the SIL vehicle and the bridge over MAVLink
         from .sil_cli import cmd_sim_sil
 
         out = prepare_out_dir(args.out or _default_out(cfg, "sil"))
-        return cmd_sim_sil(cfg, out, args.quiet, args.no_plots)
+        return cmd_sim_sil(cfg, out, args.quiet, args.no_plots, args.force)
     out = prepare_out_dir(args.out or _default_out(cfg, "sim"))
     from sim.runner import run_kinematic
 
@@ -149,6 +170,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, help="run directory (default: runs/<time>-sim-<name>)")
     s.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    s.add_argument(
+        "--force", action="store_true",
+        help="fly even when a pre-flight check fails (mpf-mavlink check): the verdict still judges it",
+    )  # fmt: skip
     s.set_defaults(func=cmd_sim)
 
     pl = sub.add_parser(

@@ -125,6 +125,7 @@ def run_checks(cfg: Config, scripted_target: bool = True) -> list[CheckResult]:
                 cfg.vehicle.max_turn_rate_rad_s,
                 s0,
                 steady,
+                bank_margin_rad=ch.bank_margin_rad,
             )  # fmt: skip
         )
     else:

@@ -168,14 +168,17 @@ def sil_summary(res: Any) -> str:
     return "\n".join(lines)
 
 
-def cmd_sim_sil(cfg: Any, out: Path, quiet: bool, no_plots: bool) -> int:
+def cmd_sim_sil(cfg: Any, out: Path, quiet: bool, no_plots: bool, force: bool = False) -> int:
     from sim.sil import run_sil
 
     res = run_sil(
-        cfg, out, progress=not quiet, plots=not no_plots, log=lambda s: print(s, flush=True)
-    )
+        cfg, out, progress=not quiet, plots=not no_plots, log=lambda s: print(s, flush=True),
+        force=force,
+    )  # fmt: skip
     res.metrics.setdefault("steady_after_s", cfg.metrics.steady_after_s)
     print(sil_summary(res), flush=True)
+    # last line: the verdict on the plant's truth (exit 5 when the flight failed it)
+    print(res.metrics.get("verdict") or "verdict: none (the bridge recorded no flight)", flush=True)
     return int(res.exit_code)
 
 

@@ -52,6 +52,7 @@ from mpf_mavlink.rundir import (
     write_run,
 )
 from mpf_mavlink.scenario import build_extensions, build_gains, build_path, build_target
+from mpf_mavlink.verdict import EXIT_VERDICT, judge, verdict_line
 
 # custom modes in which the bridge commands the vehicle (PX4 OFFBOARD, ArduPlane GUIDED)
 _ENGAGED_MODES = ("OFFBOARD", "GUIDED")
@@ -238,7 +239,9 @@ def _vehicle_run(
         v.close()
 
 
-def _bridge_run(cfg: Config, url: str, out: str, duration: float, q: Any) -> None:
+def _bridge_run(
+    cfg: Config, url: str, out: str, duration: float, q: Any, force: bool = False
+) -> None:
     """Child process: fly the bridge; results and log lines go to ``q``."""
     from mpf_mavlink.bridge import BridgeOptions, run_bridge
     from mpf_mavlink.errors import MpfError
@@ -252,7 +255,7 @@ def _bridge_run(cfg: Config, url: str, out: str, duration: float, q: Any) -> Non
     try:
         res = run_bridge(
             cfg,
-            BridgeOptions(url=url, out_dir=Path(out), duration_s=duration),
+            BridgeOptions(url=url, out_dir=Path(out), duration_s=duration, force=force),
             log=lambda s: q.put(("log", s)),
         )
         q.put(("result", res))
@@ -301,6 +304,7 @@ def run_sil(
     clock: str | None = None,
     duration_s: float | None = None,
     log: Any = print,
+    force: bool = False,
 ) -> SilResult:
     """Fly the config's mission with the SIL vehicle and the bridge over UDP loopback.
 
@@ -328,7 +332,7 @@ def run_sil(
     wall0 = time.perf_counter()
     pb = ctx.Process(
         target=_bridge_main,
-        args=(bcfg, f"udpin:127.0.0.1:{port}", str(bridge_dir), duration, q),
+        args=(bcfg, f"udpin:127.0.0.1:{port}", str(bridge_dir), duration, q, force),
         name="mpf-bridge",
         daemon=True,
     )
@@ -584,6 +588,7 @@ def truth_table(
         "alignment_residual_m": resid,
         "cross_track_m": cross,
         "t_vehicle": tv[sel],
+        "rows": sel,
     }
     return cols, info
 
@@ -624,6 +629,15 @@ def _measure(
         metrics["bridge_steady_rms_m"] = bm.get("steady_rms_m")
         metrics["bridge_thrust_saturated_fraction"] = bm.get("thrust_saturated_fraction")
         metrics["bridge_adapter_learned"] = bm.get("adapter_learned")
+        # the verdict on the plant's truth while the bridge was flying it
+        sel = info["rows"]
+        eul = truth["euler"][sel]
+        fails = judge(
+            cfg, cols["t"], cols["pt_norm"], -truth["position_ned"][sel, 2],
+            truth["airspeed"][sel], eul[:, 0], eul[:, 1],
+        )  # fmt: skip
+        metrics["verdict"], metrics["verdict_failures"] = verdict_line(fails), fails
+        metrics["bridge_verdict"] = bm.get("verdict")
     # real-time factor while the bridge was in control (the lockstep figure) and overall
     ml = vinfo["mode_log"]
     rtf_track = None
@@ -646,9 +660,15 @@ def _measure(
         vehicle_frames=vinfo.get("frames"), vehicle_lockstep_timeouts=vinfo.get("lockstep_timeouts"), statustexts=[t for _, t in vinfo["statustexts"]],
         vehicle_modes=[[round(t, 3), name] for t, _, name in ml],
     )  # fmt: skip
+    # The truth's verdict decides a run that otherwise ended normally (the bridge's own, on its
+    # estimates, is in bridge/metrics.json); any other exit of the bridge stands.
+    code = bres.exit_code
+    if code in (0, EXIT_VERDICT):
+        code = EXIT_VERDICT if metrics.get("verdict_failures") else 0
+    metrics["exit_code"] = code
     return SilResult(
         cols, metrics, path.positions(), Path("."), bridge_dir, bridge_dir / "mavlink.tlog",
-        bres.exit_code, bres.exit_reason, truth, bres, info.get("t_vehicle", np.zeros(0)),
+        code, bres.exit_reason, truth, bres, info.get("t_vehicle", np.zeros(0)),
     )  # fmt: skip
 
 

@@ -492,7 +492,7 @@ def test_scripted_target_runs_on_the_bridge_clock(tmp_path):
         DEMO,
         [
             "sil.target_live=false", "sil.plant=kinematic", "sil.turbulence=none",
-            "sim.duration_s=20", "metrics.steady_after_s=5",
+            "sim.duration_s=20",
         ],
     )  # fmt: skip
     r = run_sil(cfg, tmp_path / "run", progress=False, plots=False, log=lambda s: None)

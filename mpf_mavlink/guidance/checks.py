@@ -133,6 +133,7 @@ def feasibility(
     s0: float = 0.0,
     wind_ned: tuple[float, float, float] = (0.0, 0.0, 0.0),
     dt_s: float = 0.05,
+    bank_margin_rad: float = 0.0,
 ) -> CheckResult:
     """Peak turn rate and bank that flying the moving path exactly demands at airspeed v_w.
 
@@ -140,6 +141,8 @@ def feasibility(
     sdot = v_w wd11 - (v_t t1 + v_d - eta) . f1. We integrate s over the horizon, difference
     wd1 in time for the turn rate |d wd1/dt| (rad/s) and get the bank from the acceleration
     v_w d wd1/dt with gravity (steady wind does not change the air-relative acceleration).
+    The bank must stay ``bank_margin_rad`` below the limit (and the turn rate below the rate of
+    that bank): a path flown at the limit leaves the feedback nothing to correct with.
     """
     eta = np.asarray(wind_ned, float)
     ts = _times(horizon_s, dt_s)
@@ -163,22 +166,25 @@ def feasibility(
         [abs(bank_and_load_factor(tuple(W1[k]), tuple(v_w * dW[k]))[0]) for k in range(len(ts))]
     )
     k_r, k_b = int(np.argmax(rate)), int(np.argmax(banks))
+    bank_ok = max(max_bank_rad - bank_margin_rad, 0.0)
     limit_rate = (
         max_turn_rate_rad_s
         if max_turn_rate_rad_s is not None
-        else GRAVITY_M_S2 * math.tan(max_bank_rad) / v_w
+        else GRAVITY_M_S2 * math.tan(bank_ok) / v_w
     )
-    ok = banks[k_b] <= max_bank_rad and rate[k_r] <= limit_rate
+    ok = banks[k_b] <= bank_ok and rate[k_r] <= limit_rate
     return CheckResult(
         "feasibility",
         "pass" if ok else "fail",
         f"peak turn rate {rate[k_r]:.3f} rad/s at t = {ts[k_r]:.1f} s (limit {limit_rate:.3f}); "
         f"peak bank {math.degrees(banks[k_b]):.1f} deg at t = {ts[k_b]:.1f} s "
-        f"(limit {math.degrees(max_bank_rad):.1f})",
+        f"(limit {math.degrees(max_bank_rad):.1f}"
+        + (f" - {math.degrees(bank_margin_rad):.1f} margin)" if bank_margin_rad > 0 else ")"),
         {
             "peak_turn_rate_rad_s": float(rate[k_r]),
             "turn_rate_limit_rad_s": limit_rate,
             "peak_bank_rad": float(banks[k_b]),
             "bank_limit_rad": max_bank_rad,
+            "bank_margin_rad": bank_margin_rad,
         },
     )
