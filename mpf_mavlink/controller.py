@@ -541,8 +541,13 @@ class Controller:
         self.tau_s = tau
         cmd, diag = mpf_law(s_law, vl, tgt_law, self.path, self.gains, self.ext, diagnostics=True)
         assert diag is not None
-        if tau > 0.0:  # the logs keep the time and virtual point of the sample's own instant
-            diag = diag._replace(t=t, s=self.s)
+        if tau > 0.0:
+            # The logs describe the sample's own instant (errors, frames, the relative position:
+            # replay and the SIL truth align on them); the command and its saturation flag are
+            # the predicted evaluation's, which is what was sent.
+            _, dm = mpf_law(self.s, vs, tgt, self.path, self.gains, self.ext, diagnostics=True)
+            assert dm is not None
+            diag = dm._replace(mode=diag.mode)
         self.law_evals += 1
         w10, w11, w12 = vs.R_W_I[:, 0].tolist()
         w1 = (w10, w11, w12)  # measured: the logs' achieved rate
