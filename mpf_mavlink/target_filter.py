@@ -42,8 +42,8 @@ velocity ``[0, 0, w]``, acceleration ``w [-ve, vn, 0]``, angular acceleration 0.
 the course is undefined: the yaw is held (last course, or the reported yaw). The target's roll,
 pitch and crab angle are not followed. Stale (a reason string, no state) when the predicted
 position uncertainty ``sqrt(trace P_pos) + manoeuvre_accel_m_s2 tau^2 / 2`` exceeds
-``max_position_sigma_m`` (tau: time since the newest report) or that report is older than
-``max_age_s``. The second term is what a target that starts to manoeuvre while unseen can
+``max_position_sigma_m`` (tau: time since the newest fused position) or that position is
+older than ``max_age_s``. The second term is what a target that starts to manoeuvre while unseen can
 have moved away from the prediction: the filter's own covariance reflects its (small)
 process noise, tuned for smoothing, and would let a quiet model fly on a long outage.
 """
@@ -113,13 +113,15 @@ class Report:
 @dataclass(frozen=True)
 class _Post:
     """The posterior after a report: time (sender clock), mean, covariance, gated reports in a
-    row, and the yaw held for low speeds."""
+    row, the yaw held for low speeds, and the time of the newest fused position (what places
+    the target: the staleness counts from it, not from attitude-only or gated reports)."""
 
     t: float
     x: NDArray[np.float64]
     P: NDArray[np.float64]
     nrej: int
     yaw: float
+    t_fix: float
 
 
 def chi2_sf(x: float, k: int) -> float:
@@ -329,7 +331,7 @@ class TargetEstimator:
         else:
             P[6, 6] = INIT_TURN_SIGMA_RAD_S**2
         yaw = r.yaw if r.yaw is not None else 0.0
-        return _Post(r.t, x, P, nrej, self._course(x, yaw))
+        return _Post(r.t, x, P, nrej, self._course(x, yaw), r.t)
 
     def _pos_var(self, r: Report) -> NDArray[np.float64]:
         if r.pos_var is not None:
@@ -367,7 +369,7 @@ class TargetEstimator:
             rv.append(self.p.turn_rate_noise_rad_s**2)
         held = r.yaw if r.yaw is not None else prev.yaw
         if not rows:
-            return _Post(r.t, x, P, prev.nrej, self._course(x, held)), "fused"
+            return _Post(r.t, x, P, prev.nrej, self._course(x, held), prev.t_fix), "fused"
         H = np.zeros((len(rows), N))
         H[range(len(rows)), rows] = 1.0
         nu = np.asarray(z) - x[rows]
@@ -377,12 +379,13 @@ class TargetEstimator:
             nrej = prev.nrej + 1
             if nrej >= self.p.reinit_after and r.position is not None:
                 return self._init(r), "reinit"
-            return _Post(prev.t, prev.x, prev.P, nrej, prev.yaw), "gated"
+            return _Post(prev.t, prev.x, prev.P, nrej, prev.yaw, prev.t_fix), "gated"
         K = np.linalg.solve(S, H @ P).T  # P H' S^-1 (S symmetric)
         x = x + K @ nu
         IKH = np.eye(N) - K @ H
         P = IKH @ P @ IKH.T + K @ np.diag(rv) @ K.T  # Joseph form: stays symmetric positive
-        return _Post(r.t, x, 0.5 * (P + P.T), 0, self._course(x, held)), "fused"
+        t_fix = r.t if r.position is not None else prev.t_fix
+        return _Post(r.t, x, 0.5 * (P + P.T), 0, self._course(x, held), t_fix), "fused"
 
     # -- output ----------------------------------------------------------------------------
     def latest(self) -> _Post | None:
@@ -405,9 +408,10 @@ class TargetEstimator:
         the manoeuvre term (module docstring); inf without a state."""
         pr = self.predicted(t)
         ts = self.to_sender(t)
-        if pr is None or ts is None:
+        post = self.latest()
+        if pr is None or ts is None or post is None:
             return math.inf
-        return self._sigma(pr[1], ts - self.t_last)
+        return self._sigma(pr[1], ts - post.t_fix)
 
     def _sigma(self, P: NDArray[np.float64], age: float) -> float:
         tau = max(0.0, age)
@@ -420,9 +424,9 @@ class TargetEstimator:
         post = self.latest()
         if ts is None or post is None:
             return "no live target yet"
-        age = ts - self.t_last
+        age = ts - post.t_fix
         if age > self.p.max_age_s:
-            return f"live target stale ({age:.2f} s since its last report)"
+            return f"live target stale ({age:.2f} s since its last position)"
         # every control step: the mean and only the trace of the predicted position covariance
         # (trace(Fp P Fp') + trace(Q_pos), Fp the position rows of F), not the whole of P
         T = ts - post.t
@@ -439,7 +443,7 @@ class TargetEstimator:
         if sig > self.p.max_position_sigma_m:
             return (
                 f"live target stale (position uncertainty {sig:.2f} m > "
-                f"{self.p.max_position_sigma_m:g} m, {age:.2f} s since its last report)"
+                f"{self.p.max_position_sigma_m:g} m, {age:.2f} s since its last position)"
             )
         vn, ve, w = float(x[3]), float(x[4]), float(x[6])
         yaw = self._course(x, held)

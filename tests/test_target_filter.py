@@ -302,3 +302,19 @@ def test_follow_target_accuracy_fields_set_the_fix_noise():
         post = lt.kf.latest()
         assert post is not None
         np.testing.assert_allclose(np.diag(post.P)[:3], want, rtol=1e-6)
+
+
+def test_attitude_alone_does_not_keep_a_lost_target_placed():
+    """The target's GPS dies but its ATTITUDE keeps coming at 10 Hz: the turn rate is still
+    known, the position is not. The staleness counts from the last fix: whatever sigma_0, the
+    unseen-manoeuvre term alone passes the bound after sqrt(2 x 4 m / 0.3 m/s^2) = 5.2 s, so
+    9.9 s after the last fix the prediction is refused although reports keep arriving."""
+    p = params(max_position_sigma_m=4.0, manoeuvre_accel_m_s2=0.3)
+    kf = TargetEstimator(p)
+    reps = reports(BOAT, 60.0, seed=13)
+    feed(kf, reps)
+    rx, last = reps[-1]
+    for k in range(1, 100):  # 10 s of attitude-only reports
+        kf.add(Report(last.t + 0.1 * k, turn_rate=BOAT.turn_rate, yaw=0.0), rx + 0.1 * k)
+    why = kf.state(rx + 9.9)
+    assert isinstance(why, str) and "since its last position" in why
