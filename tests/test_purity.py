@@ -9,6 +9,7 @@ PURE = [
     "mpf_mavlink/paths/base.py",
     "mpf_mavlink/paths/shapes.py",
     "mpf_mavlink/target.py",
+    "mpf_mavlink/target_filter.py",
     "mpf_mavlink/guidance/law.py",
     "mpf_mavlink/guidance/checks.py",
     "mpf_mavlink/adapter.py",
