@@ -940,11 +940,19 @@ def scenario_target_loss(o: Opts) -> Row:
     """A live target (FOLLOW_TARGET from system 2) whose feed stops for good mid-mission."""
     row = Row("target_feed_loss")
     dur = 20.0 if o.quick else 30.0
+    # the bridge's target estimator refuses the target once its predicted uncertainty (at
+    # least what a target accelerating at a can do unseen, a tau^2 / 2) passes the bound
+    bound_m, accel = 4.0, 0.3
     spec = MissionSpec.make(
         o,
         dur,
         target="stationary",
-        sets=("target.type=mavlink", f"mavlink.target_sysid={TARGET_SYSID}"),
+        sets=(
+            "target.type=mavlink",
+            f"mavlink.target_sysid={TARGET_SYSID}",
+            f"target_estimator.max_position_sigma_m={bound_m}",
+            f"target_estimator.manoeuvre_accel_m_s2={accel}",
+        ),  # fmt: skip
     )
     b: Blackout | None = None
     with Mission(spec, o.workdir / "target") as m:
@@ -960,14 +968,19 @@ def scenario_target_loss(o: Opts) -> Row:
     stop_s = None if last_sent is None else last_sent - b.start_s
     row.figures.update(
         target_samples_before=len([e for e in tap.target_msgs if e.t < b.start_s]),
-        commands_stop_after_target_loss_s=_r(stop_s), target_timeout_s=1.0, telemetry_timeout_s=0.5,
+        commands_stop_after_target_loss_s=_r(stop_s), target_bound_m=bound_m,
+        target_unseen_accel_m_s2=accel, telemetry_timeout_s=0.5,
         frames_cut=m.relay.counters()["down"]["filtered_frames"], vehicle_mode_after=tap.mode(),
         handback_confirmed=out.metrics.get("handback_confirmed"),
     )  # fmt: skip
-    # stale after target_timeout_s (1 s), then no good law step for telemetry_timeout_s (0.5 s)
+    # stale once sigma_0 + a tau^2 / 2 > bound: no later than sqrt(2 bound / a) (5.2 s) whatever
+    # the filter's own sigma_0, and not before sqrt(2 (bound - 2 m) / a) (3.7 s) while its
+    # 1-sigma of a fixed target seen at 10 Hz stays below 2 m; then no good law step for
+    # telemetry_timeout_s (0.5 s) before the bridge stops
+    lo, hi = math.sqrt(2.0 * (bound_m - 2.0) / accel), math.sqrt(2.0 * bound_m / accel)
     row.check(
-        stop_s is not None and 0.9 <= stop_s <= 1.0 + 0.5 + 0.15,
-        f"commands stopped {stop_s} s after the feed",
+        stop_s is not None and lo <= stop_s <= hi + 0.5 + 0.15,
+        f"commands stopped {stop_s} s after the feed (expected {lo:.2f}..{hi + 0.65:.2f} s)",
     )
     row.check(out.rc == 4 and "target" in out.exit_reason, f"exit {out.rc}: {out.exit_reason}")
     row.check(
