@@ -69,6 +69,9 @@ def _optional_groups() -> None:
 
     GROUPS["sil_real_time_factor"] = sil_real_time_factor
     GROUPS["sil_tracking"] = sil_tracking
+    from .bench_robustness import sil_robustness
+
+    GROUPS["sil_robustness"] = sil_robustness
     from .bench_target import target_feed
 
     GROUPS["target_feed"] = target_feed

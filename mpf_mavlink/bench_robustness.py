@@ -110,7 +110,7 @@ def _judge(
         return bound, None
     ok = r["exit"] == 0 and rms is not None
     if ok and bound is not None:
-        ok = rms <= bound
+        ok = rms is not None and rms <= bound
     if ok and row.max_m is not None:
         ok = mx is not None and mx <= row.max_m
     return bound, ok

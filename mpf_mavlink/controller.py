@@ -43,7 +43,7 @@ from .config import Config
 from .errors import MpfError
 from .estimator import Estimate, Estimator, EstimatorParams
 from .guidance.law import MpfCommand, MpfDiagnostics, VehicleState, mpf_law
-from .guidance.predict import predict_segments, prediction_horizon
+from .guidance.predict import look_ahead, predict_segments, prediction_horizon
 from .rundir import row_from
 from .scenario import build_extensions, build_gains, build_path, build_target
 from .target import TargetState
@@ -394,6 +394,7 @@ class Controller:
         self.period_s = 0.0
         self.delay_s = float(getattr(m, "known_delay_s", 0.0))
         self.tau_s = 0.0  # the prediction horizon of the latest step
+        self.alpha_m = self.gains.alpha  # the look-ahead of the latest step (guidance/predict.py)
         # body rates sent (PX4 rate setpoints): (mission time of the ATTITUDE answered, p, q, r)
         self.sent: collections.deque[tuple[float, tuple[float, float, float]]] = collections.deque(
             maxlen=64
@@ -539,13 +540,19 @@ class Controller:
                     tgt_law = tp
                 s_law = self.s + self.sdot_prev * tau
         self.tau_s = tau
-        cmd, diag = mpf_law(s_law, vl, tgt_law, self.path, self.gains, self.ext, diagnostics=True)
+        gains = self.gains
+        if getattr(self.m, "delay_compensation", False):
+            a = look_ahead(gains.alpha, gains.K_R, vs.airspeed, self.delay_s, self.period_s)
+            if a > gains.alpha:
+                gains = dataclasses.replace(gains, alpha=a)
+        self.alpha_m = gains.alpha
+        cmd, diag = mpf_law(s_law, vl, tgt_law, self.path, gains, self.ext, diagnostics=True)
         assert diag is not None
         if tau > 0.0:
             # The logs describe the sample's own instant (errors, frames, the relative position:
             # replay and the SIL truth align on them); the command and its saturation flag are
             # the predicted evaluation's, which is what was sent.
-            _, dm = mpf_law(self.s, vs, tgt, self.path, self.gains, self.ext, diagnostics=True)
+            _, dm = mpf_law(self.s, vs, tgt, self.path, gains, self.ext, diagnostics=True)
             assert dm is not None
             diag = dm._replace(mode=diag.mode)
         self.law_evals += 1

@@ -79,3 +79,18 @@ def test_loop_delay_is_measured_from_the_attitude_target_echo():
     # an echo of rates never sent is no measurement
     ctl.feed_vehicle(AttitudeTargetSample(102.0, (9.0, 9.0, 9.0), 0.3, 128), None)
     assert ctl.delay_s == pytest.approx(0.065, abs=1e-9)
+
+
+def test_look_ahead_grows_only_where_the_hold_costs_phase():
+    """alpha is kept where the guidance crossover wc = v/alpha + K_R/2 loses at most
+    HOLD_PHASE_RAD to T/2 + delay/4, and widened until it does (never narrowed)."""
+    from mpf_mavlink.guidance.predict import HOLD_PHASE_RAD, look_ahead
+
+    v, K_R = 16.0, 3.0
+    assert look_ahead(5.0, K_R, v, 0.02, 0.02) == 5.0  # the demo: 50 Hz, 20 ms
+    assert look_ahead(5.0, K_R, v, 0.02, 0.04) == 5.0  # 25 Hz
+    a = look_ahead(5.0, K_R, v, 0.02, 0.1)  # 10 Hz: widened
+    lag = 0.05 + 0.005
+    assert (v / a + K_R / 2) * lag == pytest.approx(HOLD_PHASE_RAD)
+    assert look_ahead(20.0, K_R, v, 0.02, 0.1) == 20.0  # a wider configured alpha stands
+    assert look_ahead(5.0, K_R, v, float("nan"), 0.0) == 5.0
