@@ -125,6 +125,8 @@ def test_feed_and_estimator_keys_are_validated(tmp_path):
         ("target_estimator.gate_sigma=3", "target_estimator.gate_sigma"),
         ("target_estimator.gate_probability=1.5", "target_estimator.gate_probability"),
         ("sil.target_feed.dropout=1", "sil.target_feed.dropout"),
+        ("target_estimator.history_s=20", "target_estimator.history_s"),  # > max_age_s (10)
+        ("target_estimator.mode=ukf", "target_estimator.mode"),
     ):
         try:
             load_config(ROOT / "configs" / "default.yaml", [bad])
