@@ -49,20 +49,21 @@ def bank_and_load_factor(w1: Vec, accel: Vec, g: float = GRAVITY_M_S2) -> tuple[
 # explicit AdapterState.
 #
 # Two loops the law leaves open are closed here, on an airframe we did not model:
-# - vertical: the pitch an autopilot must hold to fly a flight-path angle gamma is gamma plus
-#   an offset (angle of attack, cos(bank) in a turn, its pitch-loop bias) that no fixed trim
+# - vertical: the pitch an autopilot must be told to fly a flight-path angle gamma is gamma plus
+#   an offset (angle of attack, cos(bank) in a turn, its own pitch-loop bias) that no fixed trim
 #   gets right (real ArduPlane SITL flies level at -1.8 deg at 15 m/s; a fixed 0.03 rad trim
-#   left it 10.5 m above the path). The offset is learned: trim_hat low-passes the measured
-#   theta - gamma with time constant trim_tau_s. Since the pitch set-point is gamma + trim_hat
-#   + tau_pitch gamma_dot_cmd, trim_hat integrates tau_pitch gamma_dot_cmd / trim_tau_s while the
-#   autopilot holds it: integral action on the law's vertical demand, which it makes only while
-#   there is a vertical error, so no standing vertical offset remains.
-# - lateral: the bank for a turn rate is atan(V chi_dot / g) only in a coordinated turn; with
-#   the rudder elsewhere (ArduPlane's forced yaw, sideslip) the aircraft turns less per bank
-#   (0.69x measured on ArduPlane SITL: a wider circle). turn_gain learns the achieved heading
-#   rate psi_dot = (q sin(phi) + r cos(phi)) / cos(theta) per coordinated-turn rate
-#   g tan(phi) / V, over samples banked more than turn_learn_min_bank_rad, and the bank set-point
-#   becomes atan(tan(bank_ideal) / turn_gain).
+#   left it 10.5 m above the path). trim_hat starts at the measured theta - gamma and then
+#   integrates the law's vertical demand: d trim_hat / dt = (tau_pitch / trim_tau_s)
+#   gamma_dot_cmd (not while the pitch set-point is saturated that way). The law demands a
+#   flight-path rate only while there is a vertical error, so none stands: integral action
+#   that also absorbs a bias of the autopilot's pitch loop.
+# - lateral: the bank for a turn rate is atan(V chi_dot / g) only in a coordinated turn that the
+#   autopilot banks exactly as told; with the rudder elsewhere (sideslip) or a roll-loop bias
+#   the aircraft turns less per commanded bank (0.69x measured on ArduPlane SITL with yaw = 0:
+#   a wider circle). turn_gain low-passes the achieved heading rate
+#   psi_dot = (q sin(phi) + r cos(phi)) / cos(theta) per coordinated-turn rate of the bank SENT
+#   last, g tan(bank_prev) / V (samples with |bank_prev| >= turn_learn_min_bank_rad), and the
+#   bank set-point becomes atan(tan(bank_ideal) / turn_gain): the commanded turn is achieved.
 
 
 @dataclass(frozen=True)
@@ -112,11 +113,12 @@ class AdapterState:
     integ: float = 0.0
     trim_hat: float | None = None
     turn_gain: float = 1.0
+    bank_prev: float | None = None  # rad, the bank set-point sent last
 
     def for_reengage(self) -> AdapterState:
         """After a hand-back: the airspeed integrator starts afresh (the autopilot flew the
         aircraft meanwhile), what was learned of the airframe stays."""
-        return AdapterState(0.0, self.trim_hat, self.turn_gain)
+        return AdapterState(0.0, self.trim_hat, self.turn_gain, None)
 
 
 @dataclass(frozen=True)
@@ -225,12 +227,12 @@ def adapt(
     bank, n = bank_and_load_factor(w1, accel, g)
     trim_hat, k_turn = state.trim_hat, state.turn_gain
     gamma = math.asin(_clip(-w1[2], -1.0, 1.0))
-    if params.adaptive and meas is not None and dt > 0.0:
-        trim_hat, k_turn = _learn(params, trim_hat, k_turn, meas, w1, v, dt, g)
+    chid, gamd = heading_and_path_angle_rates(w1, omega_w1_I)
+    if params.adaptive and meas is not None:
+        trim_hat, k_turn = _learn(params, state, meas, w1, v, dt, g, gamd, gamma)
     if params.adaptive and k_turn != 1.0:
         bank = math.atan(math.tan(_clip(bank, -1.4, 1.4)) / k_turn)
     bank = _clip(bank, -params.max_bank_rad, params.max_bank_rad)
-    chid, gamd = heading_and_path_angle_rates(w1, omega_w1_I)
     sphi, cphi = math.sin(roll), math.cos(roll)
     sth, cth = math.sin(pitch), math.cos(pitch)
     phid = (bank - roll) / params.tau_roll_s
@@ -270,22 +272,25 @@ def adapt(
     ):  # fmt: skip
         return safe_setpoint(params, roll), state
     return Setpoint((p, q, r), quat, thrust, bank, pitch_sp, n), AdapterState(
-        integ, trim_hat, k_turn
+        integ, trim_hat, k_turn, bank
     )
 
 
 def _learn(
     params: AdapterParams,
-    trim_hat: float | None,
-    k_turn: float,
+    state: AdapterState,
     meas: tuple[Any, Any],
     w1: Vec,
     v: float,
     dt: float,
     g: float,
+    gamd: float,
+    gamma: float,
 ) -> tuple[float | None, float]:
-    """One step of the two estimates (module comment) from the measured attitude and rates;
-    a non-finite or missing measurement changes nothing."""
+    """One step of the two estimates (module comment) from the measured attitude and rates and
+    the law's flight-path-angle rate demand gamd (rad/s); a non-finite or missing measurement
+    changes nothing."""
+    trim_hat, k_turn = state.trim_hat, state.turn_gain
     try:
         R, rates = meas
         R2 = R[2].tolist() if hasattr(R, "tolist") else R[2]
@@ -294,18 +299,29 @@ def _learn(
         q_m, r_m = float(rates[1]), float(rates[2])
     except (TypeError, ValueError, IndexError):
         return trim_hat, k_turn
-    gamma = math.asin(_clip(-w1[2], -1.0, 1.0))
     off = theta - gamma
-    if not (math.isfinite(off) and math.isfinite(q_m) and math.isfinite(r_m)):
+    if not (
+        math.isfinite(off) and math.isfinite(q_m) and math.isfinite(r_m) and math.isfinite(gamd)
+    ):
         return trim_hat, k_turn
     lim = params.trim_limit_rad
     if trim_hat is None:
         trim_hat = _clip(off, -lim, lim)
-    else:
-        a = min(1.0, dt / params.trim_tau_s)
-        trim_hat = _clip(trim_hat + a * (off - trim_hat), -lim, lim)
-    if abs(phi) >= params.turn_learn_min_bank_rad and abs(phi) < 1.2 and v > 1.0:
-        ideal = g * math.tan(phi) / v
+    elif dt > 0.0:
+        pitch_sp = gamma + gamd * params.tau_pitch_s + trim_hat
+        pushing_out = (pitch_sp >= params.max_pitch_rad and gamd > 0) or (
+            pitch_sp <= params.min_pitch_rad and gamd < 0
+        )
+        if not pushing_out:
+            trim_hat = _clip(
+                trim_hat + params.tau_pitch_s / params.trim_tau_s * gamd * dt, -lim, lim
+            )
+    bp = state.bank_prev
+    if (
+        dt > 0.0 and bp is not None and abs(bp) >= params.turn_learn_min_bank_rad
+        and abs(bp) < 1.2 and abs(phi) < 1.2 and v > 1.0
+    ):  # fmt: skip
+        ideal = g * math.tan(bp) / v
         psid = (q_m * math.sin(phi) + r_m * math.cos(phi)) / max(math.cos(theta), 0.2)
         ratio = psid / ideal
         if math.isfinite(ratio):

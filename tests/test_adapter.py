@@ -130,3 +130,68 @@ def test_safe_setpoint_levels_the_wings():
 
 def test_bank_and_load_factor_unchanged():
     assert bank_and_load_factor((1.0, 0.0, 0.0), (0.0, 0.0, 0.0)) == (0.0, 1.0)
+
+
+# ----------------------------------------------------------------------------- learned loops
+def test_pitch_offset_starts_at_the_measured_theta_minus_gamma_then_integrates_the_demand():
+    """trim_hat starts at theta - gamma (level flight at -1.8 deg pitch: -0.0314 rad, what real
+    ArduPlane SITL flies at 15 m/s), then d trim_hat / dt = (tau_pitch / trim_tau) gamma_dot_cmd:
+    a steady 0.01 rad/s climb demand for 2 s adds 1.0 / 4.0 * 0.01 * 2 = 0.005 rad."""
+    theta = math.radians(-1.8)
+    R = euler_to_matrix(0.0, theta, 0.0)
+    meas = (R, (0.0, 0.0, 0.0))
+    _, st0 = adapt((0.0, 0.0, 0.0), 15.0, R, NORTH, 0.0, P, meas=meas)
+    assert st0.trim_hat == pytest.approx(theta, abs=1e-12)
+    # omega about east (y): w1 = north pitches up at 0.01 rad/s (gamma_dot = +0.01)
+    st_ = st0
+    for _ in range(100):
+        _, st_ = adapt((0.0, 0.01, 0.0), 15.0, R, NORTH, 0.02, P, st_, meas=meas)
+    assert st_.trim_hat == pytest.approx(theta + 1.0 / 4.0 * 0.01 * 2.0, rel=1e-9)
+    # the pitch set-point carries it: gamma 0 + tau 0.01 + trim_hat
+    sp, _ = adapt((0.0, 0.01, 0.0), 15.0, R, NORTH, 0.02, P, st_, meas=meas)
+    assert sp.pitch_rad == pytest.approx(0.01 + st_.trim_hat + 1.0 / 4.0 * 0.01 * 0.02, abs=1e-12)
+    # no demand, no change: the offset that held the path stays
+    _, st2 = adapt((0.0, 0.0, 0.0), 15.0, R, NORTH, 0.02, P, st_, meas=meas)
+    assert st2.trim_hat == st_.trim_hat
+
+
+def test_pitch_offset_does_not_wind_up_against_the_pitch_limit():
+    R = LEVEL
+    st_ = AdapterState(trim_hat=P.max_pitch_rad)  # set-point already at the limit
+    _, st2 = adapt((0.0, 0.2, 0.0), 15.0, R, NORTH, 0.02, P, st_, meas=(R, (0, 0, 0)))
+    assert st2.trim_hat == P.max_pitch_rad  # a climb demand cannot push it further
+
+
+def test_turn_gain_learns_an_airframe_that_turns_less_per_bank_and_banks_more():
+    """An aircraft that turns at 0.7 x g tan(bank) / V for the bank it was sent (the wide
+    circles of real ArduPlane SITL with the rudder pinned): turn_gain -> 0.7 and the bank for a
+    commanded turn becomes atan(tan(ideal) / 0.7), so the turn achieved is the one commanded."""
+    v, bank_sent = 15.0, math.radians(20.0)
+    phi = bank_sent
+    psid = 0.7 * GRAVITY_M_S2 * math.tan(bank_sent) / v
+    # body rates of a level turn at heading rate psid: q = psid sin(phi), r = psid cos(phi)
+    meas = (euler_to_matrix(phi, 0.0, 0.0), (0.0, psid * math.sin(phi), psid * math.cos(phi)))
+    st_ = AdapterState(trim_hat=0.0, bank_prev=bank_sent)
+    for _ in range(3000):  # 60 s >> turn_gain_tau_s = 8 s
+        _, st_ = adapt((0.0, 0.0, 0.0), v, LEVEL, NORTH, 0.02, P, st_, meas=meas)
+        st_ = AdapterState(st_.integ, st_.trim_hat, st_.turn_gain, bank_sent)
+    assert st_.turn_gain == pytest.approx(0.7, abs=1e-3)
+    chid = 0.2  # commanded heading rate; ideal bank atan(v chid / g)
+    sp, _ = adapt((0.0, 0.0, chid), v, LEVEL, NORTH, 0.02, P, st_)
+    ideal = math.atan(v * chid / GRAVITY_M_S2)
+    assert sp.bank_rad == pytest.approx(math.atan(math.tan(ideal) / st_.turn_gain), abs=1e-9)
+    # below 5 deg of bank sent nothing is learned (the ratio would be noise)
+    st3 = AdapterState(trim_hat=0.0, turn_gain=1.0, bank_prev=math.radians(3.0))
+    _, st4 = adapt((0.0, 0.0, 0.0), v, LEVEL, NORTH, 0.02, P, st3, meas=meas)
+    assert st4.turn_gain == 1.0
+
+
+def test_airspeed_integrator_can_reach_the_thrust_ceiling():
+    """PX4's SIH airplane needs ~0.8+ throttle: the integrator is bounded by the output range
+    (thrust_max - trim), not a smaller cap, so a slow aircraft gets full thrust and the
+    saturation shows."""
+    st_ = AdapterState()
+    for _ in range(5000):
+        sp, st_ = adapt((0.0, 0.0, 0.0), 12.0, LEVEL, NORTH, 0.02, P, st_)
+    assert sp.thrust == P.thrust_max
+    assert st_.integ <= P.thrust_max - P.trim_thrust + 1e-12
