@@ -116,6 +116,9 @@ class MavlinkConfig:
     # VFR_HUD.airspeed is an equivalent airspeed (ArduPilot EAS, PX4 calibrated): the speed
     # along w1 is true airspeed, EAS * sqrt(rho0 / rho) at VFR_HUD.alt (ISA)
     airspeed_is_eas: bool = True
+    # while the autopilot's own wind (WIND / WIND_COV) is fresh, the speed along w1 is
+    # |v_ground - wind|, the air-relative speed the law's kinematics assume (no EAS/TAS factor)
+    airspeed_from_wind: bool = True
     attitude_rate_hz: float = field(default=50.0, metadata=_pos())
     attitude_min_hz: float = field(default=20.0, metadata=_nonneg())
     position_rate_hz: float = field(default=50.0, metadata=_pos())

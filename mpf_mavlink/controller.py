@@ -354,7 +354,7 @@ def estimator_params(m: Any) -> EstimatorParams:
     origin = None
     if m.origin_lat_deg is not None and m.origin_lon_deg is not None and m.origin_alt_m is not None:
         origin = (m.origin_lat_deg, m.origin_lon_deg, m.origin_alt_m)
-    return EstimatorParams(m.attitude_stale_s, m.position_stale_s, m.airspeed_stale_s, m.wind_stale_s, m.wind_filter_tau_s, origin=origin, airspeed_is_eas=m.airspeed_is_eas)  # fmt: skip
+    return EstimatorParams(m.attitude_stale_s, m.position_stale_s, m.airspeed_stale_s, m.wind_stale_s, m.wind_filter_tau_s, origin=origin, airspeed_is_eas=m.airspeed_is_eas, airspeed_from_wind=m.airspeed_from_wind)  # fmt: skip
 
 
 class Controller:

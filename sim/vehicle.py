@@ -876,6 +876,8 @@ class SimVehicle:
             if msg.target_system not in (0, self.sysid) or self.px4:
                 return  # PX4 ignores it (MAV_CMD_SET_MESSAGE_INTERVAL only)
             hz = float(msg.req_message_rate) if msg.start_stop else 0.0
+            # ArduPilot caps a stream at 1.25 main-loop periods (40 Hz at Plane's 50 Hz loop)
+            hz = min(hz, 1.0 / (1.25 * self.frame_period))
             groups = _AP_DATA_STREAMS.values() if msg.req_stream_id == 0 else (
                 [_AP_DATA_STREAMS[msg.req_stream_id]] if msg.req_stream_id in _AP_DATA_STREAMS else [])  # fmt: skip
             for names in groups:
@@ -1021,6 +1023,12 @@ class SimVehicle:
                 hz = getattr(self.stock, name)
             else:
                 hz = 1e6 / p2
+                if not self.px4 and p2 * 0.8 < self.frame_period * 1e6:
+                    # ArduPilot (GCS_Common.cpp, cap_message_interval): an interval shorter
+                    # than 1.25 main-loop periods is refused, saying so (50 Hz at Plane's 50 Hz)
+                    self._statustext(M.MAV_SEVERITY_INFO, f"Requested rate for message ID {int(p1)} too fast. Increase SCHED_LOOP_RATE")  # fmt: skip
+                    self._ack(cmd, M.MAV_RESULT_DENIED, msg)
+                    return
             setattr(self.rates, name, hz)
             self._next.pop(name, None)
             self._ack(cmd, M.MAV_RESULT_ACCEPTED, msg)

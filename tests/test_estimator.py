@@ -404,14 +404,23 @@ def test_ardupilot_wind_is_where_it_comes_from_and_is_used_when_fresh():
     f = Feed()
     f.wind(270.0, 5.0, 0.0, rx=10.0)
     f.local(10.0, (0.0, 0.0, -100.0), (12.0, 5.0, 0.0))  # ground velocity North-North-East
-    f.vfr(16.0, rx=10.0)  # the autopilot's airspeed differs from |vg - wind| = 12: v_w uses it
+    # the autopilot's airspeed (16) differs from |vg - wind| = 12: with its wind fresh, v_w is
+    # 12, the air-relative speed of the law's kinematics p_dot = v_w w1 + eta (an EAS/TAS or
+    # calibration error in VFR_HUD would otherwise bend every circle; airspeed_from_wind)
+    f.vfr(16.0, rx=10.0)
     f.att(10.0, 0.0, 0.0, 0.3)  # the nose is NOT along the air velocity: w1 must not use it
     e, why = f.estimate()
     assert e is not None, why
     assert e.wind_source == "WIND"
     np.testing.assert_allclose(e.vehicle.wind, [0.0, 5.0, 0.0], atol=1e-9)
     np.testing.assert_allclose(e.vehicle.R_W_I[:, 0], [1.0, 0.0, 0.0], atol=1e-9)  # (12,5)-(0,5)
-    assert e.vehicle.airspeed == 16.0
+    assert e.vehicle.airspeed == pytest.approx(12.0) and e.airspeed_source == "ground_minus_wind"
+    g = Feed(EstimatorParams(airspeed_from_wind=False))  # VFR_HUD as the speed along w1
+    g.wind(270.0, 5.0, 0.0, rx=10.0)
+    g.local(10.0, (0.0, 0.0, -100.0), (12.0, 5.0, 0.0))
+    g.vfr(16.0, rx=10.0)
+    g.att(10.0, 0.0, 0.0, 0.3)
+    assert g.estimate()[0].vehicle.airspeed == 16.0
     # from the North-East (45 deg) with a 1 m/s updraft (speed_z = -1, NED down):
     f.wind(45.0, math.sqrt(8.0 + 1.0), -1.0, rx=10.02)
     f.att(10.02, 0.0, 0.0, 0.3)

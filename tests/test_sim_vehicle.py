@@ -373,15 +373,19 @@ def test_arduplane_stock_rates_and_both_rate_requests(ardu):
     g.msgs.clear()
     g.c.mav.command_long_send(1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_VFR_HUD, 100_000, 0, 0, 0, 0, 0)  # fmt: skip
     g.c.mav.request_data_stream_send(1, 1, 10, 25, 1)  # EXTRA1 at 25 Hz
-    g.c.mav.request_data_stream_send(1, 1, 6, 50, 1)  # POSITION at 50 Hz
+    g.c.mav.request_data_stream_send(1, 1, 6, 50, 1)  # POSITION at 50 Hz: capped at 40
+    # 50 Hz by interval is refused: ArduPilot caps intervals at 1.25 loop periods (25 ms)
+    g.c.mav.command_long_send(1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_ATTITUDE, 20_000, 0, 0, 0, 0, 0)  # fmt: skip
     g.c.mav.command_long_send(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0)  # fmt: skip
     frames(v, g, 3)
     assert len(g.of("HOME_POSITION")) == 1  # sent once, on request
+    denied = [a for a in g.of("COMMAND_ACK") if a.command == M.MAV_CMD_SET_MESSAGE_INTERVAL]
+    assert [a.result for a in denied] == [M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED]
     g.msgs.clear()
     frames(v, g, 100)  # 2 s at the new rates
     assert 49 <= len(g.of("ATTITUDE")) <= 51  # 25 Hz
-    assert 99 <= len(g.of("LOCAL_POSITION_NED")) <= 101  # 50 Hz
-    assert 99 <= len(g.of("GLOBAL_POSITION_INT")) <= 101
+    assert 79 <= len(g.of("LOCAL_POSITION_NED")) <= 81  # 40 Hz (the cap)
+    assert 79 <= len(g.of("GLOBAL_POSITION_INT")) <= 81
     assert 19 <= len(g.of("VFR_HUD")) <= 21  # 10 Hz
     assert 1 <= len(g.of("WIND")) <= 3  # EXTRA3 untouched: 1 Hz
     g.c.mav.request_data_stream_send(1, 1, 10, 0, 0)  # stop EXTRA1
