@@ -94,3 +94,21 @@ def test_look_ahead_grows_only_where_the_hold_costs_phase():
     assert (v / a + K_R / 2) * lag == pytest.approx(HOLD_PHASE_RAD)
     assert look_ahead(20.0, K_R, v, 0.02, 0.1) == 20.0  # a wider configured alpha stands
     assert look_ahead(5.0, K_R, v, float("nan"), 0.0) == 5.0
+
+
+def test_target_samples_are_stamped_from_the_newest_vehicle_time():
+    """A live target's sample is stamped with the vehicle's time at receipt: the newest
+    time-stamped sample's autopilot time plus the receive time since. With ATTITUDE at 10 Hz
+    and LOCAL_POSITION_NED at 50 Hz the position is newer by up to 80 ms (under a lockstep clock
+    the receive times barely move, so the older ATTITUDE stamped targets 80 ms early)."""
+    from mpf_mavlink.mavlink.codec import AttitudeSample, LocalPositionSample
+
+    ctl = Controller(load_config(DEMO))
+    ctl.feed_vehicle(AttitudeSample(1.0, np.eye(3), np.zeros(3)), 10.0)
+    assert ctl.mission_time_at(10.002) == pytest.approx(1.002)
+    ctl.feed_vehicle(LocalPositionSample(1.08, np.zeros(3), np.array([16.0, 0.0, 0.0])), 10.001)
+    assert ctl.mission_time_at(10.002) == pytest.approx(1.081)
+    # an older position sample (received later) does not pull the stamp back
+    ctl.feed_vehicle(AttitudeSample(1.1, np.eye(3), np.zeros(3)), 10.003)
+    ctl.feed_vehicle(LocalPositionSample(1.06, np.zeros(3), np.zeros(3)), 10.004)
+    assert ctl.mission_time_at(10.005) == pytest.approx(1.102)
