@@ -147,7 +147,7 @@ def bridge_latency_ms(n_samples: int = 300, rate_hz: float = 50.0) -> dict[str, 
     }
 
 
-SHARED_TLOG = Path("/work/shared/data/arduplane-quadplane-sitl-vtol.tlog")
+SHARED_TLOG = Path(__file__).resolve().parents[1] / "tests" / "data" / "arduplane-quadplane-sitl-vtol.tlog"
 
 
 def replay_s(runs: int = 3) -> dict[str, float | int | str]:

@@ -166,8 +166,18 @@ def test_kinematic_state_is_rotation():
 # Outputs of the law as implemented before it was rewritten for speed (commit 9cf34ea: numpy
 # inputs, tuple arithmetic, a frozen dataclass per evaluation). The rewrite performs the same
 # floating-point operations in the same order; side by side on 12000 random states (all
-# extension combinations) it agreed bit for bit. Compared to 1e-12 relative here so that a
-# different libm (sin/cos/sqrt in the last bit) cannot fail the test on another machine.
+# extension combinations) it agreed bit for bit on that install. Across installs the bits differ:
+# numpy's SIMD paths and libm's sin/cos/sqrt may each differ in the last bit (~1.1e-16 relative),
+# and the feedforward omega_DI is a central difference of R_D with step FD_STEP_S = 1e-4 s, which
+# amplifies a last-bit difference in R_D by 1/(2 h) = 5e3. With a few hundred operations feeding
+# each R_D entry (closest point, frame interpolation, two Rodrigues products) that is
+# ~300 * 1.1e-16 * 5e3 ~ 2e-10 relative on omega_DI and everything the command takes from it
+# (numpy 2.4.6 differed by 2e-11 from the install these numbers came from). 1e-9 relative keeps a
+# factor 5 above that bound and is still seven orders of magnitude below any change of the law's
+# mathematics (a changed gain, sign or term moves these numbers at >= 1e-3 relative). The absolute
+# floor covers exact zeros (w2 = 0 on the antipode case): 1e-12 rad/s is far below any rate a plane
+# could act on. Bit-for-bit equality is asserted only where the code makes it: the extensions-off
+# identity above (same call, same install) and the replay of our own tlogs (tests/test_replay.py).
 GOLDEN = [
     (
         "paper",
@@ -243,5 +253,5 @@ def test_law_gives_the_reference_implementations_numbers(name, build, cmd_ref, d
     c, d = mpf_law(s, veh, tgt, path, gains, ext)
     got = [c.w2, c.w3, c.sdot, *c.omega_w1_I, d.psi, d.pt_norm, *d.omega_DI]
     ref = [*cmd_ref[:3], *cmd_ref[3], diag_ref[0], diag_ref[1], *diag_ref[2]]
-    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-12)
     assert d.mode == diag_ref[3]

@@ -17,7 +17,8 @@ import pytest
 from mpf_mavlink.mavlink import codec, mavutil, read_tlog
 from mpf_mavlink.mavlink.tlog import TlogWriter
 
-SHARED_TLOG = Path("/work/shared/data/arduplane-quadplane-sitl-vtol.tlog")
+# A real ArduPlane SITL recording kept in the repository (provenance: tests/data/README.md).
+SHARED_TLOG = Path(__file__).resolve().parent / "data" / "arduplane-quadplane-sitl-vtol.tlog"
 REPO = Path(__file__).resolve().parents[1]
 
 

@@ -34,7 +34,8 @@ from mpf_mavlink.mavlink import read_tlog  # noqa: E402
 from mpf_mavlink.replay import TOLERANCE, replay  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_TLOG = Path("/work/shared/data/arduplane-quadplane-sitl-vtol.tlog")
+# A real ArduPlane SITL recording kept in the repository (provenance: tests/data/README.md).
+SHARED_TLOG = Path(__file__).resolve().parent / "data" / "arduplane-quadplane-sitl-vtol.tlog"
 REPLAY_CFG = ROOT / "configs" / "replay_arduplane_sitl.yaml"
 FAST = ["mavlink.plots=false", "mavlink.heartbeat_timeout_s=3", "mavlink.mode_timeout_s=0.6",
         "mavlink.request_streams=false", "mavlink.set_fallback=false"]  # fmt: skip
