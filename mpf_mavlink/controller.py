@@ -239,7 +239,7 @@ class LiveTarget:
         name = type(sample).__name__
         if name == "AttitudeSample":
             turn, yaw = _turn_and_yaw(sample.R_B_N, sample.rates_frd)
-            return Report(float(sample.t_boot_s), turn_rate=turn, yaw=yaw)
+            return Report(float(sample.t_boot_s), turn_rate=turn, yaw=yaw, attitude=True)
         if name not in ("FollowTargetSample", "GlobalPositionSample"):
             return None
         pos = self.est.to_local(sample.lat_deg, sample.lon_deg, sample.alt_amsl_m)
@@ -257,7 +257,8 @@ class LiveTarget:
         pos_var = None
         if cov.shape == (3,) and cov[0] > 0.0 and cov[1] > 0.0:
             pos_var = np.array((cov[0] ** 2, cov[0] ** 2, cov[1] ** 2))
-        return Report(float(sample.t_s), pos, vel, turn_yaw[0], turn_yaw[1], pos_var)
+        return Report(float(sample.t_s), pos, vel, turn_yaw[0], turn_yaw[1], pos_var,
+                      attitude=turn_yaw[1] is not None)  # fmt: skip
 
     def update(self, sample: Any, t_mission: float | None) -> None:
         if t_mission is None:

@@ -56,6 +56,9 @@ class TargetEstimatorConfig:
     max_age_s: float = field(default=TargetFilterParams.max_age_s, metadata=_pos())
     latency_s: float = field(default=TargetFilterParams.latency_s, metadata=_nonneg())
     history_s: float = field(default=TargetFilterParams.history_s, metadata=_pos())
+    attitude_timeout_s: float = field(
+        default=TargetFilterParams.attitude_timeout_s, metadata=_pos()
+    )
 
     def params(self) -> TargetFilterParams:
         """The filter's parameters (every key but ``mode``)."""

@@ -36,11 +36,12 @@ time) is the clock offset plus the smallest transport delay (it leaks upward by
 estimate then lags by the true delay). A sender clock that restarts or jumps by more than
 ``max_age_s`` resets the filter.
 
-Output at control time t: the prediction of the latest posterior to t. {T} is the level course
-frame (x along the horizontal velocity, z down: the frame of the scripted targets), angular
-velocity ``[0, 0, w]``, acceleration ``w [-ve, vn, 0]``, angular acceleration 0. Below 0.5 m/s
-the course is undefined: the yaw is held (last course, or the reported yaw). The target's roll,
-pitch and crab angle are not followed. Stale (a reason string, no state) when the predicted
+Output at control time t: the prediction of the latest posterior to t. {T} is level (z down,
+the frame of the scripted targets): its yaw is the target's reported attitude yaw while that is
+younger than ``attitude_timeout_s`` (turned on at the estimated turn rate), else the course
+(x along the horizontal velocity); below 0.5 m/s the course is undefined and the yaw is held
+(last course, or the reported heading). Angular velocity ``[0, 0, w]``, acceleration
+``w [-ve, vn, 0]``, angular acceleration 0. The target's roll and pitch are not followed. Stale (a reason string, no state) when the predicted
 position uncertainty ``sqrt(trace P_pos) + manoeuvre_accel_m_s2 tau^2 / 2`` exceeds
 ``max_position_sigma_m`` (tau: time since the newest fused position) or that position is
 older than ``max_age_s``. The second term is what a target that starts to manoeuvre while unseen can
@@ -94,6 +95,7 @@ class TargetFilterParams:
     max_age_s: float = 10.0  # stale beyond, whatever the uncertainty
     latency_s: float = 0.0  # known smallest transport delay of the reports
     history_s: float = 10.0  # reports kept for re-ordering late ones
+    attitude_timeout_s: float = 1.0  # a reported attitude older than this no longer sets {T}
 
 
 @dataclass(frozen=True)
@@ -108,6 +110,7 @@ class Report:
     turn_rate: float | None = None
     yaw: float | None = None
     pos_var: NDArray[np.float64] | None = None
+    attitude: bool = False  # yaw is the target's measured attitude (not a heading hint)
 
 
 @dataclass(frozen=True)
@@ -225,6 +228,7 @@ class TargetEstimator:
         self.off: float | None = None  # clock offset + smallest delay (control - sender, s)
         self.rx_last = 0.0
         self.t_last = -math.inf  # newest report time (sender clock)
+        self.att: tuple[float, float] | None = None  # newest reported attitude: (t, yaw)
         self.counts = dict(
             fused=0, gated=0, reinit=0, out_of_order=0, duplicate=0, too_late=0,
             clock_reset=0,
@@ -253,7 +257,7 @@ class TargetEstimator:
 
     def _reset(self) -> None:
         self.hist, self.posts, self.anchor = [], [], None
-        self.off, self.t_last = None, -math.inf
+        self.off, self.t_last, self.att = None, -math.inf, None
 
     def shift_time_base(self, dt: float) -> None:
         """The control time base moved: new = old - dt (s)."""
@@ -273,6 +277,8 @@ class TargetEstimator:
         too_late, waiting (no position yet to start from)."""
         if not self._clock(r.t, t_rx):
             return "too_late"
+        if r.attitude and r.yaw is not None and (self.att is None or r.t >= self.att[0]):
+            self.att = (r.t, float(r.yaw))
         hist = self.hist
         if r.position is not None:
             # FOLLOW_TARGET and GLOBAL_POSITION_INT of one instant carry the same fix
@@ -446,7 +452,11 @@ class TargetEstimator:
                 f"{self.p.max_position_sigma_m:g} m, {age:.2f} s since its last position)"
             )
         vn, ve, w = float(x[3]), float(x[4]), float(x[6])
-        yaw = self._course(x, held)
+        att = self.att
+        if att is not None and ts - att[0] <= self.p.attitude_timeout_s:
+            yaw = att[1] + w * (ts - att[0])  # the target's own yaw, turned on at the turn rate
+        else:
+            yaw = self._course(x, held)
         return TargetState(
             t, x[_POS].copy(), x[_VEL].copy(), np.array((-w * ve, w * vn, 0.0)),
             so3.rot_z(yaw), np.array((0.0, 0.0, w)), np.zeros(3),

@@ -318,3 +318,25 @@ def test_attitude_alone_does_not_keep_a_lost_target_placed():
         kf.add(Report(last.t + 0.1 * k, turn_rate=BOAT.turn_rate, yaw=0.0), rx + 0.1 * k)
     why = kf.state(rx + 9.9)
     assert isinstance(why, str) and "since its last position" in why
+
+
+def test_reported_attitude_sets_the_frame_while_fresh_then_the_course():
+    """A boat crabbing 0.2 rad off its course (current on the beam) reports its yaw: {T} takes
+    that yaw (turned on at the estimated turn rate) while the report is younger than
+    attitude_timeout_s, then falls back to the course of the estimated velocity."""
+    kf = TargetEstimator(params(attitude_timeout_s=1.0))
+    reps = reports(BOAT, 30.0, seed=14)
+    feed(kf, reps)
+    rx, last = reps[-1]
+    yaw_true = BOAT.state(30.0).R_T_I
+    yaw0 = math.atan2(yaw_true[1, 0], yaw_true[0, 0]) + 0.2
+    kf.add(Report(last.t, yaw=yaw0, turn_rate=BOAT.turn_rate, attitude=True), rx)
+    # control time rx - LATENCY + age is "age" seconds after the report's own stamp
+    st = kf.state(rx - LATENCY + 0.5)
+    assert not isinstance(st, str)
+    w = st.omega_T[2]
+    assert math.atan2(st.R_T_I[1, 0], st.R_T_I[0, 0]) == pytest.approx(yaw0 + 0.5 * w, abs=1e-9)
+    st = kf.state(rx - LATENCY + 1.5)  # the attitude is 1.5 s old: the course again
+    assert not isinstance(st, str)
+    course = math.atan2(st.velocity[1], st.velocity[0])
+    assert math.atan2(st.R_T_I[1, 0], st.R_T_I[0, 0]) == pytest.approx(course, abs=1e-9)
