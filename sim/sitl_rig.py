@@ -75,6 +75,8 @@ class Gcs:
                 return
             m = self.c.recv_match(blocking=True, timeout=min(left, 0.1))
             if m is not None and m.get_srcSystem() == self.sys:
+                if m.get_type() == "HEARTBEAT" and m.get_srcComponent() != self.comp:
+                    continue  # the bridge's own HEARTBEAT (component 191), routed by ArduPilot
                 self.last[m.get_type()] = m
                 if m.get_type() == "STATUSTEXT":
                     print(f"  [sitl] {m.text}", flush=True)
@@ -290,7 +292,15 @@ def watch_after_kill(g: Gcs, secs: float, out: Path) -> dict[str, Any]:
         "t,roll_deg,throttle_pct,x,y,z\n"
         + "\n".join(",".join(f"{v:.3f}" for v in r) for r in trace)
     )
-    return {"peak_bank_deg": peak_bank, "modes": sorted(modes), "trace": trace}
+    info: dict[str, Any] = {"peak_bank_deg": peak_bank, "modes": sorted(modes), "trace": trace}
+    ov = (out / "mission_overrides.txt").read_text().splitlines()[0]
+    cx, cy, _ = (float(v) for v in ov.split("=", 1)[1].strip("[]").split(","))
+    tail = [r for r in trace if r[0] >= secs - 15.0]
+    if tail:  # the last 15 s: where ArduPlane's own navigation has taken it
+        info["radius_m"] = sum(math.hypot(r[3] - cx, r[4] - cy) for r in tail) / len(tail)
+        info["alt_m"] = sum(-r[5] for r in tail) / len(tail)
+        info["bank_deg"] = sum(abs(r[1]) for r in tail) / len(tail)
+    return info
 
 
 def _f(v: Any, fmt: str = ".3g") -> str:
@@ -322,7 +332,8 @@ def table_rows(
         rows += [
             ("after SIGKILL: modes seen", ", ".join(str(x) for x in kill["modes"])),
             ("after SIGKILL: peak |bank|", f"{kill['peak_bank_deg']:.1f} deg over {a.watch_s:g} s"),
-        ]
+            ("after SIGKILL: last 15 s", f"{_f(kill.get('radius_m'), '.1f')} m from the path centre, {_f(kill.get('alt_m'), '.1f')} m up, |bank| {_f(kill.get('bank_deg'), '.1f')} deg"),
+        ]  # fmt: skip
     return rows
 
 
