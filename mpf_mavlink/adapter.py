@@ -60,10 +60,11 @@ def bank_and_load_factor(w1: Vec, accel: Vec, g: float = GRAVITY_M_S2) -> tuple[
 # - lateral: the bank for a turn rate is atan(V chi_dot / g) only in a coordinated turn that the
 #   autopilot banks exactly as told; with the rudder elsewhere (sideslip) or a roll-loop bias
 #   the aircraft turns less per commanded bank (0.69x measured on ArduPlane SITL with yaw = 0:
-#   a wider circle). turn_gain low-passes the achieved heading rate
-#   psi_dot = (q sin(phi) + r cos(phi)) / cos(theta) per coordinated-turn rate of the bank SENT
-#   last, g tan(bank_prev) / V (samples with |bank_prev| >= turn_learn_min_bank_rad), and the
-#   bank set-point becomes atan(tan(bank_ideal) / turn_gain): the commanded turn is achieved.
+#   a wider circle). The bank set-point is atan(tan(bank_ideal) / turn_gain), and turn_gain
+#   integrates the relative error between the achieved heading rate psi_dot = (q sin(phi) +
+#   r cos(phi)) / cos(theta) and the heading rate the last bank was sent for (time constant
+#   turn_gain_tau_s; not while that bank was clipped, nor below turn_learn_min_bank_rad): in
+#   the mean the commanded turn is achieved, so no standing radial error remains.
 
 
 @dataclass(frozen=True)
@@ -114,11 +115,13 @@ class AdapterState:
     trim_hat: float | None = None
     turn_gain: float = 1.0
     bank_prev: float | None = None  # rad, the bank set-point sent last
+    # rad/s, the heading rate that bank was sent for (None: the bank was clipped, learn nothing)
+    chid_prev: float | None = None
 
     def for_reengage(self) -> AdapterState:
         """After a hand-back: the airspeed integrator starts afresh (the autopilot flew the
         aircraft meanwhile), what was learned of the airframe stays."""
-        return AdapterState(0.0, self.trim_hat, self.turn_gain, None)
+        return AdapterState(0.0, self.trim_hat, self.turn_gain, None, None)
 
 
 @dataclass(frozen=True)
@@ -232,6 +235,7 @@ def adapt(
         trim_hat, k_turn = _learn(params, state, meas, w1, v, dt, g, gamd, gamma)
     if params.adaptive and k_turn != 1.0:
         bank = math.atan(math.tan(_clip(bank, -1.4, 1.4)) / k_turn)
+    clipped = abs(bank) > params.max_bank_rad
     bank = _clip(bank, -params.max_bank_rad, params.max_bank_rad)
     sphi, cphi = math.sin(roll), math.cos(roll)
     sth, cth = math.sin(pitch), math.cos(pitch)
@@ -272,7 +276,7 @@ def adapt(
     ):  # fmt: skip
         return safe_setpoint(params, roll), state
     return Setpoint((p, q, r), quat, thrust, bank, pitch_sp, n), AdapterState(
-        integ, trim_hat, k_turn, bank
+        integ, trim_hat, k_turn, bank, None if clipped else chid
     )
 
 
@@ -316,18 +320,19 @@ def _learn(
             trim_hat = _clip(
                 trim_hat + params.tau_pitch_s / params.trim_tau_s * gamd * dt, -lim, lim
             )
-    bp = state.bank_prev
+    bp, cp = state.bank_prev, state.chid_prev
     if (
-        dt > 0.0 and bp is not None and abs(bp) >= params.turn_learn_min_bank_rad
-        and abs(bp) < 1.2 and abs(phi) < 1.2 and v > 1.0
+        dt > 0.0 and bp is not None and cp is not None
+        and abs(bp) >= params.turn_learn_min_bank_rad and abs(bp) < 1.2 and abs(phi) < 1.2
     ):  # fmt: skip
-        ideal = g * math.tan(bp) / v
         psid = (q_m * math.sin(phi) + r_m * math.cos(phi)) / max(math.cos(theta), 0.2)
-        ratio = psid / ideal
-        if math.isfinite(ratio):
-            ratio = _clip(ratio, params.turn_gain_min, params.turn_gain_max)
+        # integral of the relative turn-rate error (achieved - asked): unbiased in the mean,
+        # where a low-pass of the ratio psid / asked is not (fluctuations correlate)
+        err = (psid - cp) / max(abs(cp), 1e-3) * (1.0 if cp > 0 else -1.0)
+        if math.isfinite(err):
             a = min(1.0, dt / params.turn_gain_tau_s)
             k_turn = _clip(
-                k_turn + a * (ratio - k_turn), params.turn_gain_min, params.turn_gain_max
-            )
+                k_turn + a * k_turn * _clip(err, -0.5, 0.5),
+                params.turn_gain_min, params.turn_gain_max,
+            )  # fmt: skip
     return trim_hat, k_turn

@@ -164,26 +164,32 @@ def test_pitch_offset_does_not_wind_up_against_the_pitch_limit():
 
 def test_turn_gain_learns_an_airframe_that_turns_less_per_bank_and_banks_more():
     """An aircraft that turns at 0.7 x g tan(bank) / V for the bank it was sent (the wide
-    circles of real ArduPlane SITL with the rudder pinned): turn_gain -> 0.7 and the bank for a
-    commanded turn becomes atan(tan(ideal) / 0.7), so the turn achieved is the one commanded."""
-    v, bank_sent = 15.0, math.radians(20.0)
-    phi = bank_sent
-    psid = 0.7 * GRAVITY_M_S2 * math.tan(bank_sent) / v
-    # body rates of a level turn at heading rate psid: q = psid sin(phi), r = psid cos(phi)
-    meas = (euler_to_matrix(phi, 0.0, 0.0), (0.0, psid * math.sin(phi), psid * math.cos(phi)))
-    st_ = AdapterState(trim_hat=0.0, bank_prev=bank_sent)
-    for _ in range(3000):  # 60 s >> turn_gain_tau_s = 8 s
-        _, st_ = adapt((0.0, 0.0, 0.0), v, LEVEL, NORTH, 0.02, P, st_, meas=meas)
-        st_ = AdapterState(st_.integ, st_.trim_hat, st_.turn_gain, bank_sent)
-    assert st_.turn_gain == pytest.approx(0.7, abs=1e-3)
-    chid = 0.2  # commanded heading rate; ideal bank atan(v chid / g)
-    sp, _ = adapt((0.0, 0.0, chid), v, LEVEL, NORTH, 0.02, P, st_)
+    circles of real ArduPlane SITL with the rudder pinned), asked for 0.2 rad/s: turn_gain
+    integrates the relative turn-rate error down to 0.7, the bank becomes atan(tan(ideal) /
+    0.7) and the turn achieved is the one commanded."""
+    v, chid = 15.0, 0.2
     ideal = math.atan(v * chid / GRAVITY_M_S2)
+    st_ = AdapterState(trim_hat=0.0)
+    psid = 0.0
+    for _ in range(6000):  # 120 s >> turn_gain_tau_s = 8 s
+        bank = st_.bank_prev or 0.0
+        psid = 0.7 * GRAVITY_M_S2 * math.tan(bank) / v
+        meas = (
+            euler_to_matrix(bank, 0.0, 0.0),
+            (0.0, psid * math.sin(bank), psid * math.cos(bank)),
+        )
+        sp, st_ = adapt((0.0, 0.0, chid), v, LEVEL, NORTH, 0.02, P, st_, meas=meas)
+    assert st_.turn_gain == pytest.approx(0.7, rel=1e-3)
     assert sp.bank_rad == pytest.approx(math.atan(math.tan(ideal) / st_.turn_gain), abs=1e-9)
+    assert psid == pytest.approx(chid, rel=1e-3)
     # below 5 deg of bank sent nothing is learned (the ratio would be noise)
-    st3 = AdapterState(trim_hat=0.0, turn_gain=1.0, bank_prev=math.radians(3.0))
+    st3 = AdapterState(trim_hat=0.0, turn_gain=1.0, bank_prev=math.radians(3.0), chid_prev=0.05)
     _, st4 = adapt((0.0, 0.0, 0.0), v, LEVEL, NORTH, 0.02, P, st3, meas=meas)
     assert st4.turn_gain == 1.0
+    # a clipped bank (the aircraft cannot turn as asked) teaches nothing either
+    big = AdapterState(trim_hat=0.0, turn_gain=1.0)
+    _, st5 = adapt((0.0, 0.0, 2.0), v, LEVEL, NORTH, 0.02, P, big)
+    assert st5.chid_prev is None and st5.bank_prev == P.max_bank_rad
 
 
 def test_airspeed_integrator_can_reach_the_thrust_ceiling():
