@@ -247,6 +247,12 @@ def main(argv: list[str] | None = None) -> int:
                     break
         code = bridge.wait()
         m = read_metrics(out / "bridge")
+        if not m:  # a SIGKILLed bridge writes no metrics.json: what its log said before dying
+            for line in (out / "bridge.log").read_text().splitlines():
+                if line.startswith("fallback if the bridge dies: "):
+                    m["fallback"] = line.split(": ", 1)[1]
+                if line.startswith("GUIDED confirmed"):
+                    m["state_reached"] = "TRACKING"
         rows = table_rows(m, code, a, cruise, kill_info)
         if a.sil and not kill_info:
             rows += sil_rows(a, sets, m, out)
