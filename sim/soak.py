@@ -41,6 +41,7 @@ os.environ.setdefault("JSBSIM_DEBUG", "0")
 
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
+from mpf_mavlink.mavlink.codec import TYPE_MASK_ARDUPLANE_ATTITUDE  # noqa: E402
 from mpf_mavlink.mavlink.modes import is_offboard, mode_name  # noqa: E402
 
 from .relay import DOWN, UP, Blackout, Impairment, UdpRelay  # noqa: E402
@@ -425,7 +426,15 @@ class MissionSpec:
     def make(cls, o: Opts, duration_s: float, **kw: Any) -> MissionSpec:
         """A mission of ``duration_s`` (TRACKING) whose steady window is its second half;
         quick missions start on the path."""
-        sets = (f"metrics.steady_after_s={duration_s / 2:g}", *kw.pop("sets", ()))
+        # A soak row judges tracking with its own figure (the final |pt|, the silence, the
+        # setpoints); the flight verdict's |pt| bound (issue 13) is for missions long enough to
+        # capture, and an 8-40 s mission cut by blackouts, fuzz or a re-engagement is not: its
+        # |pt| bound is lifted here, every other clause of the verdict still applies.
+        sets = (
+            f"metrics.steady_after_s={duration_s / 2:g}",
+            "metrics.fail_pt_m=1000.0",
+            *kw.pop("sets", ()),
+        )
         extra = (*(START_ON_PATH if o.quick else ()), *kw.pop("vehicle_extra", ()))
         return cls(duration_s=duration_s, seed=o.seed, sets=sets, vehicle_extra=extra, **kw)
 
@@ -553,7 +562,7 @@ def setpoint_violations(tap: Tap, flavour: str, lim: Limits, tol: float = 1e-5) 
             roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
             pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
             yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-            if m.type_mask != 7 or abs(n - 1.0) > 1e-5:
+            if m.type_mask != TYPE_MASK_ARDUPLANE_ATTITUDE or abs(n - 1.0) > 1e-5:
                 why = f"type_mask {m.type_mask} |q| {n}"
             elif (
                 abs(roll) > lim.max_bank + tol

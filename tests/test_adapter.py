@@ -182,9 +182,12 @@ def test_turn_gain_learns_an_airframe_that_turns_less_per_bank_and_banks_more():
     assert st_.turn_gain == pytest.approx(0.7, rel=1e-3)
     assert sp.bank_rad == pytest.approx(math.atan(math.tan(ideal) / st_.turn_gain), abs=1e-9)
     assert psid == pytest.approx(chid, rel=1e-3)
-    # below 5 deg of bank sent nothing is learned (the ratio would be noise)
-    st3 = AdapterState(trim_hat=0.0, turn_gain=1.0, bank_prev=math.radians(3.0), chid_prev=0.05)
-    _, st4 = adapt((0.0, 0.0, 0.0), v, LEVEL, NORTH, 0.02, P, st3, meas=meas)
+    # below 5 deg of bank flown nothing is learned (the ratio would be noise)
+    phi3 = math.radians(3.0)
+    psid3 = 0.7 * GRAVITY_M_S2 * math.tan(phi3) / v
+    meas3 = (euler_to_matrix(phi3, 0.0, 0.0), (0.0, psid3 * math.sin(phi3), psid3 * math.cos(phi3)))
+    st3 = AdapterState(trim_hat=0.0, turn_gain=1.0, bank_prev=math.radians(20.0), chid_prev=0.2)
+    _, st4 = adapt((0.0, 0.0, 0.0), v, LEVEL, NORTH, 0.02, P, st3, meas=meas3)
     assert st4.turn_gain == 1.0
     # a clipped bank (the aircraft cannot turn as asked) teaches nothing either
     big = AdapterState(trim_hat=0.0, turn_gain=1.0)
