@@ -248,6 +248,10 @@ class Estimator:
             return False
         if name == "AttitudeSample":
             self.att, self.att_rx = sample, t_rx
+            # the wind low-pass advances at each control instant, here, with the telemetry
+            # received so far: advanced by whoever asked for an estimate first, its input
+            # would depend on thread timing and a replay of the tlog could not reproduce it
+            self.estimate()
             return True
         if name == "LocalPositionSample":
             self.local, self.local_rx = sample, t_rx

@@ -57,7 +57,9 @@ VEHICLE_SYSID, VEHICLE_COMPID, TARGET_SYSID = 1, 1, 2
 START_NED = (0.0, -210.0, -100.0)
 START_HEADING = 0.0
 # Quick missions start on the circle itself (its west point, flying north): steady at once.
-START_ON_PATH = ("--position", "0", "-150", "-100")
+# ... and held there in the orbit the path is (the operator's loiter about the path centre before
+# the mission): the vehicle is on the path however long the bridge takes to engage
+START_ON_PATH = ("--position", "0", "-150", "-100", "--orbit", "0", "0", "150")
 
 
 def free_udp_port() -> int:
@@ -89,6 +91,8 @@ def vehicle_main(argv: list[str]) -> int:
     ap.add_argument("--clock", choices=("lockstep", "realtime"), default="realtime")
     ap.add_argument("--position", type=float, nargs=3, default=START_NED)
     ap.add_argument("--heading", type=float, default=START_HEADING)
+    ap.add_argument("--orbit", type=float, nargs=3, default=None, metavar=("N", "E", "RADIUS"),
+                    help="boot in a hold orbit about (N, E) m at RADIUS m (default: about the start)")  # fmt: skip
     ap.add_argument("--airspeed", type=float, default=15.0)
     ap.add_argument("--target", choices=("none", "stationary", "drift"), default="none")
     ap.add_argument("--com-of-loss-t", type=float, default=1.0)
@@ -112,6 +116,7 @@ def vehicle_main(argv: list[str]) -> int:
             a.flavour, a.url, plant=a.plant, clock=a.clock, position_ned=tuple(a.position), heading=a.heading,
             airspeed=a.airspeed, target=target, target_system=TARGET_SYSID, com_of_loss_t=a.com_of_loss_t,
             guided_timeout=a.guided_timeout, record_truth=False,
+            initial_orbit=tuple(a.orbit) if a.orbit else None,
         )  # fmt: skip
         if a.signing_key_hex:
             key = bytes.fromhex(a.signing_key_hex)

@@ -278,6 +278,7 @@ class SimVehicle:
         gusts: list[dict] | None = None,
         realtime_until_engaged: bool = False,
         initial_mode: str = "hold",
+        initial_orbit: tuple[float, float, float] | None = None,
         target_epoch: str = "ready",
         target_feed: dict | None = None,
     ):
@@ -418,6 +419,12 @@ class SimVehicle:
             self._set_px4_mode(PX4_MAIN["AUTO"], PX4_AUTO_SUB["LOITER"], announce=False)
         else:
             self._set_ap_mode(ARDUPLANE_NUMBERS["LOITER"], announce=False)
+        if initial_orbit is not None and initial_mode == "hold":
+            # the operator parked the aircraft in an orbit before the mission (DO_REPOSITION with
+            # a loiter radius, or a loiter mission item): the boot hold circles (north, east) at
+            # that radius; any later hold entry loiters where it happens, as stock
+            self._center = (float(initial_orbit[0]), float(initial_orbit[1]))
+            self._hold_radius = float(initial_orbit[2])
 
         # ---- MAVLink
         self.url = url
@@ -517,6 +524,7 @@ class SimVehicle:
         self._mode_name = name
         self._custom_mode = custom_mode
         self._center = (float(st.position_ned[0]), float(st.position_ned[1]))
+        self._hold_radius = self.loiter_radius
         self._alt_sp = -float(st.position_ned[2])
         self._course = math.atan2(float(st.velocity_ned[1]), float(st.velocity_ned[0]))
         self._mode_t = self._boot_t
@@ -583,7 +591,7 @@ class SimVehicle:
             return self._guided_control(st)
         if beh == LOITER:
             out = ap.loiter_step(dt, st, self._center, self.cruise_airspeed, self._alt_sp,
-                                 self.loiter_radius, self.loiter_direction)  # fmt: skip
+                                 self._hold_radius, self.loiter_direction)  # fmt: skip
         elif beh == CRUISE:
             roll = ap.hold.heading_roll(self._course, (st.velocity_ned[0], st.velocity_ned[1]))
             out = ap.hold_step(dt, st, self.cruise_airspeed, self._alt_sp, roll)
