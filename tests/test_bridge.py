@@ -3,6 +3,7 @@ UDP and on a pty (serial) link."""
 
 from __future__ import annotations
 
+import json
 import math
 import signal
 import socket
@@ -355,6 +356,27 @@ def test_sigterm_hands_back_and_reports_exit_code(tmp_path):
     assert "terminated (SIGTERM)" in out and "hand-back         confirmed" in out
     assert [r.msg.param2 for r in mode_requests(peer)] == [6.0, 4.0]
     assert peer.mode_is("AUTO.LOITER")
+
+
+def test_cli_run_over_a_serial_port(tmp_path):
+    # `mpf-mavlink run` as a user types it, on a serial port (pyserial on a pty pair): the whole
+    # ArduPlane lifecycle, GUIDED then LOITER, and setpoints at the stream rate
+    peer = MavPeer(
+        PeerOptions(flavour="ardupilot", send_local=False, send_global=True, send_wind=True),
+        pty=True,
+    ).start()
+    sets = [x for s in FAST for x in ("--set", s)]
+    cmd = [PY, "-m", "mpf_mavlink.cli", "run", str(ROOT / "configs/bridge_arduplane.yaml"),
+           "--connect", f"{peer.device}:115200", "--out", str(tmp_path), "--duration", "1", *sets]  # fmt: skip
+    try:
+        out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=120)
+    finally:
+        peer.stop()
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert [r.msg.param2 for r in mode_requests(peer)] == [15.0, 12.0]  # GUIDED, then LOITER
+    # 1 s of tracking at the 50 Hz ATTITUDE stream: >= 30 setpoints leaves room for engagement
+    assert len([s for s in peer.setpoints if s.mode == 15]) >= 30
+    assert json.loads((tmp_path / "metrics.json").read_text())["handback_confirmed"] is True
 
 
 def test_tlog_survives_sigkill(tmp_path):

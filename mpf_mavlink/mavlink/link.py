@@ -8,13 +8,12 @@ Connection strings (pymavlink's syntax):
   ``tcpin:HOST:PORT``   listen for one TCP client
   ``/dev/ttyUSB0``, ``/dev/ttyACM0:921600``, ``/dev/ttyS1,57600``  serial device [:baud]
 
-Serial ports are driven through POSIX termios directly (pyserial, which pymavlink's mavserial
-needs, is not a dependency of this project); a pseudo-terminal works like a real port.
+Serial ports go through pyserial (as pymavlink's own ``mavserial`` does); a pseudo-terminal
+works like a real port.
 """
 
 from __future__ import annotations
 
-import errno
 import ipaddress
 import os
 import re
@@ -118,66 +117,55 @@ def parse_url(url: str, baud: int | None = None) -> ParsedUrl:
 # ---------------------------------------------------------------------------------------------
 # Transports that pymavlink's own classes do not cover the way we need
 # ---------------------------------------------------------------------------------------------
-class _PosixSerial(mavutil.mavfile):
-    """Raw 8N1 serial port via termios (no pyserial). Non-blocking reads, blocking-ish writes."""
+class _Serial(mavutil.mavfile):
+    """An 8N1 serial port through pyserial (what pymavlink's own ``mavserial`` and every MAVLink
+    ground tool use; Linux, macOS and Windows alike). Non-blocking reads; writes bounded by a
+    0.5 s timeout so that a stuck port drops a frame instead of stalling the control loop;
+    pymavlink's ``mavserial`` prints and reconnects on errors, which a bridge must not do."""
 
     def __init__(self, device: str, baud: int, source_system: int, source_component: int) -> None:
-        import termios
-        import tty
+        import serial
 
-        speed = getattr(termios, f"B{baud}", None)
-        if speed is None:
-            raise MpfError(f"serial {device}: baud rate {baud} is not supported by this OS")
-        fd = os.open(device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
         try:
-            tty.setraw(fd)
-            attrs = termios.tcgetattr(fd)
-            attrs[2] &= ~(termios.CSTOPB | termios.PARENB | getattr(termios, "CRTSCTS", 0))
-            attrs[2] |= termios.CLOCAL | termios.CREAD | termios.CS8
-            attrs[4] = attrs[5] = speed
-            attrs[6][termios.VMIN] = 0
-            attrs[6][termios.VTIME] = 0
-            termios.tcsetattr(fd, termios.TCSANOW, attrs)
-        except (termios.error, OSError) as e:
-            os.close(fd)
-            raise MpfError(f"serial {device}: cannot configure the port ({e})") from None
-        self.port_fd = fd
+            self.port = serial.Serial(
+                device, int(baud), timeout=0, write_timeout=0.5,
+                dsrdtr=False, rtscts=False, xonxoff=False,
+            )  # fmt: skip
+        except (serial.SerialException, ValueError, OSError) as e:
+            raise MpfError(f"serial {device}: cannot open the port at {baud} baud ({e})") from None
         self.device = device
         self.baud = baud
+        fd = self.port.fileno()
+        mavutil.set_close_on_exec(fd)
         mavutil.mavfile.__init__(
             self, fd, device, source_system=source_system, source_component=source_component
         )
 
     def recv(self, n: int | None = None) -> bytes:
+        import serial
+
         if n is None:
             n = self.mav.bytes_needed()
         try:
-            return os.read(self.port_fd, max(n, 256))
-        except BlockingIOError:
+            return bytes(self.port.read(max(n, 256)))
+        except (serial.SerialException, OSError):
+            # pyserial's word for the other end of a pty closing or a USB adapter unplugged
+            self.portdead = True
             return b""
-        except OSError as e:
-            if e.errno in (errno.EIO, errno.ENXIO):  # other end of a pty closed, USB unplugged
-                self.portdead = True
-                return b""
-            raise
 
     def write(self, buf: bytes) -> int:
-        data = memoryview(bytes(buf))
-        deadline = time.monotonic() + 0.5
-        sent = 0
-        while sent < len(data):
-            try:
-                sent += os.write(self.port_fd, data[sent:])
-            except BlockingIOError:
-                if time.monotonic() > deadline:
-                    return sent  # the port is stuck: drop the rest rather than hang the loop
-                select.select([], [self.port_fd], [], 0.01)
-        return sent
+        import serial
+
+        try:
+            return int(self.port.write(bytes(buf)) or 0)
+        except serial.SerialTimeoutException:
+            return 0  # the port is stuck: drop this frame rather than hang the loop
+        except (serial.SerialException, OSError):
+            self.portdead = True
+            return 0
 
     def close(self) -> None:
-        if self.port_fd >= 0:
-            os.close(self.port_fd)
-            self.port_fd = -1
+        self.port.close()
 
 
 class _TcpClient(mavutil.mavtcp):
@@ -653,7 +641,7 @@ def open_link(
         if parsed.kind == "serial":
             if not os.path.exists(parsed.device):
                 raise MpfError(f"serial device {parsed.device} does not exist")
-            conn = _PosixSerial(parsed.device, parsed.baud, **kw)
+            conn = _Serial(parsed.device, parsed.baud, **kw)
         elif parsed.kind == "tcp":
             conn = _TcpClient(f"{parsed.host}:{parsed.port}", float(timeout_s), **kw)
         else:
