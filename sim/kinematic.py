@@ -16,15 +16,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from mpf_mavlink.guidance.law import (
+from mpf_mavlink.core.guidance.law import (
     Extensions,
     Gains,
     MpfDiagnostics,
     VehicleState,
     mpf_law,
 )
-from mpf_mavlink.paths import TabulatedPath
-from mpf_mavlink.target import TargetMotion
+from mpf_mavlink.core.paths import TabulatedPath
+from mpf_mavlink.core.target import TargetMotion
 
 WindFn = Callable[[float, NDArray[np.float64]], NDArray[np.float64]]
 

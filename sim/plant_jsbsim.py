@@ -2,7 +2,7 @@
 
 :class:`JSBSimPlant` wraps ``jsbsim.FGFDMExec``: normalized surface/throttle commands in, a frozen
 :class:`PlantState` out (NED inertial, FRD body, SI units, radians; ``R_B_N`` maps body -> NED, as
-in :mod:`mpf_mavlink.frames`). The default model is the Skywalker X8 shipped in
+in :mod:`mpf_mavlink.core.frames`). The default model is the Skywalker X8 shipped in
 ``sim/jsbsim_root`` (see ``aircraft/x8/x8.xml`` for every number and its source); any JSBSim
 aircraft works when its root directory and name are given (e.g. ``c172x`` under
 ``jsbsim.get_default_root_dir()``).
@@ -225,7 +225,7 @@ class JSBSimPlant:
         self._nodes: dict[str, object] = {}
 
         # Initial conditions.
-        from mpf_mavlink.frames import ned_to_geodetic  # pymap3d, once at start-up only
+        from mpf_mavlink.core.frames import ned_to_geodetic  # pymap3d, once at start-up only
 
         lat, lon, alt = ned_to_geodetic(position_ned, lat0_deg, lon0_deg, alt0_m)
         self._set("ic/lat-geod-deg", lat)

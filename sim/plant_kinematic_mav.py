@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from .plant_jsbsim import _WGS84_A, _WGS84_E2, LocalNED, PlantState
+from sim.plant_jsbsim import _WGS84_A, _WGS84_E2, LocalNED, PlantState
 
 G = 9.80665
 

@@ -9,12 +9,11 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.config import Config
-from mpf_mavlink.frames import euler_to_matrix
-from mpf_mavlink.rundir import RunTable, compute_metrics, row_from
-from mpf_mavlink.scenario import build_extensions, build_gains, build_path, build_target
-
-from .kinematic import ClosedLoop, initial_state, record, region_wind
+from mpf_mavlink.config.schema import Config
+from mpf_mavlink.core.frames import euler_to_matrix
+from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
+from mpf_mavlink.runs.rundir import RunTable, compute_metrics, row_from
+from sim.kinematic import ClosedLoop, initial_state, record, region_wind
 
 
 @dataclass

@@ -2,7 +2,7 @@
 
 :func:`run_sil` is what ``mpf-mavlink sim CONFIG`` does when ``sil.link: udp``: the vehicle
 (:class:`sim.vehicle.SimVehicle`: the JSBSim aircraft or the kinematic plant, the simulated
-autopilot, PX4 or ArduPlane rules) and the bridge (:func:`mpf_mavlink.bridge.run_bridge`, the
+autopilot, PX4 or ArduPlane rules) and the bridge (:func:`mpf_mavlink.bridge.live.run_bridge`, the
 same code that flies a real autopilot) run in two processes - two interpreters, so neither
 waits for the other's GIL - and talk MAVLink over UDP loopback (the vehicle sends to the
 bridge's ``udpin`` port, as PX4 SITL does to an offboard API). This process watches, shows the
@@ -40,19 +40,19 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.config import Config
-from mpf_mavlink.estimator import wind_frame
-from mpf_mavlink.guidance.law import VehicleState, mpf_law
-from mpf_mavlink.rundir import (
+from mpf_mavlink.bridge.estimator import wind_frame
+from mpf_mavlink.config.schema import Config
+from mpf_mavlink.core.guidance.law import VehicleState, mpf_law
+from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
+from mpf_mavlink.runs.rundir import (
     RunTable,
     compute_metrics,
     prepare_out_dir,
     read_run,
     row_from,
-    write_run,
 )
-from mpf_mavlink.scenario import build_extensions, build_gains, build_path, build_target
-from mpf_mavlink.verdict import EXIT_VERDICT, judge, verdict_line
+from mpf_mavlink.runs.verdict import EXIT_VERDICT, judge, verdict_line
+from mpf_mavlink.runs.write import write_run
 
 # custom modes in which the bridge commands the vehicle (PX4 OFFBOARD, ArduPlane GUIDED)
 _ENGAGED_MODES = ("OFFBOARD", "GUIDED")
@@ -90,7 +90,7 @@ def _bridge_main(*args: Any) -> None:
 # --------------------------------------------------------------------------- the vehicle
 def build_autopilot(cfg: Config) -> Any:
     """The simulated autopilot for the config's aircraft (rate loops, attitude loop, hold)."""
-    from .inner_loop import AttitudeGains, FixedWingAutopilot, HoldGains, RateLoopGains
+    from sim.inner_loop import AttitudeGains, FixedWingAutopilot, HoldGains, RateLoopGains
 
     ac, sil = cfg.section("aircraft"), cfg.section("sil")
     base = RateLoopGains()
@@ -168,7 +168,7 @@ def vehicle_options(cfg: Config, url: str, clock: str | None = None, **over: Any
 
 def build_vehicle(cfg: Config, url: str, clock: str | None = None, **over: Any) -> Any:
     """The config's simulated vehicle on ``url`` (trimmed, in the hold mode, ready to serve)."""
-    from .vehicle import SimVehicle
+    from sim.vehicle import SimVehicle
 
     opts = vehicle_options(cfg, url, clock, **over)
     flavour = opts.pop("flavour")
@@ -243,7 +243,7 @@ def _bridge_run(
     cfg: Config, url: str, out: str, duration: float, q: Any, force: bool = False
 ) -> None:
     """Child process: fly the bridge; results and log lines go to ``q``."""
-    from mpf_mavlink.bridge import BridgeOptions, run_bridge
+    from mpf_mavlink.bridge.live import BridgeOptions, run_bridge
     from mpf_mavlink.errors import MpfError
 
     def on_int(signum: int, frame: Any) -> None:

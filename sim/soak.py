@@ -43,8 +43,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
 from mpf_mavlink.mavlink.codec import TYPE_MASK_ARDUPLANE_ATTITUDE  # noqa: E402
 from mpf_mavlink.mavlink.modes import is_offboard, mode_name  # noqa: E402
-
-from .relay import DOWN, UP, Blackout, Impairment, UdpRelay  # noqa: E402
+from sim.relay import DOWN, UP, Blackout, Impairment, UdpRelay  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = {
@@ -80,9 +79,8 @@ def mpf_mavlink_cmd() -> list[str]:
 # ----------------------------------------------------------------------------- the vehicle process
 def vehicle_main(argv: list[str]) -> int:
     """``python -m sim.soak vehicle``: a SimVehicle until SIGTERM, then a JSON report."""
-    from mpf_mavlink.target import ConstantTurn, Stationary
-
-    from .vehicle import SimVehicle
+    from mpf_mavlink.core.target import ConstantTurn, Stationary
+    from sim.vehicle import SimVehicle
 
     ap = argparse.ArgumentParser(prog="python -m sim.soak vehicle")
     ap.add_argument("--flavour", choices=("px4", "ardupilot"), default="px4")
@@ -523,8 +521,8 @@ class Limits:
 
     @classmethod
     def for_config(cls, flavour: str, sets: tuple[str, ...] = ()) -> Limits:
-        from mpf_mavlink import bridge_config  # noqa: F401  (registers the sections)
-        from mpf_mavlink.config import load_config
+        from mpf_mavlink.config import bridge as bridge_config  # noqa: F401  (registers the sections)
+        from mpf_mavlink.config.schema import load_config
 
         cfg = load_config(CONFIGS[flavour], list(sets))
         a = cfg.section("adapter")
@@ -699,7 +697,7 @@ def _tracking_window(tap: Tap) -> tuple[float | None, float | None]:
 
 def scenario_fuzz(o: Opts, n_frames: int | None = None, dur: float | None = None) -> Row:
     """>= 100,000 random and mutated frames into the bridge's link during a mission."""
-    from .mavfuzz import FrameFuzzer
+    from sim.mavfuzz import FrameFuzzer
 
     row = Row("fuzz")
     n_frames = n_frames or (12_000 if o.quick else 100_000)
@@ -1182,7 +1180,7 @@ def scenario_spoof(o: Opts) -> Row:
     telemetry and targets from the vehicle's and the target's own ids; (c) replays of the
     vehicle's own signed datagrams 1 s later; (d) the vehicle's ids signed with a WRONG key.
     Each must be rejected and counted exactly once; the mission must not notice."""
-    from .relay import split_frames
+    from sim.relay import split_frames
 
     row = Row("spoofing_signing")
     dur = 20.0 if o.quick else 40.0
@@ -1197,7 +1195,7 @@ def scenario_spoof(o: Opts) -> Row:
     with Mission(spec, kdir) as m:
 
         def attack() -> None:
-            from mpf_mavlink.frames import ned_to_geodetic
+            from mpf_mavlink.core.frames import ned_to_geodetic
 
             lat, lon, alt = ned_to_geodetic((2000.0, 2000.0, -100.0), 47.397742, 8.545594, 488.0)
             ins99, ins77 = _signed_mav(key, 99, 1), _signed_mav(key, 77, 1)

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.frames import matrix_to_quat_wxyz
+from mpf_mavlink.core.frames import matrix_to_quat_wxyz
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ The demo's boat (configs/default.yaml) reports itself through the SIL's feed
 (:mod:`sim.target_feed`: 1 Hz, 2 m and 0.3 m/s noise, 0.3 s latency, 10 % drop-outs, its clock
 100 s off ours, seed 7 unless told otherwise); the frames go through the bridge's decoders into
 its live target (the estimator, ``mode: filter``, with the acceptance's tuning
-:data:`mpf_mavlink.bench_target.ESTIMATOR`; ``--set`` overrides it) and, for comparison, the extrapolation of the
+:data:`mpf_mavlink.bench.target.ESTIMATOR`; ``--set`` overrides it) and, for comparison, the extrapolation of the
 last report (``mode: last_sample``), both queried every 20 ms as the control loop does. Writes
 a PNG with the north-east track over a window, and the position and {T}-yaw errors over time
 (a yaw error of d rad moves a path point r metres from the target by r d: the demo's
@@ -25,15 +25,14 @@ os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
-from mpf_mavlink.config import load_config  # noqa: E402
-from mpf_mavlink.controller import ExtrapolatedTarget, LiveTarget  # noqa: E402
-from mpf_mavlink.estimator import Estimator, EstimatorParams  # noqa: E402
+from mpf_mavlink.bridge.controller import ExtrapolatedTarget, LiveTarget  # noqa: E402
+from mpf_mavlink.bridge.estimator import Estimator, EstimatorParams  # noqa: E402
+from mpf_mavlink.config.schema import load_config  # noqa: E402
+from mpf_mavlink.core.scenario import build_target  # noqa: E402
 from mpf_mavlink.mavlink.codec import decode  # noqa: E402
-from mpf_mavlink.scenario import build_target  # noqa: E402
-
-from .plant_jsbsim import LocalNED  # noqa: E402
-from .plant_kinematic_mav import ned_to_geodetic_fast  # noqa: E402
-from .target_feed import TargetFeed  # noqa: E402
+from sim.plant_jsbsim import LocalNED  # noqa: E402
+from sim.plant_kinematic_mav import ned_to_geodetic_fast  # noqa: E402
+from sim.target_feed import TargetFeed  # noqa: E402
 
 FRAME = 0.02
 
@@ -135,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", default="target_estimate.png")
     p.add_argument("--seed", type=int, default=7)
     a = p.parse_args(argv)
-    from mpf_mavlink.bench_target import ESTIMATOR
+    from mpf_mavlink.bench.target import ESTIMATOR
 
     cfg = load_config(a.config, [*ESTIMATOR, *a.set])
     kw = dict(rate_hz=1.0, position_noise_m=2.0, velocity_noise_m_s=0.3, latency_s=0.3,

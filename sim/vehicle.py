@@ -76,12 +76,11 @@ os.environ.setdefault("JSBSIM_DEBUG", "0")
 from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
 
-from mpf_mavlink.frames import matrix_to_quat_wxyz  # noqa: E402
-
-from .clock import Clock, make_clock  # noqa: E402
-from .inner_loop import FixedWingAutopilot, fly_to_trim  # noqa: E402
-from .mavfast import FastPacker, MsgSpec, decode_set_attitude_target  # noqa: E402
-from .plant_kinematic_mav import KinematicMavPlant, ned_to_geodetic_fast  # noqa: E402
+from mpf_mavlink.core.frames import matrix_to_quat_wxyz  # noqa: E402
+from sim.clock import Clock, make_clock  # noqa: E402
+from sim.inner_loop import FixedWingAutopilot, fly_to_trim  # noqa: E402
+from sim.mavfast import FastPacker, MsgSpec, decode_set_attitude_target  # noqa: E402
+from sim.plant_kinematic_mav import KinematicMavPlant, ned_to_geodetic_fast  # noqa: E402
 
 M = mavlink2
 G = 9.80665
@@ -332,7 +331,7 @@ class SimVehicle:
                 **(plant_options or {}),
             )  # fmt: skip
             if plant == "jsbsim":
-                from .plant_jsbsim import JSBSimPlant
+                from sim.plant_jsbsim import JSBSimPlant
 
                 plant = JSBSimPlant(**kw)
             elif plant == "kinematic":
@@ -448,7 +447,7 @@ class SimVehicle:
         # a realistic feed (sim/target_feed.py) instead of the exact state at target_rate_hz
         self.target_feed = None
         if target_feed is not None and target is not None:
-            from .target_feed import feed_from_options
+            from sim.target_feed import feed_from_options
 
             self.target_feed = feed_from_options(
                 target, self._tmav, ned_to_geodetic_fast, plant.origin, target_feed
@@ -839,7 +838,7 @@ class SimVehicle:
 
     def _take_epoch(self, msg: Any) -> None:
         """The bridge's mission origin (``MPF t0=``, autopilot boot s) as the target's t = 0."""
-        from mpf_mavlink.controller import parse_marker
+        from mpf_mavlink.bridge.controller import parse_marker
 
         text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode("ascii", "replace")
         mk = parse_marker(text)
@@ -932,7 +931,7 @@ class SimVehicle:
                 thrust,
             )
         else:
-            from mpf_mavlink.frames import matrix_to_euler, quat_wxyz_to_matrix
+            from mpf_mavlink.core.frames import matrix_to_euler, quat_wxyz_to_matrix
 
             try:
                 roll, pitch, _ = matrix_to_euler(quat_wxyz_to_matrix(msg.q))
@@ -959,7 +958,7 @@ class SimVehicle:
         if not _finite(*q) or (not (msg.type_mask & 64) and not _finite(msg.thrust)):
             self.dropped["nonfinite"] += 1
             return
-        from mpf_mavlink.frames import matrix_to_euler, quat_wxyz_to_matrix
+        from mpf_mavlink.core.frames import matrix_to_euler, quat_wxyz_to_matrix
 
         inv = (~msg.type_mask) & 0xFF
         am = inv & 0x87
@@ -1047,7 +1046,7 @@ class SimVehicle:
         """ArduPlane's MAV_CMD_DO_REPOSITION (COMMAND_INT): in GUIDED (or with the change-mode
         flag) the guided target becomes a loiter of radius param3 (> 0; else the loiter radius)
         about (x, y, z), counter-clockwise when param4 is non-zero; the forced attitude stays."""
-        from mpf_mavlink.frames import geodetic_to_ned
+        from mpf_mavlink.core.frames import geodetic_to_ned
 
         lat, lon = msg.x * 1e-7, msg.y * 1e-7
         if not (abs(lat) <= 90.0 and abs(lon) <= 180.0) or (msg.x == 0 and msg.y == 0):
@@ -1352,7 +1351,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     target = None
     if a.target != "none":
-        from mpf_mavlink.target import PaperProfile, Stationary
+        from mpf_mavlink.core.target import PaperProfile, Stationary
 
         target = PaperProfile() if a.target == "paper" else Stationary()
     v = SimVehicle(a.flavour, a.url, plant=a.plant, clock=a.clock, target=target)

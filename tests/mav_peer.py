@@ -310,7 +310,7 @@ class MavPeer:
         if self.o.send_local:
             self.mav.local_position_ned_send(tb, self.pos[0], self.pos[1], self.pos[2], vn, ve, 0.0)
         if self.o.send_global and k % 2 == 0:
-            from mpf_mavlink.frames import ned_to_geodetic
+            from mpf_mavlink.core.frames import ned_to_geodetic
 
             lat, lon, alt = ned_to_geodetic(self.pos, *self.o.home)
             hdg = int(math.degrees(self.yaw) % 360 * 100)
@@ -344,7 +344,7 @@ class MavPeer:
         )
         # ATTITUDE last: the bridge acts on it, with the position of the same instant in hand
         if self.o.attitude_quaternion:
-            from mpf_mavlink.frames import euler_to_quat_wxyz
+            from mpf_mavlink.core.frames import euler_to_quat_wxyz
 
             q = euler_to_quat_wxyz(self.roll, self.pitch, self.yaw)  # (w, x, y, z) = q1..q4
             self.mav.attitude_quaternion_send(

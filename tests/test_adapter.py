@@ -9,14 +9,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mpf_mavlink.adapter import (
+from mpf_mavlink.core.adapter import (
     AdapterParams,
     AdapterState,
     adapt,
     bank_and_load_factor,
     safe_setpoint,
 )
-from mpf_mavlink.frames import GRAVITY_M_S2, euler_to_matrix, quat_wxyz_to_matrix
+from mpf_mavlink.core.frames import GRAVITY_M_S2, euler_to_matrix, quat_wxyz_to_matrix
 
 P = AdapterParams()
 LEVEL = np.eye(3)

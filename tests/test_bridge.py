@@ -19,9 +19,9 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from mav_peer import MavPeer, PeerOptions  # noqa: E402
 
-from mpf_mavlink import bridge_config  # noqa: E402,F401
-from mpf_mavlink.bridge import BridgeOptions, run_bridge  # noqa: E402
-from mpf_mavlink.config import load_config  # noqa: E402
+from mpf_mavlink.bridge.live import BridgeOptions, run_bridge  # noqa: E402
+from mpf_mavlink.config import bridge as bridge_config  # noqa: E402,F401
+from mpf_mavlink.config.schema import load_config  # noqa: E402
 from mpf_mavlink.errors import MpfError  # noqa: E402
 from mpf_mavlink.mavlink import dialect as mavlink  # noqa: E402
 from mpf_mavlink.mavlink import mavutil  # noqa: E402
@@ -260,7 +260,7 @@ def test_telemetry_loss_stops_commands_within_half_a_second(tmp_path):
 
 
 def test_reengages_once_telemetry_is_back_and_replays_identically(tmp_path):
-    from mpf_mavlink.replay import TOLERANCE, replay
+    from mpf_mavlink.runs.replay import TOLERANCE, replay
 
     port = free_port()
     peer = MavPeer(PeerOptions(flavour="px4"), port=port).start()
@@ -484,7 +484,7 @@ def test_live_follow_target(tmp_path):
     stop = threading.Event()
 
     def target():
-        from mpf_mavlink.frames import ned_to_geodetic
+        from mpf_mavlink.core.frames import ned_to_geodetic
 
         t0 = time.monotonic()
         while not stop.is_set():
@@ -509,7 +509,7 @@ def test_live_follow_target(tmp_path):
 
 # ----------------------------------------------------------------------------- CLI
 def test_absent_vehicle_is_one_line_and_nonzero(tmp_path, capsys):
-    from mpf_mavlink.cli import main
+    from mpf_mavlink.cli.main import main
 
     port = free_port()
     t = time.monotonic()
@@ -551,7 +551,7 @@ def test_run_help_explains_every_option():
 
 @pytest.mark.slow
 def test_bridge_latency():
-    from mpf_mavlink.bench_bridge import bridge_latency_ms
+    from mpf_mavlink.bench.bridge import bridge_latency_ms
 
     r = bridge_latency_ms(200)
     print(r)

@@ -21,10 +21,10 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from mav_peer import MavPeer, PeerOptions  # noqa: E402
 
-from mpf_mavlink import bridge_config  # noqa: E402,F401
-from mpf_mavlink.bridge import BridgeOptions, BridgeResult, run_bridge  # noqa: E402
-from mpf_mavlink.config import Config, load_config  # noqa: E402
-from mpf_mavlink.frames import ned_to_geodetic  # noqa: E402
+from mpf_mavlink.bridge.live import BridgeOptions, BridgeResult, run_bridge  # noqa: E402
+from mpf_mavlink.config import bridge as bridge_config  # noqa: E402,F401
+from mpf_mavlink.config.schema import Config, load_config  # noqa: E402
+from mpf_mavlink.core.frames import ned_to_geodetic  # noqa: E402
 from mpf_mavlink.mavlink import dialect as mavlink  # noqa: E402
 from mpf_mavlink.mavlink import mavutil  # noqa: E402
 
@@ -103,7 +103,7 @@ def align_to_truth(ts: np.ndarray, truth: list) -> tuple[np.ndarray, np.ndarray,
 
 # ----------------------------------------------------------------------------- arming
 def test_cli_arm_arms_after_prestream_and_before_the_mode_request(tmp_path, capsys):
-    from mpf_mavlink.cli import main
+    from mpf_mavlink.cli.main import main
 
     port = free_port()
     peer = MavPeer(PeerOptions(flavour="px4", start_armed=False), port=port).start()

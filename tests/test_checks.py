@@ -4,10 +4,10 @@ import math
 
 import pytest
 
-from mpf_mavlink.guidance import Gains
-from mpf_mavlink.guidance.checks import assumption1, feasibility, gain_condition
-from mpf_mavlink.paths import circle, lemniscate
-from mpf_mavlink.target import ConstantTurn, Stationary
+from mpf_mavlink.core.guidance import Gains
+from mpf_mavlink.core.guidance.checks import assumption1, feasibility, gain_condition
+from mpf_mavlink.core.paths import circle, lemniscate
+from mpf_mavlink.core.target import ConstantTurn, Stationary
 
 
 def test_gain_condition_by_hand():
@@ -55,7 +55,7 @@ def test_feasibility_of_a_circle_about_a_stationary_target():
 
 
 def test_feasibility_of_the_paper_scenario_needs_steep_bank():
-    from mpf_mavlink.target import PaperProfile
+    from mpf_mavlink.core.target import PaperProfile
 
     r = feasibility(lemniscate(50.0), PaperProfile(), 15.0, 100.0, math.radians(45))
     # The lemniscate's lobes at 15 m/s ask for more than 45 deg: fine for the paper's

@@ -2,7 +2,7 @@
 
 import pytest
 
-from mpf_mavlink.cli import main
+from mpf_mavlink.cli.main import main
 
 CFG = "configs/paper_lemniscate.yaml"
 

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpf_mavlink.config import load_config
-from mpf_mavlink.controller import Controller
-from mpf_mavlink.guidance.law import VehicleState
-from mpf_mavlink.guidance.predict import (
+from mpf_mavlink.bridge.controller import Controller
+from mpf_mavlink.config.schema import load_config
+from mpf_mavlink.core.guidance.law import VehicleState
+from mpf_mavlink.core.guidance.predict import (
     MAX_PREDICTION_S,
     predict,
     predict_segments,
@@ -84,7 +84,7 @@ def test_loop_delay_is_measured_from_the_attitude_target_echo():
 def test_look_ahead_grows_only_where_the_hold_costs_phase():
     """alpha is kept where the guidance crossover wc = v/alpha + K_R/2 loses at most
     HOLD_PHASE_RAD to T/2 + delay/4, and widened until it does (never narrowed)."""
-    from mpf_mavlink.guidance.predict import HOLD_PHASE_RAD, look_ahead
+    from mpf_mavlink.core.guidance.predict import HOLD_PHASE_RAD, look_ahead
 
     v, K_R = 16.0, 3.0
     assert look_ahead(5.0, K_R, v, 0.02, 0.02) == 5.0  # the demo: 50 Hz, 20 ms

@@ -16,7 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mpf_mavlink.estimator import Estimator, EstimatorParams
+from mpf_mavlink.bridge.estimator import Estimator, EstimatorParams
 from mpf_mavlink.mavlink import decode, mavutil
 from mpf_mavlink.mavlink import dialect as mavlink
 from mpf_mavlink.mavlink.codec import (
@@ -91,7 +91,7 @@ class Feed:
 
 
 def zyx_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """R_B^N for ZYX Euler angles, written out (independent of mpf_mavlink.frames)."""
+    """R_B^N for ZYX Euler angles, written out (independent of mpf_mavlink.core.frames)."""
     cr, sr = math.cos(roll), math.sin(roll)
     cp, sp = math.cos(pitch), math.sin(pitch)
     cy, sy = math.cos(yaw), math.sin(yaw)
@@ -565,8 +565,8 @@ def test_real_arduplane_log_gives_finite_estimates_and_a_sane_own_wind():
 def test_target_extrapolation_matches_the_matrix_formulas():
     # TargetState.extrapolate is written in scalars for speed: it must equal
     # p + h v + h^2/2 a, v + h a, R exp(h w + h^2/2 w'), w + h w' (tiny angles included).
-    from mpf_mavlink import so3
-    from mpf_mavlink.target import TargetState
+    from mpf_mavlink.core import so3
+    from mpf_mavlink.core.target import TargetState
 
     rng = np.random.default_rng(1)
     for i in range(2000):
@@ -595,7 +595,7 @@ def test_vfr_hud_airspeed_is_equivalent_and_becomes_true_airspeed_aloft():
     """VFR_HUD.airspeed is EAS (ArduPilot; PX4's calibrated airspeed is the same at UAV speeds);
     the law's v_w is TAS = EAS sqrt(rho0 / rho). ISA at 1000 m: rho / rho0 = 0.9075 (ICAO
     standard atmosphere table), so TAS = 20 / sqrt(0.9075) = 20.995 m/s; at sea level 20."""
-    from mpf_mavlink.estimator import eas_to_tas
+    from mpf_mavlink.bridge.estimator import eas_to_tas
 
     assert eas_to_tas(0.0) == 1.0
     assert eas_to_tas(1000.0) == pytest.approx(1.0 / math.sqrt(0.9075), rel=2e-4)

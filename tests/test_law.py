@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from mpf_mavlink import so3
-from mpf_mavlink.guidance import Extensions, Gains, VehicleState, mpf_law
-from mpf_mavlink.paths import circle, helix, lemniscate
-from mpf_mavlink.target import ConstantTurn, PaperProfile
+from mpf_mavlink.core import so3
+from mpf_mavlink.core.guidance import Extensions, Gains, VehicleState, mpf_law
+from mpf_mavlink.core.paths import circle, helix, lemniscate
+from mpf_mavlink.core.target import ConstantTurn, PaperProfile
 from sim.kinematic import ClosedLoop, KinematicState, initial_state
 
 

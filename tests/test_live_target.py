@@ -10,12 +10,12 @@ import math
 
 import numpy as np
 
-from mpf_mavlink.controller import ExtrapolatedTarget as LiveTarget
-from mpf_mavlink.estimator import Estimator, EstimatorParams
-from mpf_mavlink.frames import matrix_to_quat_wxyz, ned_to_geodetic
+from mpf_mavlink.bridge.controller import ExtrapolatedTarget as LiveTarget
+from mpf_mavlink.bridge.estimator import Estimator, EstimatorParams
+from mpf_mavlink.core.frames import matrix_to_quat_wxyz, ned_to_geodetic
+from mpf_mavlink.core.target import ConstantTurn
 from mpf_mavlink.mavlink import dialect
 from mpf_mavlink.mavlink.codec import decode_follow_target, decode_global_position_int
-from mpf_mavlink.target import ConstantTurn
 
 ORIGIN = (41.185, -8.76, 0.0)
 BOAT = ConstantTurn(speed=3.0, turn_rate=0.01)  # the demo's boat

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mpf_mavlink import frames
+from mpf_mavlink.core import frames
 from mpf_mavlink.mavlink import codec, read_tlog
 from mpf_mavlink.mavlink import dialect as mavlink
 from mpf_mavlink.mavlink.modes import (

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from mpf_mavlink import frames
+from mpf_mavlink.core import frames
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.mavlink import dialect as mavlink
 from mpf_mavlink.mavlink import mavutil, read_tlog

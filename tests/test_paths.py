@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from mpf_mavlink.paths import TabulatedPath, circle, helix, lemniscate, line, spline
+from mpf_mavlink.core.paths import TabulatedPath, circle, helix, lemniscate, line, spline
 
 
 def _tennis(u):

@@ -4,15 +4,15 @@ import ast
 from pathlib import Path
 
 PURE = [
-    "mpf_mavlink/so3.py",
-    "mpf_mavlink/frames.py",
-    "mpf_mavlink/paths/base.py",
-    "mpf_mavlink/paths/shapes.py",
-    "mpf_mavlink/target.py",
-    "mpf_mavlink/target_filter.py",
-    "mpf_mavlink/guidance/law.py",
-    "mpf_mavlink/guidance/checks.py",
-    "mpf_mavlink/adapter.py",
+    "mpf_mavlink/core/so3.py",
+    "mpf_mavlink/core/frames.py",
+    "mpf_mavlink/core/paths/base.py",
+    "mpf_mavlink/core/paths/shapes.py",
+    "mpf_mavlink/core/target.py",
+    "mpf_mavlink/core/target_filter.py",
+    "mpf_mavlink/core/guidance/law.py",
+    "mpf_mavlink/core/guidance/checks.py",
+    "mpf_mavlink/core/adapter.py",
 ]
 FORBIDDEN = {
     "socket",

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from mpf_mavlink import bridge_config  # noqa: F401  (registers the sections)
-from mpf_mavlink.config import load_config
+from mpf_mavlink.config import bridge as bridge_config  # noqa: F401  (registers the sections)
+from mpf_mavlink.config.schema import load_config
 from mpf_mavlink.errors import ConfigError
 from mpf_mavlink.mavlink import decode, dialect, mavutil
 from mpf_mavlink.mavlink.link import BootClockGate, open_link, wait_heartbeat
@@ -298,7 +298,7 @@ def test_hold_modes_that_are_fine():
 
 
 def test_cli_errors_are_one_line(capsys):
-    from mpf_mavlink.cli import main
+    from mpf_mavlink.cli.main import main
 
     for argv, culprit in ((["run", str(PX4_CFG)], "--connect"), (["run", str(PX4_CFG), "--connect", "udpin:1.2.3.4:5", "--duration", "-1"], "--duration"),
                           (["bogus"], "bogus"), (["check", str(PX4_CFG), "--nope"], "--nope")):  # fmt: skip

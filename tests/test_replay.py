@@ -23,15 +23,15 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from mav_peer import MavPeer, PeerOptions  # noqa: E402
 
-from mpf_mavlink import bridge_config  # noqa: E402,F401
-from mpf_mavlink.bridge import BridgeOptions, BridgeResult, run_bridge  # noqa: E402
-from mpf_mavlink.cli import main  # noqa: E402
-from mpf_mavlink.config import Config, load_config  # noqa: E402
-from mpf_mavlink.controller import origin_texts, parse_marker  # noqa: E402
-from mpf_mavlink.frames import geodetic_to_ned, ned_to_geodetic  # noqa: E402
+from mpf_mavlink.bridge.controller import origin_texts, parse_marker  # noqa: E402
+from mpf_mavlink.bridge.live import BridgeOptions, BridgeResult, run_bridge  # noqa: E402
+from mpf_mavlink.cli.main import main  # noqa: E402
+from mpf_mavlink.config import bridge as bridge_config  # noqa: E402,F401
+from mpf_mavlink.config.schema import Config, load_config  # noqa: E402
+from mpf_mavlink.core.frames import geodetic_to_ned, ned_to_geodetic  # noqa: E402
 from mpf_mavlink.mavlink import dialect as mavlink  # noqa: E402
 from mpf_mavlink.mavlink import read_tlog  # noqa: E402
-from mpf_mavlink.replay import TOLERANCE, replay  # noqa: E402
+from mpf_mavlink.runs.replay import TOLERANCE, replay  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 # A real ArduPlane SITL recording kept in the repository (provenance: tests/data/README.md).

@@ -27,8 +27,8 @@ pytest.importorskip("jsbsim")
 from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
-from mpf_mavlink.cli import main  # noqa: E402
-from mpf_mavlink.config import load_config  # noqa: E402
+from mpf_mavlink.cli.main import main  # noqa: E402
+from mpf_mavlink.config.schema import load_config  # noqa: E402
 from sim.mavfast import FastPacker, MsgSpec, decode_set_attitude_target, x25crc  # noqa: E402
 from sim.plant_jsbsim import JSBSimPlant  # noqa: E402
 from sim.sil import build_vehicle, run_sil  # noqa: E402
@@ -183,7 +183,7 @@ def test_check_sees_the_sil_atmosphere(capsys):
     out = capsys.readouterr().out
     assert out.count("[PASS]") == 4  # assumption 1, start altitude, gain condition, feasibility
     calm = load_config(DEMO, ["sil.wind_ned_m_s=[0,0,0]", "sil.turbulence=none"])
-    from mpf_mavlink.preflight import run_checks
+    from mpf_mavlink.bridge.preflight import run_checks
 
     windy = {r.name: r for r in run_checks(load_config(DEMO))}
     still = {r.name: r for r in run_checks(calm)}
@@ -497,7 +497,7 @@ def test_scripted_target_runs_on_the_bridge_clock(tmp_path):
     )  # fmt: skip
     r = run_sil(cfg, tmp_path / "run", progress=False, plots=False, log=lambda s: None)
     assert r.exit_code == 0, r.exit_reason
-    from mpf_mavlink.rundir import read_run
+    from mpf_mavlink.runs.rundir import read_run
 
     bc, _, _ = read_run(r.bridge_dir)
     t = r.cols["t"] + bc["t"][0]  # truth rows on the bridge's mission clock

@@ -91,7 +91,7 @@ def test_control_signs():
 
 def test_local_ned_matches_pymap3d():
     # The fast in-house geodetic->NED must agree with pymap3d (exact WGS-84) to < 1 mm over km.
-    from mpf_mavlink.frames import geodetic_to_ned, ned_to_geodetic
+    from mpf_mavlink.core.frames import geodetic_to_ned, ned_to_geodetic
 
     o = LocalNED(47.397742, 8.545594, 488.0)
     for ned in ([1500.0, -2300.0, -120.0], [-4000.0, 3500.0, 50.0]):

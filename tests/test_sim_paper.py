@@ -4,8 +4,8 @@ import json
 
 import pytest
 
-from mpf_mavlink.cli import main
-from mpf_mavlink.config import load_config
+from mpf_mavlink.cli.main import main
+from mpf_mavlink.config.schema import load_config
 from sim.runner import run_kinematic
 
 CFG = "configs/paper_lemniscate.yaml"

@@ -23,8 +23,8 @@ pytest.importorskip("pymavlink")
 from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
-from mpf_mavlink.frames import euler_to_quat_wxyz, geodetic_to_ned, matrix_to_quat_wxyz  # noqa: E402
-from mpf_mavlink.target import ConstantTurn  # noqa: E402
+from mpf_mavlink.core.frames import euler_to_quat_wxyz, geodetic_to_ned, matrix_to_quat_wxyz  # noqa: E402
+from mpf_mavlink.core.target import ConstantTurn  # noqa: E402
 from sim.clock import LockstepClock  # noqa: E402
 from sim.plant_kinematic_mav import KinematicMavPlant, ned_to_geodetic_fast  # noqa: E402
 from sim.vehicle import SimVehicle, px4_custom_mode  # noqa: E402

@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mpf_mavlink import frames, so3
+from mpf_mavlink.core import frames, so3
 
 angles = st.floats(-math.pi + 1e-3, math.pi - 1e-3)
 

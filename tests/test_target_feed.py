@@ -15,11 +15,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
-from mpf_mavlink.config import load_config  # noqa: E402
+from mpf_mavlink.config.schema import load_config  # noqa: E402
+from mpf_mavlink.core.frames import geodetic_to_ned  # noqa: E402
+from mpf_mavlink.core.target import ConstantTurn  # noqa: E402
 from mpf_mavlink.errors import ConfigError  # noqa: E402
-from mpf_mavlink.frames import geodetic_to_ned  # noqa: E402
 from mpf_mavlink.mavlink.codec import decode_follow_target  # noqa: E402
-from mpf_mavlink.target import ConstantTurn  # noqa: E402
 from sim.plant_jsbsim import LocalNED  # noqa: E402
 from sim.plant_kinematic_mav import ned_to_geodetic_fast  # noqa: E402
 from sim.target_feed import TargetFeed  # noqa: E402

@@ -1,4 +1,4 @@
-"""The target estimator (mpf_mavlink.target_filter) on physical situations.
+"""The target estimator (mpf_mavlink.core.target_filter) on physical situations.
 
 Reports are the scripted targets' true states plus seeded white noise, stamped with a sender
 clock 100 s ahead of ours and received ``LATENCY`` s late. Tolerances come from the noise and
@@ -12,8 +12,13 @@ import math
 import numpy as np
 import pytest
 
-from mpf_mavlink.target import ConstantTurn
-from mpf_mavlink.target_filter import Report, TargetEstimator, TargetFilterParams, chi2_quantile
+from mpf_mavlink.core.target import ConstantTurn
+from mpf_mavlink.core.target_filter import (
+    Report,
+    TargetEstimator,
+    TargetFilterParams,
+    chi2_quantile,
+)
 
 SIG_P = 2.0  # m, per axis
 SIG_V = 0.3  # m/s, per axis
@@ -252,7 +257,7 @@ def test_manoeuvring_target_is_followed_with_the_default_tuning():
     quiet boat) no report is taken for an outlier: at a 99.99 % gate a consistent filter gates
     0.03 of 300 reports on average (at most 1 allowed), and none re-initialises it. The
     position stays better than one fix (radial 1-sigma 3.5 m) in RMS."""
-    from mpf_mavlink.target import PaperProfile
+    from mpf_mavlink.core.target import PaperProfile
 
     motion = PaperProfile()
     kf = TargetEstimator(params())
@@ -288,8 +293,8 @@ def test_follow_target_accuracy_fields_set_the_fix_noise():
     report without them (zeros) gets the configured noise."""
     from pymavlink.dialects.v20 import ardupilotmega as M
 
-    from mpf_mavlink.controller import LiveTarget
-    from mpf_mavlink.estimator import Estimator, EstimatorParams
+    from mpf_mavlink.bridge.controller import LiveTarget
+    from mpf_mavlink.bridge.estimator import Estimator, EstimatorParams
     from mpf_mavlink.mavlink.codec import decode_follow_target
 
     origin = (41.185, -8.76, 0.0)

@@ -1,4 +1,4 @@
-"""The flight verdict (mpf_mavlink/verdict.py) and the pre-flight gate of ``sim``."""
+"""The flight verdict (mpf_mavlink/runs/verdict.py) and the pre-flight gate of ``sim``."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mpf_mavlink.cli import main
-from mpf_mavlink.config import load_config
-from mpf_mavlink.verdict import EXIT_VERDICT, judge, verdict_line
+from mpf_mavlink.cli.main import main
+from mpf_mavlink.config.schema import load_config
+from mpf_mavlink.runs.verdict import EXIT_VERDICT, judge, verdict_line
 
 DEMO = str(Path(__file__).resolve().parents[1] / "configs" / "default.yaml")
 CFG = load_config(DEMO)  # steady after 120 s, X8 limits 14-18 m/s, 45 deg bank

@@ -35,7 +35,7 @@ def _load_dialect():  # -> module
 #: the generated pymavlink dialect module (message classes, enums, ``MAVLink`` parser class)
 dialect = _load_dialect()
 
-from .codec import (  # noqa: E402
+from mpf_mavlink.mavlink.codec import (  # noqa: E402
     AttitudeSample,
     CommandAckSample,
     FollowTargetSample,
@@ -57,10 +57,10 @@ from .codec import (  # noqa: E402
     encode_set_message_interval,
     encode_set_mode,
 )
-from .link import Link, LinkCounters, open_link, parse_url, wait_heartbeat  # noqa: E402
-from .modes import Flavour, flavour_from_heartbeat, is_offboard, mode_name  # noqa: E402
-from .signing import enable_signing, load_signing_key  # noqa: E402
-from .tlog import TlogReadResult, TlogWriter, iter_tlog, read_tlog  # noqa: E402
+from mpf_mavlink.mavlink.link import Link, LinkCounters, open_link, parse_url, wait_heartbeat  # noqa: E402
+from mpf_mavlink.mavlink.modes import Flavour, flavour_from_heartbeat, is_offboard, mode_name  # noqa: E402
+from mpf_mavlink.mavlink.signing import enable_signing, load_signing_key  # noqa: E402
+from mpf_mavlink.mavlink.tlog import TlogReadResult, TlogWriter, iter_tlog, read_tlog  # noqa: E402
 
 __all__ = [
     "DIALECT_NAME",

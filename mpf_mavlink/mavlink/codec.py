@@ -5,7 +5,7 @@ malformed MAVLink can neither crash the loop nor put a NaN into the state. Encod
 (``ValueError``) to put a non-finite number on the wire.
 
 The attitude decoders (one per control step) compute the matrices of
-:func:`mpf_mavlink.frames.euler_to_matrix` / :func:`~mpf_mavlink.frames.quat_wxyz_to_matrix` in
+:func:`mpf_mavlink.core.frames.euler_to_matrix` / :func:`~mpf_mavlink.core.frames.quat_wxyz_to_matrix` in
 scalar arithmetic (same conventions; tests hold them to those functions).
 """
 
@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from . import dialect as _d
-from .modes import (
+from mpf_mavlink.mavlink import dialect as _d
+from mpf_mavlink.mavlink.modes import (
     MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
     Flavour,
     arduplane_mode_from_name,

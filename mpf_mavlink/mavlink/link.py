@@ -25,10 +25,10 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..errors import MpfError
-from . import DIALECT_NAME, dialect, mavutil
-from .codec import encode_companion_heartbeat
-from .tlog import TlogWriter
+from mpf_mavlink.errors import MpfError
+from mpf_mavlink.mavlink import DIALECT_NAME, dialect, mavutil
+from mpf_mavlink.mavlink.codec import encode_companion_heartbeat
+from mpf_mavlink.mavlink.tlog import TlogWriter
 
 SCHEMES = ("udpin", "udpout", "udp", "tcp", "tcpin")
 STANDARD_BAUDS = (

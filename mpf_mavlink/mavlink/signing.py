@@ -24,8 +24,8 @@ import struct
 from collections.abc import Iterable
 from typing import Any
 
-from ..errors import MpfError
-from .link import Link
+from mpf_mavlink.errors import MpfError
+from mpf_mavlink.mavlink.link import Link
 
 KEY_LEN = 32
 SIGNING_EPOCH_UNIX_S = 1420070400  # 2015-01-01T00:00:00Z; timestamps are 10 us ticks since then

@@ -21,8 +21,8 @@ from typing import Any
 
 from pymavlink.generator.mavcrc import x25crc
 
-from ..errors import MpfError
-from . import dialect as _d
+from mpf_mavlink.errors import MpfError
+from mpf_mavlink.mavlink import dialect as _d
 
 STX_V1 = 0xFE
 STX_V2 = 0xFD

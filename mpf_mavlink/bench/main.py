@@ -1,0 +1,107 @@
+"""Benchmarks: ``scripts/bench`` prints one JSON object of figures.
+
+controller_step_us: median and p99 of one MPF law evaluation (with diagnostics) on the paper
+scenario, over states along a real closed-loop trajectory. paper_wall_time_s: the 300 s
+Section V scenario, kinematic plant, lambda_w = 10. Further figures (bridge, SIL, replay)
+appear as those parts exist; ``--only NAME`` runs one group.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+
+def controller_step_us(n: int = 3000) -> dict[str, float]:
+    from mpf_mavlink.config.schema import load_config
+    from mpf_mavlink.core.guidance.law import VehicleState, mpf_law
+    from sim.runner import kinematic_loop
+
+    cfg = load_config("configs/paper_lemniscate.yaml", ["sim.duration_s=30"])
+    loop, x = kinematic_loop(cfg)
+    states = []
+    for i in range(n):
+        x = loop.step(x, 0.02) if i % 3 == 0 else x
+        states.append((x.s, VehicleState(x.t, x.p, x.R, loop.v_w), loop.target_state(x.t)))
+    times = np.empty(n)
+    for i, (s, veh, tgt) in enumerate(states):
+        t0 = time.perf_counter()
+        mpf_law(s, veh, tgt, loop.path, loop.gains, loop.ext)
+        times[i] = time.perf_counter() - t0
+    return {"median": float(np.median(times) * 1e6), "p99": float(np.percentile(times, 99) * 1e6)}
+
+
+def paper_wall_time_s() -> dict[str, Any]:
+    from mpf_mavlink.config.schema import load_config
+    from sim.runner import run_kinematic
+
+    cfg = load_config("configs/paper_lemniscate.yaml")
+    t0 = time.perf_counter()
+    m = run_kinematic(cfg, progress=False).metrics
+    return {
+        "wall_s": time.perf_counter() - t0,
+        "sim_s": m["sim_time_s"],
+        "convergence_time_s": m["convergence_time_s"],
+        "steady_rms_m": m["steady_rms_m"],
+    }
+
+
+GROUPS = {
+    "controller_step_us": controller_step_us,
+    "paper_scenario": paper_wall_time_s,
+}
+
+
+def _optional_groups() -> None:
+    try:
+        from mpf_mavlink.bench.bridge import bridge_latency_ms, replay_s
+
+        GROUPS["bridge_latency_ms"] = bridge_latency_ms
+        GROUPS["replay_s"] = replay_s
+    except ImportError:
+        pass
+    from mpf_mavlink.bench.sil import sil_real_time_factor, sil_tracking
+
+    GROUPS["sil_real_time_factor"] = sil_real_time_factor
+    GROUPS["sil_tracking"] = sil_tracking
+    from mpf_mavlink.bench.robustness import sil_robustness
+
+    GROUPS["sil_robustness"] = sil_robustness
+    from mpf_mavlink.bench.target import target_feed
+
+    GROUPS["target_feed"] = target_feed
+    from mpf_mavlink.bench.campaign import (
+        campaign_demo_robustness,
+        campaign_roa,
+        campaign_throughput,
+    )
+
+    GROUPS["campaign_throughput"] = campaign_throughput
+    GROUPS["campaign_roa"] = campaign_roa
+    GROUPS["campaign_demo_robustness"] = campaign_demo_robustness
+
+
+def main(argv: list[str] | None = None) -> int:
+    _optional_groups()
+    p = argparse.ArgumentParser(
+        prog="scripts/bench", description="Print benchmark figures as JSON."
+    )
+    p.add_argument("--only", choices=sorted(GROUPS), action="append", help="run only these groups")
+    args = p.parse_args(argv)
+    out: dict[str, Any] = {}
+    for name, fn in GROUPS.items():
+        if args.only and name not in args.only:
+            continue
+        print(f"[bench] {name} ...", file=sys.stderr)
+        out[name] = fn()
+    print(json.dumps(out, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

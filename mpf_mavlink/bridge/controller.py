@@ -1,0 +1,628 @@
+"""The bridge's per-sample computation, shared by the live bridge and tlog replay.
+
+:class:`Controller` holds everything between a decoded telemetry sample and the setpoint sent
+for it: the estimator, the target (scripted or live), the virtual point s, the law, the
+adapter with its airspeed-hold integrator and the safe-setpoint rule. It does no I/O and reads
+no clock: time comes from the samples (autopilot boot time) and from the receive times the
+caller passes in, which the bridge takes from its tlog records (microseconds), so a replay of
+that tlog hands it the very same numbers. Driving it with the same samples in the same order
+therefore gives the same setpoints, bit for bit.
+
+The call sequence, identical in :mod:`mpf_mavlink.bridge.live` and :mod:`mpf_mavlink.runs.replay`:
+
+1. ``feed_vehicle(sample, rx)`` / ``feed_target(sample, rx)`` for every decoded message of the
+   vehicle (after its first autopilot HEARTBEAT) or of the live target.
+2. ``ready()`` after each such message until the origin is set: the bridge's wait for a
+   complete state. (It calls :meth:`Estimator.estimate`, whose wind low-pass advances with
+   each new attitude time, so the calls must be the same in both.)
+3. ``set_origin()`` (CHECKS: mission time 0 = the attitude time then) and ``init_s()`` (INIT:
+   the virtual point at the closest point of the moving path).
+4. ``step()`` for every ATTITUDE sample once setpoints stream: s += sdot_prev dt, the law,
+   the adapter; a duplicate or out-of-order sample (dt <= 0) is skipped.
+
+What the bridge decides from the wall clock (t0, s0, the moment streaming starts) it writes to
+the tlog as STATUSTEXT (:func:`origin_texts`, :data:`STREAM_TEXT`) for replay to pick up.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from mpf_mavlink.bridge.estimator import Estimate, Estimator, EstimatorParams
+from mpf_mavlink.config.schema import Config
+from mpf_mavlink.core import so3
+from mpf_mavlink.core.adapter import AdapterParams, AdapterState, Setpoint, adapt, safe_setpoint
+from mpf_mavlink.core.guidance.law import MpfCommand, MpfDiagnostics, VehicleState, mpf_law
+from mpf_mavlink.core.guidance.predict import look_ahead, predict_segments, prediction_horizon
+from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
+from mpf_mavlink.core.target import TargetState
+from mpf_mavlink.core.target_filter import Report, TargetEstimator, TargetFilterParams
+from mpf_mavlink.errors import MpfError
+from mpf_mavlink.runs.rundir import row_from
+
+# ----------------------------------------------------------------------------- tlog markers
+#: STATUSTEXT texts (MAVLink 2, <= 50 characters, severity INFO) the bridge sends, from its own
+#: system/component ids, so that a tlog carries the decisions the telemetry cannot tell:
+#: ``MPF t0=<float>`` and ``MPF s0=<float>`` right after INIT (no message is processed between
+#: CHECKS and them), then ``MPF stream`` when setpoints start to stream (after the backlog that
+#: piled up during the checks has been taken into the state). Floats are ``repr``: exact.
+#: ``MPF halt`` when control steps stop without ending the run (telemetry or target lost with
+#: re-engagement configured); a re-engagement then records ``MPF s0=`` and ``MPF stream`` again.
+T0_PREFIX = "MPF t0="
+S0_PREFIX = "MPF s0="
+STREAM_TEXT = "MPF stream"
+HALT_TEXT = "MPF halt"
+
+
+def origin_texts(t0: float, s0: float) -> list[str]:
+    """The two STATUSTEXT texts that record the mission-time origin t0 (s, autopilot boot time)
+    and the initial arc length s0 (m). Each is at most 31 characters."""
+    return [f"{T0_PREFIX}{float(t0)!r}", f"{S0_PREFIX}{float(s0)!r}"]
+
+
+def parse_marker(text: str) -> tuple[str, float | None] | None:
+    """('t0', value), ('s0', value), ('stream', None), ('halt', None), or None for any other
+    text."""
+    text = text.rstrip("\x00").strip()
+    for key, prefix in (("t0", T0_PREFIX), ("s0", S0_PREFIX)):
+        if text.startswith(prefix):
+            try:
+                v = float(text[len(prefix) :])
+            except ValueError:
+                return None
+            return (key, v) if math.isfinite(v) else None
+    if text == STREAM_TEXT:
+        return ("stream", None)
+    if text == HALT_TEXT:
+        return ("halt", None)
+    return None
+
+
+# ----------------------------------------------------------------------------- targets
+class ScriptedTarget:
+    """The config's target motion, at mission time t (s)."""
+
+    live = False
+
+    def __init__(self, motion: Any) -> None:
+        self.motion = motion
+
+    def update(
+        self, sample: Any, t_mission: float | None
+    ) -> None:  # pragma: no cover - nothing to take
+        return None
+
+    def restamp(self, t0: float) -> None:
+        return None
+
+    def state(self, t: float) -> TargetState | str:
+        return self.motion.state(t)
+
+
+def _heading_frame(
+    vel: np.ndarray, acc: np.ndarray, fallback_yaw: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Level heading frame of a target (x along the horizontal velocity) and its turn rate."""
+    vh2 = float(vel[0] ** 2 + vel[1] ** 2)
+    if vh2 > 0.25:  # > 0.5 m/s: the velocity defines the heading
+        yaw = math.atan2(vel[1], vel[0])
+        chid = float(vel[0] * acc[1] - vel[1] * acc[0]) / vh2
+    else:
+        yaw, chid = fallback_yaw, 0.0
+    return so3.rot_z(yaw), np.array([0.0, 0.0, chid])
+
+
+class ExtrapolatedTarget:
+    """The live target before the estimator (``target_estimator.mode: last_sample``): the latest
+    FOLLOW_TARGET, or GLOBAL_POSITION_INT (+ ATTITUDE), from one id, extrapolated.
+
+    Samples are stamped with the vehicle's mission time at receipt (the sender's clock is not
+    the autopilot's) and extrapolated to the control time; older than ``timeout_s``: stale.
+
+    A target that sends both (the SIL boat, PX4's follow-me peers) sends the same instant twice;
+    GLOBAL_POSITION_INT carries no acceleration nor turn rate, so while a FOLLOW_TARGET that
+    carries them is fresh (younger than ``timeout_s``) a GLOBAL_POSITION_INT is ignored: taken,
+    it replaced the state and zeroed the turn rate the feedforward needs.
+    """
+
+    live = True
+
+    def __init__(self, est: Estimator, timeout_s: float) -> None:
+        self.est = est
+        self.timeout_s = timeout_s
+        self.base: TargetState | None = None
+        self.att: Any = None
+        self.att_stamp = -math.inf
+        self.rich_stamp = -math.inf  # the last FOLLOW_TARGET with acceleration or attitude
+        self.samples = 0
+
+    def update(self, sample: Any, t_mission: float | None) -> None:
+        if t_mission is None:
+            return
+        name = type(sample).__name__
+        if name == "AttitudeSample":
+            self.att, self.att_stamp = sample, t_mission
+            return
+        if name not in ("FollowTargetSample", "GlobalPositionSample"):
+            return
+        if name == "GlobalPositionSample" and t_mission - self.rich_stamp <= self.timeout_s:
+            return  # the richer FOLLOW_TARGET state stands (see the class docstring)
+        pos = self.est.to_local(sample.lat_deg, sample.lon_deg, sample.alt_amsl_m)
+        if pos is None:
+            return
+        vel = np.asarray(sample.vel_ned if sample.vel_ned is not None else np.zeros(3), float)
+        acc = np.zeros(3)
+        R = omega = None
+        if name == "FollowTargetSample":
+            if sample.acc_ned is not None:
+                acc = np.asarray(sample.acc_ned, float)
+            if sample.R_B_N is not None:
+                R = np.asarray(sample.R_B_N, float)
+                omega = (
+                    np.asarray(sample.rates_frd, float)
+                    if sample.rates_frd is not None
+                    else np.zeros(3)
+                )
+            fallback = 0.0
+            if sample.acc_ned is not None or sample.R_B_N is not None:
+                self.rich_stamp = t_mission
+        else:
+            fallback = sample.heading_rad if sample.heading_rad is not None else 0.0
+            if self.att is not None and t_mission - self.att_stamp <= self.timeout_s:
+                R = np.asarray(self.att.R_B_N, float)
+                omega = np.asarray(self.att.rates_frd, float)
+        if R is None:
+            if self.base is not None and name == "GlobalPositionSample":
+                # acceleration from successive velocities keeps the heading frame's turn rate
+                dt = t_mission - self.base.t
+                if 0.02 < dt < 1.0:
+                    acc = (vel - self.base.velocity) / dt
+            R, omega = _heading_frame(vel, acc, fallback)
+        assert omega is not None  # set together with R above
+        self.base = TargetState(t_mission, pos, vel, acc, R, omega, np.zeros(3))
+        self.samples += 1
+
+    def restamp(self, t0: float) -> None:
+        """Move the stamps into the mission time base that starts at boot time t0 (s)."""
+        if self.base is not None:
+            self.base = dataclasses.replace(self.base, t=self.base.t - t0)
+        # the target's ATTITUDE stamp too: left in the old base it would look fresh for ever
+        self.att_stamp -= t0
+        self.rich_stamp -= t0
+
+    def state(self, t: float) -> TargetState | str:
+        if self.base is None:
+            return "no live target yet"
+        age = t - self.base.t
+        if age > self.timeout_s:
+            return f"live target stale ({age:.2f} s old)"
+        return self.base.extrapolate(t)
+
+
+def _turn_and_yaw(R: Any, rates: Any) -> tuple[float, float]:
+    """Turn rate (rad/s, about down: the NED z component of the body angular velocity) and
+    yaw (rad) of an attitude R_B^N with body rates (FRD, rad/s)."""
+    Ra = np.asarray(R, float)
+    w = Ra @ np.asarray(rates, float)
+    return float(w[2]), math.atan2(float(Ra[1, 0]), float(Ra[0, 0]))
+
+
+class LiveTarget:
+    """A target over MAVLink through the target estimator (:mod:`mpf_mavlink.core.target_filter`).
+
+    FOLLOW_TARGET, GLOBAL_POSITION_INT and ATTITUDE from the target's system become reports
+    stamped with their own timestamps (the sender's clock); ``update`` passes the receive time
+    in mission time for the clock offset. Positions about the estimator's geodetic origin; a
+    FOLLOW_TARGET's ``position_cov`` (eph, epv: m, 1-sigma) replaces the configured position
+    noise when both are > 0; its acceleration is not used. The estimate's staleness comes from its uncertainty.
+    """
+
+    live = True
+
+    def __init__(self, est: Estimator, params: TargetFilterParams) -> None:
+        self.est = est
+        self.kf = TargetEstimator(params)
+        self.samples = 0
+        self.last_outcome = ""
+
+    def report(self, sample: Any) -> Report | None:
+        """The estimator's report of a decoded sample (None: nothing it can use)."""
+        name = type(sample).__name__
+        if name == "AttitudeSample":
+            turn, yaw = _turn_and_yaw(sample.R_B_N, sample.rates_frd)
+            return Report(float(sample.t_boot_s), turn_rate=turn, yaw=yaw, attitude=True)
+        if name not in ("FollowTargetSample", "GlobalPositionSample"):
+            return None
+        pos = self.est.to_local(sample.lat_deg, sample.lon_deg, sample.alt_amsl_m)
+        if pos is None:
+            return None
+        vel = None if sample.vel_ned is None else np.asarray(sample.vel_ned, float)
+        if name == "GlobalPositionSample":
+            return Report(float(sample.t_boot_s), pos, vel, yaw=sample.heading_rad)
+        turn_yaw: tuple[float | None, float | None] = (None, None)
+        if sample.R_B_N is not None and sample.rates_frd is not None:
+            turn_yaw = _turn_and_yaw(sample.R_B_N, sample.rates_frd)
+        # position_cov is "eph epv" in the MAVLink definition: horizontal and vertical 1-sigma
+        # (m; the third value unused); taken per axis, the conservative reading of eph
+        cov = np.asarray(sample.position_cov, float)
+        pos_var = None
+        if cov.shape == (3,) and cov[0] > 0.0 and cov[1] > 0.0:
+            pos_var = np.array((cov[0] ** 2, cov[0] ** 2, cov[1] ** 2))
+        return Report(float(sample.t_s), pos, vel, turn_yaw[0], turn_yaw[1], pos_var,
+                      attitude=turn_yaw[1] is not None)  # fmt: skip
+
+    def update(self, sample: Any, t_mission: float | None) -> None:
+        if t_mission is None:
+            return
+        r = self.report(sample)
+        if r is None:
+            return
+        self.samples += 1
+        self.last_outcome = self.kf.add(r, t_mission)
+
+    def restamp(self, t0: float) -> None:
+        """Move the receive times into the mission time base that starts at boot time t0 (s)."""
+        self.kf.shift_time_base(t0)
+
+    def state(self, t: float) -> TargetState | str:
+        return self.kf.state(t)
+
+
+# ----------------------------------------------------------------------------- one step
+class Step(NamedTuple):
+    """One control step: what the law saw and the setpoint it produced.
+
+    t: mission time (s); t_boot_s: the ATTITUDE sample's autopilot time (s);
+    time_boot_ms: what the setpoint carries; dt: time since the previous step (s, 0 first);
+    w1_prev: w1 (NED) of the previous step, for the achieved-rate column of the logs.
+    """
+
+    t: float
+    t_boot_s: float
+    time_boot_ms: int
+    dt: float
+    estimate: Estimate
+    target: TargetState
+    cmd: MpfCommand
+    diag: MpfDiagnostics
+    setpoint: Setpoint
+    w1: tuple[float, float, float]
+    w1_prev: tuple[float, float, float] | None
+
+    def row(self) -> list[float]:
+        """The run directory's timeseries row (:data:`mpf_mavlink.runs.rundir.COLUMNS`)."""
+        vs = self.estimate.vehicle
+        w_act = (0.0, 0.0)
+        wp = self.w1_prev
+        if wp is not None and self.dt > 0.0:
+            # logging only: the law never sees this difference of telemetry
+            R = vs.R_W_I
+            w = self.w1
+            d0, d1, d2 = (
+                (w[0] - wp[0]) / self.dt,
+                (w[1] - wp[1]) / self.dt,
+                (w[2] - wp[2]) / self.dt,
+            )
+            w_act = (
+                -(d0 * float(R[0, 2]) + d1 * float(R[1, 2]) + d2 * float(R[2, 2])),
+                d0 * float(R[0, 1]) + d1 * float(R[1, 1]) + d2 * float(R[2, 1]),
+            )
+        tg = self.target
+        c = self.cmd
+        return row_from(
+            self.diag, vs.position, (c.w2, c.w3), w_act, c.sdot, tg.position, tg.R_T_I, vs.wind
+        )
+
+    def setpoint_row(self) -> list[float]:
+        """The row of setpoints.csv (:data:`SETPOINT_COLUMNS`)."""
+        sp = self.setpoint
+        return [
+            self.t,
+            *sp.body_rates_frd,
+            *sp.q_wxyz,
+            sp.thrust,
+            sp.bank_rad,
+            sp.pitch_rad,
+            sp.load_factor,
+            1.0 if sp.safe else 0.0,
+        ]
+
+
+SETPOINT_COLUMNS = "t,p,q,r,qw,qx,qy,qz,thrust,bank,pitch,load_factor,safe"
+
+
+def adapter_params(cfg: Config) -> AdapterParams:
+    """The adapter's limits and gains from the ``vehicle`` and ``adapter`` sections."""
+    a = cfg.section("adapter")
+    v = cfg.vehicle
+    return AdapterParams(
+        max_bank_rad=v.max_bank_rad, airspeed_sp_m_s=v.airspeed_m_s,
+        **{f.name: getattr(a, f.name) for f in dataclasses.fields(a)},
+    )  # fmt: skip
+
+
+def estimator_params(m: Any) -> EstimatorParams:
+    """The estimator's staleness limits and origin from the ``mavlink`` section."""
+    origin = None
+    if m.origin_lat_deg is not None and m.origin_lon_deg is not None and m.origin_alt_m is not None:
+        origin = (m.origin_lat_deg, m.origin_lon_deg, m.origin_alt_m)
+    return EstimatorParams(m.attitude_stale_s, m.position_stale_s, m.airspeed_stale_s, m.wind_stale_s, m.wind_filter_tau_s, origin=origin, airspeed_is_eas=m.airspeed_is_eas, airspeed_from_wind=m.airspeed_from_wind)  # fmt: skip
+
+
+class Controller:
+    """Estimator + target + s + law + adapter for one run (see the module docstring).
+
+    ``m``: the (possibly command-line adjusted) ``mavlink`` section; default: the config's.
+    """
+
+    def __init__(self, cfg: Config, m: Any = None) -> None:
+        self.cfg = cfg
+        self.m = m = cfg.section("mavlink") if m is None else m
+        self.ad_params = adapter_params(cfg)
+        self.est = Estimator(estimator_params(m))
+        self.live = cfg.target.type == "mavlink"
+        if self.live and m.target_sysid is None:
+            raise MpfError(f"{cfg.source}: target.type mavlink needs mavlink.target_sysid")
+        te = cfg.section("target_estimator")
+        self.target: Any = (
+            ScriptedTarget(build_target(cfg.target))
+            if not self.live
+            else LiveTarget(self.est, te.params())
+            if te.mode == "filter"
+            else ExtrapolatedTarget(self.est, m.target_timeout_s)
+        )
+        self.path = build_path(cfg.path)
+        self.gains = build_gains(cfg)
+        self.ext = build_extensions(cfg)
+        self.s = 0.0
+        self.t0: float | None = None  # mission-time origin (autopilot boot time, s)
+        self.t_prev: float | None = None
+        self.sdot_prev = 0.0
+        self.w1_prev: tuple[float, float, float] | None = None
+        self.ad_state = AdapterState()
+        self.why_not = ""
+        self.law_evals = 0
+        # delay compensation: the ATTITUDE period (s, filtered) and the loop delay (s) in use
+        self.period_s = 0.0
+        self.delay_s = float(getattr(m, "known_delay_s", 0.0))
+        self.tau_s = 0.0  # the prediction horizon of the latest step
+        self.alpha_m = self.gains.alpha  # the look-ahead of the latest step (guidance/predict.py)
+        # body rates sent (PX4 rate setpoints): (mission time of the ATTITUDE answered, p, q, r)
+        self.sent: collections.deque[tuple[float, tuple[float, float, float]]] = collections.deque(
+            maxlen=64
+        )
+        self.rates_pipeline = getattr(m, "flavour", "auto") == "px4"
+        self.delays: collections.deque[float] = collections.deque(maxlen=9)  # measured (s)
+
+    # -- feeding ----------------------------------------------------------------------------
+    def feed_vehicle(self, sample: Any, rx: float | None) -> bool:
+        """A decoded sample of the vehicle; True when it is an ATTITUDE (a control instant)."""
+        if type(sample).__name__ == "AttitudeTargetSample":
+            self._echo(sample)
+            return False
+        return self.est.update(sample, rx)
+
+    def _echo(self, sample: Any) -> None:
+        """The autopilot's ATTITUDE_TARGET: when our setpoint reached it. The setpoint is found
+        by its body rates (float32 on the wire) among those sent; the loop delay is the echo's
+        time minus the time of the ATTITUDE that setpoint answered, both on the autopilot's
+        clock. The delay in use is the median of the last 9 (one late echo does not move it)."""
+        t0 = self.est.t0
+        if not self.sent or not math.isfinite(t0):
+            return
+        te = sample.t_boot_s - t0
+        a, b, c = sample.rates_frd
+        for ts, (p, q, r) in reversed(self.sent):
+            if ts > te:
+                continue
+            if (
+                abs(p - a) <= 1e-6 * max(1.0, abs(p))
+                and abs(q - b) <= 1e-6 * max(1.0, abs(q))
+                and abs(r - c) <= 1e-6 * max(1.0, abs(r))
+            ):
+                d = te - ts
+                if 0.0 <= d <= 0.5:  # beyond: not this setpoint's echo, or not a link to mend
+                    self.delays.append(d)
+                    self.delay_s = sorted(self.delays)[len(self.delays) // 2]
+                return
+
+    def feed_target(self, sample: Any, rx: float | None) -> None:
+        """A decoded sample of the live target (ignored with a scripted target)."""
+        if self.live:
+            self.target.update(sample, self.mission_time_at(rx))
+
+    def mission_time_at(self, rx: float | None) -> float | None:
+        """The vehicle's mission time (s) at receive time rx (s): the autopilot time of the
+        most recently received time-stamped sample (ATTITUDE or LOCAL_POSITION_NED) plus the
+        receive time since. The most recent one: with ATTITUDE at 10 Hz and the position at
+        50 Hz, the ATTITUDE is up to 80 ms old, and under a lockstep clock the receive times do
+        not advance with the vehicle's (a target sample was stamped that much too early: 0.15 m
+        at the demo boat's 3 m/s)."""
+        est = self.est
+        if est.att is None or rx is None or est.att_rx is None:
+            return None
+        tb, trx = est.att.t_boot_s, est.att_rx
+        loc, lrx = est.local, est.local_rx
+        if loc is not None and lrx is not None and lrx > trx and loc.t_boot_s > tb:
+            tb, trx = loc.t_boot_s, lrx
+        return tb + (rx - trx) - est.t0
+
+    # -- initialisation -----------------------------------------------------------------------
+    def ready(self) -> bool:
+        """A complete state (and a live target) exists; else ``why_not`` says what is missing."""
+        est, why = self.est.estimate()
+        if est is None:
+            self.why_not = why
+            return False
+        if self.live:
+            st = self.target.state(est.vehicle.t)
+            if isinstance(st, str):
+                self.why_not = st
+                return False
+        return True
+
+    def set_origin(self, t0: float | None = None) -> float:
+        """Mission time 0 (the checks' and the scripted target's origin): the latest attitude
+        time, or ``t0`` (s, autopilot boot time) as recorded by a bridge."""
+        est, why = self.est.estimate()
+        if t0 is None:
+            if est is None:
+                raise MpfError(f"no state to start from: {why}")
+            t0 = est.t_boot_s
+        self.t0 = float(t0)
+        self.est.t0 = self.t0
+        self.target.restamp(self.t0)
+        return self.t0
+
+    def init_s(self, s0: float | None = None) -> float:
+        """The virtual point: ``s0`` (m) if given, else ``guidance.initial_s_m``, else the
+        closest point of the moving path to the vehicle now. The step state (previous instant,
+        sdot, the adapter's integrator) starts afresh, as on a re-engagement it must: s is not
+        integrated across the time the law was not flying the vehicle."""
+        if s0 is None:
+            s0 = self.cfg.guidance.initial_s_m
+        if s0 is None:
+            est, why = self.est.estimate()
+            if est is None:
+                raise MpfError(f"no state to start from: {why}")
+            vs = est.vehicle
+            tgt = self.target.state(vs.t)
+            if isinstance(tgt, str):
+                raise MpfError(f"no target to start from: {tgt}")
+            s0 = self.path.closest(tgt.R_T_I.T @ (vs.position - tgt.position))
+        self.s = float(s0)
+        self.t_prev = None
+        self.sdot_prev = 0.0
+        self.w1_prev = None
+        self.ad_state = self.ad_state.for_reengage()  # the airframe's learned trim and turn stay
+        return self.s
+
+    def initial_state(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(position NED m, R_W^I) of the latest estimate, for the pre-flight checks."""
+        est, _ = self.est.estimate()
+        return None if est is None else (est.vehicle.position, est.vehicle.R_W_I)
+
+    # -- control ------------------------------------------------------------------------------
+    def step(self) -> Step | None:
+        """One control step at the latest ATTITUDE; None (``why_not`` set) when the state or
+        the target is not usable, or when the sample is not newer than the previous step."""
+        est, why = self.est.estimate()
+        if est is None:
+            self.why_not = why
+            return None
+        vs = est.vehicle
+        t = vs.t
+        tgt = self.target.state(t)
+        if isinstance(tgt, str):
+            self.why_not = tgt
+            return None
+        dt = 0.0
+        if self.t_prev is not None:
+            dt = t - self.t_prev
+            if dt <= 0.0:
+                return None  # duplicate or out-of-order sample: already acted on that instant
+            self.s += self.sdot_prev * dt
+            if dt < 1.0:  # the ATTITUDE period, filtered over ~10 samples (gaps excluded)
+                self.period_s = (
+                    dt if self.period_s == 0.0 else self.period_s + 0.1 * (dt - self.period_s)
+                )
+        # The law acts on the state when its setpoint acts (guidance/predict.py)
+        vl: VehicleState = vs
+        R_B_N = est.R_B_N
+        s_law = self.s
+        tgt_law = tgt
+        tau = 0.0
+        if getattr(self.m, "delay_compensation", False):
+            tau = prediction_horizon(self.delay_s, self.period_s)
+            if tau > 0.0:
+                vl, R_B_N = predict_segments(vs, est.R_B_N, self._segments(t, tau))
+                tp = self.target.state(t + tau)
+                if not isinstance(tp, str):
+                    tgt_law = tp
+                s_law = self.s + self.sdot_prev * tau
+        self.tau_s = tau
+        gains = self.gains
+        if getattr(self.m, "delay_compensation", False):
+            a = look_ahead(gains.alpha, gains.K_R, vs.airspeed, self.delay_s, self.period_s)
+            if a > gains.alpha:
+                gains = dataclasses.replace(gains, alpha=a)
+        self.alpha_m = gains.alpha
+        cmd, diag = mpf_law(s_law, vl, tgt_law, self.path, gains, self.ext, diagnostics=True)
+        assert diag is not None
+        if tau > 0.0:
+            # The logs describe the sample's own instant (errors, frames, the relative position:
+            # replay and the SIL truth align on them); the command and its saturation flag are
+            # the predicted evaluation's, which is what was sent.
+            _, dm = mpf_law(self.s, vs, tgt, self.path, gains, self.ext, diagnostics=True)
+            assert dm is not None
+            diag = dm._replace(mode=diag.mode)
+        self.law_evals += 1
+        w10, w11, w12 = vs.R_W_I[:, 0].tolist()
+        w1 = (w10, w11, w12)  # measured: the logs' achieved rate
+        w1l = w1 if vl is vs else tuple(vl.R_W_I[:, 0].tolist())
+        sp, self.ad_state = adapt(
+            cmd.omega_w1_I, vl.airspeed, R_B_N, w1l, dt, self.ad_params, self.ad_state,
+            meas=(est.R_B_N, est.rates_frd),
+        )  # fmt: skip
+        if not math.isfinite(cmd.sdot):
+            sp = safe_setpoint(self.ad_params)
+        if self.rates_pipeline:
+            self.sent.append((t, sp.body_rates_frd))
+        self.t_prev = t
+        self.sdot_prev = cmd.sdot if math.isfinite(cmd.sdot) else 0.0
+        w1_prev, self.w1_prev = self.w1_prev, w1
+        tb_ms = int(round(est.t_boot_s * 1000.0))
+        return Step(t, est.t_boot_s, tb_ms, dt, est, tgt, cmd, diag, sp, w1, w1_prev)
+
+    def _segments(self, t: float, tau: float) -> list[tuple[float, Any]]:
+        """The body rates over [t, t + tau]: the PX4 rate setpoints already sent act from
+        their ATTITUDE's time + the loop delay, one period each (the rate loop tracks them);
+        before the first of them and for ArduPlane (attitude setpoints) the measured rates."""
+        est = self.est
+        rates = est.att.rates_frd if est.att is not None else (0.0, 0.0, 0.0)
+        if not self.rates_pipeline or not self.sent:
+            return [(tau, rates)]
+        d = self.delay_s
+        segs: list[tuple[float, Any]] = []
+        now = t
+        end = t + tau
+        for ts, r in self.sent:
+            a = ts + d  # when that setpoint starts acting
+            if a <= now:
+                rates = r  # acting now (the latest that started)
+                continue
+            if a >= end:
+                break
+            segs.append((a - now, rates))
+            now, rates = a, r
+        segs.append((end - now, rates))
+        return segs
+
+    def roll(self) -> float:
+        """Roll (rad) of the latest ATTITUDE, 0 without one (for the wings-level setpoint)."""
+        a = self.est.att
+        if a is None:
+            return 0.0
+        R = a.R_B_N
+        return math.atan2(R[2][1], R[2][2])
+
+
+__all__ = [
+    "Controller",
+    "ExtrapolatedTarget",
+    "LiveTarget",
+    "ScriptedTarget",
+    "Step",
+    "SETPOINT_COLUMNS",
+    "STREAM_TEXT",
+    "HALT_TEXT",
+    "origin_texts",
+    "parse_marker",
+    "adapter_params",
+    "estimator_params",
+]

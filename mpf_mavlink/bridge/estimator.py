@@ -1,0 +1,414 @@
+"""Telemetry samples -> the law's VehicleState (pure of I/O: fed decoded samples, no clock).
+
+Streams and their times
+-----------------------
+- attitude: ATTITUDE or ATTITUDE_QUATERNION (time_boot_ms). Its time is the control time.
+- position: LOCAL_POSITION_NED (time_boot_ms), or GLOBAL_POSITION_INT converted to local NED
+  about a geodetic origin (configured, else HOME_POSITION, whose local offset is added so both
+  sources share the autopilot's local frame). LOCAL is preferred while fresh.
+  The position is extrapolated by its velocity to the attitude time.
+- airspeed: VFR_HUD (no timestamp: staleness from receive times).
+- wind: WIND (ArduPilot) / WIND_COV (PX4), receive-time staleness. Without one, a simple
+  estimator: a first-order low-pass (time constant ``wind_tau_s``, started at the first
+  measurement) of ``ground velocity - airspeed * body x-axis`` (assumes zero sideslip and angle
+  of attack, good to a few tenths of m/s for a trimmed fixed-wing).
+
+Staleness: a stream is stale when it lags the attitude sample by more than its limit (boot
+time for timestamped streams, receive time otherwise); the attitude is stale when the other
+streams have gone on for more than ``attitude_stale_s`` after it (receive times; position boot
+times when no receive times are given). A stale attitude/position/airspeed makes
+:meth:`Estimator.estimate` return None with a reason that starts with the stream's name.
+
+Samples that are non-finite or implausible (a NaN, a speed beyond 200 m/s, a matrix that is not
+a rotation, ...) are ignored by :meth:`Estimator.update`: the decoders already drop them, this
+guards samples built elsewhere (replay tools, tests). An estimate is never non-finite.
+
+Wind frame: w1 along the air-relative velocity (ground velocity - wind); when that is tiny
+(< ``min_air_speed``), along the body x-axis. v_w = VFR_HUD airspeed, else |air velocity|.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mpf_mavlink.core.frames import geodetic_to_ned, wind_frame_from_velocity
+from mpf_mavlink.core.guidance.law import VehicleState
+
+
+def eas_to_tas(alt_amsl_m: float) -> float:
+    """TAS / EAS = sqrt(rho0 / rho) in the ISA troposphere at ``alt_amsl_m`` (m), clamped to
+    [-500, 11000] m. Autopilots report VFR_HUD.airspeed as equivalent (ArduPilot: EAS; PX4:
+    calibrated/indicated, the same at UAV speeds); the law's v_w is the speed along w1, a true
+    airspeed: at 600 m AMSL they differ by 3 %."""
+    h = min(max(alt_amsl_m, -500.0), 11000.0) if math.isfinite(alt_amsl_m) else 0.0
+    return (1.0 - 2.25577e-5 * h) ** -2.127940
+
+
+def _wind_frame_rows(vx: float, vy: float, vz: float) -> tuple[tuple[float, float, float], ...]:
+    """The rows of :func:`wind_frame` as tuples (no numpy: the estimator's hot path)."""
+    n = math.sqrt(vx * vx + vy * vy + vz * vz)
+    if n < 1e-6:
+        wind_frame_from_velocity((vx, vy, vz))  # raises the documented ValueError
+    a, b, c = vx / n, vy / n, vz / n
+    h = math.sqrt(a * a + b * b)
+    if h < 1e-9:
+        e, f, g = 0.0, 1.0, 0.0
+    else:
+        e, f, g = -b / h, a / h, 0.0
+    return ((a, e, b * g - c * f), (b, f, c * e - a * g), (c, g, a * f - b * e))
+
+
+def wind_frame(vx: float, vy: float, vz: float) -> NDArray[np.float64]:
+    """Scalar twin of :func:`frames.wind_frame_from_velocity` (roll_ref = 0), ~10x faster:
+    w1 = v/|v|, w2 = down x w1 normalised (horizontal, to the right), w3 = w1 x w2."""
+    return np.array(_wind_frame_rows(vx, vy, vz))
+
+
+# Plausibility bounds of a sample (the decoders' bounds, kept here so this module stays pure)
+_MAX_SPEED_M_S = 200.0
+_MAX_RATE_RAD_S = 50.0
+_MAX_LOCAL_POS_M = 1.0e6
+_MIN_ALT_M, _MAX_ALT_M = -1000.0, 50000.0
+_ROTATION_TOL = 1e-6
+
+
+def _arr_list(a: object, shape: tuple[int, ...]) -> list | None:
+    """``a`` as a (nested) list of floats if it has that shape, else None."""
+    if type(a) is np.ndarray and a.dtype.char == "d":  # the decoders' arrays: no conversion
+        return a.tolist() if a.shape == shape else None
+    try:
+        v = np.asarray(a, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return v.tolist() if v.shape == shape else None
+
+
+def _vec3_ok(a: object, bound: float) -> bool:
+    """A finite 3-vector, every |element| <= bound (NaN fails the comparison)."""
+    v = _arr_list(a, (3,))
+    if v is None:
+        return False
+    x, y, z = v
+    return -bound <= x <= bound and -bound <= y <= bound and -bound <= z <= bound
+
+
+def _arr_ok(a: object, shape: tuple[int, ...], bound: float) -> bool:
+    """Finite, of that shape, every |element| <= bound (NaN fails the comparison)."""
+    if shape == (3,):
+        return _vec3_ok(a, bound)
+    try:
+        v = np.asarray(a, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return v.shape == shape and all(abs(x) <= bound for x in v.ravel().tolist())
+
+
+def _num_ok(x: object, lo: float, hi: float) -> bool:
+    try:
+        f = float(x)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return False
+    return math.isfinite(f) and lo <= f <= hi
+
+
+def _geodetic_ok(s: object) -> bool:
+    return (
+        _num_ok(getattr(s, "lat_deg", None), -90.0, 90.0)
+        and _num_ok(getattr(s, "lon_deg", None), -180.0, 180.0)
+        and _num_ok(getattr(s, "alt_amsl_m", None), _MIN_ALT_M, _MAX_ALT_M)
+    )
+
+
+def _time_ok(s: object) -> bool:
+    t = getattr(s, "t_boot_s", None)
+    if type(t) is float:
+        return math.isfinite(t)
+    return _num_ok(t, -math.inf, math.inf)
+
+
+def _rotation_ok(a: object) -> bool:
+    """A 3x3 rotation: finite, orthonormal columns (to _ROTATION_TOL), determinant +1."""
+    rows = _arr_list(a, (3, 3))
+    if rows is None:
+        return False
+    (x0, y0, z0), (x1, y1, z1), (x2, y2, z2) = rows  # x, y, z: the columns
+    b = 1.0 + _ROTATION_TOL  # a NaN fails the comparisons
+    if not (
+        -b <= x0 <= b and -b <= y0 <= b and -b <= z0 <= b
+        and -b <= x1 <= b and -b <= y1 <= b and -b <= z1 <= b
+        and -b <= x2 <= b and -b <= y2 <= b and -b <= z2 <= b
+    ):  # fmt: skip
+        return False
+    tol = _ROTATION_TOL
+    if not (
+        abs(x0 * x0 + x1 * x1 + x2 * x2 - 1.0) <= tol
+        and abs(y0 * y0 + y1 * y1 + y2 * y2 - 1.0) <= tol
+        and abs(z0 * z0 + z1 * z1 + z2 * z2 - 1.0) <= tol
+        and abs(x0 * y0 + x1 * y1 + x2 * y2) <= tol
+        and abs(x0 * z0 + x1 * z1 + x2 * z2) <= tol
+        and abs(y0 * z0 + y1 * z1 + y2 * z2) <= tol
+    ):
+        return False
+    det = x0 * (y1 * z2 - y2 * z1) - x1 * (y0 * z2 - y2 * z0) + x2 * (y0 * z1 - y1 * z0)
+    return det > 0.0
+
+
+def _plausible(name: str, s: object) -> bool:
+    """Whether a decoded sample can be taken into the state (finite and within bounds)."""
+    g = getattr
+    if name == "AttitudeSample":
+        return (
+            _time_ok(s)
+            and _vec3_ok(g(s, "rates_frd", None), _MAX_RATE_RAD_S)
+            and _rotation_ok(g(s, "R_B_N", None))
+        )
+    if name == "LocalPositionSample":
+        return (
+            _time_ok(s)
+            and _vec3_ok(g(s, "pos_ned", None), _MAX_LOCAL_POS_M)
+            and _vec3_ok(g(s, "vel_ned", None), _MAX_SPEED_M_S)
+        )
+    if name == "GlobalPositionSample":
+        vel_ok = _vec3_ok(g(s, "vel_ned", None), _MAX_SPEED_M_S)
+        return _time_ok(s) and _geodetic_ok(s) and vel_ok
+    if name == "HomeSample":
+        return _geodetic_ok(s) and _vec3_ok(g(s, "pos_ned", None), _MAX_LOCAL_POS_M)
+    if name == "VfrHudSample":
+        return _num_ok(g(s, "airspeed_m_s", None), 0.0, _MAX_SPEED_M_S)
+    if name == "WindSample":
+        return _vec3_ok(g(s, "wind_ned", None), _MAX_SPEED_M_S)
+    return True
+
+
+@dataclass(frozen=True)
+class EstimatorParams:
+    attitude_stale_s: float = 0.5
+    position_stale_s: float = 0.5
+    airspeed_stale_s: float = 0.5
+    wind_stale_s: float = 2.0
+    wind_tau_s: float = 5.0
+    min_air_speed: float = 1.0  # m/s: below this w1 falls back to the body x-axis
+    origin: tuple[float, float, float] | None = None  # lat deg, lon deg, alt m (AMSL)
+    airspeed_is_eas: bool = True  # VFR_HUD.airspeed is EAS: scaled to TAS (eas_to_tas)
+    airspeed_from_wind: bool = True  # v_w = |v_ground - wind| while the autopilot's wind is fresh
+
+
+@dataclass(frozen=True, eq=False)
+class Estimate:
+    """A VehicleState plus what the adapter and the logs need.
+
+    vehicle.t is the attitude sample's autopilot time (s since boot) minus ``t0``."""
+
+    vehicle: VehicleState
+    t_boot_s: float
+    R_B_N: NDArray[np.float64]
+    rates_frd: NDArray[np.float64]
+    ground_velocity: NDArray[np.float64]
+    position_source: str  # "local" | "global"
+    airspeed_source: str  # "vfr_hud" | "air_velocity" | "ground_minus_wind"
+    wind_source: str  # "WIND" | "WIND_COV" | "estimated"
+
+
+class Estimator:
+    """Keeps the latest sample of each stream; :meth:`estimate` fuses them at the attitude time."""
+
+    def __init__(self, params: EstimatorParams = EstimatorParams()) -> None:
+        self.p = params
+        self.att: Any = None  # AttitudeSample (decoded samples: mavlink.codec)
+        self.att_rx: float | None = None
+        self.local: Any = None  # LocalPositionSample
+        self.local_rx: float | None = None
+        self.glob: Any = None  # GlobalPositionSample
+        self.glob_rx: float | None = None
+        self.home: Any = None  # HomeSample
+        self.vfr: Any = None  # VfrHudSample
+        self.vfr_rx: float | None = None
+        self.wind: Any = None  # WindSample
+        self.wind_rx: float | None = None
+        self._wind_lp: NDArray[np.float64] | None = None
+        self._wind_lp_t: float | None = None
+        self.t0 = 0.0  # time origin subtracted from t_boot (mission time)
+
+    # -- feeding ------------------------------------------------------------------------------
+    def update(self, sample: object, t_rx: float | None) -> bool:
+        """Store a decoded sample (t_rx: receive time, s, any monotonic-ish clock of the link).
+        Returns True when it was an attitude sample (a control instant). A non-finite or
+        implausible sample, or a non-finite ``t_rx``, is ignored (returns False)."""
+        name = type(sample).__name__
+        if t_rx is not None and not (
+            math.isfinite(t_rx) if type(t_rx) is float else _num_ok(t_rx, -math.inf, math.inf)
+        ):
+            return False
+        if not _plausible(name, sample):
+            return False
+        if name == "AttitudeSample":
+            self.att, self.att_rx = sample, t_rx
+            # the wind low-pass advances at each control instant, here, with the telemetry
+            # received so far: advanced by whoever asked for an estimate first, its input
+            # would depend on thread timing and a replay of the tlog could not reproduce it
+            self.estimate()
+            return True
+        if name == "LocalPositionSample":
+            self.local, self.local_rx = sample, t_rx
+        elif name == "GlobalPositionSample":
+            self.glob, self.glob_rx = sample, t_rx
+        elif name == "HomeSample":
+            self.home = sample
+        elif name == "VfrHudSample":
+            self.vfr, self.vfr_rx = sample, t_rx
+        elif name == "WindSample":
+            self.wind, self.wind_rx = sample, t_rx
+        return False
+
+    def geodetic_origin(self) -> tuple[float, float, float, NDArray[np.float64]] | None:
+        """(lat, lon, alt, local offset of that point) of the local frame, or None if unknown."""
+        if self.p.origin is not None:
+            return (*self.p.origin, np.zeros(3))
+        if self.home is not None:
+            h = self.home
+            return (h.lat_deg, h.lon_deg, h.alt_amsl_m, np.asarray(h.pos_ned, float))
+        return None
+
+    def to_local(self, lat: float, lon: float, alt: float) -> NDArray[np.float64] | None:
+        o = self.geodetic_origin()
+        if o is None:
+            return None
+        return geodetic_to_ned(lat, lon, alt, o[0], o[1], o[2]) + o[3]
+
+    # -- fusing -------------------------------------------------------------------------------
+    def _position(
+        self, t: float
+    ) -> tuple[tuple[float, float, float], NDArray[np.float64], str] | str:
+        """((x, y, z) NED at time t, ground velocity array, source) or the reason why not."""
+        p = self.p
+        loc = self.local
+        if loc is not None and abs(t - loc.t_boot_s) <= p.position_stale_s:
+            dt = t - loc.t_boot_s
+            vel = np.asarray(loc.vel_ned, float)
+            (x, y, z), (vx, vy, vz) = np.asarray(loc.pos_ned).tolist(), vel.tolist()
+            return (x + dt * vx, y + dt * vy, z + dt * vz), vel, "local"
+        g = self.glob
+        if g is not None and abs(t - g.t_boot_s) <= p.position_stale_s:
+            q = self.to_local(g.lat_deg, g.lon_deg, g.alt_amsl_m)
+            if q is None:
+                return (
+                    "GLOBAL_POSITION_INT without an origin (no HOME_POSITION, no mavlink.origin_*)"
+                )
+            dt = t - g.t_boot_s
+            vel = np.asarray(g.vel_ned, float)
+            (x, y, z), (vx, vy, vz) = q.tolist(), np.asarray(g.vel_ned).tolist()
+            return (x + dt * vx, y + dt * vy, z + dt * vz), vel, "global"
+        if loc is None and g is None:
+            return "no position yet (LOCAL_POSITION_NED or GLOBAL_POSITION_INT)"
+        last = max(x.t_boot_s for x in (loc, g) if x is not None)
+        return f"position stale ({t - last:.2f} s behind the attitude)"
+
+    def _attitude_lag(self) -> float:
+        """How far (s) the other telemetry has gone on since the attitude sample, 0 if not at all:
+        by receive time (one clock for every stream; a sample that stopped coming cannot hold
+        the attitude hostage), or by the position's boot time when there are no receive times."""
+        a = self.att
+        lag = 0.0
+        if self.att_rx is not None:
+            # not the wind: it is optional, and a single odd wind sample must not stall control
+            for rx in (self.local_rx, self.glob_rx, self.vfr_rx):
+                if rx is not None:
+                    lag = max(lag, rx - self.att_rx)
+        else:
+            for x in (self.local, self.glob):
+                if x is not None:
+                    lag = max(lag, x.t_boot_s - a.t_boot_s)
+        return lag
+
+    def estimate(self) -> tuple[Estimate | None, str]:
+        """The state at the latest attitude sample, or (None, reason)."""
+        a = self.att
+        if a is None:
+            return None, "no attitude yet"
+        lag = self._attitude_lag()
+        if lag > self.p.attitude_stale_s:
+            return None, f"attitude stale ({lag:.2f} s behind the other telemetry)"
+        t = a.t_boot_s
+        pos = self._position(t)
+        if isinstance(pos, str):
+            return None, pos
+        (px, py, pz), vg, psrc = pos
+        # Scalar arithmetic throughout (a numpy call on a 3-vector costs more than the
+        # arithmetic): the same operations, in the same order, as the array form.
+        gx, gy, gz = vg.tolist()
+        R = np.asarray(a.R_B_N, float)
+        R_rows = R.tolist()
+        xb0, xb1, xb2 = R_rows[0][0], R_rows[1][0], R_rows[2][0]  # body x-axis (NED)
+        p = self.p
+        airspeed: float | None = None
+        if self.vfr is not None and (
+            self.vfr_rx is None
+            or self.att_rx is None
+            or abs(self.att_rx - self.vfr_rx) <= p.airspeed_stale_s
+        ):
+            airspeed = float(self.vfr.airspeed_m_s)
+            if p.airspeed_is_eas:
+                airspeed *= eas_to_tas(float(self.vfr.alt_amsl_m))
+        elif self.vfr is not None:
+            return None, f"airspeed stale ({self.att_rx - self.vfr_rx:.2f} s behind the attitude)"  # type: ignore[operator]
+        # wind: the autopilot's when fresh, else our low-pass of vg - v_air x_b, started at the
+        # first measurement (not at zero: a calm start would bias w1 by the drift angle for
+        # several tau) and restarted when the autopilot's clock goes back (a reboot)
+        if self._wind_lp_t is not None and t < self._wind_lp_t:
+            self._wind_lp = self._wind_lp_t = None
+        if airspeed is not None:
+            # vertical wind is not observable this way (angle of attack): 0
+            ix, iy = gx - airspeed * xb0, gy - airspeed * xb1
+            lp = self._wind_lp
+            if lp is None or self._wind_lp_t is None:
+                self._wind_lp = (ix, iy, 0.0)
+            else:
+                k = 1.0 - math.exp(-max(0.0, t - self._wind_lp_t) / p.wind_tau_s)
+                lx, ly, lz = lp
+                self._wind_lp = (lx + k * (ix - lx), ly + k * (iy - ly), lz + k * (0.0 - lz))
+            self._wind_lp_t = t
+        w = self.wind
+        if w is not None and (
+            self.wind_rx is None
+            or self.att_rx is None
+            or abs(self.att_rx - self.wind_rx) <= p.wind_stale_s
+        ):
+            wind, wsrc = np.asarray(w.wind_ned, float), w.source
+            ex, ey, ez = wind.tolist()
+        else:
+            lp = self._wind_lp
+            ex, ey, ez = (0.0, 0.0, 0.0) if lp is None else lp
+            wind, wsrc = np.array((ex, ey, ez)), "estimated"
+        v_air = (gx - ex, gy - ey, gz - ez)
+        n_air = math.sqrt(v_air[0] ** 2 + v_air[1] ** 2 + v_air[2] ** 2)
+        if n_air < p.min_air_speed:
+            W = _wind_frame_rows(xb0, xb1, xb2)
+        else:
+            W = _wind_frame_rows(*v_air)
+        if p.airspeed_from_wind and wsrc != "estimated" and n_air >= p.min_air_speed:
+            # the autopilot's own wind: v_air = v_ground - wind is what the law's kinematics
+            # p_dot = v_w w1 + eta assume, whatever its EAS-to-TAS factor (ArduPlane SITL:
+            # ground speed 22.7 m/s in 0.2 m/s of wind against EAS 21.3 m/s, ISA TAS 22.0)
+            v_w, asrc = n_air, "ground_minus_wind"
+        elif airspeed is not None and airspeed > 0.0:
+            v_w, asrc = airspeed, "vfr_hud"
+        else:
+            v_w, asrc = max(n_air, 0.0), "air_velocity"
+        if not v_w > 0.0:
+            return None, "airspeed is zero"
+        rates = np.asarray(a.rates_frd, float)
+        # belt and braces (update() already filters): one sum is NaN/inf if any element is
+        (r0, r1, r2), (w0, w1, w2) = R_rows, W
+        check = (
+            px + py + pz + sum(w0) + sum(w1) + sum(w2) + ex + ey + ez + gx + gy + gz
+            + sum(r0) + sum(r1) + sum(r2) + sum(rates.tolist())
+        )  # fmt: skip
+        if not math.isfinite(check + t - self.t0 + v_w):
+            return None, "non-finite estimate (rejected)"
+        vs = VehicleState(t - self.t0, np.array((px, py, pz)), np.array(W), v_w, wind)
+        return Estimate(vs, t, R, rates, vg, psrc, asrc, wsrc), ""

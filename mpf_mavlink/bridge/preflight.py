@@ -1,0 +1,144 @@
+"""Run the pre-flight checks for a configuration (Assumption 1, gain condition, feasibility)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mpf_mavlink.config.schema import Config
+from mpf_mavlink.core.frames import euler_to_matrix
+from mpf_mavlink.core.guidance.checks import CheckResult, assumption1, feasibility, gain_condition
+from mpf_mavlink.core.guidance.law import VehicleState, mpf_law
+from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
+
+
+def initial_errors(cfg: Config) -> tuple[float, float, float]:
+    """(|pt(0)| m, Psi(0), s(0) m) for the kinematic initial state of the config."""
+    path, target = build_path(cfg.path), build_target(cfg.target)
+    k = cfg.kinematic
+    p0 = np.asarray(k.initial_position_ned_m, float)
+    st = target.state(0.0)
+    s0 = cfg.guidance.initial_s_m
+    if s0 is None:
+        s0 = path.closest(st.R_T_I.T @ (p0 - st.position))
+    veh = VehicleState(
+        0.0, p0, euler_to_matrix(*k.initial_attitude_rpy_rad), cfg.vehicle.airspeed_m_s
+    )
+    _, d = mpf_law(s0, veh, st, path, build_gains(cfg), build_extensions(cfg))
+    assert d is not None
+    return d.pt_norm, d.psi, s0
+
+
+def auto_c1(cfg: Config, pt0: float, c2: float) -> float:
+    """Smallest c1 >= |pt(0)| (on a 5 % geometric grid) for which the gain condition holds.
+
+    The theorem holds for any c1 that satisfies it; a larger c1 weakens K but relaxes the
+    bound, so we report the first certificate found (or |pt(0)| when none exists).
+    """
+    g = build_gains(cfg)
+    c1 = max(pt0, 1e-3)
+    for _ in range(200):
+        r = gain_condition(g, cfg.vehicle.v_min, cfg.vehicle.v_max, c1, c2)
+        if r.ok:
+            return c1
+        c1 *= 1.05
+    return max(pt0, 1e-3)
+
+
+# Extra air-mass speed (m/s) the checks allow for Dryden turbulence: about 2 sigma of the
+# MIL-F-8785C low-altitude horizontal intensity at 100 m for W20 = 15 / 30 / 45 kt.
+TURBULENCE_ALLOWANCE_M_S = {"none": 0.0, "light": 2.0, "moderate": 4.0, "severe": 6.0}
+
+
+def scenario_wind(cfg: Config) -> tuple[tuple[float, float, float], float]:
+    """(steady wind NED m/s, gust allowance m/s) of the plant the scenario flies: the SIL
+    vehicle's atmosphere when ``sil.link`` is on, else the kinematic plant's."""
+    sil = cfg.extra.get("sil")
+    if sil is not None and sil.link != "none":
+        gust = (
+            max((g.magnitude_m_s for g in sil.gusts), default=0.0)
+            + TURBULENCE_ALLOWANCE_M_S[sil.turbulence]
+        )
+        return tuple(sil.wind_ned_m_s), gust  # type: ignore[return-value]
+    wind = cfg.kinematic.wind
+    gust = max((float(np.linalg.norm(g.velocity_ned_m_s)) for g in wind.gusts), default=0.0)
+    return wind.steady_ned_m_s, gust
+
+
+def start_altitude(cfg: Config) -> CheckResult:
+    """The start position against the path's altitude at t = 0: more than
+    ``checks.max_start_below_m`` below its lowest point is a failure (e.g. an aircraft on the
+    ground under a path 100 m up: take off first)."""
+    path, target = build_path(cfg.path), build_target(cfg.target)
+    p0 = np.asarray(cfg.kinematic.initial_position_ned_m, float)
+    sil = cfg.extra.get("sil")
+    if sil is not None and sil.link != "none" and sil.initial_position_ned_m is not None:
+        p0 = np.asarray(sil.initial_position_ned_m, float)
+    st = target.state(0.0)
+    pts = st.position + (st.R_T_I @ np.asarray(path.positions(), float).T).T
+    lowest_down = float(np.max(pts[:, 2]))  # NED: the lowest point has the largest "down"
+    below = float(p0[2]) - lowest_down
+    lim = cfg.checks.max_start_below_m
+    fig: dict[str, float | bool | None] = {"start_below_path_m": below, "limit_m": lim}
+    if below > lim:
+        return CheckResult(
+            "start_altitude", "fail",
+            f"the vehicle starts {below:.0f} m below the path's lowest point (start altitude "
+            f"{-p0[2] + 0.0:.0f} m, path from {-lowest_down + 0.0:.0f} m; limit "
+            f"checks.max_start_below_m = {lim:g}): take off and climb to the path first, or "
+            "give a start state in the air (kinematic/sil.initial_position_ned_m)", fig,
+        )  # fmt: skip
+    return CheckResult(
+        "start_altitude", "pass", f"start {max(below, 0.0):.1f} m below the path's lowest point (limit {lim:g} m)", fig
+    )  # fmt: skip
+
+
+def run_checks(cfg: Config, scripted_target: bool = True) -> list[CheckResult]:
+    """All checks for a config. With a live target only the gain condition can be checked."""
+    results: list[CheckResult] = []
+    ch = cfg.checks
+    horizon = ch.horizon_s if ch.horizon_s is not None else cfg.sim.duration_s
+    path = build_path(cfg.path)
+    steady, gust = scenario_wind(cfg)
+    if scripted_target and cfg.target.type != "mavlink":
+        target = build_target(cfg.target)
+        results.append(
+            assumption1(
+                path, target, cfg.vehicle.v_min, horizon, steady, gust, ch.assumption1_margin_m_s
+            )
+        )
+        results.append(start_altitude(cfg))
+        pt0, psi0, s0 = initial_errors(cfg)
+        c2 = ch.c2
+        c1 = ch.c1_m if ch.c1_m is not None else auto_c1(cfg, pt0, c2)
+        results.append(
+            gain_condition(
+                build_gains(cfg), cfg.vehicle.v_min, cfg.vehicle.v_max, c1, c2, pt0, psi0
+            )
+        )
+        results.append(
+            feasibility(
+                path,
+                target,
+                cfg.vehicle.airspeed_m_s,
+                horizon,
+                cfg.vehicle.max_bank_rad,
+                cfg.vehicle.max_turn_rate_rad_s,
+                s0,
+                steady,
+                bank_margin_rad=ch.bank_margin_rad,
+            )  # fmt: skip
+        )
+    else:
+        c1 = ch.c1_m if ch.c1_m is not None else 50.0
+        results.append(
+            gain_condition(build_gains(cfg), cfg.vehicle.v_min, cfg.vehicle.v_max, c1, ch.c2)
+        )
+    return results
+
+
+def format_checks(results: list[CheckResult]) -> str:
+    lines = []
+    for r in results:
+        mark = {"pass": "PASS", "warn": "WARN", "fail": "FAIL"}[r.status]
+        lines.append(f"[{mark}] {r.name}: {r.summary}")
+    return "\n".join(lines)

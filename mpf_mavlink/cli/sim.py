@@ -1,0 +1,185 @@
+"""``mpf-mavlink vehicle CONFIG --serve URL`` and the SIL half of ``mpf-mavlink sim``.
+
+Thin: parse, load the config, call :mod:`sim.sil`, print. Known failures are MpfError (one line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+from pathlib import Path
+from typing import Any
+
+from mpf_mavlink.errors import MpfError
+
+VEHICLE_DESCRIPTION = """\
+Run the simulated vehicle of a scenario alone, paced to the wall clock, so that MAVProxy, a
+ground station (QGroundControl, Mission Planner) or your own pymavlink / MAVSDK code can connect
+to it as to a real autopilot. What it simulates comes from the config: sil.plant (the JSBSim
+aircraft of the aircraft section, by default the Skywalker X8, or the kinematic plant),
+sil.flavour (PX4: OFFBOARD after >= 1 s of SET_ATTITUDE_TARGET, Hold after 1 s without;
+ArduPlane: GUIDED, attitude quaternion only), wind, turbulence, gusts, telemetry rates and
+latencies. It starts armed, in trimmed level flight, loitering (PX4 AUTO.LOITER, ArduPlane
+LOITER) at kinematic.initial_position_ned_m (or sil.initial_position_ned_m) about the home
+sil.home_*. The config's scripted target is published as its own MAVLink system
+(sil.target_system, FOLLOW_TARGET and GLOBAL_POSITION_INT), as a live target for the bridge.
+
+Connections (--serve):
+  udpout:127.0.0.1:14550   send to a ground station listening on 14550 (QGroundControl's and
+                           MAVProxy's default; this is what PX4 SITL does)
+  udpin:0.0.0.0:14540      listen; answer whoever sends first (the bridge: mpf-mavlink run
+                           CONFIG --connect udpout:127.0.0.1:14540)
+  tcpin:0.0.0.0:5760       listen for one TCP client (as ArduPilot SITL does)
+
+Identity: system 1, component 1 (the target: system 2). Ctrl-C (or SIGTERM) stops it cleanly.
+
+example:
+  mpf-mavlink vehicle configs/default.yaml --serve udpin:127.0.0.1:14540 &
+  mpf-mavlink run configs/default.yaml --connect udpout:127.0.0.1:14540
+"""
+
+SERVE_HELP = "MAVLink connection to serve: udpout:HOST:PORT, udpin:HOST:PORT or tcpin:HOST:PORT"
+
+
+def _check_serve_url(url: str) -> None:
+    from mpf_mavlink.mavlink.link import parse_url
+
+    parsed = parse_url(url)  # MpfError (one line) for anything malformed
+    if parsed.kind not in ("udpin", "udpout", "tcpin"):
+        raise MpfError(
+            f"--serve {url}: the vehicle serves udpin:, udpout: or tcpin: (got {parsed.kind})"
+        )
+
+
+def cmd_vehicle(args: argparse.Namespace) -> int:
+    from mpf_mavlink.config.schema import load_config
+
+    cfg = load_config(args.config, args.overrides)
+    _check_serve_url(args.serve)
+    from sim.sil import build_vehicle
+
+    over: dict[str, Any] = {}
+    if args.speed is not None:
+        over["realtime_speed"] = args.speed
+    try:
+        v = build_vehicle(cfg, args.serve, clock=args.clock, **over)
+    except OSError as e:
+        raise MpfError(f"--serve {args.serve}: cannot open ({e.strerror or e})") from None
+    sil, ac = cfg.section("sil"), cfg.section("aircraft")
+    what = f"JSBSim {ac.model}" if sil.plant == "jsbsim" else "kinematic plant"
+    print(
+        f"simulated {sil.flavour} vehicle ({what}, {args.clock} clock) on {args.serve}: system 1, "
+        f"target as system {sil.target_system}; {v.mode_name}, {v.cruise_airspeed:g} m/s. Ctrl-C to stop.",
+        flush=True,
+    )
+
+    def on_term(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    prev = signal.signal(signal.SIGTERM, on_term)
+    seen = len(v.mode_changes)
+    end = args.duration if args.duration is not None else math.inf
+    try:
+        while v.t < end:
+            v.run(min(1.0, end - v.t))
+            for t, name in v.mode_changes[seen:]:
+                print(f"t = {t:8.2f} s  mode {name}", flush=True)
+            seen = len(v.mode_changes)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        signal.signal(signal.SIGTERM, prev)
+        v.close()
+    print(
+        f"stopped after {v.t:.1f} s of simulated flight ({v.rx_count} messages received)",
+        flush=True,
+    )
+    return 0
+
+
+def add_vehicle_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentParser:
+    """Add the ``vehicle`` sub-command (with ``func``)."""
+    p = subparsers.add_parser(
+        "vehicle",
+        help="serve the simulated vehicle alone (real time) for MAVProxy, a GCS or your own code",
+        description=VEHICLE_DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_config(p)
+    p.add_argument("--serve", required=True, metavar="URL", help=SERVE_HELP)
+    p.add_argument(
+        "--clock", choices=["realtime", "lockstep"], default="realtime",
+        help="realtime (default): paced to the wall clock; lockstep: advance as soon as the peer "
+        "answers each telemetry frame with a SET_ATTITUDE_TARGET (real time while nobody commands it)",
+    )  # fmt: skip
+    p.add_argument(
+        "--speed", type=float, metavar="X", help="realtime clock at X times real time (default 1)"
+    )
+    p.add_argument(
+        "--duration",
+        type=float,
+        metavar="S",
+        help="stop after S seconds of simulated flight (default: run until Ctrl-C)",
+    )
+    p.set_defaults(func=cmd_vehicle)
+    return p
+
+
+# ----------------------------------------------------------------------------- sim (SIL)
+def sil_summary(res: Any) -> str:
+    """The table printed at the end of a SIL ``sim``: figures, then where everything is."""
+    m = res.metrics
+    rows = [
+        ("first_within_s", "first within threshold", "s"),
+        ("convergence_time_s", "stays within threshold", "s"),
+        ("steady_rms_m", "steady RMS |pt|", "m"),
+        ("steady_mean_vertical_m", "steady mean vertical", "m"),
+        ("steady_mean_radial_m", "steady mean radial", "m"),
+        ("steady_rms_cross_track_m", "steady RMS cross-track", "m"),
+        ("bridge_thrust_saturated_fraction", "thrust at ceiling", "frac"),
+        ("steady_max_m", "steady max |pt|", "m"),
+        ("steady_psi_max", "steady max Psi", ""),
+        ("max_rate_cmd_rad_s", "peak rate command", "rad/s"),
+        ("sim_time_s", "tracked (simulated)", "s"),
+        ("wall_time_s", "wall time", "s"),
+        ("real_time_factor_tracking", "real-time factor", "x"),
+    ]
+    lines = [
+        "",
+        f"SIL: {m.get('plant')} plant, {m.get('flavour')} flavour, {m.get('clock')} clock; truth of the plant, "
+        f"|pt| from t >= {m.get('steady_after_s', '?')} s after engagement",
+        f"{'figure':<24} {'value':>10}  unit",
+        "-" * 42,
+    ]
+    for k, label, unit in rows:
+        v = m.get(k)
+        val = "n/a" if v is None else (f"{v:.4g}" if isinstance(v, float) else str(v))
+        lines.append(f"{label:<24} {val:>10}  {unit}")
+    hb = "hand-back confirmed" if m.get("handback_confirmed") else "hand-back NOT confirmed"
+    lines += [
+        "",
+        f"bridge: {m.get('bridge_exit_reason')} (exit {m.get('bridge_exit_code')}); {hb}",
+        f"run directory: {res.out_dir}  (timeseries.csv and truth.csv from the plant, metrics.json)",
+        f"plots:         {res.out_dir}/*.png  (trajectory_3d, planar, target_relative, errors, sdot_rates)",
+        f"tlog:          {res.tlog}  (both directions; MAVProxy, QGC or mavlogdump.py read it)",
+        f"bridge's view: {res.bridge_dir}  (what the law saw: timeseries.csv, setpoints.csv, metrics.json)",
+    ]
+    return "\n".join(lines)
+
+
+def cmd_sim_sil(cfg: Any, out: Path, quiet: bool, no_plots: bool, force: bool = False) -> int:
+    from sim.sil import run_sil
+
+    res = run_sil(
+        cfg, out, progress=not quiet, plots=not no_plots, log=lambda s: print(s, flush=True),
+        force=force,
+    )  # fmt: skip
+    res.metrics.setdefault("steady_after_s", cfg.metrics.steady_after_s)
+    print(sil_summary(res), flush=True)
+    # last line: the verdict on the plant's truth (exit 5 when the flight failed it)
+    print(res.metrics.get("verdict") or "verdict: none (the bridge recorded no flight)", flush=True)
+    return int(res.exit_code)
+
+
+__all__ = ["add_vehicle_parser", "cmd_sim_sil", "cmd_vehicle", "sil_summary"]

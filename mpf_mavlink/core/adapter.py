@@ -1,0 +1,340 @@
+"""From the law's command (the angular velocity of w1) to what a fixed-wing autopilot accepts.
+
+Pure functions: no I/O. Frames: NED inertial, FRD body. The bank needed to turn the velocity
+vector is set by the specific force the wing must produce: ``f = a - g`` (gravity g = [0, 0, g]
+in NED), of which the part normal to w1 is lift; the bank is the angle of the lift about w1.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from mpf_mavlink.core.frames import GRAVITY_M_S2
+
+Vec = tuple[float, float, float]
+
+
+def bank_and_load_factor(w1: Vec, accel: Vec, g: float = GRAVITY_M_S2) -> tuple[float, float]:
+    """Bank angle (rad, > 0 right wing down) and load factor n (g) that produce ``accel``.
+
+    w1: unit air-relative velocity direction (NED); accel: the acceleration of the vehicle
+    normal to w1 that the turn needs (NED, m/s^2), e.g. ``v_w * (omega x w1)``.
+    Level flight (accel = 0) gives (0, 1); a level right turn of centripetal acceleration a
+    gives (atan(a/g), sqrt(1 + (a/g)^2)).
+    """
+    fx, fy, fz = accel[0], accel[1], accel[2] - g
+    d = fx * w1[0] + fy * w1[1] + fz * w1[2]
+    fx, fy, fz = fx - d * w1[0], fy - d * w1[1], fz - d * w1[2]
+    # Local "down" normal to w1, and "right" = down x w1.
+    k = w1[2]
+    nx, ny, nz = -k * w1[0], -k * w1[1], 1.0 - k * w1[2]
+    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if nn < 1e-9:  # vertical flight: bank is undefined; report it about north
+        nx, ny, nz = 1.0, 0.0, 0.0
+        nn = 1.0
+    nx, ny, nz = nx / nn, ny / nn, nz / nn
+    rx = ny * w1[2] - nz * w1[1]
+    ry = nz * w1[0] - nx * w1[2]
+    rz = nx * w1[1] - ny * w1[0]
+    bank = math.atan2(fx * rx + fy * ry + fz * rz, -(fx * nx + fy * ny + fz * nz))
+    load = math.sqrt(fx * fx + fy * fy + fz * fz) / g
+    return bank, load
+
+
+# ----------------------------------------------------------------------------- setpoints
+# Everything below turns the law's command into what an autopilot accepts. Pure: the memory
+# (airspeed integrator, learned pitch trim, learned turn gain) is passed in and returned as an
+# explicit AdapterState.
+#
+# Two loops the law leaves open are closed here, on an airframe we did not model:
+# - vertical: the pitch an autopilot must be told to fly a flight-path angle gamma is gamma plus
+#   an offset (angle of attack, cos(bank) in a turn, its own pitch-loop bias) that no fixed trim
+#   gets right (real ArduPlane SITL flies level at -1.8 deg at 15 m/s; a fixed 0.03 rad trim
+#   left it 10.5 m above the path). trim_hat starts at the measured theta - gamma and then
+#   integrates the law's vertical demand: d trim_hat / dt = (tau_pitch / trim_tau_s)
+#   gamma_dot_cmd (not while the pitch set-point is saturated that way). The law demands a
+#   flight-path rate only while there is a vertical error, so none stands: integral action
+#   that also absorbs a bias of the autopilot's pitch loop.
+# - lateral: the bank for a turn rate is atan(V chi_dot / g) only in a coordinated turn that the
+#   autopilot banks exactly as told; with the rudder elsewhere (sideslip) or a roll-loop bias
+#   the aircraft turns less per commanded bank (0.69x measured on ArduPlane SITL with yaw = 0:
+#   a wider circle). The bank set-point is atan(tan(bank_ideal) / turn_gain), and turn_gain
+#   integrates the relative error between the achieved heading rate psi_dot = (q sin(phi) +
+#   r cos(phi)) / cos(theta) and turn_gain g tan(phi) / V for the bank phi actually flown
+#   (time constant turn_gain_tau_s; not below turn_learn_min_bank_rad). Against the flown bank
+#   the roll loop's lag and a clipped bank teach nothing false: in the mean the commanded turn
+#   is achieved, so no standing radial error remains.
+
+
+@dataclass(frozen=True)
+class AdapterParams:
+    """Limits and gains of the setpoint adapter (SI units, radians).
+
+    tau_roll_s: first-order time constant to reach the bank set-point (PX4 roll rate);
+    tau_pitch_s: look-ahead on the flight-path-angle rate (ArduPlane pitch);
+    trim_pitch_rad: angle of attack at trim (pitch = flight-path angle + trim_pitch);
+    airspeed hold: thrust = trim_thrust + kp e + ki integral(e) + k_n (n - 1), e = v_sp - v.
+    """
+
+    max_bank_rad: float = 0.785398
+    tau_roll_s: float = 0.5
+    tau_pitch_s: float = 1.0
+    max_roll_rate_rad_s: float = 1.2217  # 70 deg/s (PX4 FW_R_RMAX)
+    max_pitch_rate_rad_s: float = 1.0472  # 60 deg/s
+    max_yaw_rate_rad_s: float = 0.8727  # 50 deg/s
+    min_pitch_rad: float = -0.35
+    max_pitch_rad: float = 0.35
+    trim_pitch_rad: float = 0.03
+    airspeed_sp_m_s: float = 15.0
+    trim_thrust: float = 0.5
+    thrust_min: float = 0.1
+    thrust_max: float = 1.0
+    airspeed_kp: float = 0.05  # thrust per m/s
+    airspeed_ki: float = 0.02  # thrust per (m/s s)
+    # |ki integral(e)| <= this (thrust units); also never beyond what takes the output from
+    # trim to thrust_min / thrust_max, so a saturated output stops the integrator there
+    integrator_limit: float = 1.0
+    load_factor_ff: float = 0.2  # thrust per g of extra load (n - 1)
+    adaptive: bool = True  # learn trim_hat and turn_gain (else the fixed trim, ideal turn)
+    trim_tau_s: float = 4.0
+    trim_limit_rad: float = 0.2  # |trim_hat| <= this
+    turn_gain_tau_s: float = 8.0
+    turn_gain_min: float = 0.5
+    turn_gain_max: float = 1.5
+    turn_learn_min_bank_rad: float = 0.0873  # 5 deg: below it the ratio is noise
+
+
+@dataclass(frozen=True)
+class AdapterState:
+    """Memory of the adapter: the airspeed integrator (thrust units), the learned pitch offset
+    trim_hat (rad, None until the first measurement) and turn gain (achieved heading rate per
+    coordinated-turn rate, 1 = ideal)."""
+
+    integ: float = 0.0
+    trim_hat: float | None = None
+    turn_gain: float = 1.0
+    bank_prev: float | None = None  # rad, the bank set-point sent last
+    # rad/s, the heading rate that bank was sent for (None: the bank was clipped, learn nothing)
+    chid_prev: float | None = None
+
+    def for_reengage(self) -> AdapterState:
+        """After a hand-back: the airspeed integrator starts afresh (the autopilot flew the
+        aircraft meanwhile), what was learned of the airframe stays."""
+        return AdapterState(0.0, self.trim_hat, self.turn_gain, None, None)
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    """What is sent, for either flavour.
+
+    body_rates_frd: (p, q, r) rad/s (PX4 type_mask 128; carried for logs with ArduPlane);
+    q_wxyz: attitude quaternion (w, x, y, z), roll = bank, yaw = 0 (ArduPlane GUIDED);
+    thrust: 0..1; bank_rad, pitch_rad: the attitude set-point; load_factor: n (g);
+    safe: True when a non-finite input forced the wings-level, trim-thrust set-point.
+    """
+
+    body_rates_frd: tuple[float, float, float]
+    q_wxyz: tuple[float, float, float, float]
+    thrust: float
+    bank_rad: float
+    pitch_rad: float
+    load_factor: float
+    safe: bool = False
+
+
+def _clip(x: float, lo: float, hi: float) -> float:
+    return lo if x < lo else hi if x > hi else x
+
+
+def _euler_to_quat_wxyz(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    # ZYX, the same convention as frames.euler_to_quat_wxyz (kept scalar for the hot path).
+    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
+    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
+    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+    return (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
+
+
+def heading_and_path_angle_rates(w1: Vec, omega: Vec) -> tuple[float, float]:
+    """(chi_dot, gamma_dot) rad/s of the direction w1 = [cos g cos c, cos g sin c, -sin g]
+    turning at omega (NED, rad/s): w1_dot = omega x w1. Vertical w1 gives (0, gamma_dot)."""
+    dx = omega[1] * w1[2] - omega[2] * w1[1]
+    dy = omega[2] * w1[0] - omega[0] * w1[2]
+    dz = omega[0] * w1[1] - omega[1] * w1[0]
+    h2 = w1[0] * w1[0] + w1[1] * w1[1]
+    h = math.sqrt(h2)
+    if h < 1e-6:
+        return 0.0, 0.0
+    return (w1[0] * dy - w1[1] * dx) / h2, -dz / h
+
+
+def safe_setpoint(p: AdapterParams, roll: float = 0.0) -> Setpoint:
+    """Wings level, trim pitch, trim thrust; the roll rate levels the wings when roll is known."""
+    rr = -roll / p.tau_roll_s if math.isfinite(roll) else 0.0
+    rr = _clip(rr, -p.max_roll_rate_rad_s, p.max_roll_rate_rad_s)
+    pitch = _clip(p.trim_pitch_rad, p.min_pitch_rad, p.max_pitch_rad)
+    thr = _clip(p.trim_thrust, p.thrust_min, p.thrust_max)
+    return Setpoint(
+        (rr, 0.0, 0.0), _euler_to_quat_wxyz(0.0, pitch, 0.0), thr, 0.0, pitch, 1.0, True
+    )
+
+
+def adapt(
+    omega_w1_I: Vec,
+    airspeed: float,
+    R_B_N: list[list[float]] | Any,
+    w1: Vec,
+    dt: float,
+    params: AdapterParams,
+    state: AdapterState = AdapterState(),
+    g: float = GRAVITY_M_S2,
+    meas: tuple[Any, Any] | None = None,
+) -> tuple[Setpoint, AdapterState]:
+    """The law's command -> body rates (PX4), quaternion (ArduPlane) and thrust.
+
+    omega_w1_I: angular velocity of w1 (NED, rad/s); airspeed (m/s); R_B_N: current attitude
+    (body FRD -> NED, 3x3); w1: current unit air-relative velocity (NED); dt (s): time since
+    the previous call (for the integrator; 0 freezes it).
+    Bank: from the specific force of a = v (omega x w1) (gravity included), clipped to
+    +-max_bank. Body rates: p = phid - sin(theta) psid, q = cos(phi) thetad + cos(theta)
+    sin(phi) psid, r = -sin(phi) thetad + cos(phi) cos(theta) psid with phid =
+    (bank_sp - phi) / tau_roll and psid, thetad the heading and flight-path-angle rates of w1.
+    Any non-finite value gives :func:`safe_setpoint` (flag ``safe``) and keeps the integrator.
+    ``meas``: (R_B_N, body rates FRD rad/s) as MEASURED (R_B_N may be a prediction), for
+    learning trim_hat and turn_gain (module comment); None learns nothing.
+    """
+    isf = math.isfinite
+    try:
+        R2 = R_B_N[2].tolist() if hasattr(R_B_N, "tolist") else R_B_N[2]  # only row 2 is used
+        roll = math.atan2(R2[1], R2[2])
+        pitch = math.asin(_clip(-R2[0], -1.0, 1.0))
+        ox, oy, oz = omega_w1_I
+        if not (
+            isf(ox) and isf(oy) and isf(oz) and isf(airspeed) and isf(w1[0]) and isf(w1[1])
+            and isf(w1[2]) and isf(dt) and isf(roll) and isf(pitch) and airspeed > 0.0
+        ):  # fmt: skip
+            return safe_setpoint(params, roll), state
+    except (TypeError, ValueError, IndexError):
+        return safe_setpoint(params), state
+    v = airspeed
+    accel = (
+        v * (oy * w1[2] - oz * w1[1]),
+        v * (oz * w1[0] - ox * w1[2]),
+        v * (ox * w1[1] - oy * w1[0]),
+    )
+    bank, n = bank_and_load_factor(w1, accel, g)
+    trim_hat, k_turn = state.trim_hat, state.turn_gain
+    gamma = math.asin(_clip(-w1[2], -1.0, 1.0))
+    chid, gamd = heading_and_path_angle_rates(w1, omega_w1_I)
+    if params.adaptive and meas is not None:
+        trim_hat, k_turn = _learn(params, state, meas, w1, v, dt, g, gamd, gamma)
+    if params.adaptive and k_turn != 1.0:
+        bank = math.atan(math.tan(_clip(bank, -1.4, 1.4)) / k_turn)
+    clipped = abs(bank) > params.max_bank_rad
+    bank = _clip(bank, -params.max_bank_rad, params.max_bank_rad)
+    sphi, cphi = math.sin(roll), math.cos(roll)
+    sth, cth = math.sin(pitch), math.cos(pitch)
+    phid = (bank - roll) / params.tau_roll_s
+    p = _clip(phid - sth * chid, -params.max_roll_rate_rad_s, params.max_roll_rate_rad_s)
+    q = _clip(
+        cphi * gamd + cth * sphi * chid, -params.max_pitch_rate_rad_s, params.max_pitch_rate_rad_s
+    )
+    r = _clip(
+        -sphi * gamd + cphi * cth * chid, -params.max_yaw_rate_rad_s, params.max_yaw_rate_rad_s
+    )
+    # Pitch: the flight-path angle of w1 (= theta - alpha) advanced by tau_pitch, plus the trim
+    # angle of attack. (Adding the trim to the *measured* pitch would integrate it each cycle.)
+    trim = trim_hat if (params.adaptive and trim_hat is not None) else params.trim_pitch_rad
+    pitch_sp = _clip(
+        gamma + gamd * params.tau_pitch_s + trim,
+        params.min_pitch_rad,
+        params.max_pitch_rad,
+    )
+    # Airspeed hold with conditional integration (anti-windup): the integrator moves only when
+    # the output is not saturated in the direction the error pushes.
+    e = params.airspeed_sp_m_s - v
+    ff = params.load_factor_ff * (n - 1.0)
+    base = params.trim_thrust + params.airspeed_kp * e + ff
+    raw = base + state.integ
+    integ = state.integ
+    if dt > 0.0 and not (
+        (raw >= params.thrust_max and e > 0) or (raw <= params.thrust_min and e < 0)
+    ):
+        lo = max(-params.integrator_limit, params.thrust_min - base)
+        hi = min(params.integrator_limit, params.thrust_max - base)
+        integ = _clip(integ + params.airspeed_ki * e * dt, min(lo, 0.0), max(hi, 0.0))
+    thrust = _clip(base + integ, params.thrust_min, params.thrust_max)
+    qw, qx, qy, qz = quat = _euler_to_quat_wxyz(bank, pitch_sp, 0.0)
+    if not (
+        isf(p) and isf(q) and isf(r) and isf(thrust) and isf(bank) and isf(pitch_sp)
+        and isf(qw) and isf(qx) and isf(qy) and isf(qz)
+    ):  # fmt: skip
+        return safe_setpoint(params, roll), state
+    return Setpoint((p, q, r), quat, thrust, bank, pitch_sp, n), AdapterState(
+        integ, trim_hat, k_turn, bank, None if clipped else chid
+    )
+
+
+def _learn(
+    params: AdapterParams,
+    state: AdapterState,
+    meas: tuple[Any, Any],
+    w1: Vec,
+    v: float,
+    dt: float,
+    g: float,
+    gamd: float,
+    gamma: float,
+) -> tuple[float | None, float]:
+    """One step of the two estimates (module comment) from the measured attitude and rates and
+    the law's flight-path-angle rate demand gamd (rad/s); a non-finite or missing measurement
+    changes nothing."""
+    trim_hat, k_turn = state.trim_hat, state.turn_gain
+    try:
+        R, rates = meas
+        R2 = R[2].tolist() if hasattr(R, "tolist") else R[2]
+        phi = math.atan2(R2[1], R2[2])
+        theta = math.asin(_clip(-R2[0], -1.0, 1.0))
+        q_m, r_m = float(rates[1]), float(rates[2])
+    except (TypeError, ValueError, IndexError):
+        return trim_hat, k_turn
+    off = theta - gamma
+    if not (
+        math.isfinite(off) and math.isfinite(q_m) and math.isfinite(r_m) and math.isfinite(gamd)
+    ):
+        return trim_hat, k_turn
+    lim = params.trim_limit_rad
+    if trim_hat is None:
+        trim_hat = _clip(off, -lim, lim)
+    elif dt > 0.0:
+        pitch_sp = gamma + gamd * params.tau_pitch_s + trim_hat
+        pushing_out = (pitch_sp >= params.max_pitch_rad and gamd > 0) or (
+            pitch_sp <= params.min_pitch_rad and gamd < 0
+        )
+        if not pushing_out:
+            trim_hat = _clip(
+                trim_hat + params.tau_pitch_s / params.trim_tau_s * gamd * dt, -lim, lim
+            )
+    if dt > 0.0 and params.turn_learn_min_bank_rad <= abs(phi) < 1.2 and v > 1.0:
+        psid = (q_m * math.sin(phi) + r_m * math.cos(phi)) / max(math.cos(theta), 0.2)
+        # The model is psi_dot = k g tan(phi) / V for the bank FLOWN (measured), not the bank or
+        # turn rate asked last cycle: those lead what is flown by the roll loop's lag, and an
+        # error against them read every capture's roll-in as a sluggish airframe (the X8 circle
+        # of tests/test_sil.py converged in 36 s instead of 10, 1.44 m RMS instead of 0.22).
+        # Integral of the relative error (achieved - modelled): unbiased in the mean, where a
+        # low-pass of the ratio is not (fluctuations correlate).
+        pred = k_turn * g * math.tan(phi) / v
+        err = (psid - pred) / max(abs(pred), 1e-3) * (1.0 if pred > 0 else -1.0)
+        if math.isfinite(err):
+            a = min(1.0, dt / params.turn_gain_tau_s)
+            k_turn = _clip(
+                k_turn + a * k_turn * _clip(err, -0.5, 0.5),
+                params.turn_gain_min, params.turn_gain_max,
+            )  # fmt: skip
+    return trim_hat, k_turn

@@ -1,0 +1,139 @@
+"""Frame conventions: NED inertial, FRD body, ZYX Euler angles, quaternions (w, x, y, z).
+
+Quaternions exist only at the MAVLink boundary; everything inside uses rotation matrices.
+``R_B^N`` (body FRD -> NED) is what MAVLink's ATTITUDE_QUATERNION / SET_ATTITUDE_TARGET ``q``
+encodes (Hamilton convention, w first). Geodetic helpers wrap pymap3d (WGS-84).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from mpf_mavlink.core.so3 import Mat3, Vec3, rot_x, rot_y, rot_z
+
+GRAVITY_M_S2 = 9.80665
+
+
+def quat_wxyz_to_matrix(q: ArrayLike) -> Mat3:
+    """Unit quaternion (w, x, y, z) -> rotation matrix R_B^N. Normalises q; rejects zero norm."""
+    w, x, y, z = (float(v) for v in q)
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    if not math.isfinite(n) or n < 1e-9:
+        raise ValueError(f"quaternion {tuple(q)} has no direction")
+    w, x, y, z = w / n, x / n, y / n, z / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def matrix_to_quat_wxyz(R: ArrayLike) -> tuple[float, float, float, float]:
+    """Rotation matrix R_B^N -> unit quaternion (w, x, y, z) with w >= 0 (Shepperd's method)."""
+    R = np.asarray(R, dtype=float)
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    if tr > 0:
+        S = math.sqrt(tr + 1.0) * 2
+        w, x, y, z = (
+            0.25 * S,
+            (R[2, 1] - R[1, 2]) / S,
+            (R[0, 2] - R[2, 0]) / S,
+            (R[1, 0] - R[0, 1]) / S,
+        )
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        S = math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2
+        w, x, y, z = (
+            (R[2, 1] - R[1, 2]) / S,
+            0.25 * S,
+            (R[0, 1] + R[1, 0]) / S,
+            (R[0, 2] + R[2, 0]) / S,
+        )
+    elif R[1, 1] > R[2, 2]:
+        S = math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2
+        w, x, y, z = (
+            (R[0, 2] - R[2, 0]) / S,
+            (R[0, 1] + R[1, 0]) / S,
+            0.25 * S,
+            (R[1, 2] + R[2, 1]) / S,
+        )
+    else:
+        S = math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
+        w, x, y, z = (
+            (R[1, 0] - R[0, 1]) / S,
+            (R[0, 2] + R[2, 0]) / S,
+            (R[1, 2] + R[2, 1]) / S,
+            0.25 * S,
+        )
+    if w < 0:
+        w, x, y, z = -w, -x, -y, -z
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    return (w / n, x / n, y / n, z / n)
+
+
+def euler_to_matrix(roll: float, pitch: float, yaw: float) -> Mat3:
+    """ZYX (yaw, pitch, roll) Euler angles (rad) -> R_B^N = Rz(yaw) Ry(pitch) Rx(roll)."""
+    return rot_z(yaw) @ rot_y(pitch) @ rot_x(roll)
+
+
+def matrix_to_euler(R: ArrayLike) -> tuple[float, float, float]:
+    """R_B^N -> ZYX Euler angles (roll, pitch, yaw) in rad; yaw in (-pi, pi]."""
+    R = np.asarray(R, dtype=float)
+    pitch = -math.asin(max(-1.0, min(1.0, R[2, 0])))
+    roll = math.atan2(R[2, 1], R[2, 2])
+    yaw = math.atan2(R[1, 0], R[0, 0])
+    return roll, pitch, yaw
+
+
+def euler_to_quat_wxyz(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """ZYX Euler angles (rad) -> quaternion (w, x, y, z), as MAVLink's SET_ATTITUDE_TARGET wants."""
+    return matrix_to_quat_wxyz(euler_to_matrix(roll, pitch, yaw))
+
+
+def wind_frame_from_velocity(v_air_ned: ArrayLike, roll_ref: float = 0.0) -> Mat3:
+    """Wind frame R_W^I whose w1 is along the air-relative velocity (NED, m/s).
+
+    The roll about w1 does not matter to the MPF law (its command is independent of it);
+    we choose w2 horizontal (right of w1) rotated by ``roll_ref`` so the frame is well defined
+    for any non-vertical velocity.
+    """
+    v = np.asarray(v_air_ned, dtype=float)
+    n = float(np.linalg.norm(v))
+    if n < 1e-6:
+        raise ValueError("air-relative velocity is zero: the wind frame is undefined")
+    w1 = v / n
+    down = np.array([0.0, 0.0, 1.0])
+    w2 = np.cross(down, w1)
+    if np.linalg.norm(w2) < 1e-9:
+        w2 = np.array([0.0, 1.0, 0.0])
+    w2 /= np.linalg.norm(w2)
+    w3 = np.cross(w1, w2)
+    if roll_ref:
+        c, s = math.cos(roll_ref), math.sin(roll_ref)
+        w2, w3 = c * w2 + s * w3, -s * w2 + c * w3
+    return np.column_stack([w1, w2, w3])
+
+
+def geodetic_to_ned(
+    lat_deg: float, lon_deg: float, alt_m: float, lat0_deg: float, lon0_deg: float, alt0_m: float
+) -> Vec3:
+    """WGS-84 geodetic position -> local NED (m) about an origin (pymap3d, exact, not flat-earth)."""
+    import pymap3d
+
+    n, e, d = pymap3d.geodetic2ned(lat_deg, lon_deg, alt_m, lat0_deg, lon0_deg, alt0_m)
+    return np.array([float(n), float(e), float(d)])
+
+
+def ned_to_geodetic(
+    ned: ArrayLike, lat0_deg: float, lon0_deg: float, alt0_m: float
+) -> tuple[float, float, float]:
+    """Local NED (m) about an origin -> WGS-84 (lat deg, lon deg, alt m)."""
+    import pymap3d
+
+    n, e, d = (float(v) for v in ned)
+    lat, lon, alt = pymap3d.ned2geodetic(n, e, d, lat0_deg, lon0_deg, alt0_m)
+    return float(lat), float(lon), float(alt)

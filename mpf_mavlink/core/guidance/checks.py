@@ -1,0 +1,190 @@
+"""Checks run before anything flies: Assumption 1, the theorem's gain condition and region of
+attraction, and feasibility of the path and target motion for the vehicle. Pure functions."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mpf_mavlink.core.adapter import bank_and_load_factor
+from mpf_mavlink.core.frames import GRAVITY_M_S2
+from mpf_mavlink.core.guidance.law import Gains
+from mpf_mavlink.core.paths import TabulatedPath
+from mpf_mavlink.core.target import TargetMotion
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    """One check: ``status`` is "pass", "warn" (outside the guarantee but flyable) or "fail"."""
+
+    name: str
+    status: str
+    summary: str
+    figures: dict[str, float | bool | None] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status != "fail"
+
+
+def _times(horizon: float, dt: float) -> np.ndarray:
+    n = max(2, int(math.ceil(horizon / dt)) + 1)
+    return np.linspace(0.0, horizon, n)
+
+
+def assumption1(
+    path: TabulatedPath,
+    target: TargetMotion,
+    v_w_min: float,
+    horizon_s: float,
+    wind_ned: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    gust_max_m_s: float = 0.0,
+    margin_m_s: float = 0.0,
+    dt_s: float = 0.5,
+) -> CheckResult:
+    """Assumption 1: v_w > |v_t t1 + v_d - eta| for every path point over the horizon.
+
+    The wind enters because the vehicle's airspeed must out-run the path point relative to the
+    air; gusts add their peak magnitude (worst case). Samples s every ~1 m and t every dt_s.
+    """
+    n_s = int(min(4000, max(200, path.length)))
+    ss = np.linspace(0.0, path.length, n_s, endpoint=not path.closed)
+    P = np.array([path.eval(float(s))[0] for s in ss])  # (n, 3) in {T}
+    eta = np.asarray(wind_ned, float)
+    worst, t_worst, s_worst = 0.0, 0.0, 0.0
+    for t in _times(horizon_s, dt_s):
+        st = target.state(float(t))
+        pdI = P @ st.R_T_I.T
+        wI = st.R_T_I @ st.omega_T
+        u = st.velocity[None, :] + np.cross(wI[None, :], pdI) - eta[None, :]
+        sp = np.linalg.norm(u, axis=1) + gust_max_m_s
+        i = int(np.argmax(sp))
+        if sp[i] > worst:
+            worst, t_worst, s_worst = float(sp[i]), float(t), float(ss[i])
+    margin = v_w_min - worst
+    ok = margin > margin_m_s
+    return CheckResult(
+        "assumption_1",
+        "pass" if ok else "fail",
+        f"max |v_t t1 + v_d - eta| = {worst:.2f} m/s at t = {t_worst:.1f} s, s = {s_worst:.1f} m; "
+        f"v_w,min = {v_w_min:.2f} m/s, margin {margin:.2f} m/s",
+        {"max_path_point_speed_m_s": worst, "margin_m_s": margin, "t_worst_s": t_worst},
+    )
+
+
+def gain_condition(
+    gains: Gains,
+    v_w_min: float,
+    v_w_max: float,
+    c1: float,
+    c2: float,
+    pt0: float | None = None,
+    psi0: float | None = None,
+) -> CheckResult:
+    """The theorem's condition [conditionsGainAndK] and its region of attraction.
+
+    K = min(K_p, v_min / sqrt(alpha^2 + c1^2)); needs K K_R > v_max^2 / (c1^2 (1 - 2 c2)^2).
+    lambda_MPF = lambda_min(W) / lambda_max(M2) with k1 = 1/(4 c1^2),
+    W = [[2 k1 K, -2 k1 v_max/(1-2c2)], [., K_R/2]], M2 = diag(k1, 1/(1-c2)).
+    Region: |pt(0)| <= c1 and Psi(0) <= c2 (< 1/2). Outside it the law usually still converges
+    (the estimate is conservative), so an initial state outside is a warning, not a failure.
+    """
+    K = min(gains.K_p, v_w_min / math.sqrt(gains.alpha**2 + c1**2))
+    K_R_needed = v_w_max**2 / (c1**2 * (1.0 - 2.0 * c2) ** 2 * K)
+    k1 = 1.0 / (4.0 * c1**2)
+    off = -2.0 * k1 * v_w_max / (1.0 - 2.0 * c2)
+    W = np.array([[2.0 * k1 * K, off], [off, gains.K_R / 2.0]])
+    lam_W = float(np.linalg.eigvalsh(W)[0])
+    lam_M2 = max(k1, 1.0 / (1.0 - c2))
+    lam = lam_W / lam_M2
+    ok = gains.K_R > K_R_needed
+    figs: dict[str, float | bool | None] = {
+        "K": K,
+        "K_R": gains.K_R,
+        "K_R_needed": K_R_needed,
+        "lambda_mpf": lam,
+        "c1_m": c1,
+        "c2": c2,
+    }
+    text = (
+        f"K = {K:.4g}, K_R = {gains.K_R:.4g} vs needed > {K_R_needed:.4g}, "
+        f"lambda_MPF = {lam:.4g} 1/s (c1 = {c1:.3g} m, c2 = {c2:.3g})"
+    )
+    status = "pass" if ok else "fail"
+    if pt0 is not None and psi0 is not None:
+        inside = pt0 <= c1 and psi0 <= c2
+        figs.update({"pt0_m": pt0, "psi0": psi0, "initial_inside_region": inside})
+        text += f"; initial |pt| = {pt0:.2f} m, Psi = {psi0:.3f}: "
+        text += "inside the region of attraction" if inside else "outside the guaranteed region"
+        if ok and not inside:
+            status = "warn"
+    return CheckResult("gain_condition", status, text, figs)
+
+
+def feasibility(
+    path: TabulatedPath,
+    target: TargetMotion,
+    v_w: float,
+    horizon_s: float,
+    max_bank_rad: float,
+    max_turn_rate_rad_s: float | None = None,
+    s0: float = 0.0,
+    wind_ned: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    dt_s: float = 0.05,
+    bank_margin_rad: float = 0.0,
+) -> CheckResult:
+    """Peak turn rate and bank that flying the moving path exactly demands at airspeed v_w.
+
+    On the path (pt = 0) the air-relative direction is wd1 and the virtual point moves at
+    sdot = v_w wd11 - (v_t t1 + v_d - eta) . f1. We integrate s over the horizon, difference
+    wd1 in time for the turn rate |d wd1/dt| (rad/s) and get the bank from the acceleration
+    v_w d wd1/dt with gravity (steady wind does not change the air-relative acceleration).
+    The bank must stay ``bank_margin_rad`` below the limit (and the turn rate below the rate of
+    that bank): a path flown at the limit leaves the feedback nothing to correct with.
+    """
+    eta = np.asarray(wind_ned, float)
+    ts = _times(horizon_s, dt_s)
+    s = s0
+    W1 = np.empty((len(ts), 3))
+    for k, t in enumerate(ts):
+        st = target.state(float(t))
+        pd, f1, f2, f3, _, _ = path.eval(s)
+        R = st.R_T_I
+        f1I, f2I, f3I = R @ f1, R @ f2, R @ f3
+        u = st.velocity + np.cross(R @ st.omega_T, R @ pd) - eta
+        a21, a31 = float(u @ f2I) / v_w, float(u @ f3I) / v_w
+        a11 = math.sqrt(max(1e-12, 1.0 - a21 * a21 - a31 * a31))
+        W1[k] = a11 * f1I + a21 * f2I + a31 * f3I
+        sdot = v_w * a11 - float(u @ f1I)
+        if k + 1 < len(ts):
+            s += sdot * (ts[k + 1] - t)
+    dW = np.gradient(W1, ts, axis=0)
+    rate = np.linalg.norm(dW, axis=1)
+    banks = np.array(
+        [abs(bank_and_load_factor(tuple(W1[k]), tuple(v_w * dW[k]))[0]) for k in range(len(ts))]
+    )
+    k_r, k_b = int(np.argmax(rate)), int(np.argmax(banks))
+    bank_ok = max(max_bank_rad - bank_margin_rad, 0.0)
+    limit_rate = (
+        max_turn_rate_rad_s
+        if max_turn_rate_rad_s is not None
+        else GRAVITY_M_S2 * math.tan(bank_ok) / v_w
+    )
+    ok = banks[k_b] <= bank_ok and rate[k_r] <= limit_rate
+    return CheckResult(
+        "feasibility",
+        "pass" if ok else "fail",
+        f"peak turn rate {rate[k_r]:.3f} rad/s at t = {ts[k_r]:.1f} s (limit {limit_rate:.3f}); "
+        f"peak bank {math.degrees(banks[k_b]):.1f} deg at t = {ts[k_b]:.1f} s "
+        f"(limit {math.degrees(max_bank_rad):.1f}"
+        + (f" - {math.degrees(bank_margin_rad):.1f} margin)" if bank_margin_rad > 0 else ")"),
+        {
+            "peak_turn_rate_rad_s": float(rate[k_r]),
+            "turn_rate_limit_rad_s": limit_rate,
+            "peak_bank_rad": float(banks[k_b]),
+            "bank_limit_rad": max_bank_rad,
+            "bank_margin_rad": bank_margin_rad,
+        },
+    )

@@ -1,0 +1,295 @@
+"""Arc-length parameterised paths with a parallel-transport (Bishop) frame.
+
+Every path is fixed in the target frame {T} (metres, axes x forward, y right, z down). Any
+regular curve ``c(u)`` is tabulated once at uniform arc-length nodes (ds ~ 0.25 m): position,
+unit tangent f1, transported normal f2 (double-reflection rotation-minimising frame, Wang et
+al. 2008) and the curvature components k1 = kappa . f2, k2 = kappa . f3. Between nodes the
+position is a cubic Hermite interpolant (exact tangents), f1 its normalised derivative and f2
+the blend of both neighbouring nodes' f2 carried onto f1 by the minimal rotation, so the frame
+is continuous everywhere.
+
+Closed paths: a transported frame generally comes back rotated about f1 after one lap
+(holonomy angle theta). We spread -theta evenly along the lap, so f2/f3 never jump at the
+seam, and report the resulting constant twist ``tau = -theta / L`` (rad/m); the frame's
+angular velocity is then ``omega_FT^F = sdot * [tau, -k2, k1]``.
+
+Initial normal: f3 is "down" projected orthogonal to f1 (f2 = f3 x f1), so a horizontal
+path has f2 pointing right and f3 down, like FRD, and k1 > 0 means turning right.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mpf_mavlink.errors import ConfigError
+
+CurveFn = Callable[[NDArray[np.float64]], NDArray[np.float64]]
+Tuple3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class PathSample:
+    """The path at arc length s, all vectors in the target frame {T}.
+
+    s: arc length (m, unwrapped as given); position: p_d(s) (m); R_F_T: columns f1, f2, f3;
+    k1, k2: curvature components along f2, f3 (1/m); tau: frame twist about f1 (rad/m).
+    """
+
+    s: float
+    position: NDArray[np.float64]
+    R_F_T: NDArray[np.float64]
+    k1: float
+    k2: float
+    tau: float
+
+    @property
+    def f1(self) -> NDArray[np.float64]:
+        return self.R_F_T[:, 0]
+
+
+def _mrot(v: Tuple3, a: Tuple3, b: Tuple3) -> Tuple3:
+    """Carry v by the minimal rotation taking unit vector a onto unit vector b (Rodrigues)."""
+    cx = a[1] * b[2] - a[2] * b[1]
+    cy = a[2] * b[0] - a[0] * b[2]
+    cz = a[0] * b[1] - a[1] * b[0]
+    d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    # c x v and c x (c x v), scaled by 1/(1+d): exact rotation for d > -1.
+    ux = cy * v[2] - cz * v[1]
+    uy = cz * v[0] - cx * v[2]
+    uz = cx * v[1] - cy * v[0]
+    k = 1.0 / (1.0 + d) if d > -0.999999 else 0.0
+    wx = cy * uz - cz * uy
+    wy = cz * ux - cx * uz
+    wz = cx * uy - cy * ux
+    return (v[0] + ux + k * wx, v[1] + uy + k * wy, v[2] + uz + k * wz)
+
+
+class TabulatedPath:
+    """A regular curve re-parameterised by arc length, with a continuous transported frame."""
+
+    def __init__(
+        self,
+        curve: CurveFn,
+        u0: float,
+        u1: float,
+        closed: bool,
+        name: str = "path",
+        ds_target: float = 0.25,
+        dense: int = 40000,
+    ) -> None:
+        self.name = name
+        self.closed = closed
+        u = np.linspace(u0, u1, dense + 1)
+        du = (u1 - u0) * 1e-5
+        c = curve(u)
+        d1 = (curve(u + du) - curve(u - du)) / (2 * du)
+        speed = np.linalg.norm(d1, axis=1)
+        if not np.all(np.isfinite(c)) or not np.all(np.isfinite(speed)):
+            raise ConfigError(f"{name}: the curve is not finite everywhere")
+        seg = 0.5 * (speed[1:] + speed[:-1]) * np.diff(u)
+        # Simpson-quality length from the trapezoid on a dense grid is ample (error ~1e-9 L).
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        L = float(cum[-1])
+        if not L > 1e-6:
+            raise ConfigError(f"{name}: the path has zero length")
+        if np.min(speed) < 1e-9 * max(1.0, float(np.max(speed))):
+            raise ConfigError(f"{name}: the curve is not regular (zero speed somewhere)")
+        self.length = L
+        n = int(min(200000, max(512, math.ceil(L / ds_target))))
+        self.n = n
+        self.ds = L / n
+        s_nodes = np.arange(n + 1) * self.ds
+        u_nodes = np.interp(s_nodes, cum, u)
+        # One Newton pass on arc length tightens u(s) from the linear inverse.
+        P = curve(u_nodes)
+        D1 = (curve(u_nodes + du) - curve(u_nodes - du)) / (2 * du)
+        D2 = (curve(u_nodes + du) - 2 * P + curve(u_nodes - du)) / (du * du)
+        sp = np.linalg.norm(D1, axis=1)
+        T = D1 / sp[:, None]
+        kappa = (D2 - np.sum(D2 * T, axis=1)[:, None] * T) / (sp * sp)[:, None]
+        if closed:
+            gap = float(np.linalg.norm(P[-1] - P[0]))
+            if gap > 1e-6 * max(1.0, L):
+                raise ConfigError(f"{name}: closed path does not close (gap {gap:.3g} m)")
+            P[-1], T[-1], kappa[-1] = P[0], T[0], kappa[0]
+        # Initial normal: f3 = down projected orthogonal to f1, f2 = f3 x f1.
+        down = np.array([0.0, 0.0, 1.0])
+        f3 = down - np.dot(down, T[0]) * T[0]
+        if np.linalg.norm(f3) < 1e-6:
+            f3 = np.array([1.0, 0.0, 0.0]) - T[0, 0] * T[0]
+        f3 /= np.linalg.norm(f3)
+        F2 = np.empty_like(T)
+        F2[0] = np.cross(f3, T[0])
+        for i in range(n):  # double reflection (rotation-minimising frame)
+            v1 = P[i + 1] - P[i]
+            c1 = float(v1 @ v1)
+            if c1 < 1e-30:
+                F2[i + 1] = F2[i]
+                continue
+            rL = F2[i] - (2.0 / c1) * float(v1 @ F2[i]) * v1
+            tL = T[i] - (2.0 / c1) * float(v1 @ T[i]) * v1
+            v2 = T[i + 1] - tL
+            c2 = float(v2 @ v2)
+            r = rL - (2.0 / c2) * float(v2 @ rL) * v2 if c2 > 1e-30 else rL
+            r = r - float(r @ T[i + 1]) * T[i + 1]
+            F2[i + 1] = r / np.linalg.norm(r)
+        self.tau = 0.0
+        if closed:
+            a, b = F2[0], F2[-1]
+            theta = math.atan2(float(np.cross(a, b) @ T[0]), float(a @ b))
+            self.tau = -theta / L
+            ang = self.tau * s_nodes
+            F3 = np.cross(T, F2)
+            F2 = np.cos(ang)[:, None] * F2 + np.sin(ang)[:, None] * F3
+            F2[-1] = F2[0]
+        F3 = np.cross(T, F2)
+        self._P = P
+        self._T = T
+        self._F2 = F2
+        self._K1 = np.sum(kappa * F2, axis=1)
+        self._K2 = np.sum(kappa * F3, axis=1)
+        # Python lists: scalar access to them is ~10x faster than to numpy arrays.
+        self._Pl = [tuple(map(float, r)) for r in P]
+        self._Tl = [tuple(map(float, r)) for r in T]
+        self._F2l = [tuple(map(float, r)) for r in F2]
+        self._K1l = [float(v) for v in self._K1]
+        self._K2l = [float(v) for v in self._K2]
+        # Per cell: the angle about f1_{i+1} between f2_i carried to node i+1 and f2_{i+1}.
+        # Interpolating it linearly makes the frame continuous at every node with one transport.
+        corr = []
+        for i in range(n):
+            r = _mrot(self._F2l[i], self._Tl[i], self._Tl[i + 1])
+            t1, f2b = self._Tl[i + 1], self._F2l[i + 1]
+            c = r[0] * f2b[0] + r[1] * f2b[1] + r[2] * f2b[2]
+            x = (
+                r[1] * f2b[2] - r[2] * f2b[1],
+                r[2] * f2b[0] - r[0] * f2b[2],
+                r[0] * f2b[1] - r[1] * f2b[0],
+            )
+            corr.append(math.atan2(x[0] * t1[0] + x[1] * t1[1] + x[2] * t1[2], c))
+        self._C = corr
+
+    # ------------------------------------------------------------------ evaluation
+    def eval(self, s: float) -> tuple[Tuple3, Tuple3, Tuple3, Tuple3, float, float]:
+        """Fast evaluation: (position, f1, f2, f3, k1, k2) at arc length s, in {T}."""
+        L = self.length
+        if self.closed:
+            s = s % L
+        elif s <= 0.0 or s >= L:
+            # Beyond an open end the path continues straight along the end tangent.
+            j = 0 if s <= 0.0 else self.n
+            p, t, f2 = self._Pl[j], self._Tl[j], self._F2l[j]
+            ds = s if j == 0 else s - L
+            f3 = (
+                t[1] * f2[2] - t[2] * f2[1],
+                t[2] * f2[0] - t[0] * f2[2],
+                t[0] * f2[1] - t[1] * f2[0],
+            )
+            return (p[0] + ds * t[0], p[1] + ds * t[1], p[2] + ds * t[2]), t, f2, f3, 0.0, 0.0
+        h = self.ds
+        x = s / h
+        i = int(x)
+        if i >= self.n:
+            i = self.n - 1
+        w = x - i
+        Pl, Tl = self._Pl, self._Tl
+        pa0, pa1, pa2 = Pl[i]
+        pb0, pb1, pb2 = Pl[i + 1]
+        ta0, ta1, ta2 = Tl[i]
+        tb0, tb1, tb2 = Tl[i + 1]
+        w2 = w * w
+        w3 = w2 * w
+        h00 = 2 * w3 - 3 * w2 + 1
+        h10 = (w3 - 2 * w2 + w) * h
+        h01 = -2 * w3 + 3 * w2
+        h11 = (w3 - w2) * h
+        g00 = (6 * w2 - 6 * w) / h
+        g10 = 3 * w2 - 4 * w + 1
+        g01 = (-6 * w2 + 6 * w) / h
+        g11 = 3 * w2 - 2 * w
+        p = (
+            h00 * pa0 + h10 * ta0 + h01 * pb0 + h11 * tb0,
+            h00 * pa1 + h10 * ta1 + h01 * pb1 + h11 * tb1,
+            h00 * pa2 + h10 * ta2 + h01 * pb2 + h11 * tb2,
+        )
+        dx = g00 * pa0 + g10 * ta0 + g01 * pb0 + g11 * tb0
+        dy = g00 * pa1 + g10 * ta1 + g01 * pb1 + g11 * tb1
+        dz = g00 * pa2 + g10 * ta2 + g01 * pb2 + g11 * tb2
+        nn = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+        a0, a1, a2 = dx * nn, dy * nn, dz * nn  # f1
+        # _mrot(F2[i], ta, f1) inlined: f2_i carried by the minimal rotation ta -> f1
+        v0, v1, v2 = self._F2l[i]
+        cx = ta1 * a2 - ta2 * a1
+        cy = ta2 * a0 - ta0 * a2
+        cz = ta0 * a1 - ta1 * a0
+        d = ta0 * a0 + ta1 * a1 + ta2 * a2
+        ux = cy * v2 - cz * v1
+        uy = cz * v0 - cx * v2
+        uz = cx * v1 - cy * v0
+        k = 1.0 / (1.0 + d) if d > -0.999999 else 0.0
+        r0 = v0 + ux + k * (cy * uz - cz * uy)
+        r1 = v1 + uy + k * (cz * ux - cx * uz)
+        r2 = v2 + uz + k * (cx * uy - cy * ux)
+        nr = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        r0, r1, r2 = r0 * nr, r1 * nr, r2 * nr
+        q0 = a1 * r2 - a2 * r1
+        q1 = a2 * r0 - a0 * r2
+        q2 = a0 * r1 - a1 * r0
+        ang = w * self._C[i]
+        ca, sa = math.cos(ang), math.sin(ang)
+        f2 = (ca * r0 + sa * q0, ca * r1 + sa * q1, ca * r2 + sa * q2)
+        f3 = (ca * q0 - sa * r0, ca * q1 - sa * r1, ca * q2 - sa * r2)
+        K1, K2 = self._K1l, self._K2l
+        k1 = (1 - w) * K1[i] + w * K1[i + 1]
+        k2 = (1 - w) * K2[i] + w * K2[i + 1]
+        return p, (a0, a1, a2), f2, f3, k1, k2
+
+    def sample(self, s: float) -> PathSample:
+        """The path at arc length s (m) as a :class:`PathSample` (numpy, for callers and tests)."""
+        p, f1, f2, f3, k1, k2 = self.eval(float(s))
+        tau = self.tau if (self.closed or 0.0 < s < self.length) else 0.0
+        return PathSample(float(s), np.array(p), np.column_stack([f1, f2, f3]), k1, k2, tau)
+
+    # ------------------------------------------------------------------ closest point
+    def closest(
+        self, q_T: NDArray[np.float64], s_guess: float | None = None, window: float | None = None
+    ) -> float:
+        """Arc length of the point of the path closest to q_T (m, in {T}).
+
+        Global search over all nodes, or over ``s_guess +- window`` when both are given;
+        then Newton steps on (q - p(s)) . f1 = 0. Returns s in [0, L) for closed paths.
+        """
+        q = np.asarray(q_T, dtype=float)
+        ql = [float(v) for v in q]
+        P = self._P[:-1] if self.closed else self._P
+        d2 = np.sum((P - q) ** 2, axis=1)
+        if s_guess is not None and window is not None:
+            idx = np.arange(len(P))
+            sn = idx * self.ds
+            if self.closed:
+                ds = (sn - s_guess + 0.5 * self.length) % self.length - 0.5 * self.length
+            else:
+                ds = sn - s_guess
+            d2 = np.where(np.abs(ds) <= window, d2, np.inf)
+        s = float(np.argmin(d2)) * self.ds
+        for _ in range(4):
+            p, f1, *_ = self.eval(s)
+            step = sum((ql[k] - p[k]) * f1[k] for k in range(3))
+            step = max(-self.ds, min(self.ds, step))
+            s += step
+            if abs(step) < 1e-9:
+                break
+        if self.closed:
+            s %= self.length
+        else:
+            s = min(max(s, 0.0), self.length)
+        return float(s)
+
+    def positions(self) -> NDArray[np.float64]:
+        """The node positions (n+1, 3) in {T}, for plots."""
+        return self._P.copy()

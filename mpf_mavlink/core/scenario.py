@@ -1,0 +1,64 @@
+"""Build the pure objects (path, target motion, gains, extensions) from a validated Config."""
+
+from __future__ import annotations
+
+from mpf_mavlink.config.schema import Config, PathConfig, TargetConfig
+from mpf_mavlink.core.guidance.law import Extensions, Gains
+from mpf_mavlink.core.paths import TabulatedPath, circle, helix, lemniscate, line, spline
+from mpf_mavlink.core.target import ConstantTurn, PaperProfile, Stationary, TargetMotion
+
+_PATH_CACHE: dict[PathConfig, TabulatedPath] = {}
+
+
+def build_path(p: PathConfig) -> TabulatedPath:
+    """The path described by the config (tabulated once per distinct description)."""
+    key = p if p.waypoints_m is None else None
+    if key is not None and key in _PATH_CACHE:
+        return _PATH_CACHE[key]
+    if p.type == "lemniscate":
+        assert p.size_m is not None
+        path = lemniscate(p.size_m, p.center_m)
+    elif p.type == "circle":
+        assert p.radius_m is not None
+        path = circle(p.center_m, p.radius_m, p.clockwise)
+    elif p.type == "helix":
+        assert p.radius_m is not None and p.climb_per_turn_m is not None and p.turns is not None
+        path = helix(p.center_m, p.radius_m, p.climb_per_turn_m, p.turns, p.clockwise)
+    elif p.type == "line":
+        assert p.start_m is not None and p.end_m is not None
+        path = line(p.start_m, p.end_m)
+    else:
+        assert p.waypoints_m is not None
+        path = spline(p.waypoints_m, p.closed)
+    if key is not None:
+        _PATH_CACHE[key] = path
+    return path
+
+
+def build_target(t: TargetConfig) -> TargetMotion:
+    """A scripted target motion (``mavlink`` targets are built by the bridge)."""
+    if t.type == "stationary":
+        return Stationary(t.position_ned_m, t.yaw_rad)
+    if t.type == "constant_turn":
+        return ConstantTurn(
+            t.position_ned_m, t.speed_m_s, t.heading_rad, t.turn_rate_rad_s, t.climb_rate_m_s
+        )
+    if t.type == "paper":
+        return PaperProfile(t.position_ned_m, t.yaw_rad)
+    raise ValueError("a live MAVLink target has no scripted motion")
+
+
+def build_gains(cfg: Config) -> Gains:
+    g = cfg.guidance
+    return Gains(K_p=g.K_p, K_R=g.K_R, alpha=g.alpha_m)
+
+
+def build_extensions(cfg: Config) -> Extensions:
+    g = cfg.guidance
+    return Extensions(
+        rate_limit=g.rate_limit_rad_s,
+        psi_turn=g.psi_turn,
+        psi_turn_threshold=g.psi_turn_threshold,
+        psi_turn_rate=g.psi_turn_rate_rad_s,
+        wind_compensation=g.wind_compensation,
+    )

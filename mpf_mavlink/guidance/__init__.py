@@ -1,5 +1,0 @@
-"""The MPF guidance law and its pre-flight checks (pure: no I/O, no clock)."""
-
-from .law import Extensions, Gains, MpfCommand, MpfDiagnostics, VehicleState, mpf_law
-
-__all__ = ["Extensions", "Gains", "MpfCommand", "MpfDiagnostics", "VehicleState", "mpf_law"]

@@ -1,8 +1,0 @@
-"""Paths fixed in the target frame, re-parameterised by arc length, with a transported frame."""
-
-from .base import PathSample, TabulatedPath
-from .shapes import circle, helix, lemniscate, line, spline
-
-Path = TabulatedPath
-
-__all__ = ["Path", "PathSample", "TabulatedPath", "circle", "helix", "lemniscate", "line", "spline"]

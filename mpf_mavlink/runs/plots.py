@@ -1,0 +1,240 @@
+"""The paper's figures for any run directory (``sim``, ``run``, ``replay``): 3D and planar views
+of the vehicle's (recorded) path against the moving desired path, the target-relative path,
+|pt|, Psi, sdot, w2 and w3 (commanded and achieved), and the setpoints sent (when the run has a
+``setpoints.csv``).
+
+Works from the files alone, so older run directories (without the target-attitude columns or
+without setpoints) still plot; lines are broken across gaps in time (a replay of a log with
+telemetry gaps) instead of joining them with straight segments.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mpf_mavlink.errors import MpfError
+
+
+def _gapped(t: NDArray[np.float64], *ys: NDArray[np.float64]) -> list[NDArray[np.float64]]:
+    """Insert NaN after every step longer than 5 median steps, so lines break at gaps."""
+    if len(t) < 3:
+        return [t, *ys]
+    dt = np.diff(t)
+    cut = np.nonzero(dt > 5.0 * max(float(np.median(dt)), 1e-9))[0] + 1
+    if len(cut) == 0:
+        return [t, *ys]
+    return [np.insert(np.asarray(a, float), cut, np.nan) for a in (t, *ys)]
+
+
+def _rot_zyx(roll: float, pitch: float, yaw: float) -> NDArray[np.float64]:
+    cr, sr, cp, sp, cy, sy = (
+        np.cos(roll),
+        np.sin(roll),
+        np.cos(pitch),
+        np.sin(pitch),
+        np.cos(yaw),
+        np.sin(yaw),
+    )
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def _paths_ned(
+    cols: dict[str, Any], path_T: NDArray[np.float64] | None
+) -> list[tuple[float, NDArray[np.float64]]]:
+    """The path in NED where the target carried it: at the start, the middle and the end of the
+    run (one of them for a target that does not move). Empty without the target attitude."""
+    need = ("tgt_n", "tgt_e", "tgt_d", "tgt_roll", "tgt_pitch", "tgt_yaw")
+    if path_T is None or len(path_T) == 0 or not all(k in cols for k in need):
+        return []
+    n = len(cols["t"])
+    out: list[tuple[float, NDArray[np.float64]]] = []
+    for k in sorted({0, n // 2, n - 1}):
+        R = _rot_zyx(cols["tgt_roll"][k], cols["tgt_pitch"][k], cols["tgt_yaw"][k])
+        p = np.array([cols["tgt_n"][k], cols["tgt_e"][k], cols["tgt_d"][k]])
+        P = path_T @ R.T + p
+        if out and np.max(np.abs(P - out[-1][1])) < 1e-6:
+            continue  # the target did not move: one drawing is enough
+        out.append((float(cols["t"][k]), P))
+    return out
+
+
+def _read_setpoints(d: Path) -> dict[str, NDArray[np.float64]] | None:
+    f = d / "setpoints.csv"
+    if not f.is_file():
+        return None
+    try:
+        header = f.open().readline().strip().split(",")
+        A = np.loadtxt(f, delimiter=",", skiprows=1, ndmin=2)
+    except (OSError, ValueError):
+        return None
+    if A.size == 0 or A.shape[1] != len(header):
+        return None
+    return {c: A[:, i] for i, c in enumerate(header)}
+
+
+def plot_run(d: str | Path) -> list[Path]:
+    """Draw every figure of the run directory d as PNG files; return their paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mpf_mavlink.runs.rundir import read_run
+
+    d = Path(d)
+    cols, path_T, metrics = read_run(d)
+    need = ("t", "p_n", "p_e", "p_d", "pt_norm")
+    missing = [c for c in need if c not in cols]
+    if missing:
+        raise MpfError(f"{d / 'timeseries.csv'}: not a run time series (no column {missing[0]!r})")
+    t = cols["t"]
+    out: list[Path] = []
+    if len(t) == 0:
+        return out
+
+    def col(name: str) -> NDArray[np.float64]:
+        return cols[name] if name in cols else np.full(len(t), np.nan)
+
+    def save(fig: Any, name: str, **margins: float) -> None:
+        # Fixed margins instead of tight_layout, which draws every figure twice (a third of
+        # the plotting time of a replay)
+        fig.subplots_adjust(**{"left": 0.09, "right": 0.97, "bottom": 0.1, "top": 0.93, **margins})
+        p = d / name
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        out.append(p)
+
+    paths = _paths_ned(cols, path_T)
+    stationary = bool(
+        np.all(np.ptp(np.column_stack([col("tgt_n"), col("tgt_e"), col("tgt_d")]), axis=0) < 1e-6)
+    )
+
+    # 1. 3D view (north, east, up) of the vehicle, the target, the desired point and the path.
+    fig = plt.figure(figsize=(7, 6))
+    ax = fig.add_subplot(projection="3d")
+    _, pn, pe, pd = _gapped(t, cols["p_n"], cols["p_e"], cols["p_d"])
+    ax.plot(pe, pn, -pd, lw=1.0, label="vehicle")
+    for i, (tk, P) in enumerate(paths):
+        ax.plot(P[:, 1], P[:, 0], -P[:, 2], "r-", lw=1.5, alpha=0.25 + 0.5 * (i + 1) / len(paths),
+                label=f"desired path at t = {tk:.0f} s")  # fmt: skip
+    if stationary:
+        ax.plot(col("tgt_e")[:1], col("tgt_n")[:1], -col("tgt_d")[:1], "k^", label="target")
+    else:
+        ax.plot(col("tgt_e"), col("tgt_n"), -col("tgt_d"), "k--", lw=1.0, label="target")
+    _, fn, fe, fd = _gapped(t, col("pf_n"), col("pf_e"), col("pf_d"))
+    ax.plot(fe, fn, -fd, lw=0.6, alpha=0.6, label="desired point p_f")
+    ax.set_xlabel("east [m]")
+    ax.set_ylabel("north [m]")
+    ax.set_zlabel("up [m]")
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title("Moving path following (3D)")
+    save(fig, "trajectory_3d.png", left=0.0, right=1.0, bottom=0.02, top=0.95)
+
+    # 2. Planar views: the vehicle's path against the moving desired path.
+    fig, axs = plt.subplots(1, 3, figsize=(14, 4.5))
+    views = [
+        ("p_e", "p_n", "east", "north", 1, 1, 1, 0),
+        ("p_n", "p_d", "north", "up", 1, -1, 0, 2),
+        ("p_e", "p_d", "east", "up", 1, -1, 1, 2),
+    ]
+    for ax, (a, b, la, lb, sa, sb, ia, ib) in zip(axs, views, strict=True):
+        ta, tb = "tgt_" + a[2:], "tgt_" + b[2:]
+        for i, (tk, P) in enumerate(paths):
+            ax.plot(sa * P[:, ia], sb * P[:, ib], "r-", lw=1.5, alpha=0.25 + 0.5 * (i + 1) / len(paths),
+                    label=f"desired path at t = {tk:.0f} s")  # fmt: skip
+        _, xa, xb = _gapped(t, cols[a], cols[b])
+        ax.plot(sa * xa, sb * xb, lw=1.0, label="vehicle")
+        _, fa, fb = _gapped(t, col("pf_" + a[2:]), col("pf_" + b[2:]))
+        ax.plot(sa * fa, sb * fb, lw=0.6, alpha=0.6, label="desired point p_f")
+        if stationary:
+            ax.plot(sa * col(ta)[:1], sb * col(tb)[:1], "k^", label="target")
+        else:
+            ax.plot(sa * col(ta), sb * col(tb), "k--", lw=1.0, label="target")
+        ax.set_xlabel(f"{la} [m]")
+        ax.set_ylabel(f"{lb} [m]")
+        ax.grid(alpha=0.3)
+    axs[0].set_aspect("equal", adjustable="datalim")
+    axs[0].legend(fontsize=8)
+    save(fig, "planar.png", left=0.06, right=0.99, bottom=0.12, top=0.97, wspace=0.25)
+
+    # 3. Target-relative path: where the vehicle flew in {T}, against the path.
+    fig, ax = plt.subplots(figsize=(6, 6))
+    if path_T is not None and len(path_T):
+        ax.plot(path_T[:, 1], path_T[:, 0], "r-", lw=2, alpha=0.5, label="path p_d (in {T})")
+    if "rel_x" in cols and "rel_y" in cols:
+        _, rx, ry = _gapped(t, cols["rel_x"], cols["rel_y"])
+        ax.plot(ry, rx, lw=0.8, label="vehicle relative to target")
+        ax.plot(cols["rel_y"][:1], cols["rel_x"][:1], "go", label="start")
+    ax.set_xlabel("y_T (right) [m]")
+    ax.set_ylabel("x_T (forward) [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    save(fig, "target_relative.png", left=0.13, bottom=0.09)
+
+    # 4. Errors: |pt| (log scale like the paper's zoom) and Psi.
+    fig, axs = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    tt, e, psi = _gapped(t, np.maximum(cols["pt_norm"], 1e-6), col("psi"))
+    axs[0].semilogy(tt, e)
+    axs[0].set_ylabel("|p~| [m]")
+    axs[0].grid(alpha=0.3, which="both")
+    rms = metrics.get("steady_rms_m")
+    if rms is not None:
+        conv = metrics.get("convergence_time_s")
+        conv_txt = "never" if conv is None else f"{conv:.3g} s"
+        axs[0].set_title(f"steady RMS {rms:.3g} m, convergence {conv_txt}")
+    axs[1].plot(tt, psi)
+    axs[1].set_ylabel("Psi(R~)")
+    axs[1].set_xlabel("t [s]")
+    axs[1].grid(alpha=0.3)
+    save(fig, "errors.png", left=0.12, hspace=0.08)
+
+    # 5. sdot, 6. w2 and w3.
+    fig, axs = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
+    tt, sd, w2c, w3c, w2, w3 = _gapped(
+        t, col("sdot"), col("w2_cmd"), col("w3_cmd"), col("w2"), col("w3")
+    )
+    axs[0].plot(tt, sd)
+    axs[0].set_ylabel("sdot [m/s]")
+    for ax, k, cmd, ach in ((axs[1], "w2", w2c, w2), (axs[2], "w3", w3c, w3)):
+        ax.plot(tt, cmd, lw=0.8, label=f"{k} commanded")
+        ax.plot(tt, ach, lw=0.8, alpha=0.8, label=f"{k} achieved")
+        ax.set_ylabel(f"{k} [rad/s]")
+        ax.legend(fontsize=8)
+    for ax in axs:
+        ax.grid(alpha=0.3)
+    axs[-1].set_xlabel("t [s]")
+    save(fig, "sdot_rates.png", left=0.12, bottom=0.07, top=0.97, hspace=0.08)
+
+    # 7. The setpoints sent (bridge) or that would have been sent (replay).
+    sp = _read_setpoints(d)
+    if sp is not None and {"t", "bank", "pitch", "thrust", "p", "q", "r"} <= set(sp):
+        fig, axs = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
+        ts, bank, pitch, thr, p, q, r = _gapped(
+            sp["t"], sp["bank"], sp["pitch"], sp["thrust"], sp["p"], sp["q"], sp["r"]
+        )
+        axs[0].plot(ts, np.degrees(bank), label="bank")
+        axs[0].plot(ts, np.degrees(pitch), label="pitch")
+        axs[0].set_ylabel("set-point [deg]")
+        axs[0].legend(fontsize=8)
+        for name, v in (("p", p), ("q", q), ("r", r)):
+            axs[1].plot(ts, v, lw=0.8, label=name)
+        axs[1].set_ylabel("body rates [rad/s]")
+        axs[1].legend(fontsize=8)
+        axs[2].plot(ts, thr)
+        axs[2].set_ylabel("thrust [0..1]")
+        axs[2].set_xlabel("t [s]")
+        for ax in axs:
+            ax.grid(alpha=0.3)
+        save(fig, "setpoints.png", left=0.12, bottom=0.07, top=0.97, hspace=0.08)
+    return out
