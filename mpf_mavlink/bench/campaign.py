@@ -1,0 +1,61 @@
+"""Campaign throughput and acceptance figures (issue 16): ``scripts/bench --only campaign_*``.
+
+- ``campaign_throughput``: the first 64 flights of configs/campaign_roa.yaml (kinematic plant)
+  on 1 and then 2 local workers: flights/min and the ratio (bar: >= 1.8 on 2 cores);
+- ``campaign_roa``: the whole ROA campaign (1,024 kinematic flights; bar: <= 10 min on 2
+  cores) with its convergence figures;
+- ``campaign_demo_robustness``: configs/campaign_demo_robustness.yaml, 40 SIL flights of 600 s
+  on 2 workers (bar: <= 12 min).
+
+The machine's load average is printed with each: on a shared machine the figures are pessimistic.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+ROA = "configs/campaign_roa.yaml"
+DEMO = "configs/campaign_demo_robustness.yaml"
+
+
+def _fly(path: str, workers: int, samples: int | None = None) -> dict[str, Any]:
+    from mpf_mavlink.campaign.report import summarise
+    from mpf_mavlink.campaign.run import run_campaign
+    from mpf_mavlink.campaign.spec import load_campaign
+
+    spec = load_campaign(path)
+    if samples is not None:
+        spec = dataclasses.replace(spec, samples=samples)
+    load0 = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory(prefix="mpf-bench-campaign-") as d:
+        # a copy of the campaign file with the sample count used (the fingerprint reads it)
+        res = run_campaign(spec, Path(d), workers=workers, progress=False, log=lambda _s: None)
+    s = summarise(spec, res.rows)
+    cpu = sum(float(r.get("wall_s") or 0.0) for r in res.rows)
+    return {
+        "flights": res.flown, "workers": workers, "wall_s": res.wall_s,
+        "flights_per_min": 60.0 * res.flown / res.wall_s if res.wall_s else None,
+        "flight_s_mean": cpu / max(1, len(res.rows)),
+        "success_rate": s["success_rate"], "converged_rate": s["converged_rate"],
+        "status": s["status"], "percentiles": s["percentiles"],
+        "load_avg_1min_before": load0, "load_avg_1min_after": os.getloadavg()[0],
+    }  # fmt: skip
+
+
+def campaign_throughput(n: int = 64) -> dict[str, Any]:
+    one = _fly(ROA, 1, n)
+    two = _fly(ROA, 2, n)
+    return {"one_worker": one, "two_workers": two,
+            "speedup": two["flights_per_min"] / one["flights_per_min"]}  # fmt: skip
+
+
+def campaign_roa() -> dict[str, Any]:
+    return _fly(ROA, 2)
+
+
+def campaign_demo_robustness() -> dict[str, Any]:
+    return _fly(DEMO, 2)

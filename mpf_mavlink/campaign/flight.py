@@ -1,0 +1,174 @@
+"""One flight of a campaign, run where a Dask worker puts it.
+
+- kinematic plant: in-process (the paper's closed loop of ``sim/kinematic.py``), ended early
+  once |pt| has stayed below the convergence threshold for ``stop_after_converged_s`` (the
+  rest of the flight would only repeat it), and bounded by the flight's wall-clock timeout;
+- SIL plant: ``mpf-mavlink sim`` in a subprocess of its own (its own UDP ports, picked free by
+  the SIL, and its own temporary run directory), killed at the timeout: a hang or a crash of
+  the flight is a row with its error, never a lost worker.
+
+Every flight returns a flat row: the sample, the metrics kept, ``status`` (``ok``, ``failed``:
+the flight's verdict failed it, ``refused``: the pre-flight gate did, ``error``, ``timeout``),
+``error`` (one line) and ``wall_s``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from mpf_mavlink.errors import MpfError
+
+
+def fly(
+    base: str,
+    sets: list[str],
+    plant: str,
+    metrics: list[str],
+    timeout_s: float,
+    stop_after_converged_s: float | None = None,
+    force: bool = False,
+    out_dir: str | None = None,
+) -> dict[str, Any]:
+    """Fly one configuration (``base`` + ``sets``); never raises for a flight's own failure."""
+    t0 = time.perf_counter()
+    row: dict[str, Any] = {"status": "error", "error": ""}
+    try:
+        if plant == "kinematic":
+            m, status, err = _kinematic(base, sets, timeout_s, stop_after_converged_s, out_dir)
+        else:
+            m, status, err = _sil(base, sets, timeout_s, force, out_dir)
+        row.update({k: _scalar(m.get(k)) for k in metrics})
+        row["status"], row["error"] = status, err
+        for k in ("initial_pt_m", "initial_psi"):
+            if k in m and k not in row:
+                row[k] = _scalar(m[k])
+        row["sim_time_s"] = _scalar(m.get("sim_time_s"))
+    except MpfError as e:
+        row["error"] = str(e).splitlines()[0]
+    except Exception as e:  # noqa: BLE001 - one flight's bug is that flight's row
+        row["error"] = f"{type(e).__name__}: {e}".splitlines()[0]
+    row["wall_s"] = round(time.perf_counter() - t0, 3)
+    row["worker_pid"] = os.getpid()
+    return row
+
+
+def _scalar(x: Any) -> Any:
+    if isinstance(x, bool) or x is None or isinstance(x, str | int):
+        return x
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    if isinstance(x, list | tuple | dict):
+        return json.dumps(x)
+    return str(x)
+
+
+def _kinematic(
+    base: str, sets: list[str], timeout_s: float, stop_after: float | None, out_dir: str | None
+) -> tuple[dict[str, Any], str, str]:
+    from mpf_mavlink.bridge.preflight import initial_errors
+    from mpf_mavlink.config import load_config
+    from mpf_mavlink.runs.rundir import RunTable, compute_metrics, row_from
+    from mpf_mavlink.runs.verdict import judge, verdict_line
+    from sim.kinematic import record
+    from sim.runner import kinematic_loop
+
+    cfg = load_config(base, sets)
+    pt0, psi0, _ = initial_errors(cfg)
+    loop, x = kinematic_loop(cfg)
+    dt = cfg.kinematic.dt_s
+    n = int(round(cfg.sim.duration_s / dt))
+    every = cfg.sim.record_every
+    thr = cfg.metrics.converge_threshold_m
+    table = RunTable()
+    wall_end = time.perf_counter() + timeout_s
+    inside_since: float | None = None
+    status, err = "ok", ""
+
+    def rec(smp: Any) -> None:
+        table.append(
+            row_from(smp.diag, smp.p, smp.w_cmd, smp.w, smp.sdot, smp.target_p, smp.target_R, smp.wind)
+        )  # fmt: skip
+
+    for i in range(n):
+        x = loop.step(x, dt)
+        last = loop.last
+        assert last is not None
+        if i % every == 0:
+            rec(last)
+        e = float(last.diag.pt_norm)
+        if not math.isfinite(e):
+            status, err = "failed", f"non-finite |pt| at t = {last.t:.2f} s"
+            break
+        if e < thr:
+            inside_since = last.t if inside_since is None else inside_since
+            if stop_after is not None and last.t - inside_since >= stop_after:
+                break
+        else:
+            inside_since = None
+        if i % 256 == 255 and time.perf_counter() > wall_end:
+            status, err = "timeout", f"flight timeout {timeout_s:g} s at t = {last.t:.1f} s"
+            break
+    rec(record(loop, x))
+    cols = table.arrays()
+    m = compute_metrics(cols, cfg.metrics.steady_after_s, thr)
+    m.update(initial_pt_m=pt0, initial_psi=psi0, sim_time_s=float(cols["t"][-1]),
+             final_pt_m=float(cols["pt_norm"][-1]))  # fmt: skip
+    if status == "ok":
+        verdict = verdict_line(judge(cfg, cols["t"], cols["pt_norm"]))
+        m["verdict"] = verdict
+        if verdict.startswith("verdict: FAIL"):
+            status, err = "failed", verdict
+    if out_dir is not None:
+        from mpf_mavlink.runs.write import write_run
+
+        write_run(Path(out_dir), cols, m, loop.path.positions(), plots=True)
+    return m, status, err
+
+
+def _last_pt(path: Path) -> float | None:
+    """|pt| (m) of the last row of a run's timeseries.csv (the plant's truth in the SIL)."""
+    lines = path.read_text().splitlines()
+    if len(lines) < 2:
+        return None
+    col = lines[0].split(",").index("pt_norm")
+    return float(lines[-1].split(",")[col])
+
+
+def _sil(
+    base: str, sets: list[str], timeout_s: float, force: bool, out_dir: str | None
+) -> tuple[dict[str, Any], str, str]:
+    with tempfile.TemporaryDirectory(prefix="mpf-campaign-") as tmp:
+        out = Path(out_dir) if out_dir is not None else Path(tmp) / "run"
+        cmd = [sys.executable, "-m", "mpf_mavlink.cli", "sim", base, "--out", str(out), "-q"]
+        if out_dir is None:
+            cmd.append("--no-plots")
+        if force:
+            cmd.append("--force")
+        for s in sets:
+            cmd += ["--set", s]
+        root = Path(__file__).resolve().parents[2]
+        try:
+            p = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            return {}, "timeout", f"flight timeout {timeout_s:g} s"
+        mpath = out / "metrics.json"
+        m = json.loads(mpath.read_text()) if mpath.is_file() else {}
+        ts = out / "timeseries.csv"
+        if "final_pt_m" not in m and ts.is_file():
+            m["final_pt_m"] = _last_pt(ts)
+        last = (p.stderr.strip().splitlines() or [""])[-1]
+        if p.returncode == 0:
+            return m, "ok", ""
+        if p.returncode == 3:
+            return m, "refused", last
+        if p.returncode == 5:
+            return m, "failed", str(m.get("verdict") or last)
+        return m, "error", f"exit {p.returncode}: {last}"

@@ -1,0 +1,187 @@
+"""A campaign on dask.distributed: every sample a task, every result a row as soon as it lands.
+
+The results table (``results.csv`` in the output directory) is appended and flushed row by row,
+so a campaign stopped by anything (Ctrl-C, a dead laptop) keeps every finished flight, and the
+same command run again flies only the samples without a row. A worker that dies mid-flight is
+the scheduler's to handle: its tasks go to the other workers (``distributed`` reschedules them);
+a flight that kills workers again and again ends as a row with the error, as does a flight that
+raised, timed out or was refused by the pre-flight gate.
+
+With ``--scheduler tcp://HOST:PORT`` the same campaign runs on an existing cluster (``dask
+scheduler`` and ``dask worker`` processes started from this project's environment); without
+it a LocalCluster of one single-threaded worker process per core (``--workers N``) is started
+for the run and closed after it.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import os
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from mpf_mavlink.campaign.design import overrides_for, samples
+from mpf_mavlink.campaign.flight import fly
+from mpf_mavlink.campaign.spec import CampaignSpec
+from mpf_mavlink.config import load_config
+from mpf_mavlink.errors import MpfError
+
+FINISHED = ("ok", "failed", "refused")  # a re-run does not fly these again
+RETRYABLE = ("error", "timeout")  # ... nor these, unless asked to (--retry-errors)
+
+
+@dataclass
+class CampaignResult:
+    out: Path
+    rows: list[dict[str, Any]]
+    flown: int  # flights flown by this invocation
+    skipped: int  # samples already in the results table
+    wall_s: float
+    workers: int
+    summary: dict[str, Any] = field(default_factory=dict)
+
+
+def columns(spec: CampaignSpec) -> list[str]:
+    """The results table's header: fixed for a campaign file, checked on resume."""
+    keep = [m for m in spec.metrics if m not in ("initial_pt_m", "initial_psi")]
+    return ["sample", *[v.key for v in spec.vary], "initial_pt_m", "initial_psi", *keep,
+            "status", "error", "wall_s", "sim_time_s", "worker_pid"]  # fmt: skip
+
+
+def _fingerprint(spec: CampaignSpec) -> str:
+    text = Path(spec.source).read_bytes() + spec.base_path.read_bytes()
+    return hashlib.sha256(text).hexdigest()[:16]
+
+
+def read_rows(path: Path, header: list[str]) -> dict[int, dict[str, Any]]:
+    """The rows of an existing results table, last row per sample wins."""
+    if not path.is_file():
+        return {}
+    with path.open(newline="") as f:
+        r = csv.DictReader(f)
+        if r.fieldnames != header:
+            raise MpfError(
+                f"{path}: written by another campaign (its columns differ); choose another --out"
+            )
+        rows: dict[int, dict[str, Any]] = {}
+        for row in r:
+            rows[int(row["sample"])] = row
+    return rows
+
+
+def _client(workers: int | None, scheduler: str | None) -> tuple[Any, Any, int]:
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        client = Client(scheduler, timeout="10s")
+        n = len(client.scheduler_info().get("workers", {}))
+        return client, None, n
+    n = workers or os.cpu_count() or 1
+    cluster = LocalCluster(
+        n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+        silence_logs=40,  # logging.ERROR: the progress bar is the campaign's output
+    )  # fmt: skip
+    return Client(cluster), cluster, n
+
+
+def run_campaign(
+    spec: CampaignSpec,
+    out: Path,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: bool = True,
+    retry_errors: bool = False,
+    log: Callable[[str], None] = lambda s: print(s, file=sys.stderr),
+) -> CampaignResult:
+    """Fly every sample without a finished row; returns all rows (old and new)."""
+    from tqdm import tqdm
+
+    out.mkdir(parents=True, exist_ok=True)
+    header = columns(spec)
+    table = out / "results.csv"
+    fp = _fingerprint(spec)
+    meta = out / "campaign.json"
+    if meta.is_file() and table.is_file():
+        old = json.loads(meta.read_text()).get("fingerprint")
+        if old != fp:
+            raise MpfError(
+                f"{out}: holds the results of another version of the campaign or its base "
+                "configuration; choose another --out"
+            )
+    meta.write_text(json.dumps({"name": spec.name, "source": spec.source,
+                                "base": str(spec.base_path), "fingerprint": fp}, indent=2) + "\n")  # fmt: skip
+    rows = read_rows(table, header)
+    redo = FINISHED if retry_errors else (*FINISHED, *RETRYABLE)
+    done = {i for i, r in rows.items() if r.get("status") in redo}
+    base = load_config(spec.base_path, spec.set)
+    all_samples = samples(spec)
+    todo = [i for i in range(spec.samples) if i not in done]
+    t0 = time.perf_counter()
+    result = CampaignResult(out, [], 0, len(done), 0.0, 0)
+    if todo:
+        new_file = not table.is_file()
+        fh = table.open("a", newline="")
+        w = csv.DictWriter(fh, fieldnames=header, extrasaction="ignore")
+        if new_file:
+            w.writeheader()
+            fh.flush()
+        client, cluster, n = _client(workers, scheduler)
+        result.workers = n
+        log(f"campaign {spec.name}: {len(todo)} flights to fly ({len(done)} already in "
+            f"{table}), {spec.plant} plant, {n} worker(s)")  # fmt: skip
+        try:
+            result.flown = _fly_all(
+                client, spec, base, all_samples, todo, w, fh, rows, progress, tqdm
+            )
+        finally:
+            fh.close()
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    result.wall_s = time.perf_counter() - t0
+    result.rows = [rows[i] for i in sorted(rows)]
+    return result
+
+
+def _fly_all(client, spec, base, all_samples, todo, w, fh, rows, progress, tqdm) -> int:  # noqa: ANN001
+    from distributed import as_completed
+
+    base_path = str(spec.base_path)
+    futs = {}
+    for i in todo:
+        sets = [*spec.set, *overrides_for(base, all_samples[i])]
+        f = client.submit(
+            fly, base_path, sets, spec.plant, spec.metrics, spec.timeout_s,
+            spec.stop_after_converged_s, spec.force,
+            key=f"mpf-flight-{spec.name}-{i}-{time.time_ns()}", pure=False,
+        )  # fmt: skip
+        futs[f] = i
+    failures = 0
+    bar = tqdm(total=len(todo), desc=f"campaign {spec.name}", unit="flight", disable=not progress,
+               file=sys.stderr, mininterval=0.5, dynamic_ncols=True)  # fmt: skip
+    n = 0
+    try:
+        for f in as_completed(list(futs)):
+            i = futs[f]
+            try:
+                row = f.result()
+            except Exception as e:  # noqa: BLE001 - KilledWorker, a lost scheduler...: a row
+                row = {"status": "error", "error": f"{type(e).__name__}: {e}".splitlines()[0]}
+            row = {**row, "sample": i, **all_samples[i]}
+            w.writerow({k: ("" if v is None else v) for k, v in row.items()})
+            fh.flush()
+            rows[i] = {k: ("" if v is None else v) for k, v in row.items()}
+            n += 1
+            if row.get("status") != "ok":
+                failures += 1
+            bar.set_postfix(failures=failures, refresh=False)
+            bar.update(1)
+    finally:
+        bar.close()
+    return n

@@ -1,0 +1,224 @@
+"""Monte-Carlo campaigns: the campaign file's validation, the sample designs, resumable results,
+and a real dask scheduler with two real workers, one of them killed mid-campaign."""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mpf_mavlink.campaign.design import samples, unit_points
+from mpf_mavlink.campaign.spec import load_campaign
+from mpf_mavlink.errors import ConfigError
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER = ROOT / "configs" / "paper_lemniscate.yaml"
+DEMO = ROOT / "configs" / "default.yaml"
+
+
+def _write(tmp_path: Path, text: str, name: str = "c.yaml") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+KIN = f"""
+name: t
+base: {PAPER}
+plant: kinematic
+samples: 8
+design: lhs
+seed: 3
+set: [sim.duration_s=30, kinematic.dt_s=0.04, metrics.steady_after_s=20]
+vary:
+  - {{key: initial.distance_m, dist: uniform, low: 0.0, high: 60.0}}
+  - {{key: initial.heading_rad, dist: uniform, low: -3.0, high: 3.0}}
+  - {{key: guidance.K_p, dist: loguniform, low: 1.0, high: 8.0}}
+metrics: [convergence_time_s, final_pt_m, verdict]
+rank_by: final_pt_m
+stop_after_converged_s: 3
+keep_worst: 1
+"""
+
+
+@pytest.mark.parametrize(
+    "edit, culprit",
+    [
+        (("samples: 8", "samples: 8\nbogus: 1"), "bogus"),
+        (("guidance.K_p, dist: loguniform, low: 1.0", "guidance.K_q, dist: loguniform, low: 1.0"), "guidance.K_q"),
+        (("low: 1.0, high: 8.0", "low: 0.0, high: 8.0"), "vary[2].low"),
+        (("low: 1.0, high: 8.0", "low: 1.0, high: 8.0, sd: 2"), "vary[2].sd"),
+        (("design: lhs", "design: grid"), "design"),
+        (("low: 1.0, high: 8.0", "low: 1.0, high: -8.0"), "vary[2].high"),
+        (("rank_by: final_pt_m", "rank_by: steady_rms_m"), "rank_by"),
+    ],
+)  # fmt: skip
+def test_a_bad_campaign_file_is_one_line_naming_the_key(tmp_path, edit, culprit):
+    p = _write(tmp_path, KIN.replace(*edit))
+    with pytest.raises(ConfigError) as e:
+        load_campaign(p)
+    msg = str(e.value)
+    assert culprit in msg and "\n" not in msg and str(p) in msg
+
+
+def test_a_key_out_of_the_base_configs_range_is_refused_before_flying(tmp_path):
+    # K_p must be > 0 in the config: a normal distribution centred at 0 probes it at its mean
+    p = _write(tmp_path, KIN.replace("dist: loguniform, low: 1.0, high: 8.0", "dist: normal, mean: 0.0, sd: 1.0"))  # fmt: skip
+    with pytest.raises(ConfigError, match="guidance.K_p"):
+        load_campaign(p)
+
+
+def test_designs_are_seeded_and_latin_hypercube_fills_every_stratum(tmp_path):
+    spec = load_campaign(_write(tmp_path, KIN))
+    a, b = unit_points(spec), unit_points(spec)
+    assert np.array_equal(a, b)
+    # Latin hypercube: in each dimension exactly one of the n points falls in each 1/n stratum
+    n = spec.samples
+    for j in range(a.shape[1]):
+        assert sorted(np.floor(a[:, j] * n).astype(int).tolist()) == list(range(n))
+    s = samples(spec)
+    assert all(1.0 <= x["guidance.K_p"] <= 8.0 for x in s)
+    # log-uniform: log K_p is uniform, so the LHS strata of log K_p are equally wide
+    logs = np.sort(np.log([x["guidance.K_p"] for x in s]))
+    edges = np.log(1.0) + np.arange(n + 1) * (np.log(8.0) - np.log(1.0)) / n
+    assert all(edges[i] <= logs[i] <= edges[i + 1] for i in range(n))
+
+
+def _cli(*args: str, timeout: float = 240) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "mpf_mavlink.cli", *args],
+        cwd=ROOT, capture_output=True, text=True, timeout=timeout,
+    )  # fmt: skip
+
+
+def _rows(out: Path) -> list[dict[str, str]]:
+    with (out / "results.csv").open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_local_campaign_is_resumable_and_the_rerun_flies_the_same_numbers(tmp_path):
+    p = _write(tmp_path, KIN)
+    out = tmp_path / "out"
+    r = _cli("campaign", str(p), "--out", str(out), "--workers", "1", "-q")
+    assert r.returncode == 0, r.stderr
+    rows = _rows(out)
+    assert sorted(int(x["sample"]) for x in rows) == list(range(8))
+    assert all(x["status"] == "ok" for x in rows)
+    assert "flights: 8" in r.stdout and (out / "roa.png").is_file() and (out / "ecdf.png").is_file()
+    assert (out / "worst").is_dir() and any((out / "worst").iterdir())
+    # lose the last three rows (a campaign killed mid-way): the re-run flies exactly those
+    keep, lost = rows[:5], rows[5:]
+    with (out / "results.csv").open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(keep)
+    r2 = _cli("campaign", str(p), "--out", str(out), "--workers", "1", "-q", "--no-report")
+    assert r2.returncode == 0, r2.stderr
+    assert "flown now: 3 in" in r2.stdout
+    again = {x["sample"]: x for x in _rows(out)}
+    assert len(again) == 8
+    for x in lost:
+        # the kinematic plant is deterministic: the same sample flies to the same figures
+        y = again[x["sample"]]
+        assert (y["convergence_time_s"], y["final_pt_m"]) == (
+            x["convergence_time_s"],
+            x["final_pt_m"],
+        )
+    # another campaign into the same directory is refused, not mixed in
+    r3 = _cli("campaign", str(_write(tmp_path, KIN.replace("seed: 3", "seed: 4"), "d.yaml")),
+              "--out", str(out), "--workers", "1", "-q")  # fmt: skip
+    assert r3.returncode != 0 and "another" in r3.stderr
+
+
+def _free_tcp_port() -> int:
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def _dask(*args: str) -> subprocess.Popen[bytes]:
+    exe = Path(sys.executable).parent / "dask"
+    cmd = [str(exe)] if exe.is_file() else [sys.executable, "-m", "dask"]
+    return subprocess.Popen([*cmd, *args], cwd=ROOT, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)  # fmt: skip
+
+
+@pytest.mark.slow
+def test_real_scheduler_and_two_workers_survive_a_killed_worker(tmp_path):
+    # 4 SIL flights (the demo: JSBSim X8 + PX4 endpoint + bridge over UDP, 15 s each) and 4
+    # kinematic ones on a `dask scheduler` with two `dask worker`s; one worker is SIGKILLed as
+    # soon as the first row lands, while the other flights are in the air
+    port = _free_tcp_port()
+    addr = f"tcp://127.0.0.1:{port}"
+    procs = [_dask("scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard")]
+    time.sleep(2.0)
+    for _ in range(2):
+        procs.append(_dask("worker", addr, "--nthreads", "1", "--no-nanny", "--no-dashboard"))
+    sil = _write(tmp_path, f"""
+name: sil
+base: {DEMO}
+plant: sil
+samples: 4
+design: random
+seed: 1
+set: [sim.duration_s=15, metrics.steady_after_s=10]
+vary:
+  - {{key: sil.command_latency_s, dist: uniform, low: 0.0, high: 0.04}}
+metrics: [convergence_time_s, steady_rms_m, final_pt_m, verdict]
+rank_by: final_pt_m
+timeout_s: 300
+keep_worst: 0
+""", "sil.yaml")  # fmt: skip
+    kin = _write(
+        tmp_path, KIN.replace("samples: 8", "samples: 4").replace("keep_worst: 1", "keep_worst: 0")
+    )
+    try:
+        deadline = time.monotonic() + 60
+        from distributed import Client
+
+        with Client(addr, timeout="20s") as c:
+            while len(c.scheduler_info()["workers"]) < 2:
+                assert time.monotonic() < deadline, "the two dask workers never registered"
+                time.sleep(0.5)
+        victim = procs[1]
+        outs = {}
+        for name, spec in (("sil", sil), ("kin", kin)):
+            out = tmp_path / name
+            cli = subprocess.Popen(
+                [sys.executable, "-m", "mpf_mavlink.cli", "campaign", str(spec), "--out", str(out),
+                 "--scheduler", addr, "-q", "--no-report"],
+                cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            )  # fmt: skip
+            if name == "sil":
+                while not ((out / "results.csv").is_file() and len(_rows(out)) >= 1):
+                    assert cli.poll() is None, cli.communicate()
+                    assert time.monotonic() < deadline + 200, "no SIL flight finished"
+                    time.sleep(0.2)
+                n_at_kill = len(_rows(out))
+                os.killpg(victim.pid, signal.SIGKILL)
+                victim.wait(10)
+            stdout, stderr = cli.communicate(timeout=400)
+            assert cli.returncode == 0, stdout + stderr
+            outs[name] = _rows(out)
+        assert n_at_kill < 4
+        # every sample has its row, every flight ran to its end on whichever worker was left
+        for name, rows in outs.items():
+            assert sorted(int(x["sample"]) for x in rows) == [0, 1, 2, 3], name
+            assert all(x["status"] == "ok" for x in rows), [x["error"] for x in rows]
+        # tracking, not just ending: 15 s of the demo's capture at least halve the start's |pt|
+        assert all(float(x["final_pt_m"]) < 0.5 * float(x["initial_pt_m"]) for x in outs["sil"])
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait(10)
