@@ -15,8 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpf_mavlink.campaign.design import samples, unit_points
-from mpf_mavlink.campaign.spec import load_campaign
+from mpf_mavlink.campaign.design import load_campaign, samples, unit_points
 from mpf_mavlink.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -23,9 +23,9 @@ DEMO = "configs/campaign_demo_robustness.yaml"
 
 
 def _fly(path: str, workers: int, samples: int | None = None) -> dict[str, Any]:
+    from mpf_mavlink.campaign.design import load_campaign
     from mpf_mavlink.campaign.report import summarise
     from mpf_mavlink.campaign.run import run_campaign
-    from mpf_mavlink.campaign.spec import load_campaign
 
     spec = load_campaign(path)
     if samples is not None:

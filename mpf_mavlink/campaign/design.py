@@ -5,14 +5,38 @@ that turn one sample into one flight's configuration."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
 from scipy import stats
 
-from mpf_mavlink.campaign.spec import INITIAL_KEYS, CampaignSpec, Variable, split_indexed
-from mpf_mavlink.config.schema import Config
+from mpf_mavlink.campaign.spec import (
+    INITIAL_KEYS,
+    CampaignSpec,
+    Variable,
+    parse_campaign,
+    probe_values,
+    split_indexed,
+)
+from mpf_mavlink.config.schema import Config, load_config
+from mpf_mavlink.errors import ConfigError
+
+
+def load_campaign(path: str | Path) -> CampaignSpec:
+    """Read and validate a campaign file, and try every varied key on the base configuration
+    at the ends of its range (its mean, its choices): a campaign of a thousand flights must
+    not die on its first sample."""
+    spec = parse_campaign(path)
+    base = load_config(spec.base_path, spec.set)
+    for v in spec.vary:
+        for value in probe_values(v):
+            try:
+                load_config(spec.base_path, [*spec.set, *overrides_for(base, {v.key: value})])
+            except ConfigError as e:
+                raise ConfigError(f"{spec.source}: vary {v.key} = {value!r}: {e}") from None
+    return spec
 
 
 def unit_points(spec: CampaignSpec) -> np.ndarray:
@@ -83,8 +107,6 @@ def overrides_for(base: Config, sample: dict[str, Any]) -> list[str]:
             vectors[name] = list(_current(base, name))
         vec = vectors[name]
         if i >= len(vec):
-            from mpf_mavlink.errors import ConfigError
-
             raise ConfigError(f"vary {key}: {name} has {len(vec)} components")
         vec[i] = value
     for name, vec in vectors.items():

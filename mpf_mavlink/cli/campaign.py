@@ -40,9 +40,9 @@ def add_campaign_parser(sub: Any) -> None:
 
 
 def cmd_campaign(args: argparse.Namespace) -> int:
+    from mpf_mavlink.campaign.design import load_campaign
     from mpf_mavlink.campaign.report import format_summary, plots, reflown_dirs, summarise
     from mpf_mavlink.campaign.run import run_campaign
-    from mpf_mavlink.campaign.spec import load_campaign
     from mpf_mavlink.errors import MpfError
 
     if args.workers is not None and args.workers < 1:
