@@ -1,0 +1,42 @@
+"""Writing a run directory: the tables of :mod:`.rundir` and the figures of :mod:`.plots`
+(its own module so that plots can read run directories without rundir importing plots)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mpf_mavlink.runs.plots import plot_run
+from mpf_mavlink.runs.rundir import COLUMNS, _clean
+
+
+def write_run(
+    out: Path,
+    cols: dict[str, NDArray[np.float64]],
+    metrics: dict[str, Any],
+    path_T: NDArray[np.float64] | None,
+    plots: bool = True,
+) -> list[Path]:
+    """Write timeseries.csv, path_T.csv, metrics.json and (optionally) the plots."""
+    out.mkdir(parents=True, exist_ok=True)
+    A = (
+        np.column_stack([cols[c] for c in COLUMNS])
+        if len(cols["t"])
+        else np.zeros((0, len(COLUMNS)))
+    )
+    np.savetxt(
+        out / "timeseries.csv", A, delimiter=",", header=",".join(COLUMNS), comments="", fmt="%.9g"
+    )
+    if path_T is not None:
+        np.savetxt(
+            out / "path_T.csv", path_T, delimiter=",", header="x,y,z", comments="", fmt="%.6f"
+        )
+    (out / "metrics.json").write_text(json.dumps(_clean(metrics), indent=2) + "\n")
+    written = [out / "timeseries.csv", out / "metrics.json"]
+    if plots:
+        written += plot_run(out)
+    return written
