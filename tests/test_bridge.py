@@ -259,6 +259,7 @@ def test_telemetry_loss_stops_commands_within_half_a_second(tmp_path):
     assert res.handback_requested
 
 
+@pytest.mark.slow  # > 8 s of real-time flight: full suite (CI), not the quick loop
 def test_reengages_once_telemetry_is_back_and_replays_identically(tmp_path):
     from mpf_mavlink.runs.replay import TOLERANCE, replay
 
@@ -333,6 +334,7 @@ def _wait_for_port_ready(peer: MavPeer, timeout: float = 15.0) -> bool:
     return peer.wait_for(peer.in_offboard, timeout)
 
 
+@pytest.mark.slow  # > 6 s of real-time flight: full suite (CI), not the quick loop
 def test_sigterm_hands_back_and_reports_exit_code(tmp_path):
     port = free_port()
     peer = MavPeer(PeerOptions(flavour="px4"), port=port).start()
@@ -379,6 +381,7 @@ def test_cli_run_over_a_serial_port(tmp_path):
     assert json.loads((tmp_path / "metrics.json").read_text())["handback_confirmed"] is True
 
 
+@pytest.mark.slow  # > 8 s of real-time flight: full suite (CI), not the quick loop
 def test_tlog_survives_sigkill(tmp_path):
     port = free_port()
     peer = MavPeer(PeerOptions(flavour="ardupilot"), port=port).start()

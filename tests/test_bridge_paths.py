@@ -280,6 +280,7 @@ def test_live_target_from_global_position_int_and_attitude(tmp_path):
     assert len(ts) - n_att >= 15, "the stale target ATTITUDE was still used"
 
 
+@pytest.mark.slow  # > 6 s of real-time flight: full suite (CI), not the quick loop
 def test_stale_live_target_stops_the_mission_and_says_so(tmp_path):
     port = free_port()
     peer = MavPeer(PeerOptions(flavour="px4", send_global=True), port=port).start()

@@ -103,6 +103,7 @@ def _rows(out: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow  # > 8 s of real-time flight: full suite (CI), not the quick loop
 def test_local_campaign_is_resumable_and_the_rerun_flies_the_same_numbers(tmp_path):
     p = _write(tmp_path, KIN)
     out = tmp_path / "out"

@@ -330,6 +330,7 @@ FAST_BAD_INPUTS = ("config_not_yaml", "unknown_key", "non_finite", "set_unknown_
                    "signing_key_wrong_length", "hold_mode_unknown", "thrust_limits_crossed", "target_sysid_is_vehicle")  # fmt: skip
 
 
+@pytest.mark.slow  # > 8 s of real-time flight: full suite (CI), not the quick loop
 def test_soak_bad_input_subset(tmp_path, probe):
     row = _row("bad_config_and_cli", tmp_path, probe, only=FAST_BAD_INPUTS)
     assert (
@@ -343,6 +344,7 @@ def test_soak_output_dir_refused_before_connecting(tmp_path, probe):
     assert all(r["sent_to_vehicle"] == 0 for r in row.figures["refused"].values())
 
 
+@pytest.mark.slow  # > 8 s of real-time flight: full suite (CI), not the quick loop
 def test_soak_fuzzed_mission_short(tmp_path, probe):
     row = _row("fuzz", tmp_path, probe, n_frames=8000, dur=8.0)
     # a datagram may carry several frames, so the last one can overshoot the count a little
