@@ -234,7 +234,7 @@ def roa_plot(spec: CampaignSpec, rows: list[dict[str, Any]], out: Path) -> Path 
     conv = np.array([c for _, _, c in pts])
     xmax = float(P[:, 0].max()) * 1.05 + 1e-9
     gx = np.linspace(0.0, xmax, 60)
-    gy = np.linspace(0.0, 2.0, 81)
+    gy = np.linspace(0.0, 1.0, 81)  # Psi = (1 - cos(angle to d1)) / 2 lies in [0, 1]
     cert = np.array([[certified(spec, float(x), float(y)) for x in gx] for y in gy], float)
     fig, ax = plt.subplots(figsize=(7, 5))
     ax.contourf(gx, gy, cert, levels=[0.5, 1.5], colors=["tab:green"], alpha=0.18)
@@ -245,7 +245,7 @@ def roa_plot(spec: CampaignSpec, rows: list[dict[str, Any]], out: Path) -> Path 
     ax.plot([], [], color="tab:green", label="certified by the gain condition (Theorem 1)")
     ax.set_xlabel("|pt(0)| (m)")
     ax.set_ylabel("Psi(0)")
-    ax.set_ylim(0.0, 2.0)
+    ax.set_ylim(0.0, 1.0)
     ax.set_title(f"campaign {spec.name}: empirical region of attraction")
     ax.legend(fontsize=8, loc="upper right")
     ax.grid(alpha=0.3)
