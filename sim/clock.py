@@ -61,6 +61,7 @@ class RealtimeClock:
     def wait(self, sim_t: float, poll: PollFn, has_peer: PeerFn) -> None:
         if self._wall0 is None:
             self.start(sim_t)
+        assert self._wall0 is not None
         target = self._wall0 + (sim_t - self._sim0) / self.speed
         now = time.monotonic()
         if now - target > self.max_lag_s:  # far behind: re-anchor, do not burst

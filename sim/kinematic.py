@@ -106,7 +106,7 @@ class ClosedLoop:
         (cmd, diag), eta = self.law(t, pa, Ra, s, keep)
         if keep:
             self.last = Sample(
-                t, pa, Ra, np.array(w), diag, (cmd.w2, cmd.w3), cmd.sdot,  # type: ignore[arg-type]
+                t, pa, Ra, np.array(w), diag, (cmd.w2, cmd.w3), cmd.sdot,
                 self.target_state(t).position, self.target_state(t).R_T_I, eta,
             )  # fmt: skip
         wc = (cmd.w2, cmd.w3)
@@ -148,15 +148,14 @@ class ClosedLoop:
         )
         c = dt / 6
 
-        def comb(a: list[float], j: int) -> list[float]:
-            return [
-                a[i] + c * (k1[j][i] + 2 * k2[j][i] + 2 * k3[j][i] + k4[j][i])
-                for i in range(len(a))
-            ]
+        def comb(
+            a: list[float], ka: list[float], kb: list[float], kc: list[float], kd: list[float]
+        ) -> list[float]:
+            return [a[i] + c * (ka[i] + 2 * kb[i] + 2 * kc[i] + kd[i]) for i in range(len(a))]
 
-        p2 = np.array(comb(p, 0))
-        R2 = np.array(comb(R, 1)).reshape(3, 3)
-        w2 = np.array(comb(w, 2))
+        p2 = np.array(comb(p, k1[0], k2[0], k3[0], k4[0]))
+        R2 = np.array(comb(R, k1[1], k2[1], k3[1], k4[1])).reshape(3, 3)
+        w2 = np.array(comb(w, k1[2], k2[2], k3[2], k4[2]))
         s2 = s + c * (k1[3] + 2 * k2[3] + 2 * k3[3] + k4[3])
         if self.lambda_w is None:
             w2 = np.array(k4[4])

@@ -107,6 +107,16 @@ class FastSetAttitudeTarget:
         "time_boot_ms", "q", "body_roll_rate", "body_pitch_rate", "body_yaw_rate", "thrust",
         "target_system", "target_component", "type_mask", "_src",
     )  # fmt: skip
+    time_boot_ms: int
+    q: list[float]
+    body_roll_rate: float
+    body_pitch_rate: float
+    body_yaw_rate: float
+    thrust: float
+    target_system: int
+    target_component: int
+    type_mask: int
+    _src: tuple[int, int]
 
     def get_type(self) -> str:
         return "SET_ATTITUDE_TARGET"

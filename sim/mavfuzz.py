@@ -54,6 +54,10 @@ class _Sink:
         pass
 
 
+# every system id but the vehicle's (1) and the companion's (191), the broadcast 0 excluded
+FOREIGN_SYSIDS = tuple(i for i in range(2, 256) if i != 191)
+
+
 class FrameFuzzer:
     """Seeded MAVLink frame generator. ``vehicle`` = (sysid, compid) of the autopilot;
     ``now_ms()`` optionally returns the vehicle's current time_boot_ms (for absurd-but-close
@@ -65,7 +69,7 @@ class FrameFuzzer:
         vehicle: tuple[int, int] = (1, 1),
         now_ms: Callable[[], int | None] | None = None,
         weights: tuple[float, ...] = DEFAULT_WEIGHTS,
-        foreign_sysids: tuple[int, ...] = tuple(i for i in range(2, 256) if i != 191),
+        foreign_sysids: tuple[int, ...] = FOREIGN_SYSIDS,
     ) -> None:
         if len(weights) != len(CLASSES):
             raise ValueError(f"weights must have {len(CLASSES)} entries")

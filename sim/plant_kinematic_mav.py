@@ -92,7 +92,8 @@ class KinematicMavPlant:
 
     # environment (steady wind only)
     def set_wind(self, wind_ned_m_s) -> None:
-        self._wind = tuple(float(v) for v in wind_ned_m_s)
+        w = [float(v) for v in wind_ned_m_s]
+        self._wind = (w[0], w[1], w[2])
 
     def set_turbulence(self, kind: str = "none", seed: int = 0) -> None:
         if kind != "none":
@@ -126,7 +127,7 @@ class KinematicMavPlant:
         w = self._wind
         for i in range(3):
             self._pos[i] += (0.5 * (v0[i] + v1[i]) + w[i]) * dt
-        self._acc = tuple((v1[i] - v0[i]) / dt for i in range(3))
+        self._acc = ((v1[0] - v0[0]) / dt, (v1[1] - v0[1]) / dt, (v1[2] - v0[2]) / dt)
         self._k += 1
 
     def run(self, n: int, aileron: float, elevator: float, rudder: float, throttle: float) -> None:

@@ -103,7 +103,7 @@ def vehicle_main(argv: list[str]) -> int:
         help="build the rebooted vehicle in advance (SIGUSR1 swaps at once)",
     )
     a = ap.parse_args(argv)
-    target = None
+    target: Stationary | ConstantTurn | None = None
     if a.target == "stationary":
         target = Stationary((0.0, 0.0, -100.0))
     elif a.target == "drift":
@@ -1122,7 +1122,8 @@ def scenario_sigkill(o: Opts) -> Row:
     from mpf_mavlink.mavlink import read_tlog
 
     row = Row("bridge_sigkill")
-    t_kill = t_kill_wall = None
+    t_kill: float | None = None
+    t_kill_wall: float | None = None
     with Mission(MissionSpec.make(o, 60.0), o.workdir / "sigkill") as m:
         if row.check(m.wait_engaged(30.0), "never engaged"):
             _track(m, 4.0)
@@ -1136,6 +1137,7 @@ def scenario_sigkill(o: Opts) -> Row:
     if t_kill is None:
         return row
     last_deliv = _last_before(tap.setpoints, t_kill + 0.2)
+    assert t_kill is not None and t_kill_wall is not None  # the row fails above when unkilled
     fs = [e.t for e in tap.failsafes() if e.t >= t_kill]
     sp_ms = [int(e.msg.time_boot_ms) for e in tap.setpoints]
     tl = m.out_dir / "mavlink.tlog"

@@ -393,6 +393,7 @@ class SimVehicle:
         self.mode_log: list[tuple[float, float, str]] = []  # (t, wall perf_counter s, mode name)
         self.statustexts: list[tuple[float, str]] = []
         # PX4 offboard stream bookkeeping (sim boot time, s)
+        self._reject_reason: str | None = None
         self._sp_last: float | None = None
         self._sp_stream_start: float | None = None
         self._sp: tuple | None = (
@@ -549,11 +550,12 @@ class SimVehicle:
         self._enter(_AP_BEHAVIOUR[number], ARDUPLANE_MODES[number], int(number), announce)
 
     def _offboard_available(self) -> bool:
-        t = self._boot_t
+        t, last, start = self._boot_t, self._sp_last, self._sp_stream_start
         return (
-            self._sp_last is not None
-            and t - self._sp_last <= PX4_OFFBOARD_MAX_GAP_S
-            and t - self._sp_stream_start >= PX4_OFFBOARD_MIN_STREAM_S - 1e-9
+            last is not None
+            and start is not None
+            and t - last <= PX4_OFFBOARD_MAX_GAP_S
+            and t - start >= PX4_OFFBOARD_MIN_STREAM_S - 1e-9
         )
 
     def _base_mode(self) -> int:
@@ -580,6 +582,7 @@ class SimVehicle:
                 self._set_px4_mode(PX4_MAIN["AUTO"], PX4_AUTO_SUB["LOITER"])
                 beh = self._behaviour
             else:
+                assert self._sp is not None  # offboard is only available with a setpoint
                 kind, vals, thrust = self._sp
                 if kind == "rates":
                     a, e, r = ap.rates_to_surfaces(dt, vals, tuple(st.pqr), st.airspeed)
@@ -648,6 +651,7 @@ class SimVehicle:
                 self._behaviour == OFFBOARD
                 and sp is not None
                 and sp[0] == "rates"
+                and self._sp_last is not None
                 and self._k * dt - self._sp_last <= self.com_of_loss_t
             ):
                 # Hot path (PX4 offboard body rates): the rate loops read only p, q, r and the
@@ -887,8 +891,8 @@ class SimVehicle:
             hz = min(hz, 1.0 / (1.25 * self.frame_period))
             groups = _AP_DATA_STREAMS.values() if msg.req_stream_id == 0 else (
                 [_AP_DATA_STREAMS[msg.req_stream_id]] if msg.req_stream_id in _AP_DATA_STREAMS else [])  # fmt: skip
-            for names in groups:
-                for name in names:
+            for group in groups:
+                for name in group:
                     setattr(self.rates, name, hz)
                     self._next.pop(name, None)
         elif mt == "PARAM_REQUEST_READ":
@@ -994,7 +998,7 @@ class SimVehicle:
         p1, p2, p3 = msg.param1, msg.param2, msg.param3
         if cmd == M.MAV_CMD_DO_SET_MODE:
             res = self._do_set_mode(p1, p2, p3)
-            reason = getattr(self, "_reject_reason", None)
+            reason = self._reject_reason
             self._reject_reason = None
             self._ack(cmd, res, msg, reason)
         elif cmd == M.MAV_CMD_COMPONENT_ARM_DISARM:

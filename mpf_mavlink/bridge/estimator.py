@@ -230,7 +230,7 @@ class Estimator:
         self.vfr_rx: float | None = None
         self.wind: Any = None  # WindSample
         self.wind_rx: float | None = None
-        self._wind_lp: NDArray[np.float64] | None = None
+        self._wind_lp: tuple[float, float, float] | None = None
         self._wind_lp_t: float | None = None
         self.t0 = 0.0  # time origin subtracted from t_boot (mission time)
 

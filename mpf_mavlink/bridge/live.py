@@ -686,7 +686,7 @@ class Bridge:
                 f"could not stream setpoints at {rate:g} Hz for {m.prestream_s:g} s", "engage"
             )
         self.log(
-            f"pre-streamed {self.prestream_sends} setpoints in {self.last_send_mono - self.first_send_mono:.2f} s"
+            f"pre-streamed {self.prestream_sends} setpoints in {self.last_send_mono - (self.first_send_mono or self.last_send_mono):.2f} s"
         )
         if m.arm and not (self.hb is not None and self.hb.armed):
             self.acks.clear()

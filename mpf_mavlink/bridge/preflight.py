@@ -58,7 +58,7 @@ def scenario_wind(cfg: Config) -> tuple[tuple[float, float, float], float]:
             max((g.magnitude_m_s for g in sil.gusts), default=0.0)
             + TURBULENCE_ALLOWANCE_M_S[sil.turbulence]
         )
-        return tuple(sil.wind_ned_m_s), gust  # type: ignore[return-value]
+        return sil.wind_ned_m_s, gust
     wind = cfg.kinematic.wind
     gust = max((float(np.linalg.norm(g.velocity_ned_m_s)) for g in wind.gusts), default=0.0)
     return wind.steady_ned_m_s, gust

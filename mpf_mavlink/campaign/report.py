@@ -181,13 +181,13 @@ def plots(spec: CampaignSpec, rows: list[dict[str, Any]], out: Path) -> list[Pat
     if flown and keys:
         fig, axes = plt.subplots(1, len(keys), figsize=(4.2 * len(keys), 3.6), squeeze=False)
         for ax, k in zip(axes[0], keys, strict=True):
-            v = np.sort([x for r in flown if (x := _num(r.get(k))) is not None])
-            if len(v):
-                ax.step(v, np.arange(1, len(v) + 1) / len(v), where="post")
+            vals = np.sort([x for r in flown if (x := _num(r.get(k))) is not None])
+            if len(vals):
+                ax.step(vals, np.arange(1, len(vals) + 1) / len(vals), where="post")
             ax.set_xlabel(k)
             ax.set_ylabel("fraction of flights")
             ax.grid(alpha=0.3)
-            ax.set_title(f"{len(v)} of {len(flown)} flights")
+            ax.set_title(f"{len(vals)} of {len(flown)} flights")
         fig.suptitle(f"campaign {spec.name}: ECDF")
         fig.tight_layout()
         written.append(_save(fig, out / "ecdf.png"))
@@ -195,7 +195,8 @@ def plots(spec: CampaignSpec, rows: list[dict[str, Any]], out: Path) -> list[Pat
     if flown:
         vs = spec.vary
         fig, axes = plt.subplots(1, len(vs), figsize=(4.2 * len(vs), 3.6), squeeze=False)
-        for ax, v in zip(axes[0], vs, strict=True):
+        for ax, var in zip(axes[0], vs, strict=True):
+            v = var
             xs = [_typed(r.get(v.key)) for r in flown]
             ys = [_num(r.get(spec.rank_by)) for r in flown]
             ok = [r.get("status") == "ok" for r in flown]
@@ -225,9 +226,9 @@ def roa_plot(spec: CampaignSpec, rows: list[dict[str, Any]], out: Path) -> Path 
     """Converged / not against the start (|pt(0)|, Psi(0)), over the certified region."""
     import matplotlib.pyplot as plt
 
-    pts = [(_num(r.get("initial_pt_m")), _num(r.get("initial_psi")), converged(r)) for r in rows
+    raw = [(_num(r.get("initial_pt_m")), _num(r.get("initial_psi")), converged(r)) for r in rows
            if r.get("status") in ("ok", "failed")]  # fmt: skip
-    pts = [(a, b, c) for a, b, c in pts if a is not None and b is not None]
+    pts = [(a, b, c) for a, b, c in raw if a is not None and b is not None]
     if len(pts) < 2 or not any(k.startswith("initial.") for k in (v.key for v in spec.vary)):
         return None
     P = np.array([(a, b) for a, b, _ in pts])

@@ -22,7 +22,7 @@ def hold_mode_error(mode: str, flavour: str) -> str | None:
     vehicle waiting for setpoints that no longer come."""
     from mpf_mavlink.mavlink.modes import arduplane_mode_from_name, px4_mode_from_name
 
-    ok = []
+    ok: list[bool | None] = []
     for fl, parse, offboard in (
         ("px4", px4_mode_from_name, (6, 0)),
         ("ardupilot", arduplane_mode_from_name, 15),

@@ -211,7 +211,7 @@ def adapt(
     """
     isf = math.isfinite
     try:
-        R2 = R_B_N[2].tolist() if hasattr(R_B_N, "tolist") else R_B_N[2]  # only row 2 is used
+        R2 = R_B_N[2].tolist() if hasattr(R_B_N, "tolist") else R_B_N[2]  # type: ignore[union-attr]  # only row 2 is used
         roll = math.atan2(R2[1], R2[2])
         pitch = math.asin(_clip(-R2[0], -1.0, 1.0))
         ox, oy, oz = omega_w1_I

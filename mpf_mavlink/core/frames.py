@@ -19,10 +19,10 @@ GRAVITY_M_S2 = 9.80665
 
 def quat_wxyz_to_matrix(q: ArrayLike) -> Mat3:
     """Unit quaternion (w, x, y, z) -> rotation matrix R_B^N. Normalises q; rejects zero norm."""
-    w, x, y, z = (float(v) for v in q)
+    w, x, y, z = np.asarray(q, float).tolist()
     n = math.sqrt(w * w + x * x + y * y + z * z)
     if not math.isfinite(n) or n < 1e-9:
-        raise ValueError(f"quaternion {tuple(q)} has no direction")
+        raise ValueError(f"quaternion {(w, x, y, z)} has no direction")
     w, x, y, z = w / n, x / n, y / n, z / n
     return np.array(
         [
@@ -134,6 +134,6 @@ def ned_to_geodetic(
     """Local NED (m) about an origin -> WGS-84 (lat deg, lon deg, alt m)."""
     import pymap3d
 
-    n, e, d = (float(v) for v in ned)
+    n, e, d = np.asarray(ned, float).tolist()
     lat, lon, alt = pymap3d.ned2geodetic(n, e, d, lat0_deg, lon0_deg, alt0_m)
     return float(lat), float(lon), float(alt)

@@ -16,6 +16,7 @@ MAVLink 1 (0xFE) and MAVLink 2 (0xFD) frames are parsed; we always *send* MAVLin
 from __future__ import annotations
 
 import os
+from typing import Any
 
 os.environ["MAVLINK20"] = "1"
 
@@ -33,7 +34,7 @@ def _load_dialect():  # -> module
 
 
 #: the generated pymavlink dialect module (message classes, enums, ``MAVLink`` parser class)
-dialect = _load_dialect()
+dialect: Any = _load_dialect()
 
 from mpf_mavlink.mavlink.codec import (  # noqa: E402
     AttitudeSample,

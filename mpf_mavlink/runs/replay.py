@@ -51,9 +51,9 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.core.adapter import Setpoint, safe_setpoint
-from mpf_mavlink.config.schema import Config
 from mpf_mavlink.bridge.controller import SETPOINT_COLUMNS, Controller, Step, parse_marker
+from mpf_mavlink.config.schema import Config
+from mpf_mavlink.core.adapter import Setpoint, safe_setpoint
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.mavlink import (
     Flavour,

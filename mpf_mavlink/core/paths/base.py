@@ -154,9 +154,9 @@ class TabulatedPath:
         self._K1 = np.sum(kappa * F2, axis=1)
         self._K2 = np.sum(kappa * F3, axis=1)
         # Python lists: scalar access to them is ~10x faster than to numpy arrays.
-        self._Pl = [tuple(map(float, r)) for r in P]
-        self._Tl = [tuple(map(float, r)) for r in T]
-        self._F2l = [tuple(map(float, r)) for r in F2]
+        self._Pl: list[Tuple3] = [(float(r[0]), float(r[1]), float(r[2])) for r in P]
+        self._Tl: list[Tuple3] = [(float(r[0]), float(r[1]), float(r[2])) for r in T]
+        self._F2l: list[Tuple3] = [(float(r[0]), float(r[1]), float(r[2])) for r in F2]
         self._K1l = [float(v) for v in self._K1]
         self._K2l = [float(v) for v in self._K2]
         # Per cell: the angle about f1_{i+1} between f2_i carried to node i+1 and f2_{i+1}.
@@ -165,13 +165,13 @@ class TabulatedPath:
         for i in range(n):
             r = _mrot(self._F2l[i], self._Tl[i], self._Tl[i + 1])
             t1, f2b = self._Tl[i + 1], self._F2l[i + 1]
-            c = r[0] * f2b[0] + r[1] * f2b[1] + r[2] * f2b[2]
+            cos_ = r[0] * f2b[0] + r[1] * f2b[1] + r[2] * f2b[2]
             x = (
                 r[1] * f2b[2] - r[2] * f2b[1],
                 r[2] * f2b[0] - r[0] * f2b[2],
                 r[0] * f2b[1] - r[1] * f2b[0],
             )
-            corr.append(math.atan2(x[0] * t1[0] + x[1] * t1[1] + x[2] * t1[2], c))
+            corr.append(math.atan2(x[0] * t1[0] + x[1] * t1[1] + x[2] * t1[2], cos_))
         self._C = corr
 
     # ------------------------------------------------------------------ evaluation
