@@ -460,13 +460,6 @@ def test_cli_window_and_plot_of_any_run(tmp_path, arduplane_run):
             assert (d / f).is_file(), (d, f)
 
 
-def test_replay_is_fast_enough():
-    # acceptance: <= 5 s wall for the real tlog (plots excluded here: see scripts/bench replay_s)
-    res = replay(SHARED_TLOG, load_config(REPLAY_CFG))
-    print(f"replay of the real tlog: {res.elapsed_s:.2f} s")
-    assert res.elapsed_s < 5.0
-
-
 def test_markers_in_a_bridge_tlog(px4_run):
     _, _, _, out = px4_run
     r = read_tlog(out / "mavlink.tlog", types=["STATUSTEXT"])

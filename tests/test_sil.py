@@ -1,6 +1,6 @@
 """Software-in-the-loop: the SIL vehicle and the bridge as separate MAVLink peers (sim/sil.py),
 ``mpf-mavlink vehicle --serve``, the ``sil`` / ``aircraft`` configuration sections, another
-JSBSim airframe, the vehicle's fast MAVLink framing (sim/mavfast.py), gusts and seeded turbulence.
+JSBSim airframe, gusts and seeded turbulence.
 
 Every threshold has its reason next to it. Missions fly the default demo (configs/default.yaml:
 X8 at 16 m/s, lemniscate a = 150 m about a boat at 3 m/s, 4 m/s wind, light turbulence).
@@ -29,7 +29,6 @@ from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
 from mpf_mavlink.cli.main import main  # noqa: E402
 from mpf_mavlink.config.schema import load_config  # noqa: E402
-from sim.mavfast import FastPacker, MsgSpec, decode_set_attitude_target, x25crc  # noqa: E402
 from sim.plant_jsbsim import JSBSimPlant  # noqa: E402
 from sim.sil import build_vehicle, run_sil  # noqa: E402
 from sim.vehicle import SimVehicle  # noqa: E402
@@ -45,95 +44,6 @@ def free_port() -> int:
     port = s.getsockname()[1]
     s.close()
     return port
-
-
-# --------------------------------------------------------------------------- fast framing
-def test_fast_framing_is_byte_identical_to_pymavlink():
-    class Sink:
-        def __init__(self) -> None:
-            self.bufs: list[bytes] = []
-
-        def write(self, b: bytes) -> None:
-            self.bufs.append(bytes(b))
-
-    sink = Sink()
-    ref = M.MAVLink(sink, srcSystem=1, srcComponent=1)
-    fast = FastPacker(M.MAVLink(None, srcSystem=1, srcComponent=1))
-    q = [0.9, 0.1, -0.3, 0.2]
-    cases = {
-        "attitude": (123456, 0.1, -0.2, 3.0, 0.01, 0.0, -0.5),
-        "local_position_ned": (20, 1.5, -2.5, -100.0, 16.0, 0.0, 0.0),  # trailing zeros: cut
-        "global_position_int": (20, 411850000, -87600000, 100000, 100000, 1600, -3, 0, 35999),
-        "vfr_hud": (16.1, 15.2, 359, 22, 100.0, 0.0),
-        "heartbeat": (
-            M.MAV_TYPE_FIXED_WING,
-            M.MAV_AUTOPILOT_PX4,
-            217,
-            (6 << 16),
-            M.MAV_STATE_ACTIVE,
-            3,
-        ),
-        "wind_cov": (10**9, 0.5, 4.0, 0.0, 0.0, 0.0, 100.0, 0.0, 0.0),
-        "wind": (270.0, 4.0, 0.0),
-        "home_position": (411850000, -87600000, 0, 0.0, 0.0, 0.0, q, 0.0, 0.0, 0.0, 5),
-        "sys_status": (1, 2, 3, 100, 12600, 500, 90, 0, 0, 0, 0, 0, 0, 0, 0, 0),
-        "system_time": (1_700_000_000_000_000, 1234),
-        "follow_target": (
-            99,
-            15,
-            411850000,
-            -87600000,
-            0.0,
-            [3.0, 0.1, 0.0],
-            [0.0, 0.03, 0.0],
-            q,
-            [0, 0, 0.01],
-            [0, 0, 0],
-            0,
-        ),
-        "all_zero_attitude": None,
-    }
-    for _ in range(3):  # several sequence numbers, so the counter is shared correctly
-        for name, args in cases.items():
-            if args is None:
-                name, args = (
-                    "attitude",
-                    (0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
-                )  # payload all zeros: 1 byte kept
-            enc = getattr(ref, f"{name}_encode")(*args)
-            ref.send(enc)
-            got = fast.pack(MsgSpec(getattr(M, f"MAVLink_{name}_message")), *args)
-            assert got == sink.bufs[-1], name
-            assert fast.mav.seq == ref.seq
-    assert x25crc(b"123456789") == 0x6F91  # CRC-16/MCRF4XX check value of the catalogue
-
-
-def test_fast_setpoint_decoding_matches_pymavlink_and_refuses_the_rest():
-    out: list[bytes] = []
-
-    class Sink:
-        def write(self, b: bytes) -> None:
-            out.append(bytes(b))
-
-    mav = M.MAVLink(Sink(), srcSystem=1, srcComponent=191)
-    mav.set_attitude_target_send(5000, 1, 1, 128, [1.0, 0.0, 0.0, 0.0], 0.1, -0.05, 0.2, 0.3)
-    mav.set_attitude_target_send(0, 0, 0, 0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0.0)  # zeros cut
-    parser = M.MAVLink(None)
-    for buf in out:
-        ref = parser.parse_buffer(buf)[0]
-        m = decode_set_attitude_target(buf)
-        assert m is not None and m.get_type() == "SET_ATTITUDE_TARGET"
-        for f in ("time_boot_ms", "target_system", "target_component", "type_mask", "body_roll_rate",
-                  "body_pitch_rate", "body_yaw_rate", "thrust"):  # fmt: skip
-            assert getattr(m, f) == getattr(ref, f), f
-        assert list(m.q) == list(ref.q)
-        assert (m.get_srcSystem(), m.get_srcComponent()) == (1, 191)
-    bad = bytearray(out[0])
-    bad[-1] ^= 0xFF  # CRC broken
-    assert decode_set_attitude_target(bytes(bad)) is None
-    assert decode_set_attitude_target(out[0] + out[1]) is None  # two packets: pymavlink's job
-    mav.heartbeat_send(6, 8, 0, 0, 0)
-    assert decode_set_attitude_target(out[-1]) is None  # another message
 
 
 # --------------------------------------------------------------------------- configuration

@@ -51,9 +51,18 @@ def paper_wall_time_s() -> dict[str, Any]:
     }
 
 
+def fdm_steps_per_s() -> dict[str, Any]:
+    """JSBSim X8 steps per second of wall time with the state read at 50 Hz (the SIL's core;
+    was a timed test, which a loaded machine made flaky)."""
+    from sim.plant_jsbsim import benchmark
+
+    return {"steps_per_s": benchmark(seconds=300.0)}
+
+
 GROUPS = {
     "controller_step_us": controller_step_us,
     "paper_scenario": paper_wall_time_s,
+    "fdm_steps_per_s": fdm_steps_per_s,
 }
 
 
@@ -80,7 +89,9 @@ def _optional_groups() -> None:
         campaign_roa,
         campaign_throughput,
     )
+    from mpf_mavlink.bench.framing import mavlink_framing_us
 
+    GROUPS["mavlink_framing_us"] = mavlink_framing_us
     GROUPS["campaign_throughput"] = campaign_throughput
     GROUPS["campaign_roa"] = campaign_roa
     GROUPS["campaign_demo_robustness"] = campaign_demo_robustness
@@ -89,7 +100,9 @@ def _optional_groups() -> None:
         campaign_roa,
         campaign_throughput,
     )
+    from mpf_mavlink.bench.framing import mavlink_framing_us
 
+    GROUPS["mavlink_framing_us"] = mavlink_framing_us
     GROUPS["campaign_throughput"] = campaign_throughput
     GROUPS["campaign_roa"] = campaign_roa
     GROUPS["campaign_demo_robustness"] = campaign_demo_robustness
