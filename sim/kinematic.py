@@ -16,12 +16,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from mpf_mavlink.core.guidance.baselines import guidance_law
 from mpf_mavlink.core.guidance.law import (
     Extensions,
     Gains,
     MpfDiagnostics,
     VehicleState,
-    mpf_law,
 )
 from mpf_mavlink.core.paths import TabulatedPath
 from mpf_mavlink.core.target import TargetMotion
@@ -73,11 +73,13 @@ class ClosedLoop:
         v_w: float,
         lambda_w: float | None,
         wind: WindFn = no_wind,
+        law: str = "mpf",
     ) -> None:
         self.path, self.target, self.gains, self.ext = path, target, gains, ext
         self.v_w = v_w
         self.lambda_w = lambda_w  # None: perfect rate tracking (w = w_cmd)
         self.wind = wind
+        self.law_name = law  # guidance.law: MPF or a baseline, the same command type
         self._tcache: tuple[float, object] | None = None
         self.last: Sample | None = None
 
@@ -92,7 +94,8 @@ class ClosedLoop:
     def law(self, t: float, p: NDArray[np.float64], R: NDArray[np.float64], s: float, diag: bool):  # noqa: ANN201
         eta = self.wind(t, p)
         veh = VehicleState(t, p, R, self.v_w, eta)
-        return mpf_law(s, veh, self.target_state(t), self.path, self.gains, self.ext, diag), eta
+        st = self.target_state(t)
+        return guidance_law(self.law_name, s, veh, st, self.path, self.gains, self.ext, diag), eta
 
     def deriv(
         self, t: float, p: list[float], R: list[float], w: list[float], s: float, keep: bool = False

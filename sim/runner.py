@@ -40,6 +40,7 @@ def kinematic_loop(cfg: Config) -> tuple[ClosedLoop, Any]:
         cfg.vehicle.airspeed_m_s,
         k.autopilot_bandwidth_rad_s,
         region_wind(k.wind.steady_ned_m_s, gusts),
+        cfg.guidance.law,
     )
     R0 = euler_to_matrix(*k.initial_attitude_rpy_rad)
     x0 = initial_state(

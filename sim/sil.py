@@ -42,7 +42,8 @@ import numpy as np
 
 from mpf_mavlink.bridge.estimator import wind_frame
 from mpf_mavlink.config.schema import Config
-from mpf_mavlink.core.guidance.law import VehicleState, mpf_law
+from mpf_mavlink.core.guidance.baselines import guidance_law
+from mpf_mavlink.core.guidance.law import VehicleState
 from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.runs.rundir import (
     RunTable,
@@ -570,7 +571,7 @@ def truth_table(
         t = float(tm[k]) - t_engage
         veh = VehicleState(t, P[k], R_W, float(np.linalg.norm(va)), W[k])
         tgt = target.state(float(tt[k]))
-        cmd, diag = mpf_law(float(s_at[j]), veh, tgt, path, gains, ext, diagnostics=True)
+        cmd, diag = guidance_law(cfg.guidance.law, float(s_at[j]), veh, tgt, path, gains, ext)
         w1 = R_W[:, 0]
         w_act = (0.0, 0.0)
         if w1_prev is not None and t > t_prev:

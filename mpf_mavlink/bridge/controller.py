@@ -37,7 +37,8 @@ from mpf_mavlink.bridge.estimator import Estimate, Estimator, EstimatorParams
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core import so3
 from mpf_mavlink.core.adapter import AdapterParams, AdapterState, Setpoint, adapt, safe_setpoint
-from mpf_mavlink.core.guidance.law import MpfCommand, MpfDiagnostics, VehicleState, mpf_law
+from mpf_mavlink.core.guidance.baselines import guidance_law
+from mpf_mavlink.core.guidance.law import MpfCommand, MpfDiagnostics, VehicleState
 from mpf_mavlink.core.guidance.predict import look_ahead, predict_segments, prediction_horizon
 from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.core.target import TargetState
@@ -379,6 +380,7 @@ class Controller:
         self.path = build_path(cfg.path)
         self.gains = build_gains(cfg)
         self.ext = build_extensions(cfg)
+        self.cfg_law = cfg.guidance.law  # MPF or a baseline (core/guidance/baselines.py)
         self.s = 0.0
         self.t0: float | None = None  # mission-time origin (autopilot boot time, s)
         self.t_prev: float | None = None
@@ -552,13 +554,14 @@ class Controller:
             if a > gains.alpha:
                 gains = dataclasses.replace(gains, alpha=a)
         self.alpha_m = gains.alpha
-        cmd, diag = mpf_law(s_law, vl, tgt_law, self.path, gains, self.ext, diagnostics=True)
+        law = self.cfg_law
+        cmd, diag = guidance_law(law, s_law, vl, tgt_law, self.path, gains, self.ext, True)
         assert diag is not None
         if tau > 0.0:
             # The logs describe the sample's own instant (errors, frames, the relative position:
             # replay and the SIL truth align on them); the command and its saturation flag are
             # the predicted evaluation's, which is what was sent.
-            _, dm = mpf_law(self.s, vs, tgt, self.path, gains, self.ext, diagnostics=True)
+            _, dm = guidance_law(law, self.s, vs, tgt, self.path, gains, self.ext, True)
             assert dm is not None
             diag = dm._replace(mode=diag.mode)
         self.law_evals += 1

@@ -65,8 +65,14 @@ class TargetConfig:
 
 @dataclass(frozen=True)
 class GuidanceConfig:
-    """Gains of Theorem 1 and the practical extensions (all off = the paper's law)."""
+    """Gains of Theorem 1 and the practical extensions (all off = the paper's law).
 
+    law: which guidance flies (``mpf``; or a baseline of core/guidance/baselines.py, same
+    command type and adapter: ``npfg`` PX4's NPFG on the moving path with path-relative
+    velocities, ``npfg_static`` the same path re-sent as if static, ``l1_loiter`` ArduPlane's
+    L1 loiter about the moving centre, ``pursuit`` carrot chasing). The gains below are MPF's."""
+
+    law: Literal["mpf", "npfg", "npfg_static", "l1_loiter", "pursuit"] = "mpf"
     K_p: float = field(default=4.0, metadata=_pos())
     K_R: float = field(default=2.0, metadata=_pos())
     alpha_m: float = field(default=1.0, metadata=_pos())
