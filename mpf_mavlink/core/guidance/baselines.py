@@ -290,7 +290,7 @@ def baseline_law(
     p = vehicle.position
     RT = target.R_T_I.tolist()
     RTt = [[RT[j][i] for j in range(3)] for i in range(3)]
-    q = _mv(RTt, tuple((p - target.position).tolist()))  # type: ignore[arg-type]
+    q = _mv(RTt, tuple((p - target.position).tolist()))
     window = 0.1 * path.length if path.closed else 50.0
     s_c = (
         path.closest(np.asarray(q), s, window) if math.isfinite(s) else path.closest(np.asarray(q))
@@ -301,7 +301,7 @@ def baseline_law(
     pdI = _mv(RT, pd)
     tp = target.position
     pf = (float(tp[0]) + pdI[0], float(tp[1]) + pdI[1], float(tp[2]) + pdI[2])
-    vpd = _mv(RT, _cross(om, pd))  # type: ignore[arg-type]
+    vpd = _mv(RT, _cross(om, pd))
     vp = tuple(float(target.velocity[i]) + vpd[i] for i in range(3))
     t1 = _mv(RT, f1)
     # horizontal tangent and horizontal curvature of the path (right-positive, 1/m)
