@@ -1,0 +1,123 @@
+"""The bridge's link loop: receive and dispatch messages (tlog time stamps), periodic duties
+(companion heartbeat, setpoint re-sends) and the bounded wait every life-cycle step spins in."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+from mpf_mavlink.bridge.base import State, _Stop
+from mpf_mavlink.bridge.control_step import ControlStep
+from mpf_mavlink.mavlink import decode, dialect, is_offboard, mode_name
+
+
+class LinkIO(ControlStep):
+    """Receive, dispatch, periodic sends and the bounded wait (:meth:`_spin`)."""
+
+    # -- I/O helpers -------------------------------------------------------------------------
+    def _rx_time(self, msg: Any) -> float | None:
+        """The receive time (s since the epoch) as the tlog recorded it: the link logs each
+        message just before handing it over, so the last record is this one. The same float
+        as a tlog reader computes (us * 1e-6), so replay sees exactly what we saw."""
+        tl = self.link.tlog if self.link is not None else None
+        if tl is not None and tl.last_packet is msg.get_msgbuf() and tl.last_us is not None:
+            return tl.last_us * 1e-6
+        t = getattr(msg, "_timestamp", None)  # no tlog record for it: quantise alike
+        return None if t is None else round(t * 1e6) * 1e-6
+
+    def _dispatch(self, msg: Any) -> None:
+        src = msg.get_srcSystem()
+        if src == self.m.vehicle_sysid:
+            if self._arrivals is not None:
+                self._arrivals.setdefault(msg.get_type(), deque(maxlen=400)).append(
+                    time.monotonic()
+                )
+            if msg.get_type() == "PARAM_VALUE":
+                name = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else ""
+                if math.isfinite(msg.param_value):
+                    self.params[name] = float(msg.param_value)
+                return
+        rx = self._rx_time(msg)
+        msg._timestamp = rx  # decoders copy it into the samples (VFR_HUD, WIND, HEARTBEAT)
+        sample = decode(msg)
+        if sample is None:
+            return
+        name = type(sample).__name__
+        if src == self.m.vehicle_sysid:
+            if name == "HeartbeatSample":
+                if sample.autopilot == dialect.MAV_AUTOPILOT_INVALID:
+                    return  # a GCS or companion on the same system id
+                self.hb = sample
+                if self.engaged and not is_offboard(self.flavour, sample):
+                    mode = mode_name(self.flavour, sample)
+                    if rx is not None and self.link.clock_gate.restarting(rx):
+                        # a vehicle that reboots faster than the telemetry timeout comes back
+                        # in its start-up mode: that is no pilot, and the log should say so
+                        raise _Stop(
+                            f"the vehicle rebooted (its boot clock restarted) and came back in {mode}: stopped commanding",
+                            "pilot",
+                        )
+                    raise _Stop(
+                        f"mode changed to {mode} by someone else: stopped commanding, not fighting it",
+                        "pilot",
+                    )
+                return
+            if name == "CommandAckSample":
+                self.acks.append(sample)
+                return
+            if self.ctl.feed_vehicle(sample, rx):
+                self.last_att_mono = time.monotonic()
+                if self.streaming and self.state < State.HANDBACK:
+                    self._control_step()
+        elif self.live and src == self.m.target_sysid:
+            self.ctl.feed_target(sample, rx)
+
+    def _periodic(self) -> None:
+        now = time.monotonic()
+        if now - self.last_hb_tx_mono >= 1.0:
+            self.last_hb_tx_mono = now
+            self.link.send_heartbeat()
+        if not self.streaming:
+            return
+        period = 1.0 / self.m.min_setpoint_rate_hz
+        # re-send only while the last ATTITUDE is young enough that the last re-send still
+        # falls within telemetry_timeout_s of it: commands never outlive the telemetry by more
+        fresh = now - self.last_att_mono + period <= self.m.telemetry_timeout_s
+        if self.state == State.HANDBACK:  # wings-level setpoints until the hold mode is confirmed
+            if fresh and self.last_sp is not None and now - self.last_send_mono >= period:
+                self._send_setpoint(self.last_sp, self.last_time_boot_ms)
+                self.n["setpoints_resent"] += 1
+            return
+        if now - self.last_att_mono > self.m.telemetry_timeout_s:
+            raise _Stop(
+                f"telemetry lost: no ATTITUDE for {now - self.last_att_mono:.2f} s; stopped commanding",
+                "telemetry",
+            )
+        if now - self.last_good_mono > self.m.telemetry_timeout_s:
+            kind = "target" if "target" in self.why_not else "telemetry"
+            raise _Stop(f"{self.why_not}; stopped commanding", kind)
+        if fresh and self.last_sp is not None and now - self.last_send_mono >= period:
+            self._send_setpoint(self.last_sp, self.last_time_boot_ms)
+            self.n["setpoints_resent"] += 1
+
+    def _spin(self, timeout_s: float, until: Callable[[], bool] | None = None) -> bool:
+        """Pump messages (streaming setpoints when on) until ``until()`` or the timeout."""
+        t_end = time.monotonic() + timeout_s
+        while True:
+            if until is not None and until():
+                return True
+            now = time.monotonic()
+            if now >= t_end:
+                return False
+            wait = min(t_end - now, 0.01)
+            if self.streaming:
+                wait = min(
+                    wait, max(0.0, self.last_send_mono + 1.0 / self.m.min_setpoint_rate_hz - now)
+                )
+            msg = self.link.recv(wait)
+            if msg is not None:
+                self._dispatch(msg)
+            self._periodic()

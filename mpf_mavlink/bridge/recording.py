@@ -1,0 +1,90 @@
+"""The bridge's run record: metrics, verdict, run directory (tables, plots) at the end of a run."""
+
+from __future__ import annotations
+
+import gc
+from pathlib import Path
+
+import numpy as np
+
+from mpf_mavlink.bridge.base import EXIT_OK, BridgeResult
+from mpf_mavlink.bridge.controller import SETPOINT_COLUMNS
+from mpf_mavlink.bridge.session import Session
+from mpf_mavlink.runs.rundir import compute_metrics
+from mpf_mavlink.runs.verdict import EXIT_VERDICT, judge, verdict_line
+from mpf_mavlink.runs.write import write_run
+
+
+class Recording(Session):
+    """Metrics, verdict and the run directory when the run ends."""
+
+    def _finish(self, res: BridgeResult) -> BridgeResult:
+        gc.unfreeze()  # run_bridge may be called again in this process (tests, SIL)
+        res.state_reached = self.furthest.name
+        res.final_state = self.state.name
+        if self.t_engage is not None and self.t_last is not None:
+            res.tracked_s = max(0.0, self.t_last - self.t_engage)
+        counters = dict(self.n)
+        if self.link is not None:
+            counters.update({k: v for k, v in self.link.counters.as_dict().items()})
+        res.counters = counters
+        self._close()
+        cols = self.table.arrays()
+        metrics = compute_metrics(
+            cols, self.cfg.metrics.steady_after_s, self.cfg.metrics.converge_threshold_m
+        )
+        if len(cols["t"]):
+            metrics["final_pt_m"] = float(cols["pt_norm"][-1])
+            # the verdict on what the bridge saw (its estimates: the truth is not known here)
+            J = np.array(self.judge_rows, float).reshape(-1, 4)
+            fails = judge(
+                self.cfg,
+                cols["t"] - cols["t"][0],
+                cols["pt_norm"],
+                J[:, 0],
+                J[:, 1],
+                J[:, 2],
+                J[:, 3],
+            )
+            res.verdict = verdict_line(fails)
+            metrics["verdict"], metrics["verdict_failures"] = res.verdict, fails
+            if fails and res.exit_code == EXIT_OK:
+                res.exit_code = EXIT_VERDICT
+        if self.sp_rows:
+            # thrust pinned at its ceiling: the airspeed the law assumes is not being held
+            thr = np.array([r[8] for r in self.sp_rows], float)
+            metrics["thrust_saturated_fraction"] = float(
+                np.mean(thr >= self.ad_params.thrust_max - 0.005)
+            )
+        st = self.ctl.ad_state
+        metrics["adapter_learned"] = {"trim_pitch_rad": st.trim_hat, "turn_gain": st.turn_gain}
+        metrics.update(
+            streams=res.streams, fallback=res.fallback,
+            state_reached=res.state_reached, exit_reason=res.exit_reason, exit_code=res.exit_code,
+            flavour=res.flavour, tracked_s=res.tracked_s, handback_requested=res.handback_requested,
+            handback_confirmed=res.handback_confirmed, checks=res.checks, counters=counters,
+            url=self.opts.url,
+        )  # fmt: skip
+        res.metrics = metrics
+        out = Path(self.opts.out_dir)
+        try:
+            # setpoints first: the plots draw them too
+            np.savetxt(
+                out / "setpoints.csv",
+                np.array(self.sp_rows, float).reshape(-1, 13),
+                delimiter=",",
+                header=SETPOINT_COLUMNS,
+                comments="",
+                fmt="%.9g",
+            )
+            write_run(
+                out,
+                cols,
+                metrics,
+                self.path.positions(),
+                plots=self.m.plots and len(cols["t"]) >= 2,
+            )
+        except Exception as e:  # noqa: BLE001 - records must not hide the flight's outcome
+            res.records_error = f"run directory not written: {e}"
+            self.log(f"could not write the run directory: {e}")
+        return res
