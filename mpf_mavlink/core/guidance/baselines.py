@@ -264,6 +264,22 @@ def _loiter_circle(path: TabulatedPath) -> tuple[tuple[float, float, float], flo
     return c, r
 
 
+def _closest_near(path: TabulatedPath, q: tuple[float, float, float], s: float) -> float:
+    """The closest point near the previous one (m): Newton steps on (q - p(s)) . f1 = 0 from s,
+    each capped at 2 m, pure float arithmetic (the global search of TabulatedPath.closest costs a
+    numpy pass over every node; consecutive evaluations move the point by centimetres)."""
+    for _ in range(8):
+        p, f1, _f2, _f3, _k1, _k2 = path.eval(s)
+        step = (q[0] - p[0]) * f1[0] + (q[1] - p[1]) * f1[1] + (q[2] - p[2]) * f1[2]
+        step = max(-2.0, min(2.0, step))
+        s += step
+        if abs(step) < 1e-6:
+            break
+    if path.closed:
+        s %= path.length
+    return s
+
+
 def baseline_law(
     law: str,
     s: float,
@@ -291,10 +307,7 @@ def baseline_law(
     RT = target.R_T_I.tolist()
     RTt = [[RT[j][i] for j in range(3)] for i in range(3)]
     q = _mv(RTt, tuple((p - target.position).tolist()))
-    window = 0.1 * path.length if path.closed else 50.0
-    s_c = (
-        path.closest(np.asarray(q), s, window) if math.isfinite(s) else path.closest(np.asarray(q))
-    )
+    s_c = _closest_near(path, q, s) if math.isfinite(s) else path.closest(np.asarray(q))
     pd, f1, f2, f3, k1, k2 = path.eval(s_c)
     om = tuple(target.omega_T.tolist())
     # path point in NED, its velocity (target velocity + omega x p_d), its tangent
@@ -339,7 +352,10 @@ def baseline_law(
     else:
         raise ValueError(f"unknown guidance law {law!r} (one of {', '.join(LAWS)})")
     a_max = GRAVITY * math.tan(params.max_bank_rad)
-    a_lat = max(-a_max, min(a_max, a_lat))
+    mode = law
+    if abs(a_lat) > a_max:
+        a_lat = math.copysign(a_max, a_lat)
+        mode += "+sat"  # the autopilot's roll limit acted (the table's "time saturated")
     chi_dot = a_lat / max(v_w, EPS)
     # vertical: altitude loop on the closest point's height (+ its climb rate when careful)
     h_err = -(p[2] - pf[2])
@@ -354,7 +370,10 @@ def baseline_law(
     c2 = om_w[0] * w2[0] + om_w[1] * w2[1] + om_w[2] * w2[2]
     c3 = om_w[0] * w3[0] + om_w[1] * w3[1] + om_w[2] * w3[2]
     # the closest point's progression: relative velocity along the tangent (in {T} arc length)
-    sdot = sum((gv[i] - vp[i]) * t1[i] for i in range(3))
+    # d s_c / dt = (v_rel . f1) / (1 - pt . kappa) for the closest point of a curve (in {T}; the
+    # path's own rotation omega x p_d is in vp, the frame's rotation of pt is second order here)
+    kap_pt = sum(pt[i] * kap[i] for i in range(3))
+    sdot = sum((gv[i] - vp[i]) * t1[i] for i in range(3)) / max(1.0 - kap_pt, 0.1)
     cmd = MpfCommand(t, c2, c3, sdot, (om_w[0], om_w[1], om_w[2]))
     ptn = math.sqrt(pt[0] ** 2 + pt[1] ** 2 + pt[2] ** 2)
     f1I = t1
@@ -367,7 +386,7 @@ def baseline_law(
     diag = MpfDiagnostics(
         t, s_c, pt, ptn, ptF, pf, 0.0, (0.0, 0.0), ptF[1], ptF[2], w1, f1I, f1I,
         (0.0, 0.0, 0.0), (0.0, 0.0), (c2, c3), v_w - math.sqrt(sum(x * x for x in u)),
-        law, k1, k2,
+        mode, k1, k2,
     )  # fmt: skip
     return cmd, diag
 

@@ -1,0 +1,157 @@
+"""``mpf-mavlink compare CONFIG --laws mpf,npfg,...``: the same mission flown by each guidance law.
+
+Thin: for each law the config is the same but ``guidance.law`` (so the same seeds of turbulence
+and wind, the same start, the same adapter); the kinematic plant runs in-process, ``--plant
+sil`` flies the full SIL (JSBSim vehicle + the bridge over MAVLink, figures from the plant's
+truth). Table and overlay plots: :mod:`mpf_mavlink.runs.compare`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from mpf_mavlink.errors import MpfError
+
+LAWS_ALL = ("mpf", "npfg", "npfg_static", "l1_loiter", "pursuit")
+
+
+def parse_laws(text: str) -> list[str]:
+    laws = [x.strip() for x in text.split(",") if x.strip()]
+    bad = [x for x in laws if x not in LAWS_ALL]
+    if bad or not laws:
+        raise MpfError(
+            f"--laws {text}: unknown law {', '.join(bad) or '(none)'} (one of {', '.join(LAWS_ALL)})"
+        )
+    return laws
+
+
+def run_compare(
+    cfg: Any,
+    laws: list[str],
+    plant: str,
+    out: Path,
+    duration_s: float | None = None,
+    progress: bool = True,
+    plots: bool = True,
+    log: Any = print,
+) -> tuple[list[Any], str]:
+    """Fly every law; returns (rows, markdown table). Raises MpfError for an unusable law."""
+    from mpf_mavlink.core.scenario import build_path
+    from mpf_mavlink.runs.compare import LawRow, law_figures, markdown_table, write_compare
+
+    if "l1_loiter" in laws and cfg.path.type not in ("circle", "helix"):
+        raise MpfError(
+            f"{cfg.source}: l1_loiter flies a loiter circle; path.type {cfg.path.type} is not one "
+            "(drop it from --laws)"
+        )
+    path = build_path(cfg.path)
+    nodes = path.positions()
+    closed = bool(getattr(path, "closed", False))
+    if duration_s is not None:
+        cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, duration_s=duration_s))
+    rows: list[Any] = []
+    runs: dict[str, Any] = {}
+    for i, law in enumerate(laws):
+        c = dataclasses.replace(cfg, guidance=dataclasses.replace(cfg.guidance, law=law))
+        log(f"[{i + 1}/{len(laws)}] {law}: {plant}, {c.sim.duration_s:g} s ...")
+        w0 = time.perf_counter()
+        roll = None
+        if plant == "sil":
+            from sim.sil import run_sil
+
+            res = run_sil(c, out / law, progress=progress, plots=plots, log=lambda s: None)
+            tv = res.t_vehicle
+            tr = res.truth
+            if len(tv) and "euler" in tr:
+                sel = (tr["t"] >= tv[0]) & (tr["t"] <= tv[-1])
+                roll = tr["euler"][sel, 0]
+            cols, code = res.cols, res.exit_code
+        else:
+            from mpf_mavlink.runs.write import write_run
+            from sim.runner import run_kinematic
+
+            kres = run_kinematic(c, progress=progress)
+            if plots:
+                write_run(out / law, kres.cols, kres.metrics, kres.path_T, plots=False)
+            cols, code = kres.cols, 0
+        if len(cols["t"]) < 2:
+            raise MpfError(f"{law}: the run recorded no flight (exit {code})")
+        fig = law_figures(
+            cols, nodes, closed, c.vehicle.airspeed_m_s, c.metrics.steady_after_s,
+            c.metrics.converge_threshold_m, roll,
+        )  # fmt: skip
+        fig["exit_code"] = code
+        fig["wall_s"] = time.perf_counter() - w0
+        rows.append(LawRow(law, fig))
+        runs[law] = cols
+        log(
+            f"      RMS cross-track {fig['steady_rms_xt_m'] if fig['steady_rms_xt_m'] is None else round(fig['steady_rms_xt_m'], 3)} m"
+            f" in {fig['wall_s']:.0f} s wall"
+        )
+    wind = cfg.section("sil").wind_ned_m_s if plant == "sil" else cfg.kinematic.wind.steady_ned_m_s
+    header = (
+        f"{cfg.name}: {plant} plant, {cfg.sim.duration_s:g} s, steady from t >= "
+        f"{cfg.metrics.steady_after_s:g} s, wind {tuple(wind)} m/s NED; xt = distance from the moving path"
+    )
+    write_compare(out, rows, runs, nodes, closed, header, plots)
+    return rows, header + "\n\n" + markdown_table(rows)
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    from mpf_mavlink.config.schema import load_config
+    from mpf_mavlink.runs.rundir import prepare_out_dir
+
+    cfg = load_config(args.config, args.overrides)
+    laws = parse_laws(args.laws)
+    out = args.out or Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-compare-{cfg.name}"
+    out = prepare_out_dir(out)
+    rows, table = run_compare(
+        cfg, laws, args.plant, out, args.duration, progress=not args.quiet,
+        plots=not args.no_plots, log=lambda s: print(s, file=sys.stderr, flush=True),
+    )  # fmt: skip
+    print(table)
+    print(f"\nrun directory: {out}  (compare.md, compare.json, compare_*.png, one run per law)")
+    bad = [r.law for r in rows if r.figures.get("exit_code")]
+    if bad:
+        raise MpfError(f"compare: the flight of {', '.join(bad)} failed (see its run directory)")
+    return 0
+
+
+def add_compare_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentParser:
+    p = subparsers.add_parser(
+        "compare",
+        help="fly the same mission with MPF and the baseline guidance laws; one table",
+        description="Fly the same mission (same seeds, start, adapter) with each guidance law "
+        "(mpf; npfg = PX4 NPFG on the moving path with path-relative velocities; npfg_static = "
+        "the same path re-sent as if it stood still; l1_loiter = ArduPlane's L1 loiter about the "
+        "moving centre, circular paths only; pursuit = carrot chasing) and write a table "
+        "(convergence, steady RMS / max of |pt| and of the cross-track distance, max bank, rate "
+        "effort, time saturated) and overlay plots.",
+    )
+    add_config(p)
+    p.add_argument(
+        "--laws",
+        default="mpf,npfg,npfg_static,pursuit",
+        help="comma-separated laws (default: %(default)s)",
+    )
+    p.add_argument("--plant", choices=["kinematic", "sil"], default="kinematic",
+                   help="kinematic (in-process, the paper's plant) or sil (JSBSim + bridge over MAVLink)")  # fmt: skip
+    p.add_argument(
+        "--duration",
+        type=float,
+        metavar="S",
+        help="seconds of each flight (default sim.duration_s)",
+    )
+    p.add_argument("--out", type=Path, help="directory (default runs/<time>-compare-<name>)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=cmd_compare)
+    return p
+
+
+__all__ = ["add_compare_parser", "cmd_compare", "parse_laws", "run_compare"]

@@ -1,0 +1,208 @@
+"""The head-to-head figures of ``mpf-mavlink compare``: one row per guidance law, the same
+measure for every law, a markdown table and the overlay plots.
+
+Every law is judged by the same two distances, both from the recorded run table:
+- ``|pt|``: the law's own error (MPF: to its virtual point; a baseline: to the closest point);
+- cross-track: the distance of the vehicle from the moving path (the polyline of the path's
+  nodes in the target frame), identical for every law. The comparison's ratios use it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+GRAVITY = 9.80665
+
+
+def distance_to_polyline(
+    nodes: NDArray[np.float64], q: NDArray[np.float64], closed: bool
+) -> NDArray[np.float64]:
+    """Distance (m) of each point of q (n, 3) from the polyline through nodes (m, 3)."""
+    A = nodes[:-1]
+    B = nodes[1:]
+    if closed:
+        A = np.vstack([A, nodes[-1:]])
+        B = np.vstack([B, nodes[:1]])
+    best = np.full(len(q), np.inf)
+    d = B - A
+    L2 = np.maximum(np.sum(d * d, axis=1), 1e-12)
+    for i in range(0, len(q), 256):  # chunks keep the (chunk, segments) arrays small
+        qq = q[i : i + 256, None, :]
+        u = np.clip(np.sum((qq - A) * d, axis=2) / L2, 0.0, 1.0)
+        best[i : i + 256] = np.min(np.linalg.norm(qq - (A + u[:, :, None] * d), axis=2), axis=1)
+    return best
+
+
+@dataclass
+class LawRow:
+    law: str
+    figures: dict[str, Any]
+
+
+def law_figures(
+    cols: dict[str, NDArray[np.float64]],
+    path_nodes: NDArray[np.float64],
+    closed: bool,
+    airspeed: float,
+    steady_after_s: float,
+    threshold_m: float,
+    roll: NDArray[np.float64] | None = None,
+) -> dict[str, Any]:
+    """The table's figures of one run (units in the keys)."""
+    t = cols["t"]
+    rel = np.column_stack([cols["rel_x"], cols["rel_y"], cols["rel_z"]])
+    ct = distance_to_polyline(path_nodes, rel, closed)
+    m = t >= steady_after_s
+    above = np.nonzero(ct >= threshold_m)[0]
+    if len(above) == 0:
+        conv: float | None = float(t[0])
+    elif above[-1] == len(t) - 1:
+        conv = None
+    else:
+        conv = float(t[above[-1] + 1])
+    pt = cols["pt_norm"]
+    rate = np.hypot(cols["w2_cmd"], cols["w3_cmd"])
+    # the bank a coordinated turn at the achieved rate needs (the kinematic plant has no roll)
+    bank = np.degrees(np.arctan(airspeed * np.abs(cols["w3"]) / GRAVITY))
+    out: dict[str, Any] = {
+        "convergence_s": conv,
+        "steady_rms_pt_m": float(np.sqrt(np.mean(pt[m] ** 2))) if m.any() else None,
+        "steady_max_pt_m": float(np.max(pt[m])) if m.any() else None,
+        "steady_rms_xt_m": float(np.sqrt(np.mean(ct[m] ** 2))) if m.any() else None,
+        "steady_max_xt_m": float(np.max(ct[m])) if m.any() else None,
+        "max_bank_deg": float(np.max(bank)) if len(bank) else None,
+        "rms_rate_cmd_rad_s": float(np.sqrt(np.mean(rate[m] ** 2))) if m.any() else None,
+        "saturated_frac": float(np.mean(cols["saturated"])) if len(t) else None,
+    }
+    if roll is not None and len(roll):
+        out["max_bank_deg"] = float(np.degrees(np.max(np.abs(roll))))
+    return out
+
+
+COLUMNS_SHOWN = [
+    ("law", "law", ""),
+    ("convergence_s", "conv. (s)", "{:.1f}"),
+    ("steady_rms_xt_m", "RMS xt (m)", "{:.3g}"),
+    ("steady_max_xt_m", "max xt (m)", "{:.3g}"),
+    ("steady_rms_pt_m", "RMS |pt| (m)", "{:.3g}"),
+    ("steady_max_pt_m", "max |pt| (m)", "{:.3g}"),
+    ("max_bank_deg", "max bank (deg)", "{:.1f}"),
+    ("rms_rate_cmd_rad_s", "RMS rate cmd (rad/s)", "{:.3f}"),
+    ("saturated_frac", "saturated", "{:.3f}"),
+]
+
+
+def best_baseline(
+    rows: list[LawRow], key: str = "steady_rms_xt_m"
+) -> tuple[str | None, float | None]:
+    """The baseline (not MPF) with the smallest finite figure."""
+    best: tuple[str | None, float | None] = (None, None)
+    for r in rows:
+        v = r.figures.get(key)
+        if r.law == "mpf" or v is None or not math.isfinite(v):
+            continue
+        if best[1] is None or v < best[1]:
+            best = (r.law, v)
+    return best
+
+
+def ratio_mpf_best(rows: list[LawRow], key: str = "steady_rms_xt_m") -> float | None:
+    """MPF's figure over the best baseline's (< 1: MPF better)."""
+    mpf = next((r.figures.get(key) for r in rows if r.law == "mpf"), None)
+    _, b = best_baseline(rows, key)
+    if mpf is None or b is None or b <= 0.0:
+        return None
+    return float(mpf / b)
+
+
+def markdown_table(rows: list[LawRow]) -> str:
+    head = "| " + " | ".join(h for _, h, _ in COLUMNS_SHOWN) + " |"
+    sep = "|" + "|".join("---" for _ in COLUMNS_SHOWN) + "|"
+    lines = [head, sep]
+    for r in rows:
+        cells = []
+        for k, _, fmt in COLUMNS_SHOWN:
+            if k == "law":
+                cells.append(r.law)
+                continue
+            v = r.figures.get(k)
+            cells.append("n/a" if v is None else fmt.format(v))
+        lines.append("| " + " | ".join(cells) + " |")
+    ratio = ratio_mpf_best(rows)
+    name, _ = best_baseline(rows)
+    if ratio is not None:
+        lines.append("")
+        lines.append(f"MPF / best baseline ({name}), steady RMS cross-track: {ratio:.3f}")
+    return "\n".join(lines)
+
+
+def write_compare(
+    out: Path,
+    rows: list[LawRow],
+    runs: dict[str, dict[str, NDArray[np.float64]]],
+    path_nodes: NDArray[np.float64],
+    closed: bool,
+    header: str,
+    plots: bool = True,
+) -> list[Path]:
+    """compare.md, compare.json and the overlay plots in ``out``; returns the files written."""
+    out.mkdir(parents=True, exist_ok=True)
+    files = [out / "compare.md", out / "compare.json"]
+    files[0].write_text(header + "\n\n" + markdown_table(rows) + "\n")
+    files[1].write_text(
+        json.dumps(
+            {
+                "rows": {r.law: r.figures for r in rows},
+                "ratio_mpf_best": ratio_mpf_best(rows),
+                "best_baseline": best_baseline(rows)[0],
+                "header": header,
+            },
+            indent=2,
+        )  # fmt: skip
+    )
+    if not plots:
+        return files
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for law, cols in runs.items():
+        rel = np.column_stack([cols["rel_x"], cols["rel_y"], cols["rel_z"]])
+        ct = distance_to_polyline(path_nodes, rel, closed)
+        ax.semilogy(cols["t"], np.maximum(ct, 1e-3), label=law, lw=0.9)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("cross-track distance (m)")
+    ax.set_title(header, fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    p = out / "compare_cross_track.png"
+    fig.savefig(p, dpi=110)
+    plt.close(fig)
+    files.append(p)
+    fig, ax = plt.subplots(figsize=(7, 7))
+    P = np.asarray(path_nodes)
+    ax.plot(P[:, 1], P[:, 0], "k-", lw=2.5, alpha=0.35, label="path")
+    for law, cols in runs.items():
+        ax.plot(cols["rel_y"], cols["rel_x"], lw=0.8, label=law)
+    ax.set_xlabel("target frame y (m)")
+    ax.set_ylabel("target frame x (m)")
+    ax.set_aspect("equal")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    ax.set_title("trajectories in the target frame", fontsize=9)
+    fig.tight_layout()
+    p = out / "compare_target_frame.png"
+    fig.savefig(p, dpi=110)
+    plt.close(fig)
+    files.append(p)
+    return files
