@@ -124,3 +124,15 @@ def test_pursuit_lags_a_line_moving_across_itself_by_the_derivable_distance() ->
     lag = u * t - p[:, 1]  # the line's east position minus the vehicle's
     d = L * u / math.sqrt(V * V - u * u)
     assert abs(lag[t >= 40.0] - d).max() < 0.05
+
+
+def test_a_baseline_starting_20_m_above_the_path_descends_to_it_on_the_altitude_loop() -> None:
+    # The stated vertical law: h_dot = (h_ref - h) / 5 s, gamma following with 1 s: the height
+    # error decays like a critically-damped-ish pair of first-order lags (5 s and 1 s), from 20 m
+    # to 20 * (5 e^{-t/5} - e^{-t}) / 4 = 0.0084 m at t = 40 s; never below the path.
+    R = 80.0
+    path = shapes.circle((0.0, 0.0, -100.0), R, clockwise=True)
+    t, p = fly("npfg", path, Stationary(), (R, 0.0, -120.0), math.pi / 2, 40.0)
+    above = -100.0 - p[:, 2]
+    assert above.min() > -0.05
+    assert abs(above[-1]) < 0.05

@@ -358,7 +358,7 @@ def baseline_law(
         mode += "+sat"  # the autopilot's roll limit acted (the table's "time saturated")
     chi_dot = a_lat / max(v_w, EPS)
     # vertical: altitude loop on the closest point's height (+ its climb rate when careful)
-    h_err = -(p[2] - pf[2])
+    h_err = p[2] - pf[2]  # h_ref - h, heights up: (-pf_d) - (-p_d)
     hdot = h_err / params.vertical_tau_s + (-vp[2] if careful else 0.0)
     gam_ref = math.asin(max(-1.0, min(1.0, hdot / max(v_w, EPS))))
     gam_ref = max(-params.max_gamma_rad, min(params.max_gamma_rad, gam_ref))
