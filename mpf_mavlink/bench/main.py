@@ -110,6 +110,9 @@ def _optional_groups() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     _optional_groups()
+    from mpf_mavlink.bench.compare import guidance_compare
+
+    GROUPS["guidance_compare"] = guidance_compare
     p = argparse.ArgumentParser(
         prog="scripts/bench", description="Print benchmark figures as JSON."
     )

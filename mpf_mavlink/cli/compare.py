@@ -71,6 +71,7 @@ def run_compare(
                 sel = (tr["t"] >= tv[0]) & (tr["t"] <= tv[-1])
                 roll = tr["euler"][sel, 0]
             cols, code = res.cols, res.exit_code
+            exit_reason = res.exit_reason
         else:
             from mpf_mavlink.runs.write import write_run
             from sim.runner import run_kinematic
@@ -79,6 +80,7 @@ def run_compare(
             if plots:
                 write_run(out / law, kres.cols, kres.metrics, kres.path_T, plots=False)
             cols, code = kres.cols, 0
+            exit_reason = "duration reached"
         if len(cols["t"]) < 2:
             raise MpfError(f"{law}: the run recorded no flight (exit {code})")
         fig = law_figures(
@@ -86,6 +88,8 @@ def run_compare(
             c.metrics.converge_threshold_m, roll,
         )  # fmt: skip
         fig["exit_code"] = code
+        fig["exit_reason"] = exit_reason
+        fig["tracked_s"] = float(cols["t"][-1])
         fig["wall_s"] = time.perf_counter() - w0
         rows.append(LawRow(law, fig))
         runs[law] = cols

@@ -135,6 +135,12 @@ def markdown_table(rows: list[LawRow]) -> str:
             v = r.figures.get(k)
             cells.append("n/a" if v is None else fmt.format(v))
         lines.append("| " + " | ".join(cells) + " |")
+    for r in rows:
+        if r.figures.get("exit_code"):
+            lines.append(
+                f"\n{r.law}: flight ended with exit {r.figures['exit_code']} after "
+                f"{r.figures.get('tracked_s', 0.0):.0f} s ({r.figures.get('exit_reason')})"
+            )
     ratio = ratio_mpf_best(rows)
     name, _ = best_baseline(rows)
     if ratio is not None:
