@@ -9,10 +9,10 @@ differs from what it sent (the summary says which first).
 from __future__ import annotations
 
 import argparse
-import time
 from pathlib import Path
 from typing import Any
 
+from mpf_mavlink.cli.common import add_output_flags, add_overrides, default_out, printer, seconds
 from mpf_mavlink.config import bridge as bridge_config  # noqa: F401  (registers mavlink/adapter: replay configs have them)
 
 REPLAY_DESCRIPTION = """\
@@ -36,23 +36,12 @@ configuration.
 """
 
 
-def _seconds(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
-    if not v >= 0.0:
-        raise argparse.ArgumentTypeError(f"must be >= 0 s, got {text}")
-    return v
-
-
 def cmd_replay(args: argparse.Namespace) -> int:
     from mpf_mavlink.config.schema import load_config
     from mpf_mavlink.runs.replay import replay
 
     cfg = load_config(args.config, args.overrides)
-    out = args.out or Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-replay-{cfg.name}"
-    log: Any = (lambda s: None) if args.quiet else (lambda s: print(s, flush=True))
+    out = args.out or default_out("replay", cfg.name)
     res = replay(
         args.tlog,
         cfg,
@@ -60,7 +49,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         t_from=args.t_from,
         t_to=args.t_to,
         plots=not args.no_plots,
-        log=log,
+        log=printer(args.quiet),
     )
     print(res.summary(), flush=True)
     c = res.check
@@ -92,22 +81,18 @@ def add_replay_parser(subparsers: Any) -> argparse.ArgumentParser:
     r.add_argument(
         "--from",
         dest="t_from",
-        type=_seconds,
+        type=seconds,
         metavar="SECONDS",
         help="start of the window, s since the first record (default 0)",
     )
     r.add_argument(
         "--to",
         dest="t_to",
-        type=_seconds,
+        type=seconds,
         metavar="SECONDS",
         help="end of the window, s since the first record (default: the end)",
     )
-    r.add_argument(
-        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-        help="override one configuration key, e.g. --set guidance.K_R=1.5 (repeatable; validated like the file)",
-    )  # fmt: skip
-    r.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
-    r.add_argument("-q", "--quiet", action="store_true", help="print only the summary")
+    add_overrides(r, "--set guidance.K_R=1.5")
+    add_output_flags(r, plots_help="skip the PNG figures", quiet_help="print only the summary")
     r.set_defaults(func=cmd_replay)
     return r

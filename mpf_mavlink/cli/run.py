@@ -7,10 +7,17 @@ return its exit code. Known failures (bad URL, no vehicle, bad config) are MpfEr
 from __future__ import annotations
 
 import argparse
-import time
 from pathlib import Path
 from typing import Any
 
+from mpf_mavlink.cli.common import (
+    add_output_flags,
+    add_overrides,
+    count,
+    default_out,
+    positive,
+    printer,
+)
 from mpf_mavlink.config import bridge as bridge_config  # noqa: F401  (registers mavlink/adapter: `check` accepts bridge configs)
 
 RUN_DESCRIPTION = """\
@@ -44,8 +51,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from mpf_mavlink.runs.rundir import prepare_out_dir
 
     cfg = load_config(args.config, args.overrides)
-    out = args.out or Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-run-{cfg.name}"
-    out = prepare_out_dir(out)
+    out = prepare_out_dir(args.out or default_out("run", cfg.name))
     opts = BridgeOptions(
         url=args.connect,
         out_dir=out,
@@ -57,32 +63,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         reengage=args.reengage,
         force=args.force,
     )
-    log: Any = (lambda s: None) if args.quiet else (lambda s: print(s, flush=True))
-    res = run_bridge(cfg, opts, log=log)
+    res = run_bridge(cfg, opts, log=printer(args.quiet))
     print(res.summary(), flush=True)
     if res.verdict:
         print(res.verdict, flush=True)
     return res.exit_code
-
-
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return v
-
-
-def _count(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
-    return v
 
 
 def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
@@ -112,12 +97,12 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     )
     r.add_argument(
         "--duration",
-        type=_positive,
+        type=positive,
         metavar="S",
         help="seconds of TRACKING before handing back (default: mavlink.mission_duration_s)",
     )
     r.add_argument(
-        "--heartbeat-timeout", type=_positive, metavar="S",
+        "--heartbeat-timeout", type=positive, metavar="S",
         help="give up with one line and exit 2 when no autopilot HEARTBEAT (or no usable telemetry) "
         "arrives within S seconds (default: mavlink.heartbeat_timeout_s)",
     )  # fmt: skip
@@ -127,20 +112,16 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="arm the vehicle after pre-streaming if it is disarmed (off by default: arm it yourself)",
     )
     r.add_argument(
-        "--reengage", type=_count, metavar="N",
+        "--reengage", type=count, metavar="N",
         help="after telemetry or the live target is lost and control handed back, fly again up "
         "to N times when it is back (mavlink.reengage_wait_s, reengage_settle_s) and the vehicle "
         "is in the hold mode; 0 ends the run at the first loss (default: mavlink.reengage_max, 0)",
     )  # fmt: skip
-    r.add_argument(
-        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-        help="override one configuration key, e.g. --set mavlink.vehicle_sysid=2 or "
-        "--set guidance.K_R=1.5 (repeatable; validated like the file)",
+    add_overrides(r, "--set mavlink.vehicle_sysid=2 or --set guidance.K_R=1.5")
+    add_output_flags(
+        r, plots_help="skip the PNG figures in the run directory",
+        quiet_help="print only the final summary",
     )  # fmt: skip
-    r.add_argument(
-        "--no-plots", action="store_true", help="skip the PNG figures in the run directory"
-    )
-    r.add_argument("-q", "--quiet", action="store_true", help="print only the final summary")
     r.add_argument(
         "--force", action="store_true",
         help="engage even when a pre-flight check fails (the flight's verdict still judges it)",
