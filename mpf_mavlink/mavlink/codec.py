@@ -19,65 +19,116 @@ from typing import Any
 import numpy as np
 
 from mpf_mavlink.mavlink import dialect as _d
+from mpf_mavlink.mavlink.encode import (
+    encode_arm,
+    encode_companion_heartbeat,
+    encode_do_reposition,
+    encode_get_home_position,
+    encode_request_data_stream,
+    encode_request_message,
+    encode_set_attitude_target_quat,
+    encode_set_attitude_target_rates,
+    encode_set_message_interval,
+    encode_set_mode,
+)
 from mpf_mavlink.mavlink.modes import (
-    MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-    Flavour,
-    arduplane_mode_from_name,
     is_armed,
-    px4_mode_from_name,
+)
+from mpf_mavlink.mavlink.wire_limits import (
+    ARM_FORCE_MAGIC,
+    MAV_CMD_COMPONENT_ARM_DISARM,
+    MAV_CMD_DO_REPOSITION,
+    MAV_CMD_DO_SET_MODE,
+    MAV_CMD_GET_HOME_POSITION,
+    MAV_CMD_REQUEST_MESSAGE,
+    MAV_CMD_SET_MESSAGE_INTERVAL,
+    MAX_ACCEL_M_S2,
+    MAX_ALT_M,
+    MAX_ANGLE_RAD,
+    MAX_LOCAL_POS_M,
+    MAX_RATE_RAD_S,
+    MAX_SPEED_M_S,
+    MIN_ALT_M,
+    QUAT_NORM_TOL,
+    TM_ATTITUDE_IGNORE,
+    TM_BODY_PITCH_RATE_IGNORE,
+    TM_BODY_ROLL_RATE_IGNORE,
+    TM_BODY_YAW_RATE_IGNORE,
+    TM_THROTTLE_IGNORE,
+    TM_THRUST_BODY_SET,
+    TYPE_MASK_ARDUPLANE_ATTITUDE,
+    TYPE_MASK_PX4_RATES,
+    _finite,
+    _geodetic_ok,
 )
 
-# Plausibility bounds. Anything beyond them is corruption, a unit bug or a spoof, not flight.
-MAX_SPEED_M_S = 200.0  # any velocity component or norm (fixed-wing UAV, wind)
-MAX_RATE_RAD_S = 50.0  # ~2900 deg/s, far beyond any airframe
-MAX_ANGLE_RAD = 2.0 * math.pi + 1e-3
-MAX_LOCAL_POS_M = 1.0e6  # 1000 km from the EKF origin
-MIN_ALT_M, MAX_ALT_M = -1000.0, 50000.0
-MAX_ACCEL_M_S2 = 200.0  # ~20 g
-QUAT_NORM_TOL = 0.1  # |q| must be within 1 +- 0.1 (a float32 unit quaternion is within 1e-6)
-
-# SET_ATTITUDE_TARGET type_mask bits (common.xml ATTITUDE_TARGET_TYPEMASK)
-TM_BODY_ROLL_RATE_IGNORE = 1
-TM_BODY_PITCH_RATE_IGNORE = 2
-TM_BODY_YAW_RATE_IGNORE = 4
-TM_THRUST_BODY_SET = 32
-TM_THROTTLE_IGNORE = 64
-TM_ATTITUDE_IGNORE = 128
-
-#: PX4 offboard body rates: quaternion ignored, the three rates and thrust used.
-TYPE_MASK_PX4_RATES = TM_ATTITUDE_IGNORE  # 128
-#: ArduPlane GUIDED attitude: roll and pitch from the quaternion, thrust used, yaw left to
-#: ArduPlane. ArduPlane's handler (ArduPlane/GCS_MAVLink_Plane.cpp,
-#: handle_set_attitude_target) inverts the mask and takes each Euler angle whose rate bit is
-#: clear, or all three when the attitude bit is clear; a forced yaw is written straight to the
-#: rudder (Attitude.cpp, calc_nav_yaw_coordinated), bypassing its yaw damper and rudder mix
-#: (KFF_RDDRMIX), so a yaw of 0 pins the rudder at neutral through every turn. With the
-#: attitude bit set and the yaw-rate bit set (132) roll and pitch are forced and the rudder
-#: stays ArduPlane's own coordinated-turn output, as in its other modes. ArduPlane never reads
-#: the body rates.
-TYPE_MASK_ARDUPLANE_ATTITUDE = TM_ATTITUDE_IGNORE | TM_BODY_YAW_RATE_IGNORE  # 132
-
-MAV_CMD_SET_MESSAGE_INTERVAL = 511
-MAV_CMD_REQUEST_MESSAGE = 512
-MAV_CMD_GET_HOME_POSITION = 410
-MAV_CMD_DO_REPOSITION = 192
-
-MAV_CMD_DO_SET_MODE = 176
-MAV_CMD_COMPONENT_ARM_DISARM = 400
-ARM_FORCE_MAGIC = 21196  # param2 that forces arming/disarming (PX4 and ArduPilot)
+# The encoders (mpf_mavlink.mavlink.encode) and the wire limits (wire_limits) are re-exported:
+# callers import decoders, encoders and limits from this module.
+__all__ = [
+    "ARM_FORCE_MAGIC",
+    "AttitudeSample",
+    "AttitudeTargetSample",
+    "CommandAckSample",
+    "DECODED_TYPES",
+    "FollowTargetSample",
+    "GlobalPositionSample",
+    "HeartbeatSample",
+    "HomeSample",
+    "LocalPositionSample",
+    "MAV_CMD_COMPONENT_ARM_DISARM",
+    "MAV_CMD_DO_REPOSITION",
+    "MAV_CMD_DO_SET_MODE",
+    "MAV_CMD_GET_HOME_POSITION",
+    "MAV_CMD_REQUEST_MESSAGE",
+    "MAV_CMD_SET_MESSAGE_INTERVAL",
+    "MAX_ACCEL_M_S2",
+    "MAX_ALT_M",
+    "MAX_ANGLE_RAD",
+    "MAX_LOCAL_POS_M",
+    "MAX_RATE_RAD_S",
+    "MAX_SPEED_M_S",
+    "MIN_ALT_M",
+    "QUAT_NORM_TOL",
+    "TM_ATTITUDE_IGNORE",
+    "TM_BODY_PITCH_RATE_IGNORE",
+    "TM_BODY_ROLL_RATE_IGNORE",
+    "TM_BODY_YAW_RATE_IGNORE",
+    "TM_THROTTLE_IGNORE",
+    "TM_THRUST_BODY_SET",
+    "TYPE_MASK_ARDUPLANE_ATTITUDE",
+    "TYPE_MASK_PX4_RATES",
+    "VfrHudSample",
+    "WindSample",
+    "decode",
+    "decode_attitude",
+    "decode_attitude_quaternion",
+    "decode_attitude_target",
+    "decode_command_ack",
+    "decode_follow_target",
+    "decode_global_position_int",
+    "decode_heartbeat",
+    "decode_home_position",
+    "decode_local_position_ned",
+    "decode_vfr_hud",
+    "decode_wind",
+    "decode_wind_cov",
+    "encode_arm",
+    "encode_companion_heartbeat",
+    "encode_do_reposition",
+    "encode_get_home_position",
+    "encode_request_data_stream",
+    "encode_request_message",
+    "encode_set_attitude_target_quat",
+    "encode_set_attitude_target_rates",
+    "encode_set_message_interval",
+    "encode_set_mode",
+]
 
 
 def _ro(a: Iterable[float]) -> np.ndarray:
     arr = np.array(list(a), dtype=float)
     arr.setflags(write=False)
     return arr
-
-
-def _finite(*vals: float) -> bool:
-    try:
-        return all(math.isfinite(float(v)) for v in vals)
-    except (TypeError, ValueError):
-        return False
 
 
 def _t_rx(msg: Any) -> float | None:
@@ -289,14 +340,6 @@ def decode_local_position_ned(msg: Any) -> LocalPositionSample | None:
     return LocalPositionSample(t, _ro3(x, y, z), _ro3(vx, vy, vz))
 
 
-def _geodetic_ok(lat: float, lon: float, alt: float) -> bool:
-    if not _finite(lat, lon, alt) or abs(lat) > 90.0 or abs(lon) > 180.0:
-        return False
-    if lat == 0.0 and lon == 0.0:  # what autopilots send before a fix, never a real position
-        return False
-    return MIN_ALT_M <= alt <= MAX_ALT_M
-
-
 def decode_global_position_int(msg: Any) -> GlobalPositionSample | None:
     try:
         lat, lon = msg.lat * 1e-7, msg.lon * 1e-7  # degE7 -> deg
@@ -495,215 +538,3 @@ def decode(msg: Any) -> Any:
         return fn(msg) if fn is not None else None
     except Exception:  # noqa: BLE001 - a decoder bug must not take the loop down
         return None
-
-
-# ---------------------------------------------------------------------------------------------
-# Encoders (raise ValueError rather than send a non-finite or out-of-range value)
-# ---------------------------------------------------------------------------------------------
-def _check_ids(time_boot_ms: int, target_sys: int, target_comp: int) -> int:
-    if not (0 <= int(target_sys) <= 255 and 0 <= int(target_comp) <= 255):
-        raise ValueError(f"target ids out of range: {target_sys}/{target_comp}")
-    if not isinstance(time_boot_ms, (int, np.integer)) or time_boot_ms < 0:
-        raise ValueError(f"time_boot_ms must be a non-negative integer, got {time_boot_ms!r}")
-    return int(time_boot_ms) & 0xFFFFFFFF  # uint32 on the wire; wraps after 49.7 days
-
-
-def _check_finite(name: str, vals: Sequence[float], bound: float) -> list[float]:
-    out = [float(v) for v in vals]
-    if not _finite(*out):
-        raise ValueError(f"refusing to encode non-finite {name}: {tuple(vals)}")
-    if any(abs(v) > bound for v in out):
-        raise ValueError(f"refusing to encode {name} beyond +-{bound}: {tuple(vals)}")
-    return out
-
-
-def _check_thrust(thrust: float) -> float:
-    (t,) = _check_finite("thrust", [thrust], 1.0)
-    return t
-
-
-def encode_set_attitude_target_rates(
-    mav: Any,
-    time_boot_ms: int,
-    target_sys: int,
-    target_comp: int,
-    p: float,
-    q: float,
-    r: float,
-    thrust: float,
-) -> Any:
-    """PX4 offboard body rates: SET_ATTITUDE_TARGET, type_mask 128 (attitude ignored).
-
-    p, q, r: rad/s about FRD body axes; thrust: 0..1 (must be sent: with "throttle ignore"
-    PX4's fixed-wing rate controller gets zero throttle). The quaternion field is the identity
-    (w, x, y, z) = (1, 0, 0, 0) because a NaN there could be taken for a real value by others.
-    """
-    t_ms = _check_ids(time_boot_ms, target_sys, target_comp)
-    pf, qf, rf, thr = float(p), float(q), float(r), float(thrust)
-    W = MAX_RATE_RAD_S  # a NaN fails the comparisons; the checkers then say what is wrong
-    if not (-W <= pf <= W and -W <= qf <= W and -W <= rf <= W):
-        _check_finite("body rates", (p, q, r), MAX_RATE_RAD_S)
-    if not -1.0 <= thr <= 1.0:
-        _check_thrust(thrust)
-    return mav.set_attitude_target_encode(
-        t_ms, target_sys, target_comp, TYPE_MASK_PX4_RATES, [1.0, 0.0, 0.0, 0.0], pf, qf, rf, thr
-    )
-
-
-def encode_set_attitude_target_quat(
-    mav: Any,
-    time_boot_ms: int,
-    target_sys: int,
-    target_comp: int,
-    q_wxyz: Sequence[float],
-    thrust: float,
-    body_rates: Sequence[float] = (0.0, 0.0, 0.0),
-) -> Any:
-    """ArduPlane GUIDED attitude: SET_ATTITUDE_TARGET, type_mask 132 (see
-    :data:`TYPE_MASK_ARDUPLANE_ATTITUDE`).
-
-    ArduPlane takes roll and pitch from q and leaves the rudder to its own coordinated-turn
-    output (the yaw of q is not used). Bit 64 (throttle ignore) clear: thrust 0..1 is used (only
-    if TRIM_THROTTLE > 1). ArduPlane never reads body rates; ``body_rates`` (rad/s) are carried
-    for logs and other receivers only.
-    ``q_wxyz`` is (w, x, y, z), R_B^N; it is normalised, and zero/non-finite is refused.
-    """
-    t_ms = _check_ids(time_boot_ms, target_sys, target_comp)
-    qv = _check_finite("quaternion", q_wxyz, 10.0)
-    if len(qv) != 4:
-        raise ValueError(f"quaternion must have 4 components (w, x, y, z), got {len(qv)}")
-    n = math.sqrt(sum(v * v for v in qv))
-    if n < 1e-6:
-        raise ValueError("refusing to encode a zero quaternion")
-    qv = [v / n for v in qv]
-    rates = _check_finite("body rates", body_rates, MAX_RATE_RAD_S)
-    thr = _check_thrust(thrust)
-    return mav.set_attitude_target_encode(
-        t_ms, target_sys, target_comp, TYPE_MASK_ARDUPLANE_ATTITUDE, qv, *rates, thr
-    )
-
-
-def encode_set_mode(
-    mav: Any, target_sys: int, target_comp: int, flavour: Flavour | str, mode: str | int | tuple
-) -> Any:
-    """COMMAND_LONG MAV_CMD_DO_SET_MODE, param1 = 1 (MAV_MODE_FLAG_CUSTOM_MODE_ENABLED).
-
-    PX4: param2 = main mode, param3 = sub mode; ``mode`` is a name ('OFFBOARD', 'AUTO.LOITER')
-    or a (main, sub) tuple. ArduPlane: param2 = mode number; ``mode`` is a name ('GUIDED') or int.
-    """
-    flavour = Flavour(flavour)
-    _check_ids(0, target_sys, target_comp)
-    if flavour is Flavour.PX4:
-        if isinstance(mode, str):
-            main, sub = px4_mode_from_name(mode)
-        elif isinstance(mode, tuple) and len(mode) == 2:
-            main, sub = int(mode[0]), int(mode[1])
-        else:
-            raise ValueError(f"PX4 mode must be a name or (main, sub), got {mode!r}")
-        p2, p3 = float(main), float(sub)
-    elif flavour is Flavour.ARDUPILOT:
-        if isinstance(mode, str):
-            num = arduplane_mode_from_name(mode)
-        elif isinstance(mode, int):
-            num = mode
-        else:
-            raise ValueError(f"ArduPlane mode must be a name or a number, got {mode!r}")
-        if not 0 <= num <= 255:
-            raise ValueError(f"ArduPlane mode number out of range: {num}")
-        p2, p3 = float(num), 0.0
-    else:
-        raise ValueError("cannot encode a mode change for an unknown autopilot flavour")
-    return mav.command_long_encode(
-        target_sys, target_comp, MAV_CMD_DO_SET_MODE, 0,
-        float(MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), p2, p3, 0.0, 0.0, 0.0, 0.0,
-    )  # fmt: skip
-
-
-def encode_arm(
-    mav: Any, target_sys: int, target_comp: int, arm: bool = True, force: bool = False
-) -> Any:
-    """COMMAND_LONG MAV_CMD_COMPONENT_ARM_DISARM: param1 1 arm / 0 disarm, param2 21196 forces."""
-    _check_ids(0, target_sys, target_comp)
-    return mav.command_long_encode(
-        target_sys, target_comp, MAV_CMD_COMPONENT_ARM_DISARM, 0,
-        1.0 if arm else 0.0, float(ARM_FORCE_MAGIC) if force else 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-    )  # fmt: skip
-
-
-def encode_companion_heartbeat(mav: Any, system_status: int | None = None) -> Any:
-    """HEARTBEAT of a companion computer: MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID,
-    so that autopilots and GCSs do not mistake us for a vehicle."""
-    status = _d.MAV_STATE_ACTIVE if system_status is None else int(system_status)
-    return mav.heartbeat_encode(
-        _d.MAV_TYPE_ONBOARD_CONTROLLER, _d.MAV_AUTOPILOT_INVALID, 0, 0, status
-    )
-
-
-def encode_set_message_interval(
-    mav: Any, target_sys: int, target_comp: int, msg_id: int, rate_hz: float
-) -> Any:
-    """COMMAND_LONG MAV_CMD_SET_MESSAGE_INTERVAL: param1 message id, param2 interval (us);
-    ``rate_hz`` <= 0 stops the stream (interval -1)."""
-    _check_ids(0, target_sys, target_comp)
-    if not math.isfinite(rate_hz):
-        raise ValueError(f"message rate must be finite, got {rate_hz!r}")
-    interval = -1.0 if rate_hz <= 0 else 1e6 / rate_hz
-    return mav.command_long_encode(
-        target_sys, target_comp, MAV_CMD_SET_MESSAGE_INTERVAL, 0,
-        float(msg_id), interval, 0.0, 0.0, 0.0, 0.0, 0.0,
-    )  # fmt: skip
-
-
-def encode_request_data_stream(
-    mav: Any, target_sys: int, target_comp: int, stream_id: int, rate_hz: int
-) -> Any:
-    """REQUEST_DATA_STREAM (deprecated in common, still ArduPilot's SRn mechanism): one stream
-    group (MAV_DATA_STREAM_*) at ``rate_hz`` (integer Hz, 0 stops it)."""
-    _check_ids(0, target_sys, target_comp)
-    hz = max(0, min(int(round(rate_hz)), 0xFFFF))
-    return mav.request_data_stream_encode(
-        target_sys, target_comp, int(stream_id), hz, 1 if hz else 0
-    )
-
-
-def encode_request_message(mav: Any, target_sys: int, target_comp: int, msg_id: int) -> Any:
-    """COMMAND_LONG MAV_CMD_REQUEST_MESSAGE: param1 the message id, sent once."""
-    _check_ids(0, target_sys, target_comp)
-    return mav.command_long_encode(
-        target_sys, target_comp, MAV_CMD_REQUEST_MESSAGE, 0,
-        float(msg_id), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-    )  # fmt: skip
-
-
-def encode_get_home_position(mav: Any, target_sys: int, target_comp: int) -> Any:
-    """COMMAND_LONG MAV_CMD_GET_HOME_POSITION (older autopilots' way to ask for HOME_POSITION)."""
-    _check_ids(0, target_sys, target_comp)
-    return mav.command_long_encode(
-        target_sys, target_comp, MAV_CMD_GET_HOME_POSITION, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    )
-
-
-def encode_do_reposition(
-    mav: Any,
-    target_sys: int,
-    target_comp: int,
-    lat_deg: float,
-    lon_deg: float,
-    alt_amsl_m: float,
-    radius_m: float,
-    counter_clockwise: bool,
-) -> Any:
-    """COMMAND_INT MAV_CMD_DO_REPOSITION (frame MAV_FRAME_GLOBAL, AMSL): ArduPlane in GUIDED
-    makes it its guided waypoint, a loiter of ``radius_m`` (param3) about it, counter-clockwise
-    when param4 is non-zero (ArduPlane/GCS_MAVLink_Plane.cpp, handle_command_int_do_reposition;
-    in GUIDED it leaves the forced attitude alone)."""
-    _check_ids(0, target_sys, target_comp)
-    if not _geodetic_ok(lat_deg, lon_deg, alt_amsl_m) or not (0.0 < radius_m < 1e5):
-        raise ValueError(
-            f"bad reposition target {lat_deg!r}, {lon_deg!r}, {alt_amsl_m!r} m, radius {radius_m!r} m"
-        )
-    return mav.command_int_encode(
-        target_sys, target_comp, _d.MAV_FRAME_GLOBAL, MAV_CMD_DO_REPOSITION, 0, 0,
-        -1.0, 0.0, float(radius_m), 1.0 if counter_clockwise else 0.0,
-        int(round(lat_deg * 1e7)), int(round(lon_deg * 1e7)), float(alt_amsl_m),
-    )  # fmt: skip
