@@ -424,7 +424,11 @@ def test_home_position_on_request(ardu):
 
 
 # --------------------------------------------------------------------------- clocks
-def test_lockstep_faster_than_real_time_with_answering_bridge():
+def test_lockstep_frames_advance_on_the_bridges_answers():
+    """Lockstep: each telemetry frame ends when the bridge answers, not when the wall clock says.
+
+    Counted, not timed (a wall-clock factor breaks on a loaded CI box): the speed itself is a
+    benchmark figure (scripts/bench --only sil_real_time_factor)."""
     port = free_port()
     v = SimVehicle("px4", f"udpin:127.0.0.1:{port}", clock="lockstep")
     g = Gcs(port)
@@ -432,20 +436,22 @@ def test_lockstep_faster_than_real_time_with_answering_bridge():
     try:
         t_sim0, w0 = v.t, time.perf_counter()
         n_ans = 0
-        while time.perf_counter() - w0 < 2.0:
+        hang_guard = time.monotonic() + 60.0  # a hang guard, not a measurement
+        while n_ans < 100 and time.monotonic() < hang_guard:
             if g.c.select(0.1):  # answer each telemetry frame (ATTITUDE) with a setpoint
                 for m in g.read():
                     if m.get_type() == "ATTITUDE":
                         g.rates(0.0)
                         n_ans += 1
-        wall = time.perf_counter() - w0
-        factor = (v.t - t_sim0) / wall
+        factor = (v.t - t_sim0) / (time.perf_counter() - w0)
     finally:
         v.stop()
         v.close()
         g.close()
-    print(f"lockstep real-time factor with an answering bridge: {factor:.1f}x")
-    assert factor > 2.0  # measured ~15-25x on a 2-core box; 2x leaves room for a loaded CI
+    print(f"lockstep real-time factor with an answering bridge: {factor:.1f}x (information only)")
+    assert n_ans >= 100
+    # every answer ends a frame (a few answers cross a frame boundary in flight: 5 of slack); a
+    # realtime clock would have counted no answered frames at all
     assert isinstance(v.clock, LockstepClock) and v.clock.answered_frames > 0.9 * n_ans - 5
 
 
@@ -454,10 +460,14 @@ def test_lockstep_silent_bridge_still_advances_and_realtime_is_paced():
     v = SimVehicle("px4", f"udpin:127.0.0.1:{port}", plant="kinematic", answer_timeout_s=0.05)
     g = Gcs(port)  # peer known (it said hello) but never answers
     v.start_in_thread()
-    time.sleep(1.0)
+    hang_guard = time.monotonic() + 60.0  # a hang guard, not a measurement
+    while v.clock.timeouts < 10 and time.monotonic() < hang_guard:
+        time.sleep(0.05)
     v.stop()
-    # 20 ms of sim per 50 ms wall fallback -> ~0.4 s of sim per wall second
-    assert 0.2 < v.t < 0.5
+    # counted, not timed: with a known peer that never answers, each frame ends on the 50 ms
+    # fallback (a timeout), none on an answer, and the simulation still advances
+    assert isinstance(v.clock, LockstepClock)
+    assert v.clock.timeouts >= 10 and v.clock.answered_frames == 0 and v.t > 0.0
     v.close()
     g.close()
     v = SimVehicle(
@@ -466,7 +476,10 @@ def test_lockstep_silent_bridge_still_advances_and_realtime_is_paced():
     w0 = time.perf_counter()
     v.run(0.5)
     wall = time.perf_counter() - w0
-    assert 0.45 < wall < 0.8  # paced to the wall clock
+    # paced to the wall clock: 0.5 s of sim cannot take less than 0.5 s of wall (0.05 s of
+    # slack: the first frames step before the pacing anchor); no upper bound, a loaded CI box
+    # may take longer
+    assert wall > 0.45
     v.close()
 
 
