@@ -353,8 +353,17 @@ def test_soak_fuzzed_mission_short(tmp_path, probe):
 
 
 # ----------------------------------------------------------------------------- the campaign, whole
+# Real-time missions judged on timing (setpoint gaps, failsafe delays): under pytest-xdist
+# (scripts/test) at most two of them fly at once, on two workers of their own (--dist loadgroup),
+# so that the other tests cannot crowd a 2-core machine into a late failsafe.
+_SOAK = [n for n in soak.SCENARIOS if n != "baseline"]
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("name", [n for n in soak.SCENARIOS if n != "baseline"])
+@pytest.mark.parametrize(
+    "name",
+    [pytest.param(n, marks=pytest.mark.xdist_group(f"soak{i % 2}")) for i, n in enumerate(_SOAK)],
+)
 def test_soak_scenario(name, tmp_path, probe):
     _row(name, tmp_path, probe)
 
