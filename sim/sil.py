@@ -28,7 +28,6 @@ import dataclasses
 import math
 import multiprocessing
 import os
-import re
 import signal
 import socket
 import sys
@@ -40,25 +39,21 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.bridge.estimator import wind_frame
 from mpf_mavlink.config.schema import Config
-from mpf_mavlink.core.guidance.baselines import guidance_law
-from mpf_mavlink.core.guidance.law import VehicleState
-from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
+from mpf_mavlink.core.scenario import build_path, build_target
 from mpf_mavlink.runs.rundir import (
     RunTable,
     compute_metrics,
     prepare_out_dir,
     read_run,
-    row_from,
 )
 from mpf_mavlink.runs.verdict import EXIT_VERDICT, judge, verdict_line
 from mpf_mavlink.runs.write import write_run
+from sim.sil_progress import _Progress
+from sim.sil_truth import truth_table
 
 # custom modes in which the bridge commands the vehicle (PX4 OFFBOARD, ArduPlane GUIDED)
 _ENGAGED_MODES = ("OFFBOARD", "GUIDED")
-# the bridge's life-cycle lines ("[TRACKING]"), as opposed to its check results ("[PASS] ...")
-_STATE_MARK = re.compile(r"^\[[A-Z_]+\]$")
 # MPF_SIL_PROFILE=DIR: each peer process writes cProfile statistics to DIR/{vehicle,bridge}.prof
 _PROFILE_ENV = "MPF_SIL_PROFILE"
 
@@ -422,176 +417,6 @@ def run_sil(
     if interrupted:
         raise KeyboardInterrupt
     return res
-
-
-def _cpu_s(pid: int) -> float | None:
-    """CPU seconds (user + system) a process has used so far (Linux /proc), else None."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-    except (OSError, ValueError, IndexError):
-        return None
-
-
-class _Progress:
-    """Progress for long runs: a bar over the tracking seconds, the bridge's events above it.
-    Also samples the peers' CPU time over the tracking phase (a load-independent cost figure)."""
-
-    def __init__(self, duration: float, enabled: bool, log: Any, pids: tuple[int, int] = (0, 0)):
-        self.duration, self.enabled, self.log = duration, enabled, log
-        self.pids = pids
-        self.cpu0: list[float | None] = [None, None]
-        self.cpu1: list[float | None] = [None, None]
-        self.t_end: float | None = None
-        self.next_line = 0.1
-        self.t_track: float | None = None
-        self.bar: Any = None
-        self.wall_track = 0.0
-
-    def note(self, text: str) -> None:
-        if self.enabled:
-            self._write(text)
-
-    def _write(self, text: str) -> None:
-        if self.bar is not None:
-            self.bar.write(text, file=sys.stderr)
-        else:
-            self.log(text)
-
-    def event(self, text: str, t: float) -> None:
-        if text.startswith("[TRACKING]"):
-            self.t_track, self.wall_track = t, time.perf_counter()
-            self.cpu0 = [_cpu_s(p) for p in self.pids]
-            self.next_line = 0.1
-            if self.enabled and sys.stderr.isatty():
-                from tqdm import tqdm
-
-                self.bar = tqdm(total=round(self.duration), desc="tracking", unit="s", file=sys.stderr,
-                                mininterval=0.5, bar_format="{desc} {n}/{total} s sim |{bar:24}| {elapsed} wall{postfix}")  # fmt: skip
-        elif text.startswith("[HANDBACK]") or text.startswith("[DONE]"):
-            if self.t_end is None and self.t_track is not None:
-                self.cpu1 = [_cpu_s(p) for p in self.pids]
-                self.t_end = t
-            self.update(t)
-        if self.enabled and not _STATE_MARK.match(text):  # states are shown by the bar
-            self._write(f"bridge: {text}")
-
-    def update(self, t: float) -> None:
-        if self.t_track is None or not self.enabled:
-            return
-        if self.bar is None:  # not a terminal (a log, CI): a plain line every 10 %
-            done = (t - self.t_track) / self.duration
-            if done + 1e-9 >= self.next_line and self.t_end is None:
-                wall = time.perf_counter() - self.wall_track
-                rtf = (t - self.t_track) / max(wall, 1e-9)
-                self.log(
-                    f"tracking {t - self.t_track:6.0f} / {self.duration:g} s simulated, {rtf:.0f}x real time"
-                )
-                self.next_line = math.floor(done * 10 + 1e-9) / 10 + 0.1
-            return
-        n = min(round(self.duration), max(0, int(t - self.t_track)))
-        if n > self.bar.n:
-            wall = time.perf_counter() - self.wall_track
-            self.bar.set_postfix_str(
-                f"{(t - self.t_track) / max(wall, 1e-9):.0f}x real time", refresh=False
-            )
-            self.bar.update(n - self.bar.n)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-            self.bar = None
-
-
-# --------------------------------------------------------------------------- truth
-def _align(truth: dict[str, np.ndarray], bc: dict[str, np.ndarray]) -> tuple[float, float]:
-    """Offset ``t0`` (s) with vehicle boot time = bridge mission time + t0, and the RMS position
-    mismatch (m) at that offset. The bridge logs the vehicle's LOCAL_POSITION_NED of the
-    ATTITUDE instant it acted on, so the right offset matches to float32 rounding."""
-    tb, P = truth["time_boot_s"], truth["position_ned"]
-    bt = bc["t"]
-    bp = np.column_stack([bc["p_n"], bc["p_e"], bc["p_d"]])
-    n = min(len(bt), 300)
-    d0 = np.linalg.norm(P - bp[0], axis=1)
-    best = (math.inf, 0.0)
-    for k in np.argsort(d0)[:5]:
-        t0 = round(float(tb[k] - bt[0]), 3)  # the boot clock is in ms
-        ts = bt[:n] + t0
-        Pi = np.column_stack([np.interp(ts, tb, P[:, i]) for i in range(3)])
-        rms = float(np.sqrt(np.mean(np.sum((Pi - bp[:n]) ** 2, axis=1))))
-        best = min(best, (rms, t0))
-    return best[1], best[0]
-
-
-def _distance_to_polyline(nodes: np.ndarray, q: np.ndarray, closed: bool) -> np.ndarray:
-    """Distance (m) from each point of q (N, 3) to the polyline through ``nodes`` (the path's
-    tabulation, node spacing well under a metre): nearest node (k-d tree), then the exact
-    distance to the two segments that meet there."""
-    from scipy.spatial import cKDTree
-
-    n = len(nodes)
-    _, i = cKDTree(nodes).query(q)
-    best = np.full(len(q), np.inf)
-    for a, b in ((i - 1, i), (i, i + 1)):
-        if closed:
-            a, b = a % n, b % n
-        else:
-            a, b = np.clip(a, 0, n - 1), np.clip(b, 0, n - 1)
-        A, B = nodes[a], nodes[b]
-        d = B - A
-        L2 = np.maximum(np.sum(d * d, axis=1), 1e-12)
-        u = np.clip(np.sum((q - A) * d, axis=1) / L2, 0.0, 1.0)
-        best = np.minimum(best, np.linalg.norm(q - (A + u[:, None] * d), axis=1))
-    return best
-
-
-def truth_table(
-    cfg: Config, truth: dict[str, np.ndarray], bc: dict[str, np.ndarray]
-) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """The run table from the plant's truth (see module docstring); ``t`` = s since engagement."""
-    path, target = build_path(cfg.path), build_target(cfg.target)
-    gains, ext = build_gains(cfg), build_extensions(cfg)
-    t0, resid = _align(truth, bc)
-    bt, bs = bc["t"], bc["s"]
-    tb = truth["time_boot_s"]
-    tm = tb - t0  # bridge mission time of each truth frame
-    sel = np.nonzero((tm >= bt[0] - 1e-6) & (tm <= bt[-1] + 1e-6))[0]
-    s_at = np.interp(tm[sel], bt, bs)
-    P, V, W = truth["position_ned"], truth["velocity_ned"], truth["wind_ned"]
-    tv = truth["t"]
-    tt = truth.get("target_t", tv)  # the target's clock (see SimVehicle target_epoch)
-    table = RunTable()
-    w1_prev: np.ndarray | None = None
-    t_prev = 0.0
-    t_engage = float(bt[0])
-    rel_all = np.empty((len(sel), 3))
-    for j, k in enumerate(sel):
-        va = V[k] - W[k]
-        R_W = wind_frame(float(va[0]), float(va[1]), float(va[2]))
-        t = float(tm[k]) - t_engage
-        veh = VehicleState(t, P[k], R_W, float(np.linalg.norm(va)), W[k])
-        tgt = target.state(float(tt[k]))
-        cmd, diag = guidance_law(cfg.guidance.law, float(s_at[j]), veh, tgt, path, gains, ext)
-        w1 = R_W[:, 0]
-        w_act = (0.0, 0.0)
-        if w1_prev is not None and t > t_prev:
-            w1d = (w1 - w1_prev) / (t - t_prev)
-            w_act = (-float(w1d @ R_W[:, 2]), float(w1d @ R_W[:, 1]))
-        w1_prev, t_prev = w1, t
-        table.append(
-            row_from(diag, P[k], (cmd.w2, cmd.w3), w_act, cmd.sdot, tgt.position, tgt.R_T_I, W[k])
-        )
-        rel_all[j] = tgt.R_T_I.T @ (P[k] - tgt.position)
-    cols = table.arrays()
-    cross = _distance_to_polyline(path.positions(), rel_all, bool(getattr(path, "closed", False)))
-    info = {
-        "alignment_t0_s": t0,
-        "alignment_residual_m": resid,
-        "cross_track_m": cross,
-        "t_vehicle": tv[sel],
-        "rows": sel,
-    }
-    return cols, info
 
 
 def _measure(
