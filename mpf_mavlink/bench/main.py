@@ -95,17 +95,6 @@ def _optional_groups() -> None:
     GROUPS["campaign_throughput"] = campaign_throughput
     GROUPS["campaign_roa"] = campaign_roa
     GROUPS["campaign_demo_robustness"] = campaign_demo_robustness
-    from mpf_mavlink.bench.campaign import (
-        campaign_demo_robustness,
-        campaign_roa,
-        campaign_throughput,
-    )
-    from mpf_mavlink.bench.framing import mavlink_framing_us
-
-    GROUPS["mavlink_framing_us"] = mavlink_framing_us
-    GROUPS["campaign_throughput"] = campaign_throughput
-    GROUPS["campaign_roa"] = campaign_roa
-    GROUPS["campaign_demo_robustness"] = campaign_demo_robustness
 
 
 def main(argv: list[str] | None = None) -> int:
