@@ -84,6 +84,38 @@ def _bridge_main(*args: Any) -> None:
 
 
 # --------------------------------------------------------------------------- the vehicle
+def _start_altitude_m(cfg: Config) -> float:
+    """Altitude (m MSL) where the vehicle starts: home altitude less the initial down position."""
+    sil, k = cfg.section("sil"), cfg.kinematic
+    pos = (
+        sil.initial_position_ned_m
+        if sil.initial_position_ned_m is not None
+        else k.initial_position_ned_m
+    )
+    return float(sil.home_alt_m - pos[2])
+
+
+def trim_of(cfg: Config) -> tuple[float, float | None]:
+    """(throttle, hold pitch trim rad or None) of the config's aircraft at its trim airspeed.
+
+    ``aircraft.trim_from_fdm``: JSBSim's own trim of level flight decides both (an aircraft it
+    cannot trim at that speed is a one-line error naming the key); otherwise the config's.
+    """
+    ac = cfg.section("aircraft")
+    if not (ac.trim_from_fdm and cfg.section("sil").plant == "jsbsim"):
+        return ac.trim_throttle, ac.attitude_loop.pitch_trim_rad
+    from .airframe_trim import fdm_trim
+
+    root = ac.resolved_root(cfg.source)
+    tr = fdm_trim(ac.model, root, ac.trim_airspeed_m_s, _start_altitude_m(cfg))
+    if not tr.ok:
+        raise ValueError(
+            f"aircraft.trim_airspeed_m_s: JSBSim finds no level-flight trim of {ac.model} at "
+            f"{ac.trim_airspeed_m_s:g} m/s (python -m sim.airframe_trim {ac.model} lists its range)"
+        )
+    return tr.throttle, tr.pitch_rad
+
+
 def build_autopilot(cfg: Config) -> Any:
     """The simulated autopilot for the config's aircraft (rate loops, attitude loop, hold)."""
     from sim.inner_loop import AttitudeGains, FixedWingAutopilot, HoldGains, RateLoopGains
@@ -92,10 +124,11 @@ def build_autopilot(cfg: Config) -> Any:
     base = RateLoopGains()
     over = {k: v for k, v in dataclasses.asdict(ac.rate_loop).items() if v is not None}
     v_trim = ac.trim_airspeed_m_s
+    trim_throttle, pitch_trim = trim_of(cfg)
     # The rate loops' airspeed scaling is s = V_trim / V, limited below by V_min: defaults keep
     # the X8's margins (10 / 16 / 22 m/s) in proportion for another trim airspeed.
     gains = dataclasses.replace(
-        base, **over, trim_throttle=ac.trim_throttle, airspeed_trim=v_trim,
+        base, **over, trim_throttle=trim_throttle, airspeed_trim=v_trim,
         airspeed_min=ac.airspeed_min_m_s or v_trim * base.airspeed_min / base.airspeed_trim,
         airspeed_max=ac.airspeed_max_m_s or v_trim * base.airspeed_max / base.airspeed_trim,
     )  # fmt: skip
@@ -110,8 +143,8 @@ def build_autopilot(cfg: Config) -> Any:
         att, airspeed_min=gains.airspeed_min, **{k: v for k, v in att_over.items() if v is not None}
     )
     hold = HoldGains(loiter_radius=sil.loiter_radius_m)
-    if al.pitch_trim_rad is not None:
-        hold = dataclasses.replace(hold, pitch_trim=al.pitch_trim_rad)
+    if pitch_trim is not None:
+        hold = dataclasses.replace(hold, pitch_trim=pitch_trim)
     if al.bank_max_rad is not None:
         hold = dataclasses.replace(hold, bank_max=al.bank_max_rad)
     return FixedWingAutopilot(gains, att, hold)
@@ -138,7 +171,7 @@ def vehicle_options(cfg: Config, url: str, clock: str | None = None, **over: Any
         plant_options = {
             "model": ac.model,
             "controls": ac.controls.mapping(),
-            "throttle": ac.trim_throttle,
+            "throttle": trim_of(cfg)[0],
         }
         if root is not None:
             plant_options["root_dir"] = str(root)

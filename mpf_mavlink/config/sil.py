@@ -250,7 +250,9 @@ class AircraftConfig:
     (c172x, J3Cub, ...), or a directory (relative paths: to the config file) with ``aircraft/``,
     ``engine/`` (and ``systems/``). trim_airspeed_m_s: cruise / hold airspeed, and where the
     rate loops' airspeed scaling is 1. trim_throttle: first guess for the trim flight (the trim
-    found by flying replaces it). airspeed_min_m_s / airspeed_max_m_s: the rate loops' scaling
+    found by flying replaces it). trim_from_fdm: take trim_throttle and the hold modes' pitch
+    trim from JSBSim's own trim (``simulation/do_simple_trim``) at trim_airspeed_m_s and the
+    start altitude instead (sim/airframe_trim.py). airspeed_min_m_s / airspeed_max_m_s: the rate loops' scaling
     limits (FW_AIRSPD_MIN / MAX). controls: command properties and signs.
     """
 
@@ -258,6 +260,7 @@ class AircraftConfig:
     root_dir: str | None = None
     trim_airspeed_m_s: float = field(default=16.0, metadata=_pos())
     trim_throttle: float = field(default=0.3, metadata={"check": ("range", 0.0, 1.0)})
+    trim_from_fdm: bool = False
     airspeed_min_m_s: float | None = field(default=None, metadata=_pos())
     airspeed_max_m_s: float | None = field(default=None, metadata=_pos())
     controls: ControlsConfig = field(default_factory=ControlsConfig)
