@@ -112,6 +112,9 @@ def test_local_campaign_is_resumable_and_the_rerun_flies_the_same_numbers(tmp_pa
     rows = _rows(out)
     assert sorted(int(x["sample"]) for x in rows) == list(range(8))
     assert all(x["status"] == "ok" for x in rows)
+    # one flight at a time on a one-thread worker: its CPU time is positive and cannot exceed
+    # its wall time but for the worker's idle communication threads (a few ms)
+    assert all(0.0 < float(x["cpu_s"]) <= float(x["wall_s"]) + 0.05 for x in rows), rows
     assert "flights: 8" in r.stdout and (out / "roa.png").is_file() and (out / "ecdf.png").is_file()
     assert (out / "worst").is_dir() and any((out / "worst").iterdir())
     # lose the last three rows (a campaign killed mid-way): the re-run flies exactly those
@@ -217,6 +220,11 @@ keep_worst: 0
             assert all(x["status"] == "ok" for x in rows), [x["error"] for x in rows]
         # tracking, not just ending: 15 s of the demo's capture at least halve the start's |pt|
         assert all(float(x["final_pt_m"]) < 0.5 * float(x["initial_pt_m"]) for x in outs["sil"])
+        # a SIL flight's cost is its subprocesses' (the worker only waits on them, a few ms):
+        # counted, it is at least the vehicle's ~290 us of CPU per 20 ms frame (scripts/bench
+        # mavlink_framing_us) over 15 s = 750 frames, 0.22 s, before the bridge and JSBSim's load
+        sil_cpu = [float(x["cpu_s"]) for x in outs["sil"]]
+        assert all(c > 0.2 for c in sil_cpu), sil_cpu
     finally:
         for p in procs:
             if p.poll() is None:

@@ -35,11 +35,17 @@ def _fly(path: str, workers: int, samples: int | None = None) -> dict[str, Any]:
         # a copy of the campaign file with the sample count used (the fingerprint reads it)
         res = run_campaign(spec, Path(d), workers=workers, progress=False, log=lambda _s: None)
     s = summarise(spec, res.rows)
-    cpu = sum(float(r.get("wall_s") or 0.0) for r in res.rows)
+    wall = [float(r.get("wall_s") or 0.0) for r in res.rows]
+    cpu = [float(r.get("cpu_s") or 0.0) for r in res.rows]
     return {
         "flights": res.flown, "workers": workers, "wall_s": res.wall_s,
         "flights_per_min": 60.0 * res.flown / res.wall_s if res.wall_s else None,
-        "flight_s_mean": cpu / max(1, len(res.rows)),
+        "flight_wall_s_mean": sum(wall) / max(1, len(wall)),
+        # CPU seconds per flight (worker + the flight's subprocesses): the figure a loaded,
+        # shared machine does not inflate; flights/min on an idle N-core machine is about
+        # 60 N / cpu_s_per_flight
+        "cpu_s_per_flight": sum(cpu) / max(1, len(cpu)),
+        "cpu_s_total": sum(cpu),
         "success_rate": s["success_rate"], "converged_rate": s["converged_rate"],
         "status": s["status"], "percentiles": s["percentiles"],
         "load_avg_1min_before": load0, "load_avg_1min_after": os.getloadavg()[0],

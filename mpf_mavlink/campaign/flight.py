@@ -9,7 +9,10 @@
 
 Every flight returns a flat row: the sample, the metrics kept, ``status`` (``ok``, ``failed``:
 the flight's verdict failed it, ``refused``: the pre-flight gate did, ``error``, ``timeout``),
-``error`` (one line) and ``wall_s``.
+``error`` (one line), ``wall_s`` and ``cpu_s``: the CPU seconds the flight cost (user + system,
+of the worker's process and of every process the flight started and waited for: the SIL's
+simulator, vehicle and bridge), the figure that says what a campaign costs on a loaded machine,
+where wall time says only how busy the machine was.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -39,6 +43,7 @@ def fly(
 ) -> dict[str, Any]:
     """Fly one configuration (``base`` + ``sets``); never raises for a flight's own failure."""
     t0 = time.perf_counter()
+    c0 = _cpu_s()
     row: dict[str, Any] = {"status": "error", "error": ""}
     try:
         if plant == "kinematic":
@@ -56,8 +61,20 @@ def fly(
     except Exception as e:  # noqa: BLE001 - one flight's bug is that flight's row
         row["error"] = f"{type(e).__name__}: {e}".splitlines()[0]
     row["wall_s"] = round(time.perf_counter() - t0, 3)
+    row["cpu_s"] = round(_cpu_s() - c0, 3)
     row["worker_pid"] = os.getpid()
     return row
+
+
+def _cpu_s() -> float:
+    """User + system CPU seconds of this process and its waited-for children (and theirs).
+
+    A Dask worker runs one flight at a time (one thread per worker), so the difference over a
+    flight is that flight's cost; the worker's own communication threads add a few ms.
+    """
+    me = resource.getrusage(resource.RUSAGE_SELF)
+    ch = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + ch.ru_utime + ch.ru_stime
 
 
 def _scalar(x: Any) -> Any:

@@ -21,7 +21,7 @@ from mpf_mavlink.campaign.spec import CampaignSpec
 
 NUMERIC = ("first_within_s", "convergence_time_s", "steady_rms_m", "steady_max_m",
            "steady_psi_max", "max_rate_cmd_rad_s", "final_pt_m", "initial_pt_m", "initial_psi",
-           "wall_s", "sim_time_s")  # fmt: skip
+           "wall_s", "cpu_s", "sim_time_s")  # fmt: skip
 
 
 def _num(x: Any) -> float | None:
@@ -60,7 +60,7 @@ def summarise(spec: CampaignSpec, rows: list[dict[str, Any]]) -> dict[str, Any]:
         "converged_rate": (sum(converged(r) for r in rows) / n) if n else None,
         "percentiles": {},
     }
-    for k in (*spec.metrics, "wall_s"):
+    for k in (*spec.metrics, "wall_s", "cpu_s"):
         vals = [v for r in rows if (v := _num(r.get(k))) is not None]
         if not vals or k == "verdict":
             continue

@@ -51,7 +51,7 @@ def columns(spec: CampaignSpec) -> list[str]:
     """The results table's header: fixed for a campaign file, checked on resume."""
     keep = [m for m in spec.metrics if m not in ("initial_pt_m", "initial_psi")]
     return ["sample", *[v.key for v in spec.vary], "initial_pt_m", "initial_psi", *keep,
-            "status", "error", "wall_s", "sim_time_s", "worker_pid"]  # fmt: skip
+            "status", "error", "wall_s", "cpu_s", "sim_time_s", "worker_pid"]  # fmt: skip
 
 
 def _fingerprint(spec: CampaignSpec) -> str:
