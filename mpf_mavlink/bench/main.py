@@ -78,9 +78,10 @@ def _optional_groups() -> None:
 
     GROUPS["sil_real_time_factor"] = sil_real_time_factor
     GROUPS["sil_tracking"] = sil_tracking
-    from mpf_mavlink.bench.robustness import sil_robustness
+    from mpf_mavlink.bench.robustness import sil_airframes, sil_robustness
 
     GROUPS["sil_robustness"] = sil_robustness
+    GROUPS["sil_airframes"] = sil_airframes
     from mpf_mavlink.bench.target import target_feed
 
     GROUPS["target_feed"] = target_feed
