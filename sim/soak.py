@@ -35,6 +35,7 @@ os.environ.setdefault("MAVLINK20", "1")
 os.environ.setdefault("JSBSIM_DEBUG", "0")
 
 
+from sim.soak_checks import Limits
 from sim.soak_inputs import scenario_bad_input, scenario_output_dir, scenario_spoof
 from sim.soak_missions import (
     scenario_baseline,
@@ -50,7 +51,7 @@ from sim.soak_missions import (
     scenario_sigkill,
     scenario_target_loss,
 )
-from sim.soak_rig import Limits, Opts, Row, vehicle_main
+from sim.soak_rig import Opts, Row, vehicle_main
 
 SCENARIOS: dict[str, Callable[..., Row]] = {
     "baseline": scenario_baseline,

@@ -20,6 +20,7 @@ os.environ.setdefault("JSBSIM_DEBUG", "0")
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
 from sim.relay import DOWN  # noqa: E402
+from sim.soak_checks import Limits, _r, max_gap
 from sim.soak_missions import _completed, _mission_common, _timeseries, _tracking_window
 from sim.soak_rig import (
     CONFIGS,
@@ -27,14 +28,11 @@ from sim.soak_rig import (
     TARGET_SYSID,
     VEHICLE_COMPID,
     VEHICLE_SYSID,
-    Limits,
     Mission,
     MissionSpec,
     Opts,
     Row,
-    _r,
     free_udp_port,
-    max_gap,
     mpf_mavlink_cmd,
 )
 

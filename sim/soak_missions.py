@@ -18,22 +18,18 @@ from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
 from mpf_mavlink.mavlink.modes import is_offboard  # noqa: E402
 from sim.relay import DOWN, UP, Blackout, Impairment  # noqa: E402
+from sim.soak_checks import Limits, _r, bridge_silence, max_gap, setpoint_violations
 from sim.soak_rig import (
     TARGET_SYSID,
     VEHICLE_COMPID,
     VEHICLE_SYSID,
     BridgeOutcome,
     Event,
-    Limits,
     Mission,
     MissionSpec,
     Opts,
     Row,
     Tap,
-    _r,
-    bridge_silence,
-    max_gap,
-    setpoint_violations,
 )
 
 
