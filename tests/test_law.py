@@ -146,6 +146,7 @@ def _steady_error(wind_comp: bool) -> float:
     return float(np.sqrt(np.mean(np.square(errs))))
 
 
+@pytest.mark.slow  # among the longest of the quick loop (CPU or real time): full suite (CI) only
 def test_wind_compensation_removes_the_wind_error():
     # A 4 m/s crosswind with eta_hat = eta: the Remark's compensation leaves only the autopilot
     # lag error; without it the path point is chased with a wind-sized bias.

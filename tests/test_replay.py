@@ -433,6 +433,7 @@ def test_cli_errors_are_one_line_and_nonzero(tmp_path, capsys):
     assert e.value.code == 2
 
 
+@pytest.mark.slow  # among the longest of the quick loop (CPU or real time): full suite (CI) only
 def test_cli_window_and_plot_of_any_run(tmp_path, arduplane_run):
     _, _, _, bridge_out = arduplane_run
     out = tmp_path / "w"

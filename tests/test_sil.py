@@ -86,6 +86,7 @@ def test_kinematic_plant_refuses_turbulence(capsys):
     assert rc == 2 and "sil.turbulence" in err and "steady wind only" in err
 
 
+@pytest.mark.slow  # among the longest of the quick loop (CPU or real time): full suite (CI) only
 def test_check_sees_the_sil_atmosphere(capsys):
     # The default demo passes check; its Assumption 1 margin counts the SIL wind (4 m/s) and a
     # 2 m/s allowance for light turbulence: |v_t t1 + v_d - eta| reaches ~10.5 m/s vs 14 m/s.
