@@ -200,12 +200,15 @@ def test_tlog_survives_sigkill_of_the_writing_link(tmp_path):
     assert proc.returncode == -signal.SIGKILL
     size = p.stat().st_size
     res = read_tlog(p)
-    # every record went out in one write(): nothing is half-written
-    assert res.truncated_tail_bytes == 0 and res.skipped_bytes == 0
+    # every record goes out in one write(), but Linux may still cut a write at a page boundary
+    # when SIGKILL arrives mid-copy: at most the tail of the LAST record is missing, never a
+    # record in the middle (nothing skipped) and never more than one record's bytes
+    # (8-byte stamp + a MAVLink 2 SET_ATTITUDE_TARGET of at most 12 + 39 bytes)
+    assert res.skipped_bytes == 0 and res.truncated_tail_bytes < 8 + 12 + 39
     assert res.counts == {"SET_ATTITUDE_TARGET": res.records}
     assert all(m.type_mask == 128 for _, m in res)
     # SET_ATTITUDE_TARGET v2, unsigned, trailing zeros trimmed: records have the sizes we decode
-    assert sum(8 + len(m.get_msgbuf()) for _, m in res) == size
+    assert sum(8 + len(m.get_msgbuf()) for _, m in res) + res.truncated_tail_bytes == size
     ref = mavutil.mavlink_connection(str(p))
     n = 0
     while ref.recv_msg() is not None:
