@@ -23,6 +23,13 @@ class SimResult:
     path_T: np.ndarray
 
 
+def record_sample(table: RunTable, smp: Any) -> None:
+    """Append one recorded closed-loop step (:class:`sim.kinematic.Sample`) to a run table."""
+    table.append(
+        row_from(smp.diag, smp.p, smp.w_cmd, smp.w, smp.sdot, smp.target_p, smp.target_R, smp.wind)
+    )
+
+
 def kinematic_loop(cfg: Config) -> tuple[ClosedLoop, Any]:
     """The closed loop and its initial state for a config's kinematic plant."""
     k = cfg.kinematic
@@ -65,11 +72,7 @@ def run_kinematic(cfg: Config, progress: bool = True) -> SimResult:
     )  # fmt: skip
 
     def rec(smp: Any) -> None:
-        table.append(
-            row_from(
-                smp.diag, smp.p, smp.w_cmd, smp.w, smp.sdot, smp.target_p, smp.target_R, smp.wind
-            )
-        )
+        record_sample(table, smp)
 
     for i in range(n):
         x = loop.step(x, dt)

@@ -92,10 +92,10 @@ def _kinematic(
 ) -> tuple[dict[str, Any], str, str]:
     from mpf_mavlink.bridge.preflight import initial_errors
     from mpf_mavlink.config import load_config
-    from mpf_mavlink.runs.rundir import RunTable, compute_metrics, row_from
+    from mpf_mavlink.runs.rundir import RunTable, compute_metrics
     from mpf_mavlink.runs.verdict import judge, verdict_line
     from sim.kinematic import record
-    from sim.runner import kinematic_loop
+    from sim.runner import kinematic_loop, record_sample
 
     cfg = load_config(base, sets)
     pt0, psi0, _ = initial_errors(cfg)
@@ -110,9 +110,7 @@ def _kinematic(
     status, err = "ok", ""
 
     def rec(smp: Any) -> None:
-        table.append(
-            row_from(smp.diag, smp.p, smp.w_cmd, smp.w, smp.sdot, smp.target_p, smp.target_R, smp.wind)
-        )  # fmt: skip
+        record_sample(table, smp)
 
     for i in range(n):
         x = loop.step(x, dt)
