@@ -246,6 +246,11 @@ class JSBSimPlant:
             raise RuntimeError("JSBSim run_ic() failed")
         if pm.hasNode("fcs/mixture-cmd-norm"):
             self._set("fcs/mixture-cmd-norm", 1.0)  # piston models (c172x) need fuel mixture
+        if pm.hasNode("fcs/advance-cmd-norm"):
+            # propeller lever full forward (maximum RPM), as flown in the pattern: a constant-speed
+            # propeller (pa28) left at 0 governs to its minimum RPM and the engine gives ~2/3 of its
+            # power (118 of 174 hp at full throttle, 45 m/s); fixed-pitch propellers ignore it
+            self._set("fcs/advance-cmd-norm", 1.0)
         # Start the engines and spin the propeller up. FGPropeller divides the shaft power by
         # max(omega, 1 rad/s), so throttling up a propeller at 0 RPM gives a huge one-step RPM and
         # torque spike that wrecks a 3 kg aircraft (and JSBSim's own steady-state spin-up does not

@@ -25,6 +25,7 @@ setpoints.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import multiprocessing
 import os
@@ -95,6 +96,28 @@ def _start_altitude_m(cfg: Config) -> float:
     return float(sil.home_alt_m - pos[2])
 
 
+@functools.lru_cache(maxsize=8)
+def _identify(model: str, root: str | None, v: float, alt: float, controls: tuple[Any, ...]) -> Any:
+    from .airframe_ident import identify
+
+    return identify(model, root, v, alt, dict(controls))
+
+
+def identified(cfg: Config) -> Any:
+    """The identification of the config's aircraft (sim.airframe_ident.AirframeModel) when
+    ``aircraft.gains_from_fdm`` asks for it (JSBSim plant), else None. Errors are ValueErrors
+    naming the config key."""
+    ac = cfg.section("aircraft")
+    if not (ac.gains_from_fdm and cfg.section("sil").plant == "jsbsim"):
+        return None
+    root = ac.resolved_root(cfg.source)
+    controls = tuple(sorted(ac.controls.mapping().items()))
+    return _identify(
+        ac.model, None if root is None else str(root), ac.trim_airspeed_m_s,
+        _start_altitude_m(cfg), controls,
+    )  # fmt: skip
+
+
 def trim_of(cfg: Config) -> tuple[float, float | None]:
     """(throttle, hold pitch trim rad or None) of the config's aircraft at its trim airspeed.
 
@@ -102,6 +125,9 @@ def trim_of(cfg: Config) -> tuple[float, float | None]:
     cannot trim at that speed is a one-line error naming the key); otherwise the config's.
     """
     ac = cfg.section("aircraft")
+    ident = identified(cfg)
+    if ident is not None:
+        return ident.trim["throttle"], ident.pitch_rad
     if not (ac.trim_from_fdm and cfg.section("sil").plant == "jsbsim"):
         return ac.trim_throttle, ac.attitude_loop.pitch_trim_rad
     from .airframe_trim import fdm_trim
@@ -122,6 +148,17 @@ def build_autopilot(cfg: Config) -> Any:
 
     ac, sil = cfg.section("aircraft"), cfg.section("sil")
     base = RateLoopGains()
+    ident = identified(cfg)
+    if ident is not None:
+        from .airframe_ident import derive_gains, trims
+
+        al0 = ac.attitude_loop
+        derived = derive_gains(
+            ident,
+            roll_tc_s=al0.roll_tc_s or AttitudeGains().roll_tc,
+            pitch_tc_s=al0.pitch_tc_s or AttitudeGains().pitch_tc,
+        )
+        base = dataclasses.replace(base, **derived, **trims(ident))
     over = {k: v for k, v in dataclasses.asdict(ac.rate_loop).items() if v is not None}
     v_trim = ac.trim_airspeed_m_s
     trim_throttle, pitch_trim = trim_of(cfg)

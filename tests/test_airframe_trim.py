@@ -38,9 +38,10 @@ def test_mission_radius_is_the_coordinated_turn_radius_at_the_usable_bank():
 
 def test_sil_takes_throttle_and_pitch_from_jsbsims_trim_when_asked():
     cfg = ROOT / "configs" / "sil_c172x.yaml"
-    own = trim_of(load_config(cfg))
-    assert own == (0.6, 0.035)  # the config's own numbers when trim_from_fdm is off
-    thr, pitch = trim_of(load_config(cfg, ["aircraft.trim_from_fdm=true"]))
+    off = ["aircraft.gains_from_fdm=false"]
+    own = trim_of(load_config(cfg, off + ["aircraft.trim_throttle=0.6"]))
+    assert own == (0.6, None)  # the config's own numbers when trim_from_fdm is off
+    thr, pitch = trim_of(load_config(cfg, off + ["aircraft.trim_from_fdm=true"]))
     tr = fdm_trim("c172x", None, 45.0, 488.0 + 300.0)
     assert (thr, pitch) == pytest.approx((tr.throttle, tr.pitch_rad))
     with pytest.raises(ValueError, match="aircraft.trim_airspeed_m_s"):
@@ -48,6 +49,7 @@ def test_sil_takes_throttle_and_pitch_from_jsbsims_trim_when_asked():
             load_config(
                 cfg,
                 [
+                    *off,
                     "aircraft.trim_from_fdm=true",
                     "aircraft.trim_airspeed_m_s=90",
                     "aircraft.airspeed_max_m_s=100",

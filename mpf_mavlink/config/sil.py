@@ -252,7 +252,10 @@ class AircraftConfig:
     rate loops' airspeed scaling is 1. trim_throttle: first guess for the trim flight (the trim
     found by flying replaces it). trim_from_fdm: take trim_throttle and the hold modes' pitch
     trim from JSBSim's own trim (``simulation/do_simple_trim``) at trim_airspeed_m_s and the
-    start altitude instead (sim/airframe_trim.py). airspeed_min_m_s / airspeed_max_m_s: the rate loops' scaling
+    start altitude instead (sim/airframe_trim.py). gains_from_fdm: derive the rate loops' gains
+    and surface trims (and the throttle and pitch trim) from a short identification of the FDM
+    at trim_airspeed_m_s (sim/airframe_ident.py); rate_loop entries given still win.
+    airspeed_min_m_s / airspeed_max_m_s: the rate loops' scaling
     limits (FW_AIRSPD_MIN / MAX). controls: command properties and signs.
     """
 
@@ -261,6 +264,7 @@ class AircraftConfig:
     trim_airspeed_m_s: float = field(default=16.0, metadata=_pos())
     trim_throttle: float = field(default=0.3, metadata={"check": ("range", 0.0, 1.0)})
     trim_from_fdm: bool = False
+    gains_from_fdm: bool = False
     airspeed_min_m_s: float | None = field(default=None, metadata=_pos())
     airspeed_max_m_s: float | None = field(default=None, metadata=_pos())
     controls: ControlsConfig = field(default_factory=ControlsConfig)
