@@ -30,6 +30,10 @@ No number here is tuned per aircraft. For a model, an airspeed and an altitude:
    positive rudder yaws right, the model yaws left) is an error naming the config key: the loop
    would be a positive feedback.
 
+JSBSim cannot trim a constant-speed propeller with its lever forward (sim.airframe_trim), so the
+steps start from the lever-at-0 trim; the surfaces' effect does not depend on the propeller,
+and the trim throttle it gives is only the vehicle trim flight's first guess.
+
 Units SI, radians; body rates FRD (p roll right, q nose up, r nose right).
 """
 

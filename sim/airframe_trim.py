@@ -10,6 +10,12 @@ tuned per aircraft. From it:
 - :func:`mission_radius_m`: the smallest circle radius flyable at airspeed v within a bank limit
   less a margin, ``R = v^2 / (g tan(bank_max - margin))`` (coordinated turn, still air).
 
+Constant-speed propellers (the pa28's): JSBSim's trim freezes the propeller governor's inputs
+(JSBSim issue #1440) and fails whenever the propeller lever (``fcs/advance-cmd-norm``) is
+forward, so these trims leave the lever at 0, where the governor holds the minimum RPM and the
+engine gives about two thirds of its power: their throttle is an upper bound for the SIL plant,
+which flies with the lever forward, and the vehicle's trim flight finds the real one.
+
 Units SI (m, m/s, rad); altitude above mean sea level.
 """
 

@@ -1,5 +1,7 @@
 """Strict configuration: every class of bad input is one line naming the key and the file."""
 
+from pathlib import Path
+
 import pytest
 
 from mpf_mavlink.cli.main import main
@@ -86,3 +88,16 @@ def test_check_passes_on_the_paper_and_fails_on_a_real_bank_limit(capsys):
     assert main(["check", CFG, "--set", "vehicle.max_bank_rad=0.785"]) == 3
     captured = capsys.readouterr()
     assert "[FAIL] feasibility" in captured.out and "feasibility" in captured.err
+
+
+@pytest.mark.parametrize(
+    "path", sorted(p.name for p in (Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))
+)
+def test_every_shipped_config_passes_its_own_strict_validation(path):
+    # a shipped example that the strict loader refuses is the first thing a user meets
+    from mpf_mavlink.campaign.design import load_campaign
+    from mpf_mavlink.config import load_config
+
+    f = Path(__file__).resolve().parents[1] / "configs" / path
+    cfg = (load_campaign if path.startswith("campaign_") else load_config)(f)
+    assert cfg is not None

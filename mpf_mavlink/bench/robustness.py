@@ -107,6 +107,11 @@ for _m in AIRFRAMES:
             note="54 deg of bank needed, 34 deg limit",
         )
     )
+# The demo's mission scaled to these airframes (figure-eight over a turning convoy, 4 m/s wind,
+# light turbulence, 20 ms latency: configs/sil_cessna_convoy.yaml), same 2 m bound.
+CONVOY = "configs/sil_cessna_convoy.yaml"
+for _m in AIRFRAMES:
+    ROWS.append(Row(f"{_m}_convoy", [f"aircraft.model={_m}"], config=CONVOY, rms_m=2.0))
 # flown by sil_airframes only (sil_robustness keeps its own rows, c172x as shipped among them)
 AIRFRAME_ONLY = [r.name for r in ROWS if r.name.startswith(AIRFRAMES) and r.name != "c172x"]
 AIRFRAME_ROWS = ["c172x", *AIRFRAME_ONLY]
