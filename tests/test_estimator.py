@@ -386,6 +386,44 @@ def test_own_wind_estimate_converges_to_a_steady_wind_through_a_turn():
     assert max(v for t, v in errs.items() if t >= 30.0 + 7 * tau) < 0.05
 
 
+def test_estimate_is_pure_and_the_wind_low_pass_advances_once_per_attitude():
+    """The own-wind low-pass advances when an ATTITUDE is stored, from the telemetry received
+    before it (tlog order, so a replay reproduces it), exactly the recursion
+    w += (1 - exp(-dt / tau)) (measured - w); estimate() only reads it, however often it is
+    called, and a position arriving after the ATTITUDE waits for the next one."""
+    tau, V = 2.0, 15.0
+    f = Feed(EstimatorParams(wind_tau_s=tau))
+    # an ATTITUDE before any position: nothing to measure, so no low-pass yet, even once the
+    # position and airspeed are in (an estimate is asked for before the next ATTITUDE)
+    f.att(9.98, 0.0, 0.0, 0.3)
+    f.local(9.98, (0.0, 0.0, -100.0), (V * math.cos(0.3) + 1.0, V * math.sin(0.3) - 2.0, 0.0))
+    f.vfr(V, rx=9.98)
+    e, _ = f.estimate()
+    assert e is not None and e.wind_source == "estimated" and e.vehicle.wind.tolist() == [0.0] * 3
+    assert f.est._wind_lp is None
+    want: np.ndarray | None = None
+    for k in range(50):
+        t = round(10.0 + 0.02 * k, 3)
+        wind = (1.0 + 0.1 * k, -2.0)  # a drifting wind: every sample moves the low-pass
+        level_flight(f, t, yaw=0.3, v_air=V, wind=wind)
+        # the measurement vg - V x_b is the wind itself (level, zero sideslip)
+        meas = np.array([wind[0], wind[1], 0.0])
+        gain = 1.0 - math.exp(-0.02 / tau)
+        want = meas if want is None else want + gain * (meas - want)
+        first, _ = f.estimate()
+        again, _ = f.estimate()
+        assert first is not None and again is not None
+        np.testing.assert_allclose(first.vehicle.wind, want, rtol=0, atol=1e-12)
+        assert first.vehicle.wind.tolist() == again.vehicle.wind.tolist()
+        assert first.vehicle.position.tolist() == again.vehicle.position.tolist()
+    lp = f.est._wind_lp
+    # a later position (another ground velocity) changes the estimate's frame but not the wind
+    f.local(10.99, (0.0, 0.0, -100.0), (0.0, 30.0, 0.0))
+    e, _ = f.estimate()
+    assert f.est._wind_lp == lp and e is not None and e.vehicle.wind.tolist() == list(lp)
+    assert e.ground_velocity.tolist() == [0.0, 30.0, 0.0]
+
+
 def test_own_wind_estimate_defines_the_wind_frame_and_airspeed():
     # crab: heading North at 15 m/s airspeed in a 5 m/s wind from the West (blowing East)
     f = Feed(EstimatorParams(wind_tau_s=1.0))

@@ -178,5 +178,42 @@ def replay_s(runs: int = 3) -> dict[str, float | int | str]:
     return {"s": min(full), "no_plots_s": min(bare), "steps": steps}
 
 
+def estimator_us(runs: int = 20) -> dict[str, float | int | str]:
+    """CPU time (us) per ATTITUDE of the estimator as the control loop uses it: every vehicle
+    sample of the real ArduPlane SITL tlog fed to :meth:`Estimator.update` in file order and one
+    :meth:`Estimator.estimate` after each ATTITUDE (the control step's). Best of ``runs``."""
+    from mpf_mavlink.bridge.controller import estimator_params
+    from mpf_mavlink.bridge.estimator import Estimator
+    from mpf_mavlink.config.schema import load_config
+    from mpf_mavlink.mavlink import decode, iter_tlog
+
+    if not SHARED_TLOG.is_file():
+        return {"per_attitude_us": math.nan, "note": f"{SHARED_TLOG} not found"}
+    cfg = load_config(
+        Path(__file__).resolve().parents[2] / "configs" / "replay_arduplane_sitl.yaml"
+    )
+    m = cfg.section("mavlink")
+    samples = []
+    for t, msg in iter_tlog(str(SHARED_TLOG)):
+        if msg.get_srcSystem() != m.vehicle_sysid:
+            continue
+        msg._timestamp = t  # what the bridge's dispatch does before decoding
+        s = decode(msg)
+        if s is not None:
+            samples.append((s, t))
+    best = math.inf
+    n_att = 0
+    for _ in range(runs):
+        est = Estimator(estimator_params(m))
+        n_att = 0
+        t0 = time.process_time()
+        for s, t in samples:
+            if est.update(s, t):
+                est.estimate()
+                n_att += 1
+        best = min(best, time.process_time() - t0)
+    return {"per_attitude_us": best / max(1, n_att) * 1e6, "attitudes": n_att}
+
+
 if __name__ == "__main__":  # pragma: no cover
     print(bridge_latency_ms())

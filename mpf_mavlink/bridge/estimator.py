@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -214,6 +214,20 @@ class Estimate:
     wind_source: str  # "WIND" | "WIND_COV" | "estimated"
 
 
+class _Fused(NamedTuple):
+    """What :meth:`Estimator.estimate` and the wind low-pass both derive from the samples."""
+
+    t: float
+    px: float
+    py: float
+    pz: float
+    vg: NDArray[np.float64]
+    psrc: str
+    R: NDArray[np.float64]
+    R_rows: list[list[float]]
+    airspeed: float | None
+
+
 class Estimator:
     """Keeps the latest sample of each stream; :meth:`estimate` fuses them at the attitude time."""
 
@@ -232,6 +246,8 @@ class Estimator:
         self.wind_rx: float | None = None
         self._wind_lp: tuple[float, float, float] | None = None
         self._wind_lp_t: float | None = None
+        self._gen = 0  # samples stored so far
+        self._fused: tuple[int, _Fused | tuple[None, str]] | None = None  # (_gen, _fuse())
         self.t0 = 0.0  # time origin subtracted from t_boot (mission time)
 
     # -- feeding ------------------------------------------------------------------------------
@@ -246,12 +262,13 @@ class Estimator:
             return False
         if not _plausible(name, sample):
             return False
+        self._gen += 1  # a new sample: the fused inputs cached for estimate() are out of date
         if name == "AttitudeSample":
             self.att, self.att_rx = sample, t_rx
             # the wind low-pass advances at each control instant, here, with the telemetry
             # received so far: advanced by whoever asked for an estimate first, its input
             # would depend on thread timing and a replay of the tlog could not reproduce it
-            self.estimate()
+            self._advance_wind()
             return True
         if name == "LocalPositionSample":
             self.local, self.local_rx = sample, t_rx
@@ -325,8 +342,9 @@ class Estimator:
                     lag = max(lag, x.t_boot_s - a.t_boot_s)
         return lag
 
-    def estimate(self) -> tuple[Estimate | None, str]:
-        """The state at the latest attitude sample, or (None, reason)."""
+    def _fuse(self) -> _Fused | tuple[None, str]:
+        """The inputs of an estimate at the latest attitude sample: its time, position, ground
+        velocity, attitude and airspeed (what the wind low-pass needs too), or (None, reason)."""
         a = self.att
         if a is None:
             return None, "no attitude yet"
@@ -338,12 +356,7 @@ class Estimator:
         if isinstance(pos, str):
             return None, pos
         (px, py, pz), vg, psrc = pos
-        # Scalar arithmetic throughout (a numpy call on a 3-vector costs more than the
-        # arithmetic): the same operations, in the same order, as the array form.
-        gx, gy, gz = vg.tolist()
         R = np.asarray(a.R_B_N, float)
-        R_rows = R.tolist()
-        xb0, xb1, xb2 = R_rows[0][0], R_rows[1][0], R_rows[2][0]  # body x-axis (NED)
         p = self.p
         airspeed: float | None = None
         if self.vfr is not None and (
@@ -356,22 +369,65 @@ class Estimator:
                 airspeed *= eas_to_tas(float(self.vfr.alt_amsl_m))
         elif self.vfr is not None:
             return None, f"airspeed stale ({self.att_rx - self.vfr_rx:.2f} s behind the attitude)"  # type: ignore[operator]
-        # wind: the autopilot's when fresh, else our low-pass of vg - v_air x_b, started at the
-        # first measurement (not at zero: a calm start would bias w1 by the drift angle for
-        # several tau) and restarted when the autopilot's clock goes back (a reboot)
+        return _Fused(t, px, py, pz, vg, psrc, R, R.tolist(), airspeed)
+
+    def _fused_now(self) -> _Fused | tuple[None, str]:
+        """:meth:`_fuse` of the samples stored now, computed once per new sample."""
+        c = self._fused
+        if c is not None and c[0] == self._gen:
+            return c[1]
+        f = self._fuse()
+        self._fused = (self._gen, f)
+        return f
+
+    def _advance_wind(self) -> None:
+        """Advance the wind low-pass to the attitude sample just stored (once per sample).
+
+        Our wind: a low-pass of vg - v_air x_b, started at the first measurement (not at zero:
+        a calm start would bias w1 by the drift angle for several tau) and restarted when the
+        autopilot's clock goes back (a reboot)."""
+        t = self.att.t_boot_s
         if self._wind_lp_t is not None and t < self._wind_lp_t:
             self._wind_lp = self._wind_lp_t = None
-        if airspeed is not None:
-            # vertical wind is not observable this way (angle of attack): 0
-            ix, iy = gx - airspeed * xb0, gy - airspeed * xb1
-            lp = self._wind_lp
-            if lp is None or self._wind_lp_t is None:
-                self._wind_lp = (ix, iy, 0.0)
-            else:
-                k = 1.0 - math.exp(-max(0.0, t - self._wind_lp_t) / p.wind_tau_s)
-                lx, ly, lz = lp
-                self._wind_lp = (lx + k * (ix - lx), ly + k * (iy - ly), lz + k * (0.0 - lz))
-            self._wind_lp_t = t
+        f = self._fused_now()
+        if not isinstance(f, _Fused) or f.airspeed is None:
+            return
+        R_rows = f.R_rows
+        gx, gy, _ = f.vg.tolist()
+        # vertical wind is not observable this way (angle of attack): 0
+        ix, iy = gx - f.airspeed * R_rows[0][0], gy - f.airspeed * R_rows[1][0]
+        lp = self._wind_lp
+        if lp is None or self._wind_lp_t is None:
+            self._wind_lp = (ix, iy, 0.0)
+        else:
+            k = 1.0 - math.exp(-max(0.0, t - self._wind_lp_t) / self.p.wind_tau_s)
+            lx, ly, lz = lp
+            self._wind_lp = (lx + k * (ix - lx), ly + k * (iy - ly), lz + k * (0.0 - lz))
+        self._wind_lp_t = t
+
+    def estimate(self) -> tuple[Estimate | None, str]:
+        """The state at the latest attitude sample, or (None, reason). Pure: the wind low-pass
+        it reads advanced when the attitude sample was stored (:meth:`update`)."""
+        f = self._fused_now()
+        if not isinstance(f, _Fused):
+            return f
+        t, px, py, pz, vg, psrc, R, R_rows, airspeed = (
+            f.t,
+            f.px,
+            f.py,
+            f.pz,
+            f.vg,
+            f.psrc,
+            f.R,
+            f.R_rows,
+            f.airspeed,
+        )
+        # Scalar arithmetic throughout (a numpy call on a 3-vector costs more than the
+        # arithmetic): the same operations, in the same order, as the array form.
+        gx, gy, gz = vg.tolist()
+        xb0, xb1, xb2 = R_rows[0][0], R_rows[1][0], R_rows[2][0]  # body x-axis (NED)
+        p = self.p
+        a = self.att
         w = self.wind
         if w is not None and (
             self.wind_rx is None
