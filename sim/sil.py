@@ -386,10 +386,11 @@ def run_sil(
     duration = float(duration_s if duration_s is not None else cfg.sim.duration_s)
     port = sil.port or _free_port()
     bcfg = bridge_config(cfg)
-    bcfg = dataclasses.replace(
-        bcfg,
-        extra=dict(bcfg.extra, mavlink=dataclasses.replace(bcfg.section("mavlink"), plots=plots)),
-    )
+    # in lockstep the bridge's timeouts count the vehicle's time: a simulation slowed down by
+    # a loaded host is not a lost link (mavlink.lockstep)
+    lockstep = (clock or sil.clock) == "lockstep"
+    bm = dataclasses.replace(bcfg.section("mavlink"), plots=plots, lockstep=lockstep)
+    bcfg = dataclasses.replace(bcfg, extra=dict(bcfg.extra, mavlink=bm))
     ctx = _context()
     rx, tx = ctx.Pipe(duplex=False)
     stop = ctx.Event()

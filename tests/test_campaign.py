@@ -238,7 +238,7 @@ keep_worst: 0
 
 
 def test_a_sil_flight_whose_bridge_lost_telemetry_is_flown_once_more(monkeypatch):
-    # the bridge's telemetry watchdog is wall-clock: on a CPU-starved host it trips in lockstep.
+    # a realtime-clock SIL on a CPU-starved host can trip the bridge's wall-clock watchdog.
     # The same sample is flown once more and the row says so; any other error is not retried.
     from mpf_mavlink.campaign import flight
 

@@ -193,6 +193,11 @@ class BridgeBase:
         self.last_time_boot_ms = 0
         self.last_att_mono = -math.inf
         self.last_good_mono = -math.inf
+        # the vehicle's clock (s since its boot): the newest time stamp it sent, and its value
+        # at the last ATTITUDE and the last good control step (the lockstep timeouts)
+        self.vehicle_t: float | None = None
+        self.last_att_vt: float | None = None
+        self.last_good_vt: float | None = None
         self.last_send_mono = -math.inf
         self.last_hb_tx_mono = -math.inf
         self.first_send_mono: float | None = None

@@ -28,6 +28,35 @@ class ControlStep(BridgeBase):
     def _send(self, msg: Any) -> None:
         self.link.send(msg)
 
+    # -- timeouts ----------------------------------------------------------------------------
+    def _left(
+        self, since_mono: float, since_vt: float | None, timeout_s: float, wall_s: float = 0.0
+    ) -> float:
+        """Seconds left until ``timeout_s`` has passed since an instant (``since_mono`` on the
+        wall clock, ``since_vt`` on the vehicle's); negative once it has. A real link: wall
+        time. Lockstep (``mavlink.lockstep``): the vehicle's time, which stands still while the
+        simulation is starved, bounded by ``wall_s`` (default ``lockstep_wall_timeout_s``) of
+        wall time for a vehicle that sends nothing at all."""
+        wall = time.monotonic() - since_mono
+        if not self.m.lockstep:
+            return timeout_s - wall
+        bound = wall_s or self.m.lockstep_wall_timeout_s
+        return min(timeout_s - self._vehicle_since(since_vt), bound - wall)
+
+    def _vehicle_since(self, since_vt: float | None) -> float:
+        """Vehicle seconds since ``since_vt``; 0 before any time stamp or after a reboot (its
+        clock restarted: the mode change it comes back in, or the wall bound, ends the run)."""
+        if self.vehicle_t is None or since_vt is None:
+            return 0.0
+        return max(0.0, self.vehicle_t - since_vt)
+
+    def _since(self, since_mono: float, since_vt: float | None) -> str:
+        """How long ago an instant was, for a log line (in lockstep both clocks)."""
+        wall = time.monotonic() - since_mono
+        if not self.m.lockstep:
+            return f"{wall:.2f} s"
+        return f"{self._vehicle_since(since_vt):.2f} s of vehicle time ({wall:.2f} s wall)"
+
     # -- control -----------------------------------------------------------------------------
     def _control_step(self) -> None:
         st = self.ctl.step()
@@ -37,7 +66,7 @@ class ControlStep(BridgeBase):
         self.t_last = st.t
         self._send_setpoint(st.setpoint, st.time_boot_ms)
         self.last_sp, self.last_time_boot_ms = st.setpoint, st.time_boot_ms
-        self.last_good_mono = time.monotonic()
+        self.last_good_mono, self.last_good_vt = time.monotonic(), self.vehicle_t
         if self.state == State.TRACKING:
             self._record(st)
             if self.t_engage is not None and st.t - self.t_engage >= self.m.mission_duration_s:

@@ -68,8 +68,11 @@ class LinkIO(ControlStep):
             if name == "CommandAckSample":
                 self.acks.append(sample)
                 return
+            t_boot = getattr(sample, "t_boot_s", None)
+            if t_boot is not None:
+                self.vehicle_t = t_boot
             if self.ctl.feed_vehicle(sample, rx):
-                self.last_att_mono = time.monotonic()
+                self.last_att_mono, self.last_att_vt = time.monotonic(), self.vehicle_t
                 if self.streaming and self.state < State.HANDBACK:
                     self._control_step()
         elif self.live and src == self.m.target_sysid:
@@ -83,20 +86,22 @@ class LinkIO(ControlStep):
         if not self.streaming:
             return
         period = 1.0 / self.m.min_setpoint_rate_hz
+        timeout = self.m.telemetry_timeout_s
         # re-send only while the last ATTITUDE is young enough that the last re-send still
         # falls within telemetry_timeout_s of it: commands never outlive the telemetry by more
-        fresh = now - self.last_att_mono + period <= self.m.telemetry_timeout_s
+        att_left = self._left(self.last_att_mono, self.last_att_vt, timeout)
+        fresh = att_left >= period
         if self.state == State.HANDBACK:  # wings-level setpoints until the hold mode is confirmed
             if fresh and self.last_sp is not None and now - self.last_send_mono >= period:
                 self._send_setpoint(self.last_sp, self.last_time_boot_ms)
                 self.n["setpoints_resent"] += 1
             return
-        if now - self.last_att_mono > self.m.telemetry_timeout_s:
+        if att_left < 0.0:
             raise _Stop(
-                f"telemetry lost: no ATTITUDE for {now - self.last_att_mono:.2f} s; stopped commanding",
+                f"telemetry lost: no ATTITUDE for {self._since(self.last_att_mono, self.last_att_vt)}; stopped commanding",
                 "telemetry",
             )
-        if now - self.last_good_mono > self.m.telemetry_timeout_s:
+        if self._left(self.last_good_mono, self.last_good_vt, timeout) < 0.0:
             kind = "target" if "target" in self.why_not else "telemetry"
             raise _Stop(f"{self.why_not}; stopped commanding", kind)
         if fresh and self.last_sp is not None and now - self.last_send_mono >= period:

@@ -24,7 +24,9 @@ States (``BridgeResult.state_reached`` is the furthest one):
 
 The per-sample computation (estimator, target, s, law, adapter, safe setpoints) lives in
 :class:`mpf_mavlink.bridge.controller.Controller`, which replay drives the same way. The wall clock
-(time.monotonic) is used only for link timeouts, rates and the resend timer; the receive time
+(time.monotonic) is used only for link timeouts (against a lockstep simulation,
+``mavlink.lockstep``, the telemetry and mode timeouts count the vehicle's time instead, bounded
+by ``lockstep_wall_timeout_s`` of wall time), rates and the resend timer; the receive time
 the estimator and a live target see is the message's tlog record time (microseconds), and the
 decisions taken from the wall clock are written to the tlog as STATUSTEXT: ``MPF t0=``,
 ``MPF s0=`` after INIT and ``MPF stream`` when setpoints start (see controller.py), so a replay
@@ -213,6 +215,7 @@ class Bridge(Recording):
         self._send_text(STREAM_TEXT)  # for replay: control steps start after this record
         self.streaming = True
         self.last_good_mono = self.last_att_mono = time.monotonic()
+        self.last_good_vt = self.last_att_vt = self.vehicle_t
         rate = m.min_setpoint_rate_hz
 
         def prestreamed() -> bool:

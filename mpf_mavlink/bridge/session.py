@@ -69,16 +69,20 @@ class Session(Streams):
             self.n["mode_requests"] += 1
             return time.monotonic()
 
-        for attempt in range(self.m.mode_retries):
+        # lockstep: each attempt counts vehicle time; all of them together at most
+        # lockstep_wall_timeout_s of wall time (a dead vehicle shows no time at all)
+        m = self.m
+        wall_s = max(m.mode_timeout_s, m.lockstep_wall_timeout_s / m.mode_retries)
+        for attempt in range(m.mode_retries):
             self.acks.clear()
             t_sent = send()
-            t_end = t_sent + self.m.mode_timeout_s
+            t0, vt0 = t_sent, self.vehicle_t  # the attempt's start (lockstep: vehicle time)
             while True:
-                left = t_end - time.monotonic()
-                if self._spin(max(0.0, min(left, 0.1)), done):
-                    return True, "confirmed"
-                if left <= 0.1:
+                left = self._left(t0, vt0, m.mode_timeout_s, wall_s)
+                if left <= 0.0:
                     break
+                if self._spin(min(left, 0.1), done):
+                    return True, "confirmed"
                 if confirm() and not any(acked) and asks_left and time.monotonic() - t_sent >= 0.3:
                     # the HEARTBEAT already reports the mode but the ACK was lost (a lossy
                     # radio): asking again is harmless (the autopilot ACKs the mode it is in)
@@ -167,7 +171,10 @@ class Session(Streams):
                 return f"not back for {m.reengage_settle_s:g} s within {m.reengage_wait_s:g} s ({what})"
             self._spin(min(0.05, t_end - now))
             now = time.monotonic()
-            if now - self.last_att_mono > m.telemetry_timeout_s or not self.ctl.ready():
+            if (
+                self._left(self.last_att_mono, self.last_att_vt, m.telemetry_timeout_s) < 0.0
+                or not self.ctl.ready()
+            ):
                 back_since = None
                 continue
             if back_since is None:

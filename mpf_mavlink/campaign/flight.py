@@ -163,9 +163,10 @@ def _sil(
     deadline = time.monotonic() + timeout_s
     m, status, err = _sil_once(base, sets, timeout_s, force, out_dir)
     if status == "error" and err.startswith("exit 4: telemetry lost"):
-        # the bridge's telemetry watchdog is wall-clock: a CPU-starved shared host trips it in
-        # lockstep (no property of the law). Fly the same sample once more, as `compare` does,
-        # and say so in the row; a second loss stays an error.
+        # in lockstep the bridge's watchdog counts vehicle time (mavlink.lockstep), but a SIL on
+        # the realtime clock on a CPU-starved shared host can still trip it (no property of the
+        # law). Fly the same sample once more, as `compare` does, and say so in the row; a
+        # second loss stays an error.
         first = err
         left = deadline - time.monotonic()
         if left > 0:

@@ -67,8 +67,8 @@ def run_compare(
 
             res = run_sil(c, out / law, progress=progress, plots=plots, log=lambda s: None)
             if str(res.exit_reason).startswith("telemetry lost"):
-                # the bridge's telemetry watchdog is wall-clock: a CPU-starved shared machine
-                # trips it in lockstep (no property of the law); fly once more and say so
+                # a realtime-clock SIL on a CPU-starved shared machine can trip the bridge's
+                # wall-clock watchdog (no property of the law); fly once more and say so
                 log(
                     f"      {law}: {res.exit_reason} after {res.metrics.get('sim_time_s')} s; flying it again"
                 )

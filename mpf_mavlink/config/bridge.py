@@ -83,6 +83,14 @@ class MavlinkConfig:
     prestream_s: float = field(default=1.5, metadata={"check": ("ge", 1.0)})
     mode_timeout_s: float = field(default=1.5, metadata=_pos())
     mode_retries: int = field(default=3, metadata={"check": ("ge", 1)})
+    # The vehicle is a simulation in lockstep with us (it advances once our setpoint answers
+    # its telemetry; `mpf-mavlink sim` sets this with its lockstep clock): telemetry_timeout_s,
+    # the control step's staleness and mode_timeout_s count the VEHICLE's time (the newest
+    # time_boot_ms it sent), since a slow simulation on a loaded host is not a lost link; a
+    # vehicle that sends nothing at all is still lost after lockstep_wall_timeout_s of wall time.
+    # False (a real autopilot): every timeout is wall-clock time.
+    lockstep: bool = False
+    lockstep_wall_timeout_s: float = field(default=10.0, metadata=_pos())
     hold_mode: str | None = None  # None: AUTO.LOITER (PX4), LOITER (ArduPlane)
     arm: bool = False
     # After telemetry (or the live target) was lost and control handed back: 0 ends the run;
@@ -164,6 +172,12 @@ class MavlinkConfig:
                 missing.split(",")[0],
                 f"required with {', '.join(given)} (the NED origin is lat, lon and AMSL "
                 "altitude; leave all three out to use the vehicle's HOME_POSITION)",
+            )
+        if self.lockstep and self.lockstep_wall_timeout_s < self.telemetry_timeout_s:
+            raise fail(
+                "lockstep_wall_timeout_s",
+                f"{self.lockstep_wall_timeout_s:g} is below mavlink.telemetry_timeout_s "
+                f"{self.telemetry_timeout_s:g} (it bounds the vehicle-time timeouts from above)",
             )
         for k in ("attitude", "position", "airspeed"):
             if getattr(self, f"{k}_min_hz") > getattr(self, f"{k}_rate_hz"):
