@@ -14,6 +14,7 @@ from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.guidance.baselines import guidance_law
 from mpf_mavlink.core.guidance.law import VehicleState
 from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
+from mpf_mavlink.runs.compare import distance_to_polyline
 from mpf_mavlink.runs.rundir import RunTable, row_from
 
 
@@ -34,28 +35,6 @@ def _align(truth: dict[str, np.ndarray], bc: dict[str, np.ndarray]) -> tuple[flo
         rms = float(np.sqrt(np.mean(np.sum((Pi - bp[:n]) ** 2, axis=1))))
         best = min(best, (rms, t0))
     return best[1], best[0]
-
-
-def _distance_to_polyline(nodes: np.ndarray, q: np.ndarray, closed: bool) -> np.ndarray:
-    """Distance (m) from each point of q (N, 3) to the polyline through ``nodes`` (the path's
-    tabulation, node spacing well under a metre): nearest node (k-d tree), then the exact
-    distance to the two segments that meet there."""
-    from scipy.spatial import cKDTree
-
-    n = len(nodes)
-    _, i = cKDTree(nodes).query(q)
-    best = np.full(len(q), np.inf)
-    for a, b in ((i - 1, i), (i, i + 1)):
-        if closed:
-            a, b = a % n, b % n
-        else:
-            a, b = np.clip(a, 0, n - 1), np.clip(b, 0, n - 1)
-        A, B = nodes[a], nodes[b]
-        d = B - A
-        L2 = np.maximum(np.sum(d * d, axis=1), 1e-12)
-        u = np.clip(np.sum((q - A) * d, axis=1) / L2, 0.0, 1.0)
-        best = np.minimum(best, np.linalg.norm(q - (A + u[:, None] * d), axis=1))
-    return best
 
 
 def truth_table(
@@ -96,7 +75,7 @@ def truth_table(
         )
         rel_all[j] = tgt.R_T_I.T @ (P[k] - tgt.position)
     cols = table.arrays()
-    cross = _distance_to_polyline(path.positions(), rel_all, bool(getattr(path, "closed", False)))
+    cross = distance_to_polyline(path.positions(), rel_all, bool(getattr(path, "closed", False)))
     info = {
         "alignment_t0_s": t0,
         "alignment_residual_m": resid,

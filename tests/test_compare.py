@@ -22,6 +22,50 @@ def test_distance_to_polyline_of_a_square() -> None:
     assert np.isclose(distance_to_polyline(sq, q, False)[2], np.hypot(1, 5))
 
 
+def _brute_force(nodes: np.ndarray, q: np.ndarray, closed: bool) -> np.ndarray:
+    """Every point against every segment, one at a time (the definition)."""
+    segs = list(zip(nodes[:-1], nodes[1:], strict=True))
+    if closed:
+        segs.append((nodes[-1], nodes[0]))
+    out = []
+    for p in q:
+        best = np.inf
+        for a, b in segs:
+            d = b - a
+            u = min(1.0, max(0.0, float((p - a) @ d) / max(float(d @ d), 1e-12)))
+            best = min(best, float(np.linalg.norm(p - (a + u * d))))
+        out.append(best)
+    return np.array(out)
+
+
+def test_distance_to_polyline_is_exact_where_the_nearest_node_misleads() -> None:
+    # 1 m below the middle of a 100 m segment whose ends are far, next to a node 4.5 m away whose
+    # own segments lead elsewhere: the nearest node's segments alone would say ~4.5 m
+    far = [[100.0 + 40 * i, 500.0, 0.0] for i in range(10)]  # > 8 nodes: the k-d tree path
+    nodes = np.array([[0.0, 0, 0], [100, 0, 0], [100, 50, 0], [52, 3, 0], *far])
+    q = np.array([[50.0, -1, 0]])
+    for closed in (False, True):
+        assert distance_to_polyline(nodes, q, closed)[0] == 1.0
+    # a tight lemniscate (its branches cross) and a coarse random polygon, points near and far
+    rng = np.random.default_rng(7)
+    th = np.linspace(0.0, 2 * np.pi, 300, endpoint=False)
+    lem = np.column_stack([150 * np.cos(th), 75 * np.sin(2 * th), 5 * np.sin(th)])
+    poly = rng.uniform(-200, 200, size=(25, 3))
+    for nodes, closed in ((lem, True), (lem[:170], False), (poly, True), (poly, False)):
+        q = np.vstack(
+            [
+                rng.uniform(-250, 250, size=(150, 3)),
+                nodes[::7] + rng.normal(size=(len(nodes[::7]), 3)),
+            ]
+        )
+        np.testing.assert_allclose(
+            distance_to_polyline(nodes, q, closed),
+            _brute_force(nodes, q, closed),
+            rtol=0,
+            atol=1e-9,
+        )
+
+
 def test_ratio_is_mpf_over_the_best_baseline() -> None:
     rows = [LawRow("mpf", {"steady_rms_xt_m": 0.2}), LawRow("npfg", {"steady_rms_xt_m": 0.8}),
             LawRow("pursuit", {"steady_rms_xt_m": 0.5})]  # fmt: skip

@@ -24,19 +24,39 @@ GRAVITY = 9.80665
 def distance_to_polyline(
     nodes: NDArray[np.float64], q: NDArray[np.float64], closed: bool
 ) -> NDArray[np.float64]:
-    """Distance (m) of each point of q (n, 3) from the polyline through nodes (m, 3)."""
-    A = nodes[:-1]
-    B = nodes[1:]
+    """Distance (m) of each point of q (n, 3) from the polyline through nodes (m, 3), exact.
+
+    Fast on long tables (a SIL truth of 30,000 rows against a path of thousands of nodes): the
+    segments that meet at a point's k nearest nodes (k-d tree) settle it when its k-th nearest
+    node is farther than the distance found plus half the longest segment (a closer segment
+    would have an end point within that distance, so among those nodes); the other points are
+    measured against every segment."""
+    from scipy.spatial import cKDTree
+
+    nodes, q = np.asarray(nodes, float), np.asarray(q, float).reshape(-1, 3)
+    A, B = nodes[:-1], nodes[1:]
     if closed:
-        A = np.vstack([A, nodes[-1:]])
-        B = np.vstack([B, nodes[:1]])
+        A, B = np.vstack([A, nodes[-1:]]), np.vstack([B, nodes[:1]])
     best = np.full(len(q), np.inf)
+    if len(q) == 0 or len(A) == 0:
+        return best if len(A) else np.linalg.norm(q - nodes[0], axis=1)
     d = B - A
     L2 = np.maximum(np.sum(d * d, axis=1), 1e-12)
-    for i in range(0, len(q), 256):  # chunks keep the (chunk, segments) arrays small
-        qq = q[i : i + 256, None, :]
-        u = np.clip(np.sum((qq - A) * d, axis=2) / L2, 0.0, 1.0)
-        best[i : i + 256] = np.min(np.linalg.norm(qq - (A + u[:, :, None] * d), axis=2), axis=1)
+    k = min(8, len(nodes))
+    dist, idx = cKDTree(nodes).query(q, k=k)
+    dist, idx = dist.reshape(len(q), k), idx.reshape(len(q), k)
+    seg = np.concatenate([idx - 1, idx], axis=1)  # the segments ending and starting at a node
+    seg = seg % len(A) if closed else np.clip(seg, 0, len(A) - 1)
+    Aq, dq = A[seg], d[seg]
+    u = np.clip(np.sum((q[:, None, :] - Aq) * dq, axis=2) / L2[seg], 0.0, 1.0)
+    best = np.min(np.linalg.norm(q[:, None, :] - (Aq + u[:, :, None] * dq), axis=2), axis=1)
+    if k < len(nodes):
+        rest = np.flatnonzero(dist[:, -1] <= best + 0.5 * math.sqrt(float(np.max(L2))))
+        for i in range(0, len(rest), 256):  # chunks keep the (chunk, segments) arrays small
+            r = rest[i : i + 256]
+            qq = q[r, None, :]
+            u = np.clip(np.sum((qq - A) * d, axis=2) / L2, 0.0, 1.0)
+            best[r] = np.min(np.linalg.norm(qq - (A + u[:, :, None] * d), axis=2), axis=1)
     return best
 
 
