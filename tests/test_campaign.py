@@ -75,6 +75,27 @@ def test_a_key_out_of_the_base_configs_range_is_refused_before_flying(tmp_path):
         load_campaign(p)
 
 
+def test_overrides_read_back_as_the_same_numbers():
+    # Python's repr writes 1e-05 without a dot, which YAML (PyYAML) reads as a STRING: the
+    # flight's config was refused ("must be a number"). Every override must load back exactly.
+    import math
+
+    from mpf_mavlink.campaign.design import initial_overrides, overrides_for
+    from mpf_mavlink.config.schema import load_config
+
+    src = str(Path(__file__).resolve().parents[1] / "configs" / "default.yaml")
+    base = load_config(src)
+    sample = {"mavlink.known_delay_s": 1e-05, "sil.wind_ned_m_s[0]": np.float64(2e-06)}
+    cfg = load_config(src, overrides_for(base, sample))
+    assert cfg.section("mavlink").known_delay_s == 1e-05
+    assert cfg.section("sil").wind_ned_m_s[0] == 2e-06
+    for b in (0.0, math.pi / 2, math.pi):  # sin(pi) = 1.2e-16: such components too
+        ov = initial_overrides(base, {"initial.bearing_rad": b, "initial.distance_m": 50.0})
+        got = load_config(src, ov).kinematic.initial_position_ned_m
+        want = [float(x) for x in ov[0].partition("=[")[2].rstrip("]").split(", ")]
+        assert list(got) == want
+
+
 def test_designs_are_seeded_and_latin_hypercube_fills_every_stratum(tmp_path):
     spec = load_campaign(_write(tmp_path, KIN))
     a, b = unit_points(spec), unit_points(spec)

@@ -19,6 +19,7 @@ from mpf_mavlink.campaign.spec import (
     parse_campaign,
     probe_values,
     split_indexed,
+    yaml_text,
 )
 from mpf_mavlink.config.schema import Config, load_config
 from mpf_mavlink.errors import ConfigError
@@ -86,12 +87,6 @@ def _current(cfg: Config, dotted: str) -> Any:
     return node
 
 
-def _text(value: Any) -> str:
-    if isinstance(value, float):
-        return repr(value)  # YAML reads Python's shortest repr back exactly (1e-06 -> 1.0e-06)
-    return yaml.safe_dump(value, default_flow_style=True).strip().removesuffix("...").strip()
-
-
 def overrides_for(base: Config, sample: dict[str, Any]) -> list[str]:
     """``--set`` strings for one sample (vector components filled from the base config)."""
     out: list[str] = []
@@ -101,7 +96,7 @@ def overrides_for(base: Config, sample: dict[str, Any]) -> list[str]:
             continue
         name, i = split_indexed(key)
         if i is None:
-            out.append(f"{name}={_text(value)}")
+            out.append(f"{name}={yaml_text(value)}")
             continue
         if name not in vectors:
             vectors[name] = list(_current(base, name))
@@ -110,7 +105,7 @@ def overrides_for(base: Config, sample: dict[str, Any]) -> list[str]:
             raise ConfigError(f"vary {key}: {name} has {len(vec)} components")
         vec[i] = value
     for name, vec in vectors.items():
-        out.append(f"{name}=[{', '.join(_text(float(x)) for x in vec)}]")
+        out.append(f"{name}=[{', '.join(yaml_text(float(x)) for x in vec)}]")
     initial = {k: sample[k] for k in INITIAL_KEYS if k in sample}
     if initial:
         out += initial_overrides(base, initial)
@@ -140,7 +135,7 @@ def initial_overrides(base: Config, initial: dict[str, float]) -> list[str]:
     course = math.atan2(float(f1[1]), float(f1[0])) + float(initial.get("initial.heading_rad", 0.0))
     course = math.atan2(math.sin(course), math.cos(course))
     return [
-        f"kinematic.initial_position_ned_m=[{', '.join(repr(float(x)) for x in p)}]",
-        f"kinematic.initial_attitude_rpy_rad=[0.0, 0.0, {course!r}]",
-        f"guidance.initial_s_m={float(s0)!r}",
+        f"kinematic.initial_position_ned_m=[{', '.join(yaml_text(float(x)) for x in p)}]",
+        f"kinematic.initial_attitude_rpy_rad=[0.0, 0.0, {yaml_text(course)}]",
+        f"guidance.initial_s_m={yaml_text(float(s0))}",
     ]

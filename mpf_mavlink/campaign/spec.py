@@ -114,15 +114,21 @@ def _normalise(raw: dict[str, Any]) -> dict[str, Any]:
         new = []
         for v in vary:
             if isinstance(v, dict) and isinstance(v.get("values"), list):
-                v = {**v, "values": [_yaml_text(x) for x in v["values"]]}
+                v = {**v, "values": [yaml_text(x, keep_str=True) for x in v["values"]]}
             new.append(v)
         out["vary"] = new
     return out
 
 
-def _yaml_text(x: Any) -> str:
-    if isinstance(x, str):
+def yaml_text(x: Any, keep_str: bool = False) -> str:
+    """``x`` as the YAML text that ``--set`` reads back as the same value. Floats exactly, and
+    as floats: PyYAML writes 1e-05 as 1.0e-05 (Python's repr, 1e-05, has no dot, and PyYAML
+    reads that as a string). ``keep_str``: a str is YAML text already (the choice values of a
+    campaign file, kept as written) and passes through."""
+    if keep_str and isinstance(x, str):
         return x
+    if isinstance(x, float):
+        x = float(x)  # numpy's floats: the safe dumper knows only Python's
     return yaml.safe_dump(x, default_flow_style=True).strip().removesuffix("...").strip()
 
 

@@ -44,7 +44,7 @@ def distance_to_polyline(
     L2 = np.maximum(np.sum(d * d, axis=1), 1e-12)
     k = min(8, len(nodes))
     dist, idx = cKDTree(nodes).query(q, k=k)
-    dist, idx = dist.reshape(len(q), k), idx.reshape(len(q), k)
+    dist, idx = np.reshape(dist, (len(q), k)), np.reshape(idx, (len(q), k))
     seg = np.concatenate([idx - 1, idx], axis=1)  # the segments ending and starting at a node
     seg = seg % len(A) if closed else np.clip(seg, 0, len(A) - 1)
     Aq, dq = A[seg], d[seg]
