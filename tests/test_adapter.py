@@ -204,3 +204,17 @@ def test_airspeed_integrator_can_reach_the_thrust_ceiling():
         sp, st_ = adapt((0.0, 0.0, 0.0), 12.0, LEVEL, NORTH, 0.02, P, st_)
     assert sp.thrust == P.thrust_max
     assert st_.integ <= P.thrust_max - P.trim_thrust + 1e-12
+
+
+def test_roll_rate_gain_is_the_zero_order_hold_equivalent_of_the_time_constant():
+    """Held T s, the roll-rate set-point closes 1 - exp(-T / tau) of the bank error:
+    (1 - exp(-2/3)) / 0.1 = 4.866 1/s at 10 Hz with tau 0.15 s (the continuous 1/tau = 6.667
+    closed 67 % per hold); -> 1/tau as T -> 0, and T = 0 is the continuous loop."""
+    from mpf_mavlink.core.adapter import roll_rate_gain
+
+    assert roll_rate_gain(0.15, 0.1) == pytest.approx(4.8658, abs=1e-4)
+    assert roll_rate_gain(0.15, 0.0) == 1.0 / 0.15
+    assert roll_rate_gain(0.15, 1e-6) == pytest.approx(1.0 / 0.15, rel=1e-5)
+    assert roll_rate_gain(0.15, float("nan")) == 1.0 / 0.15
+    sp, _ = adapt((0.0, 0.0, 0.3), 15.0, LEVEL, NORTH, 0.1, P, hold_s=0.1)
+    assert sp.body_rates_frd[0] == pytest.approx(sp.bank_rad * roll_rate_gain(P.tau_roll_s, 0.1))

@@ -29,11 +29,57 @@ def _level(yaw: float, V: float = 16.0, wind=(0.0, 0.0, 0.0)) -> VehicleState:
     return VehicleState(3.0, np.array([10.0, -5.0, -100.0]), R, V, np.array(wind, float))
 
 
-def test_horizon_is_delay_plus_half_the_period_and_bounded():
-    assert prediction_horizon(0.06, 0.02) == pytest.approx(0.07)
-    assert prediction_horizon(0.02, 0.1) == pytest.approx(0.07)
-    assert prediction_horizon(float("nan"), float("inf")) == 0.0
-    assert prediction_horizon(1.0, 0.02) == MAX_PREDICTION_S
+def test_horizon_is_the_delay_and_bounded():
+    """The state is predicted to when the setpoint starts acting, t + d (guidance/predict.py)."""
+    assert prediction_horizon(0.06) == pytest.approx(0.06)
+    assert prediction_horizon(0.02) == pytest.approx(0.02)
+    assert prediction_horizon(float("nan")) == 0.0
+    assert prediction_horizon(-0.1) == 0.0
+    assert prediction_horizon(1.0) == MAX_PREDICTION_S
+
+
+def _roll_loop(predict_to: str, hold: float, T: float = 0.1, d: float = 0.02) -> list[float]:
+    """Bank errors of the adapter's roll loop, step by step, against a roll that follows the
+    rate set-points exactly (phi += d p_prev + (T - d) p: the previous set-point acts until d
+    into the period). A level right turn at 0.1 rad/s and 15 m/s wants atan(1.5 / g) of bank;
+    the attitude the adapter sees is predicted by the set-point in flight to t + d ("start") or
+    t + d + T/2 ("middle")."""
+    from mpf_mavlink.core.adapter import AdapterParams, adapt
+    from mpf_mavlink.core.frames import GRAVITY_M_S2, euler_to_matrix
+
+    P = AdapterParams(tau_roll_s=0.15, adaptive=False)
+    bank = math.atan(1.5 / GRAVITY_M_S2)
+    c = d if predict_to == "start" else d + 0.5 * T
+    phi, p_prev, errs = 0.0, 0.0, []
+    for _ in range(8):
+        R = euler_to_matrix(phi + c * p_prev, 0.0, 0.0)
+        sp, _ = adapt((0.0, 0.0, 0.1), 15.0, R, (1.0, 0.0, 0.0), T, P, hold_s=hold)
+        p = sp.body_rates_frd[0]
+        assert abs(p) < P.max_roll_rate_rad_s  # the linear loop, not the clip
+        phi += d * p_prev + (T - d) * p
+        p_prev = p
+        errs.append(bank - phi)
+    return errs
+
+
+def test_roll_loop_at_10_hz_decays_like_its_time_constant_without_ringing():
+    """Predicted to the start of the hold with the zero-order-hold gain, the roll loop's poles
+    are 0 and exp(-T / tau_roll) (core/adapter.py roll_rate_gain): from the second step the
+    error shrinks by exactly exp(-0.1 / 0.15) = 0.513 per step, never changing sign. The
+    middle-of-the-hold prediction with the continuous gain 1/tau (the code before) has the
+    poles +-sqrt(T / (2 tau)) = +-0.577: its step ratios alternate (0.71, 0.47, ...: the
+    negative pole, which the rate loop's lag pushed out of the unit circle in SIL, a +-70 deg/s
+    roll-rate chatter at 5 Hz), two steps always giving the square of the pole, 1/3."""
+    e = _roll_loop("start", 0.1)
+    for a, b in zip(e[1:], e[2:], strict=False):
+        assert b / a == pytest.approx(math.exp(-0.1 / 0.15), rel=1e-9)
+    assert all(x > 0.0 for x in e)
+    old = _roll_loop("middle", 0.0)
+    ratios = [b / a for a, b in zip(old[1:], old[2:], strict=False)]
+    assert all(abs(x - y) > 0.2 for x, y in zip(ratios, ratios[1:], strict=False))
+    assert [x * y for x, y in zip(ratios, ratios[1:], strict=False)] == pytest.approx(
+        [0.1 / 0.3] * 5, rel=1e-6
+    )
 
 
 def test_level_turn_is_predicted_on_its_arc():

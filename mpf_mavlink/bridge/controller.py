@@ -347,8 +347,10 @@ class Controller:
         s_law = self.s
         tgt_law = tgt
         tau = 0.0
+        hold = 0.0  # how long the setpoint is held (s), for the adapter's roll loop
         if getattr(self.m, "delay_compensation", False):
-            tau = prediction_horizon(self.delay_s, self.period_s)
+            tau = prediction_horizon(self.delay_s)
+            hold = self.period_s
             if tau > 0.0:
                 vl, R_B_N = predict_segments(vs, est.R_B_N, self._segments(t, tau))
                 tp = self.target.state(t + tau)
@@ -378,7 +380,7 @@ class Controller:
         w1l = w1 if vl is vs else tuple(vl.R_W_I[:, 0].tolist())
         sp, self.ad_state = adapt(
             cmd.omega_w1_I, vl.airspeed, R_B_N, w1l, dt, self.ad_params, self.ad_state,
-            meas=(est.R_B_N, est.rates_frd),
+            meas=(est.R_B_N, est.rates_frd), hold_s=hold,
         )  # fmt: skip
         if not math.isfinite(cmd.sdot):
             sp = safe_setpoint(self.ad_params)

@@ -3,10 +3,19 @@
 A setpoint answers an ATTITUDE sample of time t but acts from t + d (telemetry latency, the
 bridge, the command link: the loop delay d, measured from the autopilot's ATTITUDE_TARGET echo
 or known from the config) and is held until the next one, a telemetry period T later. The law
-is therefore evaluated at the middle of that hold, t + tau with tau = d + T/2 (the zero-order
-hold's own half-period delay), on the state predicted to then. Unpredicted, tau is phase lag in
-the guidance loop: measured in SIL, 60 ms of command latency turned the demo's 0.2 m into
-2 m RMS with the turn-rate command banging between its limits.
+is therefore evaluated on the state predicted to t + d, when its setpoint starts acting.
+Unpredicted, d is phase lag in the guidance loop: measured in SIL, 60 ms of command latency
+turned the demo's 0.2 m into 2 m RMS with the turn-rate command banging between its limits.
+
+Why the start of the hold and not its middle (t + d + T/2, the zero-order hold's half-period
+delay of a continuous design): the commands are rates, integrated by the vehicle over the
+hold. A loop p_k = G (x_ref - x_hat_k), x_{k+1} = x_k + d p_{k-1} + (T - d) p_k evaluated on
+x_hat_k predicted c s ahead (by p_{k-1}) has the poles z^2 + (G (c + T - d) - 1) z - G (c - d)
+= 0: with c = d they are 0 and 1 - G T, the discrete twin of the continuous exp(-G T); with
+c = d + T/2 one is negative, -0.36 at 10 Hz for the guidance loop (G = v/alpha + K_R/2 = 4.7
+1/s) and -0.58 for the adapter's roll loop, and the rate loop's own lag pushed those toward
+the unit circle (SIL, the demo at 10 Hz ATTITUDE, 600 s: the roll-rate set-point banged +-70
+deg/s at 5 Hz, 0.63 m RMS, 1.9 m max; 0.53 / 1.48 m at t + d with the roll loop's hold gain).
 
 The prediction is the rigid-body kinematics over tau at constant body rates (ATTITUDE's p, q,
 r) and constant wind: the attitude R_B^N advances by the body rotation, the air-relative
@@ -74,12 +83,11 @@ def look_ahead(alpha_m: float, K_R: float, v_w: float, delay_s: float, period_s:
     return max(alpha_m, v_w / room)
 
 
-def prediction_horizon(delay_s: float, period_s: float) -> float:
-    """tau (s): the loop delay plus half the telemetry period (the hold), clipped to
-    [0, MAX_PREDICTION_S]. Non-finite inputs count as 0."""
+def prediction_horizon(delay_s: float) -> float:
+    """tau (s): the loop delay, when the setpoint starts acting (module docstring), clipped to
+    [0, MAX_PREDICTION_S]. A non-finite input counts as 0."""
     d = delay_s if math.isfinite(delay_s) and delay_s > 0.0 else 0.0
-    T = period_s if math.isfinite(period_s) and period_s > 0.0 else 0.0
-    return min(d + 0.5 * T, MAX_PREDICTION_S)
+    return min(d, MAX_PREDICTION_S)
 
 
 def predict(
