@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 os.environ.setdefault("MAVLINK20", "1")
 os.environ.setdefault("JSBSIM_DEBUG", "0")
 
@@ -368,6 +370,14 @@ class Tap:
 
     def vehicle_ms(self) -> int | None:
         return self.attitude_ms[-1][1] if self.attitude_ms else None
+
+    def vehicle_s(self, t: float) -> float:
+        """The vehicle's boot clock (s) at relay time ``t``, interpolated between the ATTITUDEs
+        it sent (to a 20 ms frame). The vehicle's own timeouts run on this clock: a loaded
+        host that leaves its process waiting stretches wall time, not this."""
+        ts = [a for a, _ in self.attitude_ms]
+        ms = [b * 1e-3 for _, b in self.attitude_ms]
+        return float(np.interp(t, ts, ms))
 
     def mode_requests(self) -> list[Event]:
         """DO_SET_MODE the bridge sent (whether or not the relay delivered it)."""

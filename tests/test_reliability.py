@@ -368,6 +368,22 @@ def test_soak_scenario(name, tmp_path, probe):
     _row(name, tmp_path, probe)
 
 
+def test_tap_measures_the_vehicles_timeouts_on_its_clock():
+    # the soak vehicle is paced to the wall clock, but a loaded host can leave its process
+    # waiting: 0.6 s of wall time with no simulated time (its ATTITUDEs at 50 Hz stop and go
+    # on from the next frame). Its 1 s loss timeout runs on its own clock, which the tap reads
+    # from the ATTITUDEs it relayed: 1.0 s there, 1.6 s on the wall clock.
+    from sim.soak_rig import Tap
+
+    tap = Tap(None, "px4")  # type: ignore[arg-type]  # no relay: the records are given
+    wall = [0.02 * k for k in range(26)] + [0.6 + 0.02 * k for k in range(26, 80)]
+    tap.attitude_ms = [(t, 100_000 + 20 * k) for k, t in enumerate(wall)]
+    last_command, failsafe = 0.2, 1.8  # wall s; vehicle 100.2 s and 101.2 s
+    assert failsafe - last_command == pytest.approx(1.6)
+    assert tap.vehicle_s(failsafe) - tap.vehicle_s(last_command) == pytest.approx(1.0)
+    assert tap.vehicle_s(0.01) == pytest.approx(100.01)  # between two frames: interpolated
+
+
 def test_limits_come_from_the_config():
     lim = soak.Limits.for_config("px4")
     assert (lim.max_roll_rate, lim.thrust_min, lim.max_bank) == (1.2217, 0.1, 0.61)
