@@ -407,7 +407,7 @@ def test_scripted_target_runs_on_the_bridge_clock(tmp_path):
         ],
     )  # fmt: skip
     r = run_sil(cfg, tmp_path / "run", progress=False, plots=False, log=lambda s: None)
-    assert r.exit_code == 0, r.exit_reason
+    assert r.exit_code == 0, (r.exit_reason, r.metrics.get("verdict"))
     from mpf_mavlink.runs.rundir import read_run
 
     bc, _, _ = read_run(r.bridge_dir)
