@@ -280,7 +280,8 @@ def test_pty_serial_exchange(tmp_path):
     finally:
         link.close()
         os.close(master)
-    assert read_tlog(tmp_path / "pty.tlog").counts == {"HEARTBEAT": 1, "SET_ATTITUDE_TARGET": 1}
+    # both directions: the vehicle's HEARTBEAT and ours, sent while waiting for it
+    assert read_tlog(tmp_path / "pty.tlog").counts == {"HEARTBEAT": 2, "SET_ATTITUDE_TARGET": 1}
 
 
 def test_tcp_link_to_listening_peer():
@@ -402,3 +403,27 @@ def test_struct_of_tlog_record_written_by_link(tmp_path):
     (ts,) = struct.unpack(">Q", data[:8])
     assert ts == 1_700_000_000_250_000
     assert data[8:] == bytes(msg.get_msgbuf())
+
+
+def test_waiting_for_the_heartbeat_announces_us_to_a_listening_vehicle():
+    # `mpf-mavlink vehicle --serve udpin:...` (and a GCS-facing autopilot port) answers whoever
+    # sent first: a bridge on udpout that only listened was never answered. While it waits it
+    # sends its companion HEARTBEAT at 1 Hz: 2 within 1.5 s (at 0 s and 1 s).
+    srv = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    srv.bind(("127.0.0.1", 0))
+    srv.settimeout(0.1)
+    port = srv.getsockname()[1]
+    parser = mavlink.MAVLink(None)
+    with open_link(f"udpout:127.0.0.1:{port}", vehicle_sysid=1) as link:
+        with pytest.raises(MpfError, match="no HEARTBEAT"):
+            wait_heartbeat(link, 1.5)
+    got = []
+    while True:
+        try:
+            data = srv.recv(65535)
+        except TimeoutError:
+            break
+        got += [m for m in parser.parse_buffer(data) or [] if m.get_type() == "HEARTBEAT"]
+    srv.close()
+    assert len(got) == 2
+    assert all(m.autopilot == mavlink.MAV_AUTOPILOT_INVALID for m in got)  # a companion's

@@ -426,8 +426,15 @@ def wait_heartbeat(
     allowed = None if autopilots is None else frozenset(int(a) for a in autopilots)
     ignored: Counter = Counter()  # (compid, autopilot) of HEARTBEATs from the vehicle not taken
     deadline = time.monotonic() + float(timeout_s)
+    next_hb = time.monotonic()
     while True:
-        remaining = deadline - time.monotonic()
+        now = time.monotonic()
+        remaining = deadline - now
+        if now >= next_hb and remaining > 0:
+            # our companion HEARTBEAT (1 Hz): an autopilot or simulator listening (udpin)
+            # answers whoever sent first, and would otherwise never learn where we are
+            link.send_heartbeat()
+            next_hb = now + 1.0
         if remaining <= 0:
             who = "any vehicle" if link.vehicle_sysid is None else f"system {link.vehicle_sysid}"
             c = link.counters
@@ -445,7 +452,7 @@ def wait_heartbeat(
                 )
                 + ")"
             )
-        msg = link.recv(remaining)
+        msg = link.recv(max(0.0, min(remaining, next_hb - time.monotonic())))
         if (
             msg is None
             or msg.get_type() != "HEARTBEAT"
