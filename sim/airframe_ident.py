@@ -94,6 +94,9 @@ class AirframeModel:
     roll: AxisFit
     pitch: AxisFit
     yaw: AxisFit
+    # yaw rate per unit aileron (rad/s) 0.4-0.5 s into the aileron step, before the turn's own
+    # yaw rate builds: negative = adverse yaw (the nose swings away from the roll)
+    aileron_yaw: float = 0.0
 
 
 def fit_first_order(t: np.ndarray, y: np.ndarray, du: float, gain: float | None = None) -> AxisFit:
@@ -185,24 +188,30 @@ def identify(
         trim[ch] = v * sign
     pitch_rad = float(probe["attitude/theta-rad"])
     fits: dict[str, AxisFit] = {}
+    aileron_yaw = 0.0
     for ch, (du, axis, window, surface) in STEPS.items():
         fdm = _trimmed(model, root, airspeed_m_s, altitude_m)
         prop, sign = ctl[ch]
         rate_prop = ("velocities/p-rad_sec", "velocities/q-rad_sec", "velocities/r-rad_sec")[axis]
         y0 = float(fdm[rate_prop])
+        r0 = float(fdm["velocities/r-rad_sec"])
         fdm[prop] = float(fdm[prop]) + du * surface * sign
         n = int(round(window / DT))
         t = np.empty(n)
         y = np.empty(n)
+        yaw = np.empty(n)
         for k in range(n):
             fdm.run()
             t[k] = (k + 1) * DT
             y[k] = float(fdm[rate_prop]) - y0
+            yaw[k] = float(fdm["velocities/r-rad_sec"]) - r0
+        if ch == "aileron":
+            aileron_yaw = float(np.mean(yaw[(t > 0.4) & (t <= 0.5)])) / du
         quasi_steady = float(np.mean(y[n // 2 :])) / du if ch == "elevator" else None
         fits[ch] = fit_first_order(t, y, du, quasi_steady)
     return AirframeModel(
         model, airspeed_m_s, altitude_m, trim, pitch_rad,
-        fits["aileron"], fits["elevator"], fits["rudder"],
+        fits["aileron"], fits["elevator"], fits["rudder"], aileron_yaw,
     )  # fmt: skip
 
 
@@ -240,6 +249,8 @@ def derive_gains(
     else:
         _check_sign(m.yaw, "rudder", m.model, "yaw rate (nose right)")
         out.update(yaw_p=0.5 / m.yaw.gain, yaw_i=0.0, yaw_ff=0.0, yaw_imax=0.0)
+        # the rudder that cancels the aileron's adverse yaw (none for a proverse one)
+        out["rudder_mix"] = min(max(-m.aileron_yaw / m.yaw.gain, 0.0), 1.0)
     return out
 
 

@@ -69,6 +69,9 @@ class RateLoopGains:
     yaw_i: float = 0.1
     yaw_imax: float = 0.2
     yaw_ff: float = 0.3
+    # aileron-rudder interconnect: rudder += rudder_mix * aileron (ArduPlane KFF_RDDRMIX), the
+    # rudder that cancels the yaw an aileron deflection makes (adverse yaw); 0: none
+    rudder_mix: float = 0.0
     # trims, in the normalized SURFACE command convention (TRIM_ROLL, TRIM_PITCH, TRIM_YAW):
     # elevator > 0 is nose down.
     trim_aileron: float = 0.0
@@ -371,6 +374,10 @@ class FixedWingAutopilot:
         a = self.roll.update(dt, rates_sp[0], pqr[0], airspeed)
         e = -self.pitch.update(dt, rates_sp[1], pqr[1], airspeed)
         r = self.yaw.update(dt, rates_sp[2], pqr[2], airspeed)
+        if self.gains.rudder_mix:
+            # about the trims: the mix answers the aileron the rate loop adds, not the trim's
+            mix = self.gains.rudder_mix * (a - self.gains.trim_aileron)
+            r = _clip(r + mix, -1.0, 1.0)
         return a, e, r
 
     def attitude_to_surfaces(

@@ -42,16 +42,14 @@ def test_wrong_rudder_sign_is_an_error_naming_the_config_key():
         derive_gains(m)
 
 
-@pytest.mark.parametrize("model", ["c182", "pa28"])
-def test_derived_gains_fly_a_bank_step_on_the_stock_airframe(model):
-    """Level flight, then a 20 deg bank held 25 s at constant altitude, with the autopilot built
-    from the identification alone. The rate loops are three times faster than the attitude loop
-    (first order, tc 0.4 s) so the bank should settle without a large overshoot; a c182 flown
-    with the c172x's hand-tuned gains overshot to 40 deg and spiralled (issue 13)."""
+def _fly_bank(model: str, bank_deg: float, reverse_at: float | None = None, **over: float):
+    """Level flight 10 s, then ``bank_deg`` held (reversed at ``reverse_at`` s), at constant
+    altitude, with the autopilot built from the identification alone (``over`` replaces
+    derived gains). Returns (t, roll, beta, altitude error, airspeed) as arrays."""
     v, alt = 45.0, 800.0
     m = identify(model, None, v, alt, RUDDER)
     g = dataclasses.replace(
-        RateLoopGains(), **derive_gains(m), **trims(m),
+        RateLoopGains(), **{**derive_gains(m), **over}, **trims(m),
         airspeed_trim=v, airspeed_min=30.0, airspeed_max=60.0,
     )  # fmt: skip
     ap = FixedWingAutopilot(
@@ -61,23 +59,46 @@ def test_derived_gains_fly_a_bank_step_on_the_stock_airframe(model):
         root_dir=jsbsim.get_default_root_dir(), model=model, dt=0.01, alt0_m=alt - 300.0,
         position_ned=(0.0, 0.0, -300.0), airspeed=v, throttle=m.trim["throttle"], controls=RUDDER,
     )  # fmt: skip
-    bank = math.radians(20.0)
-    roll, alt_err, speed = [], [], []
-    for k in range(3500):
+    end = 35.0 if reverse_at is None else reverse_at + 15.0
+    rows = []
+    for k in range(int(round(end / 0.01))):
         t = k * 0.01
         st = plant.state()
-        a, e, r, thr = ap.hold_step(0.01, st, v, 300.0, 0.0 if t < 10.0 else bank)
+        sp = 0.0 if t < 10.0 else math.radians(bank_deg)
+        if reverse_at is not None and t >= reverse_at:
+            sp = -sp
+        a, e, r, thr = ap.hold_step(0.01, st, v, 300.0, sp)
         plant.step(a, e, r, thr)
-        if t >= 10.0:
-            roll.append(st.euler[0])
-        alt_err.append(abs(st.altitude_rel - 300.0))
-        speed.append(st.airspeed)
-    roll_a = np.array(roll)
-    assert roll_a.max() < bank + math.radians(5.0)  # overshoot under a quarter of the step
-    assert abs(roll_a[-500:].mean() - bank) < math.radians(1.0)  # holds the bank it was given
+        rows.append((t, st.euler[0], st.beta, abs(st.altitude_rel - 300.0), st.airspeed))
+    return tuple(np.array(c) for c in zip(*rows))
+
+
+@pytest.mark.parametrize("model", ["c182", "pa28"])
+def test_derived_gains_fly_a_bank_step_on_the_stock_airframe(model):
+    """A 20 deg bank held 25 s at constant altitude, with the autopilot built from the
+    identification alone. The rate loops are three times faster than the attitude loop
+    (first order, tc 0.4 s) so the bank should settle without a large overshoot; a c182 flown
+    with the c172x's hand-tuned gains overshot to 40 deg and spiralled (issue 13)."""
+    t, roll, _, alt_err, speed = _fly_bank(model, 20.0)
+    bank, on = math.radians(20.0), t >= 10.0
+    assert roll[on].max() < bank + math.radians(5.0)  # overshoot under a quarter of the step
+    assert abs(roll[-500:].mean() - bank) < math.radians(1.0)  # holds the bank it was given
     # the verdict's bounds on a flight: altitude floor far away, airspeed within 15 % of trim
-    assert max(alt_err) < 10.0
-    assert 0.85 * v < min(speed) and max(speed) < 1.15 * v
+    assert alt_err.max() < 10.0
+    assert 0.85 * 45.0 < speed.min() and speed.max() < 1.15 * 45.0
+
+
+def test_rudder_mix_cancels_the_c182s_adverse_yaw():
+    # The c182 yaws away from its roll: -0.2 rad/s of yaw per unit aileron half a second into
+    # the step, 40 % of its roll rate. The mix is the rudder that cancels it (0.29); a 20 to -20
+    # deg reversal side-slips less with it (15 deg without). The rest of the sideslip is the
+    # roll's own (dihedral coupling), which a rudder proportional to aileron does not address.
+    m = identify("c182", None, 45.0, 800.0, RUDDER)
+    assert m.aileron_yaw < -0.1
+    assert derive_gains(m)["rudder_mix"] == pytest.approx(-m.aileron_yaw / m.yaw.gain)
+    beta_mix = np.abs(_fly_bank("c182", 20.0, reverse_at=25.0)[2]).max()
+    beta_none = np.abs(_fly_bank("c182", 20.0, reverse_at=25.0, rudder_mix=0.0)[2]).max()
+    assert beta_mix < 0.8 * beta_none
 
 
 def test_sil_builds_its_autopilot_from_the_identification():
