@@ -70,7 +70,8 @@ def _fly_bank(model: str, bank_deg: float, reverse_at: float | None = None, **ov
         a, e, r, thr = ap.hold_step(0.01, st, v, 300.0, sp)
         plant.step(a, e, r, thr)
         rows.append((t, st.euler[0], st.beta, abs(st.altitude_rel - 300.0), st.airspeed))
-    return tuple(np.array(c) for c in zip(*rows))
+    arr = np.array(rows)
+    return tuple(arr[:, i] for i in range(arr.shape[1]))
 
 
 @pytest.mark.parametrize("model", ["c182", "pa28"])
