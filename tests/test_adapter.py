@@ -218,3 +218,22 @@ def test_roll_rate_gain_is_the_zero_order_hold_equivalent_of_the_time_constant()
     assert roll_rate_gain(0.15, float("nan")) == 1.0 / 0.15
     sp, _ = adapt((0.0, 0.0, 0.3), 15.0, LEVEL, NORTH, 0.1, P, hold_s=0.1)
     assert sp.body_rates_frd[0] == pytest.approx(sp.bank_rad * roll_rate_gain(P.tau_roll_s, 0.1))
+
+
+def test_body_rates_keep_the_pitch_limits_the_attitude_set_point_has():
+    # PX4 body rates carried no pitch limit: a capture from 33 m below the path pitched a
+    # vehicle to 37 deg. The flight-path rate is cut so the pitch aimed at one tau_pitch ahead
+    # stays within [min_pitch, max_pitch] (0.35 rad = 20 deg by default), both ways.
+    up = (0.0, 0.5, 0.0)  # gamma_dot = +0.5 rad/s (see test_bank_is_clipped_and_climb_raises_pitch)
+    theta = 0.3  # 17 deg nose up, level flight path (alpha 17 deg, as in a steep capture)
+    sp, _ = adapt(up, 15.0, euler_to_matrix(0.0, theta, 0.0), NORTH, 0.02, P)
+    assert sp.body_rates_frd[1] == pytest.approx((P.max_pitch_rad - theta) / P.tau_pitch_s)
+    sp, _ = adapt(up, 15.0, euler_to_matrix(0.0, 0.4, 0.0), NORTH, 0.02, P)  # beyond: pitch down
+    q = sp.body_rates_frd[1]
+    assert q == pytest.approx((P.max_pitch_rad - 0.4) / P.tau_pitch_s) and q < 0.0
+    down = (0.0, -0.5, 0.0)
+    sp, _ = adapt(down, 15.0, euler_to_matrix(0.0, -0.3, 0.0), NORTH, 0.02, P)
+    assert sp.body_rates_frd[1] == pytest.approx((P.min_pitch_rad + 0.3) / P.tau_pitch_s)
+    # well inside the limits the law's demand passes unchanged
+    sp, _ = adapt((0.0, 0.1, 0.0), 15.0, LEVEL, NORTH, 0.02, P)
+    assert sp.body_rates_frd[1] == pytest.approx(0.1)

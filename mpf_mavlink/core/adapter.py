@@ -262,11 +262,18 @@ def adapt(
     sth, cth = math.sin(pitch), math.cos(pitch)
     phid = (bank - roll) * roll_rate_gain(params.tau_roll_s, hold_s)
     p = _clip(phid - sth * chid, -params.max_roll_rate_rad_s, params.max_roll_rate_rad_s)
+    # The body rates carry the pitch limits the attitude set-point has (min/max_pitch_rad): the
+    # flight-path rate is cut so the body pitch it aims at one tau_pitch ahead stays within
+    # them. Without it a capture from 33 m below the path pitched a PX4 vehicle to 37 deg.
+    lead = params.tau_pitch_s if params.tau_pitch_s > 0.0 else 1.0
+    gamd_b = _clip(
+        gamd, (params.min_pitch_rad - pitch) / lead, (params.max_pitch_rad - pitch) / lead
+    )
     q = _clip(
-        cphi * gamd + cth * sphi * chid, -params.max_pitch_rate_rad_s, params.max_pitch_rate_rad_s
+        cphi * gamd_b + cth * sphi * chid, -params.max_pitch_rate_rad_s, params.max_pitch_rate_rad_s
     )
     r = _clip(
-        -sphi * gamd + cphi * cth * chid, -params.max_yaw_rate_rad_s, params.max_yaw_rate_rad_s
+        -sphi * gamd_b + cphi * cth * chid, -params.max_yaw_rate_rad_s, params.max_yaw_rate_rad_s
     )
     # Pitch: the flight-path angle of w1 (= theta - alpha) advanced by tau_pitch, plus the trim
     # angle of attack. (Adding the trim to the *measured* pitch would integrate it each cycle.)
