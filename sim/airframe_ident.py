@@ -42,12 +42,13 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-FT = 0.3048
+from .airframe_trim import trimmed_fdm
+from .plant_jsbsim import DEFAULT_CONTROLS
+
 DT = 0.01  # s, the identification's FDM step (the SIL's physics rate is 100 Hz too)
 # channel -> (step of the rate loop's output, fitted body rate, fit window s, surface per output)
 # Elevator: the pitch loop's output is nose-up positive and elevator > 0 is nose down, so its
@@ -59,9 +60,6 @@ STEPS: dict[str, tuple[float, int, float, float]] = {
     "rudder": (0.1, 2, 0.5, 1.0),
 }
 RUDDER_MIN_GAIN = 0.02  # rad/s per unit: below it the rudder moves nothing (the X8 has none)
-DEFAULT_CONTROLS: dict[str, tuple[str, float]] = {
-    ch: (f"fcs/{ch}-cmd-norm", 1.0) for ch in ("aileron", "elevator", "rudder", "throttle")
-}
 
 
 class IdentError(ValueError):
@@ -120,35 +118,14 @@ def fit_first_order(t: np.ndarray, y: np.ndarray, du: float, gain: float | None 
     return AxisFit(b, tau, td, math.sqrt(max(err, 0.0) / ss) if ss > 0 else 1.0)
 
 
-def _trimmed(model: str, root: str, airspeed_m_s: float, altitude_m: float) -> Any:
-    """A JSBSim FDM trimmed in level flight, or None when JSBSim finds no trim."""
-    import jsbsim
-
-    from .plant_jsbsim import _QuietStderr
-
-    fdm = jsbsim.FGFDMExec(root)
-    fdm.set_debug_level(0)
-    with _QuietStderr():
-        ok = fdm.load_model(model)
-        if ok:
-            fdm.disable_output()
-    if not ok:
-        raise IdentError(f"aircraft.model: JSBSim could not load {model!r} from {root}")
-    fdm.set_dt(DT)
-    fdm["ic/h-sl-ft"] = altitude_m / FT
-    fdm["ic/vt-fps"] = airspeed_m_s / FT
-    fdm["ic/gamma-deg"] = 0.0
-    with _QuietStderr():
-        fdm.run_ic()
-    fdm["propulsion/set-running"] = -1
-    if fdm.get_property_manager().hasNode("fcs/mixture-cmd-norm"):
-        fdm["fcs/mixture-cmd-norm"] = 1.0
+def _trimmed(
+    model: str, root: str | os.PathLike | None, airspeed_m_s: float, altitude_m: float
+) -> Any:
+    """sim.airframe_trim.trimmed_fdm at the identification's step, the load error named."""
     try:
-        with _QuietStderr():
-            fdm["simulation/do_simple_trim"] = 1
-    except Exception:  # jsbsim.TrimFailureError
-        return None
-    return fdm
+        return trimmed_fdm(model, root, airspeed_m_s, altitude_m, DT)
+    except RuntimeError as e:
+        raise IdentError(f"aircraft.model: {e}") from None
 
 
 def _has(fdm: Any, prop: str) -> bool:
@@ -165,11 +142,8 @@ def identify(
     """Trim ``model`` at ``airspeed_m_s`` (true) and ``altitude_m`` MSL, and fit the three
     rate responses (module docstring). root_dir None: the aircraft shipped in the jsbsim
     package. controls: channel -> (JSBSim property, sign) as in the SIL plant."""
-    import jsbsim
-
-    root = str(root_dir) if root_dir is not None else str(Path(jsbsim.get_default_root_dir()))
     ctl = dict(DEFAULT_CONTROLS, **(controls or {}))
-    probe = _trimmed(model, root, airspeed_m_s, altitude_m)
+    probe = _trimmed(model, root_dir, airspeed_m_s, altitude_m)
     if probe is None:
         raise IdentError(
             f"aircraft.trim_airspeed_m_s: JSBSim finds no level-flight trim of {model} at "
@@ -190,7 +164,7 @@ def identify(
     fits: dict[str, AxisFit] = {}
     aileron_yaw = 0.0
     for ch, (du, axis, window, surface) in STEPS.items():
-        fdm = _trimmed(model, root, airspeed_m_s, altitude_m)
+        fdm = _trimmed(model, root_dir, airspeed_m_s, altitude_m)
         prop, sign = ctl[ch]
         rate_prop = ("velocities/p-rad_sec", "velocities/q-rad_sec", "velocities/r-rad_sec")[axis]
         y0 = float(fdm[rate_prop])

@@ -25,6 +25,7 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 FT = 0.3048
 G = 9.80665
@@ -41,38 +42,64 @@ class FdmTrim:
     alpha_rad: float = float("nan")
 
 
+def trimmed_fdm(
+    model: str,
+    root_dir: str | os.PathLike | None,
+    airspeed_m_s: float,
+    altitude_m: float,
+    dt: float | None = None,
+) -> Any:
+    """A ``jsbsim.FGFDMExec`` in JSBSim's full trim of level flight at true airspeed
+    ``airspeed_m_s``, ``altitude_m`` MSL, or None when JSBSim finds none with a throttle in
+    [0, 1]. root_dir None: the aircraft shipped in the jsbsim package. Engines are started
+    (``propulsion/set-running`` -1, mixture rich where the model has one) before the trim; the
+    model's output files and console chatter are suppressed. dt (s): the FDM step (None: the
+    model's). Raises RuntimeError when the model does not load."""
+    import jsbsim
+
+    from .plant_jsbsim import _QuietStderr
+
+    root = str(root_dir) if root_dir is not None else str(Path(jsbsim.get_default_root_dir()))
+    fdm = jsbsim.FGFDMExec(root)
+    fdm.set_debug_level(0)
+    with _QuietStderr():
+        ok = fdm.load_model(model)
+        if ok:
+            fdm.disable_output()
+    if not ok:
+        raise RuntimeError(f"JSBSim could not load model {model!r} from {root}")
+    if dt is not None:
+        fdm.set_dt(dt)
+    fdm["ic/h-sl-ft"] = altitude_m / FT
+    fdm["ic/vt-fps"] = airspeed_m_s / FT
+    fdm["ic/gamma-deg"] = 0.0
+    with _QuietStderr():
+        fdm.run_ic()
+    fdm["propulsion/set-running"] = -1
+    if fdm.get_property_manager().hasNode("fcs/mixture-cmd-norm"):
+        fdm["fcs/mixture-cmd-norm"] = 1.0
+    try:
+        with _QuietStderr():
+            fdm["simulation/do_simple_trim"] = 1
+    except Exception:  # jsbsim.TrimFailureError: no steady level flight at this speed
+        return None
+    if not 0.0 <= float(fdm["fcs/throttle-cmd-norm"]) <= 1.0:
+        return None
+    return fdm
+
+
 def fdm_trim(
     model: str,
     root_dir: str | os.PathLike | None,
     airspeed_m_s: float,
     altitude_m: float = 800.0,
 ) -> FdmTrim:
-    """JSBSim's full trim of level flight at true airspeed ``airspeed_m_s``, ``altitude_m`` MSL.
-
-    root_dir None: the aircraft shipped in the jsbsim package. Engines are started
-    (``propulsion/set-running`` -1, mixture rich where the model has one) before the trim.
-    """
-    import jsbsim
-
-    root = str(root_dir) if root_dir is not None else str(Path(jsbsim.get_default_root_dir()))
-    fdm = jsbsim.FGFDMExec(root)
-    fdm.set_debug_level(0)
-    if not fdm.load_model(model):
-        raise RuntimeError(f"JSBSim could not load model {model!r} from {root}")
-    fdm["ic/h-sl-ft"] = altitude_m / FT
-    fdm["ic/vt-fps"] = airspeed_m_s / FT
-    fdm["ic/gamma-deg"] = 0.0
-    fdm.run_ic()
-    fdm["propulsion/set-running"] = -1
-    if fdm.get_property_manager().hasNode("fcs/mixture-cmd-norm"):
-        fdm["fcs/mixture-cmd-norm"] = 1.0
-    try:
-        fdm["simulation/do_simple_trim"] = 1
-    except Exception:  # jsbsim.TrimFailureError: no steady level flight at this speed
+    """JSBSim's full trim of level flight at true airspeed ``airspeed_m_s``, ``altitude_m`` MSL
+    (:func:`trimmed_fdm`): throttle, body pitch and angle of attack; ok False when none."""
+    fdm = trimmed_fdm(model, root_dir, airspeed_m_s, altitude_m)
+    if fdm is None:
         return FdmTrim(airspeed_m_s, False)
     thr = float(fdm["fcs/throttle-cmd-norm"])
-    if not 0.0 <= thr <= 1.0:
-        return FdmTrim(airspeed_m_s, False)
     return FdmTrim(
         airspeed_m_s,
         True,

@@ -93,15 +93,15 @@ ROWS: list[Row] = [
 # mission made infeasible: a 150 m circle at 45 m/s needs atan(45^2 / (g 150)) = 54 deg of bank,
 # beyond the 34 deg limit, so sim must refuse it (exit 3) without --force.
 AIRFRAMES = ("c172p", "c172x", "c182", "pa28")
-FDM_TRIM = "aircraft.gains_from_fdm=true"
+DERIVED = "aircraft.gains_from_fdm=true"
 for _m in AIRFRAMES:
     ROWS.append(
-        Row(f"{_m}_derived", [f"aircraft.model={_m}", FDM_TRIM], config="configs/sil_c172x.yaml", rms_m=2.0)
+        Row(f"{_m}_derived", [f"aircraft.model={_m}", DERIVED], config="configs/sil_c172x.yaml", rms_m=2.0)
     )  # fmt: skip
     ROWS.append(
         Row(
             f"{_m}_infeasible",
-            [f"aircraft.model={_m}", FDM_TRIM, "path.radius_m=150", "sil.loiter_radius_m=400"],
+            [f"aircraft.model={_m}", DERIVED, "path.radius_m=150", "sil.loiter_radius_m=400"],
             config="configs/sil_c172x.yaml",
             expect="refuse",
             note="54 deg of bank needed, 34 deg limit",
