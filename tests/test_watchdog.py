@@ -169,3 +169,28 @@ def test_lockstep_wall_bound_below_the_telemetry_timeout_is_refused(tmp_path):
             str(ROOT / "configs" / "default.yaml"),
             ["mavlink.lockstep=true", "mavlink.lockstep_wall_timeout_s=0.2"],
         )
+
+
+def test_an_attitude_that_is_no_new_instant_is_named_when_it_starves_the_loop():
+    """An ATTITUDE whose time_boot_ms does not advance makes no control step; the controller
+    says why, so a bridge whose steps stop while ATTITUDE still arrives ends with "telemetry
+    lost: no usable state ... (no new ATTITUDE instant ...)" instead of an empty reason (CI,
+    stop 21: the blackout's last ATTITUDE before the cut was such a sample)."""
+    import numpy as np
+
+    from mpf_mavlink.bridge.controller import Controller
+    from mpf_mavlink.mavlink.codec import AttitudeSample, LocalPositionSample
+
+    ctl = Controller(load_config(str(ROOT / "configs" / "default.yaml")))
+    ctl.feed_vehicle(AttitudeSample(1.0, np.eye(3), np.zeros(3)), 10.0)
+    ctl.feed_vehicle(LocalPositionSample(1.0, np.zeros(3), np.array([16.0, 0.0, 0.0])), 10.0)
+    ctl.set_origin()
+    ctl.init_s()
+    assert ctl.step() is not None and ctl.why_not == ""
+    # the same instant again (received 20 ms later): an ATTITUDE, but no step
+    assert ctl.feed_vehicle(AttitudeSample(1.0, np.eye(3), np.zeros(3)), 10.02)
+    assert ctl.step() is None
+    assert ctl.why_not.startswith("no new ATTITUDE instant")
+    # a newer one steps again and clears the reason
+    assert ctl.feed_vehicle(AttitudeSample(1.02, np.eye(3), np.zeros(3)), 10.04)
+    assert ctl.step() is not None and ctl.why_not == ""

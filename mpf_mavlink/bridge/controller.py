@@ -334,8 +334,11 @@ class Controller:
         dt = 0.0
         if self.t_prev is not None:
             dt = t - self.t_prev
-            if dt <= 0.0:
-                return None  # duplicate or out-of-order sample: already acted on that instant
+            if dt <= 0.0:  # duplicate or out-of-order sample: already acted on that instant
+                self.why_not = (
+                    f"no new ATTITUDE instant (t {t:.3f} s, last step at {self.t_prev:.3f} s)"
+                )
+                return None
             self.s += self.sdot_prev * dt
             if dt < 1.0:  # the ATTITUDE period, filtered over ~10 samples (gaps excluded)
                 self.period_s = (
@@ -390,6 +393,7 @@ class Controller:
         self.sdot_prev = cmd.sdot if math.isfinite(cmd.sdot) else 0.0
         w1_prev, self.w1_prev = self.w1_prev, w1
         tb_ms = int(round(est.t_boot_s * 1000.0))
+        self.why_not = ""  # a step was made: nothing is missing now
         return Step(t, est.t_boot_s, tb_ms, dt, est, tgt, cmd, diag, sp, w1, w1_prev)
 
     def _segments(self, t: float, tau: float) -> list[tuple[float, Any]]:

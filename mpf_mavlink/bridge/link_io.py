@@ -102,8 +102,15 @@ class LinkIO(ControlStep):
                 "telemetry",
             )
         if self._left(self.last_good_mono, self.last_good_vt, timeout) < 0.0:
-            kind = "target" if "target" in self.why_not else "telemetry"
-            raise _Stop(f"{self.why_not}; stopped commanding", kind)
+            # ATTITUDE still arrives but none made a control step: the cause is the controller's
+            why = self.why_not or "no control step"
+            if "target" in why:
+                raise _Stop(f"{why}; stopped commanding", "target")
+            since = self._since(self.last_good_mono, self.last_good_vt)
+            raise _Stop(
+                f"telemetry lost: no usable state for {since} ({why}); stopped commanding",
+                "telemetry",
+            )
         if fresh and self.last_sp is not None and now - self.last_send_mono >= period:
             self._send_setpoint(self.last_sp, self.last_time_boot_ms)
             self.n["setpoints_resent"] += 1
