@@ -297,6 +297,14 @@ def test_full_sil_mission_converges(tmp_path, capsys):
     assert (
         m["vehicle_answered_frames"] > 0.95 * 150 / 0.02
     )  # lockstep: (nearly) every frame answered
+    # the loop delay the bridge measured from PX4's ATTITUDE_TARGET echo is the SIL's command
+    # latency (sil.command_latency_s 0.02 s), to the 1 ms of the time_boot_ms stamps it is a
+    # difference of; the ATTITUDE period is the 50 Hz stream's, to the same 1 ms
+    dc = json.loads((out / "bridge" / "metrics.json").read_text())["delay_compensation"]
+    assert dc["loop_delay_source"] == "measured" and dc["echoes_in_median"] == 9
+    assert dc["loop_delay_s"] == pytest.approx(0.02, abs=1e-3)
+    assert dc["horizon_s"] == pytest.approx(dc["loop_delay_s"], abs=1e-12)
+    assert dc["attitude_period_s"] == pytest.approx(0.02, abs=1e-3)
     tlog = out / "bridge" / "mavlink.tlog"
     assert f"tlog:          {tlog}" in text and f"run directory: {out}" in text
     assert "steady RMS |pt|" in text
