@@ -470,6 +470,7 @@ def run_sil(
                 p.terminate()
                 p.join(5.0)
     wall = time.perf_counter() - wall0
+    _write_bridge_config(bridge_dir, bcfg)
     if bres is None:
         if interrupted:
             raise KeyboardInterrupt
@@ -567,6 +568,24 @@ def _measure(
         cols, metrics, path.positions(), Path("."), bridge_dir, bridge_dir / "mavlink.tlog",
         code, bres.exit_reason, truth, bres, info.get("t_vehicle", np.zeros(0)),
     )  # fmt: skip
+
+
+def _write_bridge_config(bridge_dir: Path, bcfg: Config) -> None:
+    """``bridge/config.yaml``: the configuration the bridge flew with (the SIL's live target is
+    ``target.type: mavlink``; no ``sil``/``aircraft`` sections), so that ``mpf-mavlink replay
+    --config bridge/config.yaml bridge/mavlink.tlog`` recomputes the commands it sent."""
+    import yaml
+
+    from mpf_mavlink.config.schema import config_to_dict
+
+    if not bridge_dir.is_dir():  # the bridge never got to create its run directory
+        return
+    head = (
+        "# The bridge's configuration in this SIL flight (written by mpf-mavlink sim): replay\n"
+        "# with  mpf-mavlink replay --config bridge/config.yaml bridge/mavlink.tlog\n"
+    )
+    body = yaml.safe_dump(config_to_dict(bcfg, omit=("sil", "aircraft")), sort_keys=False)
+    (bridge_dir / "config.yaml").write_text(head + body)
 
 
 def _write(out: Path, res: SilResult, truth: dict[str, np.ndarray], plots: bool) -> None:

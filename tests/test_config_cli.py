@@ -101,3 +101,26 @@ def test_every_shipped_config_passes_its_own_strict_validation(path):
     f = Path(__file__).resolve().parents[1] / "configs" / path
     cfg = (load_campaign if path.startswith("campaign_") else load_config)(f)
     assert cfg is not None
+
+
+@pytest.mark.parametrize(
+    "path",
+    sorted(
+        p.name
+        for p in (Path(__file__).resolve().parents[1] / "configs").glob("*.yaml")
+        if not p.name.startswith("campaign_")
+    ),
+)
+def test_a_config_written_out_loads_back_to_the_same_config(path):
+    # what a run directory keeps (sim: bridge/config.yaml) must be the configuration flown,
+    # field for field: written as YAML and validated again, it is equal to the original
+    import dataclasses
+
+    import yaml
+
+    from mpf_mavlink.config import load_config
+    from mpf_mavlink.config.schema import config_from_dict, config_to_dict
+
+    cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / path)
+    back = config_from_dict(yaml.safe_load(yaml.safe_dump(config_to_dict(cfg))), "written")
+    assert dataclasses.replace(back, source=cfg.source) == cfg

@@ -320,6 +320,13 @@ def test_full_sil_mission_converges(tmp_path, capsys):
     assert ts["t"][0] == pytest.approx(0.0, abs=0.05) and ts["t"][-1] == pytest.approx(
         150.0, abs=0.1
     )
+    # the bridge's own configuration is kept, and with it the replay recomputes every command
+    # the bridge sent, bit for bit (the live target, the delay measured from the echoes)
+    from mpf_mavlink.runs.replay import replay
+
+    rp = replay(tlog, load_config(str(out / "bridge" / "config.yaml")))
+    assert rp.check.identical and rp.check.max_diff == 0.0
+    assert rp.check.compared > 150 / 0.02
 
 
 CIRCLE = """

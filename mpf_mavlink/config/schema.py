@@ -397,3 +397,28 @@ def config_from_dict(raw: dict[str, Any], src: str = "<config>") -> Any:
         if validate is not None:
             validate(cfg, src)
     return cfg
+
+
+def config_to_dict(cfg: Any, omit: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The mapping :func:`config_from_dict` turns back into ``cfg`` (every section, defaults
+    included, tuples as lists), without the sections named in ``omit``: what a run directory
+    keeps so that the flight can be re-run or replayed with the configuration it really had."""
+
+    def plain(x: Any) -> Any:
+        if dataclasses.is_dataclass(x) and not isinstance(x, type):
+            return {
+                f.name: plain(getattr(x, f.name))
+                for f in dataclasses.fields(x)
+                if not f.metadata.get("internal")
+            }
+        if isinstance(x, (list, tuple)):
+            return [plain(v) for v in x]
+        if isinstance(x, dict):
+            return {k: plain(v) for k, v in x.items()}
+        return x
+
+    out = plain(cfg)
+    out.update({k: plain(v) for k, v in cfg.extra.items()})
+    for k in omit:
+        out.pop(k, None)
+    return out
