@@ -158,6 +158,8 @@ class MavEndpoint(VehicleBase):
         the direction of ground velocity - wind, and 20 ms more lag in it costs the tight
         guidance gains of the demo a factor 2-3 in tracking error (measured)."""
         r, nxt, t = self.rates, self._next, self._k * self.dt + 1e-9
+        if self.wind_estimate_tau_s > 0.0:
+            self._update_wind_estimate(t)
         for name in _STREAM_ORDER:
             n = nxt.get(name)
             if n is not None and t < n:
@@ -173,6 +175,24 @@ class MavEndpoint(VehicleBase):
                     self._put(buf)
             elif self._due("target", self.target_rate_hz):
                 self._send_target()
+
+    def _update_wind_estimate(self, t: float) -> None:
+        """Advance the reported wind: a first-order lag (``wind_estimate_tau_s``) of the true
+        air-mass velocity, the way an autopilot's estimator follows it (PX4 EKF2's wind states
+        are a random walk observed through airspeed: gusts of a second or two barely move them).
+        It starts at the truth: a vehicle that has flown a while has converged on the steady wind."""
+        w = self._st.wind_ned
+        if self._wind_est is None:
+            self._wind_est = (float(w[0]), float(w[1]), float(w[2]))
+        else:
+            k = 1.0 - math.exp(-max(0.0, t - self._wind_est_t) / self.wind_estimate_tau_s)
+            e0, e1, e2 = self._wind_est
+            self._wind_est = (
+                e0 + k * (float(w[0]) - e0),
+                e1 + k * (float(w[1]) - e1),
+                e2 + k * (float(w[2]) - e2),
+            )
+        self._wind_est_t = t
 
     def _send_attitude(self, att: tuple[float, float, float, float, float, float]) -> None:
         """ATTITUDE from (roll, pitch, yaw, p, q, r) (rad, rad/s)."""
@@ -210,7 +230,8 @@ class MavEndpoint(VehicleBase):
             put(pack(S["vfr_hud"], eas, math.hypot(v[0], v[1]), hdg, int(round(100 * st.throttle)),
                      st.alt_m, -float(v[2])))  # fmt: skip
         elif name == "wind":
-            wn, we, wd = (float(v) for v in st.wind_ned)
+            w = self._wind_est if self._wind_est is not None else st.wind_ned
+            wn, we, wd = (float(v) for v in w)
             if self.px4:
                 put(pack(S["wind_cov"], self._us(), wn, we, 0.0, 0.0, 0.0, st.alt_m, 0.0, 0.0))
             else:

@@ -218,7 +218,7 @@ def vehicle_options(cfg: Config, url: str, clock: str | None = None, **over: Any
         lat0_deg=sil.home_lat_deg, lon0_deg=sil.home_lon_deg, alt0_m=sil.home_alt_m,
         target=build_target(cfg.target), target_system=sil.target_system, target_rate_hz=sil.target_rate_hz, target_type=sil.target_type,
         rates=rates, frame_period=sil.frame_period_s, physics_rate_hz=sil.physics_rate_hz,
-        telemetry_latency_s=sil.telemetry_latency_s, command_latency_s=sil.command_latency_s,
+        telemetry_latency_s=sil.telemetry_latency_s, command_latency_s=sil.command_latency_s, wind_estimate_tau_s=sil.wind_estimate_tau_s,
         answer_timeout_s=sil.answer_timeout_s, realtime_speed=sil.realtime_speed,
         com_of_loss_t=sil.offboard_loss_timeout_s, guided_timeout=sil.guided_timeout_s,
         loiter_radius=sil.loiter_radius_m, trim_seconds=sil.trim_s, initial_mode=sil.initial_mode, wind_ned=tuple(sil.wind_ned_m_s),

@@ -218,6 +218,7 @@ class VehicleBase:
         frame_period: float = 0.02,
         telemetry_latency_s: float = 0.0,
         command_latency_s: float = 0.0,
+        wind_estimate_tau_s: float = 0.0,
         answer_timeout_s: float = 0.05,
         realtime_speed: float = 1.0,
         com_of_loss_t: float = 1.0,
@@ -250,6 +251,11 @@ class VehicleBase:
         self.cruise_airspeed = float(airspeed)
         self.telemetry_latency_s = float(telemetry_latency_s)
         self.command_latency_s = float(command_latency_s)
+        # the wind the autopilot reports: its estimator's first-order lag of the true air-mass
+        # velocity (0: the truth itself); see SilConfig.wind_estimate_tau_s
+        self.wind_estimate_tau_s = float(wind_estimate_tau_s)
+        self._wind_est: tuple[float, float, float] | None = None
+        self._wind_est_t = 0.0
         self.com_of_loss_t = float(com_of_loss_t)
         self.guided_timeout = float(guided_timeout)
         self.loiter_radius = float(loiter_radius)

@@ -543,3 +543,29 @@ def test_lockstep_counts_only_the_answer_to_the_last_attitude():
     finally:
         v.close()
         g.close()
+
+
+def test_reported_wind_lags_the_true_wind_like_an_estimator():
+    """sil.wind_estimate_tau_s: the reported wind is a first-order lag of the air-mass velocity.
+    A 5 m/s step seen over 50 frames of 20 ms with tau 1 s has closed 1 - exp(-1) of itself:
+    each frame multiplies the remaining error by exp(-dt/tau), so after n frames it is
+    exp(-n dt/tau) to ~n ulp (float64, 50 products: 1e-13 is ample)."""
+    from types import SimpleNamespace
+
+    from sim.mav_endpoint import MavEndpoint
+
+    v = SimpleNamespace(
+        _st=SimpleNamespace(wind_ned=np.array([0.0, 4.0, 0.0])),
+        wind_estimate_tau_s=1.0,
+        _wind_est=None,
+        _wind_est_t=0.0,
+    )
+    MavEndpoint._update_wind_estimate(v, 0.0)  # starts at the truth
+    assert v._wind_est == (0.0, 4.0, 0.0)
+    v._st.wind_ned = np.array([0.0, 9.0, -1.0])  # a gust of 5 m/s east and 1 m/s up
+    for n in range(1, 51):
+        MavEndpoint._update_wind_estimate(v, 0.02 * n)
+    left = math.exp(-1.0)
+    assert v._wind_est[1] == pytest.approx(9.0 - 5.0 * left, abs=1e-13)
+    assert v._wind_est[2] == pytest.approx(-1.0 + left, abs=1e-13)
+    assert v._wind_est[0] == 0.0

@@ -114,6 +114,9 @@ class SilConfig:
     in ``initial_mode``: ``hold`` (loiter about that point) or ``cruise`` (straight on).
     Atmosphere: steady ``wind_ned_m_s`` (air-mass velocity, blowing toward), Milspec Dryden
     ``turbulence`` seeded with ``seed`` (jsbsim only), one-minus-cosine ``gusts``.
+    wind_estimate_tau_s: the wind the vehicle reports (WIND_COV / WIND) is a first-order lag of
+      the true air-mass velocity with this time constant, as an autopilot's estimator follows
+      it; 0 reports the truth, gusts included.
     """
 
     link: Literal["none", "udp"] = "none"
@@ -128,6 +131,10 @@ class SilConfig:
     telemetry: TelemetryConfig = field(default_factory=TelemetryConfig)
     telemetry_latency_s: float = field(default=0.0, metadata=_nonneg())
     command_latency_s: float = field(default=0.0, metadata=_nonneg())
+    # PX4 EKF2's wind states: a random walk of EKF2_WIND_NSD 0.05 m/s^2/sqrt(Hz) seen through
+    # airspeed of EKF2_EAS_NOISE 1.4 m/s; fused at f Hz, a scalar Kalman filter's time constant is
+    # 1.4 / (0.05 sqrt(f)): 8.9 s at 10 Hz, 4.0 s at 50 Hz; 6 s is f = 20 Hz
+    wind_estimate_tau_s: float = field(default=6.0, metadata=_nonneg())
     offboard_loss_timeout_s: float = field(default=1.0, metadata=_pos())  # PX4 COM_OF_LOSS_T
     guided_timeout_s: float = field(default=3.0, metadata=_pos())  # ArduPlane GUIDED_TIMEOUT
     loiter_radius_m: float = field(default=80.0, metadata=_pos())
