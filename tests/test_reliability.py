@@ -386,5 +386,5 @@ def test_tap_measures_the_vehicles_timeouts_on_its_clock():
 
 def test_limits_come_from_the_config():
     lim = soak.Limits.for_config("px4")
-    assert (lim.max_roll_rate, lim.thrust_min, lim.max_bank) == (1.2217, 0.1, 0.61)
+    assert (lim.max_roll_rate, lim.thrust_min, lim.max_bank) == (1.2217, 0.0, 0.61)
     assert math.isclose(lim.max_yaw_rate, 0.8727)

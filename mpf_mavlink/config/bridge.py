@@ -216,7 +216,9 @@ class AdapterSection:
     max_pitch_rad: float = field(default=0.35, metadata={"check": ("range", 0.0, 1.5)})
     trim_pitch_rad: float = field(default=0.03, metadata={"check": ("range", -0.5, 0.5)})
     trim_thrust: float = field(default=0.5, metadata={"check": ("range", 0.0, 1.0)})
-    thrust_min: float = field(default=0.1, metadata={"check": ("range", 0.0, 1.0)})
+    # PX4 FW_THR_MIN and ArduPlane THR_MIN are 0 ("for electric aircraft this will normally be
+    # set to zero"): a floor above it keeps adding energy the airframe cannot shed in an updraft
+    thrust_min: float = field(default=0.0, metadata={"check": ("range", 0.0, 1.0)})
     thrust_max: float = field(default=1.0, metadata={"check": ("range", 0.0, 1.0)})
     airspeed_kp: float = field(default=0.05, metadata=_nonneg())
     airspeed_ki: float = field(default=0.02, metadata=_nonneg())

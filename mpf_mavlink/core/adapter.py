@@ -89,7 +89,7 @@ class AdapterParams:
     trim_pitch_rad: float = 0.03
     airspeed_sp_m_s: float = 15.0
     trim_thrust: float = 0.5
-    thrust_min: float = 0.1
+    thrust_min: float = 0.0  # PX4 FW_THR_MIN, ArduPlane THR_MIN (electric: 0)
     thrust_max: float = 1.0
     airspeed_kp: float = 0.05  # thrust per m/s
     airspeed_ki: float = 0.02  # thrust per (m/s s)
