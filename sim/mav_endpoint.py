@@ -106,7 +106,9 @@ class MavEndpoint(VehicleBase):
             elif tb > self._answer_ms:
                 self._answer_ms = tb
             self.answers += 1
-            tw = self._att_t.get(tb) if self._lockstep_clock else None
+            if not self.answers_positions and tb in self._pos_t:
+                self.answers_positions = True  # a multi-rate peer: await its position frames
+            tw = self._att_t.get(tb, self._pos_t.get(tb)) if self._lockstep_clock else None
             if tw is not None:
                 # lockstep: the bridge answered at once in vehicle time, the latency runs
                 # from the ATTITUDE it answers (not from when this process got to read it)
@@ -214,7 +216,7 @@ class MavEndpoint(VehicleBase):
         elif name == "local_position":
             x, y, z = st.position_ned
             vx, vy, vz = st.velocity_ned
-            put(pack(S["local_position_ned"], ms, x, y, z, vx, vy, vz))
+            put(pack(S["local_position_ned"], ms, x, y, z, vx, vy, vz), -1, ms)
         elif name == "global_position":
             vx, vy, vz = st.velocity_ned
             hdg = int(round(math.degrees(st.euler[2]) * 100.0)) % 36000
@@ -296,10 +298,10 @@ class MavEndpoint(VehicleBase):
         wrote = False
         chunk: list[bytes] = []
         size = 0
-        att_ms = -1
+        att_ms = pos_ms = -1
         while q and q[0][0] <= t:
-            _, buf, ms = q.popleft()
-            att_ms = max(att_ms, ms)
+            _, buf, ms, pms = q.popleft()
+            att_ms, pos_ms = max(att_ms, ms), max(pos_ms, pms)
             if chunk and size + len(buf) > _DATAGRAM_MAX:
                 wrote |= self._write(b"".join(chunk))
                 chunk, size = [], 0
@@ -307,8 +309,21 @@ class MavEndpoint(VehicleBase):
             size += len(buf)
         if chunk:
             wrote |= self._write(b"".join(chunk))
-        if wrote and att_ms >= 0:
-            self._attitude_written(att_ms, t - 1e-9)
+        if not wrote:
+            return
+        if pos_ms > att_ms and not self.answers_positions:
+            self._position_written(pos_ms, t - 1e-9)
+        elif max(att_ms, pos_ms) >= 0:
+            self._attitude_written(max(att_ms, pos_ms), t - 1e-9)
+
+    def _position_written(self, ms: int, t: float) -> None:
+        """A frame with a LOCAL_POSITION_NED newer than its ATTITUDE (if any) left at vehicle
+        time ``t``, to a peer not known to answer those: remembered (not awaited) so that an
+        answer stamped with it is recognised (and its latency counted from ``t``)."""
+        p = self._pos_t
+        p[ms] = t
+        if len(p) > 512:
+            p.pop(next(iter(p)))
 
     def _attitude_written(self, ms: int, t: float) -> None:
         """An ATTITUDE stamped ``ms`` left at vehicle time ``t`` (s): choose the one to await."""

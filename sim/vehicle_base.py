@@ -399,7 +399,8 @@ class VehicleBase:
             url, source_system=self.sysid, source_component=self.compid, dialect="ardupilotmega",
             autoreconnect=True,
         )  # fmt: skip
-        self._out: deque[tuple[float, bytes, int]] = deque()  # (due, packet, ATTITUDE ms or -1)
+        # (due, packet, ATTITUDE ms or -1, LOCAL_POSITION_NED ms or -1)
+        self._out: deque[tuple[float, bytes, int, int]] = deque()
         self._in: deque[tuple[float, Any]] = deque()
         self._mav = M.MAVLink(_QueueWriter(self), srcSystem=self.sysid, srcComponent=self.compid)
         self.target = target
@@ -437,6 +438,12 @@ class VehicleBase:
         self._unstamped = False  # a setpoint stamped 0 since the last ATTITUDE was written
         self._att_written: deque[tuple[int, float]] = deque(maxlen=512)  # (ms, vehicle time)
         self._att_t: dict[int, float] = {}  # the same, by ms
+        # A bridge that also answers LOCAL_POSITION_NED between ATTITUDE samples (a multi-rate
+        # loop: mavlink.position_instants) is awaited on those frames too, from its first answer
+        # stamped with a position-only frame's time on; before that (and for a bridge that never
+        # does) they are not awaited, so a peer answering ATTITUDE only is not held up by them.
+        self._pos_t: dict[int, float] = {}  # position-only frames: ms -> vehicle time written
+        self.answers_positions = False
         self.answers = 0  # SET_ATTITUDE_TARGET messages received
         self.rx_count = 0
         self.unix0_us = int(time.time() * 1e6)
@@ -585,7 +592,9 @@ class VehicleBase:
             else float("nan")
         )
 
-    def _put(self, buf: bytes, attitude_ms: int = -1) -> None:
+    def _put(self, buf: bytes, attitude_ms: int = -1, position_ms: int = -1) -> None:
         """Queue one framed packet; it leaves ``telemetry_latency_s`` of sim time from now.
-        ``attitude_ms``: the time_boot_ms of an ATTITUDE packet (the bridge answers those)."""
-        self._out.append((self._k * self.dt + self.telemetry_latency_s, buf, attitude_ms))
+        ``attitude_ms``: the time_boot_ms of an ATTITUDE packet (the bridge answers those);
+        ``position_ms``: that of a LOCAL_POSITION_NED (a multi-rate bridge answers those too)."""
+        due = self._k * self.dt + self.telemetry_latency_s
+        self._out.append((due, buf, attitude_ms, position_ms))

@@ -305,6 +305,10 @@ def test_full_sil_mission_converges(tmp_path, capsys):
     assert dc["loop_delay_s"] == pytest.approx(0.02, abs=1e-3)
     assert dc["horizon_s"] == pytest.approx(dc["loop_delay_s"], abs=1e-12)
     assert dc["attitude_period_s"] == pytest.approx(0.02, abs=1e-3)
+    # ATTITUDE and LOCAL_POSITION_NED both at 50 Hz on one clock: no position falls between two
+    # ATTITUDE samples, so the multi-rate loop makes no step of its own (the ATTITUDE-only loop)
+    assert dc["position_instants"] and dc["position_steps"] == 0
+    assert dc["step_period_s"] == pytest.approx(0.02, abs=1e-3)
     tlog = out / "bridge" / "mavlink.tlog"
     assert f"tlog:          {tlog}" in text and f"run directory: {out}" in text
     assert "steady RMS |pt|" in text

@@ -545,6 +545,54 @@ def test_lockstep_counts_only_the_answer_to_the_last_attitude():
         g.close()
 
 
+def test_lockstep_awaits_position_frames_once_the_bridge_answers_them():
+    """ATTITUDE 10 Hz, LOCAL_POSITION_NED 50 Hz: the four frames between two ATTITUDE samples
+    carry a position only. A bridge that answers ATTITUDE only is not held up by them; once a
+    setpoint comes stamped with such a frame's time_boot_ms (a multi-rate bridge,
+    mavlink.position_instants), those frames are awaited too, each on its own stamp."""
+    port = free_port()
+    v = SimVehicle("px4", f"udpin:127.0.0.1:{port}", plant="kinematic", clock="lockstep",
+                   rates={"attitude": 10.0, "local_position": 50.0})  # fmt: skip
+    g = Gcs(port)
+
+    def frame() -> tuple[list[int], list[int]]:
+        v.step_once()
+        time.sleep(0.01)
+        new = g.read()
+        return (
+            [m.time_boot_ms for m in new if m.get_type() == "ATTITUDE"],
+            [m.time_boot_ms for m in new if m.get_type() == "LOCAL_POSITION_NED"],
+        )
+
+    def answer(ms: int) -> None:
+        g.c.mav.set_attitude_target_send(ms, 1, 1, RATES_THRUST, [1, 0, 0, 0], 0, 0, 0, 0.3)
+
+    try:
+        att: list[int] = []
+        for _ in range(20):
+            att, _pos = frame()
+            if att:
+                break
+        assert att, "no ATTITUDE from the vehicle"
+        answer(att[0])
+        assert v.poll(0.5)
+        a, pos = frame()  # 20 ms later: a position-only frame
+        assert not a and pos and pos[0] == att[0] + 20
+        assert v.poll(0.0) and not v.answers_positions  # not awaited: the ATTITUDE's answer stands
+        answer(pos[0])
+        v.poll(0.5)
+        assert v.answers_positions
+        a, pos = frame()
+        assert not a and pos and pos[0] == att[0] + 40
+        answer(pos[0] - 20)  # a late answer to the previous frame does not release this one
+        assert not v.poll(0.2), "a position frame of a multi-rate bridge was not awaited"
+        answer(pos[0])
+        assert v.poll(0.5)
+    finally:
+        v.close()
+        g.close()
+
+
 def test_reported_wind_lags_the_true_wind_like_an_estimator():
     """sil.wind_estimate_tau_s: the reported wind is a first-order lag of the air-mass velocity.
     A 5 m/s step seen over 50 frames of 20 ms with tau 1 s has closed 1 - exp(-1) of itself:

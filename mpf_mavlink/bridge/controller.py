@@ -17,8 +17,10 @@ The call sequence, identical in :mod:`mpf_mavlink.bridge.live` and :mod:`mpf_mav
    each new attitude time, so the calls must be the same in both.)
 3. ``set_origin()`` (CHECKS: mission time 0 = the attitude time then) and ``init_s()`` (INIT:
    the virtual point at the closest point of the moving path).
-4. ``step()`` for every ATTITUDE sample once setpoints stream: s += sdot_prev dt, the law,
-   the adapter; a duplicate or out-of-order sample (dt <= 0) is skipped.
+4. ``step()`` for every control instant once setpoints stream (an ATTITUDE sample, and with
+   ``mavlink.position_instants`` a LOCAL_POSITION_NED between two of them: ``feed_vehicle``
+   returns True for both): s += sdot_prev dt, the law, the adapter; a duplicate or
+   out-of-order sample (dt <= 0) is skipped.
 
 What the bridge decides from the wall clock (t0, s0, the moment streaming starts) it writes to
 the tlog as STATUSTEXT (:func:`origin_texts`, :data:`STREAM_TEXT`) for replay to pick up.
@@ -163,6 +165,17 @@ def estimator_params(m: Any) -> EstimatorParams:
     return EstimatorParams(m.attitude_stale_s, m.position_stale_s, m.airspeed_stale_s, m.wind_stale_s, m.wind_filter_tau_s, origin=origin, airspeed_is_eas=m.airspeed_is_eas, airspeed_from_wind=m.airspeed_from_wind)  # fmt: skip
 
 
+def _period(T: float, prev: Any, sample: Any) -> float:
+    """A stream's period (s) filtered over ~10 samples, from the time since its previous sample
+    ``prev`` (None: the first); gaps of 1 s or more and repeated times leave it as it was."""
+    if prev is None:
+        return T
+    dt = float(sample.t_boot_s) - float(prev.t_boot_s)
+    if not 0.0 < dt < 1.0:
+        return T
+    return dt if T == 0.0 else T + 0.1 * (dt - T)
+
+
 class Controller:
     """Estimator + target + s + law + adapter for one run (see the module docstring).
 
@@ -208,14 +221,54 @@ class Controller:
         )
         self.rates_pipeline = getattr(m, "flavour", "auto") == "px4"
         self.delays: collections.deque[float] = collections.deque(maxlen=9)  # measured (s)
+        # multi-rate loop (step): a LOCAL_POSITION_NED between two ATTITUDE samples is a
+        # control instant too; the periods (s, filtered) of both streams decide which are
+        self.position_instants = self.rates_pipeline and bool(
+            getattr(m, "position_instants", False)
+        )
+        self.att_period_s = 0.0
+        self.pos_period_s = 0.0
+        self.at_position = False  # the latest control instant is a position sample's
+        self.t_prev_boot: float | None = None  # autopilot time (s) of the latest step
+        self.position_steps = 0  # steps made at position instants
 
     # -- feeding ----------------------------------------------------------------------------
     def feed_vehicle(self, sample: Any, rx: float | None) -> bool:
-        """A decoded sample of the vehicle; True when it is an ATTITUDE (a control instant)."""
-        if type(sample).__name__ == "AttitudeTargetSample":
+        """A decoded sample of the vehicle; True when it is a control instant: an ATTITUDE, or
+        with ``mavlink.position_instants`` a LOCAL_POSITION_NED between two of them
+        (:meth:`_position_instant`)."""
+        name = type(sample).__name__
+        if name == "AttitudeTargetSample":
             self._echo(sample)
             return False
-        return self.est.update(sample, rx)
+        est = self.est
+        prev_att, prev_loc = est.att, est.local
+        if est.update(sample, rx):
+            self.att_period_s = _period(self.att_period_s, prev_att, sample)
+            self.at_position = False
+            return True
+        if name != "LocalPositionSample" or est.local is not sample:
+            return False
+        self.pos_period_s = _period(self.pos_period_s, prev_loc, sample)
+        if self.position_instants and self._position_instant(sample.t_boot_s):
+            self.at_position = True
+            return True
+        return False
+
+    def _position_instant(self, tp: float) -> bool:
+        """Whether a position sample of autopilot time tp (s) is a control instant: newer than
+        the latest ATTITUDE and the latest step, and earlier than the next ATTITUDE is due by
+        more than half a position period. A position that comes with (about) the same instant
+        as the next ATTITUDE (the streams share a clock: 50 Hz each, or every fifth position
+        at 10 Hz ATTITUDE) waits for it, whichever of the two arrives first; with both at the
+        same rate this never steps, and the loop is the ATTITUDE-only one."""
+        a = self.est.att
+        T = self.att_period_s
+        if a is None or not T > 0.0 or not tp > a.t_boot_s:
+            return False
+        if self.t_prev_boot is not None and not tp > self.t_prev_boot:
+            return False
+        return tp - a.t_boot_s < T - 0.5 * self.pos_period_s
 
     def _echo(self, sample: Any) -> None:
         """The autopilot's ATTITUDE_TARGET: when our setpoint reached it. The setpoint is found
@@ -307,6 +360,7 @@ class Controller:
             s0 = self.path.closest(tgt.R_T_I.T @ (vs.position - tgt.position))
         self.s = float(s0)
         self.t_prev = None
+        self.t_prev_boot = None
         self.sdot_prev = 0.0
         self.w1_prev = None
         self.ad_state = self.ad_state.for_reengage()  # the airframe's learned trim and turn stay
@@ -319,9 +373,10 @@ class Controller:
 
     # -- control ------------------------------------------------------------------------------
     def step(self) -> Step | None:
-        """One control step at the latest ATTITUDE; None (``why_not`` set) when the state or
-        the target is not usable, or when the sample is not newer than the previous step."""
-        est, why = self.est.estimate()
+        """One control step at the latest control instant (ATTITUDE, or a position instant:
+        :meth:`feed_vehicle`); None (``why_not`` set) when the state or the target is not
+        usable, or when the sample is not newer than the previous step."""
+        est, why = self.est.estimate(self.at_position)
         if est is None:
             self.why_not = why
             return None
@@ -340,7 +395,9 @@ class Controller:
                 )
                 return None
             self.s += self.sdot_prev * dt
-            if dt < 1.0:  # the ATTITUDE period, filtered over ~10 samples (gaps excluded)
+            # the step period (how long a setpoint is held: the ATTITUDE period, or shorter
+            # with position instants), filtered over ~10 steps (gaps excluded)
+            if dt < 1.0:
                 self.period_s = (
                     dt if self.period_s == 0.0 else self.period_s + 0.1 * (dt - self.period_s)
                 )
@@ -390,6 +447,8 @@ class Controller:
         if self.rates_pipeline:
             self.sent.append((t, sp.body_rates_frd))
         self.t_prev = t
+        self.t_prev_boot = est.t_boot_s
+        self.position_steps += self.at_position
         self.sdot_prev = cmd.sdot if math.isfinite(cmd.sdot) else 0.0
         w1_prev, self.w1_prev = self.w1_prev, w1
         tb_ms = int(round(est.t_boot_s * 1000.0))

@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 
 from mpf_mavlink.core.frames import geodetic_to_ned, wind_frame_from_velocity
 from mpf_mavlink.core.guidance.law import VehicleState
+from mpf_mavlink.core.so3 import exp as so3_exp
 
 
 def eas_to_tas(alt_amsl_m: float) -> float:
@@ -247,7 +248,9 @@ class Estimator:
         self._wind_lp: tuple[float, float, float] | None = None
         self._wind_lp_t: float | None = None
         self._gen = 0  # samples stored so far
-        self._fused: tuple[int, _Fused | tuple[None, str]] | None = None  # (_gen, _fuse())
+        self._fused: tuple[int, bool, _Fused | tuple[None, str]] | None = (
+            None  # (_gen, at, _fuse())
+        )
         self.t0 = 0.0  # time origin subtracted from t_boot (mission time)
 
     # -- feeding ------------------------------------------------------------------------------
@@ -342,9 +345,11 @@ class Estimator:
                     lag = max(lag, x.t_boot_s - a.t_boot_s)
         return lag
 
-    def _fuse(self) -> _Fused | tuple[None, str]:
+    def _fuse(self, at_position: bool = False) -> _Fused | tuple[None, str]:
         """The inputs of an estimate at the latest attitude sample: its time, position, ground
-        velocity, attitude and airspeed (what the wind low-pass needs too), or (None, reason)."""
+        velocity, attitude and airspeed (what the wind low-pass needs too), or (None, reason).
+        ``at_position``: at the latest LOCAL_POSITION_NED instead when it is newer, the attitude
+        carried there by its own body rates (:meth:`estimate`)."""
         a = self.att
         if a is None:
             return None, "no attitude yet"
@@ -352,11 +357,19 @@ class Estimator:
         if lag > self.p.attitude_stale_s:
             return None, f"attitude stale ({lag:.2f} s behind the other telemetry)"
         t = a.t_boot_s
+        R = np.asarray(a.R_B_N, float)
+        loc = self.local
+        if at_position and loc is not None and loc.t_boot_s > t:
+            # R_dot = R hat(w_body): at constant body rates the exact rotation over dt is
+            # R exp(hat(w dt)); the sample's rates are the best knowledge of the hold between
+            dt = float(loc.t_boot_s) - t
+            p, q, r = np.asarray(a.rates_frd, float).tolist()
+            R = R @ so3_exp((p * dt, q * dt, r * dt))
+            t = float(loc.t_boot_s)
         pos = self._position(t)
         if isinstance(pos, str):
             return None, pos
         (px, py, pz), vg, psrc = pos
-        R = np.asarray(a.R_B_N, float)
         p = self.p
         airspeed: float | None = None
         if self.vfr is not None and (
@@ -371,13 +384,13 @@ class Estimator:
             return None, f"airspeed stale ({self.att_rx - self.vfr_rx:.2f} s behind the attitude)"  # type: ignore[operator]
         return _Fused(t, px, py, pz, vg, psrc, R, R.tolist(), airspeed)
 
-    def _fused_now(self) -> _Fused | tuple[None, str]:
+    def _fused_now(self, at_position: bool = False) -> _Fused | tuple[None, str]:
         """:meth:`_fuse` of the samples stored now, computed once per new sample."""
         c = self._fused
-        if c is not None and c[0] == self._gen:
-            return c[1]
-        f = self._fuse()
-        self._fused = (self._gen, f)
+        if c is not None and c[0] == self._gen and c[1] == at_position:
+            return c[2]
+        f = self._fuse(at_position)
+        self._fused = (self._gen, at_position, f)
         return f
 
     def _advance_wind(self) -> None:
@@ -405,10 +418,15 @@ class Estimator:
             self._wind_lp = (lx + k * (ix - lx), ly + k * (iy - ly), lz + k * (0.0 - lz))
         self._wind_lp_t = t
 
-    def estimate(self) -> tuple[Estimate | None, str]:
+    def estimate(self, at_position: bool = False) -> tuple[Estimate | None, str]:
         """The state at the latest attitude sample, or (None, reason). Pure: the wind low-pass
-        it reads advanced when the attitude sample was stored (:meth:`update`)."""
-        f = self._fused_now()
+        it reads advanced when the attitude sample was stored (:meth:`update`).
+
+        ``at_position``: the state at the latest LOCAL_POSITION_NED when it is newer than the
+        attitude (a multi-rate loop's intersample instant): position and ground velocity of that
+        sample, the attitude propagated to its time by the attitude sample's body rates, the
+        rates themselves unchanged; otherwise the same as without."""
+        f = self._fused_now(at_position)
         if not isinstance(f, _Fused):
             return f
         t, px, py, pz, vg, psrc, R, R_rows, airspeed = (

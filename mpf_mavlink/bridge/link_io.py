@@ -71,8 +71,9 @@ class LinkIO(ControlStep):
             t_boot = getattr(sample, "t_boot_s", None)
             if t_boot is not None:
                 self.vehicle_t = t_boot
-            if self.ctl.feed_vehicle(sample, rx):
-                self.last_att_mono, self.last_att_vt = time.monotonic(), self.vehicle_t
+            if self.ctl.feed_vehicle(sample, rx):  # a control instant
+                if name == "AttitudeSample":  # the telemetry timeout counts ATTITUDE only
+                    self.last_att_mono, self.last_att_vt = time.monotonic(), self.vehicle_t
                 if self.streaming and self.state < State.HANDBACK:
                     self._control_step()
         elif self.live and src == self.m.target_sysid:

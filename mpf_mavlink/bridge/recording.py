@@ -60,14 +60,18 @@ class Recording(Session):
         metrics["adapter_learned"] = {"trim_pitch_rad": st.trim_hat, "turn_gain": st.turn_gain}
         # what the delay compensation used at the end (guidance/predict.py): the loop delay
         # measured from the autopilot's ATTITUDE_TARGET echoes (or mavlink.known_delay_s), the
-        # ATTITUDE period, the prediction horizon and the look-ahead they gave
+        # ATTITUDE period, the control-step period (shorter with position instants: the
+        # multi-rate loop), the prediction horizon and the look-ahead they gave
         ctl = self.ctl
         metrics["delay_compensation"] = {
             "enabled": bool(self.m.delay_compensation),
             "loop_delay_s": ctl.delay_s,
             "loop_delay_source": "measured" if ctl.delays else "mavlink.known_delay_s",
             "echoes_in_median": len(ctl.delays),  # the last 9 at most
-            "attitude_period_s": ctl.period_s,
+            "attitude_period_s": ctl.att_period_s,
+            "step_period_s": ctl.period_s,
+            "position_instants": bool(ctl.position_instants),
+            "position_steps": ctl.position_steps,
             "horizon_s": ctl.tau_s,
             "look_ahead_m": ctl.alpha_m,
             "look_ahead_configured_m": ctl.gains.alpha,

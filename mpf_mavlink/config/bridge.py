@@ -114,6 +114,12 @@ class MavlinkConfig:
     # replaces it once measured. delay_compensation: false = the law acts on the measured state.
     delay_compensation: bool = True
     known_delay_s: float = field(default=0.0, metadata={"check": ("range", 0.0, 0.2)})
+    # Multi-rate loop (PX4 body-rate setpoints): a LOCAL_POSITION_NED newer than the latest
+    # ATTITUDE, and due before the next one, is a control instant too: the law steps on its
+    # position and velocity with the attitude carried there by the ATTITUDE's body rates, so a
+    # slow ATTITUDE stream does not hold each rate setpoint for a whole period. Streams at the
+    # same rate (the defaults: 50 Hz each) give no such instant.
+    position_instants: bool = True
     # Stream-rate negotiation before the checks: autopilots stream slowly on most links by
     # default (ArduPlane: 1 Hz per SRn group), so the bridge asks for what the loop needs
     # (MAV_CMD_SET_MESSAGE_INTERVAL per message; REQUEST_DATA_STREAM as ArduPilot's fallback),

@@ -158,6 +158,7 @@ class _Replayer:
             None, srcSystem=m.source_system, srcComponent=m.source_component
         )
         self._pending: Step | None = None
+        self._pending_roll = 0.0  # the roll of the latest ATTITUDE at that step (ctl.roll())
         self._pending_since_match = 0
         self._last_sent: dict[str, float] | None = None
         self._last_expected: dict[str, float] | None = None  # what the replay computed for it
@@ -223,9 +224,10 @@ class _Replayer:
                     if sample.autopilot != dialect.MAV_AUTOPILOT_INVALID:
                         self._heartbeat(t, sample)
                 elif name != "CommandAckSample" and self.ctl.feed_vehicle(sample, t):
-                    self.att_times.append((t, sample.t_boot_s))
-                    R = sample.R_B_N
-                    self._rolls.append(math.atan2(R[2][1], R[2][2]))
+                    if name == "AttitudeSample":  # not a position instant (multi-rate loop)
+                        self.att_times.append((t, sample.t_boot_s))
+                        R = sample.R_B_N
+                        self._rolls.append(math.atan2(R[2][1], R[2][2]))
                     if self.phase == "streaming":
                         self._step(t)
             else:
@@ -268,6 +270,7 @@ class _Replayer:
         if self._pending is not None:
             self._pending_since_match += 1  # the previous step was never sent
         self._pending = st
+        self._pending_roll = self.ctl.roll()
         if self.win[0] <= t <= self.win[1]:
             self.table.append(st.row())
             self.sp_rows.append(tuple(st.setpoint_row()))
@@ -355,8 +358,8 @@ class _Replayer:
         st = self._pending
         if st is not None:
             # hand-back setpoints level the wings from the roll of an ATTITUDE from here on
-            R = st.estimate.R_B_N
-            self._rolls = [0.0, math.atan2(R[2][1], R[2][2])]
+            # (the step's own ATTITUDE: at a position instant its attitude is a propagated one)
+            self._rolls = [0.0, self._pending_roll]
         self._pending = None
         self._last_sent, self._last_expected, self._last_safe = rec, exp, False
         d, name = _largest_diff(rec, exp)
