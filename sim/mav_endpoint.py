@@ -311,10 +311,13 @@ class MavEndpoint(VehicleBase):
             wrote |= self._write(b"".join(chunk))
         if not wrote:
             return
-        if pos_ms > att_ms and not self.answers_positions:
-            self._position_written(pos_ms, t - 1e-9)
-        elif max(att_ms, pos_ms) >= 0:
-            self._attitude_written(max(att_ms, pos_ms), t - 1e-9)
+        if att_ms >= 0:
+            self._attitude_written(att_ms, t - 1e-9)
+        if pos_ms > att_ms:  # a position newer than any ATTITUDE in the frame
+            if self.answers_positions:
+                self._attitude_written(pos_ms, t - 1e-9)
+            else:
+                self._position_written(pos_ms, t - 1e-9)
 
     def _position_written(self, ms: int, t: float) -> None:
         """A frame with a LOCAL_POSITION_NED newer than its ATTITUDE (if any) left at vehicle
@@ -326,7 +329,8 @@ class MavEndpoint(VehicleBase):
             p.pop(next(iter(p)))
 
     def _attitude_written(self, ms: int, t: float) -> None:
-        """An ATTITUDE stamped ``ms`` left at vehicle time ``t`` (s): choose the one to await."""
+        """An ATTITUDE stamped ``ms`` (or a position of a multi-rate peer's) left at vehicle
+        time ``t`` (s): choose the one to await."""
         w = self._att_written
         if len(w) == w.maxlen:
             self._att_t.pop(w[0][0], None)
