@@ -75,23 +75,26 @@ def test_attitude_at_a_position_instant_is_the_exact_rotation_at_constant_rates(
     np.testing.assert_array_equal(e2.vehicle.position, e3.vehicle.position)
 
 
-def _feed(ctl: Controller, att_hz: float, pos_hz: float, seconds: float) -> list[tuple[str, int]]:
-    """Feed ATTITUDE and LOCAL_POSITION_NED on one 10 ms clock (the SIL's frames: the
-    position first when both fall on one instant); the control instants as (type, ms)."""
+def _feed(
+    ctl: Controller, att_hz: float, pos_hz: float, seconds: float, pos_lag_ms: int = 0
+) -> list[tuple[str, int]]:
+    """Feed ATTITUDE and LOCAL_POSITION_NED on one 1 ms clock (the SIL's frames: the position
+    first when both fall on one instant; ``pos_lag_ms``: the position stream that much later,
+    as independent stream schedules give); the control instants as (type, ms)."""
     out: list[tuple[str, int]] = []
-    na, np_ = round(100 / att_hz), round(100 / pos_hz)  # in 10 ms ticks
+    na, np_ = round(1000 / att_hz), round(1000 / pos_hz)  # in 1 ms ticks
     R = euler_to_matrix(0.2, 0.05, 1.0)
-    for k in range(round(seconds * 100)):
-        tb = 1.0 + 0.01 * k
-        rx = 10.0 + 0.01 * k
-        if k % np_ == 0:
-            pos = np.array([16.0 * 0.01 * k, 0.0, -100.0])
+    for k in range(round(seconds * 1000)):
+        tb = 1.0 + 0.001 * k
+        rx = 10.0 + 0.001 * k
+        if k >= pos_lag_ms and (k - pos_lag_ms) % np_ == 0:
+            pos = np.array([16.0 * 0.001 * k, 0.0, -100.0])
             s = LocalPositionSample(tb, pos, np.array([16.0, 0.0, 0.0]))
             if ctl.feed_vehicle(s, rx):
-                out.append(("pos", k * 10))
+                out.append(("pos", k))
         if k % na == 0:
             if ctl.feed_vehicle(AttitudeSample(tb, R, np.array([0.1, 0.0, 0.05])), rx):
-                out.append(("att", k * 10))
+                out.append(("att", k))
     return out
 
 
@@ -99,8 +102,10 @@ def test_position_instants_fall_between_attitude_samples_only():
     """ATTITUDE 10 Hz, position 50 Hz: the positions at 20, 40, 60, 80 ms after each ATTITUDE
     are control instants (80 ms < T - T_pos/2 = 90 ms); the one at 100 ms is not, it comes
     with the next ATTITUDE (which the SIL sends after it). 25 Hz: one between each pair.
-    50 Hz each: none, so the loop is the ATTITUDE-only one. Not before the ATTITUDE period is
-    known (two samples), and not at all with position_instants off."""
+    50 Hz each: none, so the loop is the ATTITUDE-only one, whatever the phase between the
+    streams (a position 5 or 15 ms after the ATTITUDE is within half a position period of it
+    or of the next one). Not before the ATTITUDE period is known (two samples), and not at
+    all with position_instants off."""
     ctl = Controller(load_config(DEMO))
     inst = _feed(ctl, 10.0, 50.0, 1.0)
     pos_ms = [ms for kind, ms in inst if kind == "pos"]
@@ -115,6 +120,16 @@ def test_position_instants_fall_between_attitude_samples_only():
     ctl = Controller(load_config(DEMO))
     inst = _feed(ctl, 50.0, 50.0, 1.0)
     assert [kind for kind, _ in inst] == ["att"] * 50
+    for lag in (3, 5, 15, 17):
+        ctl = Controller(load_config(DEMO))
+        inst = _feed(ctl, 50.0, 50.0, 1.0, pos_lag_ms=lag)
+        assert [kind for kind, _ in inst] == ["att"] * 50, lag
+    # 10 Hz ATTITUDE, 30 Hz position 7 ms behind (PX4's onboard default rate): positions
+    # 7 + 33.3 k ms after each ATTITUDE step when 10 <= delta < 100 - 16.7 (half a period each)
+    ctl = Controller(load_config(DEMO))
+    inst = _feed(ctl, 10.0, 30.0, 1.0, pos_lag_ms=7)
+    deltas = sorted({ms % 100 for kind, ms in inst if kind == "pos"})
+    assert deltas and all(16.6 <= d < 100 - 16.6 for d in deltas)
     ctl = Controller(load_config(DEMO, ["mavlink.position_instants=false"]))
     inst = _feed(ctl, 10.0, 50.0, 1.0)
     assert [kind for kind, _ in inst] == ["att"] * 10
@@ -126,11 +141,13 @@ def test_a_step_at_a_position_instant_uses_the_newer_position_and_its_time():
     ctl = Controller(load_config(DEMO))
     R = euler_to_matrix(0.0, 0.0, 0.0)
     rates = np.array([0.0, 0.0, 0.1])
-    for k, tb in enumerate((1.0, 1.1)):
+    for k in range(6):  # ATTITUDE at 1.0 and 1.1 s, positions every 20 ms
+        tb = 1.0 + 0.02 * k
         ctl.feed_vehicle(VfrHudSample(16.0, 16.0, 0.5, 0.0, 100.0, 0.0), 10.0 + tb)
-        ctl.feed_vehicle(LocalPositionSample(tb, np.array([1.6 * k, 0.0, -100.0]),
+        ctl.feed_vehicle(LocalPositionSample(tb, np.array([0.32 * k, 0.0, -100.0]),
                                              np.array([16.0, 0.0, 0.0])), 10.0 + tb)  # fmt: skip
-        assert ctl.feed_vehicle(AttitudeSample(tb, R, rates), 10.0 + tb)
+        if k in (0, 5):
+            assert ctl.feed_vehicle(AttitudeSample(tb, R, rates), 10.0 + tb)
     ctl.set_origin()
     ctl.init_s()
     assert ctl.step() is not None

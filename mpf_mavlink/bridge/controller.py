@@ -256,19 +256,20 @@ class Controller:
         return False
 
     def _position_instant(self, tp: float) -> bool:
-        """Whether a position sample of autopilot time tp (s) is a control instant: newer than
-        the latest ATTITUDE and the latest step, and earlier than the next ATTITUDE is due by
-        more than half a position period. A position that comes with (about) the same instant
-        as the next ATTITUDE (the streams share a clock: 50 Hz each, or every fifth position
-        at 10 Hz ATTITUDE) waits for it, whichever of the two arrives first; with both at the
-        same rate this never steps, and the loop is the ATTITUDE-only one."""
+        """Whether a position sample of autopilot time tp (s) is a control instant: at least
+        half a position period after the latest ATTITUDE and the latest step, and earlier than
+        the next ATTITUDE is due by more than half a position period. A position that comes
+        with (about) the same instant as an ATTITUDE (the streams share a clock: 50 Hz each, or
+        every fifth position at 10 Hz ATTITUDE) leaves the step to that ATTITUDE, whichever of
+        the two arrives first; so with both streams at one rate, in phase or not (a real PX4
+        samples each stream on its own schedule), this never steps: the ATTITUDE-only loop."""
         a = self.est.att
         T = self.att_period_s
-        if a is None or not T > 0.0 or not tp > a.t_boot_s:
+        if a is None or not T > 0.0:
             return False
-        if self.t_prev_boot is not None and not tp > self.t_prev_boot:
-            return False
-        return tp - a.t_boot_s < T - 0.5 * self.pos_period_s
+        half = 0.5 * self.pos_period_s
+        last = a.t_boot_s if self.t_prev_boot is None else max(a.t_boot_s, self.t_prev_boot)
+        return tp - last >= half and tp - a.t_boot_s < T - half
 
     def _echo(self, sample: Any) -> None:
         """The autopilot's ATTITUDE_TARGET: when our setpoint reached it. The setpoint is found
