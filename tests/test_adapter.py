@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -237,3 +238,84 @@ def test_body_rates_keep_the_pitch_limits_the_attitude_set_point_has():
     # well inside the limits the law's demand passes unchanged
     sp, _ = adapt((0.0, 0.1, 0.0), 15.0, LEVEL, NORTH, 0.02, P)
     assert sp.body_rates_frd[1] == pytest.approx(0.1)
+
+
+def _turn(phi: float, v: float) -> tuple[tuple[float, float, float], float]:
+    """The law's omega for a level turn at bank phi and v, and that turn's body pitch rate
+    g sin(phi) tan(phi) / v (the rate a rate loop must fly with the wings at phi)."""
+    chid = GRAVITY_M_S2 * math.tan(phi) / v
+    return (0.0, 0.0, chid), math.sin(phi) * chid
+
+
+def test_pitch_rate_bias_makes_an_autopilot_that_over_flies_the_turn_fly_it():
+    """SIL X8 (wind 6 m/s, 41 deg of bank): its PX4 rate loop flew 0.32 rad/s for 0.29 sent,
+    1.1x (a pull-up's feed-forward in a turn, module comment). An autopilot flying 1.1 x the
+    pitch rate sent: the estimate b_k of (flown - sent) obeys b' = b + a (0.1 (q_law - b) - b),
+    a = dt / tau_b, so the error to its fixed point 0.1 q_law / 1.1 shrinks by 1 - 1.1 a per
+    step: (1 - 0.022)^50 = 0.329 after tau_b = 1 s at 50 Hz; there the sent rate is q_law / 1.1
+    and the rate flown is the law's."""
+    phi, v = math.radians(41.0), 16.0
+    om, q_law = _turn(phi, v)
+    R = euler_to_matrix(phi, 0.0, 0.0)
+    st_ = AdapterState(trim_hat=0.0)
+    sp, st_ = adapt(om, v, R, NORTH, 0.02, P, st_)
+    assert sp.body_rates_frd[1] == pytest.approx(q_law, rel=1e-9)  # nothing measured yet
+    fixed = 0.1 * q_law / 1.1
+    errs = []
+    for _ in range(50):
+        flown = 1.1 * sp.body_rates_frd[1]
+        sp, st_ = adapt(om, v, R, NORTH, 0.02, P, st_, meas=(R, (0.0, flown, 0.0)))
+        errs.append(st_.q_bias - fixed)
+    assert errs[-1] / (0.0 - fixed) == pytest.approx((1 - 1.1 * 0.02) ** 50, rel=1e-9)
+    for _ in range(1500):  # 30 tau_b more
+        flown = 1.1 * sp.body_rates_frd[1]
+        sp, st_ = adapt(om, v, R, NORTH, 0.02, P, st_, meas=(R, (0.0, flown, 0.0)))
+    assert st_.q_bias == pytest.approx(fixed, rel=1e-9)
+    assert 1.1 * sp.body_rates_frd[1] == pytest.approx(q_law, rel=1e-9)
+    # off: the law's pitch rate is sent as it is, whatever was flown
+    off = dataclasses.replace(P, rate_bias_tau_s=0.0)
+    sp0, st0 = adapt(om, v, R, NORTH, 0.02, off, st_, meas=(R, (0.0, 1.0, 0.0)))
+    assert st0.q_bias == 0.0 and sp0.body_rates_frd[1] == pytest.approx(q_law, rel=1e-9)
+
+
+def test_pitch_rate_bias_settles_through_the_link_delay_without_ringing():
+    """The estimate's loop F (H - 1) has gain below 1 at every frequency when tau_b exceeds
+    the delay plus the rate loop's lag (module comment). A 60 ms link (3 frames at 50 Hz) and a
+    rate loop lagging 0.1 s that flies its set-point 0.03 rad/s high: tau_b = 1 s >> 0.16 s,
+    so the delivered rate comes to the law's 0.1 rad/s with no overshoot beyond 2 % of the
+    bias, and stays."""
+    om = (0.0, 0.1, 0.0)  # gamma_dot 0.1 rad/s, wings level: q_law = 0.1
+    pending = [0.0, 0.0, 0.0]
+    q_ap = 0.0
+    st_ = AdapterState(trim_hat=0.0)
+    flown_hist = []
+    for _ in range(2000):  # 40 s
+        sp, st_ = adapt(om, 15.0, LEVEL, NORTH, 0.02, P, st_, meas=(LEVEL, (0.0, q_ap, 0.0)))
+        pending.append(sp.body_rates_frd[1])
+        q_ap += (1.0 - math.exp(-0.02 / 0.1)) * (pending.pop(0) + 0.03 - q_ap)
+        flown_hist.append(q_ap)
+    assert flown_hist[-1] == pytest.approx(0.1, abs=1e-6)
+    assert max(flown_hist[500:]) <= 0.1 + 0.02 * 0.03  # after 10 s: no ringing above the law's
+    assert st_.q_bias == pytest.approx(0.03, abs=1e-6)
+    # tau_b 0.05 s, under the delay plus lag: the bound does not hold and the loop runs away
+    # (to the estimate's limit, the pitch rate of a turn at the bank limit)
+    fast = dataclasses.replace(P, rate_bias_tau_s=0.05)
+    pending, q_ap, st_ = [0.0, 0.0, 0.0], 0.0, AdapterState(trim_hat=0.0)
+    for _ in range(2000):
+        sp, st_ = adapt(om, 15.0, LEVEL, NORTH, 0.02, fast, st_, meas=(LEVEL, (0.0, q_ap, 0.0)))
+        pending.append(sp.body_rates_frd[1])
+        q_ap += (1.0 - math.exp(-0.02 / 0.1)) * (pending.pop(0) + 0.03 - q_ap)
+    assert abs(q_ap - 0.1) > 0.1
+
+
+def test_pitch_rate_bias_learns_nothing_from_a_clipped_set_point():
+    # at the pitch limit the law's demand is cut (test_body_rates_keep_the_pitch_limits...):
+    # the rate flown then answers the limit, not a bias of the autopilot
+    theta = 0.4
+    R = euler_to_matrix(0.0, theta, 0.0)
+    sp, st_ = adapt((0.0, 0.5, 0.0), 15.0, R, NORTH, 0.02, P, AdapterState(trim_hat=0.0))
+    assert st_.q_sent is None
+    _, st2 = adapt((0.0, 0.5, 0.0), 15.0, R, NORTH, 0.02, P, st_, meas=(R, (0.0, 0.3, 0.0)))
+    assert st2.q_bias == 0.0
+    # and a hand-back starts it afresh (the autopilot's own integrators moved meanwhile)
+    assert AdapterState(q_bias=0.05, q_sent=0.1).for_reengage().q_bias == 0.0

@@ -220,6 +220,8 @@ class Controller:
             maxlen=64
         )
         self.rates_pipeline = getattr(m, "flavour", "auto") == "px4"
+        if not self.rates_pipeline:  # body rates not sent: no pitch-rate bias to take off them
+            self.ad_params = dataclasses.replace(self.ad_params, rate_bias_tau_s=0.0)
         self.delays: collections.deque[float] = collections.deque(maxlen=9)  # measured (s)
         # multi-rate loop (step): a LOCAL_POSITION_NED between two ATTITUDE samples is a
         # control instant too; the periods (s, filtered) of both streams decide which are
@@ -468,7 +470,9 @@ class Controller:
         segs: list[tuple[float, Any]] = []
         now = t
         end = t + tau
-        for ts, r in self.sent:
+        qb = self.ad_state.q_bias  # the autopilot flies the pitch rate sent plus its bias
+        for ts, (p_, q_, r_) in self.sent:
+            r = (p_, q_ + qb, r_)
             a = ts + d  # when that setpoint starts acting
             if a <= now:
                 rates = r  # acting now (the latest that started)

@@ -57,7 +57,11 @@ class Recording(Session):
                 np.mean(thr >= self.ad_params.thrust_max - 0.005)
             )
         st = self.ctl.ad_state
-        metrics["adapter_learned"] = {"trim_pitch_rad": st.trim_hat, "turn_gain": st.turn_gain}
+        metrics["adapter_learned"] = {
+            "trim_pitch_rad": st.trim_hat,
+            "turn_gain": st.turn_gain,
+            "pitch_rate_bias_rad_s": st.q_bias,
+        }
         # what the delay compensation used at the end (guidance/predict.py): the loop delay
         # measured from the autopilot's ATTITUDE_TARGET echoes (or mavlink.known_delay_s), the
         # ATTITUDE period, the control-step period (shorter with position instants: the

@@ -235,6 +235,9 @@ class AdapterSection:
     adaptive: bool = True
     trim_tau_s: float = field(default=4.0, metadata=_pos())
     turn_gain_tau_s: float = field(default=8.0, metadata=_pos())
+    # PX4 body rates: the autopilot's pitch-rate tracking error (flown - sent), low-passed with
+    # this time constant, is taken off the pitch rate sent (mpf_mavlink/core/adapter.py); 0: off
+    rate_bias_tau_s: float = field(default=1.0, metadata=_nonneg())
 
     def validate(self, cfg: Any, src: str) -> None:
         if self.thrust_min > self.thrust_max:

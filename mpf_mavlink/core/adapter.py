@@ -66,6 +66,25 @@ def bank_and_load_factor(w1: Vec, accel: Vec, g: float = GRAVITY_M_S2) -> tuple[
 #   (time constant turn_gain_tau_s; not below turn_learn_min_bank_rad). Against the flown bank
 #   the roll loop's lag and a clipped bank teach nothing false: in the mean the commanded turn
 #   is achieved, so no standing radial error remains.
+# - pitch rate (PX4 body rates): the autopilot's pitch-rate loop does not deliver the pitch
+#   rate it is sent in a turn. Its feed-forward (elevator per rad/s, FW_PR_FF) is the pull-up's,
+#   where the load factor grows by V q / g; the turn's pitch rate q = g sin(phi) tan(phi) / V
+#   needs only n - 1 = 1/cos(phi) - 1, cos(phi) / (1 + cos(phi)) of that (0.43 at 40 deg), so
+#   the angle-of-attack part of the elevator (78 % of the X8's pull-up FF: C_ma against C_mq)
+#   is nearly doubled and the loop's slow integral takes seconds to take it back. SIL X8,
+#   wind 6 m/s: 0.32 rad/s flown for 0.29 sent at 41 deg of bank, 0.03 for 0.05 in the
+#   roll-out; the vehicle climbed in every turn and sank after it (pt_d against bank^2
+#   correlation -0.86), the whole of the turn-locked vertical error. The bridge measures the
+#   pitch rate flown (ATTITUDE) and subtracts the low-passed error of the previous set-point
+#   (flown - sent) from the next: integral action on the delivered rate, so that in the mean
+#   the autopilot flies the law's pitch rate whatever its own loop's bias. With the
+#   autopilot's response H (delay d plus rate-loop lag T_r) the estimate's loop is
+#   F (H - 1), F = 1 / (1 + s tau_b), |H - 1| <= min(w (d + T_r), 2): its gain is below 1 at
+#   every frequency when tau_b > d + T_r (a small-gain bound), so tau_b (rate_bias_tau_s,
+#   1 s against ~0.2 s) cannot make the loop ring. Not while the sent rate is clipped or the
+#   pitch limits cut the law's demand (the error is then the limit's, not a bias), and never
+#   beyond the largest pitch rate a turn at the bank limit asks (a rate loop missing more than
+#   all of it is saturated, not biased).
 
 
 @dataclass(frozen=True)
@@ -104,6 +123,9 @@ class AdapterParams:
     turn_gain_min: float = 0.5
     turn_gain_max: float = 1.5
     turn_learn_min_bank_rad: float = 0.0873  # 5 deg: below it the ratio is noise
+    # pitch-rate bias (module comment): low-pass time constant of the autopilot's pitch-rate
+    # tracking error subtracted from the pitch rate sent; 0 turns it off
+    rate_bias_tau_s: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -118,10 +140,15 @@ class AdapterState:
     bank_prev: float | None = None  # rad, the bank set-point sent last
     # rad/s, the heading rate that bank was sent for (None: the bank was clipped, learn nothing)
     chid_prev: float | None = None
+    # rad/s, the autopilot's pitch-rate tracking error (flown - sent, low-passed), and the pitch
+    # rate sent last (None: not sent, or sent clipped: learn nothing from it)
+    q_bias: float = 0.0
+    q_sent: float | None = None
 
     def for_reengage(self) -> AdapterState:
-        """After a hand-back: the airspeed integrator starts afresh (the autopilot flew the
-        aircraft meanwhile), what was learned of the airframe stays."""
+        """After a hand-back: the airspeed and pitch-rate integrators start afresh (the
+        autopilot flew the aircraft meanwhile, its own integrators moved), what was learned of
+        the airframe stays."""
         return AdapterState(0.0, self.trim_hat, self.turn_gain, None, None)
 
 
@@ -269,9 +296,10 @@ def adapt(
     gamd_b = _clip(
         gamd, (params.min_pitch_rad - pitch) / lead, (params.max_pitch_rad - pitch) / lead
     )
-    q = _clip(
-        cphi * gamd_b + cth * sphi * chid, -params.max_pitch_rate_rad_s, params.max_pitch_rate_rad_s
-    )
+    q_bias = _pitch_rate_bias(params, state, meas, dt, v, g)
+    q_law = cphi * gamd_b + cth * sphi * chid - q_bias
+    q = _clip(q_law, -params.max_pitch_rate_rad_s, params.max_pitch_rate_rad_s)
+    q_free = q == q_law and gamd_b == gamd  # neither the rate nor the pitch limits cut it
     r = _clip(
         -sphi * gamd_b + cphi * cth * chid, -params.max_yaw_rate_rad_s, params.max_yaw_rate_rad_s
     )
@@ -304,8 +332,36 @@ def adapt(
     ):  # fmt: skip
         return safe_setpoint(params, roll), state
     return Setpoint((p, q, r), quat, thrust, bank, pitch_sp, n), AdapterState(
-        integ, trim_hat, k_turn, bank, None if clipped else chid
+        integ, trim_hat, k_turn, bank, None if clipped else chid, q_bias, q if q_free else None
     )
+
+
+def _pitch_rate_bias(
+    params: AdapterParams,
+    state: AdapterState,
+    meas: tuple[Any, Any] | None,
+    dt: float,
+    v: float,
+    g: float,
+) -> float:
+    """The autopilot's pitch-rate tracking error (rad/s, flown - sent), low-passed with
+    rate_bias_tau_s from the measured pitch rate against the pitch rate sent last (module
+    comment); bounded by the pitch rate of a turn at the bank limit, g sin tan(max_bank) / v."""
+    b = state.q_bias
+    if params.rate_bias_tau_s <= 0.0:
+        return 0.0
+    if meas is None or state.q_sent is None or not dt > 0.0:
+        return b
+    try:
+        q_m = float(meas[1][1])
+    except (TypeError, ValueError, IndexError):
+        return b
+    if not math.isfinite(q_m):
+        return b
+    mb = params.max_bank_rad
+    lim = g * math.sin(mb) * math.tan(mb) / max(v, 1.0)
+    b += min(1.0, dt / params.rate_bias_tau_s) * ((q_m - state.q_sent) - b)
+    return _clip(b, -lim, lim)
 
 
 def _learn(
