@@ -280,32 +280,54 @@ def test_pitch_rate_bias_makes_an_autopilot_that_over_flies_the_turn_fly_it():
 
 def test_pitch_rate_bias_settles_through_the_link_delay_without_ringing():
     """The estimate's loop F (H - 1) has gain below 1 at every frequency when tau_b exceeds
-    the delay plus the rate loop's lag (module comment). A 60 ms link (3 frames at 50 Hz) and a
-    rate loop lagging 0.1 s that flies its set-point 0.03 rad/s high: tau_b = 1 s >> 0.16 s,
-    so the delivered rate comes to the law's 0.1 rad/s with no overshoot beyond 2 % of the
-    bias, and stays."""
-    om = (0.0, 0.1, 0.0)  # gamma_dot 0.1 rad/s, wings level: q_law = 0.1
-    pending = [0.0, 0.0, 0.0]
-    q_ap = 0.0
-    st_ = AdapterState(trim_hat=0.0)
-    flown_hist = []
-    for _ in range(2000):  # 40 s
-        sp, st_ = adapt(om, 15.0, LEVEL, NORTH, 0.02, P, st_, meas=(LEVEL, (0.0, q_ap, 0.0)))
-        pending.append(sp.body_rates_frd[1])
-        q_ap += (1.0 - math.exp(-0.02 / 0.1)) * (pending.pop(0) + 0.03 - q_ap)
-        flown_hist.append(q_ap)
-    assert flown_hist[-1] == pytest.approx(0.1, abs=1e-6)
-    assert max(flown_hist[500:]) <= 0.1 + 0.02 * 0.03  # after 10 s: no ringing above the law's
+    the delay plus the rate loop's lag (module comment). A level turn at 30 deg and 15 m/s
+    (the turn's pitch rate g sin tan(30 deg) / 15 = 0.18873 rad/s), a 60 ms link (3 frames at
+    50 Hz) and a rate loop lagging 0.1 s that flies its set-point 0.03 rad/s high: tau_b = 1 s
+    >> 0.16 s, so the rate flown comes to the turn's with no overshoot beyond 2 % of the bias,
+    and stays."""
+    phi, v = math.radians(30.0), 15.0
+    om, q_turn = _turn(phi, v)
+    assert q_turn == pytest.approx(0.18873, abs=1e-5)
+    R = euler_to_matrix(phi, 0.0, 0.0)
+
+    def fly(params: AdapterParams) -> tuple[list[float], AdapterState]:
+        pending, q_ap, st_, hist = [0.0, 0.0, 0.0], 0.0, AdapterState(trim_hat=0.0), []
+        for _ in range(2000):  # 40 s
+            sp, st_ = adapt(om, v, R, NORTH, 0.02, params, st_, meas=(R, (0.0, q_ap, 0.0)))
+            pending.append(sp.body_rates_frd[1])
+            q_ap += (1.0 - math.exp(-0.02 / 0.1)) * (pending.pop(0) + 0.03 - q_ap)
+            hist.append(q_ap)
+        return hist, st_
+
+    flown, st_ = fly(P)
+    assert flown[-1] == pytest.approx(q_turn, abs=1e-6)
+    assert max(flown[500:]) <= q_turn + 0.02 * 0.03  # after 10 s: no ringing above the turn's
     assert st_.q_bias == pytest.approx(0.03, abs=1e-6)
     # tau_b 0.05 s, under the delay plus lag: the bound does not hold and the loop runs away
-    # (to the estimate's limit, the pitch rate of a turn at the bank limit)
-    fast = dataclasses.replace(P, rate_bias_tau_s=0.05)
-    pending, q_ap, st_ = [0.0, 0.0, 0.0], 0.0, AdapterState(trim_hat=0.0)
-    for _ in range(2000):
-        sp, st_ = adapt(om, 15.0, LEVEL, NORTH, 0.02, fast, st_, meas=(LEVEL, (0.0, q_ap, 0.0)))
-        pending.append(sp.body_rates_frd[1])
-        q_ap += (1.0 - math.exp(-0.02 / 0.1)) * (pending.pop(0) + 0.03 - q_ap)
-    assert abs(q_ap - 0.1) > 0.1
+    # (to the estimate's limit, the turn's own pitch rate)
+    flown, _ = fly(dataclasses.replace(P, rate_bias_tau_s=0.05))
+    assert abs(flown[-1] - q_turn) > 0.05
+
+
+def test_pitch_rate_bias_is_the_turns_and_none_with_the_wings_level():
+    """The bias is the rate loop's error on the turn's pitch rate, so it is bounded by that rate:
+    wings level nothing is taken off whatever the pitch rate flown (moderate turbulence's gusts
+    pitched the X8 at +-0.28 rad/s on straights; taken off, they wound the autopilot's own
+    integrator against the next pull-up), and in a 10-deg turn at 16 m/s at most
+    g sin tan(10 deg) / 16 = 0.01877 rad/s."""
+    om = (0.0, 0.05, 0.0)  # a climb, wings level: q_law = 0.05
+    st_ = AdapterState(trim_hat=0.0)
+    for _ in range(500):
+        sp, st_ = adapt(om, 16.0, LEVEL, NORTH, 0.02, P, st_, meas=(LEVEL, (0.0, 0.3, 0.0)))
+    assert st_.q_bias == 0.0 and sp.body_rates_frd[1] == pytest.approx(0.05)
+    phi = math.radians(10.0)
+    om, q_turn = _turn(phi, 16.0)
+    R = euler_to_matrix(phi, 0.0, 0.0)
+    for _ in range(500):
+        sp, st_ = adapt(om, 16.0, R, NORTH, 0.02, P, st_, meas=(R, (0.0, 0.3, 0.0)))
+    assert q_turn == pytest.approx(0.01877, abs=1e-5)
+    assert st_.q_bias == pytest.approx(q_turn, rel=1e-9)
+    assert sp.body_rates_frd[1] == pytest.approx(0.0, abs=1e-12)  # q_turn - q_bias
 
 
 def test_pitch_rate_bias_learns_nothing_from_a_clipped_set_point():
