@@ -35,6 +35,17 @@ from mpf_mavlink.mavlink.url import MAV_COMP_ID_ONBOARD_COMPUTER, parse_url
 # ---------------------------------------------------------------------------------------------
 # Link
 # ---------------------------------------------------------------------------------------------
+class _LogThenWrite:
+    """Stands in for ``mav.file`` during one send: logs the packed bytes, then writes them."""
+
+    def __init__(self, file: Any, log: Callable[[bytes | bytearray], None]) -> None:
+        self._file, self._log = file, log
+
+    def write(self, buf: bytes | bytearray) -> Any:
+        self._log(buf)
+        return self._file.write(buf)
+
+
 @dataclass
 class LinkCounters:
     rx_packets: int = 0  # frames with a good CRC (before filtering)
@@ -281,19 +292,29 @@ class Link:
             # and a rebooted autopilot would reject us as a stale stream (> 60 s old).
             now_ticks = int((time.time() - 1420070400) * 100_000)
             mav.signing.timestamp = max(mav.signing.timestamp, now_ticks)
+        # pymavlink packs (seq, signing) and hands the bytes to mav.file.write: logging them
+        # there, before the socket, means a process killed between the two (SIGKILL) never
+        # leaves a packet the vehicle received out of the tlog (write-ahead)
+        file = mav.file
+        mav.file = _LogThenWrite(file, self._log_tx)
         try:
             mav.send(msg)
         except OSError:
             self.counters.io_errors += 1
             return
+        finally:
+            mav.file = file
         self.counters.tx_packets += 1
         self.counters.tx_by_type[msg.get_type()] += 1
-        if self.tlog is not None:
-            try:
-                self.tlog.write(msg.get_msgbuf(), self._clock())
-            except (OSError, ValueError):
-                self.counters.io_errors += 1
-                self.counters.tlog_write_errors += 1
+
+    def _log_tx(self, packet: bytes | bytearray) -> None:
+        if self.tlog is None:
+            return
+        try:
+            self.tlog.write(packet, self._clock())
+        except (OSError, ValueError):
+            self.counters.io_errors += 1
+            self.counters.tlog_write_errors += 1
 
     def send_heartbeat(self) -> None:
         """Companion heartbeat (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID), ~1 Hz."""
