@@ -182,18 +182,18 @@ class MavEndpoint(VehicleBase):
         """Advance the reported wind: a first-order lag (``wind_estimate_tau_s``) of the true
         air-mass velocity, the way an autopilot's estimator follows it (PX4 EKF2's wind states
         are a random walk observed through airspeed: gusts of a second or two barely move them).
-        It starts at the truth: a vehicle that has flown a while has converged on the steady wind."""
+        It starts at the truth: a vehicle that has flown a while has converged on the steady wind.
+        Horizontal only: neither PX4's EKF2 nor ArduPilot's EKF2/EKF3 estimates a vertical wind
+        (their getWind sets z = 0), so no autopilot reports one; a lagged vertical gust made the
+        bridge's flight-path angle wrong by it (the Cessna convoy: 0.83 -> 1.91 m, mostly
+        vertical, against the same flight with the truth reported)."""
         w = self._st.wind_ned
         if self._wind_est is None:
-            self._wind_est = (float(w[0]), float(w[1]), float(w[2]))
+            self._wind_est = (float(w[0]), float(w[1]), 0.0)
         else:
             k = 1.0 - math.exp(-max(0.0, t - self._wind_est_t) / self.wind_estimate_tau_s)
-            e0, e1, e2 = self._wind_est
-            self._wind_est = (
-                e0 + k * (float(w[0]) - e0),
-                e1 + k * (float(w[1]) - e1),
-                e2 + k * (float(w[2]) - e2),
-            )
+            e0, e1, _ = self._wind_est
+            self._wind_est = (e0 + k * (float(w[0]) - e0), e1 + k * (float(w[1]) - e1), 0.0)
         self._wind_est_t = t
 
     def _send_attitude(self, att: tuple[float, float, float, float, float, float]) -> None:
@@ -292,6 +292,14 @@ class MavEndpoint(VehicleBase):
     def _flush(self) -> None:
         """Send the packets that are due, bundled into as few datagrams as fit (PX4 does the same:
         one datagram per send cycle), so the peer wakes up once per frame, not once per packet."""
+        self._flush_due()
+        # A frame that writes no ATTITUDE still awaits the answer that acts in the next frame:
+        # with ATTITUDE at 10 Hz over 20 ms frames the vehicle otherwise ran the four frames
+        # between two of them without waiting, and applied each setpoint whenever the bridge's
+        # process got to it (the echo measured 100 ms of command latency instead of 20).
+        self._choose_await(self._boot_t)
+
+    def _flush_due(self) -> None:
         q, t = self._out, self._boot_t + 1e-9
         if not q or q[0][0] > t:
             return
@@ -330,15 +338,19 @@ class MavEndpoint(VehicleBase):
 
     def _attitude_written(self, ms: int, t: float) -> None:
         """An ATTITUDE stamped ``ms`` (or a position of a multi-rate peer's) left at vehicle
-        time ``t`` (s): choose the one to await."""
+        time ``t`` (s): remembered; :meth:`_flush` chooses the one to await."""
         w = self._att_written
         if len(w) == w.maxlen:
             self._att_t.pop(w[0][0], None)
         w.append((ms, t))
         self._att_t[ms] = t
         self._unstamped = False
-        # the answer to an ATTITUDE written at tw acts at tw + latency: await the latest one
-        # that acts before the end of the next frame
+
+    def _choose_await(self, t: float) -> None:
+        """At the end of the frame that ends at vehicle time ``t`` (s): the answer to an
+        ATTITUDE written at tw acts at tw + latency, so await the latest one that acts before
+        the end of the next frame."""
+        w = self._att_written
         horizon = t + self.frame_period - self.command_latency_s - 1e-6
         for m, tw in reversed(w):
             if tw < horizon:
