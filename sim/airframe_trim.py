@@ -154,10 +154,22 @@ def mission_radius_m(airspeed_m_s: float, bank_max_rad: float, margin_rad: float
 
 
 if __name__ == "__main__":  # python -m sim.airframe_trim c172p c172x c182 pa28
-    import sys
+    import argparse
 
-    for m in sys.argv[1:] or ["c172p", "c172x", "c182", "pa28"]:
-        env = cruise_envelope(m, None)
+    ap = argparse.ArgumentParser(
+        prog="python -m sim.airframe_trim",
+        description="JSBSim's own level-flight trim of stock jsbsim-package aircraft over "
+        "25-60 m/s: the trimmable speed range, the minimum-power speed, and throttle / body "
+        "pitch at each speed (what aircraft.trim_airspeed_m_s may be).",
+    )
+    ap.add_argument("models", nargs="*", default=["c172p", "c172x", "c182", "pa28"])
+    ap.add_argument("--altitude-m", type=float, default=800.0, help="MSL (default 800)")
+    args = ap.parse_args()
+    for m in args.models:
+        try:
+            env = cruise_envelope(m, None, altitude_m=args.altitude_m)
+        except RuntimeError as e:
+            ap.exit(2, f"python -m sim.airframe_trim: error: {e}\n")
         mp = env.min_power
         row = " ".join(
             f"{t.airspeed_m_s:g}:{t.throttle:.3f}/{math.degrees(t.pitch_rad):.1f}deg"

@@ -73,6 +73,20 @@ ROWS: list[Row] = [
         factor=2.0,
         max_m=2.0,
     ),  # fmt: skip
+    # every stream at 10 Hz (a slow radio link): no position instant between two ATTITUDEs
+    Row(
+        "telemetry_10hz",
+        [
+            "sil.telemetry.attitude_hz=10",
+            "sil.telemetry.local_position_hz=10",
+            "mavlink.attitude_rate_hz=10",
+            "mavlink.attitude_min_hz=8",
+            "mavlink.position_rate_hz=10",
+        ],
+        rel="demo",
+        factor=2.0,
+        max_m=2.0,
+    ),  # fmt: skip
     Row("wind_6", ["sil.wind_ned_m_s=[0,6,0]", "sil.turbulence=none"], rel="calm", factor=1.5),
     Row("wind_6_light_turb", ["sil.wind_ned_m_s=[0,6,0]"], note="no bound (reported)"),
     Row("moderate_turbulence", ["sil.turbulence=moderate"], rms_m=1.5, max_m=5.0),
