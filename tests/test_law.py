@@ -94,11 +94,28 @@ def test_rate_limit_scales_along_the_command():
     path, tgt, veh = _state()
     free, _ = mpf_law(12.0, veh, tgt, path, Gains())
     mag = math.hypot(free.w2, free.w3)
-    lim, d = mpf_law(12.0, veh, tgt, path, Gains(), Extensions(rate_limit=0.5 * mag))
+    ext = Extensions(rate_limit=0.5 * mag, rate_limit_mode="magnitude")
+    lim, d = mpf_law(12.0, veh, tgt, path, Gains(), ext)
     # Half the magnitude, same direction, flagged.
     assert math.isclose(math.hypot(lim.w2, lim.w3), 0.5 * mag, rel_tol=1e-12)
     assert math.isclose(lim.w2 * free.w3 - lim.w3 * free.w2, 0.0, abs_tol=1e-12)
     assert d.mode.endswith("+sat")
+
+
+def test_rate_limit_per_axis_caps_each_rate_on_its_own():
+    # the default: the flight-path rate w2 and the turn rate w3 are capped independently, so a
+    # turn at its limit leaves the vertical command whole (and the reverse); exact clipping
+    path, tgt, veh = _state()
+    free, _ = mpf_law(12.0, veh, tgt, path, Gains())
+    big, small = sorted((abs(free.w2), abs(free.w3)), reverse=True)
+    assert big > 1.5 * small > 0.0  # the premise: one axis clearly dominates
+    cap = 0.5 * (big + small)  # between the two: only the larger is cut
+    lim, d = mpf_law(12.0, veh, tgt, path, Gains(), Extensions(rate_limit=cap))
+    for f, c in ((free.w2, lim.w2), (free.w3, lim.w3)):
+        assert c == (math.copysign(cap, f) if abs(f) > cap else f)
+    assert d.mode.endswith("+sat")
+    same, d2 = mpf_law(12.0, veh, tgt, path, Gains(), Extensions(rate_limit=2.0 * big))
+    assert (same.w2, same.w3) == (free.w2, free.w3) and not d2.mode.endswith("+sat")
 
 
 def test_psi_turn_defined_at_the_antipode_and_continuous_at_one_half():
@@ -217,7 +234,10 @@ GOLDEN = [
             ),
             40.0,
             Gains(1.0, 0.5, 40.0),
-            Extensions(rate_limit=0.5, psi_turn=True, wind_compensation=True),
+            # the reference scaled the command along its direction (magnitude mode)
+            Extensions(
+                rate_limit=0.5, rate_limit_mode="magnitude", psi_turn=True, wind_compensation=True
+            ),
         ),  # fmt: skip
         (
             -0.16731430283045673,

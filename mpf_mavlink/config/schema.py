@@ -77,6 +77,8 @@ class GuidanceConfig:
     K_R: float = field(default=2.0, metadata=_pos())
     alpha_m: float = field(default=1.0, metadata=_pos())
     rate_limit_rad_s: float | None = field(default=None, metadata=_pos())
+    # per_axis: w2 and w3 capped each on its own; magnitude: |[w2, w3]| (core/guidance/law.py)
+    rate_limit_mode: Literal["per_axis", "magnitude"] = "per_axis"
     psi_turn: bool = False
     psi_turn_threshold: float = field(default=0.5, metadata={"check": ("range", 0.0, 1.0)})
     psi_turn_rate_rad_s: float | None = field(default=None, metadata=_pos())

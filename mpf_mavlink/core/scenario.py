@@ -57,6 +57,7 @@ def build_extensions(cfg: Config) -> Extensions:
     g = cfg.guidance
     return Extensions(
         rate_limit=g.rate_limit_rad_s,
+        rate_limit_mode=g.rate_limit_mode,
         psi_turn=g.psi_turn,
         psi_turn_threshold=g.psi_turn_threshold,
         psi_turn_rate=g.psi_turn_rate_rad_s,

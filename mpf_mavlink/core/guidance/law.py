@@ -47,8 +47,13 @@ class Gains:
 class Extensions:
     """Practical extensions; all off (the defaults) gives the paper's law bit for bit.
 
-    rate_limit: max |[w2, w3]| (rad/s); a larger command is scaled down along its own
-      direction (the turn keeps its sense, only its rate is capped). None = off.
+    rate_limit: a cap (rad/s) on the command [w2, w3]; None = off. ``rate_limit_mode``
+      ``per_axis`` (the default) caps the flight-path rate w2 and the turn rate w3 each on its
+      own, as an autopilot's pitch channel and bank limit are independent: a turn held at its
+      limit keeps the whole vertical correction (scaled together, the Cessna convoy's capture
+      turn left 0.05 of 0.2 rad/s to the pitch plane and dived 68 m below the path, its
+      airspeed falling to 29 m/s in the pull-up). ``magnitude`` scales [w2, w3] down along its
+      own direction to |[w2, w3]| <= rate_limit.
     psi_turn: when Psi >= psi_turn_threshold (heading more than 90 deg from d1 by default),
       replace the feedback by a turn of constant rate psi_turn_rate (rad/s; None = K_R/2, which
       equals the law's own feedback magnitude at Psi = 1/2, so the command is continuous there)
@@ -59,6 +64,7 @@ class Extensions:
     """
 
     rate_limit: float | None = None
+    rate_limit_mode: str = "per_axis"
     psi_turn: bool = False
     psi_turn_threshold: float = 0.5
     psi_turn_rate: float | None = None
@@ -375,7 +381,12 @@ def mpf_law(
             v2, v3 = (v2 / nu, v3 / nu) if nu > 1e-6 else (0.0, 1.0)
         cm2, cm3 = rate * v2 + ff2, rate * v3 + ff3
         mode = "psi_turn"
-    if ext.rate_limit is not None:
+    if ext.rate_limit is not None and ext.rate_limit_mode == "per_axis":
+        lim = ext.rate_limit
+        if abs(cm2) > lim or abs(cm3) > lim:
+            cm2, cm3 = max(-lim, min(lim, cm2)), max(-lim, min(lim, cm3))
+            mode += "+sat"
+    elif ext.rate_limit is not None:
         mag = math.hypot(cm2, cm3)
         if mag > ext.rate_limit:
             k = ext.rate_limit / mag
