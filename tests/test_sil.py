@@ -92,7 +92,14 @@ def test_check_sees_the_sil_atmosphere(capsys):
     # 2 m/s allowance for light turbulence: |v_t t1 + v_d - eta| reaches ~10.5 m/s vs 14 m/s.
     assert main(["check", DEMO]) == 0
     out = capsys.readouterr().out
-    assert out.count("[PASS]") == 4  # assumption 1, start altitude, gain condition, feasibility
+    # assumption 1, start altitude, gain condition, feasibility, and feasibility at the gust
+    # airspeed 16 + 2 m/s (light turbulence's allowance): 39.1 deg of the 40 allowed
+    assert out.count("[PASS]") == 5 and "[PASS] gust_feasibility: at the gust airspeed 18.0" in out
+    # moderate turbulence's allowance (4 m/s): 44.6 deg at 20 m/s, beyond 45 - 5: a warning,
+    # not a refusal (exit 0)
+    assert main(["check", DEMO, "--set", "sil.turbulence=moderate"]) == 0
+    out = capsys.readouterr().out
+    assert "[WARN] gust_feasibility: at the gust airspeed 20.0" in out and "[FAIL]" not in out
     calm = load_config(DEMO, ["sil.wind_ned_m_s=[0,0,0]", "sil.turbulence=none"])
     from mpf_mavlink.bridge.preflight import run_checks
 

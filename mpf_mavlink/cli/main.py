@@ -88,6 +88,9 @@ def _gate(cfg: Any, force: bool) -> None:
     from mpf_mavlink.bridge.preflight import format_checks, run_checks
 
     results = run_checks(cfg)
+    warned = [r for r in results if r.status == "warn"]
+    if warned:  # flown, but the user hears what the checks expect to go wrong
+        print(format_checks(warned), file=sys.stderr)
     failed = [r for r in results if not r.ok]
     if not failed:
         return
