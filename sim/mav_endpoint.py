@@ -184,9 +184,8 @@ class MavEndpoint(VehicleBase):
         are a random walk observed through airspeed: gusts of a second or two barely move them).
         It starts at the truth: a vehicle that has flown a while has converged on the steady wind.
         Horizontal only: neither PX4's EKF2 nor ArduPilot's EKF2/EKF3 estimates a vertical wind
-        (their getWind sets z = 0), so no autopilot reports one; a lagged vertical gust made the
-        bridge's flight-path angle wrong by it (the Cessna convoy: 0.83 -> 1.91 m, mostly
-        vertical, against the same flight with the truth reported)."""
+        (their getWind sets z = 0), so no autopilot reports one (ArduPlane's WIND.speed_z here
+        had carried the lagged vertical gust)."""
         w = self._st.wind_ned
         if self._wind_est is None:
             self._wind_est = (float(w[0]), float(w[1]), 0.0)

@@ -294,7 +294,8 @@ class Link:
             mav.signing.timestamp = max(mav.signing.timestamp, now_ticks)
         # pymavlink packs (seq, signing) and hands the bytes to mav.file.write: logging them
         # there, before the socket, means a process killed between the two (SIGKILL) never
-        # leaves a packet the vehicle received out of the tlog (write-ahead)
+        # leaves a packet the vehicle received out of the tlog (write-ahead; a packet the socket
+        # then refuses stays in the tlog, counted in io_errors)
         file = mav.file
         mav.file = _LogThenWrite(file, self._log_tx)
         try:

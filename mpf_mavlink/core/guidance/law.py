@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -64,7 +64,7 @@ class Extensions:
     """
 
     rate_limit: float | None = None
-    rate_limit_mode: str = "per_axis"
+    rate_limit_mode: Literal["per_axis", "magnitude"] = "per_axis"
     psi_turn: bool = False
     psi_turn_threshold: float = 0.5
     psi_turn_rate: float | None = None
