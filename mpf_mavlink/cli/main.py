@@ -88,10 +88,10 @@ def _gate(cfg: Any, force: bool) -> None:
     from mpf_mavlink.bridge.preflight import format_checks, run_checks
 
     results = run_checks(cfg)
-    warned = [r for r in results if r.status == "warn"]
-    if warned:  # flown, but the user hears what the checks expect to go wrong
-        print(format_checks(warned), file=sys.stderr)
     failed = [r for r in results if not r.ok]
+    warned = [r for r in results if r.status == "warn"]
+    if warned and (force or not failed):  # flown: say what the checks expect to go wrong
+        print(format_checks(warned), file=sys.stderr)
     if not failed:
         return
     if force:
