@@ -148,19 +148,8 @@ class AutopilotEmulation(MavEndpoint):
                 for name in group:
                     setattr(self.rates, name, hz)
                     self._next.pop(name, None)
-        elif mt == "PARAM_REQUEST_READ":
-            if msg.target_system not in (0, self.sysid):
-                return
-            pid = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else ""
-            names = list(self.params)
-            if pid in self.params:
-                i = names.index(pid)
-            elif 0 <= msg.param_index < len(names) and not pid:
-                i, pid = msg.param_index, names[msg.param_index]
-            else:
-                return  # both autopilots stay silent about a parameter they do not have
-            self._mav.send(self._mav.param_value_encode(
-                pid.encode("ascii"), self.params[pid], M.MAV_PARAM_TYPE_REAL32, len(names), i))  # fmt: skip
+        elif mt in self.gcs.HANDLES:
+            self.gcs.handle(msg)
         elif mt == "TIMESYNC" and msg.tc1 == 0:
             self._mav.send(self._mav.timesync_encode(int(self._boot_t * 1e9), msg.ts1))
 
@@ -264,8 +253,23 @@ class AutopilotEmulation(MavEndpoint):
             else:  # in the air: both autopilots refuse a disarm unless forced
                 res = M.MAV_RESULT_TEMPORARILY_REJECTED if self.px4 else M.MAV_RESULT_FAILED
                 self._ack(cmd, res, msg, "Disarm refused: vehicle is flying (use force 21196)")
-        elif cmd == M.MAV_CMD_DO_REPOSITION and not self.px4 and msg.get_type() == "COMMAND_INT":
-            self._ack(cmd, self._reposition(msg), msg)
+        elif cmd == M.MAV_CMD_DO_REPOSITION and not self.px4:
+            # ArduPlane takes it as COMMAND_INT only; a COMMAND_LONG is UNSUPPORTED (4.7 SITL)
+            res = (
+                self._reposition(msg)
+                if msg.get_type() == "COMMAND_INT"
+                else M.MAV_RESULT_UNSUPPORTED
+            )
+            self._ack(cmd, res, msg)
+        elif cmd == M.MAV_CMD_DO_REPOSITION:
+            self._ack(cmd, self._px4_reposition(msg), msg)
+        elif cmd == M.MAV_CMD_NAV_TAKEOFF:
+            self._ack(cmd, self._takeoff(msg), msg)
+        elif cmd == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES or (
+            cmd == M.MAV_CMD_REQUEST_MESSAGE and int(p1) == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+        ):
+            self._ack(cmd, M.MAV_RESULT_ACCEPTED, msg)
+            self.gcs.send_autopilot_version()
         elif cmd == M.MAV_CMD_GET_HOME_POSITION:
             self._ack(cmd, M.MAV_RESULT_ACCEPTED, msg)
             self._send_stream("home_position")
@@ -325,6 +329,63 @@ class AutopilotEmulation(MavEndpoint):
         )
         ccw = math.isfinite(msg.param4) and msg.param4 != 0.0
         self._guided_loiter = ((n, e), -d, r, -1 if ccw else 1)
+        return M.MAV_RESULT_ACCEPTED
+
+    def _command_position(self, msg) -> tuple[float, float, float] | None:
+        """(lat deg, lon deg, altitude AMSL m) of a COMMAND_INT (x, y 1e7, z; a global frame)
+        or COMMAND_LONG (param5..7); None when not finite or out of range. A NaN altitude is
+        the current one (the MAVLink rule for "keep")."""
+        if msg.get_type() == "COMMAND_INT":
+            if msg.frame not in (M.MAV_FRAME_GLOBAL, M.MAV_FRAME_GLOBAL_INT,
+                                 M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT):  # fmt: skip
+                return None
+            lat, lon, alt = msg.x * 1e-7, msg.y * 1e-7, float(msg.z)
+            rel = msg.frame in (
+                M.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+            )
+        else:
+            lat, lon, alt, rel = float(msg.param5), float(msg.param6), float(msg.param7), False
+        if not (_finite(lat, lon) and abs(lat) <= 90.0 and abs(lon) <= 180.0) or (
+            lat == 0 and lon == 0
+        ):
+            return None
+        if not math.isfinite(alt):
+            alt = float(self.plant.state().alt_m)
+        elif rel:
+            alt += self.home_lla[2]
+        return lat, lon, alt
+
+    def _px4_reposition(self, msg) -> int:
+        """PX4's MAV_CMD_DO_REPOSITION: with the change-mode flag (param2 bit 0), or already in
+        Hold, the vehicle loiters about the point (radius param3 when > 0, as PX4's fixed-wing
+        navigator) at its altitude; without either it is accepted and changes nothing."""
+        from mpf_mavlink.core.frames import geodetic_to_ned
+
+        pos = self._command_position(msg)
+        if pos is None:
+            return M.MAV_RESULT_DENIED
+        hold = px4_custom_mode(PX4_MAIN["AUTO"], PX4_AUTO_SUB["LOITER"])
+        if not (int(msg.param2) & 1) and self._custom_mode != hold:
+            return M.MAV_RESULT_ACCEPTED
+        if self._custom_mode != hold:
+            self._set_px4_mode(PX4_MAIN["AUTO"], PX4_AUTO_SUB["LOITER"])
+        n, e, d = (float(x) for x in geodetic_to_ned(*pos, *self.home_lla))
+        self._center, self._alt_sp = (n, e), -d
+        if math.isfinite(msg.param3) and msg.param3 > 0:
+            self._hold_radius = float(msg.param3)
+        return M.MAV_RESULT_ACCEPTED
+
+    def _takeoff(self, msg) -> int:
+        """MAV_CMD_NAV_TAKEOFF in the air. PX4 accepts it and enters AUTO.TAKEOFF (here: a loiter
+        climbing to param7, AMSL, where it is). ArduPlane answers FAILED (4.7 SITL does so from
+        the ground; its TAKEOFF is a mode, not this command)."""
+        if not self.px4:
+            return M.MAV_RESULT_FAILED
+        alt = float(msg.param7) if msg.get_type() == "COMMAND_LONG" else float(msg.z)
+        self._set_px4_mode(PX4_MAIN["AUTO"], PX4_AUTO_SUB["TAKEOFF"])
+        if math.isfinite(alt):
+            self._alt_sp = alt - self.home_lla[2]
         return M.MAV_RESULT_ACCEPTED
 
     def _do_set_mode(self, p1: float, p2: float, p3: float) -> int:

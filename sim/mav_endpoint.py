@@ -9,6 +9,7 @@ import time
 from typing import Any
 
 from mpf_mavlink.core.frames import matrix_to_quat_wxyz  # noqa: E402
+from sim.gcs_services import GcsServices  # noqa: E402
 from sim.plant_kinematic_mav import ned_to_geodetic_fast  # noqa: E402
 from sim.vehicle_base import (
     _DATAGRAM_MAX,
@@ -20,6 +21,19 @@ from sim.vehicle_base import (
     VehicleBase,
     eas_factor,
 )
+
+# what the autopilot acts on (through the incoming delay queue); the rest is dropped
+_QUEUED = (
+    frozenset(("COMMAND_LONG", "COMMAND_INT", "SET_MODE", "TIMESYNC", "REQUEST_DATA_STREAM"))
+    | GcsServices.HANDLES
+)
+
+
+# SYS_STATUS sensors: present, enabled and healthy (a simulated airframe lacks none of them)
+_SENSORS = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+            | M.MAV_SYS_STATUS_SENSOR_3D_MAG | M.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+            | M.MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE | M.MAV_SYS_STATUS_SENSOR_GPS
+            | M.MAV_SYS_STATUS_AHRS)  # fmt: skip
 
 
 class MavEndpoint(VehicleBase):
@@ -117,8 +131,7 @@ class MavEndpoint(VehicleBase):
             if self._epoch_from_bridge:
                 self._take_epoch(msg)
             return
-        elif mt not in ("COMMAND_LONG", "COMMAND_INT", "SET_MODE", "TIMESYNC",
-                        "REQUEST_DATA_STREAM", "PARAM_REQUEST_READ"):  # fmt: skip
+        elif mt not in _QUEUED:
             return
         q = self._in
         i = len(q)
@@ -243,9 +256,18 @@ class MavEndpoint(VehicleBase):
             put(pack(S["home_position"], int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
                      0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, self._us()))  # fmt: skip
         elif name == "sys_status":
-            s = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-                 | M.MAV_SYS_STATUS_SENSOR_GPS | M.MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE)  # fmt: skip
-            put(pack(S["sys_status"], s, s, s, 100, 12600, 500, 90, 0, 0, 0, 0, 0, 0, 0, 0, 0))
+            s = _SENSORS
+            # health also sets GEOFENCE, as ArduPilot reports a fence it does not have: MAVProxy
+            # reads that bit clear as "fence breach" whatever the present bits say
+            put(pack(S["sys_status"], s, s, s | M.MAV_SYS_STATUS_GEOFENCE, 100, 12600, 500, 90,
+                     0, 0, 0, 0, 0, 0, 0, 0, 0))  # fmt: skip
+        elif name == "gps_raw":
+            vn, ve = float(st.velocity_ned[0]), float(st.velocity_ned[1])
+            cog = int(round(math.degrees(math.atan2(ve, vn)) * 100.0)) % 36000
+            # a healthy 3D fix: HDOP 0.8, VDOP 1.2, 14 satellites, 0.5 m / 0.8 m accuracy
+            put(pack(S["gps_raw_int"], self._us(), M.GPS_FIX_TYPE_3D_FIX,
+                     int(round(st.lat_deg * 1e7)), int(round(st.lon_deg * 1e7)), int(round(st.alt_m * 1000.0)),
+                     80, 120, int(round(math.hypot(vn, ve) * 100.0)), cog, 14, 0, 500, 800, 150, 0, 0))  # fmt: skip
         elif name == "system_time":
             put(pack(S["system_time"], self.unix0_us + self._us(), ms))
         elif name == "attitude_target":

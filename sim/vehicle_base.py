@@ -85,6 +85,7 @@ class TelemetryRates:
     system_time: float = 1.0
     heartbeat: float = 1.0
     attitude_target: float = 10.0  # PX4 only (its onboard link); ArduPlane does not stream it
+    gps_raw: float = 1.0  # GPS_RAW_INT (what log tools and ground stations take the GPS from)
 
 
 def stock_rates(flavour: str) -> TelemetryRates:
@@ -98,16 +99,17 @@ def stock_rates(flavour: str) -> TelemetryRates:
     PX4: the onboard-mode instance (SITL's offboard link on 14540, ``mavlink start -m onboard``;
     src/modules/mavlink/mavlink_main.cpp, MAVLINK_MODE_ONBOARD): ATTITUDE 100, LOCAL_POSITION_NED
     30, GLOBAL_POSITION_INT 50, VFR_HUD 10, WIND_COV 10, HOME_POSITION 0.5, SYS_STATUS 5,
-    SYSTEM_TIME 1, ATTITUDE_TARGET 10 Hz."""
+    SYSTEM_TIME 1, ATTITUDE_TARGET 10 Hz. GPS_RAW_INT: ArduPlane's EXTENDED_STATUS group (1 Hz);
+    PX4 1 Hz (its normal-mode rate: a ground station on the link sees the GPS)."""
     if flavour == "ardupilot":
-        return TelemetryRates(1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 0.0)
-    return TelemetryRates(100.0, 30.0, 50.0, 10.0, 10.0, 0.5, 5.0, 1.0, 1.0, 10.0)
+        return TelemetryRates(1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 0.0, 1.0)
+    return TelemetryRates(100.0, 30.0, 50.0, 10.0, 10.0, 0.5, 5.0, 1.0, 1.0, 10.0, 1.0)
 
 
 # ArduPilot's REQUEST_DATA_STREAM groups -> our streams (MAV_DATA_STREAM_*: 0 all, 2 extended
 # status, 6 position, 10 extra1, 11 extra2, 12 extra3)
 _AP_DATA_STREAMS = {
-    2: ("sys_status",),
+    2: ("sys_status", "gps_raw"),
     6: ("global_position", "local_position"),
     10: ("attitude",),
     11: ("vfr_hud",),
@@ -127,7 +129,8 @@ def eas_factor(alt_amsl_m: float) -> float:
 _SPEC = {
     name: getattr(M, f"MAVLink_{name}_message")
     for name in ("heartbeat", "attitude", "local_position_ned", "global_position_int", "vfr_hud", "wind",
-                 "wind_cov", "home_position", "sys_status", "system_time", "follow_target", "attitude_target")
+                 "wind_cov", "home_position", "sys_status", "system_time", "follow_target", "attitude_target",
+                 "gps_raw_int")
 }  # fmt: skip
 
 
@@ -152,7 +155,7 @@ class _Packer:
 _DATAGRAM_MAX = 1400
 # Streams after ATTITUDE within a frame (see SimVehicle._telemetry).
 _STREAM_ORDER = ("heartbeat", "local_position", "global_position", "vfr_hud", "wind", "home_position",
-                 "sys_status", "system_time", "attitude_target")  # fmt: skip
+                 "sys_status", "system_time", "attitude_target", "gps_raw")  # fmt: skip
 
 # message id -> stream name (for MAV_CMD_SET_MESSAGE_INTERVAL / REQUEST_MESSAGE)
 _STREAM_IDS = {
@@ -166,6 +169,7 @@ _STREAM_IDS = {
     M.MAVLINK_MSG_ID_SYS_STATUS: "sys_status",
     M.MAVLINK_MSG_ID_SYSTEM_TIME: "system_time",
     M.MAVLINK_MSG_ID_HEARTBEAT: "heartbeat",
+    M.MAVLINK_MSG_ID_GPS_RAW_INT: "gps_raw",
 }
 
 
@@ -271,12 +275,13 @@ class VehicleBase:
         # ArduPlane's guided fallback (MAV_CMD_DO_REPOSITION in GUIDED): centre, altitude,
         # radius and direction of the loiter it flies when the attitude setpoints stop
         self._guided_loiter: tuple[tuple[float, float], float, float, int] | None = None
-        # parameters a companion may read (PX4's offboard-loss failsafe; ArduPlane's timeout)
-        self.params: dict[str, float] = (
-            {"COM_OF_LOSS_T": float(com_of_loss_t), "COM_OBL_RC_ACT": 0.0}
-            if flavour == "px4"
-            else {"GUIDED_TIMEOUT": float(guided_timeout)}
-        )
+        # tunables a ground station sets through parameters (sim.gcs_services): the cruise
+        # airspeed is the trim clamped to min..max (the firmware defaults widened to the trim)
+        self.obl_rc_act = 0  # PX4 COM_OBL_RC_ACT: 0 = position (Hold), what the SIL flies
+        self.airspeed_trim = self.cruise_airspeed
+        self.airspeed_min = min(10.0, self.cruise_airspeed)
+        self.airspeed_max = max(20.0 if self.px4 else 30.0, self.cruise_airspeed)
+        self._steady_wind = tuple(float(w) for w in wind_ned)
 
         # ---- plant: start behind the requested point so the trim flight ends about there
         heading = float(heading)
@@ -413,6 +418,10 @@ class VehicleBase:
             _QueueWriter(self), srcSystem=self.target_system, srcComponent=int(target_component)
         )
         self._fp, self._ftp = _Packer(self._mav), _Packer(self._tmav)
+        # parameters, missions, AUTOPILOT_VERSION, FTP: a component of its own
+        from sim.gcs_services import GcsServices
+
+        self.gcs = GcsServices(self)
         # a realistic feed (sim/target_feed.py) instead of the exact state at target_rate_hz
         self.target_feed = None
         if target_feed is not None and target is not None:
