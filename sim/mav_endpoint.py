@@ -102,6 +102,10 @@ class MavEndpoint(VehicleBase):
             except OSError:
                 return
             if server:  # what pymavlink's mavudp.recv does: remember the peer to answer it
+                if addr not in conn.clients:
+                    # a new peer hears who we are first: before our next 1 Hz HEARTBEAT a ground
+                    # station takes the target's (system 2) 10 Hz positions for the vehicle's
+                    self._next.pop("heartbeat", None)
                 conn.clients.add(addr)
                 conn.clients_last_alive[addr] = time.time()
             for msg in parse(data) or ():
