@@ -108,8 +108,31 @@ class MavEndpoint(VehicleBase):
                     self._next.pop("heartbeat", None)
                 conn.clients.add(addr)
                 conn.clients_last_alive[addr] = time.time()
-            for msg in parse(data) or ():
+            msgs = parse(data) or ()
+            for msg in msgs:
                 self._on_msg(msg)
+            if server and len(conn.clients) > 1:
+                self._route(msgs, addr)
+
+    def _route(self, msgs: Any, src: Any) -> None:
+        """Forward what one peer sends to the others, as ArduPilot's MAVLink routing (and PX4's
+        forwarding) does: every message not addressed to this vehicle (no target, or another
+        system's) from another component, so a ground station on the link sees the bridge's
+        NAMED_VALUE_FLOAT and STATUSTEXT. Only with two peers or more (never on the lockstep
+        path of a lone bridge)."""
+        port, me = self.conn.port, (self.sysid, self.compid)
+        for msg in msgs:
+            if msg.get_type() == "BAD_DATA" or (msg.get_srcSystem(), msg.get_srcComponent()) == me:
+                continue
+            if getattr(msg, "target_system", 0) in (self.sysid,):
+                continue
+            buf = msg.get_msgbuf()
+            for addr in list(self.conn.clients):
+                if addr != src:
+                    try:
+                        port.sendto(buf, addr)
+                    except OSError:
+                        pass
 
     def _on_msg(self, msg: Any) -> None:
         mt = msg.get_type()

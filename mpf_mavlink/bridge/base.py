@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from mpf_mavlink.bridge.controller import Controller
+from mpf_mavlink.bridge.operator import OperatorDisplay
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.adapter import Setpoint
 from mpf_mavlink.mavlink import Flavour
@@ -210,6 +211,8 @@ class BridgeBase:
         self._arrivals: dict[str, deque[float]] | None = None
         self.params: dict[str, float] = {}  # PARAM_VALUE answers (name -> value)
         self.judge_rows: list[tuple[float, float, float, float]] = []  # alt, airspeed, roll, pitch
+        # guidance values and state texts for a ground station (after each setpoint, rate-limited)
+        self.display = OperatorDisplay(m.operator_display, m.operator_display_hz)
         self.n = {
             "setpoints_sent": 0,
             "setpoints_resent": 0,
@@ -229,6 +232,8 @@ class BridgeBase:
         if s <= State.TRACKING:
             self.furthest = max(self.furthest, s)
         self.log(f"[{s.name}]")
+        if self.link is not None:
+            self.display.text(self.link, s.name)
 
     def _ready(self) -> bool:
         return self.ctl.ready()

@@ -67,6 +67,7 @@ class ControlStep(BridgeBase):
         self._send_setpoint(st.setpoint, st.time_boot_ms)
         self.last_sp, self.last_time_boot_ms = st.setpoint, st.time_boot_ms
         self.last_good_mono, self.last_good_vt = time.monotonic(), self.vehicle_t
+        self.display.values(self.link, st, int(self.state))  # after the setpoint: off its path
         if self.state == State.TRACKING:
             self._record(st)
             if self.t_engage is not None and st.t - self.t_engage >= self.m.mission_duration_s:

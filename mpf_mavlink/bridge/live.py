@@ -100,6 +100,7 @@ class Bridge(Recording):
                 self.opts.url, source_system=m.source_system, source_component=m.source_component,
                 vehicle_sysid=m.vehicle_sysid, allowed_sysids=allowed, tlog_path=out / "mavlink.tlog",
                 tlog_fsync_every_s=m.tlog_fsync_every_s, timeout_s=m.heartbeat_timeout_s,
+                vehicle_time=m.lockstep,  # lockstep: the tlog carries the simulation's time
             )  # fmt: skip
             if signing_key is not None:
                 enable_signing(self.link, signing_key, m.signing_link_id)

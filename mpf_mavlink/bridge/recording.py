@@ -28,6 +28,8 @@ class Recording(Session):
         if self.link is not None:
             counters.update({k: v for k, v in self.link.counters.as_dict().items()})
         res.counters = counters
+        if self.link is not None:  # a run that ends without a hand-back says why, too
+            self.display.stopped(self.link, res.exit_reason, res.exit_code == 0)
         self._close()
         cols = self.table.arrays()
         metrics = compute_metrics(

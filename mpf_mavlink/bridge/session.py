@@ -208,6 +208,7 @@ class Session(Streams):
         self.streaming = False
         if self.link is None:
             return
+        self.display.stopped(self.link, res.exit_reason, res.exit_code == EXIT_OK)
         if self.state < State.PRESTREAM:
             return
         prev = (

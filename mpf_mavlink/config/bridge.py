@@ -107,6 +107,11 @@ class MavlinkConfig:
     origin_alt_m: float | None = None
     tlog_fsync_every_s: float | None = field(default=1.0, metadata=_nonneg())
     plots: bool = True
+    # What an operator's ground station sees of the guidance (bridge/operator.py): NAMED_VALUE_FLOAT
+    # MPF_pt, MPF_psi, MPF_sdot, MPF_state at operator_display_hz (vehicle time), sent after the
+    # setpoint, and a STATUSTEXT "MPF: ..." on every state change and on the reason it stops
+    operator_display: bool = True
+    operator_display_hz: float = field(default=2.0, metadata={"check": ("range", 0.1, 10.0)})
     # Delay compensation (mpf_mavlink/core/guidance/predict.py): the law acts on the state predicted
     # to when its setpoint acts. known_delay_s: the delay (s) from an ATTITUDE sample's time to
     # the autopilot's receipt of the setpoint that answers it, as known beforehand (serial link,

@@ -14,6 +14,7 @@ works like a real port.
 
 from __future__ import annotations
 
+import math
 import os
 import select
 import socket
@@ -101,6 +102,7 @@ class Link:
         allowed_sysids: Iterable[int] = (),
         tlog: TlogWriter | None = None,
         clock: Callable[[], float] = time.time,
+        vehicle_time: bool = False,
     ) -> None:
         self.conn = conn
         self.url = url
@@ -111,6 +113,8 @@ class Link:
         self.allowed_sysids = frozenset(int(s) for s in allowed_sysids)
         self.tlog = tlog
         self._clock = clock
+        # lockstep: record times follow the vehicle's clock (see VehicleTimeStamps)
+        self.vehicle_time = VehicleTimeStamps(clock) if vehicle_time else None
         self.counters = LinkCounters()
         self.signing_enabled = False
         self._signing_counts_itself = False  # set by signing.enable_signing(hardened=True)
@@ -205,7 +209,15 @@ class Link:
         c.rx_packets += 1
         # one receive time for the record and the clock gate, quantised as the tlog stores it
         # (us): a replay of the tlog can then take exactly the gate's decisions
-        t_rec = round(self._clock() * 1e6) * 1e-6
+        vt = self.vehicle_time
+        tb_s: float | None = None
+        if vt is None:
+            t_rec = round(self._clock() * 1e6) * 1e-6
+        else:
+            tb = getattr(msg, "time_boot_ms", None)
+            if isinstance(tb, int) and msg.get_srcSystem() == self.vehicle_sysid:
+                tb_s = tb * 1e-3
+            t_rec = round(vt.stamp(tb_s) * 1e6) * 1e-6
         if self.tlog is not None:
             try:
                 self.tlog.write(msg.get_msgbuf(), t_rec)
@@ -233,6 +245,8 @@ class Link:
             if isinstance(tb, int):
                 why = self.clock_gate.check(mtype, tb * 1e-3, t_rec)
                 c.clock_resets = self.clock_gate.resets
+                if vt is not None and why != "time":
+                    vt.commit(t_rec)  # a sample of the vehicle's clock: time moves on
                 if why is not None:
                     if why == "time":
                         c.rejected_time += 1
@@ -312,7 +326,8 @@ class Link:
         if self.tlog is None:
             return
         try:
-            self.tlog.write(packet, self._clock())
+            vt = self.vehicle_time
+            self.tlog.write(packet, self._clock() if vt is None else vt.now())
         except (OSError, ValueError):
             self.counters.io_errors += 1
             self.counters.tlog_write_errors += 1
@@ -343,6 +358,45 @@ class Link:
         return f"Link({self.url!r}, vehicle={self.vehicle_sysid}/{self.vehicle_compid})"
 
 
+class VehicleTimeStamps:
+    """Record times (s since the epoch) that follow the vehicle's boot clock, for a link to a
+    lockstep simulation (``mavlink.lockstep``): its time runs at whatever speed the host allows,
+    so wall-clock record times would squeeze a minute of flight into the seconds it took to
+    compute, and every MAVLink log tool (mavflightmodes, mavsummarize, MAVExplorer) would report
+    those seconds. Here a record's time is the wall time of the first time-stamped vehicle
+    sample plus the vehicle time elapsed since (``time_boot_ms``); untimed messages (HEARTBEAT,
+    VFR_HUD, the target's, ours) take the latest vehicle instant. Only samples the boot-clock
+    gate did not reject as another clock move it (:meth:`commit`), it never goes back, and one
+    sample moves it by at most ``max_step_s``: a forged time stays a rejected sample instead of
+    becoming "now". A real autopilot's link keeps wall-clock record times."""
+
+    def __init__(self, wall: Callable[[], float] = time.time, max_step_s: float = 5.0) -> None:
+        self._wall = wall
+        self.max_step_s = float(max_step_s)
+        self.offset: float | None = None  # record time - vehicle boot time (s)
+        self.t_last: float | None = None  # the latest committed instant (s since the epoch)
+
+    def now(self) -> float:
+        """The latest vehicle instant as a record time (the wall clock before any sample)."""
+        return self._wall() if self.t_last is None else self.t_last
+
+    def stamp(self, t_boot_s: float | None) -> float:
+        """The record time of a message stamped ``t_boot_s`` (s, vehicle boot clock; None for
+        an untimed message)."""
+        if t_boot_s is None or not math.isfinite(t_boot_s):
+            return self.now()
+        if self.offset is None or self.t_last is None:
+            self.offset = self._wall() - t_boot_s
+            self.t_last = self.offset + t_boot_s
+            return self.t_last
+        t = self.offset + t_boot_s
+        return min(t, self.t_last + self.max_step_s) if t > self.t_last else self.t_last
+
+    def commit(self, t: float) -> None:
+        """A sample stamped ``t`` (from :meth:`stamp`) was accepted: time moves on to it."""
+        self.t_last = t if self.t_last is None else max(self.t_last, t)
+
+
 def open_link(
     url: str,
     *,
@@ -355,13 +409,15 @@ def open_link(
     allowed_sysids: Iterable[int] = (),
     tlog_path: str | os.PathLike[str] | None = None,
     tlog_fsync_every_s: float | None = None,
+    vehicle_time: bool = False,
 ) -> Link:
     """Open a MAVLink 2 link; raise MpfError (one line) for any bad URL or failure to open.
 
     Default identity: system 1 (the vehicle's own id, as a companion computer on the vehicle
     uses; PX4 and ArduPilot check ``target_system`` of setpoints, not the sender) and component
     191 MAV_COMP_ID_ONBOARD_COMPUTER. ``timeout_s`` bounds the TCP connect.
-    ``baud`` (serial only) defaults to 57600 unless the URL carries one.
+    ``baud`` (serial only) defaults to 57600 unless the URL carries one. ``vehicle_time``:
+    record times follow the vehicle's clock (a lockstep simulation; :class:`VehicleTimeStamps`).
     """
     if not (1 <= int(source_system) <= 255 and 0 <= int(source_component) <= 255):
         raise MpfError(
@@ -416,6 +472,7 @@ def open_link(
         vehicle_compid=vehicle_compid,
         allowed_sysids=allowed_sysids,
         tlog=tlog,
+        vehicle_time=vehicle_time,
     )
 
 
