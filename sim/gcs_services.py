@@ -282,7 +282,7 @@ class GcsServices:
             0,
             0,
             0,
-            M.MAV_FRAME_GLOBAL_INT,
+            M.MAV_FRAME_GLOBAL,  # as ArduPilot sends its home
             M.MAV_CMD_NAV_WAYPOINT,
             0,
             1,
