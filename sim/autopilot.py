@@ -125,7 +125,10 @@ class AutopilotEmulation(MavEndpoint):
         elif mt in ("COMMAND_LONG", "COMMAND_INT"):
             if msg.target_system not in (0, self.sysid):
                 return
-            self._command(msg)
+            try:
+                self._command(msg)
+            except (ValueError, OverflowError):  # a NaN / huge where an integer belongs
+                self._ack(msg.command, M.MAV_RESULT_DENIED, msg)
         elif mt == "SET_MODE":
             if msg.target_system not in (0, self.sysid):
                 return
@@ -149,7 +152,10 @@ class AutopilotEmulation(MavEndpoint):
                     setattr(self.rates, name, hz)
                     self._next.pop(name, None)
         elif mt in self.gcs.HANDLES:
-            self.gcs.handle(msg)
+            try:
+                self.gcs.handle(msg)
+            except (ValueError, OverflowError, TypeError):  # malformed: no answer, no crash
+                self.dropped["malformed"] = self.dropped.get("malformed", 0) + 1
         elif mt == "TIMESYNC" and msg.tc1 == 0:
             self._mav.send(self._mav.timesync_encode(int(self._boot_t * 1e9), msg.ts1))
 

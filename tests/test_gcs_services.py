@@ -250,3 +250,27 @@ def test_gps_raw_int_and_sys_status(vg):
     # no fence breach: ArduPilot reports the fence it does not have as healthy
     assert ss.onboard_control_sensors_health & M.MAV_SYS_STATUS_GEOFENCE
     assert not ss.onboard_control_sensors_present & M.MAV_SYS_STATUS_GEOFENCE
+
+
+def test_malformed_requests_never_stop_the_vehicle(vg):
+    v, g = vg
+    c = g.c
+    nan = math.nan
+    # NaN where the autopilot reads an integer: DENIED at once (PX4's answer to bad parameters)
+    c.mav.command_long_send(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, nan, 0, 0, 0, 0, 0, 0)
+    c.mav.command_long_send(1, 1, M.MAV_CMD_DO_SET_MODE, 0, nan, nan, 0, 0, 0, 0, 0)
+    c.mav.command_long_send(1, 1, M.MAV_CMD_DO_REPOSITION, 0, 0, nan, 0, 0, 47.4, 8.5, nan)
+    c.mav.param_set_send(1, 1, b"COM_OF_LOSS_T" if v.px4 else b"GUIDED_TIMEOUT", math.inf,
+                         M.MAV_PARAM_TYPE_REAL32)  # fmt: skip
+    c.mav.mission_item_send(1, 1, 0, M.MAV_FRAME_GLOBAL, 16, 0, 1, 0, 0, 0, 0, nan, nan, 100)
+    c.mav.file_transfer_protocol_send(0, 1, 1, [255] * 251)
+    frames(v, g, 3)
+    assert ack_for(g, M.MAV_CMD_REQUEST_MESSAGE).result == M.MAV_RESULT_DENIED
+    assert ack_for(g, M.MAV_CMD_DO_SET_MODE).result == M.MAV_RESULT_DENIED
+    # the refused PARAM_SET echoes the value in force
+    name = "COM_OF_LOSS_T" if v.px4 else "GUIDED_TIMEOUT"
+    (echo,) = [p for p in g.of("PARAM_VALUE") if p.param_id == name]
+    assert echo.param_value == v.gcs.value_of(name) and math.isfinite(echo.param_value)
+    t0 = v.t
+    frames(v, g, 5)
+    assert v.t > t0  # still flying
