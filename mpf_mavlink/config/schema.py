@@ -95,6 +95,14 @@ class VehicleConfig:
     airspeed_max_m_s: float | None = field(default=None, metadata=_pos())
     max_bank_rad: float = field(default=0.785398, metadata={"check": ("range_open", 0.0, 1.5707)})
     max_turn_rate_rad_s: float | None = field(default=None, metadata=_pos())
+    # turn per bank the aircraft really flies, as a fraction of the coordinated turn g tan(phi)/V
+    # (the adapter's learned turn_gain; the ArduPlane 4.7 SITL 'plane' learns ~0.745)
+    turn_gain: float = field(default=1.0, metadata={"check": ("range_open", 0.0, 2.0)})
+    # the autopilot's own roll limit (ArduPlane ROLL_LIMIT_DEG, PX4 FW_R_LIM) when known:
+    # the checks and the verdict use the smaller of it and max_bank_rad
+    autopilot_bank_limit_rad: float | None = field(
+        default=None, metadata={"check": ("range_open", 0.0, 1.5707)}
+    )
 
     @property
     def v_min(self) -> float:
@@ -167,9 +175,15 @@ class MetricsConfig:
     fail_pt_m: float = field(default=10.0, metadata=_pos())
     altitude_floor_m: float = 10.0
     airspeed_tolerance: float = field(default=0.15, metadata={"check": ("range", 0.0, 1.0)})
-    bank_tolerance_rad: float = field(default=0.26, metadata=_nonneg())
+    bank_tolerance_rad: float = field(default=0.0, metadata=_nonneg())
     pitch_limit_rad: float = field(default=0.6, metadata={"check": ("range_open", 0.0, 1.5707)})
     limit_hold_s: float = field(default=1.0, metadata=_nonneg())
+    # the steady window a verdict needs (s): one turn at the demo's tightest radius (2 pi 50 m
+    # at 16 m/s = 19.6 s); shorter flights are NOT JUDGED
+    min_steady_s: float = field(default=20.0, metadata=_nonneg())
+    # the fraction of the steady window that thrust may spend at its ceiling, or the bank
+    # within checks.bank_margin_rad of its limit, before the verdict fails
+    limit_fraction: float = field(default=0.2, metadata={"check": ("range", 0.0, 1.0)})
 
 
 @dataclass(frozen=True)

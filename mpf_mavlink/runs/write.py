@@ -13,6 +13,20 @@ from numpy.typing import NDArray
 from mpf_mavlink.runs.plots import plot_run
 from mpf_mavlink.runs.rundir import COLUMNS, _clean
 
+#: the header of ``limits.csv``: what the verdict judged against the limits (t s since engagement;
+#: roll, pitch rad; airspeed m/s; altitude m above home; thrust 0..1)
+LIMITS_COLUMNS = "t,roll,pitch,airspeed,altitude,thrust"
+
+
+def write_limits(out: Path, rows: NDArray[np.float64]) -> Path:
+    """``limits.csv``: the series the verdict judged (the plant's truth in ``sim``, telemetry
+    and the thrust sent in ``run``), drawn by ``limits.png``. Written before the figures."""
+    out.mkdir(parents=True, exist_ok=True)
+    p = out / "limits.csv"
+    A = np.asarray(rows, float).reshape(-1, 6)
+    np.savetxt(p, A, delimiter=",", header=LIMITS_COLUMNS, comments="", fmt="%.7g")
+    return p
+
 
 def write_run(
     out: Path,
