@@ -376,7 +376,7 @@ def test_lockstep_applies_setpoints_after_the_command_latency_at_10_hz(tmp_path)
         ["sim", DEMO, "--out", str(out), "-q", "--no-plots"]
         + [a for s in sets for a in ("--set", s)]
     )
-    assert rc in (0, 5)  # 30 s judge nothing here: the delay is the point
+    assert rc in (0, 5, 6)  # 30 s: not judged (the delay is the point)
     dc = json.loads((out / "bridge" / "metrics.json").read_text())["delay_compensation"]
     assert dc["attitude_period_s"] == pytest.approx(0.1, abs=1e-3)
     assert dc["loop_delay_source"] == "measured"

@@ -11,6 +11,7 @@ import signal
 from pathlib import Path
 from typing import Any
 
+from mpf_mavlink.cli.common import check_host, exit_codes_epilog, positive
 from mpf_mavlink.errors import MpfError
 
 VEHICLE_DESCRIPTION = """\
@@ -50,6 +51,7 @@ def _check_serve_url(url: str) -> None:
         raise MpfError(
             f"--serve {url}: the vehicle serves udpin:, udpout: or tcpin: (got {parsed.kind})"
         )
+    check_host(url, "--serve")
 
 
 def cmd_vehicle(args: argparse.Namespace) -> int:
@@ -104,6 +106,7 @@ def add_vehicle_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentPar
         "vehicle",
         help="serve the simulated vehicle alone (real time) for MAVProxy, a GCS or your own code",
         description=VEHICLE_DESCRIPTION,
+        epilog=exit_codes_epilog("vehicle"),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_config(p)
@@ -114,11 +117,14 @@ def add_vehicle_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentPar
         "answers each telemetry frame with a SET_ATTITUDE_TARGET (real time while nobody commands it)",
     )  # fmt: skip
     p.add_argument(
-        "--speed", type=float, metavar="X", help="realtime clock at X times real time (default 1)"
+        "--speed",
+        type=positive,
+        metavar="X",
+        help="realtime clock at X times real time (default 1)",
     )
     p.add_argument(
         "--duration",
-        type=float,
+        type=positive,
         metavar="S",
         help="stop after S seconds of simulated flight (default: run until Ctrl-C)",
     )
