@@ -209,6 +209,7 @@ def assess(
         alt = np.asarray(altitude, float)
         k = int(np.argmin(alt))
         fig["min_altitude_m"] = float(alt[k])
+        fig["altitude_floor_m"] = m.altitude_floor_m
         if alt[k] < m.altitude_floor_m:
             out.append(("safety", f"altitude {alt[k]:.1f} m at t = {t[k]:.1f} s, below the "
                         f"floor {m.altitude_floor_m:g} m (metrics.altitude_floor_m)"))  # fmt: skip
