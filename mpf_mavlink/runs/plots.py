@@ -246,20 +246,17 @@ def _plot_limits(
         if t_end < t[-1] - 1.0:
             ax.axvline(t_end, color="k", lw=0.8, ls="--", label="handed back")
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
-    verdict = str(metrics.get("verdict") or "")
+    # the verdict's head (its clauses are in metrics.json and the command's last line)
+    verdict = str(metrics.get("verdict") or "").split(": ", 1)[-1]
+    head = verdict if verdict.startswith(("PASS", "NOT JUDGED")) else verdict.split("):")[0] + ")"
+    head = head if len(head) < 100 else head[:97] + "..."
     title = f"Against the limits: {src}"
-    fig.suptitle(title + ("\n" + _wrap(verdict, 110) if verdict else ""), fontsize=9)
+    fig.suptitle(title + (f"\nverdict: {head}" if verdict else ""), fontsize=10)
     fig.subplots_adjust(left=0.08, right=0.74, bottom=0.05, top=0.91, hspace=0.1)
     p = d / "limits.png"
     fig.savefig(p, dpi=100)
     plt.close(fig)
     return p
-
-
-def _wrap(text: str, width: int) -> str:
-    import textwrap
-
-    return "\n".join(textwrap.wrap(text, width)[:4])
 
 
 def plot_run(d: str | Path) -> list[Path]:
