@@ -65,6 +65,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     )
     res = run_bridge(cfg, opts, log=printer(args.quiet))
     print(res.summary(), flush=True)
+    from mpf_mavlink.runs.verdict import limits_line
+
+    lim = limits_line((res.metrics or {}).get("verdict_figures") or {})
+    if lim:
+        print(lim, flush=True)
     if res.verdict:
         print(res.verdict, flush=True)
     return res.exit_code

@@ -167,7 +167,7 @@ def sil_summary(res: Any) -> str:
         "",
         f"bridge: {m.get('bridge_exit_reason')} (exit {m.get('bridge_exit_code')}); {hb}",
         f"run directory: {res.out_dir}  (timeseries.csv and truth.csv from the plant, metrics.json)",
-        f"plots:         {res.out_dir}/*.png  (trajectory_3d, planar, target_relative, errors, sdot_rates)",
+        f"plots:         {res.out_dir}/*.png  (limits, errors, sdot_rates, planar, trajectory_3d, target_relative)",
         f"tlog:          {res.tlog}  (both directions; MAVProxy, QGC or mavlogdump.py read it)",
         f"bridge's view: {res.bridge_dir}  (what the law saw: timeseries.csv, setpoints.csv, metrics.json)",
     ]
@@ -183,6 +183,11 @@ def cmd_sim_sil(cfg: Any, out: Path, quiet: bool, no_plots: bool, force: bool = 
     )  # fmt: skip
     res.metrics.setdefault("steady_after_s", cfg.metrics.steady_after_s)
     print(sil_summary(res), flush=True)
+    from mpf_mavlink.runs.verdict import limits_line
+
+    lim = limits_line(res.metrics.get("verdict_figures") or {})
+    if lim:
+        print(lim, flush=True)
     # last line: the verdict on the plant's truth (exit 5 when the flight failed it)
     print(res.metrics.get("verdict") or "verdict: none (the bridge recorded no flight)", flush=True)
     return int(res.exit_code)

@@ -283,6 +283,38 @@ def assess(
     return vd
 
 
+def limits_line(figures: dict[str, Any]) -> str | None:
+    """One line of what the verdict measured against the limits (so that a limit touched
+    within its tolerance is said, not silent): max bank and the time beyond its limit, thrust
+    at its ceiling, the steady mean airspeed. None without figures."""
+    f = figures or {}
+    parts = []
+    if f.get("max_bank_rad") is not None and f.get("bank_limit_rad") is not None:
+        parts.append(
+            f"max bank {math.degrees(f['max_bank_rad']):.1f} deg (limit "
+            f"{math.degrees(f['bank_limit_rad'] + f.get('bank_tolerance_rad', 0.0)):.1f}: "
+            f"{f.get('bank_beyond_limit_s', 0.0):.1f} s beyond, longest "
+            f"{f.get('bank_beyond_limit_longest_s', 0.0):.1f} s of {f.get('limit_hold_s', 0):g})"
+        )
+    if f.get("steady_thrust_at_ceiling_fraction") is not None:
+        parts.append(
+            f"thrust at its ceiling {100 * f['steady_thrust_at_ceiling_fraction']:.0f} % of the "
+            f"steady window (limit {100 * f.get('limit_fraction', 0):.0f} %)"
+        )
+    elif f.get("thrust_at_ceiling_fraction") is not None:
+        parts.append(
+            f"thrust at its ceiling {100 * f['thrust_at_ceiling_fraction']:.0f} % of the flight"
+        )
+    if f.get("steady_mean_airspeed_m_s") is not None:
+        parts.append(
+            f"steady mean airspeed {f['steady_mean_airspeed_m_s']:.1f} m/s (law "
+            f"{f.get('airspeed_m_s', 0):g})"
+        )
+    if not parts:
+        return None
+    return f"limits ({f.get('source', '?')}): " + "; ".join(parts)
+
+
 def judge(
     cfg: Any,
     t: np.ndarray,
@@ -312,6 +344,7 @@ __all__ = [
     "assess",
     "bank_limit_rad",
     "judge",
+    "limits_line",
     "thrust_ceiling",
     "verdict_line",
 ]
