@@ -122,9 +122,15 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from sim.runner import run_kinematic
 
     res = run_kinematic(cfg, progress=not args.quiet)
+    from mpf_mavlink.runs.verdict import assess
+
+    # the paper's kinematic plant has no attitude, airspeed or thrust to judge: tracking only
+    vd = assess(cfg, res.cols["t"], res.cols["pt_norm"])
+    vd.record(res.metrics)
     write_run(out, res.cols, res.metrics, res.path_T, plots=not args.no_plots)
     print(_summary(res.metrics, out))
-    return 0
+    print(vd.line())
+    return vd.exit_code(0)
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
