@@ -175,7 +175,9 @@ class MetricsConfig:
     fail_pt_m: float = field(default=10.0, metadata=_pos())
     altitude_floor_m: float = 10.0
     airspeed_tolerance: float = field(default=0.15, metadata={"check": ("range", 0.0, 1.0)})
-    bank_tolerance_rad: float = field(default=0.0, metadata=_nonneg())
+    # 5 deg: the margin checks.bank_margin_rad keeps below the limit for the feedback and gusts,
+    # allowed above it too (the roll loop's overshoot of a clipped set-point), for limit_hold_s
+    bank_tolerance_rad: float = field(default=0.0873, metadata=_nonneg())
     pitch_limit_rad: float = field(default=0.6, metadata={"check": ("range_open", 0.0, 1.5707)})
     limit_hold_s: float = field(default=1.0, metadata=_nonneg())
     # the steady window a verdict needs (s): one turn at the demo's tightest radius (2 pi 50 m

@@ -187,8 +187,12 @@ def _plot_limits(
     ax.plot(tt, np.degrees(roll), lw=0.8, color="tab:blue", label="bank")
     bl = vf.get("bank_limit_rad")
     if bl is not None:
-        b = math.degrees(bl + float(vf.get("bank_tolerance_rad") or 0.0))
+        b = math.degrees(bl)
         hlines(ax, [b, -b], "-", "tab:red", f"limit {b:.1f} deg")
+        tol = math.degrees(float(vf.get("bank_tolerance_rad") or 0.0))
+        if tol > 0:
+            hlines(ax, [b + tol, -b - tol], ":", "tab:red",
+                   f"+{tol:.0f} deg: fails held > {vf.get('limit_hold_s', 1):g} s")  # fmt: skip
         band = vf.get("bank_band_rad")
         if band is not None:
             hlines(ax, [math.degrees(band), -math.degrees(band)], "--", "tab:orange",
