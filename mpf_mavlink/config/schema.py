@@ -364,7 +364,23 @@ def load_config(path: str | Path, overrides: list[str] | None = None) -> Any:
         raise ConfigError(f"{src}: the top level must be a mapping of sections")
     for ov in overrides or []:
         apply_override(raw, ov, src)
+    _follow_sil_flavour(raw, overrides or [])
     return config_from_dict(raw, src)
+
+
+def _follow_sil_flavour(raw: dict[str, Any], overrides: list[str]) -> None:
+    """``--set sil.flavour=X`` is the one key that switches the SIL's autopilot: the bridge's
+    ``mavlink.flavour`` follows it and a hold mode of the other autopilot is dropped (the
+    flavour's own is the default), unless those keys are set on the command line too."""
+    keys = {ov.split("=", 1)[0].strip() for ov in overrides}
+    sil, mav = raw.get("sil"), raw.get("mavlink")
+    if "sil.flavour" not in keys or not isinstance(sil, dict) or not isinstance(mav, dict):
+        return
+    flavour = sil.get("flavour")
+    if "mavlink.flavour" not in keys and mav.get("flavour") not in (None, "auto", flavour):
+        mav["flavour"] = flavour
+        if "mavlink.hold_mode" not in keys:
+            mav.pop("hold_mode", None)
 
 
 def apply_override(raw: dict[str, Any], spec: str, src: str = "--set") -> None:
