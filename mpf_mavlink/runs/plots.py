@@ -407,7 +407,8 @@ def plot_run(d: str | Path) -> list[Path]:
     axs[1].set_ylabel("Psi(R~)")
     axs[1].set_xlabel("t [s]")
     axs[1].grid(alpha=0.3)
-    axs[0].legend(fontsize=8, loc="upper right")
+    if axs[0].get_legend_handles_labels()[0]:  # the window or the engagement is drawn
+        axs[0].legend(fontsize=8, loc="upper right")
     save(fig, "errors.png", left=0.12, hspace=0.08)
 
     # 5. sdot, 6. w2 and w3.
