@@ -48,8 +48,8 @@ from mpf_mavlink.runs.rundir import (
     prepare_out_dir,
     read_run,
 )
-from mpf_mavlink.runs.verdict import EXIT_VERDICT, judge, verdict_line
-from mpf_mavlink.runs.write import write_run
+from mpf_mavlink.runs.verdict import Verdict, assess
+from mpf_mavlink.runs.write import write_limits, write_run
 from sim.sil_progress import _Progress
 from sim.sil_truth import truth_table
 
@@ -506,6 +506,7 @@ def _measure(
     except MpfError:
         bc = {"t": np.zeros(0)}
     path = build_path(cfg.path)
+    vd: Verdict | None = None
     if len(bc["t"]) < 2:
         cols = RunTable().arrays()
         metrics: dict[str, Any] = compute_metrics(
@@ -530,11 +531,11 @@ def _measure(
         # the verdict on the plant's truth while the bridge was flying it
         sel = info["rows"]
         eul = truth["euler"][sel]
-        fails = judge(
+        vd = assess(
             cfg, cols["t"], cols["pt_norm"], -truth["position_ned"][sel, 2],
-            truth["airspeed"][sel], eul[:, 0], eul[:, 1],
+            truth["airspeed"][sel], eul[:, 0], eul[:, 1], truth["throttle"][sel], source="truth",
         )  # fmt: skip
-        metrics["verdict"], metrics["verdict_failures"] = verdict_line(fails), fails
+        vd.record(metrics)
         metrics["bridge_verdict"] = bm.get("verdict")
     # real-time factor while the bridge was in control (the lockstep figure) and overall
     ml = vinfo["mode_log"]
@@ -560,9 +561,7 @@ def _measure(
     )  # fmt: skip
     # The truth's verdict decides a run that otherwise ended normally (the bridge's own, on its
     # estimates, is in bridge/metrics.json); any other exit of the bridge stands.
-    code = bres.exit_code
-    if code in (0, EXIT_VERDICT):
-        code = EXIT_VERDICT if metrics.get("verdict_failures") else 0
+    code = vd.exit_code(bres.exit_code) if vd is not None else bres.exit_code
     metrics["exit_code"] = code
     return SilResult(
         cols, metrics, path.positions(), Path("."), bridge_dir, bridge_dir / "mavlink.tlog",
@@ -589,6 +588,14 @@ def _write_bridge_config(bridge_dir: Path, bcfg: Config) -> None:
 
 
 def _write(out: Path, res: SilResult, truth: dict[str, np.ndarray], plots: bool) -> None:
+    tv = res.t_vehicle
+    if len(tv) and len(res.cols["t"]) and "euler" in truth:
+        # the truth the verdict judged, from the start (t < 0: before engagement) for the plots
+        t0 = float(tv[0] - res.cols["t"][0])
+        write_limits(out, np.column_stack([
+            truth["t"] - t0, truth["euler"][:, 0], truth["euler"][:, 1], truth["airspeed"],
+            -truth["position_ned"][:, 2], truth["throttle"],
+        ]))  # fmt: skip
     write_run(out, res.cols, res.metrics, res.path_T, plots=plots and len(res.cols["t"]) >= 2)
     cols = [truth["t"], truth["time_boot_s"], *truth["position_ned"].T, *truth["velocity_ned"].T, *truth["euler"].T,
             truth["airspeed"], *truth["wind_ned"].T, truth["throttle"], truth["mode"]]  # fmt: skip

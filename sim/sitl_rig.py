@@ -256,7 +256,8 @@ def main(argv: list[str] | None = None) -> int:
         rows = table_rows(m, code, a, cruise, kill_info)
         if a.sil and not kill_info:
             rows += sil_rows(a, sets, m, out)
-        rc = 0 if (code == 0 or kill_info) else code
+        # 6: ran to its end, shorter than its steady window (NOT JUDGED): the table says so
+        rc = 0 if (code in (0, 6) or kill_info) else code
     finally:
         if bridge is not None and bridge.poll() is None:
             bridge.terminate()

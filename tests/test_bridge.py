@@ -26,6 +26,9 @@ from mpf_mavlink.errors import MpfError  # noqa: E402
 from mpf_mavlink.mavlink import dialect as mavlink  # noqa: E402
 from mpf_mavlink.mavlink import mavutil  # noqa: E402
 
+# a lifecycle flight of seconds has no steady window: it ends NOT JUDGED (exit 6), not PASS
+from mpf_mavlink.runs.verdict import EXIT_NOT_JUDGED as NOT_JUDGED  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 PY = sys.executable
 # the scripted peer streams at fixed rates and answers no PARAM_REQUEST_READ: stream
@@ -71,7 +74,11 @@ def test_px4_full_lifecycle_udp(tmp_path):
         res = fly(cfg_for("px4"), f"udpin:127.0.0.1:{port}", tmp_path, 1.5)
     finally:
         peer.stop()
-    assert (res.state_reached, res.exit_code, res.handback_confirmed) == ("TRACKING", 0, True)
+    assert (res.state_reached, res.exit_code, res.handback_confirmed) == (
+        "TRACKING",
+        NOT_JUDGED,
+        True,
+    )
     reqs = mode_requests(peer)
     # first OFFBOARD (main 6), then AUTO.LOITER (main 4, sub 3), nothing else
     assert [(r.msg.param1, r.msg.param2, r.msg.param3) for r in reqs] == [
@@ -121,7 +128,11 @@ def test_arduplane_full_lifecycle_over_pty_with_global_position(tmp_path):
         res = fly(cfg_for("ardupilot"), f"{peer.device}:115200", tmp_path, 1.0)
     finally:
         peer.stop()
-    assert (res.state_reached, res.exit_code, res.handback_confirmed) == ("TRACKING", 0, True)
+    assert (res.state_reached, res.exit_code, res.handback_confirmed) == (
+        "TRACKING",
+        NOT_JUDGED,
+        True,
+    )
     assert [r.msg.param2 for r in mode_requests(peer)] == [15.0, 12.0]  # GUIDED, then LOITER
     assert peer.mode_is("LOITER")
     sp = np.genfromtxt(tmp_path / "setpoints.csv", delimiter=",", names=True)
@@ -200,7 +211,7 @@ def test_stream_rates_already_fast_are_measured_and_reported(tmp_path):
         res = fly(cfg, f"udpin:127.0.0.1:{port}", tmp_path, 0.5)
     finally:
         peer.stop()
-    assert res.exit_code == 0, res.exit_reason
+    assert res.exit_code == NOT_JUDGED, res.exit_reason
     att = res.streams["messages"]["ATTITUDE"]
     # the peer sends 50 Hz: measured over 1 s within one sample of it
     assert att["requested_hz"] == 50.0 and 48.0 <= att["measured_hz"] <= 52.0
@@ -279,7 +290,7 @@ def test_reengages_once_telemetry_is_back_and_replays_identically(tmp_path):
         res = fly(cfg, f"udpin:127.0.0.1:{port}", tmp_path, 6.0, _when_offboard_then(peer, outage))
     finally:
         peer.stop()
-    assert res.exit_code == 0 and "mission duration" in res.exit_reason, res.exit_reason
+    assert res.exit_code == NOT_JUDGED and "mission duration" in res.exit_reason, res.exit_reason
     assert res.counters["reengagements"] == 1 and res.handback_confirmed
     # OFFBOARD, hand-back to Hold at the loss, OFFBOARD again, hand-back at the mission's end
     assert [r.msg.param2 for r in mode_requests(peer)] == [6.0, 4.0, 6.0, 4.0]
@@ -374,7 +385,7 @@ def test_cli_run_over_a_serial_port(tmp_path):
         out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=120)
     finally:
         peer.stop()
-    assert out.returncode == 0, out.stdout + out.stderr
+    assert out.returncode == NOT_JUDGED, out.stdout + out.stderr
     assert [r.msg.param2 for r in mode_requests(peer)] == [15.0, 12.0]  # GUIDED, then LOITER
     # 1 s of tracking at the 50 Hz ATTITUDE stream: >= 30 setpoints leaves room for engagement
     assert len([s for s in peer.setpoints if s.mode == 15]) >= 30
@@ -425,7 +436,7 @@ def test_signing_accepts_signed_and_signs_everything(tmp_path):
         res = fly(cfg, f"udpin:127.0.0.1:{port}", tmp_path / "run", 0.5)
     finally:
         peer.stop()
-    assert res.exit_code == 0 and res.handback_confirmed
+    assert res.exit_code == NOT_JUDGED and res.handback_confirmed
     # the peer, holding the key and allowing nothing unsigned, rejected nothing of ours
     assert peer.rx_invalid_signature == 0 and len(peer.setpoints) > 50
     assert all(s.msg._signed and s.msg._link_id == 7 for s in peer.setpoints)
@@ -471,7 +482,9 @@ def test_spoofed_system_ids_do_not_move_the_state(tmp_path):
     finally:
         stop.set()
         peer.stop()
-    assert res.exit_code == 0 and res.handback_confirmed  # the spoofed MANUAL did not stop us
+    assert (
+        res.exit_code == NOT_JUDGED and res.handback_confirmed
+    )  # the spoofed MANUAL did not stop us
     assert res.counters["rejected_sysid"] > 50
     ts = np.genfromtxt(tmp_path / "timeseries.csv", delimiter=",", names=True)
     # the real vehicle is within ~250 m of the origin; the spoofed one at 5 km never appears
@@ -504,7 +517,7 @@ def test_live_follow_target(tmp_path):
     finally:
         stop.set()
         peer.stop()
-    assert res.exit_code == 0, res.exit_reason
+    assert res.exit_code == NOT_JUDGED, res.exit_reason
     ts = np.genfromtxt(tmp_path / "timeseries.csv", delimiter=",", names=True)
     # the target moves east at 3 m/s (heading frame: x east); its position reached the law
     assert np.all(np.abs(ts["tgt_n"]) < 1.0) and ts["tgt_e"][-1] > ts["tgt_e"][0] + 2.0

@@ -11,6 +11,7 @@ from mpf_mavlink.core.frames import euler_to_matrix
 from mpf_mavlink.core.guidance.checks import CheckResult, assumption1, feasibility, gain_condition
 from mpf_mavlink.core.guidance.law import VehicleState, mpf_law
 from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
+from mpf_mavlink.runs.verdict import bank_limit_rad
 
 
 def initial_errors(cfg: Config) -> tuple[float, float, float]:
@@ -141,9 +142,12 @@ def run_checks(cfg: Config, scripted_target: bool = True) -> list[CheckResult]:
         )
 
         def feasible_at(v: float) -> CheckResult:
+            # the bank the aircraft may fly (ours or the autopilot's own limit, the smaller) at
+            # the turn per bank it really flies (vehicle.turn_gain)
             return feasibility(
-                path, target, v, horizon, cfg.vehicle.max_bank_rad,
+                path, target, v, horizon, bank_limit_rad(cfg),
                 cfg.vehicle.max_turn_rate_rad_s, s0, steady, bank_margin_rad=ch.bank_margin_rad,
+                turn_gain=cfg.vehicle.turn_gain,
             )  # fmt: skip
 
         results.append(feasible_at(cfg.vehicle.airspeed_m_s))

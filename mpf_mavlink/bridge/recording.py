@@ -11,8 +11,8 @@ from mpf_mavlink.bridge.base import EXIT_OK, BridgeResult
 from mpf_mavlink.bridge.controller import SETPOINT_COLUMNS
 from mpf_mavlink.bridge.session import Session
 from mpf_mavlink.runs.rundir import compute_metrics
-from mpf_mavlink.runs.verdict import EXIT_VERDICT, judge, verdict_line
-from mpf_mavlink.runs.write import write_run
+from mpf_mavlink.runs.verdict import assess
+from mpf_mavlink.runs.write import write_limits, write_run
 
 
 class Recording(Session):
@@ -32,26 +32,29 @@ class Recording(Session):
             self.display.stopped(self.link, res.exit_reason, res.exit_code == 0)
         self._close()
         cols = self.table.arrays()
+        limits_rows: np.ndarray | None = None
         metrics = compute_metrics(
             cols, self.cfg.metrics.steady_after_s, self.cfg.metrics.converge_threshold_m
         )
         if len(cols["t"]):
             metrics["final_pt_m"] = float(cols["pt_norm"][-1])
             # the verdict on what the bridge saw (its estimates: the truth is not known here)
+            # (telemetry; the thrust is the one sent, the autopilot applies it in offboard)
             J = np.array(self.judge_rows, float).reshape(-1, 4)
-            fails = judge(
-                self.cfg,
-                cols["t"] - cols["t"][0],
-                cols["pt_norm"],
-                J[:, 0],
-                J[:, 1],
-                J[:, 2],
-                J[:, 3],
-            )
-            res.verdict = verdict_line(fails)
-            metrics["verdict"], metrics["verdict_failures"] = res.verdict, fails
-            if fails and res.exit_code == EXIT_OK:
-                res.exit_code = EXIT_VERDICT
+            thr_sent = np.array([r[8] for r in self.sp_rows], float)
+            t_rel = cols["t"] - cols["t"][0]
+            vd = assess(
+                self.cfg, t_rel, cols["pt_norm"], J[:, 0], J[:, 1], J[:, 2], J[:, 3],
+                thr_sent if len(thr_sent) == len(t_rel) else None, source="telemetry",
+            )  # fmt: skip
+            res.verdict = vd.line()
+            vd.record(metrics)
+            if res.exit_code == EXIT_OK:
+                res.exit_code = vd.exit_code(EXIT_OK)
+            limits_rows = np.column_stack(
+                [t_rel, J[:, 2], J[:, 3], J[:, 1], J[:, 0],
+                 thr_sent if len(thr_sent) == len(t_rel) else np.full(len(t_rel), np.nan)]
+            )  # fmt: skip
         if self.sp_rows:
             # thrust pinned at its ceiling: the airspeed the law assumes is not being held
             thr = np.array([r[8] for r in self.sp_rows], float)
@@ -101,6 +104,8 @@ class Recording(Session):
                 comments="",
                 fmt="%.9g",
             )
+            if limits_rows is not None:
+                write_limits(out, limits_rows)
             write_run(
                 out,
                 cols,

@@ -93,7 +93,7 @@ def _kinematic(
     from mpf_mavlink.bridge.preflight import initial_errors
     from mpf_mavlink.config import load_config
     from mpf_mavlink.runs.rundir import RunTable, compute_metrics
-    from mpf_mavlink.runs.verdict import judge, verdict_line
+    from mpf_mavlink.runs.verdict import assess
     from sim.kinematic import record
     from sim.runner import kinematic_loop, record_sample
 
@@ -137,10 +137,12 @@ def _kinematic(
     m.update(initial_pt_m=pt0, initial_psi=psi0, sim_time_s=float(cols["t"][-1]),
              final_pt_m=float(cols["pt_norm"][-1]))  # fmt: skip
     if status == "ok":
-        verdict = verdict_line(judge(cfg, cols["t"], cols["pt_norm"]))
-        m["verdict"] = verdict
-        if verdict.startswith("verdict: FAIL"):
-            status, err = "failed", verdict
+        # a flight stopped early once converged has no steady window: NOT JUDGED, still "ok"
+        # (its convergence is the campaign's figure)
+        vd = assess(cfg, cols["t"], cols["pt_norm"])
+        m["verdict"] = vd.line()
+        if vd.failures:
+            status, err = "failed", vd.line()
     if out_dir is not None:
         from mpf_mavlink.runs.write import write_run
 
@@ -202,6 +204,8 @@ def _sil_once(
         last = (p.stderr.strip().splitlines() or [""])[-1] or str(m.get("bridge_exit_reason") or "")
         if p.returncode == 0:
             return m, "ok", ""
+        if p.returncode == 6:  # ran to its end, too short to judge: its figures stand
+            return m, "ok", str(m.get("verdict") or last)
         if p.returncode == 3:
             return m, "refused", last
         if p.returncode == 5:

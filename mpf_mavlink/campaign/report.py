@@ -247,16 +247,56 @@ def roa_plot(spec: CampaignSpec, rows: list[dict[str, Any]], out: Path) -> Path 
     ax.set_xlabel("|pt(0)| (m)")
     ax.set_ylabel("Psi(0)")
     ax.set_ylim(0.0, 1.0)
-    ax.set_title(f"campaign {spec.name}: empirical region of attraction")
+    command = f"mpf-mavlink campaign {_rel(spec.source)}"
+    ax.set_title(f"campaign {spec.name}: empirical region of attraction\n({command})", fontsize=10)
     ax.legend(fontsize=8, loc="upper right")
     ax.grid(alpha=0.3)
     fig.tight_layout()
     inside = [c for (a, b, c) in pts if certified(spec, a, b)]
+    outside = [c for (a, b, c) in pts if not certified(spec, a, b)]
     (out / "roa.json").write_text(json.dumps({
         "flights": len(pts), "converged": int(conv.sum()),
         "certified_starts": len(inside), "certified_converged": int(sum(inside)),
+        "uncertified_starts": len(outside), "uncertified_converged": int(sum(outside)),
+        "command": command,
     }, indent=2) + "\n")  # fmt: skip
+    (out / "roa.md").write_text(roa_table(spec, pts, command))
     return _save(fig, out / "roa.png")
+
+
+def _rel(path: str) -> str:
+    """``path`` relative to the working directory when it is inside it (for a command line)."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
+def roa_table(spec: CampaignSpec, pts: list[tuple[Any, Any, bool]], command: str) -> str:
+    """roa.md: converged flights / flights by the start's Psi(0) band and |pt(0)| band, and
+    inside / outside the certified region (markdown, naming the command that wrote it)."""
+    psi_edges = [0.0, 0.25, 0.5, 0.75, 1.0001]
+    d_max = max(float(a) for a, _, _ in pts)
+    d_edges = list(np.linspace(0.0, d_max * 1.0001, 4))
+    head = "| Psi(0) \\ \\|pt(0)\\| (m) | " + " | ".join(
+        f"{d_edges[i]:.0f}-{d_edges[i + 1]:.0f}" for i in range(3)) + " | all |"  # fmt: skip
+    lines = [f"Written by `{command}` ({len(pts)} flights): converged / flown, by the start's",
+             "Psi(0) and |pt(0)|; certified = inside the region the gain condition of Theorem 1",
+             "certifies for these gains.", "", head, "|---|---|---|---|---|"]  # fmt: skip
+
+    def cell(sel: list[bool]) -> str:
+        return f"{sum(sel)} / {len(sel)}" if sel else "-"
+
+    for i in range(4):
+        lo, hi = psi_edges[i], psi_edges[i + 1]
+        row = [c for a, b, c in pts if lo <= b < hi]
+        cells = [cell([c for a, b, c in pts if lo <= b < hi and d_edges[j] <= a < d_edges[j + 1]])
+                 for j in range(3)]  # fmt: skip
+        lines.append(f"| {lo:.2f}-{min(hi, 1.0):.2f} | " + " | ".join(cells) + f" | {cell(row)} |")
+    cert = [c for a, b, c in pts if certified(spec, a, b)]
+    unc = [c for a, b, c in pts if not certified(spec, a, b)]
+    lines += ["", f"certified starts: {cell(cert)} converged; uncertified: {cell(unc)}.", ""]
+    return "\n".join(lines)
 
 
 def _save(fig: Any, path: Path) -> Path:

@@ -79,7 +79,15 @@ def _client(workers: int | None, scheduler: str | None) -> tuple[Any, Any, int]:
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
-        client = Client(scheduler, timeout="10s")
+        if not scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://", "ws://", "wss://")):
+            raise MpfError(
+                f"--scheduler {scheduler}: not a dask scheduler address (tcp://HOST:PORT)"
+            )
+        try:
+            client = Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError) as e:
+            msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+            raise MpfError(f"--scheduler {scheduler}: no dask scheduler answered ({msg})") from None
         n = len(client.scheduler_info().get("workers", {}))
         return client, None, n
     n = workers or os.cpu_count() or 1
@@ -102,7 +110,6 @@ def run_campaign(
     """Fly every sample without a finished row; returns all rows (old and new)."""
     from tqdm import tqdm
 
-    out.mkdir(parents=True, exist_ok=True)
     header = columns(spec)
     table = out / "results.csv"
     fp = _fingerprint(spec)
@@ -114,14 +121,17 @@ def run_campaign(
                 f"{out}: holds the results of another version of the campaign or its base "
                 "configuration; choose another --out"
             )
-    meta.write_text(json.dumps({"name": spec.name, "source": spec.source,
-                                "base": str(spec.base_path), "fingerprint": fp}, indent=2) + "\n")  # fmt: skip
     rows = read_rows(table, header)
     redo = FINISHED if retry_errors else (*FINISHED, *RETRYABLE)
     done = {i for i, r in rows.items() if r.get("status") in redo}
     base = load_config(spec.base_path, spec.set)
     all_samples = samples(spec)
     todo = [i for i in range(spec.samples) if i not in done]
+    # the workers first: a scheduler that does not answer leaves no directory behind
+    client, cluster, n = _client(workers, scheduler) if todo else (None, None, 0)
+    out.mkdir(parents=True, exist_ok=True)
+    meta.write_text(json.dumps({"name": spec.name, "source": spec.source,
+                                "base": str(spec.base_path), "fingerprint": fp}, indent=2) + "\n")  # fmt: skip
     t0 = time.perf_counter()
     result = CampaignResult(out, [], 0, len(done), 0.0, 0)
     if todo:
@@ -131,7 +141,6 @@ def run_campaign(
         if new_file:
             w.writeheader()
             fh.flush()
-        client, cluster, n = _client(workers, scheduler)
         result.workers = n
         log(f"campaign {spec.name}: {len(todo)} flights to fly ({len(done)} already in "
             f"{table}), {spec.plant} plant, {n} worker(s)")  # fmt: skip
@@ -141,7 +150,8 @@ def run_campaign(
             )
         finally:
             fh.close()
-            client.close()
+            if client is not None:
+                client.close()
             if cluster is not None:
                 cluster.close()
     result.wall_s = time.perf_counter() - t0

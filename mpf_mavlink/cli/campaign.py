@@ -8,6 +8,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from mpf_mavlink.cli.common import exit_codes_epilog
+
 
 def add_campaign_parser(sub: Any) -> None:
     c = sub.add_parser(
@@ -20,9 +22,9 @@ def add_campaign_parser(sub: Any) -> None:
             "command again flies only the samples without a row. Then DIR gets summary.json, "
             "ecdf.png, parameters.png, roa.png (when the start is varied: the empirical region "
             "of attraction against the one the gain condition certifies) and worst/<sample>/ run "
-            "directories of the worst flights for `mpf-mavlink plot`. Exit 0 when every flight "
-            "ran (whatever its figures), 1 when some errored or timed out."
+            "directories of the worst flights for `mpf-mavlink plot`."
         ),
+        epilog=exit_codes_epilog("campaign"),
     )
     c.add_argument("campaign", metavar="CAMPAIGN", type=Path, help="campaign YAML file")
     c.add_argument("--out", type=Path, required=True, help="output directory (resumable)")

@@ -9,6 +9,52 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+#: the exit codes of each command (its --help lists them); a flight that ran to its end exits 0
+#: (verdict PASS), 5 (FAIL) or 6 (NOT JUDGED: too short for its steady window)
+EXIT_CODES = {
+    "check": "0 every check passed (warnings allowed); 2 bad configuration; 3 a check failed",
+    "sim": "0 flown, verdict PASS; 2 bad configuration / arguments / output directory; 3 refused "
+    "by the pre-flight checks (--force flies it); 4 a safety exit of the bridge (SIL); 5 verdict "
+    "FAIL; 6 verdict NOT JUDGED (the flight is shorter than its steady window); 130 Ctrl-C",
+    "plot": "0 figures drawn; 2 not a run directory",
+    "run": "0 flown and handed back, verdict PASS; 2 bad configuration / URL / no vehicle; 3 a "
+    "pre-flight check failed (no mode request was sent); 4 a safety exit (telemetry or target "
+    "lost, pilot took over, mode refused, hand-back not confirmed); 5 verdict FAIL; 6 verdict "
+    "NOT JUDGED (shorter than its steady window); 130 Ctrl-C; 143 SIGTERM",
+    "vehicle": "0 stopped (--duration reached, Ctrl-C or SIGTERM); 2 bad configuration / "
+    "--serve URL (unknown scheme, unresolvable host, port in use) / arguments",
+    "campaign": "0 every flight ran to its end (whatever its figures or verdict); 1 some "
+    "flights errored or timed out; 2 bad campaign file / arguments / no scheduler; 130 Ctrl-C",
+    "compare": "0 every flight ran to its end (a FAIL or NOT JUDGED verdict is a result: the "
+    "table's verdict column); 2 bad configuration / arguments, or a flight could not run to its "
+    "end (a safety exit, no flight recorded); 130 Ctrl-C",
+}
+
+
+def exit_codes_epilog(command: str) -> str:
+    """``exit codes: ...`` for a command's --help."""
+    import textwrap
+
+    return textwrap.fill(f"exit codes: {EXIT_CODES[command]}.", 95)
+
+
+def check_host(url: str, option: str) -> None:
+    """A network MAVLink URL's host must resolve: an unresolvable one would fail every send
+    (and stall each on the resolver) instead of failing once. MpfError names the option."""
+    import socket
+
+    from mpf_mavlink.errors import MpfError
+    from mpf_mavlink.mavlink.link import parse_url
+
+    parsed = parse_url(url)  # MpfError (one line) for anything malformed
+    if parsed.kind == "serial":
+        return
+    try:
+        socket.getaddrinfo(parsed.host, parsed.port)
+    except (OSError, UnicodeError) as e:
+        why = getattr(e, "strerror", None) or str(e)
+        raise MpfError(f"{option} {url}: cannot resolve host {parsed.host!r} ({why})") from None
+
 
 def add_overrides(p: argparse.ArgumentParser, example: str) -> None:
     """``--set KEY=VALUE`` (repeatable) into ``args.overrides``; ``example`` shows a key or two."""

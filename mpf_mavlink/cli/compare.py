@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from mpf_mavlink.cli.common import exit_codes_epilog, positive
 from mpf_mavlink.errors import MpfError
 
 LAWS_ALL = ("mpf", "npfg", "npfg_static", "l1_loiter", "pursuit")
@@ -43,6 +44,7 @@ def run_compare(
     """Fly every law; returns (rows, markdown table). Raises MpfError for an unusable law."""
     from mpf_mavlink.core.scenario import build_path
     from mpf_mavlink.runs.compare import LawRow, law_figures, markdown_table, write_compare
+    from mpf_mavlink.runs.verdict import assess
 
     if "l1_loiter" in laws and cfg.path.type not in ("circle", "helix"):
         raise MpfError(
@@ -96,6 +98,16 @@ def run_compare(
             cols, nodes, closed, c.vehicle.airspeed_m_s, c.metrics.steady_after_s,
             c.metrics.converge_threshold_m, roll,
         )  # fmt: skip
+        if plant == "sil":
+            status = str(res.metrics.get("verdict_status") or "n/a")
+            classes = res.metrics.get("verdict_classes") or []
+            vline = str(res.metrics.get("verdict") or "verdict: n/a (not judged: no flight)")
+        else:  # the kinematic plant has no attitude, airspeed or thrust: tracking alone
+            vd = assess(c, cols["t"], cols["pt_norm"])
+            status, classes, vline = vd.status, vd.classes, vd.line()
+            code = vd.exit_code(code)
+        fig["verdict"] = status + (f" ({', '.join(classes)})" if classes else "")
+        fig["verdict_line"] = vline
         fig["exit_code"] = code
         fig["exit_reason"] = exit_reason
         fig["retried_after_telemetry_loss"] = retried
@@ -103,10 +115,13 @@ def run_compare(
         fig["wall_s"] = time.perf_counter() - w0
         rows.append(LawRow(law, fig))
         runs[law] = cols
-        log(
-            f"      RMS cross-track {fig['steady_rms_xt_m'] if fig['steady_rms_xt_m'] is None else round(fig['steady_rms_xt_m'], 3)} m"
-            f" in {fig['wall_s']:.0f} s wall"
+        xt = fig["steady_rms_xt_m"]
+        xt_txt = (
+            f"{xt:.3f} m"
+            if xt is not None
+            else f"n/a (no steady window: the flight ended before t = {c.metrics.steady_after_s:g} s)"
         )
+        log(f"      RMS cross-track {xt_txt}; {vline} ({fig['wall_s']:.0f} s wall)")
     wind = cfg.section("sil").wind_ned_m_s if plant == "sil" else cfg.kinematic.wind.steady_ned_m_s
     header = (
         f"{cfg.name}: {plant} plant, {cfg.sim.duration_s:g} s, steady from t >= "
@@ -118,6 +133,7 @@ def run_compare(
 
 def cmd_compare(args: argparse.Namespace) -> int:
     from mpf_mavlink.config.schema import load_config
+    from mpf_mavlink.runs.compare import FLOWN_EXIT_CODES
     from mpf_mavlink.runs.rundir import prepare_out_dir
 
     cfg = load_config(args.config, args.overrides)
@@ -130,9 +146,15 @@ def cmd_compare(args: argparse.Namespace) -> int:
     )  # fmt: skip
     print(table)
     print(f"\nrun directory: {out}  (compare.md, compare.json, compare_*.png, one run per law)")
-    bad = [r.law for r in rows if r.figures.get("exit_code")]
+    # a failed or unjudged verdict is a result (the table's verdict column); only a flight
+    # that could not run to its end (a safety exit, telemetry lost) is an error
+    bad = [r for r in rows if r.figures.get("exit_code") not in FLOWN_EXIT_CODES]
     if bad:
-        raise MpfError(f"compare: the flight of {', '.join(bad)} failed (see its run directory)")
+        raise MpfError(
+            "compare: the flight of "
+            + ", ".join(f"{r.law} (exit {r.figures.get('exit_code')}: {r.figures.get('exit_reason')})" for r in bad)
+            + " could not run to its end (see its run directory)"
+        )  # fmt: skip
     return 0
 
 
@@ -145,7 +167,8 @@ def add_compare_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentPar
         "the same path re-sent as if it stood still; l1_loiter = ArduPlane's L1 loiter about the "
         "moving centre, circular paths only; pursuit = carrot chasing) and write a table "
         "(convergence, steady RMS / max of |pt| and of the cross-track distance, max bank, rate "
-        "effort, time saturated) and overlay plots.",
+        "effort, time saturated, verdict) and overlay plots.",
+        epilog=exit_codes_epilog("compare"),
     )
     add_config(p)
     p.add_argument(
@@ -157,7 +180,7 @@ def add_compare_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentPar
                    help="kinematic (in-process, the paper's plant) or sil (JSBSim + bridge over MAVLink)")  # fmt: skip
     p.add_argument(
         "--duration",
-        type=float,
+        type=positive,
         metavar="S",
         help="seconds of each flight (default sim.duration_s)",
     )

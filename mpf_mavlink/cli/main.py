@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from mpf_mavlink import __version__
+from mpf_mavlink.cli.common import exit_codes_epilog
 from mpf_mavlink.errors import CheckFailed, MpfError
 
 SET_HELP = (
@@ -121,9 +122,15 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from sim.runner import run_kinematic
 
     res = run_kinematic(cfg, progress=not args.quiet)
+    from mpf_mavlink.runs.verdict import assess
+
+    # the paper's kinematic plant has no attitude, airspeed or thrust to judge: tracking only
+    vd = assess(cfg, res.cols["t"], res.cols["pt_norm"])
+    vd.record(res.metrics)
     write_run(out, res.cols, res.metrics, res.path_T, plots=not args.no_plots)
     print(_summary(res.metrics, out))
-    return 0
+    print(vd.line())
+    return vd.exit_code(0)
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
@@ -155,6 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
         "check",
         help="run the pre-flight checks (Assumption 1, gain condition, feasibility)",
         description="Run the pre-flight checks for a scenario; exit 3 when one fails.",
+        epilog=exit_codes_epilog("check"),
     )
     _add_config(c)
     c.add_argument("--json", action="store_true", help="also print the figures as JSON")
@@ -169,6 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
         "kinematic plant behind a PX4 / ArduPlane MAVLink endpoint) and the bridge fly the mission "
         "as two processes over UDP loopback, the metrics come from the plant's truth and the "
         "bridge's tlog is kept (see configs/default.yaml).",
+        epilog=exit_codes_epilog("sim"),
     )
     _add_config(s)
     s.add_argument("--out", type=Path, help="run directory (default: runs/<time>-sim-<name>)")
@@ -184,6 +193,7 @@ def build_parser() -> argparse.ArgumentParser:
         "plot",
         help="re-draw the figures of a run directory",
         description="Re-draw the PNG figures of a run directory (sim, run or replay).",
+        epilog=exit_codes_epilog("plot"),
     )
     pl.add_argument("run_dir", metavar="RUN_DIR", type=Path)
     pl.set_defaults(func=cmd_plot)
@@ -210,11 +220,20 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args))
     except MpfError as e:
+        _leave_nothing_behind()
         print(f"mpf-mavlink: error: {e}", file=sys.stderr)
         return e.exit_code
     except KeyboardInterrupt:
+        _leave_nothing_behind()
         print("mpf-mavlink: interrupted", file=sys.stderr)
         return 130
+
+
+def _leave_nothing_behind() -> None:
+    """A failed command removes the run directories it created and left empty."""
+    from mpf_mavlink.runs.rundir import remove_empty_created
+
+    remove_empty_created()
 
 
 if __name__ == "__main__":

@@ -13,8 +13,10 @@ from typing import Any
 from mpf_mavlink.cli.common import (
     add_output_flags,
     add_overrides,
+    check_host,
     count,
     default_out,
+    exit_codes_epilog,
     positive,
     printer,
 )
@@ -31,11 +33,8 @@ someone else changes the flight mode (it never fights the pilot). After a teleme
 loss it ends the run, or with --reengage N flies again (N times at most) once the stream is
 back and the vehicle is in the hold mode. Ctrl-C, SIGTERM, the mission duration or an error
 hand control back. Everything is recorded in the run directory:
-mavlink.tlog (all traffic), timeseries.csv, setpoints.csv, metrics.json and plots.
-
-exit codes: 0 flown and handed back; 2 bad configuration / URL / no vehicle; 3 a pre-flight check
-failed (no mode request was sent); 4 a safety exit (telemetry or target lost, pilot took over,
-mode refused, hand-back not confirmed); 130 Ctrl-C; 143 SIGTERM.
+mavlink.tlog (all traffic), timeseries.csv, setpoints.csv, limits.csv, metrics.json and plots.
+The last line is the flight's verdict on telemetry (README "Verdicts").
 """
 
 CONNECT_HELP = (
@@ -51,6 +50,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from mpf_mavlink.runs.rundir import prepare_out_dir
 
     cfg = load_config(args.config, args.overrides)
+    check_host(args.connect, "--connect")
     out = prepare_out_dir(args.out or default_out("run", cfg.name))
     opts = BridgeOptions(
         url=args.connect,
@@ -65,6 +65,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     )
     res = run_bridge(cfg, opts, log=printer(args.quiet))
     print(res.summary(), flush=True)
+    from mpf_mavlink.runs.verdict import limits_line
+
+    lim = limits_line((res.metrics or {}).get("verdict_figures") or {})
+    if lim:
+        print(lim, flush=True)
     if res.verdict:
         print(res.verdict, flush=True)
     return res.exit_code
@@ -76,6 +81,7 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
         "run",
         help="fly the MPF law on a PX4 / ArduPlane autopilot over MAVLink",
         description=RUN_DESCRIPTION,
+        epilog=exit_codes_epilog("run"),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     r.add_argument(

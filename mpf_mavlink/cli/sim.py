@@ -11,6 +11,7 @@ import signal
 from pathlib import Path
 from typing import Any
 
+from mpf_mavlink.cli.common import check_host, exit_codes_epilog, positive
 from mpf_mavlink.errors import MpfError
 
 VEHICLE_DESCRIPTION = """\
@@ -55,6 +56,7 @@ def _check_serve_url(url: str) -> None:
         raise MpfError(
             f"--serve {url}: the vehicle serves udpin:, udpout: or tcpin: (got {parsed.kind})"
         )
+    check_host(url, "--serve")
 
 
 def cmd_vehicle(args: argparse.Namespace) -> int:
@@ -109,6 +111,7 @@ def add_vehicle_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentPar
         "vehicle",
         help="serve the simulated vehicle alone (real time) for MAVProxy, a GCS or your own code",
         description=VEHICLE_DESCRIPTION,
+        epilog=exit_codes_epilog("vehicle"),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_config(p)
@@ -119,11 +122,14 @@ def add_vehicle_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentPar
         "answers each telemetry frame with a SET_ATTITUDE_TARGET (real time while nobody commands it)",
     )  # fmt: skip
     p.add_argument(
-        "--speed", type=float, metavar="X", help="realtime clock at X times real time (default 1)"
+        "--speed",
+        type=positive,
+        metavar="X",
+        help="realtime clock at X times real time (default 1)",
     )
     p.add_argument(
         "--duration",
-        type=float,
+        type=positive,
         metavar="S",
         help="stop after S seconds of simulated flight (default: run until Ctrl-C)",
     )
@@ -166,7 +172,7 @@ def sil_summary(res: Any) -> str:
         "",
         f"bridge: {m.get('bridge_exit_reason')} (exit {m.get('bridge_exit_code')}); {hb}",
         f"run directory: {res.out_dir}  (timeseries.csv and truth.csv from the plant, metrics.json)",
-        f"plots:         {res.out_dir}/*.png  (trajectory_3d, planar, target_relative, errors, sdot_rates)",
+        f"plots:         {res.out_dir}/*.png  (limits, errors, sdot_rates, planar, trajectory_3d, target_relative)",
         f"tlog:          {res.tlog}  (both directions; MAVProxy, QGC or mavlogdump.py read it)",
         f"bridge's view: {res.bridge_dir}  (what the law saw: timeseries.csv, setpoints.csv, metrics.json)",
     ]
@@ -182,6 +188,11 @@ def cmd_sim_sil(cfg: Any, out: Path, quiet: bool, no_plots: bool, force: bool = 
     )  # fmt: skip
     res.metrics.setdefault("steady_after_s", cfg.metrics.steady_after_s)
     print(sil_summary(res), flush=True)
+    from mpf_mavlink.runs.verdict import limits_line
+
+    lim = limits_line(res.metrics.get("verdict_figures") or {})
+    if lim:
+        print(lim, flush=True)
     # last line: the verdict on the plant's truth (exit 5 when the flight failed it)
     print(res.metrics.get("verdict") or "verdict: none (the bridge recorded no flight)", flush=True)
     return int(res.exit_code)

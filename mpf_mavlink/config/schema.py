@@ -95,6 +95,14 @@ class VehicleConfig:
     airspeed_max_m_s: float | None = field(default=None, metadata=_pos())
     max_bank_rad: float = field(default=0.785398, metadata={"check": ("range_open", 0.0, 1.5707)})
     max_turn_rate_rad_s: float | None = field(default=None, metadata=_pos())
+    # turn per bank the aircraft really flies, as a fraction of the coordinated turn g tan(phi)/V
+    # (the adapter's learned turn_gain; the ArduPlane 4.7 SITL 'plane' learns ~0.745)
+    turn_gain: float = field(default=1.0, metadata={"check": ("range_open", 0.0, 2.0)})
+    # the autopilot's own roll limit (ArduPlane ROLL_LIMIT_DEG, PX4 FW_R_LIM) when known:
+    # the checks and the verdict use the smaller of it and max_bank_rad
+    autopilot_bank_limit_rad: float | None = field(
+        default=None, metadata={"check": ("range_open", 0.0, 1.5707)}
+    )
 
     @property
     def v_min(self) -> float:
@@ -167,9 +175,17 @@ class MetricsConfig:
     fail_pt_m: float = field(default=10.0, metadata=_pos())
     altitude_floor_m: float = 10.0
     airspeed_tolerance: float = field(default=0.15, metadata={"check": ("range", 0.0, 1.0)})
-    bank_tolerance_rad: float = field(default=0.26, metadata=_nonneg())
+    # 5 deg: the margin checks.bank_margin_rad keeps below the limit for the feedback and gusts,
+    # allowed above it too (the roll loop's overshoot of a clipped set-point), for limit_hold_s
+    bank_tolerance_rad: float = field(default=0.0873, metadata=_nonneg())
     pitch_limit_rad: float = field(default=0.6, metadata={"check": ("range_open", 0.0, 1.5707)})
     limit_hold_s: float = field(default=1.0, metadata=_nonneg())
+    # the steady window a verdict needs (s): one turn at the demo's tightest radius (2 pi 50 m
+    # at 16 m/s = 19.6 s); shorter flights are NOT JUDGED
+    min_steady_s: float = field(default=20.0, metadata=_nonneg())
+    # the fraction of the steady window that thrust may spend at its ceiling, or the bank
+    # within checks.bank_margin_rad of its limit, before the verdict fails
+    limit_fraction: float = field(default=0.2, metadata={"check": ("range", 0.0, 1.0)})
 
 
 @dataclass(frozen=True)
@@ -348,7 +364,23 @@ def load_config(path: str | Path, overrides: list[str] | None = None) -> Any:
         raise ConfigError(f"{src}: the top level must be a mapping of sections")
     for ov in overrides or []:
         apply_override(raw, ov, src)
+    _follow_sil_flavour(raw, overrides or [])
     return config_from_dict(raw, src)
+
+
+def _follow_sil_flavour(raw: dict[str, Any], overrides: list[str]) -> None:
+    """``--set sil.flavour=X`` is the one key that switches the SIL's autopilot: the bridge's
+    ``mavlink.flavour`` follows it and a hold mode of the other autopilot is dropped (the
+    flavour's own is the default), unless those keys are set on the command line too."""
+    keys = {ov.split("=", 1)[0].strip() for ov in overrides}
+    sil, mav = raw.get("sil"), raw.get("mavlink")
+    if "sil.flavour" not in keys or not isinstance(sil, dict) or not isinstance(mav, dict):
+        return
+    flavour = sil.get("flavour")
+    if "mavlink.flavour" not in keys and mav.get("flavour") not in (None, "auto", flavour):
+        mav["flavour"] = flavour
+        if "mavlink.hold_mode" not in keys:
+            mav.pop("hold_mode", None)
 
 
 def apply_override(raw: dict[str, Any], spec: str, src: str = "--set") -> None:

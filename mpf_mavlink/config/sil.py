@@ -178,11 +178,21 @@ class SilConfig:
             )
         if self.target_feed is not None and not self.target_live:
             raise _fail(src, "sil.target_feed", "needs sil.target_live: true")
+        # `--set sil.flavour=X` alone switches the SIL's autopilot (schema._follow_sil_flavour
+        # makes the bridge's flavour and hold mode follow it); set apart, they must agree
         m = cfg.extra.get("mavlink")
         if m is not None and m.flavour not in ("auto", self.flavour):
             raise _fail(
-                src, "mavlink.flavour", f"is {m.flavour!r} but sil.flavour is {self.flavour!r}"
-            )
+                src, "mavlink.flavour", f"is {m.flavour!r} but sil.flavour is {self.flavour!r} "
+                "(--set sil.flavour alone switches both)",
+            )  # fmt: skip
+        if m is not None and m.hold_mode is not None:
+            from mpf_mavlink.config.bridge import hold_mode_error
+
+            why = hold_mode_error(m.hold_mode, self.flavour)
+            if why:
+                raise _fail(src, "mavlink.hold_mode", f"{why} (sil.flavour is {self.flavour!r}; "
+                            "--set sil.flavour alone switches both)")  # fmt: skip
 
 
 @dataclass(frozen=True)

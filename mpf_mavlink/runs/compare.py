@@ -60,6 +60,10 @@ def distance_to_polyline(
     return best
 
 
+#: exit codes of a flight that ran to its end, whatever its verdict (0 PASS, 5 FAIL, 6 NOT JUDGED)
+FLOWN_EXIT_CODES = (0, 5, 6)
+
+
 @dataclass
 class LawRow:
     law: str
@@ -108,6 +112,7 @@ def law_figures(
 
 COLUMNS_SHOWN = [
     ("law", "law", ""),
+    ("verdict", "verdict", "{}"),
     ("convergence_s", "conv. (s)", "{:.1f}"),
     ("steady_rms_xt_m", "RMS xt (m)", "{:.3g}"),
     ("steady_max_xt_m", "max xt (m)", "{:.3g}"),
@@ -156,7 +161,10 @@ def markdown_table(rows: list[LawRow]) -> str:
             cells.append("n/a" if v is None else fmt.format(v))
         lines.append("| " + " | ".join(cells) + " |")
     for r in rows:
-        if r.figures.get("exit_code"):
+        line = r.figures.get("verdict_line")
+        if line and not str(line).endswith("PASS"):
+            lines.append(f"\n{r.law}: {line}")
+        if r.figures.get("exit_code") not in (None, *FLOWN_EXIT_CODES):
             lines.append(
                 f"\n{r.law}: flight ended with exit {r.figures['exit_code']} after "
                 f"{r.figures.get('tracked_s', 0.0):.0f} s ({r.figures.get('exit_reason')})"

@@ -10,6 +10,7 @@ telemetry gaps) instead of joining them with straight segments.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -82,6 +83,186 @@ def _read_setpoints(d: Path) -> dict[str, NDArray[np.float64]] | None:
     return {c: A[:, i] for i, c in enumerate(header)}
 
 
+def _steady_after(metrics: dict[str, Any]) -> float | None:
+    """The start of the steady window (s since engagement) the run was judged with."""
+    vf = metrics.get("verdict_figures") or {}
+    v = vf.get("steady_after_s", metrics.get("steady_after_s"))
+    return float(v) if isinstance(v, int | float) else None
+
+
+def _mark_window(ax: Any, t: NDArray[np.float64], steady_after: float | None) -> None:
+    """Engagement (t = 0) as a line, the steady window (t >= steady_after_s) shaded."""
+    if len(t) == 0:
+        return
+    if t[0] <= 0.0 <= t[-1]:
+        ax.axvline(0.0, color="k", lw=0.8, ls=":", label="engaged")
+    if steady_after is not None and steady_after < t[-1]:
+        ax.axvspan(steady_after, t[-1], color="tab:green", alpha=0.08, label="steady window")
+
+
+def _smooth(t: NDArray[np.float64], y: NDArray[np.float64], window_s: float) -> NDArray[np.float64]:
+    """Centred moving mean over ``window_s`` (NaNs, e.g. the gaps, kept out of the mean)."""
+    y = np.asarray(y, float)
+    if len(t) < 3:
+        return y
+    dt = float(np.nanmedian(np.diff(t)))
+    k = int(round(window_s / dt)) if dt > 0 else 1
+    if k < 2:
+        return y
+    ok = np.isfinite(y)
+    ker = np.ones(k)
+    num = np.convolve(np.where(ok, y, 0.0), ker, mode="same")
+    den = np.convolve(ok.astype(float), ker, mode="same")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(ok & (den > 0), num / np.maximum(den, 1e-12), np.nan)
+
+
+def _zoom(ax: Any, y: NDArray[np.float64]) -> None:
+    """Limit the y axis to the commanded signal's range (+30 %): the achieved one's spikes
+    must not squash it."""
+    y = np.asarray(y, float)
+    y = y[np.isfinite(y)]
+    if len(y) == 0:
+        return
+    lo, hi = float(np.percentile(y, 0.5)), float(np.percentile(y, 99.5))
+    pad = max(0.3 * (hi - lo), 0.02)
+    ax.set_ylim(lo - pad, hi + pad)
+
+
+def _up_range(
+    t: NDArray[np.float64], *ups: NDArray[np.float64], steady_after: float | None = None
+) -> tuple[float, float]:
+    """The altitude range (m) of the given series, after the capture when the run has a steady
+    window, padded by 20 % and at least 1 m each way."""
+    sel = (
+        t >= steady_after if steady_after is not None and np.any(t >= steady_after) else slice(None)
+    )
+    vals = np.concatenate([np.asarray(u, float)[sel] for u in ups])
+    vals = vals[np.isfinite(vals)]
+    if len(vals) == 0:
+        return 0.0, 1.0
+    lo, hi = float(np.min(vals)), float(np.max(vals))
+    pad = max(0.2 * (hi - lo), 1.0)
+    return lo - pad, hi + pad
+
+
+def _read_limits(d: Path) -> dict[str, NDArray[np.float64]] | None:
+    f = d / "limits.csv"
+    if not f.is_file():
+        return None
+    try:
+        header = f.open().readline().strip().split(",")
+        A = np.loadtxt(f, delimiter=",", skiprows=1, ndmin=2)
+    except (OSError, ValueError):
+        return None
+    if A.size == 0 or A.shape[1] != len(header) or A.shape[0] < 2:
+        return None
+    return {c: A[:, i] for i, c in enumerate(header)}
+
+
+def _plot_limits(
+    plt: Any,
+    d: Path,
+    lim: dict[str, NDArray[np.float64]],
+    metrics: dict[str, Any],
+    cols: dict[str, Any],
+    steady_after: float | None,
+) -> Path:
+    """limits.png: bank, pitch, airspeed, altitude, thrust against time and their limits."""
+    vf = metrics.get("verdict_figures") or {}
+    src = {"truth": "the plant's truth (SIL)", "telemetry": "telemetry (thrust: as sent)"}.get(
+        str(vf.get("source")), "recorded"
+    )
+    t = lim["t"]
+    fig, axs = plt.subplots(5, 1, figsize=(11, 11), sharex=True)
+    tt, roll, pitch, vas, alt, thr = _gapped(
+        t, lim["roll"], lim["pitch"], lim["airspeed"], lim["altitude"], lim["thrust"]
+    )
+
+    def hlines(ax: Any, vals: list[float], style: str, color: str, label: str) -> None:
+        for i, v in enumerate(vals):
+            ax.axhline(v, ls=style, color=color, lw=0.9, label=label if i == 0 else None)
+
+    ax = axs[0]
+    ax.plot(tt, np.degrees(roll), lw=0.8, color="tab:blue", label="bank")
+    bl = vf.get("bank_limit_rad")
+    if bl is not None:
+        b = math.degrees(bl)
+        hlines(ax, [b, -b], "-", "tab:red", f"limit {b:.1f} deg")
+        tol = math.degrees(float(vf.get("bank_tolerance_rad") or 0.0))
+        if tol > 0:
+            hlines(ax, [b + tol, -b - tol], ":", "tab:red",
+                   f"+{tol:.0f} deg: fails held > {vf.get('limit_hold_s', 1):g} s")  # fmt: skip
+        band = vf.get("bank_band_rad")
+        if band is not None:
+            hlines(ax, [math.degrees(band), -math.degrees(band)], "--", "tab:orange",
+                   f"limit less the margin ({math.degrees(band):.0f} deg)")  # fmt: skip
+    ax.set_ylabel("bank [deg]")
+    ax = axs[1]
+    ax.plot(tt, np.degrees(pitch), lw=0.8, color="tab:blue", label="pitch")
+    pl = vf.get("pitch_limit_rad")
+    if pl is not None:
+        hlines(
+            ax,
+            [math.degrees(pl), -math.degrees(pl)],
+            "-",
+            "tab:red",
+            f"limit {math.degrees(pl):.0f} deg",
+        )
+    ax.set_ylabel("pitch [deg]")
+    ax = axs[2]
+    ax.plot(tt, vas, lw=0.8, color="tab:blue", label="airspeed")
+    band_v = vf.get("airspeed_band_m_s")
+    if band_v:
+        hlines(ax, list(band_v), "-", "tab:red", f"limits {band_v[0]:.1f} / {band_v[1]:.1f} m/s")
+    if vf.get("airspeed_m_s") is not None:
+        hlines(
+            ax,
+            [float(vf["airspeed_m_s"])],
+            "--",
+            "tab:green",
+            f"law's airspeed {vf['airspeed_m_s']:g} m/s",
+        )
+    ax.set_ylabel("airspeed [m/s]")
+    ax = axs[3]
+    ax.plot(tt, alt, lw=0.8, color="tab:blue", label="altitude")
+    if "pf_d" in cols and len(cols["t"]):
+        _, pfu = _gapped(cols["t"], -cols["pf_d"])
+        ax.plot(_gapped(cols["t"], cols["t"])[0], pfu, lw=0.8, color="tab:green", alpha=0.8,
+                label="desired point")  # fmt: skip
+    floor = metrics.get("altitude_floor_m") or vf.get("altitude_floor_m")
+    if floor is not None:
+        hlines(ax, [float(floor)], "-", "tab:red", f"floor {floor:g} m")
+    lo, hi = _up_range(t, lim["altitude"], steady_after=None)
+    ax.set_ylim(lo, hi)
+    ax.set_ylabel("altitude [m]")
+    ax = axs[4]
+    ax.plot(tt, thr, lw=0.8, color="tab:blue", label="thrust")
+    if vf.get("thrust_max") is not None:
+        hlines(ax, [float(vf["thrust_max"])], "-", "tab:red", f"ceiling {vf['thrust_max']:g}")
+    ax.set_ylabel("thrust [0..1]")
+    ax.set_ylim(-0.05, 1.08)
+    ax.set_xlabel("t [s since engagement]")
+    t_end = float(vf.get("tracked_s") or t[-1])
+    for ax in axs:
+        ax.grid(alpha=0.3)
+        _mark_window(ax, np.array([t[0], t_end]), steady_after)
+        if t_end < t[-1] - 1.0:
+            ax.axvline(t_end, color="k", lw=0.8, ls="--", label="handed back")
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    # the verdict's head (its clauses are in metrics.json and the command's last line)
+    verdict = str(metrics.get("verdict") or "").split(": ", 1)[-1]
+    head = verdict if verdict.startswith(("PASS", "NOT JUDGED")) else verdict.split("):")[0] + ")"
+    head = head if len(head) < 100 else head[:97] + "..."
+    title = f"Against the limits: {src}"
+    fig.suptitle(title + (f"\nverdict: {head}" if verdict else ""), fontsize=10)
+    fig.subplots_adjust(left=0.08, right=0.74, bottom=0.05, top=0.91, hspace=0.1)
+    p = d / "limits.png"
+    fig.savefig(p, dpi=100)
+    plt.close(fig)
+    return p
+
+
 def plot_run(d: str | Path) -> list[Path]:
     """Draw every figure of the run directory d as PNG files; return their paths."""
     import matplotlib
@@ -115,6 +296,9 @@ def plot_run(d: str | Path) -> list[Path]:
         out.append(p)
 
     paths = _paths_ned(cols, path_T)
+    steady_after = _steady_after(metrics)
+    vf = metrics.get("verdict_figures") or {}
+    _src = {"truth": " (plant truth)", "telemetry": " (telemetry)"}.get(str(vf.get("source")), "")
     stationary = bool(
         np.all(np.ptp(np.column_stack([col("tgt_n"), col("tgt_e"), col("tgt_d")]), axis=0) < 1e-6)
     )
@@ -137,7 +321,7 @@ def plot_run(d: str | Path) -> list[Path]:
     ax.set_ylabel("north [m]")
     ax.set_zlabel("up [m]")
     ax.legend(loc="upper left", fontsize=8)
-    ax.set_title("Moving path following (3D)")
+    ax.set_title(f"Moving path following (3D){_src}")
     save(fig, "trajectory_3d.png", left=0.0, right=1.0, bottom=0.02, top=0.95)
 
     # 2. Planar views: the vehicle's path against the moving desired path.
@@ -153,9 +337,17 @@ def plot_run(d: str | Path) -> list[Path]:
             ax.plot(sa * P[:, ia], sb * P[:, ib], "r-", lw=1.5, alpha=0.25 + 0.5 * (i + 1) / len(paths),
                     label=f"desired path at t = {tk:.0f} s")  # fmt: skip
         _, xa, xb = _gapped(t, cols[a], cols[b])
-        ax.plot(sa * xa, sb * xb, lw=1.0, label="vehicle")
+        ax.plot(sa * xa, sb * xb, lw=1.0, color="tab:blue", label="vehicle")
         _, fa, fb = _gapped(t, col("pf_" + a[2:]), col("pf_" + b[2:]))
-        ax.plot(sa * fa, sb * fb, lw=0.6, alpha=0.6, label="desired point p_f")
+        ax.plot(
+            sa * fa,
+            sb * fb,
+            lw=0.8,
+            ls="--",
+            color="tab:orange",
+            zorder=3,
+            label="desired point p_f",
+        )
         if stationary:
             ax.plot(sa * col(ta)[:1], sb * col(tb)[:1], "k^", label="target")
         else:
@@ -165,7 +357,20 @@ def plot_run(d: str | Path) -> list[Path]:
         ax.grid(alpha=0.3)
     axs[0].set_aspect("equal", adjustable="datalim")
     axs[0].legend(fontsize=8)
-    save(fig, "planar.png", left=0.06, right=0.99, bottom=0.12, top=0.97, wspace=0.25)
+    # side views: the height scale of the vehicle and its desired point (after the capture when
+    # there is a steady window), so that a height error of a metre is visible; the target (on
+    # the ground under a path 100 m up) is off this scale and said so
+    lo, hi = _up_range(t, -cols["p_d"], -col("pf_d"), steady_after=steady_after)
+    for ax in axs[1:]:
+        ax.set_ylim(lo, hi)
+    tgt_up = -col("tgt_d")
+    if np.all(np.isfinite(tgt_up)) and (np.max(tgt_up) < lo or np.min(tgt_up) > hi):
+        axs[1].set_title(
+            f"side views scaled to the vehicle (target at {np.median(tgt_up):.0f} m up, off scale)",
+            fontsize=9,
+        )
+    fig.suptitle(f"Planar views: vehicle against the moving desired path{_src}", fontsize=11)
+    save(fig, "planar.png", left=0.06, right=0.99, bottom=0.12, top=0.88, wspace=0.25)
 
     # 3. Target-relative path: where the vehicle flew in {T}, against the path.
     fig, ax = plt.subplots(figsize=(6, 6))
@@ -180,6 +385,7 @@ def plot_run(d: str | Path) -> list[Path]:
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
+    ax.set_title(f"Path in the target frame {{T}}{_src}", fontsize=10)
     save(fig, "target_relative.png", left=0.13, bottom=0.09)
 
     # 4. Errors: |pt| (log scale like the paper's zoom) and Psi.
@@ -189,14 +395,20 @@ def plot_run(d: str | Path) -> list[Path]:
     axs[0].set_ylabel("|p~| [m]")
     axs[0].grid(alpha=0.3, which="both")
     rms = metrics.get("steady_rms_m")
-    if rms is not None:
-        conv = metrics.get("convergence_time_s")
-        conv_txt = "never" if conv is None else f"{conv:.3g} s"
-        axs[0].set_title(f"steady RMS {rms:.3g} m, convergence {conv_txt}")
+    conv = metrics.get("convergence_time_s")
+    conv_txt = "never" if conv is None else f"{conv:.3g} s"
+    rms_txt = "n/a (no steady window)" if rms is None else f"{rms:.3g} m"
+    axs[0].set_title(
+        f"Tracking errors{_src}: steady RMS |p~| {rms_txt}, convergence {conv_txt}", fontsize=10
+    )
+    for ax in axs:
+        _mark_window(ax, t, steady_after)
     axs[1].plot(tt, psi)
     axs[1].set_ylabel("Psi(R~)")
     axs[1].set_xlabel("t [s]")
     axs[1].grid(alpha=0.3)
+    if axs[0].get_legend_handles_labels()[0]:  # the window or the engagement is drawn
+        axs[0].legend(fontsize=8, loc="upper right")
     save(fig, "errors.png", left=0.12, hspace=0.08)
 
     # 5. sdot, 6. w2 and w3.
@@ -206,15 +418,24 @@ def plot_run(d: str | Path) -> list[Path]:
     )
     axs[0].plot(tt, sd)
     axs[0].set_ylabel("sdot [m/s]")
+    axs[0].set_title(
+        f"Virtual-point speed and wind-frame rates{_src}\ncommanded (dark, on top) against "
+        "achieved (light: 1 s mean of the attitude difference)", fontsize=10,
+    )  # fmt: skip
     for ax, k, cmd, ach in ((axs[1], "w2", w2c, w2), (axs[2], "w3", w3c, w3)):
-        ax.plot(tt, cmd, lw=0.8, label=f"{k} commanded")
-        ax.plot(tt, ach, lw=0.8, alpha=0.8, label=f"{k} achieved")
+        # the achieved rate is a difference of attitudes at the telemetry rate: its raw noise
+        # (turbulence, quantisation) hides the command, so it is drawn filtered and under it
+        ax.plot(tt, _smooth(tt, ach, 1.0), lw=1.6, color="tab:orange", alpha=0.6, zorder=2,
+                label=f"{k} achieved (1 s mean)")  # fmt: skip
+        ax.plot(tt, cmd, lw=0.8, color="tab:blue", zorder=3, label=f"{k} commanded")
         ax.set_ylabel(f"{k} [rad/s]")
-        ax.legend(fontsize=8)
+        _zoom(ax, cmd)
+        ax.legend(fontsize=8, loc="upper right")
     for ax in axs:
         ax.grid(alpha=0.3)
+        _mark_window(ax, t, steady_after)
     axs[-1].set_xlabel("t [s]")
-    save(fig, "sdot_rates.png", left=0.12, bottom=0.07, top=0.97, hspace=0.08)
+    save(fig, "sdot_rates.png", left=0.12, bottom=0.07, top=0.92, hspace=0.08)
 
     # 7. The setpoints sent (bridge) or that would have been sent (replay).
     sp = _read_setpoints(d)
@@ -234,7 +455,16 @@ def plot_run(d: str | Path) -> list[Path]:
         axs[2].plot(ts, thr)
         axs[2].set_ylabel("thrust [0..1]")
         axs[2].set_xlabel("t [s]")
+        axs[0].set_title(
+            "Set-points sent to the autopilot (bank, pitch, body rates, thrust)", fontsize=10
+        )
         for ax in axs:
             ax.grid(alpha=0.3)
-        save(fig, "setpoints.png", left=0.12, bottom=0.07, top=0.97, hspace=0.08)
+        save(fig, "setpoints.png", left=0.12, bottom=0.07, top=0.95, hspace=0.08)
+
+    # 8. What the verdict judged against the limits (limits.csv): bank, pitch, airspeed,
+    # altitude and thrust against time, with the limits, the engagement and the steady window.
+    lim = _read_limits(d)
+    if lim is not None:
+        out.append(_plot_limits(plt, d, lim, metrics, cols, steady_after))
     return out

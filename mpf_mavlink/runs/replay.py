@@ -77,7 +77,8 @@ from mpf_mavlink.runs.replay_result import (
     _sat_fields,
 )
 from mpf_mavlink.runs.rundir import RunTable, compute_metrics, prepare_out_dir
-from mpf_mavlink.runs.write import write_run
+from mpf_mavlink.runs.verdict import assess
+from mpf_mavlink.runs.write import limits_row, write_limits, write_run
 
 
 class _LinkFilter:
@@ -150,6 +151,7 @@ class _Replayer:
         self.s0: float | None = None
         self.table = RunTable()
         self.sp_rows: list[tuple[float, ...]] = []
+        self.lim_rows: list[tuple[float, ...]] = []  # limits.csv: the recorded telemetry
         self.steps = 0
         self.check = CommandCheck(markers=markers)
         self.notes: list[str] = []
@@ -274,6 +276,7 @@ class _Replayer:
         if self.win[0] <= t <= self.win[1]:
             self.table.append(st.row())
             self.sp_rows.append(tuple(st.setpoint_row()))
+            self.lim_rows.append(limits_row(st.t, st.estimate, st.setpoint.thrust))
 
     def _outgoing(self, i: int, t: float, msg: Any, mtype: str) -> None:
         if mtype == "STATUSTEXT":
@@ -499,6 +502,15 @@ def replay(
             comments="",
             fmt="%.9g",
         )
+        if rp.lim_rows:
+            L = np.array(rp.lim_rows, float)
+            L[:, 0] -= L[0, 0]  # s since the first replayed step, as the steady window counts
+            # the recorded flight against the limits (the verdict's figures; replay keeps its
+            # own exit codes)
+            vd = assess(cfg, L[:, 0], cols["pt_norm"], L[:, 4], L[:, 3], L[:, 1], L[:, 2],
+                        L[:, 5], source="telemetry")  # fmt: skip
+            vd.record(metrics)
+            write_limits(out, L)
         write_run(out, cols, metrics, rp.ctl.path.positions(), plots=plots and len(cols["t"]) >= 2)
     res.elapsed_s = time.perf_counter() - wall0
     return res

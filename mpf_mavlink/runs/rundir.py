@@ -145,9 +145,38 @@ def compute_metrics(
     return out
 
 
+#: directories prepare_out_dir created in this process (outermost first): a command that fails
+#: removes those still empty (:func:`remove_empty_created`), so a failed run leaves nothing
+_CREATED: list[Path] = []
+
+
+def remove_empty_created() -> list[Path]:
+    """Remove the directories :func:`prepare_out_dir` created that are still empty (innermost
+    first); returns those removed. Called by the CLI when a command fails."""
+    gone = []
+    for d in reversed(_CREATED):
+        try:
+            # a run that failed before it flew (no vehicle, wrong flavour) wrote only the tlog
+            # of its own few heartbeats: no record of a flight
+            items = list(d.iterdir())
+            if [p.name for p in items] == ["mavlink.tlog"] and items[0].stat().st_size < 65536:
+                items[0].unlink()
+        except OSError:
+            pass
+        try:
+            d.rmdir()  # only an empty directory
+            gone.append(d)
+        except OSError:
+            pass
+    _CREATED.clear()
+    return gone
+
+
 def prepare_out_dir(out: str | Path) -> Path:
     """Create the run directory and prove it is writable now, before anything flies."""
     d = Path(out)
+    new = [a for a in (d, *d.parents) if not a.exists()]
+    _CREATED.extend(reversed(new))
     try:
         d.mkdir(parents=True, exist_ok=True)
         # a name of its own: another process probing the same directory must not unlink ours

@@ -13,6 +13,32 @@ from numpy.typing import NDArray
 from mpf_mavlink.runs.plots import plot_run
 from mpf_mavlink.runs.rundir import COLUMNS, _clean
 
+#: the header of ``limits.csv``: what the verdict judged against the limits (t s since engagement;
+#: roll, pitch rad; airspeed m/s; altitude m above home; thrust 0..1)
+LIMITS_COLUMNS = "t,roll,pitch,airspeed,altitude,thrust"
+
+
+def limits_row(t: float, estimate: Any, thrust: float) -> tuple[float, ...]:
+    """One row of ``limits.csv`` from the bridge's estimate (``R_B_N``, ``vehicle.position``
+    NED, ``vehicle.airspeed``) and the thrust sent: t, roll, pitch, airspeed, altitude, thrust."""
+    import math
+
+    R2 = estimate.R_B_N[2]
+    roll = math.atan2(float(R2[1]), float(R2[2]))
+    pitch = math.asin(max(-1.0, min(1.0, -float(R2[0]))))
+    v = estimate.vehicle
+    return (t, roll, pitch, float(v.airspeed), -float(v.position[2]), float(thrust))
+
+
+def write_limits(out: Path, rows: NDArray[np.float64]) -> Path:
+    """``limits.csv``: the series the verdict judged (the plant's truth in ``sim``, telemetry
+    and the thrust sent in ``run``), drawn by ``limits.png``. Written before the figures."""
+    out.mkdir(parents=True, exist_ok=True)
+    p = out / "limits.csv"
+    A = np.asarray(rows, float).reshape(-1, 6)
+    np.savetxt(p, A, delimiter=",", header=LIMITS_COLUMNS, comments="", fmt="%.7g")
+    return p
+
 
 def write_run(
     out: Path,

@@ -134,6 +134,7 @@ def feasibility(
     wind_ned: tuple[float, float, float] = (0.0, 0.0, 0.0),
     dt_s: float = 0.05,
     bank_margin_rad: float = 0.0,
+    turn_gain: float = 1.0,
 ) -> CheckResult:
     """Peak turn rate and bank that flying the moving path exactly demands at airspeed v_w.
 
@@ -143,6 +144,10 @@ def feasibility(
     v_w d wd1/dt with gravity (steady wind does not change the air-relative acceleration).
     The bank must stay ``bank_margin_rad`` below the limit (and the turn rate below the rate of
     that bank): a path flown at the limit leaves the feedback nothing to correct with.
+    ``turn_gain`` is the turn the aircraft really flies per bank, as a fraction of the
+    coordinated turn (the adapter's learned turn gain): it needs tan(bank) / turn_gain to turn
+    as the path asks (an airframe that turns 25 % less needs 37.6 deg where the textbook says
+    29.8), and its turn-rate limit is turn_gain g tan(limit) / v_w.
     """
     eta = np.asarray(wind_ned, float)
     ts = _times(horizon_s, dt_s)
@@ -165,12 +170,14 @@ def feasibility(
     banks = np.array(
         [abs(bank_and_load_factor(tuple(W1[k]), tuple(v_w * dW[k]))[0]) for k in range(len(ts))]
     )
+    if turn_gain != 1.0:
+        banks = np.arctan(np.tan(banks) / turn_gain)
     k_r, k_b = int(np.argmax(rate)), int(np.argmax(banks))
     bank_ok = max(max_bank_rad - bank_margin_rad, 0.0)
     limit_rate = (
         max_turn_rate_rad_s
         if max_turn_rate_rad_s is not None
-        else GRAVITY_M_S2 * math.tan(bank_ok) / v_w
+        else turn_gain * GRAVITY_M_S2 * math.tan(bank_ok) / v_w
     )
     ok = banks[k_b] <= bank_ok and rate[k_r] <= limit_rate
     return CheckResult(
@@ -179,12 +186,14 @@ def feasibility(
         f"peak turn rate {rate[k_r]:.3f} rad/s at t = {ts[k_r]:.1f} s (limit {limit_rate:.3f}); "
         f"peak bank {math.degrees(banks[k_b]):.1f} deg at t = {ts[k_b]:.1f} s "
         f"(limit {math.degrees(max_bank_rad):.1f}"
-        + (f" - {math.degrees(bank_margin_rad):.1f} margin)" if bank_margin_rad > 0 else ")"),
+        + (f" - {math.degrees(bank_margin_rad):.1f} margin" if bank_margin_rad > 0 else "")
+        + (f"; turn gain {turn_gain:g})" if turn_gain != 1.0 else ")"),
         {
             "peak_turn_rate_rad_s": float(rate[k_r]),
             "turn_rate_limit_rad_s": limit_rate,
             "peak_bank_rad": float(banks[k_b]),
             "bank_limit_rad": max_bank_rad,
             "bank_margin_rad": bank_margin_rad,
+            "turn_gain": turn_gain,
         },
     )
