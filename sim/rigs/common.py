@@ -134,17 +134,16 @@ def validate(a: argparse.Namespace) -> dict[str, Any]:
         if not (b.is_file() and os.access(b, os.X_OK) and b.stat().st_mode & 0o111):
             raise RigError(f"--binary {a.binary}: not an executable file")
         a.binary = b.resolve()
-    if a.binary is not None and a.bundle is not None and Path(a.bundle).is_dir():
-        bundle = Path(a.bundle).expanduser().resolve()  # your checkout: only its plane.parm
-        if not (bundle / "Tools" / "autotest" / "models" / "plane.parm").is_file():
-            raise RigError(f"--bundle {a.bundle}: no Tools/autotest/models/plane.parm")
-    else:
-        bundle = check_bundle(a.autopilot, a.bundle)
     cfg_path = Path(a.config).expanduser() if a.config else mod.DEFAULT_CONFIG
     if not cfg_path.is_file():
         raise RigError(f"--config {a.config}: no such file")
     try:  # the overrides the flight will use, with a placeholder centre
         cfg = load_config(cfg_path, [*a.overrides, "target.position_ned_m=[0,0,-100]"])
+    except MpfError as e:
+        raise RigError(f"--config {cfg_path}: {e}") from None
+    tsets, _ = target_sets(cfg, a.moving)
+    try:  # and with the target the rig will give it
+        cfg = load_config(cfg_path, [*a.overrides, "target.position_ned_m=[0,0,-100]", *tsets])
     except MpfError as e:
         raise RigError(f"--config {cfg_path}: {e}") from None
     flav = cfg.extra["mavlink"].flavour
@@ -156,6 +155,12 @@ def validate(a: argparse.Namespace) -> dict[str, Any]:
         raise RigError(f"--out {a.out}: exists and is not an empty directory (nothing removed)")
     if not os.access(out.parent if not out.exists() else out, os.W_OK) and out.parent.exists():
         raise RigError(f"--out {a.out}: not writable")
+    if a.binary is not None and a.bundle is not None and Path(a.bundle).is_dir():
+        bundle = Path(a.bundle).expanduser().resolve()  # your checkout: only its plane.parm
+        if not (bundle / "Tools" / "autotest" / "models" / "plane.parm").is_file():
+            raise RigError(f"--bundle {a.bundle}: no Tools/autotest/models/plane.parm")
+    else:
+        bundle = check_bundle(a.autopilot, a.bundle)
     return {"mod": mod, "bundle": bundle, "config": cfg_path.resolve(), "cfg": cfg, "out": out}
 
 
@@ -230,7 +235,7 @@ def main(argv: list[str] | None = None) -> int:
     rc = 1
     try:
         rc = fly(a, v, fw, summary)
-    except (RuntimeError, OSError) as e:
+    except (RuntimeError, OSError, RigError, MpfError) as e:
         summary["verdict"] = f"FAIL: rig: {e}"
         print(f"sitl: {e}", file=sys.stderr)
     finally:
@@ -403,8 +408,10 @@ def figures_of(
 def sil_leg(
     a: argparse.Namespace, v: dict[str, Any], sets: list[str], summary: dict[str, Any], out: Path
 ) -> dict[str, Any]:
-    """Our SIL on the same mission and start state (the real aircraft's at engagement): the
-    start state goes into ``kinematic.initial_*`` too, so the checks judge the state flown."""
+    """Our SIL on the same mission and start state (the real aircraft's at engagement, the
+    first row of its run record): the start state goes into ``kinematic.initial_*`` too, so the
+    checks judge the state the SIL flies (a warning there is about that state: the aircraft
+    engaged off the circle when the bridge took longer than ``--lead`` to engage)."""
     import numpy as np
 
     ts = out / "bridge" / "timeseries.csv"
@@ -427,7 +434,7 @@ def sil_leg(
         r = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, check=False)
     sm = read_json(out / "sil" / "metrics.json")
     real, ours = summary["figures"].get("steady_rms_m"), sm.get("steady_rms_m")
-    warn = [ln for ln in (out / "sil.log").read_text().splitlines() if "warning" in ln.lower()]
+    warn = [ln for ln in (out / "sil.log").read_text().splitlines() if "[WARN]" in ln]
     return {
         "exit_code": r.returncode,
         "steady_rms_m": ours,
@@ -495,7 +502,7 @@ def rows(s: dict[str, Any]) -> list[tuple[str, str]]:
             ("our SIL: steady RMS |pt|", f"{fmt(sil.get('steady_rms_m'))} m" if "error" not in sil else sil["error"]),
             ("our SIL: mean vertical / radial", f"{fmt(sil.get('steady_mean_vertical_m'))} / {fmt(sil.get('steady_mean_radial_m'))} m"),
             ("real / our SIL RMS", fmt(sil.get("real_over_sil"))),
-            ("our SIL: warnings", str(len(sil.get("warnings", [])))),
+            ("our SIL: check warnings", "; ".join(w.split("]", 1)[1].split(":")[0].strip() for w in sil.get("warnings", [])) or "none"),
         ]  # fmt: skip
     if s.get("bridge_verdict"):
         r.append(("bridge", s["bridge_verdict"]))
@@ -532,8 +539,8 @@ def write_results_table() -> Path:
         "Steady figures from t >= 60 s of tracking. Cross-track: horizontal distance to the path,",
         "+ left of travel (outward on a clockwise circle). Hold: after SIGKILL of the bridge.",
         "",
-        "| flight | firmware | config | s | steady RMS / max pt (m) | cross-track RMS / mean (m) | mean vertical / radial (m) | thrust at ceiling | hold after kill | verdict | commit, date |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| flight | firmware | config | tracked (s) | steady RMS / max pt (m) | cross-track RMS / mean (m) | mean vertical / radial (m) | thrust at ceiling | our SIL RMS (m), real/SIL | hold after kill | verdict | commit, date |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]  # fmt: skip
     for p in sorted(RESULTS.glob("sitl-*.json")):
         s = read_json(p)
@@ -541,13 +548,15 @@ def write_results_table() -> Path:
         hold = (f"{fmt(h.get('max_dist_from_centre_m'), '.0f')} m, {fmt(h.get('max_bank_deg'), '.0f')} deg, "
                 f"{fmt(h.get('max_alt_error_m'), '.1f')} m: {h.get('hold_verdict')}") if h else ""  # fmt: skip
         thr = f.get("thrust_at_ceiling")
+        sil = s.get("sil") or {}
+        sil_txt = f"{fmt(sil.get('steady_rms_m'))}, {fmt(sil.get('real_over_sil'))}x" if sil else ""
         lines.append(
-            f"| {s.get('flight')} | {str(s.get('bundle', '')).split(' SITL')[0]} | {s.get('config')} "
+            f"| {s.get('flight')} | {s.get('bundle', '')} | {s.get('config')} "
             f"| {fmt(f.get('tracked_s'), '.0f')} | {fmt(f.get('steady_rms_m'))} / {fmt(f.get('steady_max_m'))} "
             f"| {fmt(f.get('cross_track_rms_m'))} / {fmt(f.get('cross_track_mean_m'))} "
             f"| {fmt(f.get('steady_mean_vertical_m'))} / {fmt(f.get('steady_mean_radial_m'))} "
-            f"| {'n/a' if thr is None else f'{thr:.1%}'} | {hold} | {s.get('verdict')} "
-            f"| {str(s.get('commit', ''))[:9]}, {str(s.get('date', ''))[:10]} |"
+            f"| {'n/a' if thr is None else f'{thr:.1%}'} | {sil_txt} | {hold} | {s.get('verdict')} "
+            f"| {s.get('commit', '')}, {str(s.get('date', ''))[:10]} |"
         )  # fmt: skip
     md = RESULTS / "sitl.md"
     md.write_text("\n".join(lines) + "\n")
