@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from mpf_mavlink.mavlink.modes import Flavour
-from sim.rigs.bundles import ROOT, RigError
+from sim.rigs.bundles import ROOT, RigError, die_with_parent
 from sim.rigs.gcs import Gcs
 
 NAME = "arduplane"
@@ -97,7 +97,12 @@ class Firmware:
                "--speedup", f"{self.a.speedup:g}"]  # fmt: skip
         log = open(work / "sitl.log", "w")  # noqa: SIM115 - lives as long as the process
         self.proc = subprocess.Popen(
-            cmd, cwd=work, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+            cmd,
+            cwd=work,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+            preexec_fn=die_with_parent,
         )
 
     def configure(self, g: Gcs) -> dict[str, float]:

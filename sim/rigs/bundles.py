@@ -107,3 +107,15 @@ def bundle_version(d: Path) -> str:
     if not run.is_file():
         return d.name
     return run.read_text(errors="replace").splitlines()[0].split(",")[0].strip()
+
+
+def die_with_parent() -> None:
+    """``preexec_fn`` of the rig's children (firmware, bridge): SIGTERM when the rig dies, even
+    by SIGKILL or a test's timeout, so that no SITL keeps flying (and holding its ports)."""
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
+    except OSError:  # not glibc Linux: the rig's own clean-up still stops them
+        pass

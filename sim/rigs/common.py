@@ -40,7 +40,7 @@ from typing import Any, NoReturn
 from mpf_mavlink.config.schema import load_config
 from mpf_mavlink.errors import MpfError
 from sim.rigs import arduplane, px4
-from sim.rigs.bundles import ROOT, RigError, bundle_version, check_bundle, unpack
+from sim.rigs.bundles import ROOT, RigError, bundle_version, check_bundle, die_with_parent, unpack
 from sim.rigs.figures import cross_track, fmt, hold_figures, read_json, tlog_counts
 from sim.rigs.gcs import Gcs
 
@@ -231,6 +231,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sitl: {e}", file=sys.stderr)
         return 2
     out.mkdir(parents=True, exist_ok=True)
+
+    def _term(signum: int, frame: Any) -> None:  # SIGTERM: clean up as Ctrl-C does
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, _term)
     summary: dict[str, Any] = {"flight": flight_name(a), "autopilot": a.autopilot}
     rc = 1
     try:
@@ -287,7 +292,9 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
            *[x for s in sets for x in ("--set", s)]]  # fmt: skip
     print("hand-over: mpf-mavlink " + " ".join(cmd[3:]), flush=True)
     with open(out / "bridge.log", "w") as blog:
-        bridge = subprocess.Popen(cmd, stdout=blog, stderr=subprocess.STDOUT, text=True)
+        bridge = subprocess.Popen(
+            cmd, stdout=blog, stderr=subprocess.STDOUT, text=True, preexec_fn=die_with_parent
+        )
     t_engaged: float | None = None
     kill: dict[str, Any] = {}
     try:

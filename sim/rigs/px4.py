@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from mpf_mavlink.mavlink.modes import Flavour
-from sim.rigs.bundles import ROOT
+from sim.rigs.bundles import ROOT, die_with_parent
 from sim.rigs.gcs import Gcs
 
 NAME = "px4"
@@ -59,7 +59,7 @@ class Firmware:
         self.proc = subprocess.Popen(
             [str(bundle / "px4-sih-airplane"), str(work / "px4-work")],
             cwd=work, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
-            start_new_session=True,
+            start_new_session=True, preexec_fn=die_with_parent,
         )  # fmt: skip
 
     def configure(self, g: Gcs) -> dict[str, float]:
