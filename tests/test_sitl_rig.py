@@ -1,47 +1,174 @@
-"""Opt-in: the real ArduPlane SITL rig (sim/sitl_rig.py, scripts/sitl-arduplane).
-
-Runs only when MPF_ARDUPLANE_SITL names an arduplane SITL binary you built (and
-MPF_ARDUPILOT_DIR its checkout, default: two levels above build/sitl/bin); otherwise skipped,
-saying why. About 3 minutes of real time: takeoff, 60 s of tracking, hand-back.
-"""
+"""The real-firmware rig's own logic, without firmware (sim/rigs): arguments refused before
+anything is created, nothing deleted, --out relative to the caller, the figures it computes
+(cross-track for any shape, the hold after a kill) and the serial relay."""
 
 from __future__ import annotations
 
-import json
+import math
 import os
+import socket
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from sim.rigs import common
+from sim.rigs.bundles import RigError
+from sim.rigs.figures import cross_track, hold_figures
+from sim.rigs.pty_relay import PtyRelay
+
 ROOT = Path(__file__).resolve().parents[1]
-BIN = os.environ.get("MPF_ARDUPLANE_SITL")
-
-pytestmark = [
-    pytest.mark.sitl,
-    pytest.mark.skipif(
-        not BIN,
-        reason="MPF_ARDUPLANE_SITL is not set (the path of an arduplane SITL binary you built; "
-        "README 'Flying ArduPilot SITL')",
-    ),
-]
 
 
-def test_arduplane_sitl_engages_tracks_and_hands_back(tmp_path):
-    binary = Path(BIN or "")
-    ardupilot = Path(os.environ.get("MPF_ARDUPILOT_DIR") or binary.resolve().parents[3])
-    out = tmp_path / "rig"
-    r = subprocess.run(
-        [sys.executable, "-m", "sim.sitl_rig", "--binary", str(binary), "--ardupilot",
-         str(ardupilot), "--out", str(out), "--duration", "60"],
-        cwd=ROOT, capture_output=True, text=True, timeout=900,
+def run_rig(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run(
+        [sys.executable, "-m", "sim.rigs", *args], cwd=cwd, env=env, capture_output=True,
+        text=True, timeout=60,
     )  # fmt: skip
-    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]
-    m = json.loads((out / "bridge" / "metrics.json").read_text())
-    assert m["state_reached"] == "TRACKING" and m["handback_confirmed"] is True
-    # stock ArduPlane streams 1 Hz on this link: the bridge must have raised ATTITUDE to what
-    # the loop needs (>= 20 Hz) before engaging
-    assert m["streams"]["messages"]["ATTITUDE"]["measured_hz"] >= 20.0
-    assert m["fallback"].startswith("ArduPlane GUIDED loiter")
-    assert m["tracked_s"] >= 59.0
+
+
+@pytest.mark.parametrize(
+    "args, culprit",
+    [
+        (["px4", "--wind", "6,90"], "PX4 v1.16 SIH has no wind model"),
+        (["arduplane", "--wind", "6"], "SPEED,DIR_DEG"),
+        (["arduplane", "--wind", "6,400"], "direction 0..360"),
+        (["arduplane", "--duration", "-3"], "--duration"),
+        (["arduplane", "--duration", "nan"], "--duration"),
+        (["arduplane", "--bundle", "/nonexistent/bundle"], "--bundle /nonexistent/bundle"),
+        (["arduplane", "--config", "/nonexistent.yaml"], "--config /nonexistent.yaml"),
+        (["arduplane", "--set", "guidance.bogus=1"], "bogus"),
+        (["px4", "--serial"], "ArduPlane options"),
+        (["arduplane", "--binary", str(ROOT / "pyproject.toml")], "not an executable"),
+    ],
+)
+def test_bad_arguments_are_one_line_and_create_nothing(tmp_path, args, culprit):
+    out = tmp_path / "out"
+    r = run_rig(*args, "--out", str(out), cwd=tmp_path)
+    assert r.returncode == 2, r.stderr
+    assert culprit in r.stderr and len(r.stderr.strip().splitlines()) <= 3, r.stderr
+    assert not out.exists()
+
+
+def test_an_existing_out_directory_is_refused_and_kept(tmp_path):
+    out = tmp_path / "precious"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    r = run_rig("arduplane", "--out", str(out), cwd=tmp_path)
+    assert r.returncode == 2 and "not an empty directory" in r.stderr
+    assert (out / "keep.txt").read_text() == "mine"
+
+
+def test_relative_out_is_the_callers(tmp_path, monkeypatch):
+    bundle = tmp_path / "b"
+    (bundle / "bin").mkdir(parents=True)
+    (bundle / "bin" / "arduplane").write_text("")
+    monkeypatch.chdir(tmp_path)
+    a = common.parser().parse_args(["arduplane", "--bundle", str(bundle), "--out", "rel/run"])
+    v = common.validate(a)
+    assert v["out"] == tmp_path / "rel" / "run"
+    assert not (tmp_path / "rel").exists()  # validation creates nothing
+
+
+def test_moving_labels_say_what_flies():
+    from mpf_mavlink.config.schema import load_config
+
+    ap = load_config(ROOT / "configs" / "bridge_arduplane.yaml")
+    px = load_config(ROOT / "configs" / "bridge_px4.yaml")
+    assert common.target_sets(ap, False) == (["target.type=stationary"], "stationary")
+    sets, label = common.target_sets(ap, True)
+    assert sets == [] and label.startswith(f"moving {ap.target.speed_m_s:g} m/s")
+    sets, label = common.target_sets(px, True)  # PX4's config is still: the rig moves it
+    assert "target.type=constant_turn" in sets and label == "moving 3 m/s heading 90 deg"
+    with pytest.raises(RigError):
+        common.validate(common.parser().parse_args(["px4", "--wind", "1,2", "--out", "x"]))
+
+
+def _circle_run(d: Path, offset: float, cw: bool = True) -> None:
+    """A 100 m circle in the target frame and a vehicle ``offset`` m outside it."""
+    th = np.linspace(0.0, 2 * math.pi, 721)
+    sgn = 1.0 if cw else -1.0
+    P = np.column_stack([100 * np.cos(th), sgn * 100 * np.sin(th), np.zeros_like(th)])
+    np.savetxt(d / "path_T.csv", P, delimiter=",", header="x,y,z", comments="")
+    t = np.linspace(0.0, 100.0, 500)
+    ang = np.linspace(0.3, 5.0, 500)
+    r = 100.0 + offset
+    cols = {"t": t, "rel_x": r * np.cos(ang), "rel_y": sgn * r * np.sin(ang)}
+    names = ",".join(cols)
+    np.savetxt(d / "timeseries.csv", np.column_stack(list(cols.values())), delimiter=",",
+               header=names, comments="")  # fmt: skip
+
+
+@pytest.mark.parametrize("cw, sign", [(True, 1.0), (False, -1.0)])
+def test_cross_track_is_the_distance_to_the_path_left_positive(tmp_path, cw, sign):
+    _circle_run(tmp_path, 2.0, cw)
+    f = cross_track(tmp_path, 60.0)
+    # 2 m outside: left of travel on a clockwise circle (NED, seen from above), right on a
+    # counter-clockwise one; the polyline's chords (0.5 deg) are within 1 mm of the arc
+    assert f["cross_track_mean_m"] == pytest.approx(sign * 2.0, abs=0.01)
+    assert f["cross_track_rms_m"] == pytest.approx(2.0, abs=0.01)
+
+
+def test_cross_track_on_a_figure_eight_has_no_radial_meaning(tmp_path):
+    s = np.linspace(0, 2 * math.pi, 2001)
+    P = np.column_stack([300 * np.sin(s), 150 * np.sin(2 * s), np.zeros_like(s)])
+    np.savetxt(tmp_path / "path_T.csv", P, delimiter=",", header="x,y,z", comments="")
+    k = np.arange(200, 1800, 7)
+    tang = np.gradient(P[:, :2], axis=0)[k]
+    nrm = np.column_stack([-tang[:, 1], tang[:, 0]]) / np.hypot(*tang.T)[:, None]
+    q = P[k, :2] - 1.5 * nrm  # 1.5 m to the left of travel in NED (-90 deg from the tangent)
+    t = np.linspace(60.0, 160.0, len(k))
+    np.savetxt(tmp_path / "timeseries.csv", np.column_stack([t, q]), delimiter=",",
+               header="t,rel_x,rel_y", comments="")  # fmt: skip
+    f = cross_track(tmp_path, 60.0)
+    assert f["cross_track_rms_m"] == pytest.approx(1.5, abs=0.05)
+    assert f["cross_track_mean_m"] == pytest.approx(1.5, abs=0.05)
+
+
+def test_hold_figures_judge_the_issue_bounds():
+    loiter = [(t, 0.4, 160 * math.cos(t / 7), 160 * math.sin(t / 7), -100.0) for t in range(61)]
+    h = hold_figures(loiter, (0.0, 0.0), 100.0, 150.0)
+    assert h["hold_verdict"] == "PASS" and h["max_bank_deg"] == pytest.approx(22.9, abs=0.1)
+    away = [(t, 0.0, 20.0 * t, 0.0, -100.0) for t in range(61)]  # straight on: no hold
+    assert hold_figures(away, (0.0, 0.0), 100.0, 150.0)["hold_verdict"].startswith("FAIL: 1200 m")
+    steep = [(t, 0.7, 100.0, 0.0, -115.0) for t in range(61)]
+    v = hold_figures(steep, (0.0, 0.0), 100.0, 150.0)["hold_verdict"]
+    assert "|bank| 40.1 deg" in v and "altitude off by 15.0 m" in v
+
+
+def test_pty_relay_carries_bytes_both_ways_untouched():
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    port = srv.getsockname()[1]
+    got: list[bytes] = []
+
+    def autopilot() -> None:
+        c, _ = srv.accept()
+        c.sendall(bytes(range(256)))  # every byte value: raw mode must pass \r, \n, ^C, ^D
+        got.append(c.recv(4096))
+        c.close()
+
+    th = threading.Thread(target=autopilot)
+    th.start()
+    relay = PtyRelay(port)
+    try:
+        fd = os.open(relay.device, os.O_RDWR | os.O_NOCTTY)
+        import tty
+
+        tty.setraw(fd)
+        buf = b""
+        while len(buf) < 256:
+            buf += os.read(fd, 4096)
+        assert buf == bytes(range(256))
+        os.write(fd, b"\x03\x04\r\n\xfd\xfe")
+        th.join(5)
+        assert got == [b"\x03\x04\r\n\xfd\xfe"]
+        os.close(fd)
+    finally:
+        relay.close()
+        srv.close()

@@ -82,7 +82,7 @@ class GuidanceConfig:
     psi_turn: bool = False
     psi_turn_threshold: float = field(default=0.5, metadata={"check": ("range", 0.0, 1.0)})
     psi_turn_rate_rad_s: float | None = field(default=None, metadata=_pos())
-    wind_compensation: bool = False
+    wind_compensation: bool = True  # eta_hat of the autopilot's WIND / WIND_COV; false by choice
     initial_s_m: float | None = None  # None: closest point of the moving path
 
 

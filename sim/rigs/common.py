@@ -1,0 +1,583 @@
+"""The real-firmware rig, the same for both autopilots: ``scripts/sitl px4|arduplane --out DIR``.
+
+It does what a user does by hand, and nothing more to the autopilot:
+
+1. checks every argument (bundle, config, numbers, the run directory) before touching anything;
+2. unpacks the bundle (``../shared/sitl``, or ``--bundle``) into the git-ignored ``.cache/sitl``
+   and starts the firmware with stock parameters in a scratch directory of the run directory;
+3. takes off as a ground station does (the autopilot module: ``sim/rigs/px4.py``,
+   ``sim/rigs/arduplane.py``) and lets the autopilot loiter;
+4. places the mission where the aircraft is: ``--config``'s path (default the autopilot's
+   ``configs/bridge_*.yaml``, as shipped) about a centre chosen so that the aircraft is on the
+   path, tangent to its flight, where its own loiter will have taken it when the bridge engages;
+   the target stationary, or moving with ``--moving``;
+5. hands over to ``mpf-mavlink run`` (over a pseudo-terminal with ``--serial``: ArduPlane only),
+   waits for it to fly ``--duration`` s and hand back; or SIGKILLs it ``--kill-after`` s into
+   tracking and watches ``--watch-s`` s of what the autopilot does on its own (the hold);
+6. with ``--sil`` flies the same mission from the same start state in our SIL;
+7. writes ``DIR/summary.json`` and prints the same as a table; exits 0 only when the flight
+   passed (the bridge's verdict, engagement, hand-back; after a kill: the hold).
+
+``--record`` also writes ``docs/results/sitl-<flight>.json`` and regenerates
+``docs/results/sitl.md`` (the README's results table) from all of them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import datetime as _dt
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+from types import ModuleType
+from typing import Any, NoReturn
+
+from mpf_mavlink.config.schema import load_config
+from mpf_mavlink.errors import MpfError
+from sim.rigs import arduplane, px4
+from sim.rigs.bundles import ROOT, RigError, bundle_version, check_bundle, die_with_parent, unpack
+from sim.rigs.figures import cross_track, fmt, hold_figures, read_json, tlog_counts
+from sim.rigs.gcs import Gcs
+
+AUTOPILOTS: dict[str, ModuleType] = {"px4": px4, "arduplane": arduplane}
+RESULTS = ROOT / "docs" / "results"
+MOVING_DEFAULT = ("constant_turn", 3.0, math.pi / 2)  # 3 m/s east, when the config's is still
+
+
+def _number(kind: str, lo: float, lo_open: bool = False) -> Any:
+    def conv(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if not math.isfinite(v) or v < lo or (lo_open and v == lo):
+            raise argparse.ArgumentTypeError(f"must be a {kind}, got {text}")
+        return v
+
+    return conv
+
+
+def _wind(text: str) -> tuple[float, float]:
+    parts = text.split(",")
+    try:
+        spd, deg = (float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected SPEED,DIR_DEG (m/s, deg)") from None
+    if not (math.isfinite(spd) and math.isfinite(deg) and spd >= 0.0 and 0.0 <= deg <= 360.0):
+        raise argparse.ArgumentTypeError(f"{text!r}: speed >= 0 m/s, direction 0..360 deg")
+    return spd, deg
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:  # one line naming the culprit, not the usage
+        self.exit(2, f"sitl: {message} (scripts/sitl --help)\n")
+
+
+def parser() -> argparse.ArgumentParser:
+    ap = _Parser(
+        prog="scripts/sitl",
+        description="Fly mpf-mavlink against real PX4 / ArduPlane SITL firmware "
+        "(README 'Flying PX4 SITL', 'Flying ArduPilot SITL').",
+    )
+    ap.add_argument("autopilot", choices=sorted(AUTOPILOTS))
+    ap.add_argument("--out", required=True, help="run directory (new or empty)")
+    ap.add_argument("--bundle", "--ardupilot", dest="bundle",
+                    help="unpacked bundle or its .tar.xz (default: ../shared/sitl); with --binary: your ArduPilot checkout")  # fmt: skip
+    ap.add_argument("--config", help="bridge config (default configs/bridge_<autopilot>.yaml)")
+    ap.add_argument("--duration", type=_number("time > 0 s", 0.0, True), default=300.0,
+                    help="seconds of tracking (autopilot time; default 300)")  # fmt: skip
+    ap.add_argument("--moving", action="store_true",
+                    help="moving target: the config's, or 3 m/s east if the config's is still")  # fmt: skip
+    ap.add_argument("--wind", type=_wind, help="SPEED,DIR_DEG (ArduPlane SIM_WIND_SPD/DIR)")
+    ap.add_argument("--turbulence", type=_number("speed >= 0 m/s", 0.0),
+                    help="ArduPlane SIM_WIND_TURB (m/s)")  # fmt: skip
+    ap.add_argument("--kill-after", type=_number("time > 0 s", 0.0, True),
+                    help="SIGKILL the bridge S s into tracking and watch the autopilot's hold")  # fmt: skip
+    ap.add_argument("--watch-s", type=_number("time > 0 s", 0.0, True), default=60.0,
+                    help="seconds watched after the kill (default 60)")  # fmt: skip
+    ap.add_argument("--sil", action="store_true", help="fly the same mission in our SIL too")
+    ap.add_argument("--speedup", type=_number("factor > 0", 0.0, True), default=1.0,
+                    help="ArduPlane SIM_SPEEDUP / PX4_SIM_SPEED_FACTOR (default 1: real time)")  # fmt: skip
+    ap.add_argument("--serial", action="store_true",
+                    help="ArduPlane: the bridge on a pseudo-terminal relayed to SERIAL1")  # fmt: skip
+    ap.add_argument("--instance", type=int, help="ArduPlane -I N (default: the first free one)")
+    ap.add_argument("--binary", help="ArduPlane: your own arduplane SITL binary instead")
+    ap.add_argument("--alt", type=_number("height > 0 m", 0.0, True), default=100.0,
+                    help="take-off / path altitude above home (m)")  # fmt: skip
+    ap.add_argument("--lead", type=_number("time >= 0 s", 0.0), default=6.0,
+                    help="wall seconds from placing the mission to engaging")  # fmt: skip
+    ap.add_argument("--record", action="store_true",
+                    help="write docs/results/sitl-<flight>.json and regenerate docs/results/sitl.md")  # fmt: skip
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="a config override passed to the bridge (repeatable)")  # fmt: skip
+    return ap
+
+
+def validate(a: argparse.Namespace) -> dict[str, Any]:
+    """Everything that can be refused before the rig creates or starts anything."""
+    mod = AUTOPILOTS[a.autopilot]
+    if not mod.HAS_WIND and (a.wind is not None or a.turbulence is not None):
+        raise RigError("--wind/--turbulence: PX4 v1.16 SIH has no wind model")
+    if a.autopilot != "arduplane" and (a.serial or a.binary or a.instance is not None):
+        raise RigError("--serial, --binary and --instance are ArduPlane options")
+    if a.instance is not None and not 0 <= a.instance <= 200:
+        raise RigError(f"--instance {a.instance}: expected 0..200")
+    if a.kill_after is not None and (a.sil or a.serial):
+        raise RigError("--kill-after flies alone (no --sil, no --serial)")
+    if a.binary is not None:
+        b = Path(a.binary).expanduser()
+        if not (b.is_file() and os.access(b, os.X_OK) and b.stat().st_mode & 0o111):
+            raise RigError(f"--binary {a.binary}: not an executable file")
+        a.binary = b.resolve()
+    cfg_path = Path(a.config).expanduser() if a.config else mod.DEFAULT_CONFIG
+    if not cfg_path.is_file():
+        raise RigError(f"--config {a.config}: no such file")
+    try:  # the overrides the flight will use, with a placeholder centre
+        cfg = load_config(cfg_path, [*a.overrides, "target.position_ned_m=[0,0,-100]"])
+    except MpfError as e:
+        raise RigError(f"--config {cfg_path}: {e}") from None
+    tsets, _ = target_sets(cfg, a.moving)
+    try:  # and with the target the rig will give it
+        cfg = load_config(cfg_path, [*a.overrides, "target.position_ned_m=[0,0,-100]", *tsets])
+    except MpfError as e:
+        raise RigError(f"--config {cfg_path}: {e}") from None
+    flav = cfg.extra["mavlink"].flavour
+    if flav not in (mod.FLAVOUR.value, "auto"):
+        raise RigError(f"--config {cfg_path}: mavlink.flavour is {flav}, not {mod.FLAVOUR.value}")
+    out = Path(a.out).expanduser()
+    out = out if out.is_absolute() else Path.cwd() / out
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise RigError(f"--out {a.out}: exists and is not an empty directory (nothing removed)")
+    if not os.access(out.parent if not out.exists() else out, os.W_OK) and out.parent.exists():
+        raise RigError(f"--out {a.out}: not writable")
+    if a.binary is not None and a.bundle is not None and Path(a.bundle).is_dir():
+        bundle = Path(a.bundle).expanduser().resolve()  # your checkout: only its plane.parm
+        if not (bundle / "Tools" / "autotest" / "models" / "plane.parm").is_file():
+            raise RigError(f"--bundle {a.bundle}: no Tools/autotest/models/plane.parm")
+    else:
+        bundle = check_bundle(a.autopilot, a.bundle)
+    return {"mod": mod, "bundle": bundle, "config": cfg_path.resolve(), "cfg": cfg, "out": out}
+
+
+def place_mission(g: Gcs, radius: float, lead_s: float) -> tuple[list[float], list[float]]:
+    """(circle centre NED, predicted aircraft position NED): the aircraft on a clockwise circle
+    of ``radius``, tangent to its flight, where its current turn takes it in ``lead_s``."""
+    lp, att = g.last["LOCAL_POSITION_NED"], g.last["ATTITUDE"]
+    vx, vy = lp.vx, lp.vy
+    v = math.hypot(vx, vy)
+    chi = math.atan2(vy, vx)
+    w = 9.80665 * math.tan(att.roll) / max(v, 1.0)  # heading rate of a coordinated turn
+    x, y = lp.x, lp.y
+    if abs(w) > 1e-3:
+        r = v / w
+        cx, cy = x - r * math.sin(chi), y + r * math.cos(chi)
+        chi2 = chi + w * lead_s
+        x, y = cx + r * math.sin(chi2), cy - r * math.cos(chi2)
+    else:
+        chi2 = chi
+        x, y = x + vx * lead_s, y + vy * lead_s
+    # clockwise seen from above: the centre is to the right of the flight direction
+    return [x - radius * math.sin(chi2), y + radius * math.cos(chi2), lp.z], [x, y, lp.z]
+
+
+def target_sets(cfg: Any, moving: bool) -> tuple[list[str], str]:
+    """The target overrides and its label (what really flies, from the config)."""
+    t = cfg.target
+    still = t.type == "stationary" or (t.speed_m_s == 0.0 and t.turn_rate_rad_s == 0.0)
+    if not moving:
+        return ["target.type=stationary"], "stationary"
+    sets: list[str] = []
+    typ, spd, hdg, turn = t.type, t.speed_m_s, t.heading_rad, t.turn_rate_rad_s
+    if still:
+        typ, spd, hdg = MOVING_DEFAULT
+        turn = 0.0
+        sets = [f"target.type={typ}", f"target.speed_m_s={spd:g}", f"target.heading_rad={hdg:.6f}"]
+    label = f"moving {spd:g} m/s heading {math.degrees(hdg) % 360:.0f} deg"
+    if turn:
+        label += f", turning {turn:g} rad/s"
+    return sets, label
+
+
+def flight_name(a: argparse.Namespace) -> str:
+    """A flight's short name: autopilot, target, wind, kill, serial."""
+    parts = [a.autopilot, "moving" if a.moving else "stationary"]
+    if a.wind is not None:
+        parts.append(f"wind{a.wind[0]:g}")
+    if a.turbulence:
+        parts.append(f"turb{a.turbulence:g}")
+    if a.kill_after is not None:
+        parts.append(f"kill{a.kill_after:g}")
+    if a.serial:
+        parts.append("serial")
+    return "-".join(parts)
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = parser().parse_args(argv)
+    try:
+        v = validate(a)
+    except RigError as e:
+        print(f"sitl: {e}", file=sys.stderr)
+        return 2
+    mod, out = v["mod"], v["out"]
+    try:
+        fw = mod.Firmware(a)  # ArduPlane: takes a free instance's lock (or refuses)
+    except RigError as e:
+        print(f"sitl: {e}", file=sys.stderr)
+        return 2
+    out.mkdir(parents=True, exist_ok=True)
+
+    def _term(signum: int, frame: Any) -> None:  # SIGTERM: clean up as Ctrl-C does
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, _term)
+    summary: dict[str, Any] = {"flight": flight_name(a), "autopilot": a.autopilot}
+    rc = 1
+    try:
+        rc = fly(a, v, fw, summary)
+    except (RuntimeError, OSError, RigError, MpfError) as e:
+        summary["verdict"] = f"FAIL: rig: {e}"
+        print(f"sitl: {e}", file=sys.stderr)
+    finally:
+        fw.stop()
+        (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
+    print_table(summary, out)
+    if a.record and "figures" in summary:
+        record(summary)
+    return rc
+
+
+def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, Any]) -> int:
+    mod, out, cfg = v["mod"], v["out"], v["cfg"]
+    bundle_dir = unpack(a.autopilot, v["bundle"])
+    summary.update(
+        bundle=bundle_version(bundle_dir), config=str(v["config"].relative_to(ROOT))
+        if v["config"].is_relative_to(ROOT) else str(v["config"]),
+        speedup=a.speedup, commit=_git_commit(), date=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        wind=list(a.wind) if a.wind else None, turbulence=a.turbulence,
+        command=" ".join(["scripts/sitl", *sys.argv[1:]]) if sys.argv else "",
+    )  # fmt: skip
+    print(f"{summary['bundle']}: starting ({bundle_dir})", flush=True)
+    fw.start(bundle_dir, out / "firmware")
+    g = Gcs(fw.gcs_url, mod.FLAVOUR)
+    summary["autopilot_params"] = fw.configure(g)
+    fw.take_off(g, a.alt)
+    cruise = fw.cruise_airspeed(g)
+    radius = float(cfg.path.radius_m) if cfg.path.type == "circle" else 0.0
+    tsets, label = target_sets(cfg, a.moving)
+    g.pump(0.3)
+    centre, start = place_mission(g, radius, a.lead * a.speedup)
+    sets = [*a.overrides, f"target.position_ned_m=[{centre[0]:.2f},{centre[1]:.2f},{centre[2]:.2f}]",
+            *tsets, "mavlink.plots=false"]  # fmt: skip
+    summary["mission"] = {
+        "path": cfg.path.type, "radius_m": radius or None, "centre_ned_m": centre,
+        "target": label, "airspeed_m_s": cfg.vehicle.airspeed_m_s,
+        "autopilot_cruise_airspeed_m_s": cruise, "overrides": sets,
+    }  # fmt: skip
+    relay = None
+    url = fw.bridge_url
+    if a.serial:
+        from sim.rigs.pty_relay import PtyRelay
+
+        relay = PtyRelay(fw.bridge_port)
+        url = f"{relay.device}:115200"
+        summary["serial"] = {"device": relay.device, "relayed_to": fw.bridge_url}
+    cmd = [sys.executable, "-m", "mpf_mavlink.cli", "run", str(v["config"]), "--connect", url,
+           "--out", str(out / "bridge"), "--duration", f"{a.duration:g}",
+           *[x for s in sets for x in ("--set", s)]]  # fmt: skip
+    print("hand-over: mpf-mavlink " + " ".join(cmd[3:]), flush=True)
+    with open(out / "bridge.log", "w") as blog:
+        bridge = subprocess.Popen(
+            cmd, stdout=blog, stderr=subprocess.STDOUT, text=True, preexec_fn=die_with_parent
+        )
+    t_engaged: float | None = None
+    kill: dict[str, Any] = {}
+    try:
+        while bridge.poll() is None:
+            g.pump(0.2)
+            if g.mode() == mod.TRACK_MODE and t_engaged is None:
+                t_engaged = g.t_boot_s
+                print(f"{mod.TRACK_MODE} at t_boot {t_engaged:.1f} s", flush=True)
+            if (a.kill_after is not None and t_engaged is not None
+                    and g.t_boot_s - t_engaged >= a.kill_after):  # fmt: skip
+                os.kill(bridge.pid, signal.SIGKILL)
+                bridge.wait()
+                tracked = g.t_boot_s - t_engaged
+                print(f"bridge SIGKILLed {tracked:.1f} s into tracking", flush=True)
+                kill = watch_hold(g, a.watch_s, centre, -centre[2], radius, out)
+                kill["killed_after_s"] = tracked
+                break
+        code = bridge.wait()
+    finally:
+        if bridge.poll() is None:
+            bridge.terminate()
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                bridge.wait(20)
+        if relay is not None:
+            summary["serial"].update(bytes_to_autopilot=relay.bytes_up,
+                                     bytes_to_bridge=relay.bytes_down, bytes_dropped=relay.dropped)  # fmt: skip
+            relay.close()
+    g.close()
+    summary.update(figures_of(out / "bridge", out / "bridge.log", code, kill, cfg, mod))
+    if a.sil and not kill:
+        summary["sil"] = sil_leg(a, v, sets, summary, out)
+    return 0 if summary["verdict"] == "PASS" else 1
+
+
+def watch_hold(
+    g: Gcs, secs: float, centre: list[float], alt_m: float, radius: float, out: Path
+) -> dict[str, Any]:
+    """What the autopilot does on its own for ``secs`` (its clock) after the bridge died."""
+    t0 = g.t_boot_s
+    modes: list[str] = []
+    trace: list[tuple[float, float, float, float, float]] = []
+    last_t = -1.0
+    while g.t_boot_s - t0 < secs:
+        g.pump(0.1)
+        if not modes or modes[-1] != g.mode():
+            modes.append(g.mode())
+        att, lp = g.last.get("ATTITUDE"), g.last.get("LOCAL_POSITION_NED")
+        if att is not None and lp is not None and g.t_boot_s != last_t:
+            last_t = g.t_boot_s
+            trace.append((g.t_boot_s - t0, att.roll, lp.x, lp.y, lp.z))
+    with open(out / "after_kill.csv", "w") as f:
+        f.write("t_s,roll_rad,north_m,east_m,down_m\n")
+        f.writelines(",".join(f"{x:.4f}" for x in r) + "\n" for r in trace)
+    h = hold_figures(trace, (centre[0], centre[1]), alt_m, radius)
+    h["modes"] = modes
+    return h
+
+
+def figures_of(
+    run: Path, log: Path, code: int, kill: dict[str, Any], cfg: Any, mod: ModuleType
+) -> dict[str, Any]:
+    """The summary's figures and verdict, from the bridge's run directory (or, after a kill,
+    its log and tlog: a SIGKILLed bridge writes no metrics.json)."""
+    m = read_json(run / "metrics.json")
+    text = log.read_text(errors="replace") if log.is_file() else ""
+    engaged = m.get("state_reached") == "TRACKING" or " confirmed: tracking" in text
+    fallback = m.get("fallback") or next(
+        (ln.split(": ", 1)[1] for ln in text.splitlines() if ln.startswith("fallback if the bridge dies: ")), None
+    )  # fmt: skip
+    f: dict[str, Any] = {
+        "engaged": engaged,
+        "fallback": fallback,
+        "first_within_s": m.get("first_within_s"),
+        "stays_within_s": m.get("convergence_time_s"),
+        "steady_rms_m": m.get("steady_rms_m"),
+        "steady_max_m": m.get("steady_max_m"),
+        "steady_mean_vertical_m": m.get("steady_mean_vertical_m"),
+        "thrust_at_ceiling": m.get("thrust_saturated_fraction"),
+        "tracked_s": m.get("tracked_s"),
+        "handback_confirmed": m.get("handback_confirmed"),
+        "turn_gain": (m.get("adapter_learned") or {}).get("turn_gain"),
+        "loop_delay_s": (m.get("delay_compensation") or {}).get("loop_delay_s"),
+        "loop_delay_source": (m.get("delay_compensation") or {}).get("loop_delay_source"),
+        "attitude_hz": (((m.get("streams") or {}).get("messages") or {}).get("ATTITUDE") or {}).get("measured_hz"),
+    }  # fmt: skip
+    if cfg.path.type == "circle":
+        f["steady_mean_radial_m"] = m.get("steady_mean_radial_m")
+    f.update(cross_track(run, cfg.metrics.steady_after_s))
+    out: dict[str, Any] = {"figures": f}
+    if kill:
+        counts = tlog_counts(run / "mavlink.tlog")
+        out["bridge_exit"] = f"SIGKILLed by the rig {kill['killed_after_s']:.1f} s into tracking"
+        out["bridge_sent"] = counts.get("sent", {})
+        f["tracked_s"] = kill["killed_after_s"]  # the autopilot's seconds, engaged to killed
+        f["handback_confirmed"] = None  # nothing to hand back: the autopilot's fallback flies
+        out["hold"] = kill
+        why = [] if engaged else ["never engaged"]
+        if kill["hold_verdict"] != "PASS":
+            why.append("hold " + kill["hold_verdict"])
+        out["verdict"] = "PASS" if not why else "FAIL: " + "; ".join(why)
+        return out
+    out["bridge_exit"] = f"{m.get('exit_reason', 'no metrics.json')} (code {code})"
+    out["bridge_verdict"] = m.get("verdict")
+    why = []
+    if not engaged:
+        why.append("never engaged")
+    if m.get("handback_confirmed") is not True:
+        why.append("hand-back not confirmed")
+    bv = str(m.get("verdict") or "")
+    if bv.startswith("verdict: NOT JUDGED") and not why:
+        # exit 6: ran to its end, shorter than its steady window: neither a pass nor a failure
+        out["verdict"] = bv.removeprefix("verdict: ")
+        return out
+    if bv != "verdict: PASS":
+        why.append(bv or "the bridge judged nothing")
+    if code != 0:
+        why.append(f"bridge exit code {code}")
+    out["verdict"] = "PASS" if not why else "FAIL: " + "; ".join(dict.fromkeys(why))
+    return out
+
+
+def sil_leg(
+    a: argparse.Namespace, v: dict[str, Any], sets: list[str], summary: dict[str, Any], out: Path
+) -> dict[str, Any]:
+    """Our SIL on the same mission and start state (the real aircraft's at engagement, the
+    first row of its run record): the start state goes into ``kinematic.initial_*`` too, so the
+    checks judge the state the SIL flies (a warning there is about that state: the aircraft
+    engaged off the circle when the bridge took longer than ``--lead`` to engage)."""
+    import numpy as np
+
+    ts = out / "bridge" / "timeseries.csv"
+    if not ts.is_file():
+        return {"error": "not flown (no real run record)"}
+    d = np.genfromtxt(ts, delimiter=",", names=True, max_rows=30)
+    if d.size < 2:
+        return {"error": "not flown (real run too short)"}
+    p0 = [float(d["p_n"][0]), float(d["p_e"][0]), float(d["p_d"][0])]
+    hdg = math.atan2(d["p_e"][-1] - d["p_e"][0], d["p_n"][-1] - d["p_n"][0])
+    sil_sets = [*sets, "sil.link=udp", f"sil.flavour={v['mod'].FLAVOUR.value}",
+                "sil.initial_mode=cruise",
+                f"kinematic.initial_position_ned_m=[{p0[0]:.2f},{p0[1]:.2f},{p0[2]:.2f}]",
+                f"kinematic.initial_attitude_rpy_rad=[0,0,{hdg:.4f}]",
+                f"aircraft.trim_airspeed_m_s={v['cfg'].vehicle.airspeed_m_s:g}"]  # fmt: skip
+    cmd = [sys.executable, "-m", "mpf_mavlink.cli", "sim", str(v["config"]), "--out",
+           str(out / "sil"), "--set", f"sim.duration_s={a.duration:g}",
+           *[x for s in sil_sets for x in ("--set", s)]]  # fmt: skip
+    with open(out / "sil.log", "w") as f:
+        r = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, check=False)
+    sm = read_json(out / "sil" / "metrics.json")
+    real, ours = summary["figures"].get("steady_rms_m"), sm.get("steady_rms_m")
+    warn = [ln for ln in (out / "sil.log").read_text().splitlines() if "[WARN]" in ln]
+    return {
+        "exit_code": r.returncode,
+        "steady_rms_m": ours,
+        "steady_mean_vertical_m": sm.get("steady_mean_vertical_m"),
+        "steady_mean_radial_m": sm.get("steady_mean_radial_m"),
+        "real_over_sil": (real / ours) if (real is not None and ours) else None,
+        "warnings": warn,
+    }
+
+
+def rows(s: dict[str, Any]) -> list[tuple[str, str]]:
+    f, ms = s.get("figures", {}), s.get("mission", {})
+    r = [("flight", s.get("flight", "?")), ("firmware", s.get("bundle", "?"))]
+    if ms:
+        r += [
+            ("mission", f"{ms['path']} r {fmt(ms['radius_m'])} m, {ms['target']}"),
+            ("airspeed: config / autopilot cruise", f"{fmt(ms['airspeed_m_s'])} / {fmt(ms['autopilot_cruise_airspeed_m_s'])} m/s"),
+        ]  # fmt: skip
+    if s.get("wind") or s.get("turbulence"):
+        w = s.get("wind") or [0, 0]
+        r.append(("wind", f"{w[0]:g} m/s from {w[1]:g} deg, turbulence {fmt(s.get('turbulence') or 0)} m/s"))  # fmt: skip
+    if s.get("speedup", 1.0) != 1.0:
+        r.append(("speed-up", f"{s['speedup']:g}x"))
+    if "serial" in s:
+        r.append(("serial", f"{s['serial']['device']} <-> {s['serial']['relayed_to']}"))
+    if not f:
+        return r + [("verdict", s.get("verdict", "?"))]
+    h = s.get("hold")
+    r += [
+        ("bridge exit", s.get("bridge_exit", "?")),
+        ("engaged by itself", "yes" if f.get("engaged") else "NO"),
+    ]
+    if h:  # a SIGKILLed bridge leaves no run record: what the tlog and the autopilot say
+        r += [
+            ("tracked before the kill", f"{fmt(f.get('tracked_s'), '.1f')} s"),
+            ("fallback (bridge's word)", fmt(f.get("fallback"))),
+            ("setpoints sent (its tlog)", str(s.get("bridge_sent", {}).get("SET_ATTITUDE_TARGET", 0))),
+            ("after SIGKILL: modes", " -> ".join(h.get("modes", []))),
+            ("after SIGKILL: max from centre", f"{fmt(h.get('max_dist_from_centre_m'), '.1f')} m (last 15 s mean {fmt(h.get('last15_mean_dist_m'), '.1f')} m) over {fmt(h.get('watched_s'), '.0f')} s"),
+            ("after SIGKILL: max |bank| / |alt error|", f"{fmt(h.get('max_bank_deg'), '.1f')} deg / {fmt(h.get('max_alt_error_m'), '.1f')} m"),
+            ("after SIGKILL: hold", h.get("hold_verdict", "?")),
+            ("verdict", s.get("verdict", "?")),
+        ]  # fmt: skip
+        return r
+    r += [
+        ("hand-back confirmed", fmt(f.get("handback_confirmed"))),
+        ("tracked", f"{fmt(f.get('tracked_s'), '.1f')} s"),
+        ("first within / stays within", f"{fmt(f.get('first_within_s'), '.1f')} / {fmt(f.get('stays_within_s'), '.1f')} s"),
+        ("steady RMS / max |pt|", f"{fmt(f.get('steady_rms_m'))} / {fmt(f.get('steady_max_m'))} m"),
+        ("steady cross-track RMS / max", f"{fmt(f.get('cross_track_rms_m'))} / {fmt(f.get('cross_track_max_m'))} m"),
+        ("steady mean cross-track (left +)", f"{fmt(f.get('cross_track_mean_m'))} m"),
+        ("steady mean vertical (up +)", f"{fmt(f.get('steady_mean_vertical_m'))} m"),
+    ]  # fmt: skip
+    if "steady_mean_radial_m" in f:
+        r.append(("steady mean radial (out +)", f"{fmt(f.get('steady_mean_radial_m'))} m"))
+    r += [
+        ("thrust at ceiling", f"{fmt(f.get('thrust_at_ceiling'), '.1%')}" if f.get("thrust_at_ceiling") is not None else "n/a"),
+        ("loop delay", f"{fmt(f.get('loop_delay_s'))} s ({f.get('loop_delay_source') or 'n/a'})"),
+        ("ATTITUDE rate / turn gain", f"{fmt(f.get('attitude_hz'), '.1f')} Hz / {fmt(f.get('turn_gain'))}"),
+        ("fallback (bridge's word)", fmt(f.get("fallback"))),
+    ]  # fmt: skip
+    sil = s.get("sil")
+    if sil:
+        r += [
+            ("our SIL: steady RMS |pt|", f"{fmt(sil.get('steady_rms_m'))} m" if "error" not in sil else sil["error"]),
+            ("our SIL: mean vertical / radial", f"{fmt(sil.get('steady_mean_vertical_m'))} / {fmt(sil.get('steady_mean_radial_m'))} m"),
+            ("real / our SIL RMS", fmt(sil.get("real_over_sil"))),
+            ("our SIL: check warnings", "; ".join(w.split("]", 1)[1].split(":")[0].strip() for w in sil.get("warnings", [])) or "none"),
+        ]  # fmt: skip
+    if s.get("bridge_verdict"):
+        r.append(("bridge", s["bridge_verdict"]))
+    r.append(("verdict", s.get("verdict", "?")))
+    return r
+
+
+def print_table(s: dict[str, Any], out: Path) -> None:
+    rr = rows(s)
+    w = max(len(k) for k, _ in rr)
+    print(f"\n{'SITL rig: ' + s.get('autopilot', '?'):<{w}}  result")
+    print("-" * (w + 50))
+    for k, val in rr:
+        print(f"{k:<{w}}  {val}")
+    print(f"{'run directory':<{w}}  {out}  (summary.json, bridge/, bridge.log, firmware/)")
+
+
+def record(s: dict[str, Any]) -> None:
+    """Write this flight's summary into docs/results and regenerate the results table."""
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    keep = {k: s.get(k) for k in ("flight", "autopilot", "bundle", "config", "speedup", "commit", "date",
+                                  "wind", "turbulence", "mission", "figures", "hold", "sil", "verdict",
+                                  "bridge_verdict", "command")}  # fmt: skip
+    (RESULTS / f"sitl-{s['flight']}.json").write_text(
+        json.dumps(keep, indent=2, default=str) + "\n"
+    )
+    write_results_table()
+
+
+def write_results_table() -> Path:
+    lines = [
+        "# Real-firmware flights (written by `scripts/sitl ... --record`; do not edit by hand)",
+        "",
+        "Steady figures from t >= 60 s of tracking. Cross-track: horizontal distance to the path,",
+        "+ left of travel (outward on a clockwise circle). Hold: after SIGKILL of the bridge.",
+        "",
+        "| flight | firmware | config | tracked (s) | steady RMS / max pt (m) | cross-track RMS / mean (m) | mean vertical / radial (m) | thrust at ceiling | our SIL RMS (m), real/SIL | hold after kill | verdict | commit, date |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]  # fmt: skip
+    for p in sorted(RESULTS.glob("sitl-*.json")):
+        s = read_json(p)
+        f, h = s.get("figures") or {}, s.get("hold") or {}
+        hold = (f"{fmt(h.get('max_dist_from_centre_m'), '.0f')} m, {fmt(h.get('max_bank_deg'), '.0f')} deg, "
+                f"{fmt(h.get('max_alt_error_m'), '.1f')} m: {h.get('hold_verdict')}") if h else ""  # fmt: skip
+        thr = f.get("thrust_at_ceiling")
+        sil = s.get("sil") or {}
+        sil_txt = f"{fmt(sil.get('steady_rms_m'))}, {fmt(sil.get('real_over_sil'))}x" if sil else ""
+        lines.append(
+            f"| {s.get('flight')} | {s.get('bundle', '')} | {s.get('config')} "
+            f"| {fmt(f.get('tracked_s'), '.0f')} | {fmt(f.get('steady_rms_m'))} / {fmt(f.get('steady_max_m'))} "
+            f"| {fmt(f.get('cross_track_rms_m'))} / {fmt(f.get('cross_track_mean_m'))} "
+            f"| {fmt(f.get('steady_mean_vertical_m'))} / {fmt(f.get('steady_mean_radial_m'))} "
+            f"| {'n/a' if thr is None else f'{thr:.1%}'} | {sil_txt} | {hold} | {s.get('verdict')} "
+            f"| {s.get('commit', '')}, {str(s.get('date', ''))[:10]} |"
+        )  # fmt: skip
+    md = RESULTS / "sitl.md"
+    md.write_text("\n".join(lines) + "\n")
+    return md
+
+
+def _git_commit() -> str:
+    try:
+        r = subprocess.run(["git", "-C", str(ROOT), "describe", "--always", "--dirty"],
+                           capture_output=True, text=True, timeout=10, check=False)  # fmt: skip
+    except OSError:
+        return "?"
+    return r.stdout.strip() or "?"
