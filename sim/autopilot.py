@@ -161,6 +161,17 @@ class AutopilotEmulation(MavEndpoint):
                 return  # both autopilots stay silent about a parameter they do not have
             self._mav.send(self._mav.param_value_encode(
                 pid.encode("ascii"), self.params[pid], M.MAV_PARAM_TYPE_REAL32, len(names), i))  # fmt: skip
+        elif mt == "PARAM_SET":
+            # a known parameter takes the value and is answered like a read (as both
+            # autopilots do); an unknown one is ignored
+            pid = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else ""
+            if msg.target_system not in (0, self.sysid) or pid not in self.params:
+                return
+            self.params[pid] = float(msg.param_value)
+            names = list(self.params)
+            self._mav.send(self._mav.param_value_encode(
+                pid.encode("ascii"), self.params[pid], M.MAV_PARAM_TYPE_REAL32, len(names),
+                names.index(pid)))  # fmt: skip
         elif mt == "TIMESYNC" and msg.tc1 == 0:
             self._mav.send(self._mav.timesync_encode(int(self._boot_t * 1e9), msg.ts1))
 

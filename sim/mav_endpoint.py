@@ -118,7 +118,7 @@ class MavEndpoint(VehicleBase):
                 self._take_epoch(msg)
             return
         elif mt not in ("COMMAND_LONG", "COMMAND_INT", "SET_MODE", "TIMESYNC",
-                        "REQUEST_DATA_STREAM", "PARAM_REQUEST_READ"):  # fmt: skip
+                        "REQUEST_DATA_STREAM", "PARAM_REQUEST_READ", "PARAM_SET"):  # fmt: skip
             return
         q = self._in
         i = len(q)
