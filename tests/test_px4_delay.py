@@ -243,3 +243,23 @@ def test_bridge_refuses_to_engage_when_the_hold_is_not_confirmed(tmp_path):
         peer.stop()
     assert res.exit_code == 3 and "COM_OBL_RC_ACT" in res.exit_reason
     assert not mode_requests(peer) and not peer.setpoints
+
+
+def test_the_fallback_line_says_what_px4_will_do():
+    """px4_fallback.describe: the stock Position fallback is called what it is on a fixed-wing
+    (straight on, not a hold); Hold names its radius, direction, centre and the RC-loss action;
+    the RC exemptions are said when set."""
+    from mpf_mavlink.bridge.px4_fallback import describe, detail
+
+    stock = {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 0.0, "NAV_RCL_ACT": 2.0}
+    line = describe(stock)
+    assert "Position mode" in line and "NOT a hold" in line and "loiter" not in line
+    hold = {**stock, "COM_OBL_RC_ACT": 5.0, "NAV_LOITER_RAD": -120.0}
+    line = describe(hold, set_from=0.0, centre="the path's centre X")
+    assert "Hold (AUTO.LOITER)" in line and "120 m CCW" in line and "the path's centre X" in line
+    assert "set by the bridge (was 0)" in line and "Return (NAV_RCL_ACT = 2)" in line
+    assert "ignored in Hold" in describe({**hold, "COM_RCL_EXCEPT": 2.0})
+    assert "no RC input" in describe({**hold, "COM_RC_IN_MODE": 4.0})
+    assert "unknown" in describe({"COM_OF_LOSS_T": 1.0})
+    d = detail(hold, 0.0, None)
+    assert d["is_hold"] and not detail(stock, None, None)["is_hold"]
