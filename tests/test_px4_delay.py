@@ -223,6 +223,13 @@ def test_bridge_against_a_px4_like_peer_measures_by_timesync_and_sets_a_hold(tmp
     assert "Hold (AUTO.LOITER)" in m["fallback"] and "the path's centre" in m["fallback"]
     assert "80 m CW (NAV_LOITER_RAD)" in m["fallback"] and "NAV_RCL_ACT = 2" in m["fallback"]
     assert [c.msg.command for c in peer.commands if c.msg.command == 192] == [192]
+    # the delays come from the tlog (TIMESYNC answers, the setpoints' record times): a replay
+    # recomputes every command bit for bit
+    from mpf_mavlink.runs.replay import replay
+
+    cfg = cfg_for("px4", "mavlink.set_fallback=true")
+    c = replay(tmp_path / "mavlink.tlog", cfg, plots=False).check
+    assert c.compared == m["counters"]["law_evals"] and c.identical
 
 
 def test_bridge_refuses_to_engage_when_the_hold_is_not_confirmed(tmp_path):
