@@ -18,6 +18,7 @@ import math
 import os
 import select
 import socket
+import struct
 import threading
 import time
 from dataclasses import dataclass
@@ -124,6 +125,12 @@ class PeerOptions:
     start_armed: bool = True  # False: disarmed until an ARM command is accepted
     arm_result: int | None = None  # force this MAV_RESULT for ARM_DISARM, stay as is (None: obey)
     attitude_quaternion: bool = False  # send ATTITUDE_QUATERNION instead of ATTITUDE
+    # PX4 v1.16 in body-rate OFFBOARD: an ATTITUDE_TARGET per tick carrying the body rates in
+    # use, stamped with this frozen time (ms; None: no echo); TIMESYNC answered on the boot
+    # clock; the offboard-loss parameters (integers bytewise, as PX4 sends them), PARAM_SET
+    # answered by PARAM_VALUE, MAV_CMD_DO_REPOSITION (COMMAND_INT) acknowledged
+    frozen_echo_ms: int | None = None
+    px4_params: bool = True
 
 
 class MavPeer:
@@ -150,6 +157,13 @@ class MavPeer:
         self.commands: list[Rx] = []
         self.data_stream_requests: list[Rx] = []  # REQUEST_DATA_STREAM (never honoured here)
         self.heartbeats_rx: list[Rx] = []
+        self.param_sets: list[Rx] = []
+        # PX4's stock offboard-loss settings: name -> (value, MAV_PARAM_TYPE)
+        self.params: dict[str, tuple[float, int]] = (
+            {"COM_OF_LOSS_T": (1.0, 9), "COM_OBL_RC_ACT": (0.0, 6), "NAV_RCL_ACT": (2.0, 6),
+             "COM_RCL_EXCEPT": (0.0, 6), "NAV_LOITER_RAD": (80.0, 9)}
+            if px4 and opts.px4_params else {}
+        )  # fmt: skip
         self.rx_invalid_signature = 0
         self.telemetry = True
         self.last_telemetry_t = -math.inf
@@ -263,6 +277,27 @@ class MavPeer:
                     self.mav.command_ack_send(400, self.o.arm_result)
         elif t == "HEARTBEAT":
             self.heartbeats_rx.append(rx)
+        elif t == "COMMAND_INT":
+            self.commands.append(rx)
+            if m.command == 192 and self.o.flavour == "px4":
+                self.mav.command_ack_send(192, 0)
+        elif t == "TIMESYNC" and m.tc1 == 0 and self.o.flavour == "px4":
+            self.mav.timesync_send(self.time_boot_ms() * 1_000_000, m.ts1)
+        elif t in ("PARAM_REQUEST_READ", "PARAM_SET"):
+            name = m.param_id.rstrip("\x00") if isinstance(m.param_id, str) else ""
+            if name not in self.params:
+                return
+            if t == "PARAM_SET":
+                self.param_sets.append(rx)
+                typ = self.params[name][1]
+                v = m.param_value
+                if typ == 6:  # PX4: bytewise
+                    v = float(struct.unpack("<i", struct.pack("<f", v))[0])
+                self.params[name] = (float(v), typ)
+            v, typ = self.params[name]
+            wire = struct.unpack("<f", struct.pack("<i", int(v)))[0] if typ == 6 else v
+            names = list(self.params)
+            self.mav.param_value_send(name.encode(), wire, typ, len(names), names.index(name))
         elif t == "REQUEST_DATA_STREAM":
             self.data_stream_requests.append(rx)
 
@@ -342,6 +377,12 @@ class MavPeer:
         self.truth.append(
             (tb, (self.pos[0], self.pos[1], self.pos[2]), (self.roll, self.pitch, self.yaw))
         )
+        if self.o.frozen_echo_ms is not None and self.setpoints:
+            sp = self.setpoints[-1].msg
+            self.mav.attitude_target_send(
+                self.o.frozen_echo_ms, 128, [1.0, 0.0, 0.0, 0.0], sp.body_roll_rate,
+                sp.body_pitch_rate, sp.body_yaw_rate, sp.thrust,
+            )  # fmt: skip
         # ATTITUDE last: the bridge acts on it, with the position of the same instant in hand
         if self.o.attitude_quaternion:
             from mpf_mavlink.core.frames import euler_to_quat_wxyz

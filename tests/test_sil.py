@@ -311,7 +311,7 @@ def test_full_sil_mission_converges(tmp_path, capsys):
     # latency (sil.command_latency_s 0.02 s), to the 1 ms of the time_boot_ms stamps it is a
     # difference of; the ATTITUDE period is the 50 Hz stream's, to the same 1 ms
     dc = json.loads((out / "bridge" / "metrics.json").read_text())["delay_compensation"]
-    assert dc["loop_delay_source"] == "measured" and dc["echoes_in_median"] == 9
+    assert dc["loop_delay_source"] == "echo" and dc["echoes_in_median"] == 9
     assert dc["loop_delay_s"] == pytest.approx(0.02, abs=1e-3)
     assert dc["horizon_s"] == pytest.approx(dc["loop_delay_s"], abs=1e-12)
     assert dc["attitude_period_s"] == pytest.approx(0.02, abs=1e-3)
@@ -382,7 +382,7 @@ def test_lockstep_applies_setpoints_after_the_command_latency_at_10_hz(tmp_path)
     assert rc in (0, 5, 6)  # 30 s: not judged (the delay is the point)
     dc = json.loads((out / "bridge" / "metrics.json").read_text())["delay_compensation"]
     assert dc["attitude_period_s"] == pytest.approx(0.1, abs=1e-3)
-    assert dc["loop_delay_source"] == "measured"
+    assert dc["loop_delay_source"] == "echo"
     assert dc["loop_delay_s"] == pytest.approx(0.02, abs=1e-3)
 
 

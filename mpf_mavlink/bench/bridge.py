@@ -43,6 +43,7 @@ _CFG = {
         "tlog_fsync_every_s": None,
         "mode_retries": 1,
         "mode_timeout_s": 0.5,
+        "set_fallback": False,  # the scripted peer answers no parameters
     },
 }
 

@@ -27,11 +27,6 @@ MAV_CMD_DO_REPOSITION = 192
 # (libraries/GCS_MAVLink/GCS_MAVLink_Parameters.cpp, STREAM_*_msgs)
 _AP_STREAM_POSITION, _AP_STREAM_EXTRA1, _AP_STREAM_EXTRA2, _AP_STREAM_EXTRA3 = 6, 10, 11, 12
 # PX4 parameters that say what happens when our setpoints stop (read and printed before engaging)
-_PX4_FALLBACK_PARAMS = ("COM_OF_LOSS_T", "COM_OBL_RC_ACT")
-_PX4_OBL_ACTIONS = {
-    0: "Position (loiter at the current position)", 1: "Altitude", 2: "Stabilized",
-    3: "Return", 4: "Land", 5: "Hold (loiter)", 6: "Terminate", 7: "Disarm",
-}  # fmt: skip
 
 
 class State(enum.IntEnum):
@@ -96,6 +91,7 @@ class BridgeResult:
     final_state: str = "CONNECTING"  # DONE after a stop or hand-back
     streams: dict[str, Any] = field(default_factory=dict)  # requested / measured rates (Hz)
     fallback: str = ""  # what the autopilot does if our setpoints stop
+    fallback_detail: dict[str, Any] = field(default_factory=dict)  # PX4: params, hold, centre
     records_error: str | None = None  # why the run directory could not be written
     verdict: str = ""  # the flight's one-line verdict (mpf_mavlink/runs/verdict.py); "" = not flown
 
@@ -130,6 +126,12 @@ class BridgeResult:
         ):
             v = m.get(k)
             lines.append(f"{label:<17} {'n/a' if v is None else f'{v:.4g}'} {unit}")
+        dc = m.get("delay_compensation")
+        if isinstance(dc, dict) and dc.get("loop_delay_s") is not None:
+            lines.append(
+                f"loop delay        {1e3 * float(dc['loop_delay_s']):.1f} ms ({dc.get('loop_delay_source')}"
+                f"{', off' if not dc.get('enabled') else ''})"
+            )
         if self.out_dir is not None:
             lines.append(
                 f"run directory     {self.out_dir}  (mavlink.tlog, timeseries.csv, metrics.json)"
@@ -201,6 +203,7 @@ class BridgeBase:
         self.last_good_vt: float | None = None
         self.last_send_mono = -math.inf
         self.last_hb_tx_mono = -math.inf
+        self.last_ts_tx_mono = -math.inf  # the latest TIMESYNC request (PX4's loop delay)
         self.first_send_mono: float | None = None
         self.prestream_sends = 0
         self.t_engage: float | None = None
@@ -210,6 +213,7 @@ class BridgeBase:
         # arrival times (monotonic s) per message type while the stream rates are measured
         self._arrivals: dict[str, deque[float]] | None = None
         self.params: dict[str, float] = {}  # PARAM_VALUE answers (name -> value)
+        self.param_types: dict[str, int] = {}  # name -> MAV_PARAM_TYPE
         self.judge_rows: list[tuple[float, float, float, float]] = []  # alt, airspeed, roll, pitch
         # guidance values and state texts for a ground station (after each setpoint, rate-limited)
         self.display = OperatorDisplay(m.operator_display, m.operator_display_hz)

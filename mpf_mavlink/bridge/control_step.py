@@ -65,6 +65,9 @@ class ControlStep(BridgeBase):
         self.n["law_evals"] += 1
         self.t_last = st.t
         self._send_setpoint(st.setpoint, st.time_boot_ms)
+        tl = self.link.tlog
+        if tl is not None and tl.last_us is not None:  # its record time, as replay reads it
+            self.ctl.note_sent(tl.last_us * 1e-6)
         self.last_sp, self.last_time_boot_ms = st.setpoint, st.time_boot_ms
         self.last_good_mono, self.last_good_vt = time.monotonic(), self.vehicle_t
         self.display.values(self.link, st, int(self.state))  # after the setpoint: off its path

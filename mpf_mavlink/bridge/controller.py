@@ -165,6 +165,10 @@ def estimator_params(m: Any) -> EstimatorParams:
     return EstimatorParams(m.attitude_stale_s, m.position_stale_s, m.airspeed_stale_s, m.wind_stale_s, m.wind_filter_tau_s, origin=origin, airspeed_is_eas=m.airspeed_is_eas, airspeed_from_wind=m.airspeed_from_wind)  # fmt: skip
 
 
+#: TIMESYNC answers kept for the clock offset (the bridge asks every 0.5 s: 8 s of them)
+TIMESYNC_WINDOW = 16
+
+
 def _period(T: float, prev: Any, sample: Any) -> float:
     """A stream's period (s) filtered over ~10 samples, from the time since its previous sample
     ``prev`` (None: the first); gaps of 1 s or more and repeated times leave it as it was."""
@@ -222,7 +226,16 @@ class Controller:
         self.rates_pipeline = getattr(m, "flavour", "auto") == "px4"
         if not self.rates_pipeline:  # body rates not sent: no pitch-rate bias to take off them
             self.ad_params = dataclasses.replace(self.ad_params, rate_bias_tau_s=0.0)
-        self.delays: collections.deque[float] = collections.deque(maxlen=9)  # measured (s)
+        # the loop delay measured (s), median of the last 9 of each source (_echo, note_sent)
+        self.delays: collections.deque[float] = collections.deque(maxlen=9)  # echoes
+        self.ts_delays: collections.deque[float] = collections.deque(maxlen=9)  # TIMESYNC
+        self.echo_tb: float | None = None  # the stamp of the latest echo (s, autopilot time)
+        self.echoes_frozen = 0  # echoes whose stamp had not moved: no measurement
+        # TIMESYNC answers: (receive time s, round trip s, vehicle clock minus ours s)
+        self.timesync: collections.deque[tuple[float, float, float]] = collections.deque(
+            maxlen=TIMESYNC_WINDOW
+        )
+        self.tx_due: float | None = None  # the autopilot time of the step not yet sent
         # multi-rate loop (step): a LOCAL_POSITION_NED between two ATTITUDE samples is a
         # control instant too; the periods (s, filtered) of both streams decide which are
         self.position_instants = self.rates_pipeline and bool(
@@ -242,6 +255,9 @@ class Controller:
         name = type(sample).__name__
         if name == "AttitudeTargetSample":
             self._echo(sample)
+            return False
+        if name == "TimesyncSample":
+            self._timesync(sample, rx)
             return False
         est = self.est
         prev_att, prev_loc = est.att, est.local
@@ -273,11 +289,99 @@ class Controller:
         last = a.t_boot_s if self.t_prev_boot is None else max(a.t_boot_s, self.t_prev_boot)
         return tp - last >= half and tp - a.t_boot_s < T - half
 
+    # -- the loop delay ------------------------------------------------------------------------
+    # The delay d from an ATTITUDE sample's time to when the setpoint answering it acts, both on
+    # the autopilot's clock, is measured two ways:
+    #
+    # 1. The ATTITUDE_TARGET echo, when its stamp moves: an autopilot that stamps the set-point
+    #    it uses with the time it received it (PX4 with attitude set-points, our SIL) gives d
+    #    directly, everything included. It is preferred whenever it exists.
+    # 2. TIMESYNC (PX4 body rates): PX4 v1.16 in body-rate OFFBOARD stamps ATTITUDE_TARGET with
+    #    the last attitude set-point from before OFFBOARD, frozen for the whole flight (its body
+    #    rates move, its time does not), so (1) never measures. PX4 answers TIMESYNC with its
+    #    boot clock (the clock of time_boot_ms, in ns): the instant a setpoint reaches PX4, on
+    #    PX4's clock, is its send time plus the clocks' offset plus the uplink latency, and d
+    #    is that minus the ATTITUDE's time. Each answer gives an offset assuming half its
+    #    round trip each way; the uplink latency added back is half the median round trip: on
+    #    a steady link their sum is tc1 - ts1, the request's own uplink latency plus the
+    #    offset, so an asymmetric link does not bias it. The clocks drift: PX4 SITL's lockstep
+    #    clock ran 1.1 % slow on a loaded host (11 ms/s), so the offset is a straight line
+    #    fitted to the last answers (queued ones, round trip beyond twice the median, left
+    #    out) and read at the send time. It
+    #    covers the telemetry's age when sent, the link both ways and the bridge's own time;
+    #    what it leaves out is PX4's receiver-to-rate-controller hop (one uORB publication,
+    #    at most a rate-loop period, a few ms): a lower bound by that much.
+    #    The other candidate, the ATTITUDE body rates' response to the rates sent, measures the
+    #    delay plus the rate loop's own lag, which the prediction must not add (the rate loop
+    #    is modelled as tracking the setpoint), and needs excitation a circle does not give.
+    # Both are deterministic functions of the tlog (record times and message contents), so a
+    # replay measures the same delays: the send time is the tlog record time of the step's
+    # first SET_ATTITUDE_TARGET (:meth:`note_sent`).
+    def delay_source(self) -> str:
+        """Where :attr:`delay_s` comes from: "echo", "timesync" or "mavlink.known_delay_s"."""
+        return "echo" if self.delays else "timesync" if self.ts_delays else "mavlink.known_delay_s"
+
+    def _use_delay(self) -> None:
+        q = self.delays or self.ts_delays
+        if q:
+            self.delay_s = sorted(q)[len(q) // 2]
+
+    def _timesync(self, sample: Any, rx: float | None) -> None:
+        """A TIMESYNC answer to one of our requests (ts1 = our clock when sent, ns): its round
+        trip and the offset of the vehicle's clock from ours (s), assuming a symmetric link.
+        An answer to someone else's request (a round trip outside [0, 1] s) is ignored."""
+        if rx is None or not self.rates_pipeline:
+            return
+        ts = sample.ts1_ns * 1e-9
+        rtt = rx - ts
+        if not 0.0 <= rtt <= 1.0:
+            return
+        self.timesync.append((rx, rtt, sample.tc1_ns * 1e-9 - 0.5 * (ts + rx)))
+
+    def clock_offset(self, t: float) -> tuple[float, float] | None:
+        """(vehicle clock minus ours at our time t, half the median round trip), both s, from
+        the TIMESYNC answers kept; None without any."""
+        if not self.timesync:
+            return None
+        rtts = sorted(r for _, r, _ in self.timesync)
+        med = rtts[len(rtts) // 2]
+        good = [(x, o) for x, r, o in self.timesync if r <= 2.0 * med + 1e-4]
+        n = len(good)
+        tl, ol = good[-1]
+        if n < 3 or tl - good[0][0] < 1.0:
+            return ol, 0.5 * med
+        # least squares o = a + b (x - tl), centred on the latest answer
+        mx = sum(x - tl for x, _ in good) / n
+        mo = sum(o for _, o in good) / n
+        sxx = sum((x - tl - mx) ** 2 for x, _ in good)
+        b = sum((x - tl - mx) * (o - mo) for x, o in good) / sxx
+        return mo + b * (t - tl - mx), 0.5 * med
+
+    def note_sent(self, t_tx: float) -> None:
+        """The latest step's setpoint was sent at t_tx (s, the tlog record time of its first
+        SET_ATTITUDE_TARGET): with TIMESYNC answers, one measurement of the loop delay (see
+        above). Re-sends of the same setpoint do not count."""
+        tb, self.tx_due = self.tx_due, None
+        got = None if tb is None else self.clock_offset(t_tx)
+        if tb is None or got is None:
+            return
+        off, one_way = got
+        d = t_tx + off + one_way - tb
+        if 0.0 <= d <= 0.5:  # beyond: a clock jump, not a link to mend
+            self.ts_delays.append(d)
+            self._use_delay()
+
     def _echo(self, sample: Any) -> None:
-        """The autopilot's ATTITUDE_TARGET: when our setpoint reached it. The setpoint is found
-        by its body rates (float32 on the wire) among those sent; the loop delay is the echo's
-        time minus the time of the ATTITUDE that setpoint answered, both on the autopilot's
-        clock. The delay in use is the median of the last 9 (one late echo does not move it)."""
+        """The autopilot's ATTITUDE_TARGET: when our setpoint reached it. Only an echo whose
+        stamp moved since the previous one measures (a frozen stamp, PX4 v1.16's body-rate
+        OFFBOARD, says nothing about when). The setpoint is found by its body rates (float32
+        on the wire) among those sent; the loop delay is the echo's time minus the time of the
+        ATTITUDE that setpoint answered, both on the autopilot's clock. The delay in use is
+        the median of the last 9 (one late echo does not move it)."""
+        prev, self.echo_tb = self.echo_tb, sample.t_boot_s
+        if prev is not None and sample.t_boot_s <= prev:
+            self.echoes_frozen += 1
+            return
         t0 = self.est.t0
         if not self.sent or not math.isfinite(t0):
             return
@@ -294,7 +398,7 @@ class Controller:
                 d = te - ts
                 if 0.0 <= d <= 0.5:  # beyond: not this setpoint's echo, or not a link to mend
                     self.delays.append(d)
-                    self.delay_s = sorted(self.delays)[len(self.delays) // 2]
+                    self._use_delay()
                 return
 
     def feed_target(self, sample: Any, rx: float | None) -> None:
@@ -342,6 +446,7 @@ class Controller:
             t0 = est.t_boot_s
         self.t0 = float(t0)
         self.est.t0 = self.t0
+        self.est.lock_attitude_source()  # one attitude source, one control rate, per flight
         self.target.restamp(self.t0)
         return self.t0
 
@@ -449,6 +554,7 @@ class Controller:
             sp = safe_setpoint(self.ad_params)
         if self.rates_pipeline:
             self.sent.append((t, sp.body_rates_frd))
+            self.tx_due = est.t_boot_s
         self.t_prev = t
         self.t_prev_boot = est.t_boot_s
         self.position_steps += self.at_position

@@ -3,6 +3,11 @@
 Streams and their times
 -----------------------
 - attitude: ATTITUDE or ATTITUDE_QUATERNION (time_boot_ms). Its time is the control time.
+  One source per flight: ATTITUDE once one has been seen (the bridge asks for its rate),
+  ATTITUDE_QUATERNION only while none has; :meth:`Estimator.lock_attitude_source` (at the
+  mission origin) fixes the choice. PX4 streams both on some links, sampled on its own schedules:
+  taken together their stamps interleave and the control rate became 50 or 100 Hz depending
+  on how PX4 booted.
 - position: LOCAL_POSITION_NED (time_boot_ms), or GLOBAL_POSITION_INT converted to local NED
   about a geodetic origin (configured, else HOME_POSITION, whose local offset is added so both
   sources share the autopilot's local frame). LOCAL is preferred while fresh.
@@ -236,6 +241,9 @@ class Estimator:
         self.p = params
         self.att: Any = None  # AttitudeSample (decoded samples: mavlink.codec)
         self.att_rx: float | None = None
+        self.att_source: str | None = None  # fixed by lock_attitude_source()
+        self.att_seen: set[str] = set()  # the attitude sources heard so far
+        self.att_ignored = 0  # attitude samples of the source not chosen
         self.local: Any = None  # LocalPositionSample
         self.local_rx: float | None = None
         self.glob: Any = None  # GlobalPositionSample
@@ -265,6 +273,15 @@ class Estimator:
             return False
         if not _plausible(name, sample):
             return False
+        if name == "AttitudeSample":
+            src = getattr(sample, "source", "ATTITUDE")
+            self.att_seen.add(src)
+            want = self.att_source or (
+                "ATTITUDE" if "ATTITUDE" in self.att_seen else "ATTITUDE_QUATERNION"
+            )
+            if src != want:
+                self.att_ignored += 1
+                return False
         self._gen += 1  # a new sample: the fused inputs cached for estimate() are out of date
         if name == "AttitudeSample":
             self.att, self.att_rx = sample, t_rx
@@ -284,6 +301,13 @@ class Estimator:
         elif name == "WindSample":
             self.wind, self.wind_rx = sample, t_rx
         return False
+
+    def lock_attitude_source(self) -> str | None:
+        """Fix the attitude source for the rest of the flight (the one in use now); returns it
+        (None before any attitude sample)."""
+        if self.att_source is None and self.att is not None:
+            self.att_source = getattr(self.att, "source", "ATTITUDE")
+        return self.att_source
 
     def geodetic_origin(self) -> tuple[float, float, float, NDArray[np.float64]] | None:
         """(lat, lon, alt, local offset of that point) of the local frame, or None if unknown."""

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+import struct
 import time
 from collections import deque
 from collections.abc import Callable
@@ -11,7 +12,30 @@ from typing import Any
 
 from mpf_mavlink.bridge.base import State, _Stop
 from mpf_mavlink.bridge.control_step import ControlStep
-from mpf_mavlink.mavlink import decode, dialect, is_offboard, mode_name
+from mpf_mavlink.mavlink import Flavour, decode, dialect, is_offboard, mode_name
+
+#: How often the bridge asks PX4 for TIMESYNC (s): the 16 answers kept (controller.py) span
+#: 8 s, over which a line follows the clocks' drift.
+TIMESYNC_PERIOD_S = 0.5
+
+
+_INT_PARAM_TYPES = frozenset({1, 2, 3, 4, 5, 6})  # MAV_PARAM_TYPE_(U)INT8/16/32
+
+
+def param_value(msg: Any, bytewise: bool) -> float | None:
+    """A PARAM_VALUE's value; None if not finite. PX4 encodes integer parameters bytewise (the
+    int's bits in the float field), ArduPilot casts them to float."""
+    v = msg.param_value
+    if bytewise and int(getattr(msg, "param_type", 9)) in _INT_PARAM_TYPES:
+        return float(struct.unpack("<i", struct.pack("<f", v))[0])
+    return float(v) if math.isfinite(v) else None
+
+
+def param_set_value(value: float, param_type: int, bytewise: bool) -> float:
+    """The float a PARAM_SET carries for ``value`` of a parameter of ``param_type``."""
+    if bytewise and param_type in _INT_PARAM_TYPES:
+        return float(struct.unpack("<f", struct.pack("<i", int(value)))[0])
+    return float(value)
 
 
 class LinkIO(ControlStep):
@@ -37,8 +61,10 @@ class LinkIO(ControlStep):
                 )
             if msg.get_type() == "PARAM_VALUE":
                 name = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else ""
-                if math.isfinite(msg.param_value):
-                    self.params[name] = float(msg.param_value)
+                v = param_value(msg, self.flavour is Flavour.PX4)
+                if v is not None:
+                    self.params[name] = v
+                    self.param_types[name] = int(msg.param_type)
                 return
         rx = self._rx_time(msg)
         msg._timestamp = rx  # decoders copy it into the samples (VFR_HUD, WIND, HEARTBEAT)
@@ -84,6 +110,15 @@ class LinkIO(ControlStep):
         if now - self.last_hb_tx_mono >= 1.0:
             self.last_hb_tx_mono = now
             self.link.send_heartbeat()
+        if (
+            self.flavour is Flavour.PX4
+            and not self.m.lockstep  # a lockstep vehicle's clock is not comparable with ours
+            and now - self.last_ts_tx_mono >= TIMESYNC_PERIOD_S
+        ):
+            # a request (tc1 = 0) stamped with the link's clock, which stamps the tlog too:
+            # the answer measures the loop delay (Controller.note_sent)
+            self.last_ts_tx_mono = now
+            self._send(self.link.mav.timesync_encode(0, int(round(self.link.clock() * 1e9))))
         if not self.streaming:
             return
         period = 1.0 / self.m.min_setpoint_rate_hz

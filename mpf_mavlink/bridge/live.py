@@ -145,8 +145,18 @@ class Bridge(Recording):
                     self.log(res.exit_reason)
                     return self._finish(res)
             if self.flavour is Flavour.PX4 and m.set_fallback:
-                res.fallback = self._px4_fallback()
+                why = self._px4_fallback(res)
                 self.log(f"fallback if the bridge dies: {res.fallback}")
+                if why is not None:
+                    res.exit_reason = f"refused to engage: {why}"
+                    res.exit_code = EXIT_CHECK
+                    self.log(res.exit_reason)
+                    return self._finish(res)
+            elif self.flavour is Flavour.PX4:
+                res.fallback = (
+                    "not read or set (mavlink.set_fallback: false): PX4's COM_OBL_RC_ACT decides "
+                    "(stock 0: Position mode, which on a fixed-wing flies straight on, not a hold)"
+                )
             # wait for a complete state (and the live target) before checking anything
             ok = self._spin(m.heartbeat_timeout_s, self._ready)
             if not ok:
@@ -261,6 +271,8 @@ class Bridge(Recording):
         res.engaged = True
         if self.flavour is Flavour.ARDUPILOT and m.set_fallback and not self.n["reengagements"]:
             self._set_set_fallback(res)
+        if self.flavour is Flavour.PX4 and m.set_fallback and not self.n["reengagements"]:
+            self._px4_reposition(res)
         if self.t_engage is None:  # a re-engagement keeps the mission's end
             self.t_engage = self.t_last if self.t_last is not None else 0.0
         self._set_state(State.TRACKING)

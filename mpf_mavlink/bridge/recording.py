@@ -68,16 +68,22 @@ class Recording(Session):
             "pitch_rate_bias_rad_s": st.q_bias,
         }
         # what the delay compensation used at the end (guidance/predict.py): the loop delay
-        # measured from the autopilot's ATTITUDE_TARGET echoes (or mavlink.known_delay_s), the
+        # measured from the autopilot's ATTITUDE_TARGET echoes or TIMESYNC (controller.py, the
+        # loop delay), or mavlink.known_delay_s, the
         # ATTITUDE period, the control-step period (shorter with position instants: the
         # multi-rate loop), the prediction horizon and the look-ahead they gave
         ctl = self.ctl
         metrics["delay_compensation"] = {
             "enabled": bool(self.m.delay_compensation),
             "loop_delay_s": ctl.delay_s,
-            "loop_delay_source": "measured" if ctl.delays else "mavlink.known_delay_s",
+            "loop_delay_source": ctl.delay_source(),  # echo, timesync or mavlink.known_delay_s
             "echoes_in_median": len(ctl.delays),  # the last 9 at most
+            "echoes_frozen": ctl.echoes_frozen,  # ATTITUDE_TARGET stamps that had not moved
+            "timesync_delays_in_median": len(ctl.ts_delays),
+            "timesync_rtt_min_s": min(r for _, r, _ in ctl.timesync) if ctl.timesync else None,
             "attitude_period_s": ctl.att_period_s,
+            "attitude_source": ctl.est.att_source,  # chosen once per flight (estimator.py)
+            "attitude_samples_ignored": ctl.est.att_ignored,  # of the other source
             "step_period_s": ctl.period_s,
             "position_instants": bool(ctl.position_instants),
             "position_steps": ctl.position_steps,
@@ -86,7 +92,7 @@ class Recording(Session):
             "look_ahead_configured_m": ctl.gains.alpha,
         }
         metrics.update(
-            streams=res.streams, fallback=res.fallback,
+            streams=res.streams, fallback=res.fallback, fallback_detail=res.fallback_detail,
             state_reached=res.state_reached, exit_reason=res.exit_reason, exit_code=res.exit_code,
             flavour=res.flavour, tracked_s=res.tracked_s, handback_requested=res.handback_requested,
             handback_confirmed=res.handback_confirmed, checks=res.checks, counters=counters,

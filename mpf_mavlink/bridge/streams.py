@@ -14,13 +14,12 @@ from mpf_mavlink.bridge.base import (
     _AP_STREAM_EXTRA2,
     _AP_STREAM_EXTRA3,
     _AP_STREAM_POSITION,
-    _PX4_FALLBACK_PARAMS,
-    _PX4_OBL_ACTIONS,
     MAV_CMD_DO_REPOSITION,
     MAV_CMD_SET_MESSAGE_INTERVAL,
     BridgeResult,
 )
-from mpf_mavlink.bridge.link_io import LinkIO
+from mpf_mavlink.bridge.link_io import LinkIO, param_set_value
+from mpf_mavlink.bridge.px4_fallback import PX4_FALLBACK_PARAMS, PX4_OBL_HOLD, describe, detail
 from mpf_mavlink.mavlink import (
     Flavour,
     dialect,
@@ -30,6 +29,10 @@ from mpf_mavlink.mavlink import (
     encode_request_message,
     encode_set_message_interval,
 )
+
+#: PARAM_REQUEST_READ / PARAM_SET attempts (0.6 s each) for PX4's fallback: with 20 % loss
+#: each way one round trip fails 36 % of the time, six in a row 0.2 %
+FALLBACK_ATTEMPTS = 6
 
 
 class Streams(LinkIO):
@@ -167,36 +170,100 @@ class Streams(LinkIO):
         self.log(f"no HOME_POSITION within {self.m.home_timeout_s:g} s")
         return False
 
-    def _px4_fallback(self) -> str:
-        """Read PX4's offboard-loss timeout and action (PARAM_REQUEST_READ) and say what they do."""
+    def _px4_fallback(self, res: BridgeResult) -> str | None:
+        """PX4, before engaging: read what an offboard loss does (px4_fallback.py), make it Hold
+        (COM_OBL_RC_ACT = 5 by PARAM_SET, confirmed by the PARAM_VALUE that answers it) and
+        say so in ``res.fallback``. Returns why the bridge must not engage (the Hold could not
+        be confirmed), else None."""
         mav, sysid, comp = self.link.mav, self.m.vehicle_sysid, self.vehicle_compid
-        for name in _PX4_FALLBACK_PARAMS:
-            self._send(mav.param_request_read_encode(sysid, comp, name.encode("ascii"), -1))
-        self._spin(2.0, lambda: all(n in self.params for n in _PX4_FALLBACK_PARAMS))
-        t, act = self.params.get("COM_OF_LOSS_T"), self.params.get("COM_OBL_RC_ACT")
-        if t is None or act is None:
-            return (
-                "PX4 offboard-loss failsafe: COM_OF_LOSS_T / COM_OBL_RC_ACT not answered (unknown)"
-            )
-        what = _PX4_OBL_ACTIONS.get(int(act), f"action {int(act)}")
-        return f"PX4 offboard-loss failsafe after COM_OF_LOSS_T = {t:g} s: COM_OBL_RC_ACT = {int(act)}, {what}"
+        p = self.params
+        core = PX4_FALLBACK_PARAMS[:2]
+        # a request or its answer lost on a lossy link is asked again (an autopilot without a
+        # parameter stays silent: only the first two are required)
+        for attempt in range(FALLBACK_ATTEMPTS):
+            for name in PX4_FALLBACK_PARAMS:
+                if name not in p:
+                    self._send(mav.param_request_read_encode(sysid, comp, name.encode("ascii"), -1))
+            if self._spin(0.6, lambda: all(n in p for n in PX4_FALLBACK_PARAMS)):
+                break
+            if attempt >= 1 and all(n in p for n in core):
+                break
+        act = p.get("COM_OBL_RC_ACT")
+        set_from: float | None = None
+        if act is not None and int(act) != PX4_OBL_HOLD:
+            set_from = act
+            ptype = self.param_types.get("COM_OBL_RC_ACT", dialect.MAV_PARAM_TYPE_INT32)
+            p.pop("COM_OBL_RC_ACT", None)
+            for _ in range(FALLBACK_ATTEMPTS):  # answered by PARAM_VALUE; a lost one re-sent
+                self._send(mav.param_set_encode(
+                    sysid, comp, b"COM_OBL_RC_ACT",
+                    param_set_value(PX4_OBL_HOLD, ptype, True), ptype))  # fmt: skip
+                if self._spin(0.6, lambda: "COM_OBL_RC_ACT" in p):
+                    break
+        self._px4_fallback_state = (set_from, None)
+        res.fallback = describe(p, set_from)
+        res.fallback_detail = detail(p, set_from, None)
+        act = p.get("COM_OBL_RC_ACT")
+        if act is None or int(act) != PX4_OBL_HOLD:
+            got = "no answer" if act is None else f"it is {int(act)}"
+            return f"PX4's offboard-loss action could not be made Hold (COM_OBL_RC_ACT = 5: {got}); mavlink.set_fallback: false flies without"
+        return None
 
-    def _set_set_fallback(self, res: BridgeResult) -> None:
-        """ArduPlane in GUIDED: make its guided target a loiter about the path's centre at the
-        path's altitude (radius and direction of the path when it is a circle), so that the
-        aircraft circles where the mission was when our setpoints stop (GUIDED_TIMEOUT)."""
+    def _px4_reposition(self, res: BridgeResult) -> None:
+        """PX4 in OFFBOARD: MAV_CMD_DO_REPOSITION to the path's centre at the path's altitude,
+        without a mode change (param2 = 0): the navigator keeps it as the loiter point of the
+        next Hold (the offboard-loss failsafe set above, or our hand-back), instead of where the
+        aircraft happens to be then."""
+        set_from = getattr(self, "_px4_fallback_state", (None, None))[0]
+        got = self._path_centre()
+        if isinstance(got, str):
+            res.fallback = describe(self.params, set_from)
+            self.log(f"fallback if the bridge dies: {res.fallback} ({got})")
+            return
+        lat, lon, alt, _r, _ccw = got
+        self.acks.clear()
+        try:
+            self._send(encode_do_reposition(
+                self.link.mav, self.m.vehicle_sysid, self.vehicle_compid, lat, lon, alt, 100.0,
+                False, px4=True))  # fmt: skip
+        except ValueError as e:
+            self.log(f"fallback: no reposition point ({e})")
+            return
+        acks: list[Any] = []
+
+        def acked() -> bool:
+            acks.extend(a for a in self.acks if a.command == MAV_CMD_DO_REPOSITION)
+            self.acks.clear()
+            return bool(acks)
+
+        self._spin(1.5, acked)
+        where = f"the path's centre {lat:.7f}, {lon:.7f} at {alt:.1f} m AMSL"
+        centre = None
+        if acks and acks[0].accepted:
+            centre = where
+        else:
+            why = acks[0].result_name if acks else "no COMMAND_ACK"
+            self.log(f"fallback: DO_REPOSITION to {where} not accepted ({why})")
+        res.fallback = describe(self.params, set_from, centre)
+        res.fallback_detail = detail(
+            self.params,
+            set_from,
+            None if centre is None else {"lat": lat, "lon": lon, "alt_amsl_m": alt},
+        )
+        self.log(f"fallback if the bridge dies: {res.fallback}")
+
+    def _path_centre(self) -> tuple[float, float, float, float, bool] | str:
+        """(lat, lon, alt AMSL, radius m, counter-clockwise) of the path's centre now, or why
+        not."""
         from mpf_mavlink.core.frames import ned_to_geodetic
 
         o = self.est.geodetic_origin()
         est, _ = self.est.estimate()
         if o is None or est is None:
-            res.fallback = "ArduPlane's own GUIDED loiter (no HOME_POSITION: none set by us)"
-            self.log(f"fallback if the bridge dies: {res.fallback}")
-            return
+            return "no HOME_POSITION"
         tgt = self.target.state(est.vehicle.t)
         if isinstance(tgt, str):
-            res.fallback = f"ArduPlane's own GUIDED loiter ({tgt})"
-            return
+            return tgt
         pts = self.path.positions()  # in the target frame
         centre_T = np.asarray(pts, float).mean(axis=0)
         centre = tgt.position + tgt.R_T_I @ centre_T
@@ -205,8 +272,22 @@ class Streams(LinkIO):
         p = self.cfg.path
         ccw = p.type in ("circle", "helix") and not p.clockwise
         lat0, lon0, alt0, off = o
-        rel = centre - np.asarray(off, float)
-        lat, lon, alt = ned_to_geodetic(rel, lat0, lon0, alt0)
+        lat, lon, alt = ned_to_geodetic(centre - np.asarray(off, float), lat0, lon0, alt0)
+        return float(lat), float(lon), float(alt), radius, bool(ccw)
+
+    def _set_set_fallback(self, res: BridgeResult) -> None:
+        """ArduPlane in GUIDED: make its guided target a loiter about the path's centre at the
+        path's altitude (radius and direction of the path when it is a circle), so that the
+        aircraft circles where the mission was when our setpoints stop (GUIDED_TIMEOUT)."""
+        got = self._path_centre()
+        if isinstance(got, str):
+            if got == "no HOME_POSITION":
+                res.fallback = "ArduPlane's own GUIDED loiter (no HOME_POSITION: none set by us)"
+                self.log(f"fallback if the bridge dies: {res.fallback}")
+            else:
+                res.fallback = f"ArduPlane's own GUIDED loiter ({got})"
+            return
+        lat, lon, alt, radius, ccw = got
         self.acks.clear()
         try:
             self._send(encode_do_reposition(

@@ -152,8 +152,12 @@ class MavlinkConfig:
     # What the autopilot does if our setpoints stop (the bridge died), chosen and printed before
     # tracking. ArduPlane: once GUIDED is confirmed, its guided target (MAV_CMD_DO_REPOSITION)
     # becomes a loiter about the path's centre at the path's altitude, with the path's radius
-    # and direction (flown after GUIDED_TIMEOUT). PX4: COM_OF_LOSS_T and COM_OBL_RC_ACT are read
-    # and printed
+    # and direction (flown after GUIDED_TIMEOUT). PX4: COM_OF_LOSS_T, COM_OBL_RC_ACT and the
+    # RC-loss parameters are read, COM_OBL_RC_ACT is made Hold (5) by PARAM_SET with read-back
+    # (the bridge refuses to engage when that is not confirmed: stock 0 is Position mode, which
+    # on a fixed-wing flies straight on), and once OFFBOARD is confirmed the Hold's loiter point
+    # becomes the path's centre (MAV_CMD_DO_REPOSITION, no mode change; radius NAV_LOITER_RAD).
+    # false: nothing is read or set (bridge/px4_fallback.py)
     set_fallback: bool = True
 
     def validate(self, cfg: Any, src: str) -> None:

@@ -5,6 +5,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+#: Messages whose time_boot_ms is the time of a set-point the autopilot holds, not the time of
+#: the message: old stamps are normal there (see :meth:`BootClockGate.check`).
+SETPOINT_STAMPED = frozenset(
+    {"ATTITUDE_TARGET", "POSITION_TARGET_LOCAL_NED", "POSITION_TARGET_GLOBAL_INT"}
+)
+
 
 # ---------------------------------------------------------------------------------------------
 # The vehicle's boot clock
@@ -113,8 +119,17 @@ class BootClockGate:
 
     def check(self, mtype: str, t_boot_s: float, t_rx: float) -> str | None:
         """None to accept the sample; "time" (inconsistent clock), "stale" or "settling" (no
-        clock established yet) to reject it."""
+        clock established yet) to reject it. A set-point echo (:data:`SETPOINT_STAMPED`)
+        carries the time of its set-point, not the time it was sent: any time up to "now" is
+        consistent (PX4 v1.16 in body-rate OFFBOARD keeps the stamp of the last attitude
+        set-point from before OFFBOARD for the whole flight), a time ahead of "now" is not, and
+        it never moves the clock."""
         off = t_boot_s - t_rx
+        if mtype in SETPOINT_STAMPED:
+            if self.off is None:
+                return "settling"
+            hi = self.hi - self.drift_s_per_s * max(0.0, t_rx - self.hi_t)
+            return None if off - hi <= self.fwd_tol_s and t_boot_s >= 0.0 else "time"
         if self.off is None:
             return self._settle(mtype, t_boot_s, off, t_rx)
         hi = self.hi - self.drift_s_per_s * max(0.0, t_rx - self.hi_t)

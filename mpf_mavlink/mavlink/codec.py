@@ -95,6 +95,7 @@ __all__ = [
     "TM_BODY_YAW_RATE_IGNORE",
     "TM_THROTTLE_IGNORE",
     "TM_THRUST_BODY_SET",
+    "TimesyncSample",
     "TYPE_MASK_ARDUPLANE_ATTITUDE",
     "TYPE_MASK_PX4_RATES",
     "VfrHudSample",
@@ -108,6 +109,7 @@ __all__ = [
     "decode_global_position_int",
     "decode_heartbeat",
     "decode_home_position",
+    "decode_timesync",
     "decode_local_position_ned",
     "decode_vfr_hud",
     "decode_wind",
@@ -239,6 +241,16 @@ class AttitudeTargetSample:
     rates_frd: tuple[float, float, float]  # rad/s, body rate setpoint (p, q, r)
     thrust: float  # 0..1
     type_mask: int
+
+
+@dataclass(frozen=True)
+class TimesyncSample:
+    """TIMESYNC (#111) from the vehicle: ``tc1_ns`` its clock (PX4 and ArduPilot: time since
+    boot, the clock of time_boot_ms, in ns), ``ts1_ns`` echoed from the request it answers
+    (0 in a request of its own, which the bridge does not answer)."""
+
+    tc1_ns: int
+    ts1_ns: int
 
 
 # ---------------------------------------------------------------------------------------------
@@ -514,6 +526,16 @@ def decode_attitude_target(msg: Any) -> AttitudeTargetSample | None:
     return AttitudeTargetSample(t, rates, thrust, tm)
 
 
+def decode_timesync(msg: Any) -> TimesyncSample | None:
+    try:
+        tc1, ts1 = int(msg.tc1), int(msg.ts1)
+    except (AttributeError, TypeError, ValueError):
+        return None
+    if tc1 <= 0 or ts1 <= 0:  # a request (tc1 == 0), not an answer
+        return None
+    return TimesyncSample(tc1, ts1)
+
+
 _DECODERS: dict[str, Callable[[Any], Any]] = {
     "ATTITUDE": decode_attitude,
     "ATTITUDE_QUATERNION": decode_attitude_quaternion,
@@ -527,6 +549,7 @@ _DECODERS: dict[str, Callable[[Any], Any]] = {
     "COMMAND_ACK": decode_command_ack,
     "FOLLOW_TARGET": decode_follow_target,
     "ATTITUDE_TARGET": decode_attitude_target,
+    "TIMESYNC": decode_timesync,
 }
 DECODED_TYPES = frozenset(_DECODERS)
 

@@ -228,18 +228,22 @@ def encode_do_reposition(
     alt_amsl_m: float,
     radius_m: float,
     counter_clockwise: bool,
+    px4: bool = False,
 ) -> Any:
     """COMMAND_INT MAV_CMD_DO_REPOSITION (frame MAV_FRAME_GLOBAL, AMSL): ArduPlane in GUIDED
     makes it its guided waypoint, a loiter of ``radius_m`` (param3) about it, counter-clockwise
     when param4 is non-zero (ArduPlane/GCS_MAVLink_Plane.cpp, handle_command_int_do_reposition;
-    in GUIDED it leaves the forced attitude alone)."""
+    in GUIDED it leaves the forced attitude alone). ``px4``: param2 = 0 (no mode change) and
+    param3/param4 NaN (PX4 reads param4 as a yaw and has no radius there: its Hold loiters
+    NAV_LOITER_RAD); the navigator keeps the point for the next Hold (navigator_main.cpp)."""
     _check_ids(0, target_sys, target_comp)
     if not _geodetic_ok(lat_deg, lon_deg, alt_amsl_m) or not (0.0 < radius_m < 1e5):
         raise ValueError(
             f"bad reposition target {lat_deg!r}, {lon_deg!r}, {alt_amsl_m!r} m, radius {radius_m!r} m"
         )
+    p3, p4 = (math.nan, math.nan) if px4 else (float(radius_m), 1.0 if counter_clockwise else 0.0)
     return mav.command_int_encode(
         target_sys, target_comp, _d.MAV_FRAME_GLOBAL, MAV_CMD_DO_REPOSITION, 0, 0,
-        -1.0, 0.0, float(radius_m), 1.0 if counter_clockwise else 0.0,
+        -1.0, 0.0, p3, p4,
         int(round(lat_deg * 1e7)), int(round(lon_deg * 1e7)), float(alt_amsl_m),
     )  # fmt: skip

@@ -332,6 +332,10 @@ class Link:
             self.counters.io_errors += 1
             self.counters.tlog_write_errors += 1
 
+    def clock(self) -> float:
+        """The link's clock (s since the epoch): what its tlog records are stamped with."""
+        return float(self._clock())
+
     def send_heartbeat(self) -> None:
         """Companion heartbeat (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID), ~1 Hz."""
         self.send(encode_companion_heartbeat(self.conn.mav))

@@ -326,6 +326,7 @@ class _Replayer:
         where = f"SET_ATTITUDE_TARGET #{self._n_sat} (tlog record {i}, t = {self._t_rel(t):.3f} s, time_boot_ms {int(rec['time_boot_ms'])})"
         st = self._pending
         if st is not None and rec["time_boot_ms"] == st.time_boot_ms:
+            self.ctl.note_sent(t)  # the step's first send measures the loop delay (TIMESYNC)
             self._compare(where, rec, self._expected(st.setpoint, st.time_boot_ms))
             return
         if rec == self._last_sent or rec == self._last_expected:
