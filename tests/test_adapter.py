@@ -77,7 +77,8 @@ def test_bank_is_clipped_and_climb_raises_pitch():
 
 
 def test_airspeed_hold_integrates_and_anti_windup():
-    # 2 m/s slow: kp e = 0.1, integrator +ki e dt each call
+    # the airspeed PI (energy control off): 2 m/s slow: kp e = 0.1, integrator +ki e dt each call
+    P = dataclasses.replace(globals()["P"], energy_control=False)
     sp, s1 = adapt((0.0, 0.0, 0.0), 13.0, LEVEL, NORTH, 0.5, P)
     assert s1.integ == pytest.approx(P.airspeed_ki * 2.0 * 0.5)
     assert sp.thrust == pytest.approx(P.trim_thrust + 0.1 + s1.integ)

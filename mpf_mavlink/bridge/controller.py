@@ -151,9 +151,10 @@ def adapter_params(cfg: Config) -> AdapterParams:
     """The adapter's limits and gains from the ``vehicle`` and ``adapter`` sections."""
     a = cfg.section("adapter")
     v = cfg.vehicle
+    fields = {f.name: getattr(a, f.name) for f in dataclasses.fields(a)}
+    fields["thrust_per_gamma"] = a.k_thrust(v)
     return AdapterParams(
-        max_bank_rad=v.max_bank_rad, airspeed_sp_m_s=v.airspeed_m_s,
-        **{f.name: getattr(a, f.name) for f in dataclasses.fields(a)},
+        max_bank_rad=v.max_bank_rad, airspeed_sp_m_s=v.airspeed_m_s, **fields
     )  # fmt: skip
 
 

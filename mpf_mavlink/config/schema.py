@@ -95,6 +95,10 @@ class VehicleConfig:
     airspeed_max_m_s: float | None = field(default=None, metadata=_pos())
     max_bank_rad: float = field(default=0.785398, metadata={"check": ("range_open", 0.0, 1.5707)})
     max_turn_rate_rad_s: float | None = field(default=None, metadata=_pos())
+    # steady climb at full thrust and sink at idle, both at airspeed_m_s (m/s, > 0); null:
+    # unknown (check measures them from a JSBSim SIL airframe, else skips the climb check)
+    max_climb_rate_m_s: float | None = field(default=None, metadata=_pos())
+    max_sink_rate_m_s: float | None = field(default=None, metadata=_pos())
 
     @property
     def v_min(self) -> float:

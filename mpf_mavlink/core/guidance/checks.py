@@ -123,6 +123,116 @@ def gain_condition(
     return CheckResult("gain_condition", status, text, figs)
 
 
+def demanded_directions(
+    path: TabulatedPath,
+    target: TargetMotion,
+    v_w: float,
+    horizon_s: float,
+    s0: float = 0.0,
+    wind_ned: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    dt_s: float = 0.05,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(t (s), wd1 (n, 3)): the air-relative direction flying the moving path exactly demands
+    at airspeed v_w over the horizon (see :func:`feasibility`)."""
+    eta = np.asarray(wind_ned, float)
+    ts = _times(horizon_s, dt_s)
+    s = s0
+    W1 = np.empty((len(ts), 3))
+    for k, t in enumerate(ts):
+        st = target.state(float(t))
+        pd, f1, f2, f3, _, _ = path.eval(s)
+        R = st.R_T_I
+        f1I, f2I, f3I = R @ f1, R @ f2, R @ f3
+        u = st.velocity + np.cross(R @ st.omega_T, R @ pd) - eta
+        a21, a31 = float(u @ f2I) / v_w, float(u @ f3I) / v_w
+        a11 = math.sqrt(max(1e-12, 1.0 - a21 * a21 - a31 * a31))
+        W1[k] = a11 * f1I + a21 * f2I + a31 * f3I
+        sdot = v_w * a11 - float(u @ f1I)
+        if k + 1 < len(ts):
+            s += sdot * (ts[k + 1] - t)
+    return ts, W1
+
+
+def climb_feasibility(
+    ts: np.ndarray,
+    W1: np.ndarray,
+    v_w: float,
+    v_min: float,
+    v_max: float,
+    max_climb_m_s: float | None,
+    max_sink_m_s: float | None,
+    marginal: float = 0.8,
+    g: float = GRAVITY_M_S2,
+) -> CheckResult:
+    """The climb and descent the path demands (air-relative: path slope, target climb, vertical
+    wind; c = -v_w wd1_z) against the aircraft's steady capability at v_w.
+
+    A climb beyond max_climb for a while is paid from kinetic energy: the speed may fall from
+    v_w to v_min, a reserve of (v_w^2 - v_min^2) / (2 g) m of height (a descent beyond max_sink
+    fills v_max likewise). The deficit D(t) = max(0, D + (c - max_climb) dt) is the largest
+    integral of the excess over any interval: D above the reserve is refused (the airspeed
+    cannot be held), a peak demand above ``marginal`` x the capability or D above half the
+    reserve warns. Unknown capability (None): a warning when the path climbs or sinks at all.
+    """
+    c = -v_w * W1[:, 2]
+    k_up, k_dn = int(np.argmax(c)), int(np.argmin(c))
+    up, dn = max(float(c[k_up]), 0.0), max(float(-c[k_dn]), 0.0)
+    figs: dict[str, float | bool | None] = {
+        "peak_climb_m_s": up, "peak_sink_m_s": dn,
+        "max_climb_m_s": max_climb_m_s, "max_sink_m_s": max_sink_m_s,
+    }  # fmt: skip
+    head = (
+        f"the path demands up to {up:.2f} m/s of climb at t = {ts[k_up]:.1f} s and "
+        f"{dn:.2f} m/s of sink at t = {ts[k_dn]:.1f} s"
+    )
+    if max_climb_m_s is None or max_sink_m_s is None:
+        st = "warn" if max(up, dn) > 0.5 else "pass"
+        return CheckResult(
+            "climb", st, head + " (capability unknown: set vehicle.max_climb_rate_m_s and "
+            "vehicle.max_sink_rate_m_s)", figs,
+        )  # fmt: skip
+    res_up = max(v_w * v_w - v_min * v_min, 0.0) / (2.0 * g)
+    res_dn = max(v_max * v_max - v_w * v_w, 0.0) / (2.0 * g)
+    dts = np.diff(ts, prepend=ts[0])
+    d_up = d_dn = 0.0
+    worst_up = worst_dn = 0.0
+    t_up = t_dn = float(ts[0])
+    for k in range(len(ts)):
+        d_up = max(0.0, d_up + (c[k] - max_climb_m_s) * dts[k])
+        d_dn = max(0.0, d_dn + (-c[k] - max_sink_m_s) * dts[k])
+        if d_up > worst_up:
+            worst_up, t_up = d_up, float(ts[k])
+        if d_dn > worst_dn:
+            worst_dn, t_dn = d_dn, float(ts[k])
+    figs.update(deficit_climb_m=worst_up, deficit_sink_m=worst_dn, reserve_climb_m=res_up,
+                reserve_sink_m=res_dn)  # fmt: skip
+    cap = f" (capability at {v_w:g} m/s: climb {max_climb_m_s:g}, sink {max_sink_m_s:g} m/s)"
+    if worst_up > res_up:
+        return CheckResult(
+            "climb", "fail",
+            f"the path climbs faster than the aircraft can for long: {worst_up:.1f} m of "
+            f"height beyond its climb by t = {t_up:.1f} s, more than the {res_up:.1f} m that "
+            f"slowing from {v_w:g} to {v_min:g} m/s buys; " + head + cap, figs,
+        )  # fmt: skip
+    if worst_dn > res_dn:
+        return CheckResult(
+            "climb", "fail",
+            f"the path descends faster than the aircraft can at idle: {worst_dn:.1f} m beyond "
+            f"its sink by t = {t_dn:.1f} s, more than the {res_dn:.1f} m that speeding up to "
+            f"{v_max:g} m/s absorbs; " + head + cap, figs,
+        )  # fmt: skip
+    marg = (
+        up > marginal * max_climb_m_s or dn > marginal * max_sink_m_s
+        or worst_up > 0.5 * res_up or worst_dn > 0.5 * res_dn
+    )  # fmt: skip
+    return CheckResult(
+        "climb",
+        "warn" if marg else "pass",
+        head + cap + (f": marginal (above {marginal:g} x the capability)" if marg else ""),
+        figs,
+    )
+
+
 def feasibility(
     path: TabulatedPath,
     target: TargetMotion,
@@ -144,22 +254,7 @@ def feasibility(
     The bank must stay ``bank_margin_rad`` below the limit (and the turn rate below the rate of
     that bank): a path flown at the limit leaves the feedback nothing to correct with.
     """
-    eta = np.asarray(wind_ned, float)
-    ts = _times(horizon_s, dt_s)
-    s = s0
-    W1 = np.empty((len(ts), 3))
-    for k, t in enumerate(ts):
-        st = target.state(float(t))
-        pd, f1, f2, f3, _, _ = path.eval(s)
-        R = st.R_T_I
-        f1I, f2I, f3I = R @ f1, R @ f2, R @ f3
-        u = st.velocity + np.cross(R @ st.omega_T, R @ pd) - eta
-        a21, a31 = float(u @ f2I) / v_w, float(u @ f3I) / v_w
-        a11 = math.sqrt(max(1e-12, 1.0 - a21 * a21 - a31 * a31))
-        W1[k] = a11 * f1I + a21 * f2I + a31 * f3I
-        sdot = v_w * a11 - float(u @ f1I)
-        if k + 1 < len(ts):
-            s += sdot * (ts[k + 1] - t)
+    ts, W1 = demanded_directions(path, target, v_w, horizon_s, s0, wind_ned, dt_s)
     dW = np.gradient(W1, ts, axis=0)
     rate = np.linalg.norm(dW, axis=1)
     banks = np.array(
