@@ -154,7 +154,8 @@ def adapter_params(cfg: Config) -> AdapterParams:
     fields = {f.name: getattr(a, f.name) for f in dataclasses.fields(a)}
     fields["thrust_per_gamma"] = a.k_thrust(v)
     return AdapterParams(
-        max_bank_rad=v.max_bank_rad, airspeed_sp_m_s=v.airspeed_m_s, **fields
+        max_bank_rad=v.max_bank_rad, airspeed_sp_m_s=v.airspeed_m_s, airspeed_min_m_s=v.v_min,
+        airspeed_max_m_s=v.v_max, **fields,
     )  # fmt: skip
 
 

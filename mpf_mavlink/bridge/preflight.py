@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -15,6 +16,7 @@ from mpf_mavlink.core.guidance.checks import (
     demanded_directions,
     feasibility,
     gain_condition,
+    vertical_gusts,
 )
 from mpf_mavlink.core.guidance.law import VehicleState, mpf_law
 from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
@@ -123,6 +125,28 @@ def start_altitude(cfg: Config) -> CheckResult:
     )  # fmt: skip
 
 
+def climb_check(
+    cfg: Config, path: Any, target: Any, horizon: float, s0: float, steady: Any
+) -> CheckResult:
+    """:func:`climb_feasibility` of the config: the vehicle's climb/sink capability, the
+    verdict's airspeed window as the energy reserve, and in the SIL the vertical gusts of its
+    turbulence (2 sigma_w over L_w / V at the altitude above sea level the path reaches, as
+    JSBSim keys them: home_alt_m + height)."""
+    v, m = cfg.vehicle, cfg.metrics
+    ts, W1, P = demanded_directions(
+        path, target, v.airspeed_m_s, horizon, s0, steady, with_positions=True
+    )
+    gusts = None
+    sil = cfg.extra.get("sil")
+    if sil is not None and sil.link != "none" and sil.turbulence != "none":
+        gusts = vertical_gusts(sil.turbulence, sil.home_alt_m - P[:, 2], v.airspeed_m_s)
+    return climb_feasibility(
+        ts, W1, v.airspeed_m_s, v.v_min * (1.0 - m.airspeed_tolerance),
+        v.v_max * (1.0 + m.airspeed_tolerance), v.max_climb_rate_m_s, v.max_sink_rate_m_s,
+        gusts=gusts,
+    )  # fmt: skip
+
+
 def airspeed_hold(cfg: Config) -> CheckResult | None:
     """An airspeed the aircraft cannot hold: the thrust it needs in level flight
     (adapter.trim_thrust) at the ceiling (adapter.thrust_max), or no climb left
@@ -180,14 +204,7 @@ def run_checks(cfg: Config, scripted_target: bool = True) -> list[CheckResult]:
             )  # fmt: skip
 
         results.append(feasible_at(cfg.vehicle.airspeed_m_s))
-        v = cfg.vehicle
-        ts, W1 = demanded_directions(path, target, v.airspeed_m_s, horizon, s0, steady)
-        results.append(
-            climb_feasibility(
-                ts, W1, v.airspeed_m_s, v.v_min, v.v_max, v.max_climb_rate_m_s,
-                v.max_sink_rate_m_s,
-            )
-        )  # fmt: skip
+        results.append(climb_check(cfg, path, target, horizon, s0, steady))
         if gust > 0.0:
             results.append(gust_feasibility(feasible_at, cfg.vehicle.airspeed_m_s, gust))
         hold = airspeed_hold(cfg)

@@ -110,6 +110,8 @@ class AdapterParams:
     max_pitch_rad: float = 0.35
     trim_pitch_rad: float = 0.03
     airspeed_sp_m_s: float = 15.0
+    airspeed_min_m_s: float = 0.0  # the envelope the "height" priority protects (m/s)
+    airspeed_max_m_s: float = math.inf
     trim_thrust: float = 0.5
     thrust_min: float = 0.0  # PX4 FW_THR_MIN, ArduPlane THR_MIN (electric: 0)
     thrust_max: float = 1.0
@@ -164,6 +166,7 @@ class AdapterState:
     vdot_f: float = 0.0
     gam_f: float | None = None
     balance: float = 0.0
+    gam_m_f: float | None = None  # rad, the measured flight-path angle, low-passed
 
     def for_reengage(self, trim_thrust_offset: float = 0.0) -> AdapterState:
         """After a hand-back: the thrust and pitch-rate integrators and the energy filters start
@@ -348,12 +351,15 @@ def adapt(
         params.max_pitch_rad,
     )
     ff = params.load_factor_ff * (n - 1.0)
-    en = EnergyState(state.integ, state.v_prev, state.v_sp_prev, state.vdot_f, state.gam_f, bal)
+    en = EnergyState(
+        state.integ, state.v_prev, state.v_sp_prev, state.vdot_f, state.gam_f, bal, state.gam_m_f
+    )
     if params.energy_control:
         # the flight-path angle the law aims at one tau_pitch ahead (pitch limits included)
         gamma_c = gamma + gamd_law * params.tau_pitch_s
         gamma_c = _clip(gamma_c, params.min_pitch_rad - trim, params.max_pitch_rad - trim)
-        thrust, en = energy_thrust(params, en, v, v_sp, gamma, gamma_c, ff, dt, g)
+        gamma_law = gamma + gamd_law * params.tau_pitch_s
+        thrust, en = energy_thrust(params, en, v, v_sp, gamma, gamma_c, ff, dt, g, gamma_law)
     else:
         thrust, integ = _airspeed_pi(params, state.integ, v_sp - v, ff, dt)
         en = en._replace(integ=integ)
@@ -366,6 +372,7 @@ def adapt(
     return Setpoint((p, q, r), quat, thrust, bank, pitch_sp, n), AdapterState(
         en.integ, trim_hat, k_turn, bank, None if clipped else chid, q_bias,
         q if q_free else None, en.v_prev, en.v_sp_prev, en.vdot_f, en.gam_f, en.balance,
+        en.gam_m_f,
     )  # fmt: skip
 
 
@@ -378,6 +385,7 @@ class EnergyState(NamedTuple):
     vdot_f: float
     gam_f: float | None
     balance: float
+    gam_m_f: float | None = None
 
 
 def _airspeed_pi(
@@ -406,6 +414,7 @@ def energy_thrust(
     ff: float,
     dt: float,
     g: float = GRAVITY_M_S2,
+    gamma_law: float | None = None,
 ) -> tuple[float, EnergyState]:
     """Thrust from the total specific energy rate, and the priority's flight-path offset.
 
@@ -422,32 +431,37 @@ def energy_thrust(
       T   = T_trim + k_T E_c~ + k_E (E_c - E) + k_I integral(E_c - E) dt + k_n (n - 1)
 
     gamma_c: the flight-path angle the law aims at one tau_pitch ahead, which carries the path's
-    slope, the target's climb and the law's correction (gamma + gamma_dot tau); E_c~ is E_c with
-    gamma_c low-passed (vdot_tau_s: gusts tilt the air-relative gamma, the mean is what the
-    airframe must sustain); V_dot low-passed likewise from the airspeed's difference. k_T
+    slope, the target's climb and the law's correction (gamma + gamma_dot tau). gamma_c, gamma and
+    V_dot (from the airspeed's difference) are low-passed over vdot_tau_s before they enter:
+    gusts tilt the air-relative gamma and the law's correction rings with them, and a throttle
+    that follows them chattered between idle and 0.8 within 0.5 s in light turbulence. k_T
     (thrust_per_gamma) is the airframe's throttle per rad of steady climb, so the feed-forward
     alone flies a demanded climb at constant speed; k_E, k_I close the loop on what it misses.
     Anti-windup: the integrator moves only when the output is not saturated in the direction
     the error pushes, and never beyond what takes the output to a limit.
 
     Priority (when thrust cannot meet E_c): the unmet rate u = (T_raw - T_limit) / (k_T + k_E)
-    (rad; > 0 short of thrust, < 0 a surplus at the floor, e.g. an updraft at idle). With
-    ``priority`` "airspeed" the flight-path demand is moved by -u (low-passed, balance_tau_s):
-    at the ceiling the aircraft climbs only as steeply as full thrust sustains at the set-point
-    airspeed, at the floor it puts the surplus into height rather than speed. With "height" the
-    path's flight-path angle stands and the airspeed takes the difference.
+    (rad; > 0 short of thrust, < 0 a surplus at the floor, e.g. an updraft at idle), so the
+    flight path thrust sustains at its limit is gamma_c - u. With ``priority`` "airspeed" the
+    law's flight-path demand ``gamma_law`` (gamma + gamma_dot tau, unclipped; None: gamma_c) is
+    moved to it (low-passed, balance_tau_s): at the ceiling the aircraft climbs only as steeply
+    as full thrust sustains at the set-point airspeed, at the floor it puts the surplus into
+    height rather than speed. With "height" the path's flight-path angle stands and the airspeed
+    takes the difference, until it is within 1 m/s of airspeed_min_m_s / airspeed_max_m_s (the
+    vehicle's envelope): from there to the limit the offset ramps in all the same.
     Returns (thrust, state); the state's ``balance`` is that offset (rad).
     """
     p = params
-    integ, v_prev, v_sp_prev, vdot_f, gam_f, bal = st
+    integ, v_prev, v_sp_prev, vdot_f, gam_f, bal, gam_m_f = st
     a = min(1.0, dt / p.vdot_tau_s) if p.vdot_tau_s > 0.0 and dt > 0.0 else 1.0
     if v_prev is not None and dt > 0.0:
         vdot_f += a * ((v - v_prev) / dt - vdot_f)
     vsp_dot = (v_sp - v_sp_prev) / dt if v_sp_prev is not None and dt > 0.0 else 0.0
     gam_f = gamma_c if gam_f is None else gam_f + a * (gamma_c - gam_f)
+    gam_m_f = gamma if gam_m_f is None else gam_m_f + a * (gamma - gam_m_f)
     tau_v = p.speed_tau_s if p.speed_tau_s > 0.0 else 1.0
     vdot_c = vsp_dot + (v_sp - v) / tau_v
-    e_E = (gamma_c - gamma) + (vdot_c - vdot_f) / g
+    e_E = (gam_f - gam_m_f) + (vdot_c - vdot_f) / g
     base = p.trim_thrust + p.thrust_per_gamma * (gam_f + vdot_c / g) + p.energy_kp * e_E + ff
     raw = base + integ
     if dt > 0.0 and not ((raw >= p.thrust_max and e_E > 0) or (raw <= p.thrust_min and e_E < 0)):
@@ -458,13 +472,23 @@ def energy_thrust(
     thrust = _clip(raw, p.thrust_min, p.thrust_max)
     k = p.thrust_per_gamma + p.energy_kp
     u = (raw - thrust) / k if k > 0.0 else 0.0
-    target = _clip(-u, -0.3, 0.3) if p.priority == "airspeed" else 0.0
+    # the flight path thrust sustains at its limit, against what the law asks (unclipped)
+    law = gamma_c if gamma_law is None else gamma_law
+    sus = gamma_c - u
+    off = min(0.0, sus - law) if u > 0.0 else max(0.0, sus - law) if u < 0.0 else 0.0
+    if p.priority == "airspeed":
+        w = 1.0
+    else:  # height: the airspeed gives way, but not beyond its envelope (1 m/s ramp)
+        w = _clip(p.airspeed_min_m_s + 1.0 - v, 0.0, 1.0) if u > 0.0 else 0.0
+        w = _clip(v - p.airspeed_max_m_s + 1.0, 0.0, 1.0) if u < 0.0 else w
+    span = p.max_pitch_rad - p.min_pitch_rad  # at most the whole pitch range
+    target = _clip(w * off, -span, span)
     if dt > 0.0:
         b = min(1.0, dt / p.balance_tau_s) if p.balance_tau_s > 0.0 else 1.0
         bal += b * (target - bal)
         if abs(bal) < 1e-6 and target == 0.0:
             bal = 0.0
-    return thrust, EnergyState(integ, v, v_sp, vdot_f, gam_f, bal)
+    return thrust, EnergyState(integ, v, v_sp, vdot_f, gam_f, bal, gam_m_f)
 
 
 def _pitch_rate_bias(

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -131,17 +132,21 @@ def demanded_directions(
     s0: float = 0.0,
     wind_ned: tuple[float, float, float] = (0.0, 0.0, 0.0),
     dt_s: float = 0.05,
-) -> tuple[np.ndarray, np.ndarray]:
+    with_positions: bool = False,
+) -> Any:
     """(t (s), wd1 (n, 3)): the air-relative direction flying the moving path exactly demands
-    at airspeed v_w over the horizon (see :func:`feasibility`)."""
+    at airspeed v_w over the horizon (see :func:`feasibility`); with_positions: also the path
+    point flown (NED m, (n, 3))."""
     eta = np.asarray(wind_ned, float)
     ts = _times(horizon_s, dt_s)
     s = s0
     W1 = np.empty((len(ts), 3))
+    P = np.empty((len(ts), 3))
     for k, t in enumerate(ts):
         st = target.state(float(t))
         pd, f1, f2, f3, _, _ = path.eval(s)
         R = st.R_T_I
+        P[k] = st.position + R @ pd
         f1I, f2I, f3I = R @ f1, R @ f2, R @ f3
         u = st.velocity + np.cross(R @ st.omega_T, R @ pd) - eta
         a21, a31 = float(u @ f2I) / v_w, float(u @ f3I) / v_w
@@ -150,7 +155,52 @@ def demanded_directions(
         sdot = v_w * a11 - float(u @ f1I)
         if k + 1 < len(ts):
             s += sdot * (ts[k + 1] - t)
-    return ts, W1
+    return (ts, W1, P) if with_positions else (ts, W1)
+
+
+# MIL-F-8785C Fig. 7: sigma (ft/s) of medium/high-altitude turbulence at 500, 1750, 3750 and
+# 7500 ft for the probability-of-exceedance rows the SIL's levels use (light 10^-2, moderate
+# 10^-3, severe 10^-5), and the low-altitude W20 (ft/s) of sim/plant_jsbsim.TURBULENCE_LEVELS
+_POE_ALT_FT = (500.0, 1750.0, 3750.0, 7500.0)
+_POE_SIGMA_FPS = {
+    "light": (6.6, 6.9, 7.4, 6.7),
+    "moderate": (8.6, 9.6, 10.6, 10.1),
+    "severe": (15.6, 17.6, 23.0, 23.6),
+}
+_W20_FPS = {"light": 25.0, "moderate": 50.0, "severe": 75.0}
+_FT = 0.3048
+
+
+def vertical_gust_scale(level: str, h_m: float) -> tuple[float, float]:
+    """(sigma_w m/s, L_w m) of MIL-F-8785C Dryden turbulence at height h_m, as JSBSim's Milspec
+    model computes them (with h the altitude above sea level, as it passes): below 1000 ft
+    sigma_w = 0.1 W20, L_w = h; above 2000 ft the tabulated sigma and L = 1750 ft; linear
+    between. ``none``: (0, 0)."""
+    if level not in _W20_FPS:
+        return 0.0, 0.0
+    h = max(h_m / _FT, 10.0)
+    s_low = 0.1 * _W20_FPS[level]
+    s_tab = float(np.interp(h, _POE_ALT_FT, _POE_SIGMA_FPS[level]))
+    if h <= 1000.0:
+        sig, L = s_low, h
+    elif h <= 2000.0:
+        f = (h - 1000.0) / 1000.0
+        sig, L = s_low + f * (s_tab - s_low), 1000.0 + f * 750.0
+    else:
+        sig, L = s_tab, 1750.0
+    return sig * _FT, L * _FT
+
+
+def vertical_gusts(
+    level: str, heights_asl_m: np.ndarray, v_w: float, n_sigma: float = 2.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """(w, T) per sample for :func:`climb_feasibility`: n_sigma sigma_w sustained over the
+    turbulence's time scale L_w / v_w at each height (m above sea level)."""
+    sc = [vertical_gust_scale(level, float(h)) for h in heights_asl_m]
+    return (
+        np.array([n_sigma * s for s, _ in sc]),
+        np.array([L / max(v_w, 1.0) for _, L in sc]),
+    )
 
 
 def climb_feasibility(
@@ -163,6 +213,7 @@ def climb_feasibility(
     max_sink_m_s: float | None,
     marginal: float = 0.8,
     g: float = GRAVITY_M_S2,
+    gusts: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> CheckResult:
     """The climb and descent the path demands (air-relative: path slope, target climb, vertical
     wind; c = -v_w wd1_z) against the aircraft's steady capability at v_w.
@@ -173,6 +224,11 @@ def climb_feasibility(
     integral of the excess over any interval: D above the reserve is refused (the airspeed
     cannot be held), a peak demand above ``marginal`` x the capability or D above half the
     reserve warns. Unknown capability (None): a warning when the path climbs or sinks at all.
+    v_min, v_max: the airspeeds the flight may reach (the verdict's window).
+    gusts: (w (m/s), T (s)) per sample: a vertical gust of w sustained for T (turbulence: 2
+    sigma_w over the Dryden time scale L_w / V, :func:`vertical_gusts`). A downdraft adds w to the
+    climb, an updraft to the sink, for T from each instant: the excess over that window beyond
+    the capability is a deficit like the steady one.
     """
     c = -v_w * W1[:, 2]
     k_up, k_dn = int(np.argmax(c)), int(np.argmin(c))
@@ -204,6 +260,25 @@ def climb_feasibility(
             worst_up, t_up = d_up, float(ts[k])
         if d_dn > worst_dn:
             worst_dn, t_dn = d_dn, float(ts[k])
+    gust_note = ""
+    if gusts is not None:
+        w, T = gusts
+        cum = np.concatenate([[0.0], np.cumsum(c * dts)])
+        for k in range(len(ts)):
+            j = int(np.searchsorted(ts, ts[k] + T[k]))
+            j = min(j, len(ts) - 1)
+            span = float(ts[j] - ts[k])
+            if span <= 0.0:
+                continue
+            mean_c = float(cum[j + 1] - cum[k + 1]) / span
+            # the gust lasts T or until the horizon ends, whichever is first
+            gu = max(0.0, mean_c + w[k] - max_climb_m_s) * span
+            gd = max(0.0, -mean_c + w[k] - max_sink_m_s) * span
+            if gu > worst_up:
+                worst_up, t_up = gu, float(ts[k])
+                gust_note = f" (a {w[k]:.1f} m/s downdraft for {T[k]:.0f} s from t = {ts[k]:.0f} s)"
+            if gd > worst_dn:
+                worst_dn, t_dn = gd, float(ts[k])
     figs.update(deficit_climb_m=worst_up, deficit_sink_m=worst_dn, reserve_climb_m=res_up,
                 reserve_sink_m=res_dn)  # fmt: skip
     cap = f" (capability at {v_w:g} m/s: climb {max_climb_m_s:g}, sink {max_sink_m_s:g} m/s)"
@@ -211,15 +286,15 @@ def climb_feasibility(
         return CheckResult(
             "climb", "fail",
             f"the path climbs faster than the aircraft can for long: {worst_up:.1f} m of "
-            f"height beyond its climb by t = {t_up:.1f} s, more than the {res_up:.1f} m that "
-            f"slowing from {v_w:g} to {v_min:g} m/s buys; " + head + cap, figs,
+            f"height beyond its climb by t = {t_up:.1f} s{gust_note}, more than the {res_up:.1f} m "
+            f"that slowing from {v_w:g} to {v_min:.1f} m/s buys; " + head + cap, figs,
         )  # fmt: skip
     if worst_dn > res_dn:
         return CheckResult(
             "climb", "fail",
             f"the path descends faster than the aircraft can at idle: {worst_dn:.1f} m beyond "
-            f"its sink by t = {t_dn:.1f} s, more than the {res_dn:.1f} m that speeding up to "
-            f"{v_max:g} m/s absorbs; " + head + cap, figs,
+            f"its sink by t = {t_dn:.1f} s (updrafts included), more than the {res_dn:.1f} m that "
+            f"speeding up to {v_max:.1f} m/s absorbs; " + head + cap, figs,
         )  # fmt: skip
     marg = (
         up > marginal * max_climb_m_s or dn > marginal * max_sink_m_s
