@@ -442,13 +442,17 @@ def energy_thrust(
 
     Priority (when thrust cannot meet E_c): the unmet rate u = (T_raw - T_limit) / (k_T + k_E)
     (rad; > 0 short of thrust, < 0 a surplus at the floor, e.g. an updraft at idle), so the
-    flight path thrust sustains at its limit is gamma_c - u. With ``priority`` "airspeed" the
-    law's flight-path demand ``gamma_law`` (gamma + gamma_dot tau, unclipped; None: gamma_c) is
-    moved to it (low-passed, balance_tau_s): at the ceiling the aircraft climbs only as steeply
-    as full thrust sustains at the set-point airspeed, at the floor it puts the surplus into
-    height rather than speed. With "height" the path's flight-path angle stands and the airspeed
-    takes the difference, until it is within 1 m/s of airspeed_min_m_s / airspeed_max_m_s (the
-    vehicle's envelope): from there to the limit the offset ramps in all the same.
+    flight path thrust sustains at its limit is gamma_c - u. ``priority`` "airspeed" (the
+    default: the safe one) holds the airspeed inside its envelope [airspeed_min_m_s,
+    airspeed_max_m_s]: the path's flight-path angle stands while the airspeed has room, and from
+    1 m/s inside the limit to the limit the law's flight-path demand ``gamma_law`` (gamma +
+    gamma_dot tau, unclipped; None: gamma_c) is moved to the sustainable one (weight ramping 0
+    -> 1, low-passed over balance_tau_s): at the ceiling the aircraft climbs only as steeply as
+    full thrust sustains, at the floor it puts an updraft's surplus into height rather than
+    speed. "height": the flight path never gives way (the airspeed may leave its envelope).
+    Moving the flight path at the set-point already (weight 1 at any airspeed) put every
+    updraft of moderate turbulence into height: 1.48 m RMS, 10.9 m max in SIL against 0.83 /
+    6.0 m with the envelope rule.
     Returns (thrust, state); the state's ``balance`` is that offset (rad).
     """
     p = params
@@ -476,9 +480,8 @@ def energy_thrust(
     law = gamma_c if gamma_law is None else gamma_law
     sus = gamma_c - u
     off = min(0.0, sus - law) if u > 0.0 else max(0.0, sus - law) if u < 0.0 else 0.0
-    if p.priority == "airspeed":
-        w = 1.0
-    else:  # height: the airspeed gives way, but not beyond its envelope (1 m/s ramp)
+    w = 0.0  # height: the flight path never gives way
+    if p.priority == "airspeed":  # ... but near the envelope's edges (1 m/s ramp) it does
         w = _clip(p.airspeed_min_m_s + 1.0 - v, 0.0, 1.0) if u > 0.0 else 0.0
         w = _clip(v - p.airspeed_max_m_s + 1.0, 0.0, 1.0) if u < 0.0 else w
     span = p.max_pitch_rad - p.min_pitch_rad  # at most the whole pitch range
