@@ -167,13 +167,20 @@ class AdapterState:
     gam_f: float | None = None
     balance: float = 0.0
     gam_m_f: float | None = None  # rad, the measured flight-path angle, low-passed
+    # the thrust (0..1) the autopilot flies at engagement: the first step sets the integrator
+    # so that the first thrust sent is this one (no step), then None
+    thrust_engaged: float | None = None
 
-    def for_reengage(self, trim_thrust_offset: float = 0.0) -> AdapterState:
+    def for_reengage(self, thrust_engaged: float | None = None) -> AdapterState:
         """After a hand-back: the thrust and pitch-rate integrators and the energy filters start
         afresh (the autopilot flew the aircraft meanwhile, its own integrators moved), what was
-        learned of the airframe stays. ``trim_thrust_offset``: the integrator's start, e.g. the
-        autopilot's thrust at engagement less the configured trim (no step at engagement)."""
-        return AdapterState(trim_thrust_offset, self.trim_hat, self.turn_gain, None, None)
+        learned of the airframe stays. ``thrust_engaged`` (0..1): the thrust the autopilot flies
+        now (VFR_HUD.throttle); the energy control's first step starts from it (no step at
+        engagement: its integrator takes up the difference from the configured trim)."""
+        te = (
+            thrust_engaged if thrust_engaged is not None and math.isfinite(thrust_engaged) else None
+        )
+        return AdapterState(0.0, self.trim_hat, self.turn_gain, None, None, thrust_engaged=te)
 
 
 @dataclass(frozen=True)
@@ -352,7 +359,14 @@ def adapt(
     )
     ff = params.load_factor_ff * (n - 1.0)
     en = EnergyState(
-        state.integ, state.v_prev, state.v_sp_prev, state.vdot_f, state.gam_f, bal, state.gam_m_f
+        state.integ,
+        state.v_prev,
+        state.v_sp_prev,
+        state.vdot_f,
+        state.gam_f,
+        bal,
+        state.gam_m_f,
+        state.thrust_engaged,
     )
     if params.energy_control:
         # the flight-path angle the law aims at one tau_pitch ahead (pitch limits included)
@@ -372,7 +386,7 @@ def adapt(
     return Setpoint((p, q, r), quat, thrust, bank, pitch_sp, n), AdapterState(
         en.integ, trim_hat, k_turn, bank, None if clipped else chid, q_bias,
         q if q_free else None, en.v_prev, en.v_sp_prev, en.vdot_f, en.gam_f, en.balance,
-        en.gam_m_f,
+        en.gam_m_f, en.thrust_engaged,
     )  # fmt: skip
 
 
@@ -386,6 +400,7 @@ class EnergyState(NamedTuple):
     gam_f: float | None
     balance: float
     gam_m_f: float | None = None
+    thrust_engaged: float | None = None
 
 
 def _airspeed_pi(
@@ -456,7 +471,7 @@ def energy_thrust(
     Returns (thrust, state); the state's ``balance`` is that offset (rad).
     """
     p = params
-    integ, v_prev, v_sp_prev, vdot_f, gam_f, bal, gam_m_f = st
+    integ, v_prev, v_sp_prev, vdot_f, gam_f, bal, gam_m_f, t_eng = st
     a = min(1.0, dt / p.vdot_tau_s) if p.vdot_tau_s > 0.0 and dt > 0.0 else 1.0
     if v_prev is not None and dt > 0.0:
         vdot_f += a * ((v - v_prev) / dt - vdot_f)
@@ -467,6 +482,10 @@ def energy_thrust(
     vdot_c = vsp_dot + (v_sp - v) / tau_v
     e_E = (gam_f - gam_m_f) + (vdot_c - vdot_f) / g
     base = p.trim_thrust + p.thrust_per_gamma * (gam_f + vdot_c / g) + p.energy_kp * e_E + ff
+    if t_eng is not None:  # engagement: start from the autopilot's thrust (no step)
+        lim = p.integrator_limit
+        integ = _clip(_clip(t_eng, p.thrust_min, p.thrust_max) - base, -lim, lim)
+        t_eng = None
     raw = base + integ
     if dt > 0.0 and not ((raw >= p.thrust_max and e_E > 0) or (raw <= p.thrust_min and e_E < 0)):
         lo = max(-p.integrator_limit, p.thrust_min - base)
@@ -491,7 +510,7 @@ def energy_thrust(
         bal += b * (target - bal)
         if abs(bal) < 1e-6 and target == 0.0:
             bal = 0.0
-    return thrust, EnergyState(integ, v, v_sp, vdot_f, gam_f, bal, gam_m_f)
+    return thrust, EnergyState(integ, v, v_sp, vdot_f, gam_f, bal, gam_m_f, t_eng)
 
 
 def _pitch_rate_bias(
