@@ -232,7 +232,7 @@ def climb_feasibility(
     """
     c = -v_w * W1[:, 2]
     k_up, k_dn = int(np.argmax(c)), int(np.argmin(c))
-    up, dn = max(float(c[k_up]), 0.0), max(float(-c[k_dn]), 0.0)
+    up, dn = max(0.0, float(c[k_up])) + 0.0, max(0.0, float(-c[k_dn])) + 0.0
     figs: dict[str, float | bool | None] = {
         "peak_climb_m_s": up, "peak_sink_m_s": dn,
         "max_climb_m_s": max_climb_m_s, "max_sink_m_s": max_sink_m_s,
@@ -261,6 +261,7 @@ def climb_feasibility(
         if d_dn > worst_dn:
             worst_dn, t_dn = d_dn, float(ts[k])
     gust_note = ""
+    need_up, need_dn = up, dn  # the climb / sink needed at the worst instant, gusts included
     if gusts is not None:
         w, T = gusts
         cum = np.concatenate([[0.0], np.cumsum(c * dts)])
@@ -272,6 +273,7 @@ def climb_feasibility(
                 continue
             mean_c = float(cum[j + 1] - cum[k + 1]) / span
             # the gust lasts T or until the horizon ends, whichever is first
+            need_up, need_dn = max(need_up, mean_c + w[k]), max(need_dn, -mean_c + w[k])
             gu = max(0.0, mean_c + w[k] - max_climb_m_s) * span
             gd = max(0.0, -mean_c + w[k] - max_sink_m_s) * span
             if gu > worst_up:
@@ -296,15 +298,22 @@ def climb_feasibility(
             f"its sink by t = {t_dn:.1f} s (updrafts included), more than the {res_dn:.1f} m that "
             f"speeding up to {v_max:.1f} m/s absorbs; " + head + cap, figs,
         )  # fmt: skip
+    figs.update(need_climb_m_s=need_up, need_sink_m_s=need_dn)
+    # marginal: the steady demand above ``marginal`` x the capability, a gust's above the
+    # capability itself, or half a reserve spent
     marg = (
         up > marginal * max_climb_m_s or dn > marginal * max_sink_m_s
+        or need_up > max_climb_m_s or need_dn > max_sink_m_s
         or worst_up > 0.5 * res_up or worst_dn > 0.5 * res_dn
     )  # fmt: skip
+    why = (
+        f": marginal: climb up to {need_up:.2f} and sink up to {need_dn:.2f} m/s needed"
+        + (" with the turbulence's 2-sigma gusts" if gusts is not None else "")
+        + f" (warn above the capability, {marginal:g} x without gusts), deficits {worst_up:.1f} / "
+        f"{worst_dn:.1f} m of the {res_up:.1f} / {res_dn:.1f} m reserves (warn above half)"
+    )
     return CheckResult(
-        "climb",
-        "warn" if marg else "pass",
-        head + cap + (f": marginal (above {marginal:g} x the capability)" if marg else ""),
-        figs,
+        "climb", "warn" if marg else "pass", head + cap + (why if marg else ""), figs
     )
 
 
