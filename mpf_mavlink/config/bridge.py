@@ -248,7 +248,7 @@ class AdapterSection:
     speed_tau_s: float = field(default=4.0, metadata=_pos())
     energy_kp: float = field(default=1.0, metadata=_nonneg())
     energy_ki: float = field(default=0.6, metadata=_nonneg())
-    vdot_tau_s: float = field(default=0.5, metadata=_nonneg())
+    vdot_tau_s: float = field(default=2.0, metadata=_nonneg())
     # what is held when thrust cannot meet both: the airspeed inside its envelope
     # vehicle.airspeed_min/max_m_s (the flight path gives way near the limits) or the height
     # (the airspeed may leave the envelope)
