@@ -54,6 +54,21 @@ TURBULENCE_LEVELS: dict[str, tuple[float, int]] = {
 }
 
 
+# JSBSim's turbulence generator is a minimal-standard linear congruential engine (modulus
+# 2^31 - 1): a seed is taken modulo 2^31 - 1 and 0 is replaced by 1, so seeds 0 and 1 drew the same
+# turbulence (measured). Accepted seeds are below this limit, and 0 is sent as the one value left.
+TURBULENCE_SEED_LIMIT = 2**31 - 2
+
+
+def jsbsim_turbulence_seed(seed: int) -> int:
+    """The ``atmosphere/randomseed`` for a seed in [0, TURBULENCE_SEED_LIMIT): itself, except 0
+    (which JSBSim's engine would turn into 1) -> 2^31 - 2, a distinct stream no other seed has."""
+    s = int(seed)
+    if not 0 <= s < TURBULENCE_SEED_LIMIT:
+        raise ValueError(f"turbulence seed must be in [0, {TURBULENCE_SEED_LIMIT}), got {seed}")
+    return s if s > 0 else TURBULENCE_SEED_LIMIT
+
+
 def _geodetic_to_ecef(lat_rad: float, lon_rad: float, h: float) -> tuple[float, float, float]:
     s, c = math.sin(lat_rad), math.cos(lat_rad)
     n = _WGS84_A / math.sqrt(1.0 - _WGS84_E2 * s * s)
@@ -349,12 +364,21 @@ class JSBSimPlant:
         """Milspec Dryden turbulence (JSBSim turb-type 3): none, light, moderate or severe.
 
         Windspeed at 20 ft AGL / severity: light 25 fps / 3, moderate 50 fps / 4, severe 75 fps / 6.
-        ``seed`` goes to ``atmosphere/randomseed`` (the turbulence noise generator).
+        ``seed`` (0 <= seed < :data:`TURBULENCE_SEED_LIMIT`) picks the turbulence noise: every
+        seed its own draw (:func:`jsbsim_turbulence_seed`).
+
+        JSBSim evaluates the MIL-F-8785C scales at the altitude above SEA LEVEL (FGWinds::Run
+        passes AltitudeASL), not above ground: with a home 488 m AMSL the X8 at 100 m AGL is at
+        1932 ft, in the blend towards the high-altitude model (L_u = L_w ~ 520 m, sigma ~ 2 m/s in
+        every axis for "light"), not the low-altitude one the levels are named after (at 100 m
+        AGL: L_w = 100 m, sigma_w = 0.76 m/s). Its gusts are therefore long and strong: the mean
+        of one 300 s flight can sit ~1 m/s (one sigma of sigma sqrt(2 L / (V T))) off the steady
+        wind.
         """
         if kind not in TURBULENCE_LEVELS:
             raise ValueError(f"turbulence kind must be one of {sorted(TURBULENCE_LEVELS)}")
         w20, sev = TURBULENCE_LEVELS[kind]
-        self._set("atmosphere/randomseed", int(seed))
+        self._set("atmosphere/randomseed", jsbsim_turbulence_seed(seed))
         if kind == "none":
             self._set("atmosphere/turb-type", 0)
             self._set("atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps", 0.0)

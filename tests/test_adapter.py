@@ -77,7 +77,8 @@ def test_bank_is_clipped_and_climb_raises_pitch():
 
 
 def test_airspeed_hold_integrates_and_anti_windup():
-    # 2 m/s slow: kp e = 0.1, integrator +ki e dt each call
+    # the airspeed PI (energy control off): 2 m/s slow: kp e = 0.1, integrator +ki e dt each call
+    P = dataclasses.replace(globals()["P"], energy_control=False)
     sp, s1 = adapt((0.0, 0.0, 0.0), 13.0, LEVEL, NORTH, 0.5, P)
     assert s1.integ == pytest.approx(P.airspeed_ki * 2.0 * 0.5)
     assert sp.thrust == pytest.approx(P.trim_thrust + 0.1 + s1.integ)
@@ -341,3 +342,88 @@ def test_pitch_rate_bias_learns_nothing_from_a_clipped_set_point():
     assert st2.q_bias == 0.0
     # and a hand-back starts it afresh (the autopilot's own integrators moved meanwhile)
     assert AdapterState(q_bias=0.05, q_sent=0.1).for_reengage().q_bias == 0.0
+
+
+# ---------------------------------------------------------------- energy control (issue 25)
+# Flight along north pitched up by gamma: w1 = (cos g, 0, -sin g); omega = 0 asks for no change.
+E = AdapterParams(
+    airspeed_sp_m_s=16.0, airspeed_min_m_s=14.0, airspeed_max_m_s=18.0, trim_thrust=0.3,
+    thrust_per_gamma=3.0, load_factor_ff=0.0, max_pitch_rad=0.6,  # pitch limit beyond the climbs
+)  # fmt: skip
+
+
+def _climb(gamma):
+    return (math.cos(gamma), 0.0, -math.sin(gamma)), euler_to_matrix(0.0, gamma + 0.05, 0.0)
+
+
+def test_energy_feedforward_flies_a_steady_climb_at_trim_plus_k_gamma():
+    # at the set airspeed, no acceleration and the flight path the law asks for: every error
+    # term is 0, so thrust = T_trim + k_T gamma (the steady-climb energy balance), to rounding
+    g_ = 0.1
+    w1, R = _climb(g_)
+    s = AdapterState(trim_hat=0.05)
+    for _ in range(5):
+        sp, s = adapt((0.0, 0.0, 0.0), 16.0, R, w1, 0.02, E, s)
+    assert sp.thrust == pytest.approx(E.trim_thrust + E.thrust_per_gamma * g_, abs=1e-9)
+    assert s.integ == pytest.approx(0.0, abs=1e-12)
+    assert s.balance == 0.0
+
+
+def test_energy_saturation_anti_windup_and_airspeed_priority():
+    # a climb of 0.4 rad needs 0.3 + 3 * 0.4 = 1.5 > thrust_max: thrust pins at 1 and the
+    # integrator does not wind up while the error pushes into the limit
+    w1, R = _climb(0.4)
+    dt, n = 0.02, 500  # 10 s = 10 balance_tau_s
+    s = AdapterState(trim_hat=0.05)
+    for _ in range(n):
+        sp, s = adapt((0.0, 0.0, 0.0), 13.0, R, w1, dt, E, s)  # 13 m/s: below v_min + 1
+    assert sp.thrust == E.thrust_max
+    assert s.integ <= 1e-12  # never grew (its only move was toward the limit's room)
+    # airspeed priority, airspeed at or below v_min + 1 (weight 1): the flight path moves to
+    # what full thrust sustains, gamma_c - u, u = (T_raw - 1) / (k_T + k_E) > 0: the offset is
+    # negative, and after 10 time constants it has reached its target to exp(-10) ~ 5e-5
+    assert s.balance < -0.1
+    # the pitch set-point carries it: the same state under "height" keeps the path's demand
+    h = dataclasses.replace(E, priority="height")
+    sh = AdapterState(trim_hat=0.05)
+    for _ in range(n):
+        sph, sh = adapt((0.0, 0.0, 0.0), 13.0, R, w1, dt, h, sh)
+    assert sh.balance == 0.0
+    assert sp.pitch_rad < sph.pitch_rad - 0.1
+
+
+def test_energy_priority_leaves_the_path_alone_while_the_airspeed_has_room():
+    # same saturation at the set airspeed (2 m/s above v_min + 1): weight 0, no offset
+    w1, R = _climb(0.4)
+    s = AdapterState(trim_hat=0.05)
+    for _ in range(100):
+        sp, s = adapt((0.0, 0.0, 0.0), 16.0, R, w1, 0.02, E, s)
+    assert sp.thrust == E.thrust_max
+    assert s.balance == 0.0
+
+
+def test_energy_updraft_surplus_goes_into_height_near_vmax():
+    # descending 0.2 rad at 17.5 m/s (within 1 m/s of v_max): T_raw = 0.3 - 0.6 - ... < 0, thrust
+    # at idle, and the surplus raises the flight path (offset > 0)
+    w1, R = _climb(-0.2)
+    s = AdapterState(trim_hat=0.05)
+    for _ in range(200):
+        sp, s = adapt((0.0, 0.0, 0.0), 17.5, R, w1, 0.02, E, s)
+    assert sp.thrust == E.thrust_min
+    assert s.balance > 0.05
+
+
+def test_energy_reengagement_starts_from_the_autopilots_thrust():
+    # the autopilot flies 0.8 where the configured trim is 0.3: the first set-point after
+    # (re-)engagement is 0.8 exactly (no step), the integrator holds the difference
+    w1, R = _climb(0.0)
+    s = AdapterState(integ=0.4, trim_hat=0.05, balance=0.2).for_reengage(thrust_engaged=0.8)
+    assert s.balance == 0.0 and s.v_prev is None
+    sp, s = adapt((0.0, 0.0, 0.0), 16.0, R, w1, 0.02, E, s)
+    assert sp.thrust == pytest.approx(0.8, abs=1e-12)
+    assert s.integ == pytest.approx(0.5, abs=1e-9)
+    assert s.thrust_engaged is None  # used once
+    # unknown thrust (no VFR_HUD): the configured trim, integrator at 0
+    s2 = AdapterState(integ=0.4).for_reengage(None)
+    sp2, _ = adapt((0.0, 0.0, 0.0), 16.0, R, w1, 0.02, E, AdapterState(trim_hat=0.05))
+    assert s2.integ == 0.0 and sp2.thrust == pytest.approx(E.trim_thrust, abs=1e-9)

@@ -61,3 +61,58 @@ def test_feasibility_of_the_paper_scenario_needs_steep_bank():
     # The lemniscate's lobes at 15 m/s ask for more than 45 deg: fine for the paper's
     # kinematic vehicle, infeasible for a real small UAV.
     assert not r.ok and r.figures["peak_bank_rad"] > math.radians(45)
+
+
+# ---------------------------------------------------------------- climb (issue 25)
+def _const_climb(c, v=16.0, T=600.0, dt=0.5):
+    import numpy as np
+
+    ts = np.arange(0.0, T + dt / 2, dt)
+    g = math.asin(c / v)
+    W1 = np.tile([math.cos(g), 0.0, -math.sin(g)], (len(ts), 1))
+    return ts, W1
+
+
+def test_climb_check_against_capability_and_energy_reserve():
+    from mpf_mavlink.core.guidance.checks import climb_feasibility
+
+    # reserve of slowing from 16 to 14 m/s: (16^2 - 14^2) / (2 g) = 3.06 m of height
+    ts, W1 = _const_climb(1.0)
+    assert climb_feasibility(ts, W1, 16.0, 14.0, 18.0, 4.0, 1.5).status == "pass"
+    # 0.5 m/s more than the aircraft climbs, for 600 s: 300 m of deficit >> 3.06 m: refused
+    ts, W1 = _const_climb(4.5)
+    r = climb_feasibility(ts, W1, 16.0, 14.0, 18.0, 4.0, 1.5)
+    assert r.status == "fail" and r.figures["deficit_climb_m"] == pytest.approx(300.0, rel=0.01)
+    # a short excess the kinetic energy covers: 0.5 m/s over for 4 s = 2 m < 3.06 m (marginal)
+    ts, W1 = _const_climb(4.5, T=4.0)
+    assert climb_feasibility(ts, W1, 16.0, 14.0, 18.0, 4.0, 1.5).status == "warn"
+    # descent beyond idle sink: 2 m/s against 1.5 for 600 s
+    ts, W1 = _const_climb(-2.0)
+    assert climb_feasibility(ts, W1, 16.0, 14.0, 18.0, 4.0, 1.5).status == "fail"
+    # capability unknown: a warning when the path climbs
+    ts, W1 = _const_climb(1.0)
+    assert climb_feasibility(ts, W1, 16.0, 14.0, 18.0, None, None).status == "warn"
+
+
+def test_climb_check_counts_the_turbulence_downdrafts():
+    import numpy as np
+
+    from mpf_mavlink.core.guidance.checks import climb_feasibility, vertical_gusts
+
+    # 1.5 m/s of climb at 1000 m (3281 ft) above sea level in "light" turbulence: MIL-F-8785C
+    # above 2000 ft, sigma_w between the table's 6.9 (1750 ft) and 7.4 ft/s (3750 ft): 7.28 ft/s
+    # (2.2 m/s), L_w 1750 ft (533 m, 33 s at 16 m/s): a 2-sigma downdraft of 4.4 m/s for 33 s
+    # needs 5.9 m/s against 4.1: (5.9 - 4.1) 33 = 60 m >> 3 m
+    ts, W1 = _const_climb(1.5)
+    w, T = vertical_gusts("light", np.full(len(ts), 1000.0), 16.0)
+    sig_fps = 6.9 + 0.5 * (1000.0 / 0.3048 - 1750.0) / 2000.0
+    assert w[0] == pytest.approx(2 * sig_fps * 0.3048, rel=1e-6)
+    assert T[0] == pytest.approx(1750 * 0.3048 / 16.0, rel=1e-6)
+    r = climb_feasibility(ts, W1, 16.0, 14.0, 18.0, 4.1, 1.5, gusts=(w, T))
+    assert r.status == "fail" and r.figures["deficit_climb_m"] == pytest.approx(
+        (1.5 + w[0] - 4.1) * T[0], rel=0.02
+    )
+    # near the sea: below 1000 ft, sigma_w = 0.1 W20 = 2.5 ft/s and L_w = h: no deficit
+    w, T = vertical_gusts("light", np.full(len(ts), 100.0), 16.0)
+    assert w[0] == pytest.approx(2 * 0.762, rel=0.01) and T[0] == pytest.approx(100 / 16.0)
+    assert climb_feasibility(ts, W1, 16.0, 14.0, 18.0, 4.1, 1.5, gusts=(w, T)).status == "pass"

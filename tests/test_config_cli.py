@@ -83,7 +83,8 @@ def test_check_fails_a_start_on_the_ground_far_below_the_path(capsys):
 def test_check_passes_on_the_paper_and_fails_on_a_real_bank_limit(capsys):
     assert main(["check", CFG]) == 0
     out = capsys.readouterr().out
-    assert out.count("[PASS]") == 4  # assumption 1, start altitude, gain condition, feasibility
+    # assumption 1, start altitude, gain condition, feasibility, climb, airspeed hold
+    assert out.count("[PASS]") == 6
     # 45 deg of bank cannot fly the paper's lemniscate at 15 m/s: exit 3, and why.
     assert main(["check", CFG, "--set", "vehicle.max_bank_rad=0.785"]) == 3
     captured = capsys.readouterr()

@@ -95,14 +95,20 @@ def test_check_sees_the_sil_atmosphere(capsys):
     # 2 m/s allowance for light turbulence: |v_t t1 + v_d - eta| reaches ~10.5 m/s vs 14 m/s.
     assert main(["check", DEMO]) == 0
     out = capsys.readouterr().out
-    # assumption 1, start altitude, gain condition, feasibility, and feasibility at the gust
-    # airspeed 16 + 2 m/s (light turbulence's allowance): 39.1 deg of the 40 allowed
-    assert out.count("[PASS]") == 5 and "[PASS] gust_feasibility: at the gust airspeed 18.0" in out
-    # moderate turbulence's allowance (4 m/s): 44.6 deg at 20 m/s, beyond 45 - 5: a warning,
-    # not a refusal (exit 0)
-    assert main(["check", DEMO, "--set", "sil.turbulence=moderate"]) == 0
+    # assumption 1, start altitude, gain condition, feasibility, feasibility at the gust
+    # airspeed 16 + 2 m/s (light turbulence's allowance): 39.1 deg of the 40 allowed, airspeed
+    # hold; climb warns: light turbulence's 2 sigma_w updraft at 100 m (0.2 x 25 ft/s = 1.52
+    # m/s) just exceeds the X8's idle sink (1.5 m/s), 0.2 m of the 8.8 m reserve
+    assert out.count("[PASS]") == 6 and "[PASS] gust_feasibility: at the gust airspeed 18.0" in out
+    assert "[WARN] climb:" in out and "sink up to 1.52 m/s" in out
+    # moderate turbulence's allowance (4 m/s): 44.6 deg at 20 m/s, beyond 45 - 5: a warning;
+    # its updrafts (2 sigma_w = 0.2 x 50 ft/s = 3.0 m/s for L_w / V = 100 m / 16 m/s) hold
+    # (3.0 - 1.5) 6.25 = 9.5-9.7 m of height beyond idle sink, more than the 8.8 m that the
+    # airspeed absorbs up to the verdict's 18 x 1.15 = 20.7 m/s: refused on energy (exit 3)
+    assert main(["check", DEMO, "--set", "sil.turbulence=moderate"]) == 3
     out = capsys.readouterr().out
-    assert "[WARN] gust_feasibility: at the gust airspeed 20.0" in out and "[FAIL]" not in out
+    assert "[WARN] gust_feasibility: at the gust airspeed 20.0" in out
+    assert "[FAIL] climb: the path descends faster than the aircraft can at idle" in out
     calm = load_config(DEMO, ["sil.wind_ned_m_s=[0,0,0]", "sil.turbulence=none"])
     from mpf_mavlink.bridge.preflight import run_checks
 

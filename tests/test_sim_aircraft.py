@@ -288,3 +288,27 @@ def test_attitude_controller_turn_coordination():
     p, _, _ = att.update(0.01, math.radians(90), 0.0, -math.radians(50), 0.0, V)
     assert p == pytest.approx(math.radians(70.0))
     assert RateLoopGains.px4_defaults().roll_ff == 0.5
+
+
+def test_every_turbulence_seed_its_own_draw():
+    # JSBSim's engine (minimal standard LCG) turned seed 0 into seed 1: the same gusts. Each seed
+    # must give its own: moderate turbulence moves the air by ~metres per second within 2 s, so
+    # two independent draws differ by far more than 0.1 m/s somewhere (the same draw: exactly 0).
+    def gusts(seed):
+        plant, ap, _ = trimmed(2.0)
+        plant.set_turbulence("moderate", seed=seed)
+        w = []
+        for _ in range(int(2.0 / plant.dt)):
+            st = plant.state()
+            plant.step(*ap.hold_step(plant.dt, st, V_TRIM, H, 0.0))
+            w.append(st.wind_ned)
+        return np.array(w)
+
+    w0, w1, w0b = gusts(0), gusts(1), gusts(0)
+    assert np.abs(w0 - w0b).max() == 0.0  # reproducible
+    assert np.abs(w0 - w1).max() > 0.1
+    from sim.plant_jsbsim import jsbsim_turbulence_seed
+
+    assert jsbsim_turbulence_seed(7) == 7  # the demo's turbulence is unchanged
+    with pytest.raises(ValueError):
+        jsbsim_turbulence_seed(2**31 - 2)

@@ -15,13 +15,17 @@ from typing import Any
 BENCH_COMPARE_S = 240.0
 BENCH_STEADY_S = 120.0
 CIRCLE_LAWS = ["mpf", "npfg", "npfg_static", "l1_loiter", "pursuit"]
+PATH_LAWS = ["mpf", "npfg", "npfg_static", "pursuit"]
 SCENARIOS: dict[str, tuple[str, list[str]]] = {
-    "demo_figure_eight": ("configs/default.yaml", ["mpf", "npfg", "npfg_static", "pursuit"]),
+    "demo_figure_eight": ("configs/default.yaml", PATH_LAWS),
     "circle_turning_target": ("configs/compare/circle_turning_target.yaml", CIRCLE_LAWS),
     "helix_climbing_target": ("configs/compare/helix_climbing_target.yaml", CIRCLE_LAWS),
     "static_circle": ("configs/compare/static_circle.yaml", CIRCLE_LAWS),
     "strong_wind": ("configs/compare/strong_wind.yaml", CIRCLE_LAWS),
     "turning_target_latency": ("configs/compare/turning_target_latency.yaml", CIRCLE_LAWS),
+    # 3D missions (issue 25): no loiter circle to compare with
+    "spline3d_turning_target": ("configs/spline3d_turning_target.yaml", PATH_LAWS),
+    "helix": ("configs/helix.yaml", PATH_LAWS),
 }
 
 

@@ -151,9 +151,11 @@ def adapter_params(cfg: Config) -> AdapterParams:
     """The adapter's limits and gains from the ``vehicle`` and ``adapter`` sections."""
     a = cfg.section("adapter")
     v = cfg.vehicle
+    fields = {f.name: getattr(a, f.name) for f in dataclasses.fields(a)}
+    fields["thrust_per_gamma"] = a.k_thrust(v)
     return AdapterParams(
-        max_bank_rad=v.max_bank_rad, airspeed_sp_m_s=v.airspeed_m_s,
-        **{f.name: getattr(a, f.name) for f in dataclasses.fields(a)},
+        max_bank_rad=v.max_bank_rad, airspeed_sp_m_s=v.airspeed_m_s, airspeed_min_m_s=v.v_min,
+        airspeed_max_m_s=v.v_max, **fields,
     )  # fmt: skip
 
 
@@ -471,8 +473,19 @@ class Controller:
         self.t_prev_boot = None
         self.sdot_prev = 0.0
         self.w1_prev = None
-        self.ad_state = self.ad_state.for_reengage()  # the airframe's learned trim and turn stay
+        # the airframe's learned trim and turn stay; thrust starts from the autopilot's own
+        self.ad_state = self.ad_state.for_reengage(self.thrust_flown())
         return self.s
+
+    def thrust_flown(self) -> float | None:
+        """The thrust (0..1) the autopilot reports now (VFR_HUD.throttle), None when unknown:
+        at engagement the energy control starts from it, so that its first set-point is no step
+        (PX4 SIH flies ~0.8 in AUTO.LOITER where a configured trim of 0.5 lost ~5 m in 8 s)."""
+        vfr = getattr(self.est, "vfr", None)
+        thr = getattr(vfr, "throttle_frac", None)
+        if thr is None or not math.isfinite(thr) or not 0.0 <= thr <= 1.0:
+            return None
+        return float(thr)
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(position NED m, R_W^I) of the latest estimate, for the pre-flight checks."""

@@ -3,12 +3,21 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.frames import euler_to_matrix
-from mpf_mavlink.core.guidance.checks import CheckResult, assumption1, feasibility, gain_condition
+from mpf_mavlink.core.guidance.checks import (
+    CheckResult,
+    assumption1,
+    climb_feasibility,
+    demanded_directions,
+    feasibility,
+    gain_condition,
+    vertical_gusts,
+)
 from mpf_mavlink.core.guidance.law import VehicleState, mpf_law
 from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.runs.verdict import bank_limit_rad
@@ -117,6 +126,54 @@ def start_altitude(cfg: Config) -> CheckResult:
     )  # fmt: skip
 
 
+def climb_check(
+    cfg: Config, path: Any, target: Any, horizon: float, s0: float, steady: Any
+) -> CheckResult:
+    """:func:`climb_feasibility` of the config: the vehicle's climb/sink capability, the
+    verdict's airspeed window as the energy reserve, and in the SIL the vertical gusts of its
+    turbulence (2 sigma_w over L_w / V at the altitude above sea level the path reaches, as
+    JSBSim keys them: home_alt_m + height)."""
+    v, m = cfg.vehicle, cfg.metrics
+    ts, W1, P = demanded_directions(
+        path, target, v.airspeed_m_s, horizon, s0, steady, with_positions=True
+    )
+    gusts = None
+    sil = cfg.extra.get("sil")
+    if sil is not None and sil.link != "none" and sil.turbulence != "none":
+        gusts = vertical_gusts(sil.turbulence, sil.home_alt_m - P[:, 2], v.airspeed_m_s)
+    return climb_feasibility(
+        ts, W1, v.airspeed_m_s, v.v_min * (1.0 - m.airspeed_tolerance),
+        v.v_max * (1.0 + m.airspeed_tolerance), v.max_climb_rate_m_s, v.max_sink_rate_m_s,
+        gusts=gusts,
+    )  # fmt: skip
+
+
+def airspeed_hold(cfg: Config) -> CheckResult | None:
+    """An airspeed the aircraft cannot hold: the thrust it needs in level flight
+    (adapter.trim_thrust) at the ceiling (adapter.thrust_max), or no climb left
+    (vehicle.max_climb_rate_m_s 0). None without an adapter section."""
+    a = cfg.extra.get("adapter")
+    if a is None:
+        return None
+    v = cfg.vehicle
+    fig: dict[str, float | bool | None] = {"trim_thrust": a.trim_thrust, "thrust_max": a.thrust_max}
+    if a.trim_thrust >= a.thrust_max or (
+        v.max_climb_rate_m_s is not None and v.max_climb_rate_m_s <= 0.0
+    ):
+        return CheckResult(
+            "airspeed_hold", "fail",
+            f"vehicle.airspeed_m_s {v.airspeed_m_s:g} m/s needs the thrust at its ceiling in level "
+            f"flight (adapter.trim_thrust {a.trim_thrust:g} of thrust_max {a.thrust_max:g}): "
+            "nothing is left to climb, turn or hold it; fly a slower airspeed", fig,
+        )  # fmt: skip
+    return CheckResult(
+        "airspeed_hold",
+        "pass",
+        f"level flight at {v.airspeed_m_s:g} m/s needs thrust {a.trim_thrust:g} of {a.thrust_max:g}",
+        fig,
+    )
+
+
 def run_checks(cfg: Config, scripted_target: bool = True) -> list[CheckResult]:
     """All checks for a config. With a live target only the gain condition can be checked."""
     results: list[CheckResult] = []
@@ -151,8 +208,12 @@ def run_checks(cfg: Config, scripted_target: bool = True) -> list[CheckResult]:
             )  # fmt: skip
 
         results.append(feasible_at(cfg.vehicle.airspeed_m_s))
+        results.append(climb_check(cfg, path, target, horizon, s0, steady))
         if gust > 0.0:
             results.append(gust_feasibility(feasible_at, cfg.vehicle.airspeed_m_s, gust))
+        hold = airspeed_hold(cfg)
+        if hold is not None:
+            results.append(hold)
     else:
         c1 = ch.c1_m if ch.c1_m is not None else 50.0
         results.append(

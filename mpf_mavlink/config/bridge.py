@@ -7,6 +7,7 @@ values are one-line errors naming the key and the file). Units are in the key na
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -247,6 +248,31 @@ class AdapterSection:
     # PX4 body rates: the autopilot's pitch-rate tracking error (flown - sent), low-passed with
     # this time constant, is taken off the pitch rate sent (mpf_mavlink/core/adapter.py); 0: off
     rate_bias_tau_s: float = field(default=1.0, metadata=_nonneg())
+    # Total energy control of thrust and the flight-path demand (mpf_mavlink/core/adapter.py:
+    # energy_thrust); false: the airspeed PI (airspeed_kp, airspeed_ki)
+    energy_control: bool = True
+    # throttle per rad of steady climb (k_T); null: (thrust_max - trim_thrust) / (climb / V)
+    # from vehicle.max_climb_rate_m_s at vehicle.airspeed_m_s, else 2.5
+    thrust_per_gamma: float | None = field(default=None, metadata=_pos())
+    speed_tau_s: float = field(default=4.0, metadata=_pos())
+    energy_kp: float = field(default=1.0, metadata=_nonneg())
+    energy_ki: float = field(default=0.6, metadata=_nonneg())
+    vdot_tau_s: float = field(default=2.0, metadata=_nonneg())
+    # what is held when thrust cannot meet both: the airspeed inside its envelope
+    # vehicle.airspeed_min/max_m_s (the flight path gives way near the limits) or the height
+    # (the airspeed may leave the envelope)
+    priority: Literal["airspeed", "height"] = "airspeed"
+    balance_tau_s: float = field(default=1.0, metadata=_nonneg())
+
+    def k_thrust(self, v: Any) -> float:
+        """thrust_per_gamma, or its value derived from the vehicle's climb (see the field)."""
+        if self.thrust_per_gamma is not None:
+            return self.thrust_per_gamma
+        climb = getattr(v, "max_climb_rate_m_s", None)
+        if climb is not None and self.thrust_max > self.trim_thrust:
+            gam = math.asin(min(climb / v.airspeed_m_s, 0.99))
+            return (self.thrust_max - self.trim_thrust) / gam
+        return 2.5
 
     def validate(self, cfg: Any, src: str) -> None:
         if self.thrust_min > self.thrust_max:

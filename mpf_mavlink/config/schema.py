@@ -103,6 +103,10 @@ class VehicleConfig:
     autopilot_bank_limit_rad: float | None = field(
         default=None, metadata={"check": ("range_open", 0.0, 1.5707)}
     )
+    # steady climb at full thrust and sink at idle, both at airspeed_m_s (m/s, > 0); null:
+    # unknown (check measures them from a JSBSim SIL airframe, else skips the climb check)
+    max_climb_rate_m_s: float | None = field(default=None, metadata=_pos())
+    max_sink_rate_m_s: float | None = field(default=None, metadata=_pos())
 
     @property
     def v_min(self) -> float:

@@ -153,7 +153,8 @@ class SilConfig:
     )
     wind_ned_m_s: Vec3 = (0.0, 0.0, 0.0)
     turbulence: Literal["none", "light", "moderate", "severe"] = "none"
-    seed: int = 0
+    # JSBSim's noise engine takes seeds below 2^31 - 2 (sim/plant_jsbsim.py: jsbsim_turbulence_seed)
+    seed: int = field(default=0, metadata={"check": ("range", 0, 2**31 - 3)})
     gusts: list[GustEventConfig] = field(default_factory=list)
     home_lat_deg: float = field(default=47.397742, metadata={"check": ("range", -90.0, 90.0)})
     home_lon_deg: float = field(default=8.545594, metadata={"check": ("range", -180.0, 180.0)})

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from mpf_mavlink.core.frames import GRAVITY_M_S2
 
@@ -110,6 +110,8 @@ class AdapterParams:
     max_pitch_rad: float = 0.35
     trim_pitch_rad: float = 0.03
     airspeed_sp_m_s: float = 15.0
+    airspeed_min_m_s: float = 0.0  # the envelope the "height" priority protects (m/s)
+    airspeed_max_m_s: float = math.inf
     trim_thrust: float = 0.5
     thrust_min: float = 0.0  # PX4 FW_THR_MIN, ArduPlane THR_MIN (electric: 0)
     thrust_max: float = 1.0
@@ -129,6 +131,15 @@ class AdapterParams:
     # pitch-rate bias (module comment): low-pass time constant of the autopilot's pitch-rate
     # tracking error subtracted from the pitch rate sent; 0 turns it off
     rate_bias_tau_s: float = 1.0
+    # total energy control (module comment "speed and height"); False: the airspeed PI above
+    energy_control: bool = True
+    thrust_per_gamma: float = 2.5  # k_T: throttle per rad of flight-path angle (steady climb)
+    speed_tau_s: float = 4.0  # tau_V: airspeed error -> acceleration demand (V_sp - V) / tau_V
+    energy_kp: float = 1.0  # k_E: throttle per rad of total energy rate error
+    energy_ki: float = 0.6  # k_I: throttle per rad s of it (integral: the energy error)
+    vdot_tau_s: float = 2.0  # low-pass of the measured dV/dt and of the fed-forward gamma
+    priority: str = "airspeed"  # "airspeed" or "height": what is held when thrust cannot
+    balance_tau_s: float = 1.0  # low-pass of the flight-path offset that the priority takes
 
 
 @dataclass(frozen=True)
@@ -147,12 +158,29 @@ class AdapterState:
     # rate sent last (None: not sent, or sent clipped: learn nothing from it)
     q_bias: float = 0.0
     q_sent: float | None = None
+    # energy control: the previous airspeed and set-point (m/s, None: none yet), the filtered
+    # dV/dt (m/s^2) and fed-forward flight-path angle (rad, None: none yet), and the flight-path
+    # offset (rad, <= 0 when thrust is short) that the priority takes off the pitch demand
+    v_prev: float | None = None
+    v_sp_prev: float | None = None
+    vdot_f: float = 0.0
+    gam_f: float | None = None
+    balance: float = 0.0
+    gam_m_f: float | None = None  # rad, the measured flight-path angle, low-passed
+    # the thrust (0..1) the autopilot flies at engagement: the first step sets the integrator
+    # so that the first thrust sent is this one (no step), then None
+    thrust_engaged: float | None = None
 
-    def for_reengage(self) -> AdapterState:
-        """After a hand-back: the airspeed and pitch-rate integrators start afresh (the
-        autopilot flew the aircraft meanwhile, its own integrators moved), what was learned of
-        the airframe stays."""
-        return AdapterState(0.0, self.trim_hat, self.turn_gain, None, None)
+    def for_reengage(self, thrust_engaged: float | None = None) -> AdapterState:
+        """After a hand-back: the thrust and pitch-rate integrators and the energy filters start
+        afresh (the autopilot flew the aircraft meanwhile, its own integrators moved), what was
+        learned of the airframe stays. ``thrust_engaged`` (0..1): the thrust the autopilot flies
+        now (VFR_HUD.throttle); the energy control's first step starts from it (no step at
+        engagement: its integrator takes up the difference from the configured trim)."""
+        te = (
+            thrust_engaged if thrust_engaged is not None and math.isfinite(thrust_engaged) else None
+        )
+        return AdapterState(0.0, self.trim_hat, self.turn_gain, None, None, thrust_engaged=te)
 
 
 @dataclass(frozen=True)
@@ -243,6 +271,7 @@ def adapt(
     g: float = GRAVITY_M_S2,
     meas: tuple[Any, Any] | None = None,
     hold_s: float = 0.0,
+    airspeed_sp: float | None = None,
 ) -> tuple[Setpoint, AdapterState]:
     """The law's command -> body rates (PX4), quaternion (ArduPlane) and thrust.
 
@@ -258,6 +287,8 @@ def adapt(
     learning trim_hat and turn_gain (module comment); None learns nothing.
     ``hold_s`` (s): how long the set-point is held (the telemetry period; 0: a continuous
     loop), with R_B_N the attitude when it starts acting (:func:`roll_rate_gain`).
+    ``airspeed_sp`` (m/s): the airspeed set-point now (None: ``params.airspeed_sp_m_s``); its
+    rate is fed forward (:func:`energy_thrust`).
     """
     isf = math.isfinite
     try:
@@ -281,9 +312,20 @@ def adapt(
     bank, n = bank_and_load_factor(w1, accel, g)
     trim_hat, k_turn = state.trim_hat, state.turn_gain
     gamma = math.asin(_clip(-w1[2], -1.0, 1.0))
-    chid, gamd = heading_and_path_angle_rates(w1, omega_w1_I)
+    chid, gamd_law = heading_and_path_angle_rates(w1, omega_w1_I)
+    v_sp = params.airspeed_sp_m_s if airspeed_sp is None or not isf(airspeed_sp) else airspeed_sp
+    # The priority's offset (previous step's, low-passed) lowers (raises) the flight-path
+    # demand while thrust is at its ceiling (floor): the law's gamma_dot plus the rate that
+    # takes the offset out over one tau_pitch, for both the pitch set-point and the body rates.
+    lead0 = params.tau_pitch_s if params.tau_pitch_s > 0.0 else 1.0
+    bal = state.balance if params.energy_control else 0.0
+    gamd = gamd_law + bal / lead0
     if params.adaptive and meas is not None:
-        trim_hat, k_turn = _learn(params, state, meas, w1, v, dt, g, gamd, gamma)
+        # the law's demand is what trim_hat integrates; not while the priority overrides it
+        # (the standing vertical error is then the energy's, not a pitch offset's)
+        trim_hat, k_turn = _learn(
+            params, state, meas, w1, v, dt, g, gamd_law, gamma, freeze_trim=bal != 0.0
+        )
     if params.adaptive and k_turn != 1.0:
         bank = math.atan(math.tan(_clip(bank, -1.4, 1.4)) / k_turn)
     clipped = abs(bank) > params.max_bank_rad
@@ -315,20 +357,26 @@ def adapt(
         params.min_pitch_rad,
         params.max_pitch_rad,
     )
-    # Airspeed hold with conditional integration (anti-windup): the integrator moves only when
-    # the output is not saturated in the direction the error pushes.
-    e = params.airspeed_sp_m_s - v
     ff = params.load_factor_ff * (n - 1.0)
-    base = params.trim_thrust + params.airspeed_kp * e + ff
-    raw = base + state.integ
-    integ = state.integ
-    if dt > 0.0 and not (
-        (raw >= params.thrust_max and e > 0) or (raw <= params.thrust_min and e < 0)
-    ):
-        lo = max(-params.integrator_limit, params.thrust_min - base)
-        hi = min(params.integrator_limit, params.thrust_max - base)
-        integ = _clip(integ + params.airspeed_ki * e * dt, min(lo, 0.0), max(hi, 0.0))
-    thrust = _clip(base + integ, params.thrust_min, params.thrust_max)
+    en = EnergyState(
+        state.integ,
+        state.v_prev,
+        state.v_sp_prev,
+        state.vdot_f,
+        state.gam_f,
+        bal,
+        state.gam_m_f,
+        state.thrust_engaged,
+    )
+    if params.energy_control:
+        # the flight-path angle the law aims at one tau_pitch ahead (pitch limits included)
+        gamma_c = gamma + gamd_law * params.tau_pitch_s
+        gamma_c = _clip(gamma_c, params.min_pitch_rad - trim, params.max_pitch_rad - trim)
+        gamma_law = gamma + gamd_law * params.tau_pitch_s
+        thrust, en = energy_thrust(params, en, v, v_sp, gamma, gamma_c, ff, dt, g, gamma_law)
+    else:
+        thrust, integ = _airspeed_pi(params, state.integ, v_sp - v, ff, dt)
+        en = en._replace(integ=integ)
     qw, qx, qy, qz = quat = _euler_to_quat_wxyz(bank, pitch_sp, 0.0)
     if not (
         isf(p) and isf(q) and isf(r) and isf(thrust) and isf(bank) and isf(pitch_sp)
@@ -336,8 +384,134 @@ def adapt(
     ):  # fmt: skip
         return safe_setpoint(params, roll), state
     return Setpoint((p, q, r), quat, thrust, bank, pitch_sp, n), AdapterState(
-        integ, trim_hat, k_turn, bank, None if clipped else chid, q_bias, q if q_free else None
-    )
+        en.integ, trim_hat, k_turn, bank, None if clipped else chid, q_bias,
+        q if q_free else None, en.v_prev, en.v_sp_prev, en.vdot_f, en.gam_f, en.balance,
+        en.gam_m_f, en.thrust_engaged,
+    )  # fmt: skip
+
+
+class EnergyState(NamedTuple):
+    """The energy controller's memory (see :class:`AdapterState` for the fields)."""
+
+    integ: float
+    v_prev: float | None
+    v_sp_prev: float | None
+    vdot_f: float
+    gam_f: float | None
+    balance: float
+    gam_m_f: float | None = None
+    thrust_engaged: float | None = None
+
+
+def _airspeed_pi(
+    params: AdapterParams, integ: float, e: float, ff: float, dt: float
+) -> tuple[float, float]:
+    """The airspeed PI (``energy_control`` off): (thrust, integrator). Conditional integration:
+    the integrator moves only when the output is not saturated in the direction e pushes."""
+    base = params.trim_thrust + params.airspeed_kp * e + ff
+    raw = base + integ
+    if dt > 0.0 and not (
+        (raw >= params.thrust_max and e > 0) or (raw <= params.thrust_min and e < 0)
+    ):
+        lo = max(-params.integrator_limit, params.thrust_min - base)
+        hi = min(params.integrator_limit, params.thrust_max - base)
+        integ = _clip(integ + params.airspeed_ki * e * dt, min(lo, 0.0), max(hi, 0.0))
+    return _clip(base + integ, params.thrust_min, params.thrust_max), integ
+
+
+def energy_thrust(
+    params: AdapterParams,
+    st: EnergyState,
+    v: float,
+    v_sp: float,
+    gamma: float,
+    gamma_c: float,
+    ff: float,
+    dt: float,
+    g: float = GRAVITY_M_S2,
+    gamma_law: float | None = None,
+) -> tuple[float, EnergyState]:
+    """Thrust from the total specific energy rate, and the priority's flight-path offset.
+
+    Lambregts' total energy control (TECS; A. A. Lambregts, "Vertical flight path and speed
+    control autopilot design using total energy principles", AIAA 83-2239, 1983; and
+    "Functional integration of vertical flight path and speed control using energy
+    principles", NASA CP-2296, 1984): the specific total energy rate normalised by V,
+    E_dot / (m g V) = gamma + V_dot / g, is what thrust changes (T - D = W (gamma + V_dot / g)
+    for small angles), while the balance gamma - V_dot / g is what the elevator moves at
+    constant thrust. Here:
+
+      E_c = gamma_c + V_dot_c / g,  V_dot_c = V_dot_sp + (V_sp - V) / tau_V  (the demand)
+      E   = gamma + V_dot / g                                           (what is flown)
+      T   = T_trim + k_T E_c~ + k_E (E_c - E) + k_I integral(E_c - E) dt + k_n (n - 1)
+
+    gamma_c: the flight-path angle the law aims at one tau_pitch ahead, which carries the path's
+    slope, the target's climb and the law's correction (gamma + gamma_dot tau). gamma_c, gamma and
+    V_dot (from the airspeed's difference) are low-passed over vdot_tau_s before they enter:
+    gusts tilt the air-relative gamma and the law's correction rings with them: over 0.5 s the
+    throttle chattered between idle and 0.8 in light turbulence and swung 0-0.7 through a
+    circle's capture (airspeed to 20 m/s, captured in 36 s); over 2 s the capture took 10 s. k_T
+    (thrust_per_gamma) is the airframe's throttle per rad of steady climb, so the feed-forward
+    alone flies a demanded climb at constant speed; k_E, k_I close the loop on what it misses.
+    Anti-windup: the integrator moves only when the output is not saturated in the direction
+    the error pushes, and never beyond what takes the output to a limit.
+
+    Priority (when thrust cannot meet E_c): the unmet rate u = (T_raw - T_limit) / (k_T + k_E)
+    (rad; > 0 short of thrust, < 0 a surplus at the floor, e.g. an updraft at idle), so the
+    flight path thrust sustains at its limit is gamma_c - u. ``priority`` "airspeed" (the
+    default: the safe one) holds the airspeed inside its envelope [airspeed_min_m_s,
+    airspeed_max_m_s]: the path's flight-path angle stands while the airspeed has room, and from
+    1 m/s inside the limit to the limit the law's flight-path demand ``gamma_law`` (gamma +
+    gamma_dot tau, unclipped; None: gamma_c) is moved to the sustainable one (weight ramping 0
+    -> 1, low-passed over balance_tau_s): at the ceiling the aircraft climbs only as steeply as
+    full thrust sustains, at the floor it puts an updraft's surplus into height rather than
+    speed. "height": the flight path never gives way (the airspeed may leave its envelope).
+    Moving the flight path at the set-point already (weight 1 at any airspeed) put every
+    updraft of moderate turbulence into height: 1.48 m RMS, 10.9 m max in SIL against 0.83 /
+    6.0 m with the envelope rule.
+    Returns (thrust, state); the state's ``balance`` is that offset (rad).
+    """
+    p = params
+    integ, v_prev, v_sp_prev, vdot_f, gam_f, bal, gam_m_f, t_eng = st
+    a = min(1.0, dt / p.vdot_tau_s) if p.vdot_tau_s > 0.0 and dt > 0.0 else 1.0
+    if v_prev is not None and dt > 0.0:
+        vdot_f += a * ((v - v_prev) / dt - vdot_f)
+    vsp_dot = (v_sp - v_sp_prev) / dt if v_sp_prev is not None and dt > 0.0 else 0.0
+    gam_f = gamma_c if gam_f is None else gam_f + a * (gamma_c - gam_f)
+    gam_m_f = gamma if gam_m_f is None else gam_m_f + a * (gamma - gam_m_f)
+    tau_v = p.speed_tau_s if p.speed_tau_s > 0.0 else 1.0
+    vdot_c = vsp_dot + (v_sp - v) / tau_v
+    e_E = (gam_f - gam_m_f) + (vdot_c - vdot_f) / g
+    base = p.trim_thrust + p.thrust_per_gamma * (gam_f + vdot_c / g) + p.energy_kp * e_E + ff
+    if t_eng is not None:  # engagement: start from the autopilot's thrust (no step)
+        lim = p.integrator_limit
+        integ = _clip(_clip(t_eng, p.thrust_min, p.thrust_max) - base, -lim, lim)
+        t_eng = None
+    raw = base + integ
+    if dt > 0.0 and not ((raw >= p.thrust_max and e_E > 0) or (raw <= p.thrust_min and e_E < 0)):
+        lo = max(-p.integrator_limit, p.thrust_min - base)
+        hi = min(p.integrator_limit, p.thrust_max - base)
+        integ = _clip(integ + p.energy_ki * e_E * dt, min(lo, 0.0), max(hi, 0.0))
+    raw = base + integ
+    thrust = _clip(raw, p.thrust_min, p.thrust_max)
+    k = p.thrust_per_gamma + p.energy_kp
+    u = (raw - thrust) / k if k > 0.0 else 0.0
+    # the flight path thrust sustains at its limit, against what the law asks (unclipped)
+    law = gamma_c if gamma_law is None else gamma_law
+    sus = gamma_c - u
+    off = min(0.0, sus - law) if u > 0.0 else max(0.0, sus - law) if u < 0.0 else 0.0
+    w = 0.0  # height: the flight path never gives way
+    if p.priority == "airspeed":  # ... but near the envelope's edges (1 m/s ramp) it does
+        w = _clip(p.airspeed_min_m_s + 1.0 - v, 0.0, 1.0) if u > 0.0 else 0.0
+        w = _clip(v - p.airspeed_max_m_s + 1.0, 0.0, 1.0) if u < 0.0 else w
+    span = p.max_pitch_rad - p.min_pitch_rad  # at most the whole pitch range
+    target = _clip(w * off, -span, span)
+    if dt > 0.0:
+        b = min(1.0, dt / p.balance_tau_s) if p.balance_tau_s > 0.0 else 1.0
+        bal += b * (target - bal)
+        if abs(bal) < 1e-6 and target == 0.0:
+            bal = 0.0
+    return thrust, EnergyState(integ, v, v_sp, vdot_f, gam_f, bal, gam_m_f, t_eng)
 
 
 def _pitch_rate_bias(
@@ -374,6 +548,7 @@ def _learn(
     g: float,
     gamd: float,
     gamma: float,
+    freeze_trim: bool = False,
 ) -> tuple[float | None, float]:
     """One step of the two estimates (module comment) from the measured attitude and rates and
     the law's flight-path-angle rate demand gamd (rad/s); a non-finite or missing measurement
@@ -400,7 +575,7 @@ def _learn(
         pushing_out = (pitch_sp >= params.max_pitch_rad and gamd > 0) or (
             pitch_sp <= params.min_pitch_rad and gamd < 0
         )
-        if not pushing_out:
+        if not (pushing_out or freeze_trim):
             trim_hat = _clip(
                 trim_hat + params.tau_pitch_s / params.trim_tau_s * gamd * dt, -lim, lim
             )

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -123,6 +124,199 @@ def gain_condition(
     return CheckResult("gain_condition", status, text, figs)
 
 
+def demanded_directions(
+    path: TabulatedPath,
+    target: TargetMotion,
+    v_w: float,
+    horizon_s: float,
+    s0: float = 0.0,
+    wind_ned: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    dt_s: float = 0.05,
+    with_positions: bool = False,
+) -> Any:
+    """(t (s), wd1 (n, 3)): the air-relative direction flying the moving path exactly demands
+    at airspeed v_w over the horizon (see :func:`feasibility`); with_positions: also the path
+    point flown (NED m, (n, 3))."""
+    eta = np.asarray(wind_ned, float)
+    ts = _times(horizon_s, dt_s)
+    s = s0
+    W1 = np.empty((len(ts), 3))
+    P = np.empty((len(ts), 3))
+    for k, t in enumerate(ts):
+        st = target.state(float(t))
+        pd, f1, f2, f3, _, _ = path.eval(s)
+        R = st.R_T_I
+        P[k] = st.position + R @ pd
+        f1I, f2I, f3I = R @ f1, R @ f2, R @ f3
+        u = st.velocity + np.cross(R @ st.omega_T, R @ pd) - eta
+        a21, a31 = float(u @ f2I) / v_w, float(u @ f3I) / v_w
+        a11 = math.sqrt(max(1e-12, 1.0 - a21 * a21 - a31 * a31))
+        W1[k] = a11 * f1I + a21 * f2I + a31 * f3I
+        sdot = v_w * a11 - float(u @ f1I)
+        if k + 1 < len(ts):
+            s += sdot * (ts[k + 1] - t)
+    return (ts, W1, P) if with_positions else (ts, W1)
+
+
+# MIL-F-8785C Fig. 7: sigma (ft/s) of medium/high-altitude turbulence at 500, 1750, 3750 and
+# 7500 ft for the probability-of-exceedance rows the SIL's levels use (light 10^-2, moderate
+# 10^-3, severe 10^-5), and the low-altitude W20 (ft/s) of sim/plant_jsbsim.TURBULENCE_LEVELS
+_POE_ALT_FT = (500.0, 1750.0, 3750.0, 7500.0)
+_POE_SIGMA_FPS = {
+    "light": (6.6, 6.9, 7.4, 6.7),
+    "moderate": (8.6, 9.6, 10.6, 10.1),
+    "severe": (15.6, 17.6, 23.0, 23.6),
+}
+_W20_FPS = {"light": 25.0, "moderate": 50.0, "severe": 75.0}
+_FT = 0.3048
+
+
+def vertical_gust_scale(level: str, h_m: float) -> tuple[float, float]:
+    """(sigma_w m/s, L_w m) of MIL-F-8785C Dryden turbulence at height h_m, as JSBSim's Milspec
+    model computes them (with h the altitude above sea level, as it passes): below 1000 ft
+    sigma_w = 0.1 W20, L_w = h; above 2000 ft the tabulated sigma and L = 1750 ft; linear
+    between. ``none``: (0, 0)."""
+    if level not in _W20_FPS:
+        return 0.0, 0.0
+    h = max(h_m / _FT, 10.0)
+    s_low = 0.1 * _W20_FPS[level]
+    s_tab = float(np.interp(h, _POE_ALT_FT, _POE_SIGMA_FPS[level]))
+    if h <= 1000.0:
+        sig, L = s_low, h
+    elif h <= 2000.0:
+        f = (h - 1000.0) / 1000.0
+        sig, L = s_low + f * (s_tab - s_low), 1000.0 + f * 750.0
+    else:
+        sig, L = s_tab, 1750.0
+    return sig * _FT, L * _FT
+
+
+def vertical_gusts(
+    level: str, heights_asl_m: np.ndarray, v_w: float, n_sigma: float = 2.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """(w, T) per sample for :func:`climb_feasibility`: n_sigma sigma_w sustained over the
+    turbulence's time scale L_w / v_w at each height (m above sea level)."""
+    sc = [vertical_gust_scale(level, float(h)) for h in heights_asl_m]
+    return (
+        np.array([n_sigma * s for s, _ in sc]),
+        np.array([L / max(v_w, 1.0) for _, L in sc]),
+    )
+
+
+def climb_feasibility(
+    ts: np.ndarray,
+    W1: np.ndarray,
+    v_w: float,
+    v_min: float,
+    v_max: float,
+    max_climb_m_s: float | None,
+    max_sink_m_s: float | None,
+    marginal: float = 0.8,
+    g: float = GRAVITY_M_S2,
+    gusts: tuple[np.ndarray, np.ndarray] | None = None,
+) -> CheckResult:
+    """The climb and descent the path demands (air-relative: path slope, target climb, vertical
+    wind; c = -v_w wd1_z) against the aircraft's steady capability at v_w.
+
+    A climb beyond max_climb for a while is paid from kinetic energy: the speed may fall from
+    v_w to v_min, a reserve of (v_w^2 - v_min^2) / (2 g) m of height (a descent beyond max_sink
+    fills v_max likewise). The deficit D(t) = max(0, D + (c - max_climb) dt) is the largest
+    integral of the excess over any interval: D above the reserve is refused (the airspeed
+    cannot be held), a peak demand above ``marginal`` x the capability or D above half the
+    reserve warns. Unknown capability (None): a warning when the path climbs or sinks at all.
+    v_min, v_max: the airspeeds the flight may reach (the verdict's window).
+    gusts: (w (m/s), T (s)) per sample: a vertical gust of w sustained for T (turbulence: 2
+    sigma_w over the Dryden time scale L_w / V, :func:`vertical_gusts`). A downdraft adds w to the
+    climb, an updraft to the sink, for T from each instant: the excess over that window beyond
+    the capability is a deficit like the steady one.
+    """
+    c = -v_w * W1[:, 2]
+    k_up, k_dn = int(np.argmax(c)), int(np.argmin(c))
+    up, dn = max(0.0, float(c[k_up])) + 0.0, max(0.0, float(-c[k_dn])) + 0.0
+    figs: dict[str, float | bool | None] = {
+        "peak_climb_m_s": up, "peak_sink_m_s": dn,
+        "max_climb_m_s": max_climb_m_s, "max_sink_m_s": max_sink_m_s,
+    }  # fmt: skip
+    head = (
+        f"the path demands up to {up:.2f} m/s of climb at t = {ts[k_up]:.1f} s and "
+        f"{dn:.2f} m/s of sink at t = {ts[k_dn]:.1f} s"
+    )
+    if max_climb_m_s is None or max_sink_m_s is None:
+        st = "warn" if max(up, dn) > 0.5 else "pass"
+        return CheckResult(
+            "climb", st, head + " (capability unknown: set vehicle.max_climb_rate_m_s and "
+            "vehicle.max_sink_rate_m_s)", figs,
+        )  # fmt: skip
+    res_up = max(v_w * v_w - v_min * v_min, 0.0) / (2.0 * g)
+    res_dn = max(v_max * v_max - v_w * v_w, 0.0) / (2.0 * g)
+    dts = np.diff(ts, prepend=ts[0])
+    d_up = d_dn = 0.0
+    worst_up = worst_dn = 0.0
+    t_up = t_dn = float(ts[0])
+    for k in range(len(ts)):
+        d_up = max(0.0, d_up + (c[k] - max_climb_m_s) * dts[k])
+        d_dn = max(0.0, d_dn + (-c[k] - max_sink_m_s) * dts[k])
+        if d_up > worst_up:
+            worst_up, t_up = d_up, float(ts[k])
+        if d_dn > worst_dn:
+            worst_dn, t_dn = d_dn, float(ts[k])
+    gust_note = ""
+    need_up, need_dn = up, dn  # the climb / sink needed at the worst instant, gusts included
+    if gusts is not None:
+        w, T = gusts
+        cum = np.concatenate([[0.0], np.cumsum(c * dts)])
+        for k in range(len(ts)):
+            j = int(np.searchsorted(ts, ts[k] + T[k]))
+            j = min(j, len(ts) - 1)
+            span = float(ts[j] - ts[k])
+            if span <= 0.0:
+                continue
+            mean_c = float(cum[j + 1] - cum[k + 1]) / span
+            # the gust lasts T or until the horizon ends, whichever is first
+            need_up, need_dn = max(need_up, mean_c + w[k]), max(need_dn, -mean_c + w[k])
+            gu = max(0.0, mean_c + w[k] - max_climb_m_s) * span
+            gd = max(0.0, -mean_c + w[k] - max_sink_m_s) * span
+            if gu > worst_up:
+                worst_up, t_up = gu, float(ts[k])
+                gust_note = f" (a {w[k]:.1f} m/s downdraft for {T[k]:.0f} s from t = {ts[k]:.0f} s)"
+            if gd > worst_dn:
+                worst_dn, t_dn = gd, float(ts[k])
+    figs.update(deficit_climb_m=worst_up, deficit_sink_m=worst_dn, reserve_climb_m=res_up,
+                reserve_sink_m=res_dn)  # fmt: skip
+    cap = f" (capability at {v_w:g} m/s: climb {max_climb_m_s:g}, sink {max_sink_m_s:g} m/s)"
+    if worst_up > res_up:
+        return CheckResult(
+            "climb", "fail",
+            f"the path climbs faster than the aircraft can for long: {worst_up:.1f} m of "
+            f"height beyond its climb by t = {t_up:.1f} s{gust_note}, more than the {res_up:.1f} m "
+            f"that slowing from {v_w:g} to {v_min:.1f} m/s buys; " + head + cap, figs,
+        )  # fmt: skip
+    if worst_dn > res_dn:
+        return CheckResult(
+            "climb", "fail",
+            f"the path descends faster than the aircraft can at idle: {worst_dn:.1f} m beyond "
+            f"its sink by t = {t_dn:.1f} s (updrafts included), more than the {res_dn:.1f} m that "
+            f"speeding up to {v_max:.1f} m/s absorbs; " + head + cap, figs,
+        )  # fmt: skip
+    figs.update(need_climb_m_s=need_up, need_sink_m_s=need_dn)
+    # marginal: the steady demand above ``marginal`` x the capability, a gust's above the
+    # capability itself, or half a reserve spent
+    marg = (
+        up > marginal * max_climb_m_s or dn > marginal * max_sink_m_s
+        or need_up > max_climb_m_s or need_dn > max_sink_m_s
+        or worst_up > 0.5 * res_up or worst_dn > 0.5 * res_dn
+    )  # fmt: skip
+    why = (
+        f": marginal: climb up to {need_up:.2f} and sink up to {need_dn:.2f} m/s needed"
+        + (" with the turbulence's 2-sigma gusts" if gusts is not None else "")
+        + f" (warn above the capability, {marginal:g} x without gusts), deficits {worst_up:.1f} / "
+        f"{worst_dn:.1f} m of the {res_up:.1f} / {res_dn:.1f} m reserves (warn above half)"
+    )
+    return CheckResult(
+        "climb", "warn" if marg else "pass", head + cap + (why if marg else ""), figs
+    )
+
+
 def feasibility(
     path: TabulatedPath,
     target: TargetMotion,
@@ -149,22 +343,7 @@ def feasibility(
     as the path asks (an airframe that turns 25 % less needs 37.6 deg where the textbook says
     29.8), and its turn-rate limit is turn_gain g tan(limit) / v_w.
     """
-    eta = np.asarray(wind_ned, float)
-    ts = _times(horizon_s, dt_s)
-    s = s0
-    W1 = np.empty((len(ts), 3))
-    for k, t in enumerate(ts):
-        st = target.state(float(t))
-        pd, f1, f2, f3, _, _ = path.eval(s)
-        R = st.R_T_I
-        f1I, f2I, f3I = R @ f1, R @ f2, R @ f3
-        u = st.velocity + np.cross(R @ st.omega_T, R @ pd) - eta
-        a21, a31 = float(u @ f2I) / v_w, float(u @ f3I) / v_w
-        a11 = math.sqrt(max(1e-12, 1.0 - a21 * a21 - a31 * a31))
-        W1[k] = a11 * f1I + a21 * f2I + a31 * f3I
-        sdot = v_w * a11 - float(u @ f1I)
-        if k + 1 < len(ts):
-            s += sdot * (ts[k + 1] - t)
+    ts, W1 = demanded_directions(path, target, v_w, horizon_s, s0, wind_ned, dt_s)
     dW = np.gradient(W1, ts, axis=0)
     rate = np.linalg.norm(dW, axis=1)
     banks = np.array(
