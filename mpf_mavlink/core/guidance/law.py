@@ -1,26 +1,33 @@
 """The 3D moving-path-following law (Jain, de Sousa, Aguiar, Theorem 1), pure and exact.
 
-:func:`_frame` builds the paper's frames at one point ([wdbasis] W_d, then the transient frame
-D) and :func:`mpf_law` evaluates [sdot], Psi, e, the feedforward omega_DI and the command
-[omega]. Everything is plain float arithmetic on local variables: the bridge evaluates the law
-once per ATTITUDE sample inside its latency budget, and a Python-level float operation costs
-far less than a numpy call on a 3-vector (one evaluation is ~30 us, three frame evaluations
-of which are the feedforward). No I/O, no clock.
+Read it beside the paper (equation labels in brackets) and the restatement of the law in the
+project's docs: one function per step.
 
-Frames (see ../shared/spec/mpf-law.md): {I} NED; {W} wind frame (w1 along the air-relative
-velocity); {T} target; {F} parallel-transport frame at p_d(s); {W_d} steady-state desired
-velocity frame; {D} transient desired frame.
+1. :func:`steady_state_frame` [wdbasis]: {W_d} in {F} from v_t t1 + v_d (Assumption 1).
+2. :func:`cross_track_errors`: y_w, z_w, the cross-track error on wd2, wd3.
+3. :func:`transient_frame`: {D} in {W_d}, shaped by the look-ahead alpha.
+4. :func:`desired_frame`: steps 1-3 at one point of the flow, composed into R_D^T.
+5. :func:`progression_rate` [sdot].
+6. :func:`feedforward_omega_DI`: omega_DI, the derivative of R_D along the closed-loop flow.
+7. :func:`attitude_error`: Psi and e [ertilde] from d1 and the wind frame.
+8. :func:`mpf_law` [omega]: -K_R e + Pi_R Rt^T omega_DI^D, then the extensions
+   (:func:`psi_turn_rate_command`, :func:`limit_rates`).
+
+Frames: {I} NED; {W} wind frame (w1 along the air-relative velocity); {T} target; {F}
+parallel-transport frame at p_d(s); {W_d} steady-state desired velocity frame; {D} transient
+desired frame. Vectors and matrices are tuples (see :mod:`mpf_mavlink.core.vec3`, matrices by
+columns, so R_F^T = (f1, f2, f3)); the frames are built in {T}, where the path is fixed.
 
 The feedforward omega_DI (angular velocity of {D} relative to {I}) is the exact derivative
-of R_D^I along the closed-loop flow: R_D^I is a pure function of (t, s, p, target) and we
+of R_D^I along the closed-loop flow: R_D^T is a pure function of (s, p, target) and we
 difference it along the known kinematics (pdot = v_w w1 + eta_hat, sdot from the law, the
 target's velocity, acceleration, angular velocity and its rate), never along telemetry.
+No I/O, no clock.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal, NamedTuple
 
@@ -29,8 +36,22 @@ from numpy.typing import NDArray
 
 from mpf_mavlink.core.paths import TabulatedPath
 from mpf_mavlink.core.target import TargetState
+from mpf_mavlink.core.vec3 import (
+    Mat3,
+    Vec3,
+    add,
+    add_scaled,
+    cross,
+    dot,
+    mat_mul,
+    mat_T_vec,
+    mat_vec,
+    norm,
+    rotation_rate,
+    sub,
+)
 
-Vec = tuple[float, float, float]
+Vec = Vec3  # kept for importers
 
 
 @dataclass(frozen=True)
@@ -128,115 +149,160 @@ class MpfDiagnostics(NamedTuple):
     k2: float  # path curvature along f3 (1/m)
 
 
-def _cross(a: Vec, b: Vec) -> Vec:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+# The path at one arc length, as TabulatedPath.eval gives it: (p_d, f1, f2, f3, k1, k2) in {T}.
+_PathPoint = tuple[Vec3, Vec3, Vec3, Vec3, float, float]
+# What the centre evaluation of the frames hands on to the command and the diagnostics.
+_FrameDetails = tuple[Vec3, Vec3, Vec3, Mat3, Vec3, float, float]
+
+_ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 
-def _dot(a: Vec, b: Vec) -> float:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+def steady_state_frame(u_f2: float, u_f3: float, v_w: float) -> Mat3:
+    """[wdbasis] R_{W_d}^F = (wd1, wd2, wd3), components in {F}.
 
-
-# Everything the centre evaluation hands on besides R_D^T (see _frame).
-_Extra = tuple[Vec, Vec, Vec, Vec, float, float, Vec, Vec, Vec, float, float, float, float]
-_Frame = tuple[float, float, float, float, float, float, float, float, float, _Extra]
-_PathEval = Callable[[float], tuple[Vec, Vec, Vec, Vec, float, float]]
-
-
-def _frame(
-    s: float,
-    q0: float, q1: float, q2: float,
-    uu0: float, uu1: float, uu2: float,
-    o0: float, o1: float, o2: float,
-    peval: _PathEval,
-    v_w: float,
-    a: float,
-) -> _Frame:  # fmt: skip
-    """[wdbasis] W_d and the transient frame D at one point of the flow, in {T} coordinates.
-
-    q = R_T^T (p - p_t): vehicle position relative to the target (m);
-    uu = R_T^T (v_t - eta_hat): target velocity less the wind estimate (m/s);
-    o = omega_TI^T (rad/s); path point p_d(s), v_d = o x p_d; a = alpha (m).
-    Returns d1, d2, d3 (the columns of R_D^T, 9 floats) and, for the centre evaluation,
-    (p_d, f1, f2, f3, k1, k2, pt, u, wd1 in {F}, pt.f2, pt.f3, y_w, z_w) where
-    u = v_t t1 + v_d - eta_hat.
-    Vectors arrive as scalars and tuples are unpacked once: this runs three times per law
-    evaluation and tuple indexing would cost as much as the arithmetic.
+    u_f2, u_f3: the components along f2, f3 of u = v_t t1 + v_d (- eta_hat with wind
+    compensation), the velocity the path point asks of the vehicle (m/s); v_w airspeed (m/s).
     """
-    pd, f1, f2, f3, k1, k2 = peval(s)
-    pd0, pd1, pd2 = pd
-    a0, a1_, a2_ = f1
-    b0, b1_, b2_ = f2
-    c0, c1_, c2_ = f3
-    pt0, pt1, pt2 = q0 - pd0, q1 - pd1, q2 - pd2
-    # u = v_t t1 + v_d - eta_hat: v_w times the air-relative direction needed in steady state.
-    u0 = uu0 + o1 * pd2 - o2 * pd1
-    u1 = uu1 + o2 * pd0 - o0 * pd2
-    u2 = uu2 + o0 * pd1 - o1 * pd0
-    iv = 1.0 / v_w
-    wd21 = (u0 * b0 + u1 * b1_ + u2 * b2_) * iv
-    wd31 = (u0 * c0 + u1 * c1_ + u2 * c2_) * iv
-    rad = 1.0 - wd21 * wd21 - wd31 * wd31
-    # Assumption 1 keeps rad > 0; outside it we keep the frame defined (the margin says so).
-    wd11 = math.sqrt(rad) if rad > 1e-12 else 1e-6
-    n = 1.0 / math.sqrt(wd11 * wd11 + wd21 * wd21)
-    wd12, wd22 = -wd21 * n, wd11 * n
-    # wd3 = wd1 x wd2 in {F} components (wd32 = 0).
-    wd13 = -wd31 * wd22
-    wd23 = wd31 * wd12
-    wd33 = wd11 * wd22 - wd21 * wd12
-    pF2 = pt0 * b0 + pt1 * b1_ + pt2 * b2_
-    pF3 = pt0 * c0 + pt1 * c1_ + pt2 * c2_
-    # Cross-track error pt_x = pt - (pt.f1) f1, projected on wd2 and wd3.
-    y_w = pF2 * wd22
-    z_w = pF2 * wd23 + pF3 * wd33
-    n1 = 1.0 / math.sqrt(a * a + y_w * y_w + z_w * z_w)
-    n2 = 1.0 / math.sqrt(a * a + y_w * y_w)
-    x1, y1, z1 = a * n1, -y_w * n1, -z_w * n1  # d1 in {W_d}
-    x2, y2 = y_w * n2, a * n2  # d2 in {W_d} (third component 0)
-    x3, y3, z3 = -z1 * y2, z1 * x2, x1 * y2 - y1 * x2  # d3 = d1 x d2
-    # {W_d} axes in {F}: wd1 = (wd11, wd21, wd31), wd2 = (wd12, wd22, 0), wd3 = (wd13, wd23,
-    # wd33); each d_k goes {W_d} -> {F} (g) -> {T}.
-    g1 = x1 * wd11 + y1 * wd12 + z1 * wd13
-    g2 = x1 * wd21 + y1 * wd22 + z1 * wd23
-    g3 = x1 * wd31 + z1 * wd33
-    h1 = x2 * wd11 + y2 * wd12
-    h2 = x2 * wd21 + y2 * wd22
-    h3 = x2 * wd31
-    k1_ = x3 * wd11 + y3 * wd12 + z3 * wd13
-    k2_ = x3 * wd21 + y3 * wd22 + z3 * wd23
-    k3_ = x3 * wd31 + z3 * wd33
-    return (
-        g1 * a0 + g2 * b0 + g3 * c0,
-        g1 * a1_ + g2 * b1_ + g3 * c1_,
-        g1 * a2_ + g2 * b2_ + g3 * c2_,
-        h1 * a0 + h2 * b0 + h3 * c0,
-        h1 * a1_ + h2 * b1_ + h3 * c1_,
-        h1 * a2_ + h2 * b2_ + h3 * c2_,
-        k1_ * a0 + k2_ * b0 + k3_ * c0,
-        k1_ * a1_ + k2_ * b1_ + k3_ * c1_,
-        k1_ * a2_ + k2_ * b2_ + k3_ * c2_,
-        (
-            pd,
-            f1,
-            f2,
-            f3,
-            k1,
-            k2,
-            (pt0, pt1, pt2),
-            (u0, u1, u2),
-            (wd11, wd21, wd31),
-            pF2,
-            pF3,
-            y_w,
-            z_w,
-        ),
-    )
+    wd21 = u_f2 / v_w
+    wd31 = u_f3 / v_w
+    radicand = 1.0 - wd21 * wd21 - wd31 * wd31
+    # Assumption 1 keeps the radicand > 0; outside it the frame stays defined (the
+    # diagnostics' path_speed_margin says so).
+    wd11 = math.sqrt(radicand) if radicand > 1e-12 else 1e-6
+    n = math.sqrt(wd11 * wd11 + wd21 * wd21)
+    wd1 = (wd11, wd21, wd31)
+    wd2 = (-wd21 / n, wd11 / n, 0.0)  # wd32 = 0
+    return wd1, wd2, cross(wd1, wd2)
+
+
+def cross_track_errors(pt_x_F: Vec3, R_Wd_F: Mat3) -> tuple[float, float]:
+    """y_w = pt_x . wd2, z_w = pt_x . wd3 (m): the cross-track error pt_x = (pt.f2) f2 + (pt.f3) f3
+    (given in {F}) on the plane of wd2, wd3."""
+    return dot(pt_x_F, R_Wd_F[1]), dot(pt_x_F, R_Wd_F[2])
+
+
+def transient_frame(y_w: float, z_w: float, alpha: float) -> Mat3:
+    """R_D^{W_d} = (d1, d2, d3), components in {W_d}; alpha (m) the look-ahead distance."""
+    n1 = math.sqrt(alpha * alpha + y_w * y_w + z_w * z_w)
+    n2 = math.sqrt(alpha * alpha + y_w * y_w)
+    d1 = (alpha / n1, -y_w / n1, -z_w / n1)
+    d2 = (y_w / n2, alpha / n2, 0.0)  # d32 = 0
+    return d1, d2, cross(d1, d2)
+
+
+def desired_frame(
+    path_point: _PathPoint, q: Vec3, uu: Vec3, omega: Vec3, v_w: float, alpha: float
+) -> tuple[Mat3, _FrameDetails]:
+    """R_D^T = R_F^T R_{W_d}^F R_D^{W_d} at one point of the flow, everything in {T}.
+
+    path_point: the path at s; q = R_T^T (p - p_t), the vehicle relative to the target (m);
+    uu = R_T^T (v_t - eta_hat) (m/s); omega = omega_TI^T (rad/s); v_w (m/s); alpha (m).
+    Returns R_D^T and (pt, v_d, u, R_{W_d}^F, pt_x in {F}, y_w, z_w) for the diagnostics.
+    """
+    p_d, f1, f2, f3, _, _ = path_point
+    pt = sub(q, p_d)  # position error p - p_f
+    v_d = cross(omega, p_d)  # velocity of the path point from the target's rotation
+    u = add(uu, v_d)  # v_t t1 + v_d - eta_hat
+    R_Wd_F = steady_state_frame(dot(u, f2), dot(u, f3), v_w)
+    pt_x_F = (0.0, dot(pt, f2), dot(pt, f3))
+    y_w, z_w = cross_track_errors(pt_x_F, R_Wd_F)
+    R_D_Wd = transient_frame(y_w, z_w, alpha)
+    R_D_T = mat_mul((f1, f2, f3), mat_mul(R_Wd_F, R_D_Wd))
+    return R_D_T, (pt, v_d, u, R_Wd_F, pt_x_F, y_w, z_w)
+
+
+def progression_rate(pt: Vec3, c: Vec3, v_d: Vec3, f1: Vec3, K_p: float) -> float:
+    """[sdot] = (K_p pt + v_w w1 + eta_hat - v_t t1 - v_d) . f1 (m/s), in {T}, where
+    c = R_T^T (v_w w1 + eta_hat - v_t) is the vehicle's velocity relative to the target."""
+    return K_p * dot(pt, f1) + dot(sub(c, v_d), f1)
 
 
 # Step for differencing R_D^T along the flow (s). Central differences cancel the symmetric
 # second-order terms of a first-order state advance, so the error is O(h^2) ~ 1e-8 relative,
 # and round-off (~1e-16 / h) is smaller still.
 FD_STEP_S = 1e-4
+
+
+def feedforward_omega_DT(
+    path: TabulatedPath,
+    s: float,
+    sdot: float,
+    q: Vec3,
+    c: Vec3,
+    uu: Vec3,
+    a_t: Vec3,
+    omega: Vec3,
+    omega_dot: Vec3,
+    R_D_T: Mat3,
+    v_w: float,
+    alpha: float,
+) -> Vec3:
+    """omega_DT^T (rad/s): the angular velocity of {D} relative to {T}, by central differences
+    of R_D^T = desired_frame(...) along the closed-loop flow, with R_D^T at the centre given.
+
+    The flow in {T}: sdot from the law; qdot = c - omega x q; d(uu)/dt = a_t - omega x uu with
+    a_t = R_T^T a_t^I (eta_hat held); omega_dot from the target. Then
+    omega_DT^T = vee(dR/dt R^T) for R = R_D^T (:func:`rotation_rate`).
+    """
+    h = FD_STEP_S
+    q_dot = sub(c, cross(omega, q))
+    uu_dot = sub(a_t, cross(omega, uu))
+    R_plus, _ = desired_frame(
+        path.eval(s + h * sdot),
+        add_scaled(q, h, q_dot),
+        add_scaled(uu, h, uu_dot),
+        add_scaled(omega, h, omega_dot),
+        v_w,
+        alpha,
+    )
+    R_minus, _ = desired_frame(
+        path.eval(s - h * sdot),
+        add_scaled(q, -h, q_dot),
+        add_scaled(uu, -h, uu_dot),
+        add_scaled(omega, -h, omega_dot),
+        v_w,
+        alpha,
+    )
+    return rotation_rate(R_plus, R_minus, R_D_T, 2.0 * h)
+
+
+def attitude_error(d1: Vec3, R_W_I: Mat3) -> tuple[float, float, float]:
+    """Psi [attitudeErrorFunction] and e = (e2, e3) [ertilde] from d1 and R_W^I (both in NED).
+
+    Rt = R_W^D = (R_D^I)^T R_W^I; its first row is (d1.w1, d1.w2, d1.w3).
+    """
+    Rt11, Rt12, Rt13 = mat_T_vec(R_W_I, d1)
+    return 0.5 * (1.0 - Rt11), 0.5 * Rt13, -0.5 * Rt12
+
+
+def psi_turn_direction(R_W_I: Mat3, d1: Vec3) -> tuple[float, float]:
+    """Unit direction on (w2, w3) of the turn that brings w1 onto d1: about w1 x d1; at the
+    antipode (w1 = -d1) a right turn about the local vertical (down)."""
+    w1, w2, w3 = R_W_I
+    axis = cross(w1, d1)
+    n = norm(axis)
+    if n > 1e-3:
+        return dot(axis, w2) / n, dot(axis, w3) / n
+    v2, v3 = w2[2], w3[2]  # the vertical (0, 0, 1) on w2, w3
+    nu = math.hypot(v2, v3)
+    return (v2 / nu, v3 / nu) if nu > 1e-6 else (0.0, 1.0)
+
+
+def limit_rates(w2: float, w3: float, ext: Extensions) -> tuple[float, float, bool]:
+    """The rate limit of :class:`Extensions` on the command (rad/s); True when it acted."""
+    lim = ext.rate_limit
+    if lim is None:
+        return w2, w3, False
+    if ext.rate_limit_mode == "per_axis":
+        if abs(w2) > lim or abs(w3) > lim:
+            return max(-lim, min(lim, w2)), max(-lim, min(lim, w3)), True
+        return w2, w3, False
+    mag = math.hypot(w2, w3)
+    if mag > lim:
+        k = lim / mag
+        return w2 * k, w3 * k, True
+    return w2, w3, False
+
 
 _NO_EXTENSIONS = Extensions()
 
@@ -260,183 +326,71 @@ def mpf_law(
     t = float(vehicle.t)
     s = float(s)
     v_w = float(vehicle.airspeed)
-    # R_W^I: columns w1, w2, w3 (NED). R_T^I: rows r_i, R_T^T v = sum_i v_i r_i.
-    (w10, w20, w30), (w11, w21, w31), (w12, w22, w32) = vehicle.R_W_I.tolist()
-    (T00, T01, T02), (T10, T11, T12), (T20, T21, T22) = target.R_T_I.tolist()
-    if ext.wind_compensation:
-        e0, e1, e2 = vehicle.wind.tolist()
-    else:
-        e0 = e1 = e2 = 0.0
-    p0, p1, p2 = vehicle.position.tolist()
-    tp0, tp1, tp2 = target.position.tolist()
-    tv0, tv1, tv2 = target.velocity.tolist()
-    ta0, ta1, ta2 = target.acceleration.tolist()
-    o0, o1, o2 = target.omega_T.tolist()
-    od0, od1, od2 = target.omega_dot_T.tolist()
-    # The vehicle's ground velocity as the law models it: v_w w1 + eta_hat (NED).
-    gv0, gv1, gv2 = v_w * w10 + e0, v_w * w11 + e1, v_w * w12 + e2
-    # Into {T}: q = R_T^T (p - p_t), c = R_T^T (pdot - v_t), uu = R_T^T (v_t - eta_hat),
-    # at = R_T^T a_t.
-    x0, x1, x2 = p0 - tp0, p1 - tp1, p2 - tp2
-    q0 = T00 * x0 + T10 * x1 + T20 * x2
-    q1 = T01 * x0 + T11 * x1 + T21 * x2
-    q2 = T02 * x0 + T12 * x1 + T22 * x2
-    x0, x1, x2 = gv0 - tv0, gv1 - tv1, gv2 - tv2
-    c0 = T00 * x0 + T10 * x1 + T20 * x2
-    c1 = T01 * x0 + T11 * x1 + T21 * x2
-    c2 = T02 * x0 + T12 * x1 + T22 * x2
-    x0, x1, x2 = tv0 - e0, tv1 - e1, tv2 - e2
-    uu0 = T00 * x0 + T10 * x1 + T20 * x2
-    uu1 = T01 * x0 + T11 * x1 + T21 * x2
-    uu2 = T02 * x0 + T12 * x1 + T22 * x2
-    at0 = T00 * ta0 + T10 * ta1 + T20 * ta2
-    at1 = T01 * ta0 + T11 * ta1 + T21 * ta2
-    at2 = T02 * ta0 + T12 * ta1 + T22 * ta2
-    alpha = gains.alpha
-    peval = path.eval
-    D10, D11, D12, D20, D21, D22, D30, D31, D32, extra = _frame(
-        s, q0, q1, q2, uu0, uu1, uu2, o0, o1, o2, peval, v_w, alpha
-    )
-    pd, f1, f2, f3, k1, k2, pt, u, wdF, pF2, pF3, y_w, z_w = extra
-    pd0, pd1, pd2 = pd
-    f10, f11, f12 = f1
-    pt0, pt1, pt2 = pt
-    # [sdot] = (K_p pt + v_w w1 + eta_hat - v_t t1 - om x p_d) . f1, in {T} coordinates.
-    vd0 = o1 * pd2 - o2 * pd1
-    vd1 = o2 * pd0 - o0 * pd2
-    vd2 = o0 * pd1 - o1 * pd0
-    pF1 = pt0 * f10 + pt1 * f11 + pt2 * f12
-    sdot = gains.K_p * pF1 + ((c0 - vd0) * f10 + (c1 - vd1) * f11 + (c2 - vd2) * f12)
+    # ndarray.tolist() gives lists; the vec3 helpers only index and unpack them. The
+    # transposes' rows are the matrices' columns.
+    R_W_I: Mat3 = vehicle.R_W_I.T.tolist()  # (w1, w2, w3) in NED
+    R_T_I: Mat3 = target.R_T_I.T.tolist()  # (t1, t2, t3) in NED
+    eta: Vec3 = vehicle.wind.tolist() if ext.wind_compensation else _ZERO
+    p_t: Vec3 = target.position.tolist()
+    v_t: Vec3 = target.velocity.tolist()
+    omega: Vec3 = target.omega_T.tolist()  # omega_TI^T
+    w1, w2, w3 = R_W_I
+    # Into {T}: the vehicle relative to the target, its velocity as the law models it
+    # (v_w w1 + eta_hat) relative to the target's, and the target's velocity less the wind.
+    q = mat_T_vec(R_T_I, sub(vehicle.position.tolist(), p_t))
+    c = mat_T_vec(R_T_I, sub(add_scaled(eta, v_w, w1), v_t))
+    uu = mat_T_vec(R_T_I, sub(v_t, eta))
 
-    # Exact feedforward: central differences of R_D^T along the flow, in {T}:
-    # qdot = c - om x q; d/dt uu = R_T^T a_t - om x uu (eta_hat constant); omdot from the target.
-    qd0 = c0 - (o1 * q2 - o2 * q1)
-    qd1 = c1 - (o2 * q0 - o0 * q2)
-    qd2 = c2 - (o0 * q1 - o1 * q0)
-    ud0 = at0 - (o1 * uu2 - o2 * uu1)
-    ud1 = at1 - (o2 * uu0 - o0 * uu2)
-    ud2 = at2 - (o0 * uu1 - o1 * uu0)
-    h = FD_STEP_S
-    A10, A11, A12, A20, A21, A22, A30, A31, A32, _ = _frame(
-        s + h * sdot,
-        q0 + h * qd0, q1 + h * qd1, q2 + h * qd2,
-        uu0 + h * ud0, uu1 + h * ud1, uu2 + h * ud2,
-        o0 + h * od0, o1 + h * od1, o2 + h * od2,
-        peval, v_w, alpha,
+    path_point = path.eval(s)
+    p_d, f1, f2, f3, k1, k2 = path_point
+    R_D_T, (pt, v_d, u, R_Wd_F, pt_x_F, y_w, z_w) = desired_frame(
+        path_point, q, uu, omega, v_w, gains.alpha
+    )
+    sdot = progression_rate(pt, c, v_d, f1, gains.K_p)
+    omega_DT = feedforward_omega_DT(
+        path, s, sdot, q, c, uu,
+        mat_T_vec(R_T_I, target.acceleration.tolist()), omega, target.omega_dot_T.tolist(),
+        R_D_T, v_w, gains.alpha,
     )  # fmt: skip
-    B10, B11, B12, B20, B21, B22, B30, B31, B32, _ = _frame(
-        s - h * sdot,
-        q0 - h * qd0, q1 - h * qd1, q2 - h * qd2,
-        uu0 - h * ud0, uu1 - h * ud1, uu2 - h * ud2,
-        o0 - h * od0, o1 - h * od1, o2 - h * od2,
-        peval, v_w, alpha,
-    )  # fmt: skip
-    inv = 1.0 / (2.0 * h)
-    # omega^T = vee(dR R^T), R = [d1 d2 d3]: (dR R^T)_ij = sum_k d(d_k)_i (d_k)_j.
-    dA0, dA1, dA2 = A10 - B10, A11 - B11, A12 - B12
-    dB0, dB1, dB2 = A20 - B20, A21 - B21, A22 - B22
-    dC0, dC1, dC2 = A30 - B30, A31 - B31, A32 - B32
-    M21 = (dA2 * D11 + dB2 * D21 + dC2 * D31) * inv
-    M12 = (dA1 * D12 + dB1 * D22 + dC1 * D32) * inv
-    M02 = (dA0 * D12 + dB0 * D22 + dC0 * D32) * inv
-    M20 = (dA2 * D10 + dB2 * D20 + dC2 * D30) * inv
-    M10 = (dA1 * D10 + dB1 * D20 + dC1 * D30) * inv
-    M01 = (dA0 * D11 + dB0 * D21 + dC0 * D31) * inv
-    # omega_DI = omega_DT + omega_TI, then in NED (R_T^I v).
-    x0 = 0.5 * (M21 - M12) + o0
-    x1 = 0.5 * (M02 - M20) + o1
-    x2 = 0.5 * (M10 - M01) + o2
-    oI0 = T00 * x0 + T01 * x1 + T02 * x2
-    oI1 = T10 * x0 + T11 * x1 + T12 * x2
-    oI2 = T20 * x0 + T21 * x1 + T22 * x2
-    d10 = T00 * D10 + T01 * D11 + T02 * D12
-    d11 = T10 * D10 + T11 * D11 + T12 * D12
-    d12 = T20 * D10 + T21 * D11 + T22 * D12
-    # Rt = R_W^D: Rt11 = d1.w1, Rt12 = d1.w2, Rt13 = d1.w3.
-    R12 = d10 * w20 + d11 * w21 + d12 * w22
-    R13 = d10 * w30 + d11 * w31 + d12 * w32
-    psi = 0.5 * (1.0 - (d10 * w10 + d11 * w11 + d12 * w12))
-    e2, e3 = 0.5 * R13, -0.5 * R12
-    # Pi_R Rt^T omega_DI^D is omega_DI expressed on w2, w3.
-    ff2 = oI0 * w20 + oI1 * w21 + oI2 * w22
-    ff3 = oI0 * w30 + oI1 * w31 + oI2 * w32
-    K_R = gains.K_R
-    cm2 = -K_R * e2 + ff2
-    cm3 = -K_R * e3 + ff3
-    law2, law3 = cm2, cm3
+    omega_DI = mat_vec(R_T_I, add(omega_DT, omega))  # omega_DT + omega_TI, in NED
+    d1 = mat_vec(R_T_I, R_D_T[0])
+    psi, e2, e3 = attitude_error(d1, R_W_I)
+    # [omega]: -K_R e + Pi_R Rt^T omega_DI^D, the last term being omega_DI on w2, w3.
+    ff2, ff3 = dot(omega_DI, w2), dot(omega_DI, w3)
+    law2, law3 = -gains.K_R * e2 + ff2, -gains.K_R * e3 + ff3
+    cmd2, cmd3 = law2, law3
     mode = "law"
     if ext.psi_turn and psi >= ext.psi_turn_threshold:
-        rate = ext.psi_turn_rate if ext.psi_turn_rate is not None else 0.5 * K_R
-        w1: Vec = (w10, w11, w12)
-        w2: Vec = (w20, w21, w22)
-        w3: Vec = (w30, w31, w32)
-        ax = _cross(w1, (d10, d11, d12))
-        na = math.sqrt(_dot(ax, ax))
-        if na > 1e-3:
-            v2, v3 = _dot(ax, w2) / na, _dot(ax, w3) / na
-        else:
-            # Antipodal: a right turn about the local vertical (down), projected on w2, w3.
-            v2, v3 = w22, w32
-            nu = math.hypot(v2, v3)
-            v2, v3 = (v2 / nu, v3 / nu) if nu > 1e-6 else (0.0, 1.0)
-        cm2, cm3 = rate * v2 + ff2, rate * v3 + ff3
+        rate = ext.psi_turn_rate if ext.psi_turn_rate is not None else 0.5 * gains.K_R
+        v2, v3 = psi_turn_direction(R_W_I, d1)
+        cmd2, cmd3 = rate * v2 + ff2, rate * v3 + ff3
         mode = "psi_turn"
-    if ext.rate_limit is not None and ext.rate_limit_mode == "per_axis":
-        lim = ext.rate_limit
-        if abs(cm2) > lim or abs(cm3) > lim:
-            cm2, cm3 = max(-lim, min(lim, cm2)), max(-lim, min(lim, cm3))
-            mode += "+sat"
-    elif ext.rate_limit is not None:
-        mag = math.hypot(cm2, cm3)
-        if mag > ext.rate_limit:
-            k = ext.rate_limit / mag
-            cm2, cm3 = cm2 * k, cm3 * k
-            mode += "+sat"
-    omega_w1 = (cm2 * w20 + cm3 * w30, cm2 * w21 + cm3 * w31, cm2 * w22 + cm3 * w32)
-    cmd = MpfCommand(t, cm2, cm3, sdot, omega_w1)
+    cmd2, cmd3, saturated = limit_rates(cmd2, cmd3, ext)
+    if saturated:
+        mode += "+sat"
+    # The command as the angular velocity of w1 in NED: R_W^I [0, w2, w3].
+    cmd = MpfCommand(t, cmd2, cmd3, sdot, mat_vec(R_W_I, (0.0, cmd2, cmd3)))
     if not diagnostics:
         return cmd, None
-    u0, u1, u2 = u
-    wd11, wd21, wd31 = wdF
-    f20, f21, f22 = f2
-    f30, f31, f32 = f3
-    wd0 = wd11 * f10 + wd21 * f20 + wd31 * f30
-    wd1 = wd11 * f11 + wd21 * f21 + wd31 * f31
-    wd2 = wd11 * f12 + wd21 * f22 + wd31 * f32
+    R_F_T = (f1, f2, f3)
     diag = MpfDiagnostics(
         t,
         s,
-        (
-            T00 * pt0 + T01 * pt1 + T02 * pt2,
-            T10 * pt0 + T11 * pt1 + T12 * pt2,
-            T20 * pt0 + T21 * pt1 + T22 * pt2,
-        ),
-        math.sqrt(pt0 * pt0 + pt1 * pt1 + pt2 * pt2),
-        (pF1, pF2, pF3),
-        (
-            tp0 + (T00 * pd0 + T01 * pd1 + T02 * pd2),
-            tp1 + (T10 * pd0 + T11 * pd1 + T12 * pd2),
-            tp2 + (T20 * pd0 + T21 * pd1 + T22 * pd2),
-        ),
+        mat_vec(R_T_I, pt),
+        norm(pt),
+        (dot(pt, f1), pt_x_F[1], pt_x_F[2]),
+        add(p_t, mat_vec(R_T_I, p_d)),
         psi,
         (e2, e3),
         y_w,
         z_w,
-        (d10, d11, d12),
-        (
-            T00 * wd0 + T01 * wd1 + T02 * wd2,
-            T10 * wd0 + T11 * wd1 + T12 * wd2,
-            T20 * wd0 + T21 * wd1 + T22 * wd2,
-        ),
-        (
-            T00 * f10 + T01 * f11 + T02 * f12,
-            T10 * f10 + T11 * f11 + T12 * f12,
-            T20 * f10 + T21 * f11 + T22 * f12,
-        ),
-        (oI0, oI1, oI2),
+        d1,
+        mat_vec(R_T_I, mat_vec(R_F_T, R_Wd_F[0])),
+        mat_vec(R_T_I, f1),
+        omega_DI,
         (ff2, ff3),
         (law2, law3),
-        v_w - math.sqrt(u0 * u0 + u1 * u1 + u2 * u2),
+        v_w - norm(u),  # Assumption 1 holds while > 0
         mode,
         k1,
         k2,

@@ -1,0 +1,133 @@
+"""The rewritten law gives the numbers of the law it replaced (tests/_law_reference.py).
+
+Tolerance, derived: both codes evaluate the same mathematics at the same states, so what can
+differ is floating-point rounding (the reordered sums, divisions for multiplications by an
+inverse, the path's Hermite cubic in power form). The frames R_D are O(1) functions of
+pt = q - p_d, whose rounding is ~eps |q| (eps = 2.2e-16, |q| the distance to the target, up to
+a few hundred metres), and R_D turns pt into a direction over the look-ahead alpha: a rounding
+difference of ~n eps (1 + |q| / alpha) in R_D, with n ~ 10 operations deep. The feedforward
+omega_DI differences R_D over 2 h = 2e-4 s, which amplifies that by 1 / (2 h) = 5e3; the FD's
+own truncation error is the same in both codes and cancels. So the commands and omega_DI may
+differ by ~n eps (1 + |q| / alpha) / (2 h) rad/s: 1e-9 rad/s at |q| = 100 m, alpha = 1 m. We
+allow 64 eps (1 + |q| / alpha) / (2 h) (the bound with n = 64) on every rate; quantities that
+do not pass through the difference (sdot, Psi, errors, frames) must agree to 64 eps times
+their scale (1 + |q| / alpha, m or 1). Any change of the mathematics (a gain, a sign, a term)
+moves these numbers by >= 1e-6, three orders of magnitude above the bound.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+
+import numpy as np
+import pytest
+
+from mpf_mavlink.core import so3
+from mpf_mavlink.core.guidance import Extensions, Gains, VehicleState, mpf_law
+from mpf_mavlink.core.guidance.law import FD_STEP_S
+from mpf_mavlink.core.paths import circle, helix, lemniscate
+from mpf_mavlink.core.target import ConstantTurn, PaperProfile
+from tests._law_reference import reference_mpf_law
+
+EPS = np.finfo(float).eps
+
+RATE_FIELDS = ("omega_DI", "feedforward", "w_cmd_law")
+FLOAT_FIELDS = ("pt", "pt_norm", "pt_F", "p_f", "psi", "e", "y_w", "z_w", "d1", "wd1", "f1")
+FLOAT_FIELDS += ("path_speed_margin", "k1", "k2")
+
+
+def _flat(x: object) -> list[float]:
+    return [float(v) for v in (x if isinstance(x, tuple) else (x,))]
+
+
+def _scenarios():
+    """(name, path, target motion, gains, extensions, airspeed, wind) covering the law's
+    branches: the paper's rotating target, the SIL demo (wind, psi turn, per-axis limit),
+    magnitude limit, an open helix past both ends, a tight look-ahead."""
+    default_ext = Extensions(rate_limit=0.6, psi_turn=True, wind_compensation=True)
+    return [
+        ("paper", lemniscate(50.0), PaperProfile(), Gains(), Extensions(), 15.0, 0.0),
+        (
+            "sil_demo",
+            lemniscate(150.0, center=(0.0, 0.0, -100.0)),
+            ConstantTurn((0.0, 0.0, 0.0), 3.0, 0.0, 0.01),
+            Gains(2.0, 3.0, 5.0),
+            default_ext,
+            16.0,
+            4.0,
+        ),
+        (
+            "magnitude_limit_climbing_target",
+            helix((0, 0, 0), 80.0, 20.0, 3, False),
+            ConstantTurn((0, 0, 0), 4.0, 0.3, 0.05, 0.5),
+            Gains(1.0, 0.5, 40.0),
+            Extensions(
+                rate_limit=0.5, rate_limit_mode="magnitude", psi_turn=True, wind_compensation=True
+            ),
+            18.0,
+            3.0,
+        ),
+        (
+            "psi_turn_own_rate_circle",
+            circle((0, 0, 0), 200.0),
+            PaperProfile(),
+            Gains(4.0, 2.0, 2.0),
+            Extensions(psi_turn=True, psi_turn_rate=0.3, rate_limit=1.0),
+            20.0,
+            0.0,
+        ),
+    ]
+
+
+def _states(path, motion, n, rng, wind):
+    """States around the path: the virtual point anywhere (open paths: also past the ends),
+    the vehicle within +-60 m of it, any heading (Psi up to 1), any wind up to ``wind``."""
+    for _ in range(n):
+        t = float(rng.uniform(0.0, 200.0))
+        tgt = motion.state(t)
+        L = path.length
+        s = float(rng.uniform(-0.1 * L, 1.1 * L) if not path.closed else rng.uniform(-L, 2 * L))
+        p_d = path.sample(s).position
+        q = p_d + rng.normal(0.0, 1.0, 3) * rng.choice([0.01, 1.0, 20.0, 60.0])
+        p = tgt.position + tgt.R_T_I @ q
+        R = so3.rot_z(rng.uniform(-math.pi, math.pi)) @ so3.rot_y(rng.uniform(-0.5, 0.5))
+        R = R @ so3.rot_x(rng.uniform(-0.8, 0.8))
+        eta = rng.normal(0.0, 1.0, 3) * wind / math.sqrt(3.0)
+        yield s, t, p, R, eta, tgt, float(np.linalg.norm(q))
+
+
+@pytest.mark.parametrize("scenario", _scenarios(), ids=lambda sc: sc[0])
+def test_rewritten_law_matches_the_reference(scenario):
+    name, path, motion, gains, ext, v_w, wind = scenario
+    rng = np.random.default_rng(zlib.crc32(name.encode()))
+    modes = set()
+    worst_rate = worst_other = 0.0
+    for s, t, p, R, eta, tgt, qn in _states(path, motion, 400, rng, wind):
+        veh = VehicleState(t, p, R, v_w, eta)
+        c, d = mpf_law(s, veh, tgt, path, gains, ext)
+        cr, dr = reference_mpf_law(s, veh, tgt, path, gains, ext)
+        scale = 1.0 + qn / gains.alpha
+        rate_tol = 64 * EPS * scale / (2 * FD_STEP_S)
+        other_tol = 64 * EPS * scale
+        assert d is not None and dr is not None
+        assert d.mode == dr.mode
+        modes.add(d.mode)
+        rates = [c.w2 - cr.w2, c.w3 - cr.w3]
+        rates += list(np.subtract(c.omega_w1_I, cr.omega_w1_I))
+        for f in RATE_FIELDS:
+            rates += list(np.subtract(_flat(getattr(d, f)), _flat(getattr(dr, f))))
+        others = [c.sdot - cr.sdot, c.t - cr.t]
+        for f in FLOAT_FIELDS:
+            ref = np.array(_flat(getattr(dr, f)))
+            others += list((np.array(_flat(getattr(d, f))) - ref) / np.maximum(1.0, abs(ref)))
+        worst_rate = max(worst_rate, float(np.max(np.abs(rates))) / rate_tol)
+        worst_other = max(worst_other, float(np.max(np.abs(others))) / other_tol)
+    print(f"{name}: worst rate diff {worst_rate:.3g} of tol, other {worst_other:.3g} of tol; {modes}")
+    assert worst_rate <= 1.0
+    assert worst_other <= 1.0
+    # The states exercised the branches this scenario is for.
+    if ext.psi_turn:
+        assert any(m.startswith("psi_turn") for m in modes)
+    if ext.rate_limit is not None:
+        assert any(m.endswith("+sat") for m in modes)
