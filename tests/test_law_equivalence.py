@@ -123,7 +123,9 @@ def test_rewritten_law_matches_the_reference(scenario):
             others += list((np.array(_flat(getattr(d, f))) - ref) / np.maximum(1.0, abs(ref)))
         worst_rate = max(worst_rate, float(np.max(np.abs(rates))) / rate_tol)
         worst_other = max(worst_other, float(np.max(np.abs(others))) / other_tol)
-    print(f"{name}: worst rate diff {worst_rate:.3g} of tol, other {worst_other:.3g} of tol; {modes}")
+    print(
+        f"{name}: worst rate diff {worst_rate:.3g} of tol, other {worst_other:.3g} of tol; {modes}"
+    )
     assert worst_rate <= 1.0
     assert worst_other <= 1.0
     # The states exercised the branches this scenario is for.

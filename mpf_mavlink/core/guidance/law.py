@@ -157,37 +157,42 @@ _FrameDetails = tuple[Vec3, Vec3, Vec3, Mat3, Vec3, float, float]
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 
-def steady_state_frame(u_f2: float, u_f3: float, v_w: float) -> Mat3:
+def steady_state_frame(u_F: Vec3, v_w: float) -> Mat3:
     """[wdbasis] R_{W_d}^F = (wd1, wd2, wd3), components in {F}.
 
-    u_f2, u_f3: the components along f2, f3 of u = v_t t1 + v_d (- eta_hat with wind
-    compensation), the velocity the path point asks of the vehicle (m/s); v_w airspeed (m/s).
+    u_F: u = v_t t1 + v_d (- eta_hat with wind compensation) in {F}, the velocity the path
+    point asks of the vehicle (m/s); v_w airspeed (m/s).
     """
-    wd21 = u_f2 / v_w
-    wd31 = u_f3 / v_w
+    wd21 = u_F[1] / v_w
+    wd31 = u_F[2] / v_w
     radicand = 1.0 - wd21 * wd21 - wd31 * wd31
     # Assumption 1 keeps the radicand > 0; outside it the frame stays defined (the
     # diagnostics' path_speed_margin says so).
     wd11 = math.sqrt(radicand) if radicand > 1e-12 else 1e-6
     n = math.sqrt(wd11 * wd11 + wd21 * wd21)
-    wd1 = (wd11, wd21, wd31)
-    wd2 = (-wd21 / n, wd11 / n, 0.0)  # wd32 = 0
-    return wd1, wd2, cross(wd1, wd2)
+    wd12, wd22 = -wd21 / n, wd11 / n  # wd32 = 0
+    # wd3 = wd1 x wd2, written out with wd32 = 0.
+    wd13, wd23, wd33 = -wd31 * wd22, wd31 * wd12, wd11 * wd22 - wd21 * wd12
+    return (wd11, wd21, wd31), (wd12, wd22, 0.0), (wd13, wd23, wd33)
 
 
-def cross_track_errors(pt_x_F: Vec3, R_Wd_F: Mat3) -> tuple[float, float]:
-    """y_w = pt_x . wd2, z_w = pt_x . wd3 (m): the cross-track error pt_x = (pt.f2) f2 + (pt.f3) f3
-    (given in {F}) on the plane of wd2, wd3."""
-    return dot(pt_x_F, R_Wd_F[1]), dot(pt_x_F, R_Wd_F[2])
+def cross_track_errors(pt_F: Vec3, R_Wd_F: Mat3) -> tuple[float, float]:
+    """y_w = pt_x . wd2 and z_w = pt_x . wd3 (m), pt_x = (pt.f2) f2 + (pt.f3) f3 the cross-track
+    error; pt_F is pt in {F}, and wd32 = 0."""
+    _, pt_f2, pt_f3 = pt_F
+    (_, wd22, _), (_, wd23, wd33) = R_Wd_F[1], R_Wd_F[2]
+    return pt_f2 * wd22, pt_f2 * wd23 + pt_f3 * wd33
 
 
 def transient_frame(y_w: float, z_w: float, alpha: float) -> Mat3:
     """R_D^{W_d} = (d1, d2, d3), components in {W_d}; alpha (m) the look-ahead distance."""
     n1 = math.sqrt(alpha * alpha + y_w * y_w + z_w * z_w)
     n2 = math.sqrt(alpha * alpha + y_w * y_w)
-    d1 = (alpha / n1, -y_w / n1, -z_w / n1)
-    d2 = (y_w / n2, alpha / n2, 0.0)  # d32 = 0
-    return d1, d2, cross(d1, d2)
+    d11, d21, d31 = alpha / n1, -y_w / n1, -z_w / n1
+    d12, d22 = y_w / n2, alpha / n2  # d32 = 0
+    # d3 = d1 x d2, written out with d32 = 0.
+    d3 = (-d31 * d22, d31 * d12, d11 * d22 - d21 * d12)
+    return (d11, d21, d31), (d12, d22, 0.0), d3
 
 
 def desired_frame(
@@ -197,24 +202,26 @@ def desired_frame(
 
     path_point: the path at s; q = R_T^T (p - p_t), the vehicle relative to the target (m);
     uu = R_T^T (v_t - eta_hat) (m/s); omega = omega_TI^T (rad/s); v_w (m/s); alpha (m).
-    Returns R_D^T and (pt, v_d, u, R_{W_d}^F, pt_x in {F}, y_w, z_w) for the diagnostics.
+    Returns R_D^T and (pt, v_d, u, R_{W_d}^F, pt in {F}, y_w, z_w) for the diagnostics.
     """
     p_d, f1, f2, f3, _, _ = path_point
+    R_F_T = (f1, f2, f3)
     pt = sub(q, p_d)  # position error p - p_f
     v_d = cross(omega, p_d)  # velocity of the path point from the target's rotation
     u = add(uu, v_d)  # v_t t1 + v_d - eta_hat
-    R_Wd_F = steady_state_frame(dot(u, f2), dot(u, f3), v_w)
-    pt_x_F = (0.0, dot(pt, f2), dot(pt, f3))
-    y_w, z_w = cross_track_errors(pt_x_F, R_Wd_F)
+    R_Wd_F = steady_state_frame(mat_T_vec(R_F_T, u), v_w)
+    pt_F = mat_T_vec(R_F_T, pt)
+    y_w, z_w = cross_track_errors(pt_F, R_Wd_F)
     R_D_Wd = transient_frame(y_w, z_w, alpha)
-    R_D_T = mat_mul((f1, f2, f3), mat_mul(R_Wd_F, R_D_Wd))
-    return R_D_T, (pt, v_d, u, R_Wd_F, pt_x_F, y_w, z_w)
+    R_D_T = mat_mul(R_F_T, mat_mul(R_Wd_F, R_D_Wd))
+    return R_D_T, (pt, v_d, u, R_Wd_F, pt_F, y_w, z_w)
 
 
-def progression_rate(pt: Vec3, c: Vec3, v_d: Vec3, f1: Vec3, K_p: float) -> float:
+def progression_rate(pt_f1: float, c: Vec3, v_d: Vec3, f1: Vec3, K_p: float) -> float:
     """[sdot] = (K_p pt + v_w w1 + eta_hat - v_t t1 - v_d) . f1 (m/s), in {T}, where
-    c = R_T^T (v_w w1 + eta_hat - v_t) is the vehicle's velocity relative to the target."""
-    return K_p * dot(pt, f1) + dot(sub(c, v_d), f1)
+    pt_f1 = pt . f1 and c = R_T^T (v_w w1 + eta_hat - v_t) is the vehicle's velocity relative
+    to the target."""
+    return K_p * pt_f1 + dot(sub(c, v_d), f1)
 
 
 # Step for differencing R_D^T along the flow (s). Central differences cancel the symmetric
@@ -343,10 +350,10 @@ def mpf_law(
 
     path_point = path.eval(s)
     p_d, f1, f2, f3, k1, k2 = path_point
-    R_D_T, (pt, v_d, u, R_Wd_F, pt_x_F, y_w, z_w) = desired_frame(
+    R_D_T, (pt, v_d, u, R_Wd_F, pt_F, y_w, z_w) = desired_frame(
         path_point, q, uu, omega, v_w, gains.alpha
     )
-    sdot = progression_rate(pt, c, v_d, f1, gains.K_p)
+    sdot = progression_rate(pt_F[0], c, v_d, f1, gains.K_p)
     omega_DT = feedforward_omega_DT(
         path, s, sdot, q, c, uu,
         mat_T_vec(R_T_I, target.acceleration.tolist()), omega, target.omega_dot_T.tolist(),
@@ -378,7 +385,7 @@ def mpf_law(
         s,
         mat_vec(R_T_I, pt),
         norm(pt),
-        (dot(pt, f1), pt_x_F[1], pt_x_F[2]),
+        pt_F,
         add(p_t, mat_vec(R_T_I, p_d)),
         psi,
         (e2, e3),
