@@ -105,7 +105,7 @@ def test_rewritten_law_matches_the_reference(scenario):
     worst_rate = worst_other = 0.0
     for s, t, p, R, eta, tgt, qn in _states(path, motion, 400, rng, wind):
         veh = VehicleState(t, p, R, v_w, eta)
-        c, d = mpf_law(s, veh, tgt, path, gains, ext, True, "fd")
+        c, d = mpf_law(s, veh, tgt, path, gains, ext)
         cr, dr = reference_mpf_law(s, veh, tgt, path, gains, ext)
         scale = 1.0 + qn / gains.alpha
         rate_tol = 64 * EPS * scale / (2 * FD_STEP_S)

@@ -99,10 +99,3 @@ def rotation_rate(R_plus: Mat3, R_minus: Mat3, R: Mat3, two_h: float) -> Vec3:
     m01 = a0 * p1 + b0 * q1 + c0 * r1
     k = 0.5 / two_h
     return (k * (m21 - m12), k * (m02 - m20), k * (m10 - m01))
-
-
-def angular_velocity(R: Mat3, R_dot: Mat3) -> Vec3:
-    """vee(dR/dt R^T) = 1/2 sum_k r_k x dr_k/dt over the columns of a rotation R: the
-    angular velocity of R's frame, in the frame R maps into."""
-    a, b, c = cross(R[0], R_dot[0]), cross(R[1], R_dot[1]), cross(R[2], R_dot[2])
-    return (0.5 * (a[0] + b[0] + c[0]), 0.5 * (a[1] + b[1] + c[1]), 0.5 * (a[2] + b[2] + c[2]))

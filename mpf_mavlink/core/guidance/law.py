@@ -41,7 +41,6 @@ from mpf_mavlink.core.vec3 import (
     Vec3,
     add,
     add_scaled,
-    angular_velocity,
     cross,
     dot,
     mat_mul,
@@ -49,7 +48,6 @@ from mpf_mavlink.core.vec3 import (
     mat_vec,
     norm,
     rotation_rate,
-    scale,
     sub,
 )
 
@@ -154,7 +152,7 @@ class MpfDiagnostics(NamedTuple):
 # The path at one arc length, as TabulatedPath.eval gives it: (p_d, f1, f2, f3, k1, k2) in {T}.
 _PathPoint = tuple[Vec3, Vec3, Vec3, Vec3, float, float]
 # What the centre evaluation of the frames hands on to the command and the diagnostics.
-_FrameDetails = tuple[Vec3, Vec3, Vec3, Mat3, Vec3, float, float, Mat3]
+_FrameDetails = tuple[Vec3, Vec3, Vec3, Mat3, Vec3, float, float]
 
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 
@@ -204,7 +202,7 @@ def desired_frame(
 
     path_point: the path at s; q = R_T^T (p - p_t), the vehicle relative to the target (m);
     uu = R_T^T (v_t - eta_hat) (m/s); omega = omega_TI^T (rad/s); v_w (m/s); alpha (m).
-    Returns R_D^T and (pt, v_d, u, R_{W_d}^F, pt in {F}, y_w, z_w, R_D^{W_d}).
+    Returns R_D^T and (pt, v_d, u, R_{W_d}^F, pt in {F}, y_w, z_w) for the diagnostics.
     """
     p_d, f1, f2, f3, _, _ = path_point
     R_F_T = (f1, f2, f3)
@@ -216,7 +214,7 @@ def desired_frame(
     y_w, z_w = cross_track_errors(pt_F, R_Wd_F)
     R_D_Wd = transient_frame(y_w, z_w, alpha)
     R_D_T = mat_mul(R_F_T, mat_mul(R_Wd_F, R_D_Wd))
-    return R_D_T, (pt, v_d, u, R_Wd_F, pt_F, y_w, z_w, R_D_Wd)
+    return R_D_T, (pt, v_d, u, R_Wd_F, pt_F, y_w, z_w)
 
 
 def progression_rate(pt_f1: float, c: Vec3, v_d: Vec3, f1: Vec3, K_p: float) -> float:
@@ -275,73 +273,6 @@ def feedforward_omega_DT(
     return rotation_rate(R_plus, R_minus, R_D_T, 2.0 * h)
 
 
-def feedforward_omega_DT_analytic(
-    frame_rate: Vec3,
-    sdot: float,
-    path_point: _PathPoint,
-    q: Vec3,
-    c: Vec3,
-    uu: Vec3,
-    a_t: Vec3,
-    omega: Vec3,
-    omega_dot: Vec3,
-    details: _FrameDetails,
-    v_w: float,
-    alpha: float,
-) -> Vec3:
-    """omega_DT^T (rad/s) by the chain rule through R_D^T = R_F^T R_{W_d}^F R_D^{W_d}:
-
-    omega_DT = omega_FT + R_F^T (omega_{W_d F}^F + R_{W_d}^F omega_{D W_d}^{W_d}),
-
-    the paper's sum in [omega] less omega_TI. frame_rate: the path frame's angular velocity
-    per unit arc length in {T} (rad/m, TabulatedPath.eval_with_rate); the flow as in
-    :func:`feedforward_omega_DT`. Each frame's rate is 1/2 sum_k r_k x dr_k/dt over its columns.
-    """
-    p_d, f1, f2, f3, _, _ = path_point
-    _, _, u, R_Wd_F, pt_F, y_w, z_w, R_D_Wd = details
-    R_F_T = (f1, f2, f3)
-    omega_FT_F = scale(sdot, mat_T_vec(R_F_T, frame_rate))  # omega_FT in {F}
-    # Rates in {T}: the path point moves at sdot f1; qdot = c - omega x q; d(uu)/dt =
-    # a_t - omega x uu; u = uu + omega x p_d.
-    p_d_dot = scale(sdot, f1)
-    q_dot = sub(c, cross(omega, q))
-    u_dot = add(add(sub(a_t, cross(omega, uu)), cross(omega_dot, p_d)), cross(omega, p_d_dot))
-    pt_dot = sub(q_dot, p_d_dot)
-    # The same in {F} coordinates, which turn at omega_FT: d(R_F^T x)/dt = R_F^T dx/dt
-    # - omega_FT^F x (R_F^T x).
-    u_F = mat_T_vec(R_F_T, u)
-    u_F_dot = sub(mat_T_vec(R_F_T, u_dot), cross(omega_FT_F, u_F))
-    pt_F_dot = sub(mat_T_vec(R_F_T, pt_dot), cross(omega_FT_F, pt_F))
-    # [wdbasis] differentiated: wd21 = u.f2 / v_w, wd31 = u.f3 / v_w.
-    (wd11, wd21, wd31), (wd12, wd22, _), wd3 = R_Wd_F
-    wd21_dot, wd31_dot = u_F_dot[1] / v_w, u_F_dot[2] / v_w
-    radicand = 1.0 - wd21 * wd21 - wd31 * wd31
-    wd11_dot = -(wd21 * wd21_dot + wd31 * wd31_dot) / wd11 if radicand > 1e-12 else 0.0
-    n = math.sqrt(wd11 * wd11 + wd21 * wd21)
-    n_dot = (wd11 * wd11_dot + wd21 * wd21_dot) / n
-    wd1_dot = (wd11_dot, wd21_dot, wd31_dot)
-    wd2_dot = ((-wd21_dot - wd12 * n_dot) / n, (wd11_dot - wd22 * n_dot) / n, 0.0)
-    wd3_dot = add(cross(wd1_dot, R_Wd_F[1]), cross(R_Wd_F[0], wd2_dot))
-    omega_WdF_F = angular_velocity(R_Wd_F, (wd1_dot, wd2_dot, wd3_dot))
-    # y_w = pt_f2 wd22, z_w = pt_f2 wd23 + pt_f3 wd33, differentiated.
-    _, pt_f2, pt_f3 = pt_F
-    _, pt_f2_dot, pt_f3_dot = pt_F_dot
-    y_dot = pt_f2_dot * wd22 + pt_f2 * wd2_dot[1]
-    z_dot = pt_f2_dot * wd3[1] + pt_f2 * wd3_dot[1] + pt_f3_dot * wd3[2] + pt_f3 * wd3_dot[2]
-    # {D} in {W_d}: d1 = (alpha, -y_w, -z_w) / n1, d2 = (y_w, alpha, 0) / n2, d3 = d1 x d2.
-    d1, d2, _ = R_D_Wd
-    n1 = math.sqrt(alpha * alpha + y_w * y_w + z_w * z_w)
-    n2 = math.sqrt(alpha * alpha + y_w * y_w)
-    n1_dot = (y_w * y_dot + z_w * z_dot) / n1
-    n2_dot = y_w * y_dot / n2
-    d1_dot = scale(1.0 / n1, sub((0.0, -y_dot, -z_dot), scale(n1_dot, d1)))
-    d2_dot = scale(1.0 / n2, sub((y_dot, 0.0, 0.0), scale(n2_dot, d2)))
-    d3_dot = add(cross(d1_dot, d2), cross(d1, d2_dot))
-    omega_DWd_Wd = angular_velocity(R_D_Wd, (d1_dot, d2_dot, d3_dot))
-    omega_DT_F = add(add(omega_FT_F, omega_WdF_F), mat_vec(R_Wd_F, omega_DWd_Wd))
-    return mat_vec(R_F_T, omega_DT_F)
-
-
 def attitude_error(d1: Vec3, R_W_I: Mat3) -> tuple[float, float, float]:
     """Psi [attitudeErrorFunction] and e = (e2, e3) [ertilde] from d1 and R_W^I (both in NED).
 
@@ -391,17 +322,13 @@ def mpf_law(
     gains: Gains,
     ext: Extensions = _NO_EXTENSIONS,
     diagnostics: bool = True,
-    feedforward: Literal["analytic", "fd"] = "fd",
 ) -> tuple[MpfCommand, MpfDiagnostics | None]:
     """Evaluate the MPF law [sdot], [omega] at the vehicle's time.
 
     s is the virtual point's arc length (m, unwrapped); the target state must be for the same
     time as the vehicle (extrapolate it first: :meth:`TargetState.extrapolate`).
     Returns the command and the diagnostics record (None when ``diagnostics`` is False, which
-    saves the cost of building it inside integrators). ``feedforward`` picks how omega_DI is
-    differentiated: "analytic" (the chain rule, :func:`feedforward_omega_DT_analytic`) or
-    "fd" (central differences of R_D along the flow, :func:`feedforward_omega_DT`); they
-    agree to the difference's O(h^2) error.
+    saves the cost of building it inside integrators).
     """
     t = float(vehicle.t)
     s = float(s)
@@ -421,26 +348,17 @@ def mpf_law(
     c = mat_T_vec(R_T_I, sub(add_scaled(eta, v_w, w1), v_t))
     uu = mat_T_vec(R_T_I, sub(v_t, eta))
 
-    if feedforward == "analytic":
-        *point, frame_rate = path.eval_with_rate(s)
-        path_point: _PathPoint = tuple(point)  # type: ignore[assignment]
-    else:
-        path_point = path.eval(s)
+    path_point = path.eval(s)
     p_d, f1, f2, f3, k1, k2 = path_point
-    R_D_T, details = desired_frame(path_point, q, uu, omega, v_w, gains.alpha)
-    pt, v_d, u, R_Wd_F, pt_F, y_w, z_w, _ = details
+    R_D_T, (pt, v_d, u, R_Wd_F, pt_F, y_w, z_w) = desired_frame(
+        path_point, q, uu, omega, v_w, gains.alpha
+    )
     sdot = progression_rate(pt_F[0], c, v_d, f1, gains.K_p)
-    a_t = mat_T_vec(R_T_I, target.acceleration.tolist())
-    omega_dot: Vec3 = target.omega_dot_T.tolist()
-    if feedforward == "analytic":
-        omega_DT = feedforward_omega_DT_analytic(
-            frame_rate, sdot, path_point, q, c, uu, a_t, omega, omega_dot, details, v_w,
-            gains.alpha,
-        )  # fmt: skip
-    else:
-        omega_DT = feedforward_omega_DT(
-            path, s, sdot, q, c, uu, a_t, omega, omega_dot, R_D_T, v_w, gains.alpha
-        )
+    omega_DT = feedforward_omega_DT(
+        path, s, sdot, q, c, uu,
+        mat_T_vec(R_T_I, target.acceleration.tolist()), omega, target.omega_dot_T.tolist(),
+        R_D_T, v_w, gains.alpha,
+    )  # fmt: skip
     omega_DI = mat_vec(R_T_I, add(omega_DT, omega))  # omega_DT + omega_TI, in NED
     d1 = mat_vec(R_T_I, R_D_T[0])
     psi, e2, e3 = attitude_error(d1, R_W_I)

@@ -69,26 +69,6 @@ def _mrot(v: Tuple3, a: Tuple3, b: Tuple3) -> Tuple3:
     return (v[0] + ux + k * wx, v[1] + uy + k * wy, v[2] + uz + k * wz)
 
 
-def _dot(a: Tuple3, b: Tuple3) -> float:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _cross(a: Tuple3, b: Tuple3) -> Tuple3:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-def _add(a: Tuple3, b: Tuple3) -> Tuple3:
-    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
-
-
-def _sub(a: Tuple3, b: Tuple3) -> Tuple3:
-    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
-
-
-def _scale(k: float, a: Tuple3) -> Tuple3:
-    return (k * a[0], k * a[1], k * a[2])
-
-
 class TabulatedPath:
     """A regular curve re-parameterised by arc length, with a continuous transported frame."""
 
@@ -268,74 +248,6 @@ class TabulatedPath:
         k1 = (1 - w) * K1[i] + w * K1[i + 1]
         k2 = (1 - w) * K2[i] + w * K2[i + 1]
         return p, (a0, a1, a2), f2, f3, k1, k2
-
-    def eval_with_rate(
-        self, s: float
-    ) -> tuple[Tuple3, Tuple3, Tuple3, Tuple3, float, float, Tuple3]:
-        """:meth:`eval` and the frame's angular velocity per unit arc length, in {T} (rad/m).
-
-        The exact derivative of the interpolated frame that :meth:`eval` returns (so it agrees
-        with a difference of eval to the difference's own error): with F' = dF/ds,
-        omega = 1/2 sum_k f_k x f_k'. Multiply by sdot for omega_FT^T (rad/s).
-        """
-        L = self.length
-        if self.closed:
-            s = s % L
-        elif s <= 0.0 or s >= L:
-            # Straight continuation past an open end: the frame does not turn.
-            return (*self.eval(s), (0.0, 0.0, 0.0))
-        x = s / self.ds
-        i = min(int(x), self.n - 1)
-        w = x - i
-        h = self.ds
-        pa, pb = self._Pl[i], self._Pl[i + 1]
-        ta, tb = self._Tl[i], self._Tl[i + 1]
-        # The cell's Hermite cubic p(w): position, dp/dw, d2p/dw2 (w = (s - s_i) / ds).
-        d = pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]
-        c2 = tuple(3.0 * d[k] - h * (2.0 * ta[k] + tb[k]) for k in range(3))
-        c3 = tuple(-2.0 * d[k] + h * (ta[k] + tb[k]) for k in range(3))
-        dp = tuple(h * ta[k] + w * (2.0 * c2[k] + 3.0 * w * c3[k]) for k in range(3))
-        ddp = tuple(2.0 * c2[k] + 6.0 * w * c3[k] for k in range(3))
-        n_dp = math.sqrt(_dot(dp, dp))
-        f1 = (dp[0] / n_dp, dp[1] / n_dp, dp[2] / n_dp)
-        # f1' = (I - f1 f1^T) p'' / |p'| per unit w.
-        f1_w = _sub(ddp, _scale(_dot(f1, ddp), f1))
-        f1_w = _scale(1.0 / n_dp, f1_w)
-        # r = unit(mrot(f2_i, t_i -> f1)) = unit(v + c x v + c x (c x v) / (1 + a.b)), c = t_i x f1.
-        v = self._F2l[i]
-        c = _cross(ta, f1)
-        c_w = _cross(ta, f1_w)
-        dd = _dot(ta, f1)
-        dd_w = _dot(ta, f1_w)
-        k = 1.0 / (1.0 + dd) if dd > -0.999999 else 0.0
-        cv = _cross(c, v)
-        ccv = _cross(c, cv)
-        raw = _add(_add(v, cv), _scale(k, ccv))
-        cv_w = _cross(c_w, v)
-        ccv_w = _add(_cross(c_w, cv), _cross(c, cv_w))
-        k_w = -k * k * dd_w if dd > -0.999999 else 0.0
-        raw_w = _add(_add(cv_w, _scale(k, ccv_w)), _scale(k_w, ccv))
-        n_r = math.sqrt(_dot(raw, raw))
-        r = _scale(1.0 / n_r, raw)
-        r_w = _scale(1.0 / n_r, _sub(raw_w, _scale(_dot(r, raw_w), r)))
-        # f2 = cos(w C) r + sin(w C) f1 x r, f3 = f1 x f2.
-        ang = w * self._C[i]
-        ca, sa = math.cos(ang), math.sin(ang)
-        q = _cross(f1, r)
-        q_w = _add(_cross(f1_w, r), _cross(f1, r_w))
-        f2 = _add(_scale(ca, r), _scale(sa, q))
-        f2_w = _add(
-            _add(_scale(ca, r_w), _scale(sa, q_w)),
-            _scale(self._C[i], _sub(_scale(ca, q), _scale(sa, r))),
-        )
-        f3 = _cross(f1, f2)
-        f3_w = _add(_cross(f1_w, f2), _cross(f1, f2_w))
-        rate = _add(_add(_cross(f1, f1_w), _cross(f2, f2_w)), _cross(f3, f3_w))
-        K1, K2 = self._K1l, self._K2l
-        k1 = (1 - w) * K1[i] + w * K1[i + 1]
-        k2 = (1 - w) * K2[i] + w * K2[i + 1]
-        p = self.eval(s)[0]
-        return p, f1, f2, f3, k1, k2, _scale(0.5 / h, rate)
 
     def sample(self, s: float) -> PathSample:
         """The path at arc length s (m) as a :class:`PathSample` (numpy, for callers and tests)."""
