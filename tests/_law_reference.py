@@ -7,7 +7,6 @@ rewrite also changed how TabulatedPath.eval evaluates the Hermite cubic.
 # ruff: noqa
 # mypy: ignore-errors
 
-
 from __future__ import annotations
 
 import math
@@ -19,7 +18,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mpf_mavlink.core.paths import TabulatedPath
-from mpf_mavlink.core.guidance.law import Extensions, Gains, MpfCommand, MpfDiagnostics, VehicleState
+from mpf_mavlink.core.guidance.law import (
+    Extensions,
+    Gains,
+    MpfCommand,
+    MpfDiagnostics,
+    VehicleState,
+)
+
 Tuple3 = tuple[float, float, float]
 from mpf_mavlink.core.target import TargetState
 
@@ -342,7 +348,9 @@ def reference_mpf_law(
     return cmd, diag
 
 
-def reference_path_eval(self: TabulatedPath, s: float) -> tuple[Tuple3, Tuple3, Tuple3, Tuple3, float, float]:
+def reference_path_eval(
+    self: TabulatedPath, s: float
+) -> tuple[Tuple3, Tuple3, Tuple3, Tuple3, float, float]:
     """Fast evaluation: (position, f1, f2, f3, k1, k2) at arc length s, in {T}."""
     L = self.length
     if self.closed:
@@ -415,4 +423,3 @@ def reference_path_eval(self: TabulatedPath, s: float) -> tuple[Tuple3, Tuple3, 
     k1 = (1 - w) * K1[i] + w * K1[i + 1]
     k2 = (1 - w) * K2[i] + w * K2[i + 1]
     return p, (a0, a1, a2), f2, f3, k1, k2
-
