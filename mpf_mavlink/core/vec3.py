@@ -38,11 +38,6 @@ def sub(a: Vec3, b: Vec3) -> Vec3:
     return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
 
 
-def scale(k: float, a: Vec3) -> Vec3:
-    """k a"""
-    return (k * a[0], k * a[1], k * a[2])
-
-
 def add_scaled(a: Vec3, k: float, b: Vec3) -> Vec3:
     """a + k b (one step of a state along its rate b)."""
     return (a[0] + k * b[0], a[1] + k * b[1], a[2] + k * b[2])

@@ -8,10 +8,11 @@ project's docs: one function per step.
 3. :func:`transient_frame`: {D} in {W_d}, shaped by the look-ahead alpha.
 4. :func:`desired_frame`: steps 1-3 at one point of the flow, composed into R_D^T.
 5. :func:`progression_rate` [sdot].
-6. :func:`feedforward_omega_DI`: omega_DI, the derivative of R_D along the closed-loop flow.
+6. :func:`feedforward_omega_DT`: omega_DT, the derivative of R_D along the closed-loop flow
+   (omega_DI = omega_DT + omega_TI).
 7. :func:`attitude_error`: Psi and e [ertilde] from d1 and the wind frame.
 8. :func:`mpf_law` [omega]: -K_R e + Pi_R Rt^T omega_DI^D, then the extensions
-   (:func:`psi_turn_rate_command`, :func:`limit_rates`).
+   (:func:`psi_turn_direction`, :func:`limit_rates`).
 
 Frames: {I} NED; {W} wind frame (w1 along the air-relative velocity); {T} target; {F}
 parallel-transport frame at p_d(s); {W_d} steady-state desired velocity frame; {D} transient
