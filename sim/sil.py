@@ -238,7 +238,14 @@ def build_vehicle(cfg: Config, url: str, clock: str | None = None, **over: Any) 
 
     opts = vehicle_options(cfg, url, clock, **over)
     flavour = opts.pop("flavour")
-    return SimVehicle(flavour, opts.pop("url"), **opts)
+    v = SimVehicle(flavour, opts.pop("url"), **opts)
+    sil = cfg.section("sil")
+    prof_path = sil.profile_path(cfg.source)
+    if prof_path is not None:
+        from sim.autopilot_profile import load_profile
+
+        v.use_profile(load_profile(prof_path), seed=sil.seed)
+    return v
 
 
 def bridge_config(cfg: Config) -> Config:

@@ -63,6 +63,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from typing import Any
 
 from sim.autopilot import AutopilotEmulation
 from sim.vehicle_base import (
@@ -82,6 +83,45 @@ class SimVehicle(AutopilotEmulation):
     Drive it with :meth:`run` (clock-paced), :meth:`step_once` (one frame, no waiting; call
     :meth:`poll` in between if you like) or :meth:`start_in_thread` / :meth:`stop`.
     """
+
+    # the firmware's identified behaviour (sim/autopilot_profile.py): None = the plain emulation
+    profile: Any = None
+    _estimate: Any = None  # truth PlantState -> the state the autopilot reports and controls on
+    _shaper: Any = None  # the attitude set-point as the firmware's loop would fly it
+    _truth_st: Any = None
+
+    def use_profile(self, profile: Any, seed: int = 0) -> None:
+        """Emulate ``profile`` (an :class:`sim.autopilot_profile.AutopilotProfile`) from now on:
+        the reported (and controlled-on) state passes through its estimator model, the attitude
+        set-points through its attitude response; the truth record stays the plant's."""
+        from sim.autopilot_profile import AttitudeShaper, StateEstimate
+
+        self.profile = profile
+        self._estimate = StateEstimate(profile, seed)
+        self._shaper = AttitudeShaper(
+            profile.attitude, self.dt, native_tau_s=self.ap.attitude.gains.roll_tc
+        )
+        self._truth_st = self.plant.state()
+        self._st = self._estimate(self._truth_st)
+
+    def _observe(self) -> Any:
+        """The plant's state as the autopilot has it (the truth without a profile)."""
+        st = self.plant.state()
+        if self._estimate is None:
+            return st
+        self._truth_st = st
+        return self._estimate(st)
+
+    def _record(self) -> None:
+        truth = self._truth_st
+        if truth is None or self._estimate is None:
+            super()._record()
+            return
+        est, self._st = self._st, truth  # the record is the plant's truth, not the estimate
+        try:
+            super()._record()
+        finally:
+            self._st = est
 
     # ------------------------------------------------------------------ stepping
     def step_once(self) -> float:
@@ -107,7 +147,7 @@ class SimVehicle(AutopilotEmulation):
                 cmd = (a, e, r, sp[2] if self.armed else 0.0)
             else:
                 if not fresh:
-                    self._st = plant.state()
+                    self._st = self._observe()
                 cmd = self._control(self._st)
             plant.step(*cmd)
             self._k += 1
@@ -117,7 +157,7 @@ class SimVehicle(AutopilotEmulation):
             if self._in and i < last:
                 self._apply_due()
         self._rates = rates
-        self._st = plant.state()
+        self._st = self._observe()
         if self._due("attitude", self.rates.attitude):
             # the 50 Hz pair first, in its own datagram (see _telemetry)
             if self._due("local_position", self.rates.local_position):
