@@ -11,7 +11,9 @@ are one-line errors naming the key and the file). What each section changes in t
   loop is given so that the whole (its loop's own lag included) matches.
 * ``turn``: heading rate per bank, ``turn_gain = psi_dot / (g tan(bank) / V)`` as the bridge's
   adapter measures it from the reported attitude. A turn gain below 1 (the airframe slips in the
-  turn, rudder neutral) is emulated by reporting a bank ``atan(tan(bank) / turn_gain)``.
+  turn, rudder neutral) is emulated by reporting, in a steady turn, the bank
+  ``atan(V psi_dot / (g turn_gain))`` for the plant's heading rate (whatever the plant's own
+  turn per bank), so the autopilot's loops and the bridge bank more for the same turn.
 * ``estimator``: what the reported state adds to the truth: white noise on position, velocity,
   attitude; a first-order Gauss-Markov position wander (sigma, correlation time); a lag.
 
@@ -52,6 +54,9 @@ class TurnResponse:
     """Heading rate per bank relative to the coordinated turn (1: textbook)."""
 
     turn_gain: float = field(default=1.0, metadata={"check": ("range", 0.5, 1.5)})
+    # heading minus ground course in a steady turn, per unit tan(bank) (rad; the sideslip of the
+    # slipping turn: the nose points outside the turn, ArduPlane -0.075)
+    slip_per_tan_bank_rad: float = field(default=0.0, metadata={"check": ("range", -0.5, 0.5)})
 
 
 @dataclass(frozen=True)
@@ -64,6 +69,17 @@ class EstimatorModel:
     horizontal_wander_m: float = field(default=0.0, metadata=_nonneg())
     vertical_wander_m: float = field(default=0.0, metadata=_nonneg())
     wander_tau_s: float = field(default=30.0, metadata=_pos())
+    # The firmware's wind estimate: a first-order lag (wind_tau_s; None: the vehicle's
+    # sil.wind_estimate_tau_s) of the air mass plus an apparent wind fixed to the ground velocity
+    # (along it and to its right, m/s): an airspeed scale error and the sideslip of a turn that
+    # an estimator assuming no sideslip reads as wind. Turning at omega, the lag turns it by
+    # atan(omega tau) and shrinks it by sqrt(1 + (omega tau)^2), as seen on ArduPlane.
+    wind_apparent_along_m_s: float = 0.0
+    wind_scale: float = field(
+        default=1.0, metadata={"check": ("range", 0.5, 1.5)}
+    )  # of the air mass
+    wind_apparent_side_m_s: float = 0.0
+    wind_tau_s: float | None = field(default=None, metadata=_nonneg())
 
 
 @dataclass(frozen=True)
@@ -103,6 +119,14 @@ def load_profile(path: str | Path) -> AutopilotProfile:
 
 def profile_to_dict(prof: AutopilotProfile) -> dict[str, Any]:
     return dataclasses.asdict(prof)
+
+
+G = 9.80665
+TURN_TAU_S = 2.0  # s, the low-pass of the reported bank's offset (StateEstimate._bank_offset)
+
+
+def _clip(x: float, lo: float, hi: float) -> float:
+    return lo if x < lo else hi if x > hi else x
 
 
 class _Lag:
@@ -152,16 +176,79 @@ class StateEstimate:
 
     def __init__(self, prof: AutopilotProfile, seed: int = 0) -> None:
         self.k_turn = prof.turn.turn_gain
+        self.slip = prof.turn.slip_per_tan_bank_rad
         self.est = prof.estimator
         self.rng = np.random.default_rng(np.random.SeedSequence([int(seed), 24]))
         self._walk = np.zeros(3)
         self._t: float | None = None
+        self._w: np.ndarray | None = None
+        self._b = 0.0
+        self._bt: float | None = None
+        self._y = 0.0
+        self._yt: float | None = None
+        self._wt: float | None = None
+
+    def _bank_offset(self, st: Any) -> float:
+        """What the reported bank adds to the plant's: the bank that turns the plant as it turns
+        with the profile's turn gain, ``atan(V psi_dot / (g k))``, minus the plant's own, low-passed
+        (TURN_TAU_S) so that a roll transient shows the plant's roll and a steady turn the
+        profile's turn per bank whatever the plant's own (the X8 turns ~0.93x the textbook)."""
+        roll, pitch, _ = st.euler
+        p, q, r = (float(x) for x in st.pqr)
+        psid = (q * math.sin(roll) + r * math.cos(roll)) / max(math.cos(pitch), 0.2)
+        v = max(float(st.airspeed), 1.0)
+        target = math.atan(v * psid / (G * self.k_turn))
+        d = _clip(target - roll, -0.3, 0.3) if abs(roll) > 0.03 else 0.0
+        t = float(st.t)
+        if self._bt is None:
+            self._b = d
+        else:
+            k = 1.0 - math.exp(-max(0.0, t - self._bt) / TURN_TAU_S)
+            self._b += k * (d - self._b)
+        self._bt = t
+        return self._b
+
+    def _yaw_offset(self, st: Any, roll_rep: float) -> float:
+        """What the reported heading adds to the plant's: the profile's sideslip for the reported
+        bank minus the plant's own (heading - course), low-passed like the bank's offset."""
+        vn, ve = float(st.velocity_ned[0]), float(st.velocity_ned[1])
+        if math.hypot(vn, ve) < 1.0:
+            return self._y
+        own = (float(st.euler[2]) - math.atan2(ve, vn) + math.pi) % (2.0 * math.pi) - math.pi
+        d = _clip(self.slip * math.tan(_clip(roll_rep, -1.2, 1.2)) - own, -0.3, 0.3)
+        t = float(st.t)
+        if self._yt is None:
+            self._y = d
+        else:
+            self._y += (1.0 - math.exp(-max(0.0, t - self._yt) / TURN_TAU_S)) * (d - self._y)
+        self._yt = t
+        return self._y
+
+    def _wind(self, st: Any, e: EstimatorModel) -> np.ndarray:
+        """The reported wind: lag of (air mass + apparent wind) with time constant wind_tau_s."""
+        vn, ve = float(st.velocity_ned[0]), float(st.velocity_ned[1])
+        v = math.hypot(vn, ve)
+        u = e.wind_scale * np.array(st.wind_ned, float)
+        if v > 1.0:
+            a, s = e.wind_apparent_along_m_s, e.wind_apparent_side_m_s
+            u = u + np.array(((vn * a - ve * s) / v, (ve * a + vn * s) / v, 0.0))
+        t = float(st.t)
+        if self._w is None or self._wt is None:
+            self._w = u
+        else:
+            tau = float(e.wind_tau_s or 0.0)
+            k = 1.0 if tau <= 0.0 else 1.0 - math.exp(-max(0.0, t - self._wt) / tau)
+            self._w = self._w + k * (u - self._w)
+        self._wt = t
+        return self._w
 
     def __call__(self, st: Any) -> Any:
         e = self.est
         roll, pitch, yaw = st.euler
         if self.k_turn != 1.0:
-            roll = math.atan2(math.sin(roll), math.cos(roll) * self.k_turn)
+            roll = roll + self._bank_offset(st)
+        if self.slip:
+            yaw = yaw + self._yaw_offset(st, roll)
         upd: dict[str, Any] = {}
         sig = (e.horizontal_wander_m, e.horizontal_wander_m, e.vertical_wander_m)
         if any(sig):
@@ -177,6 +264,8 @@ class StateEstimate:
             pos = pos + e.position_noise_m * self.rng.standard_normal(3)
         if any(sig) or e.position_noise_m:
             upd["position_ned"] = pos
+        if e.wind_tau_s is not None:
+            upd["wind_ned"] = self._wind(st, e)
         if e.velocity_noise_m_s:
             upd["velocity_ned"] = st.velocity_ned + e.velocity_noise_m_s * self.rng.standard_normal(
                 3

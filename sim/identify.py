@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
 
 G = 9.80665
 ROOT = Path(__file__).resolve().parents[1]
@@ -156,7 +157,9 @@ def fit_turn(att: np.ndarray, pos: np.ndarray, hud: np.ndarray, segs: list[tuple
         rows.append({"bank_deg": math.degrees(phi), "chi_dot": chid, "airspeed": v_air,
                      "groundspeed": v_gnd, "gain_airspeed": chid / model,
                      "gain_groundspeed": chid / (G * math.tan(phi) / v_gnd)})  # fmt: skip
-    x = np.array([G * math.tan(math.radians(r["bank_deg"])) / r["airspeed"] for r in rows])
+    # the adapter's V is |ground velocity - wind| (TAS; VFR_HUD reports EAS): in still air the
+    # ground speed
+    x = np.array([G * math.tan(math.radians(r["bank_deg"])) / r["groundspeed"] for r in rows])
     y = np.array([r["chi_dot"] for r in rows])
     k = float(x @ y / (x @ x)) if len(rows) else float("nan")
     return {"turn_gain": k, "turns": rows}
@@ -267,6 +270,68 @@ def analyse(rec: Recorder, t_start: float, schedule: list[tuple[float, float, fl
     return res
 
 
+def circle_wind_error(tlog: Path, after_s: float = 90.0) -> dict[str, float]:
+    """From a bridge tlog of a steady circle: the reported wind (WIND) in the ground velocity's
+    frame (along, to the right; m/s), the turn rate (rad/s), its mean in NED and the bank."""
+    m = mavutil.mavlink_connection(str(tlog))
+    w, p, a = [], [], []
+    while True:
+        x = m.recv_match(type=["WIND", "LOCAL_POSITION_NED", "ATTITUDE"])
+        if x is None:
+            break
+        ts = x._timestamp
+        if x.get_type() == "WIND":
+            w.append((ts, x.direction, x.speed))
+        elif x.get_type() == "ATTITUDE":
+            a.append((ts, x.roll))
+        else:
+            p.append((ts, x.vx, x.vy, x.time_boot_ms / 1e3))
+    W, P, A = np.array(w, float), np.array(p, float), np.array(a, float)
+    W = W[W[:, 0] > W[0, 0] + after_s]
+    P = P[P[:, 0] > P[0, 0] + after_s]
+    # WIND.direction: where it blows FROM (deg); the air moves toward the opposite
+    wn = -W[:, 2] * np.cos(np.radians(W[:, 1]))
+    we = -W[:, 2] * np.sin(np.radians(W[:, 1]))
+    vx, vy = np.interp(W[:, 0], P[:, 0], P[:, 1]), np.interp(W[:, 0], P[:, 0], P[:, 2])
+    v = np.hypot(vx, vy)
+    chi = np.unwrap(np.arctan2(P[:, 2], P[:, 1]))
+    return {
+        "along": float(np.mean((wn * vx + we * vy) / v)),
+        "right": float(np.mean((-wn * vy + we * vx) / v)),
+        "omega": float(np.polyfit(P[:, 3], chi, 1)[0]),
+        "north": float(np.mean(wn)), "east": float(np.mean(we)),
+        "bank": float(np.mean(A[A[:, 0] > A[0, 0] + after_s, 1])),
+    }  # fmt: skip
+
+
+WIND_NOISE_M_S = 0.01  # 1-sigma of a circle's mean reported wind (its WIND std over the orbit)
+
+
+def fit_wind_estimator(circles: list[dict[str, float]]) -> dict[str, float]:
+    """An apparent wind (along, side) fixed to the ground velocity, through a first-order lag of
+    time constant tau in NED: turning at omega, it is seen in the velocity frame as
+    ``(along + i side) / (1 + i omega tau)``. Least squares over still-air circles at different
+    turn rates. Where omega tau >> 1 a large apparent wind lagged by minutes fits as well as a
+    small one lagged by seconds; the shortest tau that fits within the measurement noise is
+    taken (an estimator that follows the wind within a take-off)."""
+    om = np.array([c["omega"] for c in circles])
+    y = np.array([complex(c["along"], c["right"]) for c in circles])
+    best: dict[str, float] | None = None
+    rows = []
+    for tau in np.arange(0.5, 120.0, 0.5):
+        h = 1.0 / (1.0 + 1j * om * tau)
+        c = complex(np.vdot(h, y) / np.vdot(h, h))  # linear least squares for the complex input
+        rms = float(np.sqrt(np.mean(np.abs(h * c - y) ** 2)))
+        rows.append((float(tau), c, rms))
+    rmin = min(r[2] for r in rows)
+    for tau, c, rms in rows:
+        if rms <= rmin + WIND_NOISE_M_S / 2:
+            best = {"along_m_s": c.real, "side_m_s": c.imag, "tau_s": tau, "rms_m_s": rms}
+            break
+    assert best is not None
+    return best
+
+
 def write_profile(res: dict[str, Any], autopilot: str, firmware: str, out: Path,
                   command: str) -> Path:  # fmt: skip
     import yaml
@@ -289,6 +354,16 @@ def write_profile(res: dict[str, Any], autopilot: str, firmware: str, out: Path,
         },
         "fit": {"roll_rms_rad": round(r["rms_rad"], 4), "pitch_rms_rad": round(p["rms_rad"], 4)},
     }  # fmt: skip
+    wf = res.get("wind_estimator")
+    if wf:
+        prof["estimator"].update({
+            "wind_apparent_along_m_s": round(wf["along_m_s"], 3),
+            "wind_apparent_side_m_s": round(wf["side_m_s"], 3),
+            "wind_tau_s": round(wf["tau_s"], 2),
+        })  # fmt: skip
+        prof["fit"]["wind_rms_m_s"] = round(wf["rms_m_s"], 4)
+    if res.get("wind_scale"):
+        prof["estimator"]["wind_scale"] = round(res["wind_scale"], 3)
     path = out / "profile.yaml"
     path.write_text(yaml.safe_dump(prof, sort_keys=False))
     return path
@@ -301,30 +376,65 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--bundle", default=None, help="the unpacked SITL bundle")
     ap.add_argument("--instance", type=int, default=4, help="ArduPlane -I (TCP 5760 + 10 I)")
     ap.add_argument("--alt", type=float, default=100.0)
-    ap.add_argument("--analyse", action="store_true", help="re-fit DIR/samples.npz, fly nothing")
+    ap.add_argument(
+        "--circles",
+        nargs="*",
+        default=[],
+        help="bridge tlogs of still-air circles on this firmware (the wind estimator)",
+    )
+    ap.add_argument(
+        "--wind-flight",
+        nargs=2,
+        metavar=("TLOG", "SPEED"),
+        default=None,
+        help="a bridge tlog in a steady wind of SPEED m/s (the reported wind's scale)",
+    )
+    ap.add_argument("--reuse", action="store_true", help="re-fit DIR's last flight, fly nothing")
     a = ap.parse_args(argv)
     out = Path(a.out).resolve()
-    if a.autopilot == "px4":
-        from sim.px4_harness import identify_px4
-
-        bundle = Path(a.bundle or "/tmp/sitl/px4-sitl-v1.16.0-sih")
-        out.mkdir(parents=True, exist_ok=True)
-        res = identify_px4(out, bundle, a.alt)
-        fw = "PX4 v1.16.0 SITL, SIH airplane (airframe 10041), stock parameters"
-    else:
-        bundle = Path(a.bundle or "/tmp/sitl/arduplane-sitl-4.7dev")
-        if not (bundle / "bin" / "arduplane").is_file():
-            print(f"identify: {bundle}/bin/arduplane: no such file", file=sys.stderr)
-            return 2
-        out.mkdir(parents=True, exist_ok=True)
-        res = identify_arduplane(out, bundle, a.instance, a.alt)
-        fw = "ArduPlane 4.7.0-dev SITL, plane model, stock parameters"
+    res = _identify(a, out)
+    if a.circles:
+        circles = [circle_wind_error(Path(t)) for t in a.circles]
+        res["circles"] = circles
+        res["wind_estimator"] = fit_wind_estimator(circles)
+    if a.wind_flight:
+        c = circle_wind_error(Path(a.wind_flight[0]))
+        res["wind_scale"] = math.hypot(c["north"], c["east"]) / float(a.wind_flight[1])
+    (out / "fit.json").write_text(json.dumps(res, indent=1))
+    fw = FIRMWARE[a.autopilot]
     cmd = "python -m sim.identify " + " ".join(argv if argv is not None else sys.argv[1:])
     path = write_profile(res, a.autopilot, fw, out, cmd)
     print(json.dumps({k: v for k, v in res.items() if k != "turn"}, indent=1))
     print(json.dumps(res["turn"], indent=1))
     print(f"profile: {path}")
     return 0
+
+
+FIRMWARE = {
+    "px4": "PX4 v1.16.0 SITL, SIH airplane (airframe 10041), stock parameters",
+    "arduplane": "ArduPlane 4.7.0-dev SITL, plane model, stock parameters",
+}
+
+
+def _identify(a: Any, out: Path) -> dict[str, Any]:
+    if a.reuse:
+        res = json.loads((out / "fit.json").read_text())
+        turns = res["turn"]["turns"]
+        x = np.array([G * math.tan(math.radians(r["bank_deg"])) / r["groundspeed"] for r in turns])
+        y = np.array([r["chi_dot"] for r in turns])
+        res["turn"]["turn_gain"] = float(x @ y / (x @ x))
+        return res
+    if a.autopilot == "px4":
+        from sim.px4_harness import identify_px4
+
+        bundle = Path(a.bundle or "/tmp/sitl/px4-sitl-v1.16.0-sih")
+        out.mkdir(parents=True, exist_ok=True)
+        return identify_px4(out, bundle, a.alt)
+    bundle = Path(a.bundle or "/tmp/sitl/arduplane-sitl-4.7dev")
+    if not (bundle / "bin" / "arduplane").is_file():
+        raise SystemExit(f"identify: {bundle}/bin/arduplane: no such file")
+    out.mkdir(parents=True, exist_ok=True)
+    return identify_arduplane(out, bundle, a.instance, a.alt)
 
 
 if __name__ == "__main__":

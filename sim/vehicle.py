@@ -101,6 +101,8 @@ class SimVehicle(AutopilotEmulation):
         self._shaper = AttitudeShaper(
             profile.attitude, self.dt, native_tau_s=self.ap.attitude.gains.roll_tc
         )
+        if profile.estimator.wind_tau_s is not None:
+            self.wind_estimate_tau_s = 0.0  # the profile's estimate carries its own lag
         self._truth_st = self.plant.state()
         self._st = self._estimate(self._truth_st)
 
