@@ -65,7 +65,8 @@ class AutopilotEmulation(MavEndpoint):
                     if shaper is not None:
                         roll_sp, pitch_sp = shaper(roll_sp, pitch_sp)
                     a, e, r = ap.attitude_to_surfaces(dt, roll_sp, pitch_sp, st)
-                return a, e, r, (thrust if self.armed else 0.0)
+                scale = getattr(self, "thrust_scale", 1.0)  # the profile's full thrust
+                return a, e, r, (thrust * scale if self.armed else 0.0)
         if beh == GUIDED:
             return self._guided_control(st)
         if beh == LOITER:

@@ -31,7 +31,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from mpf_mavlink.config.fields import _fail, _nonneg, _pos
+from mpf_mavlink.config.fields import _nonneg, _pos
 from mpf_mavlink.errors import ConfigError
 
 
@@ -47,6 +47,11 @@ class AttitudeResponse:
     pitch_tau_s: float = field(default=0.0, metadata={"check": ("range", 0.0, 5.0)})
     pitch_gain: float = field(default=1.0, metadata={"check": ("range", 0.5, 1.5)})
     pitch_bias_rad: float = field(default=0.0, metadata={"check": ("range", -0.2, 0.2)})
+    # body-rate offboard: a slow random roll-rate error of the firmware's rate loop (Gauss-Markov,
+    # 1-sigma rad/s, correlation time s), as PX4 SIH's noisy gyros leave in its integrators: the
+    # slow +-2-5 m radial wander of real PX4 (an empirical disturbance, fitted to its flights)
+    roll_rate_wander_rad_s: float = field(default=0.0, metadata=_nonneg())
+    rate_wander_tau_s: float = field(default=30.0, metadata=_pos())
 
 
 @dataclass(frozen=True)
@@ -60,12 +65,22 @@ class TurnResponse:
 
 
 @dataclass(frozen=True)
+class ThrustResponse:
+    """What full offboard thrust flies: the level airspeed (m/s) at thrust 1 (None: the plant's
+    own). PX4 SIH's airplane holds ~13.6 m/s at full throttle, short of FW_AIRSPD_TRIM 15."""
+
+    full_thrust_airspeed_m_s: float | None = field(default=None, metadata=_pos())
+
+
+@dataclass(frozen=True)
 class EstimatorModel:
     """What the reported state adds to the truth (1-sigma; m, m/s, rad; s)."""
 
     position_noise_m: float = field(default=0.0, metadata=_nonneg())
     velocity_noise_m_s: float = field(default=0.0, metadata=_nonneg())
     attitude_noise_rad: float = field(default=0.0, metadata=_nonneg())
+    rate_noise_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)  # p, q, r reported, 1-sigma
+    vertical_noise_m: float = field(default=0.0, metadata=_nonneg())
     horizontal_wander_m: float = field(default=0.0, metadata=_nonneg())
     vertical_wander_m: float = field(default=0.0, metadata=_nonneg())
     wander_tau_s: float = field(default=30.0, metadata=_pos())
@@ -83,6 +98,15 @@ class EstimatorModel:
 
 
 @dataclass(frozen=True)
+class FitResiduals:
+    """The identification's residuals (for the record): attitude fits (rad), wind fit (m/s)."""
+
+    roll_rms_rad: float | None = field(default=None, metadata=_nonneg())
+    pitch_rms_rad: float | None = field(default=None, metadata=_nonneg())
+    wind_rms_m_s: float | None = field(default=None, metadata=_nonneg())
+
+
+@dataclass(frozen=True)
 class AutopilotProfile:
     """One firmware's identified behaviour (module docstring). ``source``: how it was found."""
 
@@ -91,8 +115,9 @@ class AutopilotProfile:
     source: str = ""
     attitude: AttitudeResponse = field(default_factory=AttitudeResponse)
     turn: TurnResponse = field(default_factory=TurnResponse)
+    thrust: ThrustResponse = field(default_factory=ThrustResponse)
     estimator: EstimatorModel = field(default_factory=EstimatorModel)
-    fit: dict[str, float] = field(default_factory=dict)  # the fits' residuals, for the record
+    fit: FitResiduals = field(default_factory=FitResiduals)
 
 
 def load_profile(path: str | Path) -> AutopilotProfile:
@@ -110,11 +135,7 @@ def load_profile(path: str | Path) -> AutopilotProfile:
         raise ConfigError(f"{p}: not YAML: {str(e).splitlines()[0]}") from None
     if not isinstance(raw, dict):
         raise ConfigError(f"{p}: an autopilot profile is a mapping")
-    prof = _build(AutopilotProfile, raw, str(p), "")
-    for k, v in prof.fit.items():
-        if not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise _fail(str(p), f"fit.{k}", "must be a finite number")
-    return prof
+    return _build(AutopilotProfile, raw, str(p), "")
 
 
 def profile_to_dict(prof: AutopilotProfile) -> dict[str, Any]:
@@ -150,6 +171,32 @@ class _Lag:
         else:
             self.y += self.a * (x - self.y)
         return self.y
+
+
+class RateWander:
+    """The Gauss-Markov roll-rate error of :class:`AttitudeResponse` (rad/s), sampled at dt."""
+
+    def __init__(self, resp: AttitudeResponse, dt: float, seed: int = 0) -> None:
+        self.sigma = resp.roll_rate_wander_rad_s
+        self.phi = math.exp(-dt / resp.rate_wander_tau_s)
+        self.rng = np.random.default_rng(np.random.SeedSequence([int(seed), 25]))
+        self.x = self.sigma * float(self.rng.standard_normal()) if self.sigma else 0.0
+
+    def __call__(self) -> float:
+        if self.sigma:
+            q = self.sigma * math.sqrt(1.0 - self.phi * self.phi)
+            self.x = self.phi * self.x + q * float(self.rng.standard_normal())
+        return self.x
+
+
+def thrust_scale(resp: ThrustResponse, trim_throttle: float, trim_airspeed: float) -> float:
+    """Plant throttle per unit of offboard thrust so that full thrust holds about
+    ``full_thrust_airspeed_m_s`` level: the trim throttle scaled by the cube of the airspeed ratio
+    (the power of parasitic drag; an approximation, checked by the calibration flights)."""
+    v = resp.full_thrust_airspeed_m_s
+    if v is None:
+        return 1.0
+    return min(1.0, trim_throttle * (v / trim_airspeed) ** 3)
 
 
 class AttitudeShaper:
@@ -260,9 +307,10 @@ class StateEstimate:
                 max(0.0, 1.0 - phi * phi)
             ) * self.rng.standard_normal(3)
         pos = st.position_ned + self._walk
-        if e.position_noise_m:
-            pos = pos + e.position_noise_m * self.rng.standard_normal(3)
-        if any(sig) or e.position_noise_m:
+        if e.position_noise_m or e.vertical_noise_m:
+            sd = (e.position_noise_m, e.position_noise_m, e.vertical_noise_m)
+            pos = pos + np.asarray(sd) * self.rng.standard_normal(3)
+        if any(sig) or e.position_noise_m or e.vertical_noise_m:
             upd["position_ned"] = pos
         if e.wind_tau_s is not None:
             upd["wind_ned"] = self._wind(st, e)
@@ -270,6 +318,8 @@ class StateEstimate:
             upd["velocity_ned"] = st.velocity_ned + e.velocity_noise_m_s * self.rng.standard_normal(
                 3
             )
+        if any(e.rate_noise_rad_s):
+            upd["pqr"] = st.pqr + np.asarray(e.rate_noise_rad_s) * self.rng.standard_normal(3)
         if e.attitude_noise_rad:
             n = e.attitude_noise_rad * self.rng.standard_normal(3)
             roll, pitch, yaw = roll + n[0], pitch + n[1], yaw + n[2]

@@ -55,13 +55,40 @@ PX4_MATRIX = (
 )
 
 
+BUNDLES = {"arduplane": "arduplane-sitl-4.7dev", "px4": "px4-sitl-v1.16.0-sih"}
+
+
 def sitl_dir() -> Path | None:
-    """Where the firmware bundles are unpacked or packed: MPF_SITL_DIR, else ../shared/sitl."""
+    """Where the firmware bundles are: MPF_SITL_DIR, else <repo>/../shared/sitl (None: neither)."""
     env = os.environ.get("MPF_SITL_DIR")
     for p in ([Path(env)] if env else []) + [ROOT.parent / "shared" / "sitl"]:
         if p.is_dir():
             return p
     return None
+
+
+def find_bundle(autopilot: str) -> Path | None:
+    """The unpacked bundle of ``autopilot``: an unpacked copy beside the tarball, else the tarball
+    unpacked once into the git-ignored ``runs/sitl-cache`` (None: no bundle anywhere)."""
+    import tarfile
+
+    base, name = sitl_dir(), BUNDLES[autopilot]
+    if base is None:
+        return None
+    if (base / name).is_dir():
+        return base / name
+    tar = base / f"{name}.tar.xz"
+    if not tar.is_file():
+        return None
+    cache = ROOT / "runs" / "sitl-cache"
+    if not (cache / name).is_dir():
+        cache.mkdir(parents=True, exist_ok=True)
+        tmp = cache / f".{name}.partial"
+        with tarfile.open(tar) as tf:
+            tf.extractall(tmp, filter="tar")
+        (tmp / name).rename(cache / name)
+        tmp.rmdir()
+    return cache / name
 
 
 def _wind_config(base: Path, out: Path) -> Path:
@@ -139,11 +166,15 @@ def fly_sil(run: Path, autopilot: str, profile: Path | None, tag: str, seed: int
     sets = (run / "mission_overrides.txt").read_text().split()
     real = _metrics(run / "bridge" / "metrics.json")
     p0, heading = _start_state(run)
-    cruise = next(float(s.split("=")[1]) for s in sets if s.startswith("vehicle.airspeed_m_s="))
+    cruise = next(
+        (float(s.split("=")[1]) for s in sets if s.startswith("vehicle.airspeed_m_s=")), None
+    )
     flavour = "ardupilot" if autopilot == "arduplane" else "px4"
     sil_sets = [*sets, "sil.link=udp", f"sil.flavour={flavour}", "sil.initial_mode=cruise",
                 f"sil.initial_position_ned_m=[{p0[0]:.2f},{p0[1]:.2f},{p0[2]:.2f}]",
-                f"aircraft.trim_airspeed_m_s={cruise:g}", f"sil.seed={seed}"]  # fmt: skip
+                f"sil.seed={seed}"]  # fmt: skip
+    if cruise is not None:
+        sil_sets.append(f"aircraft.trim_airspeed_m_s={cruise:g}")
     if heading is not None:
         sil_sets.append(f"sil.initial_heading_rad={heading:.4f}")
     if m.wind_m_s > 0:
@@ -160,7 +191,7 @@ def fly_sil(run: Path, autopilot: str, profile: Path | None, tag: str, seed: int
             / "configs"
             / ("bridge_arduplane.yaml" if flavour == "ardupilot" else "bridge_px4.yaml")
         )
-    dur = real.get("duration_s") or 300.0
+    dur = round(real.get("tracked_s") or 300.0)
     sil_out = run / f"sil_{tag}"
     cmd = [sys.executable, "-m", "mpf_mavlink.cli", "sim", str(config), "--out", str(sil_out),
            "--set", f"sim.duration_s={dur:g}", *[x for s in sil_sets for x in ("--set", s)]]  # fmt: skip
@@ -217,7 +248,7 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--only", default="", help="comma-separated mission names (default: all)")
     r.add_argument("--duration", type=float, default=300.0)
     r.add_argument("--instance", type=int, default=4, help="ArduPlane -I (ports 5760 + 10 I)")
-    r.add_argument("--bundle", default=None, help="unpacked bundle (default: /tmp/sitl/...)")
+    r.add_argument("--bundle", default=None, help="unpacked bundle (default: find_bundle)")
     sl = sub.add_parser("sil", help="re-fly the real runs of --out in our SIL, print the table")
     sl.add_argument("autopilot", choices=("arduplane", "px4"))
     sl.add_argument("--out", required=True)
@@ -267,12 +298,24 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             t0 = time.monotonic()
             if a.autopilot == "arduplane":
-                bundle = Path(a.bundle or "/tmp/sitl/arduplane-sitl-4.7dev")
+                bundle = Path(a.bundle) if a.bundle else find_bundle("arduplane")
+                if bundle is None:
+                    print(
+                        "calibrate: no ArduPlane bundle (--bundle, MPF_SITL_DIR or ../shared/sitl)",
+                        file=sys.stderr,
+                    )
+                    return 2
                 code = fly_arduplane(m, out / m.name, bundle, a.instance, a.duration)
             else:
                 from sim.px4_harness import fly_px4
 
-                bundle = Path(a.bundle or "/tmp/sitl/px4-sitl-v1.16.0-sih")
+                bundle = Path(a.bundle) if a.bundle else find_bundle("px4")
+                if bundle is None:
+                    print(
+                        "calibrate: no PX4 bundle (--bundle, MPF_SITL_DIR or ../shared/sitl)",
+                        file=sys.stderr,
+                    )
+                    return 2
                 code = fly_px4(m, out / m.name, bundle, a.duration)
             print(f"calibrate: {m.name} exit {code} in {time.monotonic() - t0:.0f} s", flush=True)
             rc = rc or code

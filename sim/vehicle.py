@@ -89,18 +89,32 @@ class SimVehicle(AutopilotEmulation):
     _estimate: Any = None  # truth PlantState -> the state the autopilot reports and controls on
     _shaper: Any = None  # the attitude set-point as the firmware's loop would fly it
     _truth_st: Any = None
+    _wander: Any = None  # the profile's slow roll-rate error of body-rate offboard
+    thrust_scale = 1.0  # plant throttle per unit of offboard thrust (profile.thrust)
 
-    def use_profile(self, profile: Any, seed: int = 0) -> None:
+    def use_profile(
+        self, profile: Any, seed: int = 0, full_thrust_throttle: float | None = None
+    ) -> None:
         """Emulate ``profile`` (an :class:`sim.autopilot_profile.AutopilotProfile`) from now on:
         the reported (and controlled-on) state passes through its estimator model, the attitude
-        set-points through its attitude response; the truth record stays the plant's."""
-        from sim.autopilot_profile import AttitudeShaper, StateEstimate
+        set-points through its attitude response; the truth record stays the plant's.
+        ``full_thrust_throttle``: the plant throttle that offboard thrust 1 maps to (the plant's
+        level throttle at the profile's full-thrust airspeed; None: the cubic estimate)."""
+        from sim.autopilot_profile import AttitudeShaper, RateWander, StateEstimate, thrust_scale
 
         self.profile = profile
         self._estimate = StateEstimate(profile, seed)
+        if profile.attitude.roll_rate_wander_rad_s:
+            self._wander = RateWander(profile.attitude, self.dt, seed)
         self._shaper = AttitudeShaper(
             profile.attitude, self.dt, native_tau_s=self.ap.attitude.gains.roll_tc
         )
+        if full_thrust_throttle is not None:
+            self.thrust_scale = min(1.0, float(full_thrust_throttle))
+        elif self.trim is not None:
+            self.thrust_scale = thrust_scale(
+                profile.thrust, self.trim.throttle, self.cruise_airspeed
+            )
         if profile.estimator.wind_tau_s is not None:
             self.wind_estimate_tau_s = 0.0  # the profile's estimate carries its own lag
         self._truth_st = self.plant.state()
@@ -145,8 +159,11 @@ class SimVehicle(AutopilotEmulation):
             ):
                 # Hot path (PX4 offboard body rates): the rate loops read only p, q, r and the
                 # airspeed, so the full state (geodetic conversion, matrices) is not needed here.
-                a, e, r = ap.rates_to_surfaces(dt, sp[1], rates, rates[3])
-                cmd = (a, e, r, sp[2] if self.armed else 0.0)
+                rsp = sp[1]
+                if self._wander is not None:
+                    rsp = (rsp[0] + self._wander(), rsp[1], rsp[2])
+                a, e, r = ap.rates_to_surfaces(dt, rsp, rates, rates[3])
+                cmd = (a, e, r, sp[2] * self.thrust_scale if self.armed else 0.0)
             else:
                 if not fresh:
                     self._st = self._observe()
