@@ -338,7 +338,7 @@ def write_profile(res: dict[str, Any], autopilot: str, firmware: str, out: Path,
 
     r, p = res["roll"], res["pitch"]
     est = res.get("estimator", {})
-    prof = {
+    prof: dict[str, Any] = {
         "autopilot": autopilot,
         "firmware": firmware,
         "source": f"identified by `{command}` ({time.strftime('%Y-%m-%d')})",
