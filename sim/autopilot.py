@@ -60,8 +60,13 @@ class AutopilotEmulation(MavEndpoint):
                 if kind == "rates":
                     a, e, r = ap.rates_to_surfaces(dt, vals, tuple(st.pqr), st.airspeed)
                 else:
-                    a, e, r = ap.attitude_to_surfaces(dt, vals[0], vals[1], st)
-                return a, e, r, (thrust if self.armed else 0.0)
+                    roll_sp, pitch_sp = vals
+                    shaper = getattr(self, "_shaper", None)
+                    if shaper is not None:
+                        roll_sp, pitch_sp = shaper(roll_sp, pitch_sp)
+                    a, e, r = ap.attitude_to_surfaces(dt, roll_sp, pitch_sp, st)
+                scale = getattr(self, "thrust_scale", 1.0)  # the profile's full thrust
+                return a, e, r, (thrust * scale if self.armed else 0.0)
         if beh == GUIDED:
             return self._guided_control(st)
         if beh == LOITER:
@@ -103,6 +108,9 @@ class AutopilotEmulation(MavEndpoint):
             roll_sp,
         )
         pitch_sp = fv[1] if fresh[1] else pitch_tecs
+        shaper = getattr(self, "_shaper", None)
+        if shaper is not None:  # the firmware's own attitude loop: lag, gain, bias (profile)
+            roll_sp, pitch_sp = shaper(roll_sp, pitch_sp)
         a, e, r = ap.attitude_to_surfaces(dt, roll_sp, pitch_sp, st)
         if fresh[2]:
             r = _clip(math.degrees(fv[2]) / 45.0, -1.0, 1.0)  # ArduPlane: +-4500 cdeg = full rudder

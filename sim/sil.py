@@ -238,7 +238,35 @@ def build_vehicle(cfg: Config, url: str, clock: str | None = None, **over: Any) 
 
     opts = vehicle_options(cfg, url, clock, **over)
     flavour = opts.pop("flavour")
-    return SimVehicle(flavour, opts.pop("url"), **opts)
+    v = SimVehicle(flavour, opts.pop("url"), **opts)
+    sil = cfg.section("sil")
+    prof_path = sil.profile_path(cfg.source)
+    if prof_path is not None:
+        from sim.autopilot_profile import load_profile
+
+        prof = load_profile(prof_path)
+        full = None
+        if prof.thrust.full_thrust_airspeed_m_s is not None and sil.plant == "jsbsim":
+            full = full_thrust_throttle(cfg, opts, prof.thrust.full_thrust_airspeed_m_s)
+        v.use_profile(prof, seed=sil.seed, full_thrust_throttle=full)
+    return v
+
+
+def full_thrust_throttle(cfg: Config, opts: dict[str, Any], airspeed: float) -> float:
+    """The plant's level-flight throttle at ``airspeed`` (m/s), found by flying it (a trim flight
+    of a second plant at the start altitude): what the profile's full offboard thrust maps to."""
+    from sim.inner_loop import fly_to_trim
+    from sim.plant_jsbsim import JSBSimPlant
+
+    po = dict(opts.get("plant_options") or {})
+    alt = -float(opts["position_ned"][2])
+    plant = JSBSimPlant(
+        dt=opts.get("frame_period", 0.02) / max(1, math.ceil(opts.get("frame_period", 0.02) * opts.get("physics_rate_hz", 120.0) - 1e-9)),
+        lat0_deg=opts["lat0_deg"], lon0_deg=opts["lon0_deg"], alt0_m=opts["alt0_m"],
+        position_ned=(0.0, 0.0, -alt), heading=0.0, airspeed=airspeed, **po,
+    )  # fmt: skip
+    res = fly_to_trim(plant, build_autopilot(cfg), airspeed, alt, seconds=20.0, apply=False)
+    return float(res.throttle)
 
 
 def bridge_config(cfg: Config) -> Config:

@@ -63,6 +63,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from typing import Any
 
 from sim.autopilot import AutopilotEmulation
 from sim.vehicle_base import (
@@ -82,6 +83,61 @@ class SimVehicle(AutopilotEmulation):
     Drive it with :meth:`run` (clock-paced), :meth:`step_once` (one frame, no waiting; call
     :meth:`poll` in between if you like) or :meth:`start_in_thread` / :meth:`stop`.
     """
+
+    # the firmware's identified behaviour (sim/autopilot_profile.py): None = the plain emulation
+    profile: Any = None
+    _estimate: Any = None  # truth PlantState -> the state the autopilot reports and controls on
+    _shaper: Any = None  # the attitude set-point as the firmware's loop would fly it
+    _truth_st: Any = None
+    _wander: Any = None  # the profile's slow roll-rate error of body-rate offboard
+    thrust_scale = 1.0  # plant throttle per unit of offboard thrust (profile.thrust)
+
+    def use_profile(
+        self, profile: Any, seed: int = 0, full_thrust_throttle: float | None = None
+    ) -> None:
+        """Emulate ``profile`` (an :class:`sim.autopilot_profile.AutopilotProfile`) from now on:
+        the reported (and controlled-on) state passes through its estimator model, the attitude
+        set-points through its attitude response; the truth record stays the plant's.
+        ``full_thrust_throttle``: the plant throttle that offboard thrust 1 maps to (the plant's
+        level throttle at the profile's full-thrust airspeed; None: the cubic estimate)."""
+        from sim.autopilot_profile import AttitudeShaper, RateWander, StateEstimate, thrust_scale
+
+        self.profile = profile
+        self._estimate = StateEstimate(profile, seed)
+        if profile.attitude.roll_rate_wander_rad_s:
+            self._wander = RateWander(profile.attitude, self.dt, seed)
+        self._shaper = AttitudeShaper(
+            profile.attitude, self.dt, native_tau_s=self.ap.attitude.gains.roll_tc
+        )
+        if full_thrust_throttle is not None:
+            self.thrust_scale = min(1.0, float(full_thrust_throttle))
+        elif self.trim is not None:
+            self.thrust_scale = thrust_scale(
+                profile.thrust, self.trim.throttle, self.cruise_airspeed
+            )
+        if profile.estimator.wind_tau_s is not None:
+            self.wind_estimate_tau_s = 0.0  # the profile's estimate carries its own lag
+        self._truth_st = self.plant.state()
+        self._st = self._estimate(self._truth_st)
+
+    def _observe(self) -> Any:
+        """The plant's state as the autopilot has it (the truth without a profile)."""
+        st = self.plant.state()
+        if self._estimate is None:
+            return st
+        self._truth_st = st
+        return self._estimate(st)
+
+    def _record(self) -> None:
+        truth = self._truth_st
+        if truth is None or self._estimate is None:
+            super()._record()
+            return
+        est, self._st = self._st, truth  # the record is the plant's truth, not the estimate
+        try:
+            super()._record()
+        finally:
+            self._st = est
 
     # ------------------------------------------------------------------ stepping
     def step_once(self) -> float:
@@ -103,11 +159,14 @@ class SimVehicle(AutopilotEmulation):
             ):
                 # Hot path (PX4 offboard body rates): the rate loops read only p, q, r and the
                 # airspeed, so the full state (geodetic conversion, matrices) is not needed here.
-                a, e, r = ap.rates_to_surfaces(dt, sp[1], rates, rates[3])
-                cmd = (a, e, r, sp[2] if self.armed else 0.0)
+                rsp = sp[1]
+                if self._wander is not None:
+                    rsp = (rsp[0] + self._wander(), rsp[1], rsp[2])
+                a, e, r = ap.rates_to_surfaces(dt, rsp, rates, rates[3])
+                cmd = (a, e, r, sp[2] * self.thrust_scale if self.armed else 0.0)
             else:
                 if not fresh:
-                    self._st = plant.state()
+                    self._st = self._observe()
                 cmd = self._control(self._st)
             plant.step(*cmd)
             self._k += 1
@@ -117,7 +176,7 @@ class SimVehicle(AutopilotEmulation):
             if self._in and i < last:
                 self._apply_due()
         self._rates = rates
-        self._st = plant.state()
+        self._st = self._observe()
         if self._due("attitude", self.rates.attitude):
             # the 50 Hz pair first, in its own datagram (see _telemetry)
             if self._due("local_position", self.rates.local_position):

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from mpf_mavlink.config.fields import EXTRA_SECTIONS, Vec3, _fail, _nonneg, _pos
+from mpf_mavlink.errors import ConfigError
 
 
 def _rate(**kw: Any) -> dict[str, Any]:
@@ -159,10 +160,41 @@ class SilConfig:
     home_lat_deg: float = field(default=47.397742, metadata={"check": ("range", -90.0, 90.0)})
     home_lon_deg: float = field(default=8.545594, metadata={"check": ("range", -180.0, 180.0)})
     home_alt_m: float = 488.0
+    # the firmware's identified behaviour the vehicle emulates (sim/autopilot_profile.py); a path
+    # absolute, relative to the config file, or to the repository (configs/autopilots/*.yaml)
+    autopilot_profile: str | None = None
+
+    def profile_path(self, src: str) -> Path | None:
+        """The profile's file (None: no profile); the first of the places above that exists."""
+        if self.autopilot_profile is None:
+            return None
+        p = Path(self.autopilot_profile).expanduser()
+        if p.is_absolute():
+            return p
+        bases = [Path(src).resolve().parent] if src and not src.startswith("<") else []
+        bases.append(Path(__file__).resolve().parents[2])
+        for b in bases:
+            if (b / p).is_file():
+                return b / p
+        return p
 
     def validate(self, cfg: Any, src: str) -> None:
         if self.link == "none":
             return
+        prof_path = self.profile_path(src)
+        if prof_path is not None:
+            from sim.autopilot_profile import load_profile
+
+            try:
+                prof = load_profile(prof_path)
+            except ConfigError as e:
+                raise _fail(src, "sil.autopilot_profile", str(e)) from None
+            want = "px4" if self.flavour == "px4" else "arduplane"
+            if prof.autopilot != want:
+                raise _fail(
+                    src, "sil.autopilot_profile",
+                    f"{prof_path} is a {prof.autopilot} profile but sil.flavour is {self.flavour!r}",
+                )  # fmt: skip
         if self.plant == "kinematic" and (self.turbulence != "none" or self.gusts):
             key = "sil.turbulence" if self.turbulence != "none" else "sil.gusts"
             raise _fail(

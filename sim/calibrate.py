@@ -1,0 +1,327 @@
+"""Calibration check: the same missions on the real firmware and in our SIL with a profile.
+
+``python -m sim.calibrate real arduplane --out DIR`` flies the matrix on the ArduPlane SITL bundle
+(one run directory per mission, the rig of :mod:`sim.sitl_rig` on instance ``--instance``);
+``python -m sim.calibrate sil --out DIR [--profile P]`` re-flies every real run of DIR in our SIL
+from the real flight's start state and writes ``DIR/calibration.json`` and a Markdown table
+(``--doc``). Real flights take real time; the SIL leg takes seconds per mission, so a profile can
+be re-checked against the same real flights as often as needed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+BAND = (0.67, 1.5)  # real / SIL steady RMS (issue 24's acceptance)
+MEAN_TOL_M = 0.3  # |SIL - real| mean radial and mean vertical
+
+
+@dataclass(frozen=True)
+class Mission:
+    """One row of the matrix: what the rig is told (radius, altitude, moving target, wind)."""
+
+    name: str
+    radius_m: float = 150.0
+    alt_m: float = 100.0
+    moving: bool = False
+    wind_m_s: float = 0.0
+    wind_dir_deg: float = 0.0
+
+
+ARDUPLANE_MATRIX = (
+    Mission("stationary"),
+    Mission("moving", moving=True),
+    Mission("r100_h146", radius_m=100.0, alt_m=146.0),
+    Mission("wind6", wind_m_s=6.0, wind_dir_deg=180.0),
+)
+PX4_MATRIX = (
+    Mission("stationary"),
+    Mission("moving", moving=True),
+    Mission("r120_h130", radius_m=120.0, alt_m=130.0),
+    Mission("r200", radius_m=200.0),
+)
+
+
+BUNDLES = {"arduplane": "arduplane-sitl-4.7dev", "px4": "px4-sitl-v1.16.0-sih"}
+
+
+def sitl_dir() -> Path | None:
+    """Where the firmware bundles are: MPF_SITL_DIR, else <repo>/../shared/sitl (None: neither)."""
+    env = os.environ.get("MPF_SITL_DIR")
+    for p in ([Path(env)] if env else []) + [ROOT.parent / "shared" / "sitl"]:
+        if p.is_dir():
+            return p
+    return None
+
+
+def find_bundle(autopilot: str) -> Path | None:
+    """The unpacked bundle of ``autopilot``: an unpacked copy beside the tarball, else the tarball
+    unpacked once into the git-ignored ``runs/sitl-cache`` (None: no bundle anywhere)."""
+    import tarfile
+
+    base, name = sitl_dir(), BUNDLES[autopilot]
+    if base is None:
+        return None
+    if (base / name).is_dir():
+        return base / name
+    tar = base / f"{name}.tar.xz"
+    if not tar.is_file():
+        return None
+    cache = ROOT / "runs" / "sitl-cache"
+    if not (cache / name).is_dir():
+        cache.mkdir(parents=True, exist_ok=True)
+        tmp = cache / f".{name}.partial"
+        with tarfile.open(tar) as tf:
+            tf.extractall(tmp, filter="tar")
+        (tmp / name).rename(cache / name)
+        tmp.rmdir()
+    return cache / name
+
+
+def _wind_config(base: Path, out: Path) -> Path:
+    """A copy of ``base`` with wind compensation on (the issue 22 wind flight's setting)."""
+    d = yaml.safe_load(base.read_text())
+    d.setdefault("guidance", {})["wind_compensation"] = True
+    p = out / "config_wind.yaml"
+    p.write_text(yaml.safe_dump(d, sort_keys=False))
+    return p
+
+
+def fly_arduplane(m: Mission, out: Path, bundle: Path, instance: int, duration: float) -> int:
+    """One real ArduPlane flight with :mod:`sim.sitl_rig` (instance ports, wind parameters)."""
+    from sim import sitl_rig
+
+    gcs_port, bridge_port = 5760 + 10 * instance, 5762 + 10 * instance
+    sitl_rig.GCS_PORT, sitl_rig.BRIDGE_PORT = gcs_port, bridge_port
+
+    def start(binary: Path, ardupilot: Path, work: Path, speedup: float) -> subprocess.Popen:
+        work.mkdir(parents=True, exist_ok=True)
+        parm = ardupilot / "Tools" / "autotest" / "models" / "plane.parm"
+        cmd = [str(binary), "--model", "plane", "--defaults", str(parm), f"-I{instance}",
+               "--speedup", f"{speedup:g}"]  # fmt: skip
+        log = open(work / "sitl.log", "w")  # noqa: SIM115 - lives as long as the process
+        return subprocess.Popen(
+            cmd, cwd=work, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+        )
+
+    sitl_rig.start_sitl = start
+    take_off = sitl_rig.take_off
+
+    def take_off_in_wind(g: Any, alt_m: float, timeout_s: float = 240.0) -> None:
+        if m.wind_m_s > 0:
+            g.set_param("SIM_WIND_SPD", m.wind_m_s)
+            g.set_param("SIM_WIND_DIR", m.wind_dir_deg)
+            g.pump(1.0)
+        take_off(g, alt_m, timeout_s)
+
+    sitl_rig.take_off = take_off_in_wind
+    config = ROOT / "configs" / "bridge_arduplane.yaml"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if m.wind_m_s > 0:
+        out.parent.joinpath(f"{m.name}.cfg").mkdir(exist_ok=True)
+        config = _wind_config(config, out.parent / f"{m.name}.cfg")
+    argv = ["--binary", str(bundle / "bin" / "arduplane"), "--ardupilot", str(bundle),
+            "--out", str(out), "--duration", f"{duration:g}", "--alt", f"{m.alt_m:g}",
+            "--radius", f"{m.radius_m:g}", "--config", str(config)]  # fmt: skip
+    if m.moving:
+        argv.append("--moving")
+    (out.parent / f"{m.name}.mission.json").write_text(json.dumps(m.__dict__))
+    return sitl_rig.main(argv)
+
+
+def _start_state(run: Path) -> tuple[list[float], float | None]:
+    """The real flight's first bridge sample (NED) and its heading over the first samples."""
+    import numpy as np
+
+    d = np.genfromtxt(run / "bridge" / "timeseries.csv", delimiter=",", names=True, max_rows=30)
+    p0 = [float(d["p_n"][0]), float(d["p_e"][0]), float(d["p_d"][0])]
+    hd = None
+    if len(d) >= 2:
+        hd = float(math.atan2(d["p_e"][-1] - d["p_e"][0], d["p_n"][-1] - d["p_n"][0]))
+    return p0, hd
+
+
+def _metrics(p: Path) -> dict[str, Any]:
+    return json.loads(p.read_text()) if p.is_file() else {}
+
+
+def fly_sil(run: Path, autopilot: str, profile: Path | None, tag: str, seed: int = 0
+            ) -> dict[str, Any]:  # fmt: skip
+    """Our SIL on the real flight's mission and start state (the rig's overrides), with or
+    without a profile; returns the bridge's own metrics there (as the real flight's are)."""
+    m = Mission(**json.loads((run.parent / f"{run.name}.mission.json").read_text()))
+    sets = (run / "mission_overrides.txt").read_text().split()
+    real = _metrics(run / "bridge" / "metrics.json")
+    p0, heading = _start_state(run)
+    cruise = next(
+        (float(s.split("=")[1]) for s in sets if s.startswith("vehicle.airspeed_m_s=")), None
+    )
+    flavour = "ardupilot" if autopilot == "arduplane" else "px4"
+    sil_sets = [*sets, "sil.link=udp", f"sil.flavour={flavour}", "sil.initial_mode=cruise",
+                f"sil.initial_position_ned_m=[{p0[0]:.2f},{p0[1]:.2f},{p0[2]:.2f}]",
+                f"sil.seed={seed}"]  # fmt: skip
+    if cruise is not None:
+        sil_sets.append(f"aircraft.trim_airspeed_m_s={cruise:g}")
+    if heading is not None:
+        sil_sets.append(f"sil.initial_heading_rad={heading:.4f}")
+    if m.wind_m_s > 0:
+        # SIM_WIND_DIR is where the wind comes FROM; sil.wind_ned_m_s is where the air moves TO
+        to = math.radians(m.wind_dir_deg + 180.0)
+        sil_sets.append(f"sil.wind_ned_m_s=[{m.wind_m_s * math.cos(to):.3f},"
+                        f"{m.wind_m_s * math.sin(to):.3f},0.0]")  # fmt: skip
+    if profile is not None:
+        sil_sets.append(f"sil.autopilot_profile={profile}")
+    config = run.parent / f"{m.name}.cfg" / "config_wind.yaml"
+    if not config.is_file():
+        config = (
+            ROOT
+            / "configs"
+            / ("bridge_arduplane.yaml" if flavour == "ardupilot" else "bridge_px4.yaml")
+        )
+    dur = round(real.get("tracked_s") or 300.0)
+    sil_out = run / f"sil_{tag}"
+    cmd = [sys.executable, "-m", "mpf_mavlink.cli", "sim", str(config), "--out", str(sil_out),
+           "--set", f"sim.duration_s={dur:g}", *[x for s in sil_sets for x in ("--set", s)]]  # fmt: skip
+    with open(run / f"sil_{tag}.log", "w") as f:
+        f.write(" ".join(shlex.quote(c) for c in cmd) + "\n")
+        f.flush()
+        subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, check=False, cwd=ROOT)
+    bm = _metrics(sil_out / "bridge" / "metrics.json")
+    tm = _metrics(sil_out / "metrics.json")
+    return {"bridge": bm, "truth": tm}
+
+
+def compare_row(name: str, real: dict[str, Any], sil: dict[str, Any]) -> dict[str, Any]:
+    """One row: real and SIL steady RMS, their ratio, mean radial / vertical and the verdict."""
+    b = sil["bridge"]
+    r_rms, s_rms = real.get("steady_rms_m"), b.get("steady_rms_m")
+    ratio = r_rms / s_rms if (r_rms is not None and s_rms) else None
+    keys = ("steady_mean_radial_m", "steady_mean_vertical_m")
+    d = {k: (None if real.get(k) is None or b.get(k) is None else b[k] - real[k]) for k in keys}
+    ok = (
+        ratio is not None and BAND[0] <= ratio <= BAND[1]
+        and all(v is not None and abs(v) <= MEAN_TOL_M for v in d.values())
+    )  # fmt: skip
+    return {"mission": name, "real_rms_m": r_rms, "sil_rms_m": s_rms, "ratio": ratio,
+            "real_radial_m": real.get("steady_mean_radial_m"), "sil_radial_m": b.get("steady_mean_radial_m"),
+            "real_vertical_m": real.get("steady_mean_vertical_m"), "sil_vertical_m": b.get("steady_mean_vertical_m"),
+            "sil_truth_rms_m": sil["truth"].get("steady_rms_m"), "within": ok}  # fmt: skip
+
+
+def _g(v: Any, f: str = ".3f") -> str:
+    return "n/a" if v is None else format(v, f)
+
+
+def table(rows: list[dict[str, Any]], title: str) -> str:
+    head = ("| mission | real RMS (m) | SIL RMS (m) | real / SIL | real radial / vertical (m) "
+            "| SIL radial / vertical (m) | within band |\n|---|---|---|---|---|---|---|")  # fmt: skip
+    lines = [f"**{title}**", "", head]
+    for r in rows:
+        lines.append(
+            f"| {r['mission']} | {_g(r['real_rms_m'])} | {_g(r['sil_rms_m'])} | {_g(r['ratio'], '.2f')} "
+            f"| {_g(r['real_radial_m'], '+.2f')} / {_g(r['real_vertical_m'], '+.2f')} "
+            f"| {_g(r['sil_radial_m'], '+.2f')} / {_g(r['sil_vertical_m'], '+.2f')} "
+            f"| {'yes' if r['within'] else 'NO'} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("real", help="fly the matrix on the real firmware")
+    r.add_argument("autopilot", choices=("arduplane", "px4"))
+    r.add_argument("--out", required=True)
+    r.add_argument("--only", default="", help="comma-separated mission names (default: all)")
+    r.add_argument("--duration", type=float, default=300.0)
+    r.add_argument("--instance", type=int, default=4, help="ArduPlane -I (ports 5760 + 10 I)")
+    r.add_argument("--bundle", default=None, help="unpacked bundle (default: find_bundle)")
+    sl = sub.add_parser("sil", help="re-fly the real runs of --out in our SIL, print the table")
+    sl.add_argument("autopilot", choices=("arduplane", "px4"))
+    sl.add_argument("--out", required=True)
+    sl.add_argument("--profile", default=None, help="profile YAML (default: none, the plain SIL)")
+    sl.add_argument("--tag", default=None, help="name of this SIL leg (default: profile or plain)")
+    sl.add_argument("--only", default="")
+    sl.add_argument("--doc", default=None, help="also write the table to this Markdown file")
+    a = ap.parse_args(argv)
+    if a.cmd == "sil":
+        out = Path(a.out).resolve()
+        prof = Path(a.profile).resolve() if a.profile else None
+        if prof is not None and not prof.is_file():
+            print(f"calibrate: {prof}: no such profile", file=sys.stderr)
+            return 2
+        tag = a.tag or (prof.stem if prof else "plain")
+        matrix = ARDUPLANE_MATRIX if a.autopilot == "arduplane" else PX4_MATRIX
+        names = [n for n in a.only.split(",") if n]
+        rows = []
+        for m in matrix:
+            run = out / m.name
+            if (names and m.name not in names) or not (run / "bridge" / "metrics.json").is_file():
+                continue
+            real = _metrics(run / "bridge" / "metrics.json")
+            rows.append(compare_row(m.name, real, fly_sil(run, a.autopilot, prof, tag)))
+        if not rows:
+            print(f"calibrate: no real runs under {out}", file=sys.stderr)
+            return 2
+        argv_s = " ".join(argv if argv is not None else sys.argv[1:])
+        title = f"{a.autopilot}, SIL {tag} (written by `python -m sim.calibrate {argv_s}`)"
+        text = table(rows, title)
+        print(text)
+        (out / f"calibration_{tag}.json").write_text(json.dumps(rows, indent=1))
+        if a.doc:
+            Path(a.doc).write_text(text + "\n")
+        return 0 if all(r["within"] for r in rows) else 1
+    if a.cmd == "real":
+        out = Path(a.out).resolve()
+        matrix = ARDUPLANE_MATRIX if a.autopilot == "arduplane" else PX4_MATRIX
+        names = [n for n in a.only.split(",") if n]
+        unknown = [n for n in names if n not in {m.name for m in matrix}]
+        if unknown:
+            print(f"calibrate: unknown mission {unknown[0]!r}", file=sys.stderr)
+            return 2
+        rc = 0
+        for m in matrix:
+            if names and m.name not in names:
+                continue
+            t0 = time.monotonic()
+            if a.autopilot == "arduplane":
+                bundle = Path(a.bundle) if a.bundle else find_bundle("arduplane")
+                if bundle is None:
+                    print(
+                        "calibrate: no ArduPlane bundle (--bundle, MPF_SITL_DIR or ../shared/sitl)",
+                        file=sys.stderr,
+                    )
+                    return 2
+                code = fly_arduplane(m, out / m.name, bundle, a.instance, a.duration)
+            else:
+                from sim.px4_harness import fly_px4
+
+                bundle = Path(a.bundle) if a.bundle else find_bundle("px4")
+                if bundle is None:
+                    print(
+                        "calibrate: no PX4 bundle (--bundle, MPF_SITL_DIR or ../shared/sitl)",
+                        file=sys.stderr,
+                    )
+                    return 2
+                code = fly_px4(m, out / m.name, bundle, a.duration)
+            print(f"calibrate: {m.name} exit {code} in {time.monotonic() - t0:.0f} s", flush=True)
+            rc = rc or code
+        return rc
+    return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,441 @@
+"""Identify an autopilot profile from the real firmware: ``python -m sim.identify arduplane --out DIR``.
+
+Flies short manoeuvres on the SITL firmware through pymavlink (its ground-station link) and fits
+the parameters :mod:`sim.autopilot_profile` needs (scipy least squares), then writes
+``DIR/profile.yaml`` (copy it to ``configs/autopilots/``), ``DIR/samples.csv`` and ``DIR/fit.json``.
+
+ArduPlane (GUIDED, SET_ATTITUDE_TARGET with the quaternion's yaw 0 as the bridge sends it,
+throttle left to TECS): bank steps and doublets (+-10 .. +-35 deg) and pitch steps for the attitude
+loop's dead time, lag, gain and bias; steady turns at 10, 20, 30, 40 deg for the turn per bank
+(the heading rate from the ground track against ``g tan(bank) / V``, as the bridge's adapter
+learns it); SIMSTATE (the simulator's truth) against the reported attitude and position for
+the estimator's noise and wander.
+
+PX4 (OFFBOARD, attitude quaternion + thrust): the same bank steps and turns.
+
+Nothing of the firmware's source is used: the binaries are driven and their answers fitted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+G = 9.80665
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _quat(roll: float, pitch: float, yaw: float) -> list[float]:
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return [
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    ]
+
+
+# (duration s, roll deg, pitch offset deg) segments flown in order
+ARDUPLANE_SCHEDULE: list[tuple[float, float, float]] = [
+    (6.0, 0.0, 0.0),
+    (8.0, 20.0, 0.0), (8.0, -20.0, 0.0), (6.0, 0.0, 0.0),     # doublet
+    (5.0, 10.0, 0.0), (5.0, -10.0, 0.0), (5.0, 0.0, 0.0),
+    (6.0, 0.0, 4.0), (6.0, 0.0, -3.0), (6.0, 0.0, 0.0),       # pitch steps
+    (14.0, 10.0, 0.0), (6.0, 0.0, 0.0),                        # steady turns
+    (14.0, 20.0, 0.0), (6.0, 0.0, 0.0),
+    (14.0, 30.0, 0.0), (6.0, 0.0, 0.0),
+    (14.0, -35.0, 0.0), (6.0, 0.0, 0.0),
+]  # fmt: skip
+
+
+class Recorder:
+    """What the link brings, stamped with the receive time (monotonic s)."""
+
+    def __init__(self, c: Any, sysid: int) -> None:
+        self.c, self.sysid = c, sysid
+        self.rows: dict[str, list[tuple]] = {"att": [], "pos": [], "hud": [], "sim": [], "cmd": []}
+        self.last: dict[str, Any] = {}
+
+    def pump(self, secs: float) -> None:
+        t_end = time.monotonic() + secs
+        while True:
+            left = t_end - time.monotonic()
+            if left <= 0:
+                return
+            m = self.c.recv_match(blocking=True, timeout=min(left, 0.02))
+            if m is None or m.get_srcSystem() != self.sysid:
+                continue
+            t, mt = time.monotonic(), m.get_type()
+            self.last[mt] = m
+            if mt == "ATTITUDE":
+                self.rows["att"].append((t, m.time_boot_ms / 1e3, m.roll, m.pitch, m.yaw,
+                                         m.rollspeed, m.pitchspeed, m.yawspeed))  # fmt: skip
+            elif mt == "LOCAL_POSITION_NED":
+                self.rows["pos"].append((t, m.time_boot_ms / 1e3, m.x, m.y, m.z, m.vx, m.vy, m.vz))
+            elif mt == "VFR_HUD":
+                self.rows["hud"].append((t, m.airspeed, m.groundspeed, m.throttle, m.alt))
+            elif mt == "SIMSTATE":
+                self.rows["sim"].append((t, m.roll, m.pitch, m.yaw, m.lat * 1e-7, m.lng * 1e-7))
+            elif mt == "STATUSTEXT":
+                print(f"  [sitl] {m.text}", flush=True)
+
+
+def fly_schedule(rec: Recorder, send: Any, schedule: list[tuple[float, float, float]],
+                 pitch0: float, rate_hz: float = 25.0) -> None:  # fmt: skip
+    for dur, roll_deg, dpitch_deg in schedule:
+        t_end = time.monotonic() + dur
+        roll, pitch = math.radians(roll_deg), pitch0 + math.radians(dpitch_deg)
+        while time.monotonic() < t_end:
+            send(roll, pitch)
+            rec.rows["cmd"].append((time.monotonic(), roll, pitch))
+            rec.pump(1.0 / rate_hz)
+
+
+# --------------------------------------------------------------------------- fits
+def _lag_response(t: np.ndarray, u: np.ndarray, delay: float, tau: float) -> np.ndarray:
+    """First-order lag of u(t - delay) on the (non-uniform) sample times t (zero-order hold)."""
+    ud = np.interp(t - delay, t, u, left=u[0])
+    y = np.empty_like(ud)
+    y[0] = ud[0]
+    for i in range(1, len(t)):
+        a = 1.0 - math.exp(-(t[i] - t[i - 1]) / max(tau, 1e-3))
+        y[i] = y[i - 1] + a * (ud[i] - y[i - 1])
+    return y
+
+
+def fit_axis(t: np.ndarray, cmd: np.ndarray, meas: np.ndarray) -> dict[str, float]:
+    """Dead time, lag, gain, bias of meas against cmd (least squares over the whole record)."""
+    from scipy.optimize import least_squares
+
+    def res(x: np.ndarray) -> np.ndarray:
+        return x[2] * _lag_response(t, cmd, x[0], x[1]) + x[3] - meas
+
+    best = None
+    for d0 in (0.02, 0.1, 0.2):
+        for tau0 in (0.2, 0.5, 1.0):
+            r = least_squares(res, [d0, tau0, 1.0, 0.0],
+                              bounds=([0.0, 0.01, 0.5, -0.2], [1.0, 5.0, 1.5, 0.2]))  # fmt: skip
+            if best is None or r.cost < best.cost:
+                best = r
+    assert best is not None
+    rms = float(np.sqrt(np.mean(best.fun**2)))
+    d, tau, k, b = (float(v) for v in best.x)
+    return {"delay_s": d, "tau_s": tau, "gain": k, "bias_rad": b, "rms_rad": rms}
+
+
+def fit_turn(att: np.ndarray, pos: np.ndarray, hud: np.ndarray, segs: list[tuple[float, float]]
+             ) -> dict[str, Any]:  # fmt: skip
+    """Heading rate (ground course rate, still air) per g tan(bank) / V over the steady turns."""
+    rows = []
+    for t0, t1 in segs:
+        pm = (pos[:, 0] >= t0) & (pos[:, 0] <= t1)
+        am = (att[:, 0] >= t0) & (att[:, 0] <= t1)
+        hm = (hud[:, 0] >= t0) & (hud[:, 0] <= t1)
+        if pm.sum() < 10 or am.sum() < 10 or hm.sum() < 3:
+            continue
+        tp = pos[pm, 1]
+        chi = np.unwrap(np.arctan2(pos[pm, 6], pos[pm, 5]))
+        chid = float(np.polyfit(tp, chi, 1)[0])
+        phi = float(np.mean(att[am, 2]))
+        v_air = float(np.mean(hud[hm, 1]))
+        v_gnd = float(np.mean(np.hypot(pos[pm, 5], pos[pm, 6])))
+        model = G * math.tan(phi) / v_air
+        rows.append({"bank_deg": math.degrees(phi), "chi_dot": chid, "airspeed": v_air,
+                     "groundspeed": v_gnd, "gain_airspeed": chid / model,
+                     "gain_groundspeed": chid / (G * math.tan(phi) / v_gnd)})  # fmt: skip
+    # the adapter's V is |ground velocity - wind| (TAS; VFR_HUD reports EAS): in still air the
+    # ground speed
+    x = np.array([G * math.tan(math.radians(r["bank_deg"])) / r["groundspeed"] for r in rows])
+    y = np.array([r["chi_dot"] for r in rows])
+    k = float(x @ y / (x @ x)) if len(rows) else float("nan")
+    return {"turn_gain": k, "turns": rows}
+
+
+def estimator_stats(att: np.ndarray, sim: np.ndarray, pos: np.ndarray,
+                    origin: tuple[float, float]) -> dict[str, float]:  # fmt: skip
+    """Reported minus simulator truth: attitude (rad) and horizontal position (m)."""
+    out: dict[str, float] = {}
+    if len(sim) < 20:
+        return out
+    dr = np.interp(att[:, 0], sim[:, 0], sim[:, 1]) - att[:, 2]
+    out["roll_err_mean_rad"] = float(np.mean(dr))
+    out["roll_err_std_rad"] = float(np.std(dr))
+    lat0, lon0 = origin
+    n = (sim[:, 4] - lat0) * math.radians(1.0) * 6378137.0
+    e = (sim[:, 5] - lon0) * math.radians(1.0) * 6378137.0 * math.cos(math.radians(lat0))
+    tn, te = np.interp(pos[:, 0], sim[:, 0], n), np.interp(pos[:, 0], sim[:, 0], e)
+    dn, de = pos[:, 2] - tn, pos[:, 3] - te
+    # the origins differ by a constant (EKF origin vs the first truth sample): remove the mean
+    out["pos_err_std_n_m"] = float(np.std(dn - np.mean(dn)))
+    out["pos_err_std_e_m"] = float(np.std(de - np.mean(de)))
+    return out
+
+
+# --------------------------------------------------------------------------- ArduPlane
+def identify_arduplane(out: Path, bundle: Path, instance: int, alt: float) -> dict[str, Any]:
+    from sim import sitl_rig
+
+    port = 5760 + 10 * instance
+    work = out / "sitl"
+    work.mkdir(parents=True, exist_ok=True)
+    parm = bundle / "Tools" / "autotest" / "models" / "plane.parm"
+    cmd = [str(bundle / "bin" / "arduplane"), "--model", "plane", "--defaults", str(parm),
+           f"-I{instance}"]  # fmt: skip
+    log = open(work / "sitl.log", "w")  # noqa: SIM115 - lives as long as the process
+    proc = subprocess.Popen(cmd, cwd=work, stdout=log, stderr=subprocess.STDOUT,
+                            start_new_session=True)  # fmt: skip
+    try:
+        g = sitl_rig.Gcs(f"tcp:127.0.0.1:{port}")
+        sitl_rig.take_off(g, alt)
+        c = g.c
+        for sid, hz in ((10, 40), (6, 10), (11, 10), (12, 10)):  # attitude, position, hud, extra3
+            c.mav.request_data_stream_send(g.sys, g.comp, sid, hz, 1)
+        rec = Recorder(c, g.sys)
+        rec.pump(2.0)
+        gp = g.last["GLOBAL_POSITION_INT"]
+        pitch0 = float(np.mean([r[3] for r in rec.rows["att"][-20:]])) if rec.rows["att"] else 0.03
+        g.set_mode("GUIDED")
+        rec.pump(1.0)
+
+        def send(roll: float, pitch: float) -> None:
+            # type_mask 7: body rates ignored; 64: throttle ignored (TECS keeps the speed)
+            c.mav.set_attitude_target_send(int(time.monotonic() * 1e3) & 0xFFFFFFFF, g.sys,
+                                           g.comp, 7 | 64, _quat(roll, pitch, 0.0), 0, 0, 0, 0.0)  # fmt: skip
+
+        t_start = time.monotonic()
+        fly_schedule(rec, send, ARDUPLANE_SCHEDULE, pitch0)
+        g.set_mode("LOITER")
+        rec.pump(1.0)
+        origin = (gp.lat * 1e-7, gp.lon * 1e-7)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, 15)
+            try:
+                proc.wait(5)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, 9)
+    return analyse(rec, t_start, ARDUPLANE_SCHEDULE, pitch0, origin, out)
+
+
+def analyse(rec: Recorder, t_start: float, schedule: list[tuple[float, float, float]],
+            pitch0: float, origin: tuple[float, float], out: Path) -> dict[str, Any]:  # fmt: skip
+    att = np.array(rec.rows["att"], float)
+    pos = np.array(rec.rows["pos"], float)
+    hud = np.array(rec.rows["hud"], float)
+    sim = np.array(rec.rows["sim"], float).reshape(-1, 6)
+    cmd = np.array(rec.rows["cmd"], float)
+    np.savez(out / "samples.npz", att=att, pos=pos, hud=hud, sim=sim, cmd=cmd)
+    m = att[:, 0] >= t_start
+    a = att[m]
+    # the command in force at each ATTITUDE sample (zero-order hold of what was sent)
+    idx = np.clip(np.searchsorted(cmd[:, 0], a[:, 0], side="right") - 1, 0, len(cmd) - 1)
+    roll_cmd, pitch_cmd = cmd[idx, 1], cmd[idx, 2]
+    ta = a[:, 0] - a[0, 0]
+    # the transients (first 40 % of the schedule: doublets and pitch steps) carry the dynamics
+    t_dyn = sum(s[0] for s in schedule[:10])
+    md = ta <= t_dyn
+    roll = fit_axis(ta[md], roll_cmd[md], a[md, 2])
+    pitch = fit_axis(ta[md], pitch_cmd[md], a[md, 3])
+    # the steady turns: their last 8 s (the roll-in and the lag over)
+    segs, t = [], t_start
+    for dur, roll_deg, _ in schedule:
+        if dur >= 12.0 and roll_deg != 0.0:
+            segs.append((t + dur - 8.0, t + dur))
+        t += dur
+    turn = fit_turn(att, pos, hud, segs)
+    # steady bank per commanded bank over the turns (the turn's own roll bias)
+    steady = []
+    turns = [s for s in schedule if s[0] >= 12.0 and s[1] != 0.0]
+    for (t0, t1), (_, roll_deg, _) in zip(segs, turns, strict=True):
+        mm = (att[:, 0] >= t0) & (att[:, 0] <= t1)
+        steady.append((roll_deg, math.degrees(float(np.mean(att[mm, 2])))))
+    est = estimator_stats(att, sim, pos, origin)
+    res = {"roll": roll, "pitch": pitch, "turn": turn, "steady_bank_deg": steady,
+           "estimator": est, "pitch0_rad": pitch0}  # fmt: skip
+    (out / "fit.json").write_text(json.dumps(res, indent=1))
+    return res
+
+
+def circle_wind_error(tlog: Path, after_s: float = 90.0) -> dict[str, float]:
+    """From a bridge tlog of a steady circle: the reported wind (WIND) in the ground velocity's
+    frame (along, to the right; m/s), the turn rate (rad/s), its mean in NED and the bank."""
+    m = mavutil.mavlink_connection(str(tlog))
+    w, p, a = [], [], []
+    while True:
+        x = m.recv_match(type=["WIND", "LOCAL_POSITION_NED", "ATTITUDE"])
+        if x is None:
+            break
+        ts = x._timestamp
+        if x.get_type() == "WIND":
+            w.append((ts, x.direction, x.speed))
+        elif x.get_type() == "ATTITUDE":
+            a.append((ts, x.roll))
+        else:
+            p.append((ts, x.vx, x.vy, x.time_boot_ms / 1e3))
+    W, P, A = np.array(w, float), np.array(p, float), np.array(a, float)
+    W = W[W[:, 0] > W[0, 0] + after_s]
+    P = P[P[:, 0] > P[0, 0] + after_s]
+    # WIND.direction: where it blows FROM (deg); the air moves toward the opposite
+    wn = -W[:, 2] * np.cos(np.radians(W[:, 1]))
+    we = -W[:, 2] * np.sin(np.radians(W[:, 1]))
+    vx, vy = np.interp(W[:, 0], P[:, 0], P[:, 1]), np.interp(W[:, 0], P[:, 0], P[:, 2])
+    v = np.hypot(vx, vy)
+    chi = np.unwrap(np.arctan2(P[:, 2], P[:, 1]))
+    return {
+        "along": float(np.mean((wn * vx + we * vy) / v)),
+        "right": float(np.mean((-wn * vy + we * vx) / v)),
+        "omega": float(np.polyfit(P[:, 3], chi, 1)[0]),
+        "north": float(np.mean(wn)), "east": float(np.mean(we)),
+        "bank": float(np.mean(A[A[:, 0] > A[0, 0] + after_s, 1])),
+    }  # fmt: skip
+
+
+WIND_NOISE_M_S = 0.01  # 1-sigma of a circle's mean reported wind (its WIND std over the orbit)
+
+
+def fit_wind_estimator(circles: list[dict[str, float]]) -> dict[str, float]:
+    """An apparent wind (along, side) fixed to the ground velocity, through a first-order lag of
+    time constant tau in NED: turning at omega, it is seen in the velocity frame as
+    ``(along + i side) / (1 + i omega tau)``. Least squares over still-air circles at different
+    turn rates. Where omega tau >> 1 a large apparent wind lagged by minutes fits as well as a
+    small one lagged by seconds; the shortest tau that fits within the measurement noise is
+    taken (an estimator that follows the wind within a take-off)."""
+    om = np.array([c["omega"] for c in circles])
+    y = np.array([complex(c["along"], c["right"]) for c in circles])
+    best: dict[str, float] | None = None
+    rows = []
+    for tau in np.arange(0.5, 120.0, 0.5):
+        h = 1.0 / (1.0 + 1j * om * tau)
+        c = complex(np.vdot(h, y) / np.vdot(h, h))  # linear least squares for the complex input
+        rms = float(np.sqrt(np.mean(np.abs(h * c - y) ** 2)))
+        rows.append((float(tau), c, rms))
+    rmin = min(r[2] for r in rows)
+    for tau, c, rms in rows:
+        if rms <= rmin + WIND_NOISE_M_S / 2:
+            best = {"along_m_s": c.real, "side_m_s": c.imag, "tau_s": tau, "rms_m_s": rms}
+            break
+    assert best is not None
+    return best
+
+
+def write_profile(res: dict[str, Any], autopilot: str, firmware: str, out: Path,
+                  command: str) -> Path:  # fmt: skip
+    import yaml
+
+    r, p = res["roll"], res["pitch"]
+    est = res.get("estimator", {})
+    prof: dict[str, Any] = {
+        "autopilot": autopilot,
+        "firmware": firmware,
+        "source": f"identified by `{command}` ({time.strftime('%Y-%m-%d')})",
+        "attitude": {
+            "roll_delay_s": round(r["delay_s"], 3), "roll_tau_s": round(r["tau_s"], 3),
+            "roll_gain": round(r["gain"], 3), "roll_bias_rad": round(r["bias_rad"], 4),
+            "pitch_delay_s": round(p["delay_s"], 3), "pitch_tau_s": round(p["tau_s"], 3),
+            "pitch_gain": round(p["gain"], 3), "pitch_bias_rad": round(p["bias_rad"], 4),
+        },
+        "turn": {"turn_gain": round(res["turn"]["turn_gain"], 3)},
+        "estimator": {
+            "attitude_noise_rad": round(est.get("roll_err_std_rad", 0.0), 4),
+        },
+        "fit": {"roll_rms_rad": round(r["rms_rad"], 4), "pitch_rms_rad": round(p["rms_rad"], 4)},
+    }  # fmt: skip
+    wf = res.get("wind_estimator")
+    if wf:
+        prof["estimator"].update({
+            "wind_apparent_along_m_s": round(wf["along_m_s"], 3),
+            "wind_apparent_side_m_s": round(wf["side_m_s"], 3),
+            "wind_tau_s": round(wf["tau_s"], 2),
+        })  # fmt: skip
+        prof["fit"]["wind_rms_m_s"] = round(wf["rms_m_s"], 4)
+    if res.get("wind_scale"):
+        prof["estimator"]["wind_scale"] = round(res["wind_scale"], 3)
+    path = out / "profile.yaml"
+    path.write_text(yaml.safe_dump(prof, sort_keys=False))
+    return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("autopilot", choices=("arduplane", "px4"))
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--bundle", default=None, help="the unpacked SITL bundle")
+    ap.add_argument("--instance", type=int, default=4, help="ArduPlane -I (TCP 5760 + 10 I)")
+    ap.add_argument("--alt", type=float, default=100.0)
+    ap.add_argument(
+        "--circles",
+        nargs="*",
+        default=[],
+        help="bridge tlogs of still-air circles on this firmware (the wind estimator)",
+    )
+    ap.add_argument(
+        "--wind-flight",
+        nargs=2,
+        metavar=("TLOG", "SPEED"),
+        default=None,
+        help="a bridge tlog in a steady wind of SPEED m/s (the reported wind's scale)",
+    )
+    ap.add_argument("--reuse", action="store_true", help="re-fit DIR's last flight, fly nothing")
+    a = ap.parse_args(argv)
+    out = Path(a.out).resolve()
+    res = _identify(a, out)
+    if a.circles:
+        circles = [circle_wind_error(Path(t)) for t in a.circles]
+        res["circles"] = circles
+        res["wind_estimator"] = fit_wind_estimator(circles)
+    if a.wind_flight:
+        c = circle_wind_error(Path(a.wind_flight[0]))
+        res["wind_scale"] = math.hypot(c["north"], c["east"]) / float(a.wind_flight[1])
+    (out / "fit.json").write_text(json.dumps(res, indent=1))
+    fw = FIRMWARE[a.autopilot]
+    cmd = "python -m sim.identify " + " ".join(argv if argv is not None else sys.argv[1:])
+    path = write_profile(res, a.autopilot, fw, out, cmd)
+    print(json.dumps({k: v for k, v in res.items() if k != "turn"}, indent=1))
+    print(json.dumps(res["turn"], indent=1))
+    print(f"profile: {path}")
+    return 0
+
+
+FIRMWARE = {
+    "px4": "PX4 v1.16.0 SITL, SIH airplane (airframe 10041), stock parameters",
+    "arduplane": "ArduPlane 4.7.0-dev SITL, plane model, stock parameters",
+}
+
+
+def _identify(a: Any, out: Path) -> dict[str, Any]:
+    if a.reuse:
+        res = json.loads((out / "fit.json").read_text())
+        turns = res["turn"]["turns"]
+        x = np.array([G * math.tan(math.radians(r["bank_deg"])) / r["groundspeed"] for r in turns])
+        y = np.array([r["chi_dot"] for r in turns])
+        res["turn"]["turn_gain"] = float(x @ y / (x @ x))
+        return res
+    if a.autopilot == "px4":
+        from sim.px4_harness import identify_px4
+
+        bundle = Path(a.bundle or "/tmp/sitl/px4-sitl-v1.16.0-sih")
+        out.mkdir(parents=True, exist_ok=True)
+        return identify_px4(out, bundle, a.alt)
+    bundle = Path(a.bundle or "/tmp/sitl/arduplane-sitl-4.7dev")
+    if not (bundle / "bin" / "arduplane").is_file():
+        raise SystemExit(f"identify: {bundle}/bin/arduplane: no such file")
+    out.mkdir(parents=True, exist_ok=True)
+    return identify_arduplane(out, bundle, a.instance, a.alt)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

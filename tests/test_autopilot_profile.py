@@ -1,0 +1,136 @@
+"""The autopilot profile (sim/autopilot_profile.py): strict loading, and that each emulation does
+what its docstring says on synthetic states (no SITL, no JSBSim)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mpf_mavlink.errors import ConfigError
+from sim.autopilot_profile import (
+    AttitudeResponse,
+    AttitudeShaper,
+    AutopilotProfile,
+    EstimatorModel,
+    RateWander,
+    StateEstimate,
+    TurnResponse,
+    load_profile,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+G = 9.80665
+
+
+@dataclasses.dataclass(frozen=True)
+class _St:
+    t: float
+    euler: tuple[float, float, float]
+    pqr: np.ndarray
+    airspeed: float
+    velocity_ned: np.ndarray
+    position_ned: np.ndarray
+    wind_ned: np.ndarray
+    R_B_N: np.ndarray
+
+
+def _turn(t: float, bank: float, k_plant: float, v: float = 22.0) -> _St:
+    """A steady level turn flown at ``bank`` by a plant turning k_plant x the textbook."""
+    psid = k_plant * G * math.tan(bank) / v
+    chi = psid * t
+    return _St(t, (bank, 0.0, chi), np.array((0.0, psid * math.sin(bank), psid * math.cos(bank))),
+               v, np.array((v * math.cos(chi), v * math.sin(chi), 0.0)), np.zeros(3), np.zeros(3),
+               np.eye(3))  # fmt: skip
+
+
+@pytest.mark.parametrize("name", ["arduplane-4.7.yaml", "px4-1.16-sih.yaml"])
+def test_shipped_profiles_load(name):
+    p = load_profile(ROOT / "configs" / "autopilots" / name)
+    assert p.autopilot in ("arduplane", "px4")
+
+
+def test_unknown_key_is_a_one_line_error_naming_it(tmp_path):
+    f = tmp_path / "p.yaml"
+    f.write_text("autopilot: arduplane\nturn:\n  turn_gian: 0.7\n")
+    with pytest.raises(ConfigError, match=r"turn\.turn_gian") as e:
+        load_profile(f)
+    assert "\n" not in str(e.value)
+    f.write_text("autopilot: arduplane\nturn:\n  turn_gain: 3.0\n")
+    with pytest.raises(ConfigError, match=r"turn\.turn_gain"):
+        load_profile(f)
+
+
+def test_reported_bank_gives_the_profiles_turn_per_bank():
+    # the plant turns 0.93x the textbook (the X8); the firmware's airframe 0.745x: in a steady
+    # turn the reported bank must satisfy psi_dot = 0.745 g tan(bank_reported) / V
+    prof = AutopilotProfile(turn=TurnResponse(turn_gain=0.745))
+    est = StateEstimate(prof)
+    bank = math.radians(20.0)
+    for i in range(2000):  # 20 s at 100 Hz: ten time constants of the offset's low-pass
+        rep = est(_turn(i * 0.01, bank, 0.93))
+    st = _turn(20.0, bank, 0.93)
+    psid = st.pqr[1] * math.sin(bank) + st.pqr[2] * math.cos(bank)
+    k_seen = psid / (G * math.tan(rep.euler[0]) / st.airspeed)
+    assert k_seen == pytest.approx(0.745, rel=1e-3)
+
+
+def test_apparent_wind_is_lagged_and_turned_by_the_turn():
+    # the steady state of a first-order lag of a vector rotating at omega: (a + i s)/(1 + i w tau)
+    e = EstimatorModel(wind_apparent_along_m_s=0.4, wind_apparent_side_m_s=-0.1, wind_tau_s=10.0)
+    est = StateEstimate(AutopilotProfile(estimator=e))
+    bank, dt = math.radians(24.0), 0.01
+    for i in range(12000):  # 120 s: 12 time constants
+        st = _turn(i * dt, bank, 1.0)
+        rep = est(st)
+    v = st.velocity_ned / np.linalg.norm(st.velocity_ned)
+    along = float(rep.wind_ned[:2] @ v[:2])
+    right = float(rep.wind_ned[0] * -v[1] + rep.wind_ned[1] * v[0])
+    w = G * math.tan(bank) / st.airspeed
+    want = complex(0.4, -0.1) / complex(1.0, w * 10.0)
+    assert along == pytest.approx(want.real, abs=2e-3)
+    assert right == pytest.approx(want.imag, abs=2e-3)
+
+
+def test_attitude_shaper_settles_at_gain_times_command_plus_bias_after_the_dead_time():
+    r = AttitudeResponse(roll_delay_s=0.2, roll_tau_s=0.9, roll_gain=0.95, roll_bias_rad=0.01)
+    sh = AttitudeShaper(r, 0.01, native_tau_s=0.4)
+    out = [sh(0.3, 0.0)[0] for _ in range(20)]  # the first 0.2 s: the dead time (initial value)
+    assert out[-1] == pytest.approx(0.95 * 0.3 + 0.01)  # first sample initialises at the command
+    sh = AttitudeShaper(r, 0.01, native_tau_s=0.4)
+    sh(0.0, 0.0)
+    ys = [sh(0.3, 0.0)[0] for _ in range(800)]
+    assert ys[15] == pytest.approx(0.01)  # still inside the dead time
+    assert ys[-1] == pytest.approx(0.95 * 0.3 + 0.01, abs=1e-6)
+    # the remaining lag is the firmware's minus the SIL loop's own: 0.5 s -> 63 % 0.5 s later
+    i63 = next(i for i, y in enumerate(ys) if y - 0.01 >= 0.632 * 0.95 * 0.3)
+    assert (i63 + 1) * 0.01 == pytest.approx(0.2 + 0.5, abs=0.02)
+
+
+def test_rate_wander_has_the_configured_sigma_and_every_seed_its_own_draw():
+    r = AttitudeResponse(roll_rate_wander_rad_s=0.03, rate_wander_tau_s=1.0)
+    a, b = RateWander(r, 0.05, seed=0), RateWander(r, 0.05, seed=1)
+    xa = np.array([a() for _ in range(40000)])  # 2000 correlation times
+    xb = np.array([b() for _ in range(100)])
+    # the sample sigma of 2000 independent-ish stretches: within ~3/sqrt(2 * 2000 / 2) of 0.03
+    assert float(np.std(xa)) == pytest.approx(0.03, rel=0.1)
+    assert not np.allclose(xa[:100], xb)
+
+
+def test_config_key_checks_the_file_and_the_flavour():
+    from mpf_mavlink.config.schema import load_config
+
+    cfg = ROOT / "configs" / "bridge_arduplane.yaml"
+    ok = load_config(
+        cfg, ["sil.link=udp", "sil.autopilot_profile=configs/autopilots/arduplane-4.7.yaml"]
+    )
+    assert ok.section("sil").profile_path(ok.source).is_file()
+    with pytest.raises(ConfigError, match="sil.autopilot_profile.*px4 profile"):
+        load_config(
+            cfg, ["sil.link=udp", "sil.autopilot_profile=configs/autopilots/px4-1.16-sih.yaml"]
+        )
+    with pytest.raises(ConfigError, match="sil.autopilot_profile.*no such"):
+        load_config(cfg, ["sil.link=udp", "sil.autopilot_profile=nowhere.yaml"])
