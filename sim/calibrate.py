@@ -1,7 +1,7 @@
 """Calibration check: the same missions on the real firmware and in our SIL with a profile.
 
 ``python -m sim.calibrate real arduplane --out DIR`` flies the matrix on the ArduPlane SITL bundle
-(one run directory per mission, the rig of :mod:`sim.sitl_rig` on instance ``--instance``);
+(one run directory per mission, the rig of :mod:`sim.rigs` on instance ``--instance``);
 ``python -m sim.calibrate sil --out DIR [--profile P]`` re-flies every real run of DIR in our SIL
 from the real flight's start state and writes ``DIR/calibration.json`` and a Markdown table
 (``--doc``). Real flights take real time; the SIL leg takes seconds per mission, so a profile can
@@ -21,8 +21,6 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-
-import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 BAND = (0.67, 1.5)  # real / SIL steady RMS (issue 24's acceptance)
@@ -91,55 +89,22 @@ def find_bundle(autopilot: str) -> Path | None:
     return cache / name
 
 
-def _wind_config(base: Path, out: Path) -> Path:
-    """A copy of ``base`` with wind compensation on (the issue 22 wind flight's setting)."""
-    d = yaml.safe_load(base.read_text())
-    d.setdefault("guidance", {})["wind_compensation"] = True
-    p = out / "config_wind.yaml"
-    p.write_text(yaml.safe_dump(d, sort_keys=False))
-    return p
-
-
 def fly_arduplane(m: Mission, out: Path, bundle: Path, instance: int, duration: float) -> int:
-    """One real ArduPlane flight with :mod:`sim.sitl_rig` (instance ports, wind parameters)."""
-    from sim import sitl_rig
+    """One real ArduPlane flight with the real-firmware rig (:mod:`sim.rigs`) on ``-I
+    instance``: the mission's radius, altitude, wind (SIM_WIND_*) and target."""
+    from sim.rigs.common import main as rig
 
-    gcs_port, bridge_port = 5760 + 10 * instance, 5762 + 10 * instance
-    sitl_rig.GCS_PORT, sitl_rig.BRIDGE_PORT = gcs_port, bridge_port
-
-    def start(binary: Path, ardupilot: Path, work: Path, speedup: float) -> subprocess.Popen:
-        work.mkdir(parents=True, exist_ok=True)
-        parm = ardupilot / "Tools" / "autotest" / "models" / "plane.parm"
-        cmd = [str(binary), "--model", "plane", "--defaults", str(parm), f"-I{instance}",
-               "--speedup", f"{speedup:g}"]  # fmt: skip
-        log = open(work / "sitl.log", "w")  # noqa: SIM115 - lives as long as the process
-        return subprocess.Popen(
-            cmd, cwd=work, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
-        )
-
-    sitl_rig.start_sitl = start
-    take_off = sitl_rig.take_off
-
-    def take_off_in_wind(g: Any, alt_m: float, timeout_s: float = 240.0) -> None:
-        if m.wind_m_s > 0:
-            g.set_param("SIM_WIND_SPD", m.wind_m_s)
-            g.set_param("SIM_WIND_DIR", m.wind_dir_deg)
-            g.pump(1.0)
-        take_off(g, alt_m, timeout_s)
-
-    sitl_rig.take_off = take_off_in_wind
     config = ROOT / "configs" / "bridge_arduplane.yaml"
     out.parent.mkdir(parents=True, exist_ok=True)
-    if m.wind_m_s > 0:
-        out.parent.joinpath(f"{m.name}.cfg").mkdir(exist_ok=True)
-        config = _wind_config(config, out.parent / f"{m.name}.cfg")
-    argv = ["--binary", str(bundle / "bin" / "arduplane"), "--ardupilot", str(bundle),
+    argv = ["arduplane", "--bundle", str(bundle), "--instance", str(instance),
             "--out", str(out), "--duration", f"{duration:g}", "--alt", f"{m.alt_m:g}",
-            "--radius", f"{m.radius_m:g}", "--config", str(config)]  # fmt: skip
+            "--config", str(config), "--set", f"path.radius_m={m.radius_m:g}"]  # fmt: skip
+    if m.wind_m_s > 0:
+        argv += ["--wind", f"{m.wind_m_s:g},{m.wind_dir_deg:g}"]
     if m.moving:
         argv.append("--moving")
     (out.parent / f"{m.name}.mission.json").write_text(json.dumps(m.__dict__))
-    return sitl_rig.main(argv)
+    return rig(argv)
 
 
 def _start_state(run: Path) -> tuple[list[float], float | None]:

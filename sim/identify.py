@@ -187,7 +187,9 @@ def estimator_stats(att: np.ndarray, sim: np.ndarray, pos: np.ndarray,
 
 # --------------------------------------------------------------------------- ArduPlane
 def identify_arduplane(out: Path, bundle: Path, instance: int, alt: float) -> dict[str, Any]:
-    from sim import sitl_rig
+    from mpf_mavlink.mavlink.modes import Flavour
+    from sim.rigs.arduplane import take_off
+    from sim.rigs.gcs import Gcs
 
     port = 5760 + 10 * instance
     work = out / "sitl"
@@ -199,8 +201,8 @@ def identify_arduplane(out: Path, bundle: Path, instance: int, alt: float) -> di
     proc = subprocess.Popen(cmd, cwd=work, stdout=log, stderr=subprocess.STDOUT,
                             start_new_session=True)  # fmt: skip
     try:
-        g = sitl_rig.Gcs(f"tcp:127.0.0.1:{port}")
-        sitl_rig.take_off(g, alt)
+        g = Gcs(f"tcp:127.0.0.1:{port}", Flavour.ARDUPILOT)
+        take_off(g, alt)
         c = g.c
         for sid, hz in ((10, 40), (6, 10), (11, 10), (12, 10)):  # attitude, position, hud, extra3
             c.mav.request_data_stream_send(g.sys, g.comp, sid, hz, 1)

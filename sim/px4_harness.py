@@ -6,7 +6,7 @@ aircraft is. What a user does by hand:
    ``px4-sih-airplane WORKDIR`` from the unpacked bundle;
 2. on the ground-station link (``udpout:127.0.0.1:18570``) sends MAV_CMD_NAV_TAKEOFF with param7
    = home AMSL + the path altitude, arms, and waits for AUTO.LOITER at that altitude;
-3. places the circle tangent to the aircraft's flight (:func:`sim.sitl_rig.place_mission`) and
+3. places the circle tangent to the aircraft's flight (:func:`sim.rigs.common.place_mission`) and
    hands over to ``mpf-mavlink run configs/bridge_px4.yaml --connect udpin:0.0.0.0:14540``;
 4. stops PX4 (SIGTERM, then SIGKILL) and releases the lock.
 """
@@ -134,7 +134,7 @@ def take_off(g: Px4Gcs, alt_m: float, timeout_s: float = 150.0) -> None:
 
 def fly_px4(m: Any, out: Path, bundle: Path, duration: float) -> int:
     """One real PX4 flight of mission ``m`` (:class:`sim.calibrate.Mission`) into ``out``."""
-    from sim.sitl_rig import place_mission
+    from sim.rigs.common import place_mission
 
     if not (bundle / "px4-sih-airplane").is_file():
         print(f"calibrate: {bundle}/px4-sih-airplane: no such file", file=sys.stderr)
@@ -150,7 +150,7 @@ def fly_px4(m: Any, out: Path, bundle: Path, duration: float) -> int:
             time.sleep(3.0)
             g = Px4Gcs()
             take_off(g, m.alt_m)
-            centre, _, _ = place_mission(g, m.radius_m, 6.0)  # type: ignore[arg-type]
+            centre, _ = place_mission(g, m.radius_m, 6.0)  # type: ignore[arg-type]
             sets = [
                 f"target.position_ned_m=[{centre[0]:.2f},{centre[1]:.2f},{centre[2]:.2f}]",
                 f"path.radius_m={m.radius_m:g}", "mavlink.plots=false",

@@ -23,6 +23,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = [
     pytest.mark.sitl,
+    # one real ArduPlane flight at a time in a pytest run, like tests/test_sitl_arduplane.py
+    pytest.mark.xdist_group("sitl-arduplane"),
     pytest.mark.skipif(
         sitl_dir() is None,
         reason="no SITL bundles: <repo>/../shared/sitl is absent and MPF_SITL_DIR is not set",

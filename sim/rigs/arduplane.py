@@ -117,32 +117,7 @@ class Firmware:
         return sets
 
     def take_off(self, g: Gcs, alt_m: float, timeout_s: float = 300.0) -> None:
-        """TAKEOFF to alt_m (TKOFF_ALT), then LOITER; arming is retried until pre-arm passes."""
-        g.set_param("TKOFF_ALT", alt_m)
-        g.set_mode("TAKEOFF")
-        t_end = time.monotonic() + timeout_s
-        last_arm = -math.inf
-        while not g.armed():
-            if time.monotonic() > t_end:
-                raise RuntimeError("SITL did not arm (pre-arm checks) in time")
-            if time.monotonic() - last_arm > 3.0:
-                if g.mode() != "TAKEOFF":
-                    g.set_mode("TAKEOFF")
-                g.arm()
-                last_arm = time.monotonic()
-            g.pump(0.5)
-        print(f"armed; climbing to {alt_m:g} m", flush=True)
-        while True:
-            if time.monotonic() > t_end:
-                raise RuntimeError("the take-off did not reach the altitude in time")
-            g.pump(0.5)
-            gp = g.last.get("GLOBAL_POSITION_INT")
-            if gp is not None and gp.relative_alt / 1000.0 >= alt_m - 3.0:
-                break
-        g.set_mode("LOITER")
-        g.wait_boot(15.0)  # settle into the loiter at that altitude
-        gp = g.last["GLOBAL_POSITION_INT"]
-        print(f"loitering at {gp.relative_alt / 1000.0:.1f} m ({g.mode()})", flush=True)
+        take_off(g, alt_m, timeout_s)
 
     def cruise_airspeed(self, g: Gcs) -> float | None:
         return g.get_param("AIRSPEED_CRUISE")
@@ -156,3 +131,33 @@ class Firmware:
                 os.killpg(self.proc.pid, signal.SIGKILL)
                 self.proc.wait(5)
         self.lock.release()
+
+
+def take_off(g: Gcs, alt_m: float, timeout_s: float = 300.0) -> None:
+    """TAKEOFF to alt_m (TKOFF_ALT), then LOITER; arming is retried until pre-arm passes
+    (the rig's and the identification flights' take-off, :mod:`sim.identify`)."""
+    g.set_param("TKOFF_ALT", alt_m)
+    g.set_mode("TAKEOFF")
+    t_end = time.monotonic() + timeout_s
+    last_arm = -math.inf
+    while not g.armed():
+        if time.monotonic() > t_end:
+            raise RuntimeError("SITL did not arm (pre-arm checks) in time")
+        if time.monotonic() - last_arm > 3.0:
+            if g.mode() != "TAKEOFF":
+                g.set_mode("TAKEOFF")
+            g.arm()
+            last_arm = time.monotonic()
+        g.pump(0.5)
+    print(f"armed; climbing to {alt_m:g} m", flush=True)
+    while True:
+        if time.monotonic() > t_end:
+            raise RuntimeError("the take-off did not reach the altitude in time")
+        g.pump(0.5)
+        gp = g.last.get("GLOBAL_POSITION_INT")
+        if gp is not None and gp.relative_alt / 1000.0 >= alt_m - 3.0:
+            break
+    g.set_mode("LOITER")
+    g.wait_boot(15.0)  # settle into the loiter at that altitude
+    gp = g.last["GLOBAL_POSITION_INT"]
+    print(f"loitering at {gp.relative_alt / 1000.0:.1f} m ({g.mode()})", flush=True)
