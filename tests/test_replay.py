@@ -83,7 +83,9 @@ def record_bridge_run(
     cfg = bridge_cfg(flavour)
     port = free_port()
     peer = SlowHandbackPeer(
-        PeerOptions(flavour=flavour, telemetry_hz=telemetry_hz), port=port
+        # the scripted plane flies the config's airspeed (ArduPlane's: 22 m/s, the bundle's cruise)
+        PeerOptions(flavour=flavour, telemetry_hz=telemetry_hz, airspeed=cfg.vehicle.airspeed_m_s),
+        port=port,
     ).start()
     try:
         res = run_bridge(

@@ -4,8 +4,9 @@ configs/bridge_px4.yaml as it stands, the circle placed where PX4's own loiter h
 
 Real time. PX4_SIM_SPEED_FACTOR works with SIH (PX4's boot clock ran 1.97x wall time at 2,
 `scripts/sitl px4 --speedup 2`), but a speed-up multiplies the bridge's wall-clock latency in
-the firmware's time, and ArduPlane showed that this diverges on 2 busy cores (see
-tests/test_sitl_arduplane.py): CI flies PX4 at 1x too.
+the firmware's time: at 2x on 2 busy cores the bridge never engaged PX4 ("telemetry lost:
+no usable state for 0.50 s"), and ArduPlane diverged at 2x-5x (tests/test_sitl_arduplane.py).
+CI flies PX4 at 1x.
 """
 
 from __future__ import annotations
