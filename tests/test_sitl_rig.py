@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import math
 import os
+import select
 import socket
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -157,13 +159,14 @@ def test_pty_relay_carries_bytes_both_ways_untouched():
     th.start()
     relay = PtyRelay(port)
     try:
+        # The relay made the line raw; no tcsetattr here: tty.setraw's default TCSAFLUSH would
+        # discard whatever the relay had already delivered (a race that hung this test).
         fd = os.open(relay.device, os.O_RDWR | os.O_NOCTTY)
-        import tty
-
-        tty.setraw(fd)
         buf = b""
-        while len(buf) < 256:
-            buf += os.read(fd, 4096)
+        t_end = time.monotonic() + 10.0
+        while len(buf) < 256 and time.monotonic() < t_end:
+            if select.select([fd], [], [], 0.5)[0]:
+                buf += os.read(fd, 4096)
         assert buf == bytes(range(256))
         os.write(fd, b"\x03\x04\r\n\xfd\xfe")
         th.join(5)
