@@ -28,7 +28,7 @@ from sim.sil import run_sil  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = str(ROOT / "configs" / "default.yaml")
 PX4_OFFBOARD = 6 << 16
-TRACK_S = 60.0
+TRACK_S = 120.0
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +36,7 @@ def run(tmp_path_factory):
     cfg = load_config(
         DEMO,
         ["sil.plant=kinematic", "sil.turbulence=none", f"sim.duration_s={TRACK_S:g}",
-         "metrics.steady_after_s=30"],
+         "metrics.steady_after_s=60"],
     )  # fmt: skip
     out = tmp_path_factory.mktemp("gcs") / "run"
     r = run_sil(cfg, out, progress=False, plots=False, log=lambda s: None)
