@@ -128,7 +128,12 @@ def fly_sil(run: Path, autopilot: str, profile: Path | None, tag: str, seed: int
     """Our SIL on the real flight's mission and start state (the rig's overrides), with or
     without a profile; returns the bridge's own metrics there (as the real flight's are)."""
     m = Mission(**json.loads((run.parent / f"{run.name}.mission.json").read_text()))
-    sets = (run / "mission_overrides.txt").read_text().split()
+    # the rig (sim.rigs) keeps the overrides it flew in summary.json; the PX4 harness in a file
+    summary = run / "summary.json"
+    if summary.is_file():
+        sets = list(json.loads(summary.read_text())["mission"]["overrides"])
+    else:
+        sets = (run / "mission_overrides.txt").read_text().split()
     real = _metrics(run / "bridge" / "metrics.json")
     p0, heading = _start_state(run)
     cruise = next(
