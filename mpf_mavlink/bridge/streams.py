@@ -229,20 +229,13 @@ class Streams(LinkIO):
         except ValueError as e:
             self.log(f"fallback: no reposition point ({e})")
             return
-        acks: list[Any] = []
-
-        def acked() -> bool:
-            acks.extend(a for a in self.acks if a.command == MAV_CMD_DO_REPOSITION)
-            self.acks.clear()
-            return bool(acks)
-
-        self._spin(1.5, acked)
+        ack = self._reposition_ack()
         where = f"the path's centre {lat:.7f}, {lon:.7f} at {alt:.1f} m AMSL"
         centre = None
-        if acks and acks[0].accepted:
+        if ack is not None and ack.accepted:
             centre = where
         else:
-            why = acks[0].result_name if acks else "no COMMAND_ACK"
+            why = ack.result_name if ack is not None else "no COMMAND_ACK"
             self.log(f"fallback: DO_REPOSITION to {where} not accepted ({why})")
         res.fallback = describe(self.params, set_from, centre)
         res.fallback_detail = detail(
@@ -251,6 +244,18 @@ class Streams(LinkIO):
             None if centre is None else {"lat": lat, "lon": lon, "alt_amsl_m": alt},
         )
         self.log(f"fallback if the bridge dies: {res.fallback}")
+
+    def _reposition_ack(self) -> Any | None:
+        """The autopilot's COMMAND_ACK to the DO_REPOSITION just sent, within 1.5 s, or None."""
+        acks: list[Any] = []
+
+        def acked() -> bool:
+            acks.extend(a for a in self.acks if a.command == MAV_CMD_DO_REPOSITION)
+            self.acks.clear()
+            return bool(acks)
+
+        self._spin(1.5, acked)
+        return acks[0] if acks else None
 
     def _path_centre(self) -> tuple[float, float, float, float, bool] | str:
         """(lat, lon, alt AMSL, radius m, counter-clockwise) of the path's centre now, or why
@@ -296,21 +301,14 @@ class Streams(LinkIO):
             res.fallback = f"ArduPlane's own GUIDED loiter (reposition not sent: {e})"
             self.log(f"fallback if the bridge dies: {res.fallback}")
             return
-        acks: list[Any] = []
-
-        def acked() -> bool:
-            acks.extend(a for a in self.acks if a.command == MAV_CMD_DO_REPOSITION)
-            self.acks.clear()
-            return bool(acks)
-
-        self._spin(1.5, acked)
+        ack = self._reposition_ack()
         what = (
             f"ArduPlane GUIDED loiter r = {radius:.0f} m {'CCW' if ccw else 'CW'} about "
             f"{lat:.7f}, {lon:.7f} at {alt:.1f} m AMSL (the path's centre)"
         )
-        if acks and acks[0].accepted:
+        if ack is not None and ack.accepted:
             res.fallback = what
         else:
-            why = acks[0].result_name if acks else "no COMMAND_ACK"
+            why = ack.result_name if ack is not None else "no COMMAND_ACK"
             res.fallback = f"NOT set ({why}): ArduPlane's own GUIDED loiter; asked for {what}"
         self.log(f"fallback if the bridge dies: {res.fallback}")
