@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
+from mpf_mavlink.config.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.frames import euler_to_matrix
-from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.runs.rundir import RunTable, compute_metrics, row_from
 from sim.kinematic import ClosedLoop, initial_state, record, region_wind
 

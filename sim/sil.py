@@ -40,8 +40,8 @@ from typing import Any
 
 import numpy as np
 
+from mpf_mavlink.config.scenario import build_path, build_target
 from mpf_mavlink.config.schema import Config
-from mpf_mavlink.core.scenario import build_path, build_target
 from mpf_mavlink.runs.rundir import (
     RunTable,
     compute_metrics,

@@ -10,10 +10,10 @@ from typing import Any
 import numpy as np
 
 from mpf_mavlink.bridge.estimator import wind_frame
+from mpf_mavlink.config.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.guidance.baselines import guidance_law
 from mpf_mavlink.core.guidance.law import VehicleState
-from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.runs.compare import distance_to_polyline
 from mpf_mavlink.runs.rundir import RunTable, row_from
 

@@ -27,8 +27,8 @@ from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
 from mpf_mavlink.bridge.controller import ExtrapolatedTarget, LiveTarget  # noqa: E402
 from mpf_mavlink.bridge.estimator import Estimator, EstimatorParams  # noqa: E402
+from mpf_mavlink.config.scenario import build_target  # noqa: E402
 from mpf_mavlink.config.schema import load_config  # noqa: E402
-from mpf_mavlink.core.scenario import build_target  # noqa: E402
 from mpf_mavlink.mavlink.codec import decode  # noqa: E402
 from sim.plant_jsbsim import LocalNED  # noqa: E402
 from sim.plant_kinematic_mav import ned_to_geodetic_fast  # noqa: E402

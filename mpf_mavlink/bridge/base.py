@@ -10,7 +10,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from mpf_mavlink.bridge.controller import Controller
 from mpf_mavlink.bridge.operator import OperatorDisplay
@@ -65,7 +65,7 @@ class BridgeOptions:
 
     url: str
     out_dir: Path
-    flavour: str | None = None  # None: mavlink.flavour
+    flavour: Literal["auto", "px4", "ardupilot"] | None = None  # None: mavlink.flavour
     duration_s: float | None = None  # None: mavlink.mission_duration_s
     heartbeat_timeout_s: float | None = None
     arm: bool | None = None

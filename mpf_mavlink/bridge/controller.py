@@ -37,12 +37,12 @@ import numpy as np
 
 from mpf_mavlink.bridge.estimator import Estimate, Estimator, EstimatorParams
 from mpf_mavlink.bridge.target_sources import ExtrapolatedTarget, LiveTarget, ScriptedTarget
+from mpf_mavlink.config.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.adapter import AdapterParams, AdapterState, Setpoint, adapt, safe_setpoint
 from mpf_mavlink.core.guidance.baselines import guidance_law
 from mpf_mavlink.core.guidance.law import MpfCommand, MpfDiagnostics, VehicleState
 from mpf_mavlink.core.guidance.predict import look_ahead, predict_segments, prediction_horizon
-from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.core.target import TargetState
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.runs.rundir import row_from

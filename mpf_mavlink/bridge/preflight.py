@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from mpf_mavlink.config.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.frames import euler_to_matrix
 from mpf_mavlink.core.guidance.checks import (
@@ -19,7 +20,6 @@ from mpf_mavlink.core.guidance.checks import (
     vertical_gusts,
 )
 from mpf_mavlink.core.guidance.law import VehicleState, mpf_law
-from mpf_mavlink.core.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.runs.verdict import bank_limit_rad
 
 

@@ -77,13 +77,12 @@ def samples(spec: CampaignSpec) -> list[dict[str, Any]]:
     ]
 
 
-def _current(cfg: Config, dotted: str) -> Any:
-    node: Any = cfg
+def _current(cfg: Config, dotted: str) -> object:
+    """The value of a dotted key (``vehicle.airspeed_m_s``, ``sil.wind_ned_m_s``) in ``cfg``;
+    the campaign's keys were checked against the schema when the spec was read."""
+    node: object = cfg
     for part in dotted.split("."):
-        if hasattr(node, "extra") and part in getattr(node, "extra", {}):
-            node = node.extra[part]
-        else:
-            node = getattr(node, part)
+        node = getattr(node, part)
     return node
 
 
@@ -99,7 +98,10 @@ def overrides_for(base: Config, sample: dict[str, Any]) -> list[str]:
             out.append(f"{name}={yaml_text(value)}")
             continue
         if name not in vectors:
-            vectors[name] = list(_current(base, name))
+            cur = _current(base, name)
+            if not isinstance(cur, tuple | list):
+                raise ConfigError(f"vary {key}: {name} is not a vector")
+            vectors[name] = list(cur)
         vec = vectors[name]
         if i >= len(vec):
             raise ConfigError(f"vary {key}: {name} has {len(vec)} components")
@@ -117,7 +119,7 @@ def initial_overrides(base: Config, initial: dict[str, float]) -> list[str]:
     from the path's closest point to the configured start, in the direction
     ``initial.bearing_rad`` about the path tangent (0 = f2, pi/2 = f3), with the course of
     the tangent turned by ``initial.heading_rad`` (level wings, level flight)."""
-    from mpf_mavlink.core.scenario import build_path, build_target
+    from mpf_mavlink.config.scenario import build_path, build_target
 
     path, target = build_path(base.path), build_target(base.target)
     st = target.state(0.0)

@@ -136,8 +136,8 @@ def certified_c1(spec: CampaignSpec, psi0: float, c1_max: float = 1e5) -> float 
     c2 = Psi(0), or None. K c1^2 grows with c1, so the condition holds for every larger c1:
     a start with this Psi(0) is certified whatever its |pt(0)| (c1 = max(|pt(0)|, this))."""
     from mpf_mavlink.config import load_config
+    from mpf_mavlink.config.scenario import build_gains
     from mpf_mavlink.core.guidance.checks import gain_condition
-    from mpf_mavlink.core.scenario import build_gains
 
     key = (spec.source, round(psi0, 12))
     if key in _c1_cache:

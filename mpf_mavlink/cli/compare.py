@@ -13,10 +13,13 @@ import dataclasses
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 from mpf_mavlink.cli.common import exit_codes_epilog, positive
 from mpf_mavlink.errors import MpfError
+
+if TYPE_CHECKING:
+    from mpf_mavlink.config.schema import Config, LawName
 
 LAWS_ALL = ("mpf", "npfg", "npfg_static", "l1_loiter", "pursuit")
 
@@ -26,13 +29,14 @@ def parse_laws(text: str) -> list[str]:
     bad = [x for x in laws if x not in LAWS_ALL]
     if bad or not laws:
         raise MpfError(
-            f"--laws {text}: unknown law {', '.join(bad) or '(none)'} (one of {', '.join(LAWS_ALL)})"
+            f"--laws {text}: unknown law {', '.join(bad) or '(none)'} "
+            f"(one of {', '.join(LAWS_ALL)})"
         )
     return laws
 
 
 def run_compare(
-    cfg: Any,
+    cfg: Config,
     laws: list[str],
     plant: str,
     out: Path,
@@ -42,7 +46,7 @@ def run_compare(
     log: Any = print,
 ) -> tuple[list[Any], str]:
     """Fly every law; returns (rows, markdown table). Raises MpfError for an unusable law."""
-    from mpf_mavlink.core.scenario import build_path
+    from mpf_mavlink.config.scenario import build_path
     from mpf_mavlink.runs.compare import LawRow, law_figures, markdown_table, write_compare
     from mpf_mavlink.runs.verdict import assess
 
@@ -58,8 +62,10 @@ def run_compare(
         cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, duration_s=duration_s))
     rows: list[Any] = []
     runs: dict[str, Any] = {}
+    parse_laws(",".join(laws))  # the names' check, for callers other than the command line
     for i, law in enumerate(laws):
-        c = dataclasses.replace(cfg, guidance=dataclasses.replace(cfg.guidance, law=law))
+        name = cast("LawName", law)
+        c = dataclasses.replace(cfg, guidance=dataclasses.replace(cfg.guidance, law=name))
         log(f"[{i + 1}/{len(laws)}] {law}: {plant}, {c.sim.duration_s:g} s ...")
         w0 = time.perf_counter()
         roll = None
@@ -122,7 +128,7 @@ def run_compare(
             else f"n/a (no steady window: the flight ended before t = {c.metrics.steady_after_s:g} s)"
         )
         log(f"      RMS cross-track {xt_txt}; {vline} ({fig['wall_s']:.0f} s wall)")
-    wind = cfg.section("sil").wind_ned_m_s if plant == "sil" else cfg.kinematic.wind.steady_ned_m_s
+    wind = cfg.sil.wind_ned_m_s if plant == "sil" else cfg.kinematic.wind.steady_ned_m_s
     header = (
         f"{cfg.name}: {plant} plant, {cfg.sim.duration_s:g} s, steady from t >= "
         f"{cfg.metrics.steady_after_s:g} s, wind {tuple(wind)} m/s NED; xt = distance from the moving path"

@@ -11,11 +11,14 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mpf_mavlink import __version__
 from mpf_mavlink.cli.common import exit_codes_epilog
 from mpf_mavlink.errors import CheckFailed, MpfError
+
+if TYPE_CHECKING:
+    from mpf_mavlink.config.schema import Config
 
 SET_HELP = (
     "override one configuration key, e.g. --set guidance.K_R=3 or "
@@ -56,7 +59,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     return 0
 
 
-def _default_out(cfg: Any, kind: str) -> Path:
+def _default_out(cfg: Config, kind: str) -> Path:
     stamp = time.strftime("%Y%m%d-%H%M%S")
     return Path("runs") / f"{stamp}-{kind}-{cfg.name}"
 
@@ -84,7 +87,7 @@ def _summary(metrics: dict[str, Any], out: Path) -> str:
     return "\n".join(lines)
 
 
-def _gate(cfg: Any, force: bool) -> None:
+def _gate(cfg: Config, force: bool) -> None:
     """The pre-flight gate of ``check``: a failed check refuses the flight unless forced."""
     from mpf_mavlink.bridge.preflight import format_checks, run_checks
 
@@ -113,7 +116,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     cfg = _load(args)
     _gate(cfg, args.force)
-    if cfg.section("sil").link != "none":  # the SIL vehicle and the bridge over MAVLink
+    if cfg.sil.link != "none":  # the SIL vehicle and the bridge over MAVLink
         from mpf_mavlink.cli.sim import cmd_sim_sil
 
         out = prepare_out_dir(args.out or _default_out(cfg, "sil"))

@@ -9,10 +9,13 @@ import argparse
 import math
 import signal
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mpf_mavlink.cli.common import check_host, exit_codes_epilog, positive
 from mpf_mavlink.errors import MpfError
+
+if TYPE_CHECKING:
+    from mpf_mavlink.config.schema import Config
 
 VEHICLE_DESCRIPTION = """\
 Run the simulated vehicle of a scenario alone, paced to the wall clock, so that MAVProxy, a
@@ -73,7 +76,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
         v = build_vehicle(cfg, args.serve, clock=args.clock, **over)
     except OSError as e:
         raise MpfError(f"--serve {args.serve}: cannot open ({e.strerror or e})") from None
-    sil, ac = cfg.section("sil"), cfg.section("aircraft")
+    sil, ac = cfg.sil, cfg.aircraft
     what = f"JSBSim {ac.model}" if sil.plant == "jsbsim" else "kinematic plant"
     print(
         f"simulated {sil.flavour} vehicle ({what}, {args.clock} clock) on {args.serve}: system 1, "
@@ -179,7 +182,7 @@ def sil_summary(res: Any) -> str:
     return "\n".join(lines)
 
 
-def cmd_sim_sil(cfg: Any, out: Path, quiet: bool, no_plots: bool, force: bool = False) -> int:
+def cmd_sim_sil(cfg: Config, out: Path, quiet: bool, no_plots: bool, force: bool = False) -> int:
     from sim.sil import run_sil
 
     res = run_sil(

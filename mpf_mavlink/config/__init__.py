@@ -1,11 +1,9 @@
-"""Configuration: the YAML schema (:mod:`.schema`) and the sections the bridge, the SIL vehicle
-and the target estimator add (:mod:`.bridge`, :mod:`.sil`, :mod:`.target`).
-
-Importing the package registers every section, so any configuration accepts (and strictly
-checks) them whoever loads it.
+"""Configuration: the YAML schema (:mod:`.schema`) with the sections of the bridge, the SIL
+vehicle and the target estimator (:mod:`.bridge`, :mod:`.sil`, :mod:`.target`), every one a
+typed, strictly validated dataclass; :mod:`.scenario` builds the guidance core's objects from
+them and :mod:`.reference` writes the reference of every key (docs/configuration.md).
 """
 
-from mpf_mavlink.config import bridge, sil, target  # noqa: F401  (registers the sections)
 from mpf_mavlink.config.schema import Config, apply_override, config_from_dict, load_config
 
 __all__ = ["Config", "apply_override", "config_from_dict", "load_config"]

@@ -2,7 +2,10 @@
 errors naming the key and the file (one line). ``--set dotted.key=value`` overrides apply to the
 raw mapping before validation, so they are checked exactly like the file.
 
-Units are in the key names (``_m``, ``_m_s``, ``_rad``, ``_rad_s``, ``_s``); angles in radians.
+Every section is a frozen dataclass and :class:`Config` hands each one out with its type
+(``cfg.guidance``, ``cfg.mavlink``, ``cfg.sil``, ...). Units are in the key names (``_m``,
+``_m_s``, ``_rad``, ``_rad_s``, ``_s``); angles in radians. The reference of every key,
+docs/configuration.md, is generated from these classes (:mod:`mpf_mavlink.config.reference`).
 """
 
 from __future__ import annotations
@@ -13,30 +16,36 @@ import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar, overload
 
 import yaml
 
-from mpf_mavlink.config.fields import EXTRA_SECTIONS, Vec3, _fail, _nonneg, _pos
+from mpf_mavlink.config.bridge import AdapterSection, MavlinkConfig
+from mpf_mavlink.config.fields import Vec3, _doc, _fail, _nonneg, _open, _pos, _rng
+from mpf_mavlink.config.sil import AircraftConfig, SilConfig
+from mpf_mavlink.config.target import TargetEstimatorConfig
 from mpf_mavlink.errors import ConfigError
 
 
 # ----------------------------------------------------------------------------- sections
 @dataclass(frozen=True)
 class PathConfig:
-    """The path, fixed in the target frame {T} (x forward, y right, z down)."""
+    """The path, fixed in the target frame {T} (x forward, y right, z down). Which keys a type
+    needs: lemniscate ``size_m``; circle ``radius_m``; helix ``radius_m``, ``climb_per_turn_m``,
+    ``turns``; line ``start_m``, ``end_m``; spline ``waypoints_m``. Keys of another type are
+    errors."""
 
     type: Literal["line", "circle", "helix", "lemniscate", "spline"] = "lemniscate"
-    size_m: float | None = field(default=None, metadata=_pos())  # lemniscate half-length a
-    center_m: Vec3 = (0.0, 0.0, 0.0)  # circle, helix, lemniscate
-    radius_m: float | None = field(default=None, metadata=_pos())  # circle, helix
-    clockwise: bool = True  # circle, helix (seen from above)
-    climb_per_turn_m: float | None = None  # helix (up > 0)
-    turns: float | None = field(default=None, metadata=_pos())  # helix
-    start_m: Vec3 | None = None  # line
-    end_m: Vec3 | None = None  # line
-    waypoints_m: list[Vec3] | None = None  # spline
-    closed: bool = False  # spline
+    size_m: float | None = field(default=None, metadata=_pos("lemniscate: half-length a"))
+    center_m: Vec3 = field(default=(0.0, 0.0, 0.0), metadata=_doc("circle, helix, lemniscate"))
+    radius_m: float | None = field(default=None, metadata=_pos("circle, helix"))
+    clockwise: bool = field(default=True, metadata=_doc("circle, helix: seen from above"))
+    climb_per_turn_m: float | None = field(default=None, metadata=_doc("helix: up > 0"))
+    turns: float | None = field(default=None, metadata=_pos("helix"))
+    start_m: Vec3 | None = field(default=None, metadata=_doc("line"))
+    end_m: Vec3 | None = field(default=None, metadata=_doc("line"))
+    waypoints_m: list[Vec3] | None = field(default=None, metadata=_doc("spline"))
+    closed: bool = field(default=False, metadata=_doc("spline: a loop"))
 
 
 _PATH_KEYS = {
@@ -50,63 +59,94 @@ _PATH_KEYS = {
 
 @dataclass(frozen=True)
 class TargetConfig:
-    """The moving target {T}. ``paper``: Section V; ``constant_turn``: constant speed,
-    turn and climb rates (stationary when speed = 0); ``mavlink``: live over MAVLink
-    (bridge only, see the ``mavlink`` section)."""
+    """The moving target {T}. ``paper``: Section V of the paper; ``constant_turn``: constant
+    speed, turn and climb rates (stationary when speed = 0); ``mavlink``: live over MAVLink
+    (bridge only, see the ``mavlink`` and ``target_estimator`` sections)."""
 
     type: Literal["stationary", "constant_turn", "paper", "mavlink"] = "stationary"
-    position_ned_m: Vec3 = (0.0, 0.0, 0.0)
-    yaw_rad: float = 0.0  # stationary / paper initial yaw
-    speed_m_s: float = field(default=0.0, metadata=_nonneg())
-    heading_rad: float = 0.0
-    turn_rate_rad_s: float = 0.0
-    climb_rate_m_s: float = 0.0
+    position_ned_m: Vec3 = field(default=(0.0, 0.0, 0.0), metadata=_doc("initial position"))
+    yaw_rad: float = field(default=0.0, metadata=_doc("stationary / paper: initial yaw"))
+    speed_m_s: float = field(default=0.0, metadata=_nonneg("constant_turn"))
+    heading_rad: float = field(default=0.0, metadata=_doc("constant_turn: initial heading"))
+    turn_rate_rad_s: float = field(default=0.0, metadata=_doc("constant_turn"))
+    climb_rate_m_s: float = field(default=0.0, metadata=_doc("constant_turn: up > 0"))
+
+
+#: the guidance laws ``guidance.law`` names (the paper's MPF and the baselines)
+LawName = Literal["mpf", "npfg", "npfg_static", "l1_loiter", "pursuit"]
 
 
 @dataclass(frozen=True)
 class GuidanceConfig:
-    """Gains of Theorem 1 and the practical extensions (all off = the paper's law).
+    """Gains of Theorem 1 and the practical extensions (all off = the paper's law)."""
 
-    law: which guidance flies (``mpf``; or a baseline of core/guidance/baselines.py, same
-    command type and adapter: ``npfg`` PX4's NPFG on the moving path with path-relative
-    velocities, ``npfg_static`` the same path re-sent as if static, ``l1_loiter`` ArduPlane's
-    L1 loiter about the moving centre, ``pursuit`` carrot chasing). The gains below are MPF's."""
-
-    law: Literal["mpf", "npfg", "npfg_static", "l1_loiter", "pursuit"] = "mpf"
-    K_p: float = field(default=4.0, metadata=_pos())
-    K_R: float = field(default=2.0, metadata=_pos())
-    alpha_m: float = field(default=1.0, metadata=_pos())
-    rate_limit_rad_s: float | None = field(default=None, metadata=_pos())
-    # per_axis: w2 and w3 capped each on its own; magnitude: |[w2, w3]| (core/guidance/law.py)
-    rate_limit_mode: Literal["per_axis", "magnitude"] = "per_axis"
-    psi_turn: bool = False
-    psi_turn_threshold: float = field(default=0.5, metadata={"check": ("range", 0.0, 1.0)})
+    law: LawName = field(
+        default="mpf",
+        metadata=_doc(
+            "which guidance flies: mpf, or a baseline with the same command type and adapter "
+            "(npfg: PX4's NPFG on the moving path; npfg_static: the path re-sent as if static; "
+            "l1_loiter: ArduPlane's L1 loiter about the moving centre; pursuit: carrot chasing)"
+        ),
+    )
+    K_p: float = field(default=4.0, metadata=_pos("position gain of Theorem 1"))
+    K_R: float = field(default=2.0, metadata=_pos("attitude gain of Theorem 1"))
+    alpha_m: float = field(default=1.0, metadata=_pos("the approach-angle length scale"))
+    rate_limit_rad_s: float | None = field(
+        default=None, metadata=_pos("cap on the commanded rates w2, w3; null: none")
+    )
+    rate_limit_mode: Literal["per_axis", "magnitude"] = field(
+        default="per_axis", metadata=_doc("per_axis: w2 and w3 each; magnitude: |[w2, w3]|")
+    )
+    psi_turn: bool = field(default=False, metadata=_doc("turn in place when Psi is large"))
+    psi_turn_threshold: float = field(default=0.5, metadata=_rng(0.0, 1.0))
     psi_turn_rate_rad_s: float | None = field(default=None, metadata=_pos())
-    wind_compensation: bool = True  # eta_hat of the autopilot's WIND / WIND_COV; false by choice
-    initial_s_m: float | None = None  # None: closest point of the moving path
+    wind_compensation: bool = field(
+        default=True, metadata=_doc("use the autopilot's wind (WIND / WIND_COV) in the law")
+    )
+    initial_s_m: float | None = field(
+        default=None, metadata=_doc("initial path parameter; null: the closest point")
+    )
 
 
 @dataclass(frozen=True)
 class VehicleConfig:
     """Airspeed and the limits the feasibility check and the adapter respect."""
 
-    airspeed_m_s: float = field(default=15.0, metadata=_pos())
-    airspeed_min_m_s: float | None = field(default=None, metadata=_pos())
-    airspeed_max_m_s: float | None = field(default=None, metadata=_pos())
-    max_bank_rad: float = field(default=0.785398, metadata={"check": ("range_open", 0.0, 1.5707)})
-    max_turn_rate_rad_s: float | None = field(default=None, metadata=_pos())
-    # turn per bank the aircraft really flies, as a fraction of the coordinated turn g tan(phi)/V
-    # (the adapter's learned turn_gain; the ArduPlane 4.7 SITL 'plane' learns ~0.745)
-    turn_gain: float = field(default=1.0, metadata={"check": ("range_open", 0.0, 2.0)})
-    # the autopilot's own roll limit (ArduPlane ROLL_LIMIT_DEG, PX4 FW_R_LIM) when known:
-    # the checks and the verdict use the smaller of it and max_bank_rad
-    autopilot_bank_limit_rad: float | None = field(
-        default=None, metadata={"check": ("range_open", 0.0, 1.5707)}
+    airspeed_m_s: float = field(default=15.0, metadata=_pos("the airspeed flown"))
+    airspeed_min_m_s: float | None = field(
+        default=None, metadata=_pos("the envelope's floor; null: airspeed_m_s")
     )
-    # steady climb at full thrust and sink at idle, both at airspeed_m_s (m/s, > 0); null:
-    # unknown (check measures them from a JSBSim SIL airframe, else skips the climb check)
-    max_climb_rate_m_s: float | None = field(default=None, metadata=_pos())
-    max_sink_rate_m_s: float | None = field(default=None, metadata=_pos())
+    airspeed_max_m_s: float | None = field(
+        default=None, metadata=_pos("the envelope's ceiling; null: airspeed_m_s")
+    )
+    max_bank_rad: float = field(default=0.785398, metadata=_open(0.0, 1.5707))
+    max_turn_rate_rad_s: float | None = field(default=None, metadata=_pos())
+    turn_gain: float = field(
+        default=1.0,
+        metadata=_open(
+            0.0, 2.0,
+            "turn per bank the aircraft really flies, as a fraction of g tan(phi) / V "
+            "(the ArduPlane 4.7 SITL plane flies about 0.745)",
+        ),
+    )  # fmt: skip
+    autopilot_bank_limit_rad: float | None = field(
+        default=None,
+        metadata=_open(
+            0.0, 1.5707,
+            "the autopilot's own roll limit (ArduPlane ROLL_LIMIT_DEG, PX4 FW_R_LIM): the "
+            "checks and the verdict use the smaller of it and max_bank_rad",
+        ),
+    )  # fmt: skip
+    max_climb_rate_m_s: float | None = field(
+        default=None,
+        metadata=_pos(
+            "steady climb at full thrust at airspeed_m_s; null: measured from a JSBSim SIL "
+            "airframe, else the climb check is skipped"
+        ),
+    )
+    max_sink_rate_m_s: float | None = field(
+        default=None, metadata=_pos("steady sink at idle at airspeed_m_s; null as above")
+    )
 
     @property
     def v_min(self) -> float:
@@ -119,17 +159,18 @@ class VehicleConfig:
 
 @dataclass(frozen=True)
 class GustConfig:
-    """A region of wind (the paper's gusts acting at specified regions): NED centre (m),
-    radius (m) and the extra air-mass velocity inside it (NED, m/s)."""
+    """A region of wind (the paper's gusts acting at specified regions)."""
 
     center_ned_m: Vec3 = (0.0, 0.0, 0.0)
     radius_m: float = field(default=10.0, metadata=_pos())
-    velocity_ned_m_s: Vec3 = (0.0, 0.0, 0.0)
+    velocity_ned_m_s: Vec3 = field(
+        default=(0.0, 0.0, 0.0), metadata=_doc("the extra air-mass velocity inside")
+    )
 
 
 @dataclass(frozen=True)
 class WindConfig:
-    """Wind for the kinematic plant: steady air-mass velocity (NED, m/s, blowing toward)."""
+    """Wind for the kinematic plant: steady air-mass velocity (NED, blowing toward)."""
 
     steady_ned_m_s: Vec3 = (0.0, 0.0, 0.0)
     gusts: list[GustConfig] = field(default_factory=list)
@@ -140,61 +181,107 @@ class KinematicConfig:
     """The paper's vehicle: constant airspeed, first-order rate autopilot of bandwidth lambda_w."""
 
     initial_position_ned_m: Vec3 = (0.0, 0.0, 0.0)
-    initial_attitude_rpy_rad: Vec3 = (0.0, 0.0, 0.0)  # roll, pitch, yaw of the wind frame
-    autopilot_bandwidth_rad_s: float = field(default=10.0, metadata=_pos())  # lambda_w
-    dt_s: float = field(default=0.02, metadata={"check": ("range_open", 0.0, 1.0)})
+    initial_attitude_rpy_rad: Vec3 = field(
+        default=(0.0, 0.0, 0.0), metadata=_doc("roll, pitch, yaw of the wind frame")
+    )
+    autopilot_bandwidth_rad_s: float = field(default=10.0, metadata=_pos("lambda_w"))
+    dt_s: float = field(default=0.02, metadata=_open(0.0, 1.0))
     wind: WindConfig = field(default_factory=WindConfig)
 
 
 @dataclass(frozen=True)
 class SimConfig:
+    """The paper's in-process closed loop (``mpf-mavlink sim`` with ``sil.link: none``)."""
+
     duration_s: float = field(default=300.0, metadata=_pos())
     plant: Literal["kinematic"] = "kinematic"
-    record_every: int = field(default=1, metadata={"check": ("ge", 1)})
+    record_every: int = field(
+        default=1, metadata={"check": ("ge", 1), "doc": "keep every n-th step"}
+    )
 
 
 @dataclass(frozen=True)
 class ChecksConfig:
-    """Parameters of the theorem's checks. c1 (m) bounds |pt(0)| (None: 1.25 |pt(0)|);
-    c2 < 1/2 bounds Psi(0); the horizon (s) for Assumption 1 and feasibility (None: duration)."""
+    """Parameters of the theorem's checks (``mpf-mavlink check``, and before every flight)."""
 
-    c1_m: float | None = field(default=None, metadata=_pos())
-    c2: float = field(default=0.25, metadata={"check": ("range_open", 0.0, 0.5)})
-    horizon_s: float | None = field(default=None, metadata=_pos())
+    c1_m: float | None = field(default=None, metadata=_pos("bounds |pt(0)|; null: 1.25 |pt(0)|"))
+    c2: float = field(default=0.25, metadata=_open(0.0, 0.5, "bounds Psi(0)"))
+    horizon_s: float | None = field(
+        default=None, metadata=_pos("for Assumption 1 and feasibility; null: the duration")
+    )
     assumption1_margin_m_s: float = field(default=0.0, metadata=_nonneg())
-    # the vehicle may start at most this far (m) below the path's lowest point: further down
-    # (on the ground under a path 100 m up) the capture would be a climb the law never flies
-    max_start_below_m: float = field(default=30.0, metadata=_pos())
-    # feasibility: a path that needs a bank within this much of vehicle.max_bank_rad fails
-    # (the feedback needs room to correct; 44.6 of 45 deg flew 2.9 m RMS in SIL)
-    bank_margin_rad: float = field(default=0.0873, metadata=_nonneg())
+    max_start_below_m: float = field(
+        default=30.0,
+        metadata=_pos(
+            "how far below the path's lowest point the vehicle may start (further down the "
+            "capture would be a climb the law never flies)"
+        ),
+    )
+    bank_margin_rad: float = field(
+        default=0.0873,
+        metadata=_nonneg(
+            "a path that needs a bank within this much of vehicle.max_bank_rad fails "
+            "(the feedback needs room to correct)"
+        ),
+    )
 
 
 @dataclass(frozen=True)
 class MetricsConfig:
-    """Steady-state window and the verdict's bounds (mpf_mavlink/runs/verdict.py; SIL and run)."""
+    """The steady-state window and the verdict's bounds (mpf_mavlink/runs/verdict.py)."""
 
-    steady_after_s: float = field(default=100.0, metadata=_nonneg())
+    steady_after_s: float = field(default=100.0, metadata=_nonneg("capture time not judged"))
     converge_threshold_m: float = field(default=1.0, metadata=_pos())
-    fail_pt_m: float = field(default=10.0, metadata=_pos())
+    fail_pt_m: float = field(default=10.0, metadata=_pos("|pt| above this in steady state fails"))
     altitude_floor_m: float = 10.0
-    airspeed_tolerance: float = field(default=0.15, metadata={"check": ("range", 0.0, 1.0)})
-    # 5 deg: the margin checks.bank_margin_rad keeps below the limit for the feedback and gusts,
-    # allowed above it too (the roll loop's overshoot of a clipped set-point), for limit_hold_s
-    bank_tolerance_rad: float = field(default=0.0873, metadata=_nonneg())
-    pitch_limit_rad: float = field(default=0.6, metadata={"check": ("range_open", 0.0, 1.5707)})
+    airspeed_tolerance: float = field(
+        default=0.15, metadata=_rng(0.0, 1.0, "fraction outside the envelope allowed")
+    )
+    bank_tolerance_rad: float = field(
+        default=0.0873,
+        metadata=_nonneg(
+            "allowed above the bank limit (the roll loop's overshoot) for limit_hold_s"
+        ),
+    )
+    pitch_limit_rad: float = field(default=0.6, metadata=_open(0.0, 1.5707))
     limit_hold_s: float = field(default=1.0, metadata=_nonneg())
-    # the steady window a verdict needs (s): one turn at the demo's tightest radius (2 pi 50 m
-    # at 16 m/s = 19.6 s); shorter flights are NOT JUDGED
-    min_steady_s: float = field(default=20.0, metadata=_nonneg())
-    # the fraction of the steady window that thrust may spend at its ceiling, or the bank
-    # within checks.bank_margin_rad of its limit, before the verdict fails
-    limit_fraction: float = field(default=0.2, metadata={"check": ("range", 0.0, 1.0)})
+    min_steady_s: float = field(
+        default=20.0,
+        metadata=_nonneg(
+            "the steady window a verdict needs (one turn at 50 m and 16 m/s is 19.6 s); "
+            "shorter flights are NOT JUDGED"
+        ),
+    )
+    limit_fraction: float = field(
+        default=0.2,
+        metadata=_rng(
+            0.0, 1.0,
+            "fraction of the steady window thrust may spend at its ceiling, or the bank "
+            "within checks.bank_margin_rad of its limit",
+        ),
+    )  # fmt: skip
+
+
+S = TypeVar("S")
+
+#: the sections of the bridge, the SIL vehicle and the target estimator, by their YAML name
+SECTIONS: dict[str, type] = {
+    "mavlink": MavlinkConfig,
+    "adapter": AdapterSection,
+    "target_estimator": TargetEstimatorConfig,
+    "sil": SilConfig,
+    "aircraft": AircraftConfig,
+}
 
 
 @dataclass(frozen=True)
 class Config:
-    """A whole scenario. ``source`` is the file it came from (for messages)."""
+    """A whole scenario. ``source`` is the file it came from (for messages).
+
+    The sections of the bridge, the SIL vehicle and the target estimator are properties typed
+    like the rest (``cfg.mavlink``, ``cfg.adapter``, ``cfg.target_estimator``, ``cfg.sil``,
+    ``cfg.aircraft``); ``extra`` holds them by name (``dataclasses.replace(cfg, extra=...)``
+    swaps one) and a section left out of ``extra`` reads as its defaults."""
 
     name: str = "scenario"
     path: PathConfig = field(default_factory=PathConfig)
@@ -208,14 +295,58 @@ class Config:
     source: str = field(default="<config>", metadata={"internal": True})
     extra: dict[str, Any] = field(default_factory=dict, metadata={"internal": True})
 
-    def section(self, name: str) -> Any:
-        """A section registered in EXTRA_SECTIONS (bridge, SIL), validated like the rest."""
-        return self.extra[name]
+    def _get(self, name: str, cls: type[S]) -> S:
+        value = self.extra.get(name)
+        if value is None:
+            return cls()
+        if not isinstance(value, cls):
+            raise TypeError(f"section {name} is a {type(value).__name__}, not {cls.__name__}")
+        return value
+
+    @property
+    def mavlink(self) -> MavlinkConfig:
+        return self._get("mavlink", MavlinkConfig)
+
+    @property
+    def adapter(self) -> AdapterSection:
+        return self._get("adapter", AdapterSection)
+
+    @property
+    def target_estimator(self) -> TargetEstimatorConfig:
+        return self._get("target_estimator", TargetEstimatorConfig)
+
+    @property
+    def sil(self) -> SilConfig:
+        return self._get("sil", SilConfig)
+
+    @property
+    def aircraft(self) -> AircraftConfig:
+        return self._get("aircraft", AircraftConfig)
+
+    @overload
+    def section(self, name: Literal["mavlink"]) -> MavlinkConfig: ...
+    @overload
+    def section(self, name: Literal["adapter"]) -> AdapterSection: ...
+    @overload
+    def section(self, name: Literal["target_estimator"]) -> TargetEstimatorConfig: ...
+    @overload
+    def section(self, name: Literal["sil"]) -> SilConfig: ...
+    @overload
+    def section(self, name: Literal["aircraft"]) -> AircraftConfig: ...
+    def section(self, name: str) -> object:
+        """The section called ``name`` (one of :data:`SECTIONS`), with its type."""
+        if name not in SECTIONS:
+            raise KeyError(f"no configuration section {name!r} (known: {', '.join(SECTIONS)})")
+        return self._get(name, SECTIONS[name])
 
 
 # ----------------------------------------------------------------------------- validation
 def _describe(tp: Any) -> str:
+    """A type as the error messages and the reference name it."""
     origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        inner = [a for a in typing.get_args(tp) if a is not type(None)]
+        return " or ".join(_describe(a) for a in inner) + " or null"
     if tp is float:
         return "a number"
     if tp is int:
@@ -247,8 +378,8 @@ def _convert(tp: Any, value: Any, src: str, key: str) -> Any:
         raise _fail(src, key, "unsupported union")  # pragma: no cover
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
-            raise _fail(src, key, f"must be {_describe(tp)}, got {value!r}")
-        return _build(tp, value, src, key)  # type: ignore[arg-type]
+            raise _fail(src, key, f"must be a mapping, got {value!r}")
+        return _build(typing.cast(type, tp), value, src, key)
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise _fail(src, key, f"must be a number, got {value!r}")
@@ -288,26 +419,47 @@ def _convert(tp: Any, value: Any, src: str, key: str) -> Any:
     raise _fail(src, key, f"unsupported type {tp}")  # pragma: no cover
 
 
-def _check(meta: Any, v: Any, src: str, key: str) -> None:
-    chk = meta.get("check") if meta else None
+def describe_check(chk: tuple[Any, ...] | None) -> str:
+    """A field's bound in words (``> 0``, ``in [0, 1]``, ...), or "" without one."""
+    if chk is None:
+        return ""
+    kind = chk[0]
+    if kind == "gt":
+        return f"> {chk[1]:g}"
+    if kind == "ge":
+        return f">= {chk[1]:g}"
+    if kind == "range":
+        return f"in [{chk[1]:g}, {chk[2]:g}]"
+    if kind == "range_open":
+        return f"in ({chk[1]:g}, {chk[2]:g})"
+    if kind == "sign":
+        return "1 or -1"
+    raise ValueError(f"unknown check {chk!r}")  # pragma: no cover
+
+
+def _check(meta: typing.Mapping[str, Any], v: Any, src: str, key: str) -> None:
+    chk = meta.get("check")
     if chk is None or v is None:
         return
     kind = chk[0]
-    if kind == "gt" and not v > chk[1]:
-        raise _fail(src, key, f"must be > {chk[1]:g}, got {v!r}")
-    if kind == "ge" and not v >= chk[1]:
-        raise _fail(src, key, f"must be >= {chk[1]:g}, got {v!r}")
-    if kind == "range" and not chk[1] <= v <= chk[2]:
-        raise _fail(src, key, f"must be in [{chk[1]:g}, {chk[2]:g}], got {v!r}")
-    if kind == "range_open" and not chk[1] < v < chk[2]:
-        raise _fail(src, key, f"must be in ({chk[1]:g}, {chk[2]:g}), got {v!r}")
-    if kind == "sign" and v not in (-1.0, 1.0):
-        raise _fail(src, key, f"must be 1 or -1, got {v!r}")
+    if kind == "gt":
+        ok = v > chk[1]
+    elif kind == "ge":
+        ok = v >= chk[1]
+    elif kind == "range":
+        ok = chk[1] <= v <= chk[2]
+    elif kind == "range_open":
+        ok = chk[1] < v < chk[2]
+    else:
+        ok = v in (-1.0, 1.0)
+    if not ok:
+        raise _fail(src, key, f"must be {describe_check(chk)}, got {v!r}")
 
 
-def _build(cls: type, data: dict[str, Any], src: str, prefix: str) -> Any:
+def _build(cls: type[S], data: dict[str, Any], src: str, prefix: str) -> S:
     hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if not f.metadata.get("internal")}
+    all_fields = dataclasses.fields(typing.cast(Any, cls))
+    fields = {f.name: f for f in all_fields if not f.metadata.get("internal")}
     kwargs: dict[str, Any] = {}
     for k, v in data.items():
         key = f"{prefix}.{k}" if prefix else str(k)
@@ -320,7 +472,7 @@ def _build(cls: type, data: dict[str, Any], src: str, prefix: str) -> Any:
     return cls(**kwargs)
 
 
-def _validate_cross(cfg: Config, extra: dict[str, Any]) -> None:
+def _validate_cross(cfg: Config) -> None:
     src = cfg.source
     p = cfg.path
     need, opt = _PATH_KEYS[p.type]
@@ -349,7 +501,7 @@ def _validate_cross(cfg: Config, extra: dict[str, Any]) -> None:
         )
 
 
-def load_config(path: str | Path, overrides: list[str] | None = None) -> Any:
+def load_config(path: str | Path, overrides: list[str] | None = None) -> Config:
     """Read, override and validate a YAML configuration; raise ConfigError naming key and file."""
     src = str(path)
     try:
@@ -412,51 +564,55 @@ def apply_override(raw: dict[str, Any], spec: str, src: str = "--set") -> None:
     node[parts[-1]] = value
 
 
-def config_from_dict(raw: dict[str, Any], src: str = "<config>") -> Any:
-    """Validate a raw mapping into a :class:`Config` (plus registered extra sections).
+def config_from_dict(raw: dict[str, Any], src: str = "<config>") -> Config:
+    """Validate a raw mapping into a :class:`Config` (every section of :data:`SECTIONS` too).
 
-    A section class may define ``validate(cfg, src)`` for checks across sections; it runs once
-    the whole configuration is built and raises ConfigError like the rest."""
-    base = {k: v for k, v in raw.items() if k not in EXTRA_SECTIONS}
+    Checks across sections (a section's ``validate(cfg, src)``) run once the whole
+    configuration is built and raise ConfigError like the rest."""
+    base = {k: v for k, v in raw.items() if k not in SECTIONS}
     cfg = _build(Config, base, src, "")
-    cfg = dataclasses.replace(cfg, source=src)
-    extra = {}
-    for name, cls in EXTRA_SECTIONS.items():
+    extra: dict[str, Any] = {}
+    for name, cls in SECTIONS.items():
         data = raw.get(name, {})
         if data is None:
             data = {}
         if not isinstance(data, dict):
             raise _fail(src, name, "must be a mapping")
         extra[name] = _build(cls, data, src, name)
-    _validate_cross(cfg, extra)
-    cfg = dataclasses.replace(cfg, extra=extra)
-    for section in extra.values():
-        validate = getattr(section, "validate", None)
-        if validate is not None:
-            validate(cfg, src)
+    cfg = dataclasses.replace(cfg, source=src, extra=extra)
+    _validate_cross(cfg)
+    cfg.mavlink.validate(src, cfg.target.type)
+    cfg.adapter.validate(src)
+    cfg.target_estimator.validate(src)
+    cfg.sil.validate(src, cfg.target.type, cfg.mavlink)
+    cfg.aircraft.validate(src, cfg.sil)
     return cfg
 
 
-def config_to_dict(cfg: Any, omit: tuple[str, ...] = ()) -> dict[str, Any]:
+def config_to_dict(cfg: Config, omit: tuple[str, ...] = ()) -> dict[str, Any]:
     """The mapping :func:`config_from_dict` turns back into ``cfg`` (every section, defaults
     included, tuples as lists), without the sections named in ``omit``: what a run directory
     keeps so that the flight can be re-run or replayed with the configuration it really had."""
 
-    def plain(x: Any) -> Any:
+    def plain(x: object) -> object:
         if dataclasses.is_dataclass(x) and not isinstance(x, type):
             return {
                 f.name: plain(getattr(x, f.name))
                 for f in dataclasses.fields(x)
                 if not f.metadata.get("internal")
             }
-        if isinstance(x, (list, tuple)):
+        if isinstance(x, list | tuple):
             return [plain(v) for v in x]
         if isinstance(x, dict):
             return {k: plain(v) for k, v in x.items()}
         return x
 
-    out = plain(cfg)
-    out.update({k: plain(v) for k, v in cfg.extra.items()})
+    out: dict[str, Any] = {
+        f.name: plain(getattr(cfg, f.name))
+        for f in dataclasses.fields(cfg)
+        if not f.metadata.get("internal")
+    }
+    out.update({name: plain(cfg._get(name, cls)) for name, cls in SECTIONS.items()})
     for k in omit:
         out.pop(k, None)
     return out

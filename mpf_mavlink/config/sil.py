@@ -1,7 +1,6 @@
 """Configuration sections of the software-in-the-loop (SIL) vehicle: ``sil`` and ``aircraft``.
 
-Importing this module registers both in :data:`mpf_mavlink.config.schema.EXTRA_SECTIONS` (config.py
-does it for every load), so they are validated strictly like the rest: unknown keys, wrong
+Validated strictly by :mod:`mpf_mavlink.config.schema` like every section: unknown keys, wrong
 types and impossible values are one-line errors naming the key and the file. Units are in the
 key names; NED, radians. Only configuration lives here: the simulation is in ``sim/``.
 
@@ -17,12 +16,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from mpf_mavlink.config.fields import EXTRA_SECTIONS, Vec3, _fail, _nonneg, _pos
+from mpf_mavlink.config.bridge import MavlinkConfig, hold_mode_error
+from mpf_mavlink.config.fields import Vec3, _doc, _fail, _ge, _nonneg, _open, _pos, _rng
 from mpf_mavlink.errors import ConfigError
 
+_REPO = Path(__file__).resolve().parents[2]
 
-def _rate(**kw: Any) -> dict[str, Any]:
-    return {"check": ("ge", 0.0), **kw}
+
+def _rate(doc: str = "") -> dict[str, Any]:
+    return _nonneg(doc)
 
 
 @dataclass(frozen=True)
@@ -42,14 +44,15 @@ class TelemetryConfig:
     sys_status_hz: float | None = field(default=None, metadata=_rate())
     system_time_hz: float | None = field(default=None, metadata=_rate())
     heartbeat_hz: float | None = field(default=None, metadata=_rate())
-    attitude_target_hz: float | None = field(default=None, metadata=_rate())  # PX4 flavour only
+    attitude_target_hz: float | None = field(default=None, metadata=_rate("PX4 flavour only"))
 
 
 @dataclass(frozen=True)
 class GustEventConfig:
     """One-minus-cosine gust (JSBSim cosine-gust) starting ``start_s`` seconds of simulated
     time after the vehicle is ready: the air moves along ``direction_ned`` (normalized) with a
-    (1 - cos) ramp over ``rise_s``, ``magnitude_m_s`` held ``hold_s``, a cosine decay over ``decay_s``."""
+    (1 - cos) ramp over ``rise_s``, ``magnitude_m_s`` held ``hold_s``, a cosine decay over
+    ``decay_s``."""
 
     start_s: float = field(default=0.0, metadata=_nonneg())
     direction_ned: Vec3 = (0.0, 1.0, 0.0)
@@ -78,15 +81,15 @@ class TargetFeedConfig:
     ``attitude``: FOLLOW_TARGET carries attitude and rates (and ATTITUDE follows each
     GLOBAL_POSITION_INT); ``messages``: which messages carry the fix. ``seed``: the feed's own."""
 
-    rate_hz: float = field(default=1.0, metadata={"check": ("range", 0.05, 50.0)})
+    rate_hz: float = field(default=1.0, metadata=_rng(0.05, 50.0))
     position_noise_m: float = field(default=0.0, metadata=_nonneg())
     vertical_noise_m: float | None = field(default=None, metadata=_nonneg())
     velocity_noise_m_s: float = field(default=0.0, metadata=_nonneg())
     turn_rate_noise_rad_s: float = field(default=0.0, metadata=_nonneg())
     latency_s: float = field(default=0.0, metadata=_nonneg())
     latency_jitter_s: float = field(default=0.0, metadata=_nonneg())
-    dropout: float = field(default=0.0, metadata={"check": ("range", 0.0, 0.95)})
-    dropout_burst: float = field(default=1.0, metadata={"check": ("ge", 1.0)})
+    dropout: float = field(default=0.0, metadata=_rng(0.0, 0.95))
+    dropout_burst: float = field(default=1.0, metadata=_ge(1.0))
     outages: list[OutageConfig] = field(default_factory=list)
     attitude: bool = False
     messages: Literal["both", "follow_target", "global_position_int"] = "both"
@@ -126,43 +129,55 @@ class SilConfig:
     clock: Literal["lockstep", "realtime"] = "lockstep"
     answer_timeout_s: float = field(default=0.05, metadata=_pos())
     realtime_speed: float = field(default=1.0, metadata=_pos())
-    port: int | None = field(default=None, metadata={"check": ("range", 1024, 65535)})
-    frame_period_s: float = field(default=0.02, metadata={"check": ("range_open", 0.0, 0.5)})
-    physics_rate_hz: float = field(default=120.0, metadata={"check": ("range", 50.0, 1000.0)})
+    port: int | None = field(default=None, metadata=_rng(1024, 65535, "null: a free one"))
+    frame_period_s: float = field(default=0.02, metadata=_open(0.0, 0.5))
+    physics_rate_hz: float = field(default=120.0, metadata=_rng(50.0, 1000.0))
     telemetry: TelemetryConfig = field(default_factory=TelemetryConfig)
     telemetry_latency_s: float = field(default=0.0, metadata=_nonneg())
     command_latency_s: float = field(default=0.0, metadata=_nonneg())
     # PX4 EKF2's wind states: a random walk of EKF2_WIND_NSD 0.05 m/s^2/sqrt(Hz) seen through
     # airspeed of EKF2_EAS_NOISE 1.4 m/s; fused at f Hz, a scalar Kalman filter's time constant is
     # 1.4 / (0.05 sqrt(f)): 8.9 s at 10 Hz, 4.0 s at 50 Hz; 6 s is f = 20 Hz
-    wind_estimate_tau_s: float = field(default=6.0, metadata=_nonneg())
-    offboard_loss_timeout_s: float = field(default=1.0, metadata=_pos())  # PX4 COM_OF_LOSS_T
-    guided_timeout_s: float = field(default=3.0, metadata=_pos())  # ArduPlane GUIDED_TIMEOUT
+    wind_estimate_tau_s: float = field(
+        default=6.0, metadata=_nonneg("lag of the reported wind; 0: the truth")
+    )
+    offboard_loss_timeout_s: float = field(default=1.0, metadata=_pos("PX4 COM_OF_LOSS_T"))
+    guided_timeout_s: float = field(default=3.0, metadata=_pos("ArduPlane GUIDED_TIMEOUT"))
     loiter_radius_m: float = field(default=80.0, metadata=_pos())
     target_live: bool = True
-    target_system: int = field(default=2, metadata={"check": ("range", 2, 255)})
+    target_system: int = field(default=2, metadata=_rng(2, 255))
     target_rate_hz: float = field(default=10.0, metadata=_pos())
     target_feed: TargetFeedConfig | None = None
-    target_type: Literal["rover", "boat"] = (
-        "rover"  # its HEARTBEAT type (ground rover / surface boat)
+    target_type: Literal["rover", "boat"] = field(
+        default="rover", metadata=_doc("the target's HEARTBEAT type")
     )
     initial_position_ned_m: Vec3 | None = None
     initial_heading_rad: float | None = None
     trim_s: float = field(default=12.0, metadata=_pos())
-    initial_mode: Literal["hold", "cruise"] = (
-        "hold"  # hold: loiter (PX4 AUTO.LOITER, ArduPlane LOITER); cruise: course + altitude hold (POSCTL, CRUISE)
+    initial_mode: Literal["hold", "cruise"] = field(
+        default="hold",
+        metadata=_doc(
+            "hold: loiter (PX4 AUTO.LOITER, ArduPlane LOITER); cruise: course and altitude "
+            "hold (POSCTL, CRUISE)"
+        ),
     )
     wind_ned_m_s: Vec3 = (0.0, 0.0, 0.0)
     turbulence: Literal["none", "light", "moderate", "severe"] = "none"
-    # JSBSim's noise engine takes seeds below 2^31 - 2 (sim/plant_jsbsim.py: jsbsim_turbulence_seed)
-    seed: int = field(default=0, metadata={"check": ("range", 0, 2**31 - 3)})
+    seed: int = field(
+        default=0, metadata=_rng(0, 2**31 - 3, "JSBSim's noise engine takes seeds below 2^31 - 2")
+    )
     gusts: list[GustEventConfig] = field(default_factory=list)
-    home_lat_deg: float = field(default=47.397742, metadata={"check": ("range", -90.0, 90.0)})
-    home_lon_deg: float = field(default=8.545594, metadata={"check": ("range", -180.0, 180.0)})
+    home_lat_deg: float = field(default=47.397742, metadata=_rng(-90.0, 90.0))
+    home_lon_deg: float = field(default=8.545594, metadata=_rng(-180.0, 180.0))
     home_alt_m: float = 488.0
-    # the firmware's identified behaviour the vehicle emulates (sim/autopilot_profile.py); a path
-    # absolute, relative to the config file, or to the repository (configs/autopilots/*.yaml)
-    autopilot_profile: str | None = None
+    autopilot_profile: str | None = field(
+        default=None,
+        metadata=_doc(
+            "the firmware's identified behaviour the vehicle emulates (sim/autopilot_profile.py): "
+            "a file absolute, relative to the config file, or to the repository "
+            "(configs/autopilots/*.yaml)"
+        ),
+    )
 
     def profile_path(self, src: str) -> Path | None:
         """The profile's file (None: no profile); the first of the places above that exists."""
@@ -172,13 +187,14 @@ class SilConfig:
         if p.is_absolute():
             return p
         bases = [Path(src).resolve().parent] if src and not src.startswith("<") else []
-        bases.append(Path(__file__).resolve().parents[2])
+        bases.append(_REPO)
         for b in bases:
             if (b / p).is_file():
                 return b / p
         return p
 
-    def validate(self, cfg: Any, src: str) -> None:
+    def validate(self, src: str, target_type: str, m: MavlinkConfig) -> None:
+        """Contradictions with ``target.type`` and the ``mavlink`` section."""
         if self.link == "none":
             return
         prof_path = self.profile_path(src)
@@ -193,7 +209,8 @@ class SilConfig:
             if prof.autopilot != want:
                 raise _fail(
                     src, "sil.autopilot_profile",
-                    f"{prof_path} is a {prof.autopilot} profile but sil.flavour is {self.flavour!r}",
+                    f"{prof_path} is a {prof.autopilot} profile but sil.flavour is "
+                    f"{self.flavour!r}",
                 )  # fmt: skip
         if self.plant == "kinematic" and (self.turbulence != "none" or self.gusts):
             key = "sil.turbulence" if self.turbulence != "none" else "sil.gusts"
@@ -203,25 +220,23 @@ class SilConfig:
         for i, g in enumerate(self.gusts):
             if math.hypot(*g.direction_ned) < 1e-9:
                 raise _fail(src, f"sil.gusts[{i}].direction_ned", "must not be zero")
-        if cfg.target.type == "mavlink":
+        if target_type == "mavlink":
             raise _fail(
                 src,
                 "target.type",
-                "the SIL vehicle publishes the scripted target: use stationary, constant_turn or paper",
+                "the SIL vehicle publishes the scripted target: use stationary, constant_turn "
+                "or paper",
             )
         if self.target_feed is not None and not self.target_live:
             raise _fail(src, "sil.target_feed", "needs sil.target_live: true")
         # `--set sil.flavour=X` alone switches the SIL's autopilot (schema._follow_sil_flavour
         # makes the bridge's flavour and hold mode follow it); set apart, they must agree
-        m = cfg.extra.get("mavlink")
-        if m is not None and m.flavour not in ("auto", self.flavour):
+        if m.flavour not in ("auto", self.flavour):
             raise _fail(
                 src, "mavlink.flavour", f"is {m.flavour!r} but sil.flavour is {self.flavour!r} "
                 "(--set sil.flavour alone switches both)",
             )  # fmt: skip
-        if m is not None and m.hold_mode is not None:
-            from mpf_mavlink.config.bridge import hold_mode_error
-
+        if m.hold_mode is not None:
             why = hold_mode_error(m.hold_mode, self.flavour)
             if why:
                 raise _fail(src, "mavlink.hold_mode", f"{why} (sil.flavour is {self.flavour!r}; "
@@ -235,7 +250,7 @@ class ControlChannelConfig:
     property None: the FlightGear/JSBSim standard ``fcs/<channel>-cmd-norm``."""
 
     property: str | None = None
-    sign: float = field(default=1.0, metadata={"check": ("sign",)})
+    sign: float = field(default=1.0, metadata={"check": ("sign",), "doc": "1 or -1"})
 
 
 @dataclass(frozen=True)
@@ -287,8 +302,8 @@ class AttitudeLoopConfig:
     roll_rate_max_rad_s: float | None = field(default=None, metadata=_pos())
     pitch_rate_max_rad_s: float | None = field(default=None, metadata=_pos())
     yaw_rate_max_rad_s: float | None = field(default=None, metadata=_pos())
-    bank_max_rad: float | None = field(default=None, metadata={"check": ("range_open", 0.0, 1.5)})
-    pitch_trim_rad: float | None = field(default=None, metadata={"check": ("range", -0.5, 0.5)})
+    bank_max_rad: float | None = field(default=None, metadata=_open(0.0, 1.5))
+    pitch_trim_rad: float | None = field(default=None, metadata=_rng(-0.5, 0.5))
 
 
 @dataclass(frozen=True)
@@ -312,7 +327,7 @@ class AircraftConfig:
     model: str = "x8"
     root_dir: str | None = None
     trim_airspeed_m_s: float = field(default=16.0, metadata=_pos())
-    trim_throttle: float = field(default=0.3, metadata={"check": ("range", 0.0, 1.0)})
+    trim_throttle: float = field(default=0.3, metadata=_rng(0.0, 1.0))
     trim_from_fdm: bool = False
     gains_from_fdm: bool = False
     airspeed_min_m_s: float | None = field(default=None, metadata=_pos())
@@ -334,15 +349,14 @@ class AircraftConfig:
             p = Path(src).resolve().parent / p
         return p
 
-    def validate(self, cfg: Any, src: str) -> None:
-        sil = cfg.extra.get("sil")
-        if sil is None or sil.link == "none" or sil.plant != "jsbsim":
+    def validate(self, src: str, sil: SilConfig) -> None:
+        if sil.link == "none" or sil.plant != "jsbsim":
             return
         root = self.resolved_root(src)
         if root is not None and not root.is_dir():
             raise _fail(src, "aircraft.root_dir", f"{root} is not a directory")
         if root is None:
-            root = Path(__file__).resolve().parents[2] / "sim" / "jsbsim_root"
+            root = _REPO / "sim" / "jsbsim_root"
         xml = root / "aircraft" / self.model / f"{self.model}.xml"
         if not xml.is_file():
             raise _fail(src, "aircraft.model", f"no JSBSim aircraft {xml}")
@@ -354,7 +368,3 @@ class AircraftConfig:
             raise _fail(src, "aircraft.airspeed_min_m_s", "must be below trim_airspeed_m_s")
         if hi is not None and hi <= self.trim_airspeed_m_s:
             raise _fail(src, "aircraft.airspeed_max_m_s", "must be above trim_airspeed_m_s")
-
-
-EXTRA_SECTIONS["sil"] = SilConfig
-EXTRA_SECTIONS["aircraft"] = AircraftConfig

@@ -1,7 +1,6 @@
 """Configuration section ``target_estimator``: how the bridge estimates a live target.
 
-Importing this module registers it in :data:`mpf_mavlink.config.schema.EXTRA_SECTIONS` (config.py does
-it for every load), validated strictly like the rest. The keys are those of
+Validated strictly by :mod:`mpf_mavlink.config.schema` like every section. The keys are those of
 :class:`mpf_mavlink.core.target_filter.TargetFilterParams` (see its module for the model) plus
 ``mode``: ``filter`` (the EKF) or ``last_sample`` (the bridge before the estimator: the latest
 report extrapolated, stale after ``mavlink.target_timeout_s``; kept to measure against).
@@ -11,11 +10,10 @@ predicted position 1-sigma exceeds ``max_position_sigma_m`` (or after ``max_age_
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Literal
 
-from mpf_mavlink.config.fields import EXTRA_SECTIONS, _fail, _nonneg, _pos
+from mpf_mavlink.config.fields import _doc, _fail, _ge, _nonneg, _open, _pos
 from mpf_mavlink.core.target_filter import TargetFilterParams
 
 
@@ -24,52 +22,85 @@ class TargetEstimatorConfig:
     """See the module docstring; units in the key names (noise: 1-sigma; process noise: square
     roots of white-noise spectral densities)."""
 
-    mode: Literal["filter", "last_sample"] = "filter"
-    accel_noise_m_s2: float = field(default=TargetFilterParams.accel_noise_m_s2, metadata=_pos())
+    mode: Literal["filter", "last_sample"] = field(
+        default="filter",
+        metadata=_doc("filter: the EKF; last_sample: the latest report extrapolated"),
+    )
+    accel_noise_m_s2: float = field(
+        default=TargetFilterParams.accel_noise_m_s2,
+        metadata=_pos("horizontal acceleration, m/s^2/sqrt(Hz)"),
+    )
     vertical_accel_noise_m_s2: float = field(
-        default=TargetFilterParams.vertical_accel_noise_m_s2, metadata=_pos()
+        default=TargetFilterParams.vertical_accel_noise_m_s2, metadata=_pos("m/s^2/sqrt(Hz)")
     )
     turn_accel_noise_rad_s2: float = field(
-        default=TargetFilterParams.turn_accel_noise_rad_s2, metadata=_pos()
+        default=TargetFilterParams.turn_accel_noise_rad_s2,
+        metadata=_pos("turn-rate random walk, rad/s/sqrt(s)"),
     )
-    position_noise_m: float = field(default=TargetFilterParams.position_noise_m, metadata=_pos())
+    position_noise_m: float = field(
+        default=TargetFilterParams.position_noise_m,
+        metadata=_pos("horizontal, per axis, when the report carries none"),
+    )
     vertical_noise_m: float = field(default=TargetFilterParams.vertical_noise_m, metadata=_pos())
     velocity_noise_m_s: float = field(
-        default=TargetFilterParams.velocity_noise_m_s, metadata=_pos()
+        default=TargetFilterParams.velocity_noise_m_s, metadata=_pos("per axis")
     )
     turn_rate_noise_rad_s: float = field(
-        default=TargetFilterParams.turn_rate_noise_rad_s, metadata=_pos()
+        default=TargetFilterParams.turn_rate_noise_rad_s,
+        metadata=_pos("the attitude-derived turn rate"),
     )
     gate_probability: float = field(
         default=TargetFilterParams.gate_probability,
-        metadata={"check": ("range_open", 0.5, 1.0)},
+        metadata=_open(0.5, 1.0),
     )
-    reinit_after: int = field(
-        default=TargetFilterParams.reinit_after, metadata={"check": ("ge", 1)}
-    )
+    reinit_after: int = field(default=TargetFilterParams.reinit_after, metadata=_ge(1))
     max_position_sigma_m: float = field(
-        default=TargetFilterParams.max_position_sigma_m, metadata=_pos()
+        default=TargetFilterParams.max_position_sigma_m,
+        metadata=_pos("stale beyond this predicted 1-sigma"),
     )
     manoeuvre_accel_m_s2: float = field(
-        default=TargetFilterParams.manoeuvre_accel_m_s2, metadata=_nonneg()
+        default=TargetFilterParams.manoeuvre_accel_m_s2,
+        metadata=_nonneg("what the target may do unseen (staleness only)"),
     )
-    max_age_s: float = field(default=TargetFilterParams.max_age_s, metadata=_pos())
-    latency_s: float = field(default=TargetFilterParams.latency_s, metadata=_nonneg())
-    history_s: float = field(default=TargetFilterParams.history_s, metadata=_pos())
+    max_age_s: float = field(
+        default=TargetFilterParams.max_age_s,
+        metadata=_pos("stale beyond, whatever the uncertainty"),
+    )
+    latency_s: float = field(
+        default=TargetFilterParams.latency_s,
+        metadata=_nonneg("known smallest transport delay of the reports"),
+    )
+    history_s: float = field(
+        default=TargetFilterParams.history_s,
+        metadata=_pos("reports kept for re-ordering late ones"),
+    )
     attitude_timeout_s: float = field(
-        default=TargetFilterParams.attitude_timeout_s, metadata=_pos()
+        default=TargetFilterParams.attitude_timeout_s,
+        metadata=_pos("a reported attitude older than this no longer sets {T}"),
     )
 
     def params(self) -> TargetFilterParams:
         """The filter's parameters (every key but ``mode``)."""
-        names = {f.name for f in dataclasses.fields(TargetFilterParams)}
-        return TargetFilterParams(**{k: getattr(self, k) for k in names})
+        return TargetFilterParams(
+            accel_noise_m_s2=self.accel_noise_m_s2,
+            vertical_accel_noise_m_s2=self.vertical_accel_noise_m_s2,
+            turn_accel_noise_rad_s2=self.turn_accel_noise_rad_s2,
+            position_noise_m=self.position_noise_m,
+            vertical_noise_m=self.vertical_noise_m,
+            velocity_noise_m_s=self.velocity_noise_m_s,
+            turn_rate_noise_rad_s=self.turn_rate_noise_rad_s,
+            gate_probability=self.gate_probability,
+            reinit_after=self.reinit_after,
+            max_position_sigma_m=self.max_position_sigma_m,
+            manoeuvre_accel_m_s2=self.manoeuvre_accel_m_s2,
+            max_age_s=self.max_age_s,
+            latency_s=self.latency_s,
+            history_s=self.history_s,
+            attitude_timeout_s=self.attitude_timeout_s,
+        )
 
-    def validate(self, cfg: Any, src: str) -> None:
+    def validate(self, src: str) -> None:
         if self.history_s > self.max_age_s:
             raise _fail(
                 src, "target_estimator.history_s", "must not exceed target_estimator.max_age_s"
             )
-
-
-EXTRA_SECTIONS["target_estimator"] = TargetEstimatorConfig

@@ -47,6 +47,8 @@ from typing import Any
 
 import numpy as np
 
+from mpf_mavlink.config.schema import Config
+
 #: exit code of a flight that ran to its end but failed its verdict (3: refused by the checks,
 #: 4: a safety exit of the bridge)
 EXIT_VERDICT = 5
@@ -94,17 +96,16 @@ def _time_fraction(mask: np.ndarray, t: np.ndarray) -> tuple[float, float, float
     return (secs / total if total > 0 else float(mask.mean())), secs, first
 
 
-def bank_limit_rad(cfg: Any) -> float:
+def bank_limit_rad(cfg: Config) -> float:
     """The bank the vehicle may fly (rad): ours, or the autopilot's own when it is smaller."""
     v = cfg.vehicle
-    ap = getattr(v, "autopilot_bank_limit_rad", None)
-    return float(v.max_bank_rad if ap is None else min(v.max_bank_rad, ap))
+    ap = v.autopilot_bank_limit_rad
+    return v.max_bank_rad if ap is None else min(v.max_bank_rad, ap)
 
 
-def thrust_ceiling(cfg: Any) -> float:
-    """The adapter's thrust ceiling (0..1): ``adapter.thrust_max`` when the config has one."""
-    ad = cfg.extra.get("adapter") if hasattr(cfg, "extra") else None
-    return float(getattr(ad, "thrust_max", 1.0)) if ad is not None else 1.0
+def thrust_ceiling(cfg: Config) -> float:
+    """The adapter's thrust ceiling (0..1): ``adapter.thrust_max``."""
+    return cfg.adapter.thrust_max
 
 
 @dataclass
@@ -164,7 +165,7 @@ class Verdict:
 
 
 def assess(
-    cfg: Any,
+    cfg: Config,
     t: np.ndarray,
     pt_norm: np.ndarray,
     altitude: np.ndarray | None = None,
@@ -192,12 +193,12 @@ def assess(
     hold = m.limit_hold_s
     steady = t >= m.steady_after_s
     steady_s = float(t[-1] - m.steady_after_s) if steady.any() else 0.0
-    min_steady = getattr(m, "min_steady_s", 0.0)
+    min_steady = m.min_steady_s
     judged_steady = steady_s >= min_steady and steady.sum() >= 2
-    frac_lim = getattr(m, "limit_fraction", 1.0)
+    frac_lim = m.limit_fraction
     fig.update(tracked_s=float(t[-1]), steady_after_s=m.steady_after_s, steady_s=steady_s)
     bank_lim = bank_limit_rad(cfg)
-    margin = float(getattr(cfg.checks, "bank_margin_rad", 0.0))
+    margin = cfg.checks.bank_margin_rad
     fig.update(bank_limit_rad=bank_lim, bank_tolerance_rad=m.bank_tolerance_rad,
                bank_band_rad=max(bank_lim - margin, 0.0), pitch_limit_rad=m.pitch_limit_rad,
                limit_hold_s=hold, limit_fraction=frac_lim)  # fmt: skip
@@ -321,7 +322,7 @@ def limits_line(figures: dict[str, Any]) -> str | None:
 
 
 def judge(
-    cfg: Any,
+    cfg: Config,
     t: np.ndarray,
     pt_norm: np.ndarray,
     altitude: np.ndarray | None = None,

@@ -1,4 +1,6 @@
-"""Build the pure objects (path, target motion, gains, extensions) from a validated Config."""
+"""Build the guidance core's objects (path, target motion, gains, extensions) from a validated
+Config: the one place that knows both the YAML sections and the core's types, so the core stays
+free of configuration."""
 
 from __future__ import annotations
 
