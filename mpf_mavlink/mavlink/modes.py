@@ -1,9 +1,12 @@
-"""Flight-mode tables for PX4 and ArduPlane, and HEARTBEAT helpers.
+"""THE flight-mode tables of PX4 and ArduPlane, the MAV_CMD numbers the project sends or
+answers, and HEARTBEAT helpers: every other module (bridge, SIL vehicle, rigs) takes its modes and
+commands from here.
 
 PX4 packs its mode into HEARTBEAT.custom_mode as ``(main << 16) | (sub << 24)``
 (src/modules/commander/px4_custom_mode.h); ArduPilot sends the mode number itself
 (ArduPlane/mode.h ``Mode::Number``). Both set MAV_MODE_FLAG_CUSTOM_MODE_ENABLED (1) in
-base_mode. The tables are plain data: no pymavlink needed (works on HeartbeatSample too).
+base_mode. The tables are plain data: no pymavlink needed (works on HeartbeatSample too);
+tests/test_modes.py checks them against pymavlink's own tables and the MAVLink dialect.
 """
 
 from __future__ import annotations
@@ -15,6 +18,22 @@ MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 MAV_AUTOPILOT_PX4 = 12
 MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
 MAV_MODE_FLAG_SAFETY_ARMED = 128
+MAV_MODE_FLAG_AUTO_ENABLED = 4
+MAV_MODE_FLAG_GUIDED_ENABLED = 8
+MAV_MODE_FLAG_STABILIZE_ENABLED = 16
+
+# --- MAV_CMD (common.xml MAV_CMD) the bridge sends and the SIL vehicle answers -----------------
+MAV_CMD_NAV_TAKEOFF = 22
+MAV_CMD_DO_SET_MODE = 176
+MAV_CMD_DO_CHANGE_SPEED = 178
+MAV_CMD_DO_REPOSITION = 192
+MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_GET_HOME_POSITION = 410
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_CMD_REQUEST_MESSAGE = 512
+MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES = 520
+#: param2 of MAV_CMD_COMPONENT_ARM_DISARM that forces arming/disarming (PX4 and ArduPilot)
+ARM_FORCE_MAGIC = 21196
 
 
 class Flavour(enum.StrEnum):
@@ -55,6 +74,9 @@ PX4_AUTO_SUB_MODES: dict[str, int] = {
 }
 _PX4_MAIN_BY_NUM = {v: k for k, v in PX4_MAIN_MODES.items()}
 _PX4_AUTO_SUB_BY_NUM = {v: k for k, v in PX4_AUTO_SUB_MODES.items()}
+#: number -> name, the tables above turned round
+PX4_MAIN_MODE_NAMES: dict[int, str] = dict(_PX4_MAIN_BY_NUM)
+PX4_AUTO_SUB_MODE_NAMES: dict[int, str] = dict(_PX4_AUTO_SUB_BY_NUM)
 
 # --- ArduPlane (ArduPlane/mode.h, Mode::Number) -----------------------------------------------
 ARDUPLANE_MODES: dict[str, int] = {
@@ -86,9 +108,11 @@ ARDUPLANE_MODES: dict[str, int] = {
     "AUTOLAND": 26,
 }
 _ARDUPLANE_BY_NUM = {v: k for k, v in ARDUPLANE_MODES.items()}
+ARDUPLANE_MODE_NAMES: dict[int, str] = dict(_ARDUPLANE_BY_NUM)
 
 PX4_OFFBOARD_MAIN = PX4_MAIN_MODES["OFFBOARD"]
 ARDUPLANE_GUIDED = ARDUPLANE_MODES["GUIDED"]
+ARDUPLANE_LOITER = ARDUPLANE_MODES["LOITER"]
 
 
 def px4_custom_mode(main: int, sub: int = 0) -> int:
@@ -101,6 +125,11 @@ def px4_custom_mode(main: int, sub: int = 0) -> int:
 def px4_decode_custom_mode(custom_mode: int) -> tuple[int, int]:
     """PX4 custom_mode -> (main, sub); the low 16 bits are unused by PX4."""
     return (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+
+
+#: PX4 HEARTBEAT.custom_mode of OFFBOARD and of AUTO.LOITER ("Hold", the default hand-back)
+PX4_OFFBOARD_CUSTOM_MODE = px4_custom_mode(PX4_OFFBOARD_MAIN)
+PX4_LOITER_CUSTOM_MODE = px4_custom_mode(PX4_MAIN_MODES["AUTO"], PX4_AUTO_SUB_MODES["LOITER"])
 
 
 def px4_mode_from_name(name: str) -> tuple[int, int]:
