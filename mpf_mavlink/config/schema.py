@@ -88,18 +88,29 @@ class GuidanceConfig:
             "l1_loiter: ArduPlane's L1 loiter about the moving centre; pursuit: carrot chasing)"
         ),
     )
-    K_p: float = field(default=4.0, metadata=_pos("position gain of Theorem 1"))
-    K_R: float = field(default=2.0, metadata=_pos("attitude gain of Theorem 1"))
-    alpha_m: float = field(default=1.0, metadata=_pos("the approach-angle length scale"))
+    K_p: float = field(
+        default=4.0,
+        metadata=_pos("gain of the virtual point's progression sdot on the along-path error"),
+    )
+    K_R: float = field(default=2.0, metadata=_pos("gain on the attitude error e"))
+    alpha_m: float = field(
+        default=1.0,
+        metadata=_pos("look-ahead distance of the approach direction (small: aggressive capture)"),
+    )
     rate_limit_rad_s: float | None = field(
         default=None, metadata=_pos("cap on the commanded rates w2, w3; null: none")
     )
     rate_limit_mode: Literal["per_axis", "magnitude"] = field(
         default="per_axis", metadata=_doc("per_axis: w2 and w3 each; magnitude: |[w2, w3]|")
     )
-    psi_turn: bool = field(default=False, metadata=_doc("turn in place when Psi is large"))
+    psi_turn: bool = field(
+        default=False,
+        metadata=_doc("a defined constant-rate turn when Psi >= psi_turn_threshold (far off)"),
+    )
     psi_turn_threshold: float = field(default=0.5, metadata=_rng(0.0, 1.0))
-    psi_turn_rate_rad_s: float | None = field(default=None, metadata=_pos())
+    psi_turn_rate_rad_s: float | None = field(
+        default=None, metadata=_pos("the turn's rate; null: K_R / 2")
+    )
     wind_compensation: bool = field(
         default=True, metadata=_doc("use the autopilot's wind (WIND / WIND_COV) in the law")
     )

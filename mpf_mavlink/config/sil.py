@@ -255,6 +255,8 @@ class ControlChannelConfig:
 
 @dataclass(frozen=True)
 class ControlsConfig:
+    """The JSBSim command of each control channel (:class:`ControlChannelConfig`)."""
+
     aileron: ControlChannelConfig = ControlChannelConfig()
     elevator: ControlChannelConfig = ControlChannelConfig()
     rudder: ControlChannelConfig = ControlChannelConfig()
