@@ -52,7 +52,10 @@ keep_worst: 1
     "edit, culprit",
     [
         (("samples: 8", "samples: 8\nbogus: 1"), "bogus"),
-        (("guidance.K_p, dist: loguniform, low: 1.0", "guidance.K_q, dist: loguniform, low: 1.0"), "guidance.K_q"),
+        (
+            ("guidance.K_p, dist: loguniform", "guidance.K_q, dist: loguniform"),
+            "guidance.K_q",
+        ),
         (("low: 1.0, high: 8.0", "low: 0.0, high: 8.0"), "vary[2].low"),
         (("low: 1.0, high: 8.0", "low: 1.0, high: 8.0, sd: 2"), "vary[2].sd"),
         (("design: lhs", "design: grid"), "design"),
@@ -70,7 +73,10 @@ def test_a_bad_campaign_file_is_one_line_naming_the_key(tmp_path, edit, culprit)
 
 def test_a_key_out_of_the_base_configs_range_is_refused_before_flying(tmp_path):
     # K_p must be > 0 in the config: a normal distribution centred at 0 probes it at its mean
-    p = _write(tmp_path, KIN.replace("dist: loguniform, low: 1.0, high: 8.0", "dist: normal, mean: 0.0, sd: 1.0"))  # fmt: skip
+    normal = KIN.replace(
+        "dist: loguniform, low: 1.0, high: 8.0", "dist: normal, mean: 0.0, sd: 1.0"
+    )
+    p = _write(tmp_path, normal)
     with pytest.raises(ConfigError, match="guidance.K_p"):
         load_campaign(p)
 

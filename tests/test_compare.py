@@ -80,7 +80,8 @@ def run(*args: str) -> subprocess.CompletedProcess[str]:
 def test_compare_flies_each_law_on_the_same_mission_and_writes_the_table(tmp_path: Path) -> None:
     out = tmp_path / "cmp"
     r = run("compare", "configs/compare/static_circle.yaml", "--laws", "mpf,pursuit",
-            "--duration", "30", "--set", "metrics.steady_after_s=20", "--out", str(out), "-q")  # fmt: skip
+            "--duration", "30", "--set", "metrics.steady_after_s=20", "--out", str(out),
+            "-q")  # fmt: skip
     assert r.returncode == 0, r.stderr
     assert "| mpf |" in r.stdout and "| pursuit |" in r.stdout and "MPF / best baseline" in r.stdout
     js = json.loads((out / "compare.json").read_text())

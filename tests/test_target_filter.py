@@ -302,7 +302,8 @@ def test_follow_target_accuracy_fields_set_the_fix_noise():
     for cov, want in (([0.5, 1.5, 0.0], [0.25, 0.25, 2.25]), ([0.0] * 3, [SIG_P**2] * 3)):
         lt = LiveTarget(Estimator(EstimatorParams(origin=origin)), params())
         m = mav.follow_target_encode(10000, 3, 411850000, -87600000, 0.0, [3.0, 0.0, 0.0],
-                                     [0.0] * 3, [1.0, 0.0, 0.0, 0.0], [0.0] * 3, cov, 0)  # fmt: skip
+                                     [0.0] * 3, [1.0, 0.0, 0.0, 0.0], [0.0] * 3, cov,
+                                     0)  # fmt: skip
         lt.update(decode_follow_target(mav.decode(bytearray(m.pack(mav)))), 0.3)
         post = lt.kf.latest()
         assert post is not None

@@ -145,8 +145,8 @@ def test_sim_refuses_what_check_refuses_unless_forced(tmp_path, capsys):
     assert "refused to fly: check failed: assumption_1" in err and "--force" in err
     assert err.count("\n") == 1  # one line
     # 20 m/s needs 44.6 deg of bank of the 45: inside the 5 deg margin, refused
-    rc = main(["sim", DEMO, "--set", "vehicle.airspeed_m_s=20", "--set", "vehicle.airspeed_max_m_s=22",
-               "--out", str(tmp_path / "r2")])  # fmt: skip
+    rc = main(["sim", DEMO, "--set", "vehicle.airspeed_m_s=20",
+               "--set", "vehicle.airspeed_max_m_s=22", "--out", str(tmp_path / "r2")])  # fmt: skip
     assert rc == 3 and "feasibility" in capsys.readouterr().err
 
 

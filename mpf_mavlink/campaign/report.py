@@ -116,8 +116,9 @@ def reflown_dirs(spec: CampaignSpec, rows: list[dict[str, Any]], out: Path) -> l
             continue
         sample = {v.key: _typed(r.get(v.key)) for v in spec.vary}
         d = out / "worst" / f"sample-{int(r['sample']):05d}"
-        fly(str(spec.base_path), [*spec.set, *overrides_for(base, sample)], spec.plant,
-            spec.metrics, spec.timeout_s, spec.stop_after_converged_s, spec.force, str(d))  # fmt: skip
+        sets = [*spec.set, *overrides_for(base, sample)]
+        fly(str(spec.base_path), sets, spec.plant, spec.metrics, spec.timeout_s,
+            spec.stop_after_converged_s, spec.force, str(d))  # fmt: skip
         if (d / "metrics.json").is_file():
             dirs.append(d)
     return dirs
@@ -202,7 +203,8 @@ def plots(spec: CampaignSpec, rows: list[dict[str, Any]], out: Path) -> list[Pat
             ok = [r.get("status") == "ok" for r in flown]
             cats = sorted({str(x) for x in xs}) if v.dist == "choice" else None
             for good, color in ((True, "tab:blue"), (False, "tab:red")):
-                pts = [(cats.index(str(x)) if cats else x, y) for x, y, o in zip(xs, ys, ok, strict=True)
+                pts = [(cats.index(str(x)) if cats else x, y)
+                       for x, y, o in zip(xs, ys, ok, strict=True)
                        if o == good and y is not None]  # fmt: skip
                 if pts:
                     ax.scatter(*zip(*pts, strict=True), s=8, color=color,

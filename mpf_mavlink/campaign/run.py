@@ -130,8 +130,9 @@ def run_campaign(
     # the workers first: a scheduler that does not answer leaves no directory behind
     client, cluster, n = _client(workers, scheduler) if todo else (None, None, 0)
     out.mkdir(parents=True, exist_ok=True)
-    meta.write_text(json.dumps({"name": spec.name, "source": spec.source,
-                                "base": str(spec.base_path), "fingerprint": fp}, indent=2) + "\n")  # fmt: skip
+    info = {"name": spec.name, "source": spec.source, "base": str(spec.base_path),
+            "fingerprint": fp}  # fmt: skip
+    meta.write_text(json.dumps(info, indent=2) + "\n")
     t0 = time.perf_counter()
     result = CampaignResult(out, [], 0, len(done), 0.0, 0)
     if todo:
@@ -159,7 +160,9 @@ def run_campaign(
     return result
 
 
-def _fly_all(client, spec, base, all_samples, todo, w, fh, rows, progress, tqdm) -> int:  # noqa: ANN001
+def _fly_all(  # noqa: ANN001
+    client, spec, base, all_samples, todo, w, fh, rows, progress, tqdm
+) -> int:
     from distributed import as_completed
 
     base_path = str(spec.base_path)

@@ -32,7 +32,8 @@ def add_campaign_parser(sub: Any) -> None:
     g.add_argument("--workers", type=int, default=None,
                    help="local worker processes (default: one per core)")  # fmt: skip
     g.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
-                   help="an existing dask scheduler to run on instead of local workers")  # fmt: skip
+                   help="an existing dask scheduler to run on instead of local "
+                        "workers")  # fmt: skip
     c.add_argument("--retry-errors", action="store_true",
                    help="fly again the samples whose row is an error or a timeout")  # fmt: skip
     c.add_argument("--no-report", action="store_true",
@@ -67,7 +68,8 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     print(format_summary(summary))
     if "flights_per_min" in summary:
         print(f"flown now: {res.flown} in {res.wall_s:.1f} s on {res.workers} worker(s) "
-              f"({summary['flights_per_min']:.1f} flights/min); results: {args.out / 'results.csv'}")  # fmt: skip
+              f"({summary['flights_per_min']:.1f} flights/min); "
+              f"results: {args.out / 'results.csv'}")  # fmt: skip
     for d in summary.get("worst_run_dirs", []):
         print(f"worst flight kept: {d}  (mpf-mavlink plot {d})")
     bad = summary["status"].get("error", 0) + summary["status"].get("timeout", 0)

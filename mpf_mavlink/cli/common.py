@@ -60,7 +60,8 @@ def add_overrides(p: argparse.ArgumentParser, example: str) -> None:
     """``--set KEY=VALUE`` (repeatable) into ``args.overrides``; ``example`` shows a key or two."""
     p.add_argument(
         "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-        help=f"override one configuration key, e.g. {example} (repeatable; validated like the file)",
+        help=f"override one configuration key, e.g. {example} (repeatable; validated like "
+        "the file)",
     )  # fmt: skip
 
 

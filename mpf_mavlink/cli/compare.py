@@ -78,7 +78,8 @@ def run_compare(
                 # a realtime-clock SIL on a CPU-starved shared machine can trip the bridge's
                 # wall-clock watchdog (no property of the law); fly once more and say so
                 log(
-                    f"      {law}: {res.exit_reason} after {res.metrics.get('sim_time_s')} s; flying it again"
+                    f"      {law}: {res.exit_reason} after {res.metrics.get('sim_time_s')} s; "
+                    "flying it again"
                 )
                 res = run_sil(c, out / law, progress=progress, plots=plots, log=lambda s: None)
                 retried = True
@@ -125,13 +126,15 @@ def run_compare(
         xt_txt = (
             f"{xt:.3f} m"
             if xt is not None
-            else f"n/a (no steady window: the flight ended before t = {c.metrics.steady_after_s:g} s)"
+            else "n/a (no steady window: the flight ended before "
+            f"t = {c.metrics.steady_after_s:g} s)"
         )
         log(f"      RMS cross-track {xt_txt}; {vline} ({fig['wall_s']:.0f} s wall)")
     wind = cfg.sil.wind_ned_m_s if plant == "sil" else cfg.kinematic.wind.steady_ned_m_s
     header = (
         f"{cfg.name}: {plant} plant, {cfg.sim.duration_s:g} s, steady from t >= "
-        f"{cfg.metrics.steady_after_s:g} s, wind {tuple(wind)} m/s NED; xt = distance from the moving path"
+        f"{cfg.metrics.steady_after_s:g} s, wind {tuple(wind)} m/s NED; "
+        "xt = distance from the moving path"
     )
     write_compare(out, rows, runs, nodes, closed, header, plots)
     return rows, header + "\n\n" + markdown_table(rows)
@@ -156,11 +159,14 @@ def cmd_compare(args: argparse.Namespace) -> int:
     # that could not run to its end (a safety exit, telemetry lost) is an error
     bad = [r for r in rows if r.figures.get("exit_code") not in FLOWN_EXIT_CODES]
     if bad:
+        why = [
+            f"{r.law} (exit {r.figures.get('exit_code')}: {r.figures.get('exit_reason')})"
+            for r in bad
+        ]
         raise MpfError(
-            "compare: the flight of "
-            + ", ".join(f"{r.law} (exit {r.figures.get('exit_code')}: {r.figures.get('exit_reason')})" for r in bad)
-            + " could not run to its end (see its run directory)"
-        )  # fmt: skip
+            f"compare: the flight of {', '.join(why)} could not run to its end (see its run "
+            "directory)"
+        )
     return 0
 
 
@@ -183,7 +189,8 @@ def add_compare_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentPar
         help="comma-separated laws (default: %(default)s)",
     )
     p.add_argument("--plant", choices=["kinematic", "sil"], default="kinematic",
-                   help="kinematic (in-process, the paper's plant) or sil (JSBSim + bridge over MAVLink)")  # fmt: skip
+                   help="kinematic (in-process, the paper's plant) or sil (JSBSim + bridge "
+                        "over MAVLink)")  # fmt: skip
     p.add_argument(
         "--duration",
         type=positive,

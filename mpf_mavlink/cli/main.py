@@ -100,8 +100,8 @@ def _gate(cfg: Config, force: bool) -> None:
         return
     if force:
         print(format_checks(failed), file=sys.stderr)
-        print(f"mpf-mavlink: --force: flying despite the failed check: {', '.join(r.name for r in failed)}",
-              file=sys.stderr)  # fmt: skip
+        names = ", ".join(r.name for r in failed)
+        print(f"mpf-mavlink: --force: flying despite the failed check: {names}", file=sys.stderr)
         return
     raise CheckFailed(
         f"{cfg.source}: refused to fly: check failed: "
@@ -188,7 +188,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     s.add_argument(
         "--force", action="store_true",
-        help="fly even when a pre-flight check fails (mpf-mavlink check): the verdict still judges it",
+        help="fly even when a pre-flight check fails (mpf-mavlink check): the verdict still "
+        "judges it",
     )  # fmt: skip
     s.set_defaults(func=cmd_sim)
 

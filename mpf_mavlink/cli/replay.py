@@ -13,7 +13,6 @@ from pathlib import Path
 from typing import Any
 
 from mpf_mavlink.cli.common import add_output_flags, add_overrides, default_out, printer, seconds
-from mpf_mavlink.config import bridge as bridge_config  # noqa: F401  (registers mavlink/adapter: replay configs have them)
 
 REPLAY_DESCRIPTION = """\
 Replay a tlog (this project's, MAVProxy's, QGroundControl's, an autopilot SITL's; MAVLink 1 or
@@ -73,7 +72,8 @@ def add_replay_parser(subparsers: Any) -> argparse.ArgumentParser:
         "--config",
         required=True,
         metavar="CONFIG",
-        help="scenario YAML (path, target, gains, mavlink ids and limits); see configs/replay_arduplane_sitl.yaml",
+        help="scenario YAML (path, target, gains, mavlink ids and limits); see "
+        "configs/replay_arduplane_sitl.yaml",
     )
     r.add_argument(
         "--out", type=Path, metavar="DIR", help="run directory (default: runs/<time>-replay-<name>)"

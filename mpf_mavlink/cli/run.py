@@ -20,7 +20,6 @@ from mpf_mavlink.cli.common import (
     positive,
     printer,
 )
-from mpf_mavlink.config import bridge as bridge_config  # noqa: F401  (registers mavlink/adapter: `check` accepts bridge configs)
 
 RUN_DESCRIPTION = """\
 Connect to a PX4 or ArduPlane autopilot, run the pre-flight checks, pre-stream setpoints,
@@ -34,7 +33,7 @@ loss it ends the run, or with --reengage N flies again (N times at most) once th
 back and the vehicle is in the hold mode. Ctrl-C, SIGTERM, the mission duration or an error
 hand control back. Everything is recorded in the run directory:
 mavlink.tlog (all traffic), timeseries.csv, setpoints.csv, limits.csv, metrics.json and plots.
-The last line is the flight's verdict on telemetry (README "Verdicts").
+The last line is the flight's verdict on telemetry (docs/checks.md, "Verdicts").
 """
 
 CONNECT_HELP = (
@@ -92,8 +91,8 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     r.add_argument("--connect", required=True, metavar="URL", help=CONNECT_HELP)
     r.add_argument(
         "--flavour", choices=["px4", "ardupilot", "auto"], default=None,
-        help="autopilot family; auto (the default, or mavlink.flavour) reads it from the HEARTBEAT. "
-        "A value that contradicts the HEARTBEAT is an error",
+        help="autopilot family; auto (the default, or mavlink.flavour) reads it from the "
+        "HEARTBEAT. A value that contradicts the HEARTBEAT is an error",
     )  # fmt: skip
     r.add_argument(
         "--out",
@@ -109,13 +108,14 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     )
     r.add_argument(
         "--heartbeat-timeout", type=positive, metavar="S",
-        help="give up with one line and exit 2 when no autopilot HEARTBEAT (or no usable telemetry) "
-        "arrives within S seconds (default: mavlink.heartbeat_timeout_s)",
+        help="give up with one line and exit 2 when no autopilot HEARTBEAT (or no usable "
+        "telemetry) arrives within S seconds (default: mavlink.heartbeat_timeout_s)",
     )  # fmt: skip
     r.add_argument(
         "--arm",
         action="store_true",
-        help="arm the vehicle after pre-streaming if it is disarmed (off by default: arm it yourself)",
+        help="arm the vehicle after pre-streaming if it is disarmed (off by default: arm it "
+        "yourself)",
     )
     r.add_argument(
         "--reengage", type=count, metavar="N",

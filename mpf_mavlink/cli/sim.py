@@ -80,7 +80,8 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     what = f"JSBSim {ac.model}" if sil.plant == "jsbsim" else "kinematic plant"
     print(
         f"simulated {sil.flavour} vehicle ({what}, {args.clock} clock) on {args.serve}: system 1, "
-        f"target as system {sil.target_system}; {v.mode_name}, {v.cruise_airspeed:g} m/s. Ctrl-C to stop.",
+        f"target as system {sil.target_system}; {v.mode_name}, {v.cruise_airspeed:g} m/s. "
+        "Ctrl-C to stop.",
         flush=True,
     )
 
@@ -122,7 +123,8 @@ def add_vehicle_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentPar
     p.add_argument(
         "--clock", choices=["realtime", "lockstep"], default="realtime",
         help="realtime (default): paced to the wall clock; lockstep: advance as soon as the peer "
-        "answers each telemetry frame with a SET_ATTITUDE_TARGET (real time while nobody commands it)",
+        "answers each telemetry frame with a SET_ATTITUDE_TARGET (real time while nobody "
+        "commands it)",
     )  # fmt: skip
     p.add_argument(
         "--speed",
@@ -161,7 +163,8 @@ def sil_summary(res: Any) -> str:
     ]
     lines = [
         "",
-        f"SIL: {m.get('plant')} plant, {m.get('flavour')} flavour, {m.get('clock')} clock; truth of the plant, "
+        f"SIL: {m.get('plant')} plant, {m.get('flavour')} flavour, {m.get('clock')} clock; "
+        "truth of the plant, "
         f"|pt| from t >= {m.get('steady_after_s', '?')} s after engagement",
         f"{'figure':<24} {'value':>10}  unit",
         "-" * 42,
@@ -174,10 +177,13 @@ def sil_summary(res: Any) -> str:
     lines += [
         "",
         f"bridge: {m.get('bridge_exit_reason')} (exit {m.get('bridge_exit_code')}); {hb}",
-        f"run directory: {res.out_dir}  (timeseries.csv and truth.csv from the plant, metrics.json)",
-        f"plots:         {res.out_dir}/*.png  (limits, errors, sdot_rates, planar, trajectory_3d, target_relative)",
+        f"run directory: {res.out_dir}  (timeseries.csv and truth.csv from the plant, "
+        "metrics.json)",
+        f"plots:         {res.out_dir}/*.png  (limits, errors, sdot_rates, planar, "
+        "trajectory_3d, target_relative)",
         f"tlog:          {res.tlog}  (both directions; MAVProxy, QGC or mavlogdump.py read it)",
-        f"bridge's view: {res.bridge_dir}  (what the law saw: timeseries.csv, setpoints.csv, metrics.json)",
+        f"bridge's view: {res.bridge_dir}  (what the law saw: timeseries.csv, setpoints.csv, "
+        "metrics.json)",
     ]
     return "\n".join(lines)
 

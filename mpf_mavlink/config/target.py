@@ -2,7 +2,7 @@
 
 Validated strictly by :mod:`mpf_mavlink.config.schema` like every section. The keys are those of
 :class:`mpf_mavlink.core.target_filter.TargetFilterParams` (see its module for the model) plus
-``mode``: ``filter`` (the EKF) or ``last_sample`` (the bridge before the estimator: the latest
+``mode``: ``filter`` (the EKF) or ``last_sample`` (no estimator: the latest
 report extrapolated, stale after ``mavlink.target_timeout_s``; kept to measure against).
 ``mavlink.target_timeout_s`` applies to ``last_sample`` only: the filter is stale when its
 predicted position 1-sigma exceeds ``max_position_sigma_m`` (or after ``max_age_s``).

@@ -41,12 +41,13 @@ the frame of the scripted targets): its yaw is the target's reported attitude ya
 younger than ``attitude_timeout_s`` (turned on at the estimated turn rate), else the course
 (x along the horizontal velocity); below 0.5 m/s the course is undefined and the yaw is held
 (last course, or the reported heading). Angular velocity ``[0, 0, w]``, acceleration
-``w [-ve, vn, 0]``, angular acceleration 0. The target's roll and pitch are not followed. Stale (a reason string, no state) when the predicted
-position uncertainty ``sqrt(trace P_pos) + manoeuvre_accel_m_s2 tau^2 / 2`` exceeds
-``max_position_sigma_m`` (tau: time since the newest fused position) or that position is
-older than ``max_age_s``. The second term is what a target that starts to manoeuvre while unseen can
-have moved away from the prediction: the filter's own covariance reflects its (small)
-process noise, tuned for smoothing, and would let a quiet model fly on a long outage.
+``w [-ve, vn, 0]``, angular acceleration 0. The target's roll and pitch are not followed.
+Stale (a reason string, no state) when the predicted position uncertainty ``sqrt(trace P_pos) +
+manoeuvre_accel_m_s2 tau^2 / 2`` exceeds ``max_position_sigma_m`` (tau: time since the newest fused
+position) or that position is older than ``max_age_s``. The second term is what a target that starts
+to manoeuvre while unseen can have moved away from the prediction: the filter's own covariance
+reflects its (small) process noise, tuned for smoothing, and would let a quiet model fly on a long
+outage.
 """
 
 from __future__ import annotations

@@ -334,7 +334,8 @@ def plot_run(d: str | Path) -> list[Path]:
     for ax, (a, b, la, lb, sa, sb, ia, ib) in zip(axs, views, strict=True):
         ta, tb = "tgt_" + a[2:], "tgt_" + b[2:]
         for i, (tk, P) in enumerate(paths):
-            ax.plot(sa * P[:, ia], sb * P[:, ib], "r-", lw=1.5, alpha=0.25 + 0.5 * (i + 1) / len(paths),
+            alpha = 0.25 + 0.5 * (i + 1) / len(paths)
+            ax.plot(sa * P[:, ia], sb * P[:, ib], "r-", lw=1.5, alpha=alpha,
                     label=f"desired path at t = {tk:.0f} s")  # fmt: skip
         _, xa, xb = _gapped(t, cols[a], cols[b])
         ax.plot(sa * xa, sb * xb, lw=1.0, color="tab:blue", label="vehicle")

@@ -8,8 +8,8 @@ one clause of a class, so that the verdict tells an energy problem from a tracki
 - ``safety``: loss of control (|bank| > 90 deg or |pitch| > 60 deg at any instant: no
   fixed-wing mission flies there); altitude below ``metrics.altitude_floor_m`` above home.
 - ``attitude``: |bank| beyond the vehicle's bank limit (the smaller of ``vehicle.max_bank_rad``
-  and ``vehicle.autopilot_bank_limit_rad``) + ``metrics.bank_tolerance_rad`` (5 deg), or |pitch| beyond
-  ``metrics.pitch_limit_rad``, for longer than ``metrics.limit_hold_s`` at a stretch; |bank|
+  and ``vehicle.autopilot_bank_limit_rad``) + ``metrics.bank_tolerance_rad`` (5 deg), or |pitch|
+  beyond ``metrics.pitch_limit_rad``, for longer than ``metrics.limit_hold_s`` at a stretch; |bank|
   within ``checks.bank_margin_rad`` of the limit for more than ``metrics.limit_fraction`` of the
   steady window (the turn is saturated: the feedback has nothing left to correct with).
 - ``energy``: airspeed outside [airspeed_min (1 - tol), airspeed_max (1 + tol)]
@@ -20,17 +20,16 @@ one clause of a class, so that the verdict tells an energy problem from a tracki
   margin left).
 - ``tracking``: |pt| above ``metrics.fail_pt_m`` at any time after ``metrics.steady_after_s``.
 
-Why these tolerances (README "Verdicts"): ``bank_tolerance_rad`` 5 deg mirrors above the limit
-the margin ``checks.bank_margin_rad`` keeps below it for the feedback and gusts (the autopilot
-clips the set-point; the roll loop overshoots it: the demo's capture reaches 47.6-47.9 deg);
-the time beyond the limit itself is reported (:func:`limits_line`). ``limit_hold_s`` 1 s is ~3 time constants of an
-autopilot's roll loop (PX4 FW_R_TC 0.4 s, ArduPlane ~0.3-0.5 s, the X8's 0.19 s roll mode): a
-gust that rolls the aircraft past its limit is corrected within it, a bank held longer is
-demanded. ``airspeed_tolerance`` 15 % is the light-turbulence allowance of the checks (2 m/s,
-about 2 sigma at 100 m) at the X8's 14 m/s minimum. ``limit_fraction`` 20 %: a path that passes
-the feasibility check needs no bank in the margin band at all, and the level flight the checks
-assume needs trim thrust (0.22 on the X8), far from the ceiling; a fifth of the steady window
-there is no longer a gust.
+Why these tolerances (also docs/checks.md): ``bank_tolerance_rad`` 5 deg mirrors above the limit the
+margin ``checks.bank_margin_rad`` keeps below it for the feedback and gusts (the autopilot clips the
+set-point; the roll loop overshoots it: the demo's capture reaches 47.6-47.9 deg); the time beyond
+the limit itself is reported (:func:`limits_line`). ``limit_hold_s`` 1 s is ~3 time constants of an
+autopilot's roll loop (PX4 FW_R_TC 0.4 s, ArduPlane ~0.3-0.5 s, the X8's 0.19 s roll mode): a gust
+that rolls the aircraft past its limit is corrected within it, a bank held longer is demanded.
+``airspeed_tolerance`` 15 % is the light-turbulence allowance of the checks (2 m/s, about 2 sigma at
+100 m) at the X8's 14 m/s minimum. ``limit_fraction`` 20 %: a path that passes the feasibility check
+needs no bank in the margin band at all, and the level flight the checks assume needs trim thrust
+(0.22 on the X8), far from the ceiling; a fifth of the steady window there is no longer a gust.
 
 A flight whose steady window (``t >= steady_after_s``) is shorter than ``metrics.min_steady_s``
 and that broke no limit is NOT JUDGED (exit :data:`EXIT_NOT_JUDGED`): its tracking figures are
@@ -208,7 +207,8 @@ def assess(
         if lost.any():
             k = int(np.argmax(lost))
             out.append(("safety", f"loss of control at t = {t[k]:.1f} s (bank "
-                        f"{math.degrees(r[k]):.0f} deg, pitch {math.degrees(p[k]):.0f} deg)"))  # fmt: skip
+                        f"{math.degrees(r[k]):.0f} deg, pitch "
+                        f"{math.degrees(p[k]):.0f} deg)"))  # fmt: skip
     if altitude is not None:
         alt = np.asarray(altitude, float)
         k = int(np.argmin(alt))
@@ -221,7 +221,8 @@ def assess(
         a = np.asarray(airspeed, float)
         lo, hi = v.v_min * (1.0 - m.airspeed_tolerance), v.v_max * (1.0 + m.airspeed_tolerance)
         fig.update(airspeed_band_m_s=[lo, hi], airspeed_m_s=v.airspeed_m_s,
-                   min_airspeed_m_s=float(np.nanmin(a)), max_airspeed_m_s=float(np.nanmax(a)))  # fmt: skip
+                   min_airspeed_m_s=float(np.nanmin(a)),
+                   max_airspeed_m_s=float(np.nanmax(a)))  # fmt: skip
         dur, t_at = _longest_run((a < lo) | (a > hi), t)
         if dur > hold:
             out.append(("energy", f"airspeed outside [{lo:.1f}, {hi:.1f}] m/s for {dur:.1f} s "
@@ -233,7 +234,8 @@ def assess(
             if not abs(mean - v.airspeed_m_s) <= dv:
                 out.append(("energy", f"airspeed not held: mean {mean:.1f} m/s from t = "
                             f"{m.steady_after_s:g} s for {steady_s:.0f} s against the "
-                            f"{v.airspeed_m_s:g} m/s the law assumes (limit +-{dv:.1f} m/s)"))  # fmt: skip
+                            f"{v.airspeed_m_s:g} m/s the law assumes "
+                            f"(limit +-{dv:.1f} m/s)"))  # fmt: skip
     if thrust is not None:
         thr = np.asarray(thrust, float)
         ceil = thrust_ceiling(cfg)
@@ -272,13 +274,15 @@ def assess(
                 out.append(("attitude", f"bank at its limit (>= {math.degrees(band):.1f} of "
                             f"{math.degrees(bank_lim):.1f} deg) for {100 * frac:.0f} % of the "
                             f"steady window ({secs:.0f} of {steady_s:.0f} s, first at t = "
-                            f"{first:.1f} s; limit {100 * frac_lim:.0f} %): the turn is saturated"))  # fmt: skip
+                            f"{first:.1f} s; limit {100 * frac_lim:.0f} %): "
+                            "the turn is saturated"))  # fmt: skip
     if judged_steady:
         pts = np.asarray(pt_norm, float)[steady]
         k = int(np.argmax(pts))
         if not pts[k] <= m.fail_pt_m:  # NaN fails too
             out.append(("tracking", f"|pt| {pts[k]:.1f} m at t = {t[steady][k]:.1f} s after "
-                        f"convergence (bound {m.fail_pt_m:g} m from t = {m.steady_after_s:g} s)"))  # fmt: skip
+                        f"convergence (bound {m.fail_pt_m:g} m from "
+                        f"t = {m.steady_after_s:g} s)"))  # fmt: skip
     else:
         vd.not_judged = (
             f"tracked {t[-1]:.1f} s, steady window {steady_s:.1f} s from t = "
