@@ -30,6 +30,7 @@ from mpf_mavlink.campaign.design import overrides_for, samples
 from mpf_mavlink.campaign.flight import fly
 from mpf_mavlink.campaign.spec import CampaignSpec
 from mpf_mavlink.config import load_config
+from mpf_mavlink.config.schema import Config
 from mpf_mavlink.errors import MpfError
 
 FINISHED = ("ok", "failed", "refused")  # a re-run does not fly these again
@@ -160,8 +161,17 @@ def run_campaign(
     return result
 
 
-def _fly_all(  # noqa: ANN001
-    client, spec, base, all_samples, todo, w, fh, rows, progress, tqdm
+def _fly_all(
+    client: Any,
+    spec: CampaignSpec,
+    base: Config,
+    all_samples: list[dict[str, Any]],
+    todo: list[int],
+    w: Any,
+    fh: Any,
+    rows: dict[int, dict[str, Any]],
+    progress: bool,
+    tqdm: Any,
 ) -> int:
     from distributed import as_completed
 

@@ -44,7 +44,7 @@ def check_host(url: str, option: str) -> None:
     import socket
 
     from mpf_mavlink.errors import MpfError
-    from mpf_mavlink.mavlink.link import parse_url
+    from mpf_mavlink.mavlink.url import parse_url
 
     parsed = parse_url(url)  # MpfError (one line) for anything malformed
     if parsed.kind == "serial":

@@ -171,7 +171,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 
 def add_compare_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentParser:
-    p = subparsers.add_parser(
+    p: argparse.ArgumentParser = subparsers.add_parser(
         "compare",
         help="fly the same mission with MPF and the baseline guidance laws; one table",
         description="Fly the same mission (same seeds, start, adapter) with each guidance law "

@@ -57,7 +57,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 def add_replay_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Add the ``replay`` sub-command (with ``func``) to an argparse sub-parsers object."""
-    r = subparsers.add_parser(
+    r: argparse.ArgumentParser = subparsers.add_parser(
         "replay",
         help="re-run the guidance on a recorded tlog (open loop) and check recorded commands",
         description=REPLAY_DESCRIPTION,

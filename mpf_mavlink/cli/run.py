@@ -76,7 +76,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Add the ``run`` sub-command (with ``func``) to an argparse sub-parsers object."""
-    r = subparsers.add_parser(
+    r: argparse.ArgumentParser = subparsers.add_parser(
         "run",
         help="fly the MPF law on a PX4 / ArduPlane autopilot over MAVLink",
         description=RUN_DESCRIPTION,

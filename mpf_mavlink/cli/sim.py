@@ -52,7 +52,7 @@ SERVE_HELP = "MAVLink connection to serve: udpout:HOST:PORT, udpin:HOST:PORT or 
 
 
 def _check_serve_url(url: str) -> None:
-    from mpf_mavlink.mavlink.link import parse_url
+    from mpf_mavlink.mavlink.url import parse_url
 
     parsed = parse_url(url)  # MpfError (one line) for anything malformed
     if parsed.kind not in ("udpin", "udpout", "tcpin"):
@@ -111,7 +111,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
 
 def add_vehicle_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentParser:
     """Add the ``vehicle`` sub-command (with ``func``)."""
-    p = subparsers.add_parser(
+    p: argparse.ArgumentParser = subparsers.add_parser(
         "vehicle",
         help="serve the simulated vehicle alone (real time) for MAVProxy, a GCS or your own code",
         description=VEHICLE_DESCRIPTION,

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-GRAVITY = 9.80665
+from mpf_mavlink.constants import GRAVITY_M_S2
 
 
 def distance_to_polyline(
@@ -57,7 +57,7 @@ def distance_to_polyline(
             qq = q[r, None, :]
             u = np.clip(np.sum((qq - A) * d, axis=2) / L2, 0.0, 1.0)
             best[r] = np.min(np.linalg.norm(qq - (A + u[:, :, None] * d), axis=2), axis=1)
-    return best
+    return np.asarray(best, dtype=np.float64)
 
 
 #: exit codes of a flight that ran to its end, whatever its verdict (0 PASS, 5 FAIL, 6 NOT JUDGED)
@@ -94,7 +94,7 @@ def law_figures(
     pt = cols["pt_norm"]
     rate = np.hypot(cols["w2_cmd"], cols["w3_cmd"])
     # the bank a coordinated turn at the achieved rate needs (the kinematic plant has no roll)
-    bank = np.degrees(np.arctan(airspeed * np.abs(cols["w3"]) / GRAVITY))
+    bank = np.degrees(np.arctan(airspeed * np.abs(cols["w3"]) / GRAVITY_M_S2))
     out: dict[str, Any] = {
         "convergence_s": conv,
         "steady_rms_pt_m": float(np.sqrt(np.mean(pt[m] ** 2))) if m.any() else None,
