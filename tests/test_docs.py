@@ -1,6 +1,7 @@
 """The user guide holds together: README.md within its length, every relative link in README.md
-and docs/ resolves, and every file in docs/ (figures, tables, results) is named in docs/README.md
-with the command that wrote it or as a hand-written guide."""
+and docs/ resolves, every file and ``python -m`` module the guide names exists (a file moved
+without its documentation fails here), and every file in docs/ (figures, tables, results) is
+named in docs/README.md with the command that wrote it or as a hand-written guide."""
 
 from __future__ import annotations
 
@@ -51,3 +52,29 @@ def test_every_file_in_docs_names_what_wrote_it():
         if not named:
             missing.append(rel)
     assert not missing, f"docs/README.md does not name: {missing}"
+
+
+# a path in the text, not a pattern (sitl-<flight>.json, campaign_roa*.yaml)
+PATH_REF = re.compile(
+    r"(?<![\w/.])((?:mpf_mavlink|sim|tests|configs|scripts|docs)/[\w./-]*\w)(?![\w*<{-])"
+)
+MODULE_REF = re.compile(r"python -m ([\w.]+)")
+
+
+def test_the_files_and_modules_the_guide_names_exist():
+    import importlib.util
+
+    bad = []
+    for md in _markdown():
+        text = md.read_text()
+        for ref in PATH_REF.findall(text):
+            if not (ROOT / ref).exists() and not (ROOT / ref).with_suffix("").exists():
+                bad.append(f"{md.relative_to(ROOT)}: {ref}")
+        for mod in MODULE_REF.findall(text):
+            mod = mod.rstrip(".")
+            if (
+                mod.split(".")[0] in ("mpf_mavlink", "sim")
+                and importlib.util.find_spec(mod) is None
+            ):
+                bad.append(f"{md.relative_to(ROOT)}: python -m {mod}")
+    assert not bad, "the guide names what does not exist: " + "; ".join(sorted(set(bad)))
