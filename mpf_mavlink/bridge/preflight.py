@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -129,23 +131,64 @@ def start_altitude(cfg: Config) -> CheckResult:
 def climb_check(
     cfg: Config, path: Any, target: Any, horizon: float, s0: float, steady: Any
 ) -> CheckResult:
-    """:func:`climb_feasibility` of the config: the vehicle's climb/sink capability, the
-    verdict's airspeed window as the energy reserve, and in the SIL the vertical gusts of its
-    turbulence (2 sigma_w over L_w / V at the altitude above sea level the path reaches, as
-    JSBSim keys them: home_alt_m + height)."""
+    """:func:`climb_feasibility` of the config: the vehicle's climb/sink capability (given where
+    the aircraft starts, scaled by the air density at the highest point the path reaches over
+    the horizon: :func:`density_ratio`), the verdict's airspeed window as the energy reserve,
+    and in the SIL the vertical gusts of its turbulence (2 sigma_w over L_w / V at the altitude
+    above sea level the path reaches, as JSBSim keys them: home_alt_m + height). Heights above
+    sea level start from sil.home_alt_m (SIL), mavlink.origin_alt_m or 0."""
     v, m = cfg.vehicle, cfg.metrics
     ts, W1, P = demanded_directions(
         path, target, v.airspeed_m_s, horizon, s0, steady, with_positions=True
     )
     gusts = None
     sil = cfg.extra.get("sil")
-    if sil is not None and sil.link != "none" and sil.turbulence != "none":
-        gusts = vertical_gusts(sil.turbulence, sil.home_alt_m - P[:, 2], v.airspeed_m_s)
-    return climb_feasibility(
+    sil = sil if sil is not None and sil.link != "none" else None
+    home = (
+        sil.home_alt_m
+        if sil is not None
+        else getattr(cfg.extra.get("mavlink"), "origin_alt_m", None)
+    )
+    home = float(home) if home is not None else 0.0
+    if sil is not None and sil.turbulence != "none":
+        gusts = vertical_gusts(sil.turbulence, home - P[:, 2], v.airspeed_m_s)
+    # the capability is the aircraft's where it starts; the top of the path over the horizon is
+    # where the thinner air leaves the least of it (a descent keeps the start's, conservatively)
+    p0 = cfg.kinematic.initial_position_ned_m
+    if sil is not None and sil.initial_position_ned_m is not None:
+        p0 = sil.initial_position_ned_m
+    h0, top = home - float(p0[2]), home - float(np.min(P[:, 2]))
+    k = min(1.0, density_ratio(top, h0))
+    climb, sink = v.max_climb_rate_m_s, v.max_sink_rate_m_s
+    r = climb_feasibility(
         ts, W1, v.airspeed_m_s, v.v_min * (1.0 - m.airspeed_tolerance),
-        v.v_max * (1.0 + m.airspeed_tolerance), v.max_climb_rate_m_s, v.max_sink_rate_m_s,
-        gusts=gusts,
+        v.v_max * (1.0 + m.airspeed_tolerance), None if climb is None else round(climb * k, 2),
+        None if sink is None else round(sink * k, 2), gusts=gusts,
     )  # fmt: skip
+    figs = {**r.figures, "density_ratio": k, "top_asl_m": top}
+    why = ""
+    if k < 1.0 and climb is not None:
+        why = (
+            f"; capability scaled by the air density at the path's top, {top:.0f} m above sea "
+            f"level: {k:.3f} of the start's ({climb:g} / {sink:g} m/s there)"
+        )
+    return dataclasses.replace(r, summary=r.summary + why, figures=figs)
+
+
+def density_ratio(h_m: float, h_ref_m: float) -> float:
+    """ISA troposphere density at h_m over that at h_ref_m (heights above sea level, m,
+    clamped to [-500, 11000]).
+
+    Why the climb and sink capability scale with it: at a fixed true airspeed a propeller's
+    thrust at a given rpm and the aircraft's drag are both proportional to the air density, so
+    the steady climb at full thrust and the sink at idle, (T - D) V / W, are too (to first
+    order; induced drag, which grows as 1 / rho, takes a little more of the climb)."""
+
+    def rho(h: float) -> float:
+        h = min(max(h, -500.0), 11000.0) if math.isfinite(h) else 0.0
+        return (1.0 - 2.25577e-5 * h) ** 4.255876
+
+    return rho(h_m) / rho(h_ref_m)
 
 
 def airspeed_hold(cfg: Config) -> CheckResult | None:

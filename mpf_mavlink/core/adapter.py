@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-from mpf_mavlink.core.frames import GRAVITY_M_S2
+from mpf_mavlink.constants import GRAVITY_M_S2
 
 Vec = tuple[float, float, float]
 
@@ -292,7 +292,8 @@ def adapt(
     """
     isf = math.isfinite
     try:
-        R2 = R_B_N[2].tolist() if hasattr(R_B_N, "tolist") else R_B_N[2]  # type: ignore[union-attr]  # only row 2 is used
+        # only row 2 is used (a numpy matrix or nested lists)
+        R2 = R_B_N[2].tolist() if hasattr(R_B_N, "tolist") else R_B_N[2]  # type: ignore[union-attr]
         roll = math.atan2(R2[1], R2[2])
         pitch = math.asin(_clip(-R2[0], -1.0, 1.0))
         ox, oy, oz = omega_w1_I
