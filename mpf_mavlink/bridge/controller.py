@@ -31,7 +31,8 @@ from __future__ import annotations
 import collections
 import dataclasses
 import math
-from typing import Any, NamedTuple
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -85,25 +86,50 @@ def parse_marker(text: str) -> tuple[str, float | None] | None:
     return None
 
 
-class Step(NamedTuple):
+class Step:
     """One control step: what the law saw and the setpoint it produced.
 
     t: mission time (s); t_boot_s: the ATTITUDE sample's autopilot time (s);
     time_boot_ms: what the setpoint carries; dt: time since the previous step (s, 0 first);
     w1_prev: w1 (NED) of the previous step, for the achieved-rate column of the logs.
+    ``diag``: the law's diagnostics at the sample's own instant. With delay compensation the
+    command comes from the predicted state, and the diagnostics the logs need are a second
+    evaluation of the (pure) law, made only when a record or the display asks for them.
     """
 
-    t: float
-    t_boot_s: float
-    time_boot_ms: int
-    dt: float
-    estimate: Estimate
-    target: TargetState
-    cmd: MpfCommand
-    diag: MpfDiagnostics
-    setpoint: Setpoint
-    w1: tuple[float, float, float]
-    w1_prev: tuple[float, float, float] | None
+    __slots__ = (
+        "t", "t_boot_s", "time_boot_ms", "dt", "estimate", "target", "cmd", "setpoint",
+        "w1", "w1_prev", "_diag", "_diag_of",
+    )  # fmt: skip
+
+    def __init__(
+        self,
+        t: float,
+        t_boot_s: float,
+        time_boot_ms: int,
+        dt: float,
+        estimate: Estimate,
+        target: TargetState,
+        cmd: MpfCommand,
+        diag: MpfDiagnostics | Callable[[], MpfDiagnostics],
+        setpoint: Setpoint,
+        w1: tuple[float, float, float],
+        w1_prev: tuple[float, float, float] | None,
+    ) -> None:
+        self.t, self.t_boot_s, self.time_boot_ms, self.dt = t, t_boot_s, time_boot_ms, dt
+        self.estimate, self.target, self.cmd, self.setpoint = estimate, target, cmd, setpoint
+        self.w1, self.w1_prev = w1, w1_prev
+        if callable(diag):
+            self._diag, self._diag_of = None, diag
+        else:
+            self._diag, self._diag_of = diag, None
+
+    @property
+    def diag(self) -> MpfDiagnostics:
+        if self._diag is None:
+            assert self._diag_of is not None
+            self._diag, self._diag_of = self._diag_of(), None
+        return self._diag
 
     def row(self) -> list[float]:
         """The run directory's timeseries row (:data:`mpf_mavlink.runs.rundir.COLUMNS`)."""
@@ -546,15 +572,14 @@ class Controller:
                 gains = dataclasses.replace(gains, alpha=a)
         self.alpha_m = gains.alpha
         law = self.cfg_law
-        cmd, diag = guidance_law(law, s_law, vl, tgt_law, self.path, gains, self.ext, True)
-        assert diag is not None
+        cmd, diag_law = guidance_law(law, s_law, vl, tgt_law, self.path, gains, self.ext, True)
+        assert diag_law is not None
+        diag: MpfDiagnostics | Callable[[], MpfDiagnostics] = diag_law
         if tau > 0.0:
             # The logs describe the sample's own instant (errors, frames, the relative position:
             # replay and the SIL truth align on them); the command and its saturation flag are
             # the predicted evaluation's, which is what was sent.
-            _, dm = guidance_law(law, self.s, vs, tgt, self.path, gains, self.ext, True)
-            assert dm is not None
-            diag = dm._replace(mode=diag.mode)
+            diag = self._diag_at_sample(self.s, vs, tgt, gains, diag_law.mode)
         self.law_evals += 1
         w10, w11, w12 = vs.R_W_I[:, 0].tolist()
         w1 = (w10, w11, w12)  # measured: the logs' achieved rate
@@ -576,6 +601,19 @@ class Controller:
         tb_ms = int(round(est.t_boot_s * 1000.0))
         self.why_not = ""  # a step was made: nothing is missing now
         return Step(t, est.t_boot_s, tb_ms, dt, est, tgt, cmd, diag, sp, w1, w1_prev)
+
+    def _diag_at_sample(
+        self, s: float, vs: VehicleState, tgt: TargetState, gains: Any, mode: str
+    ) -> Callable[[], MpfDiagnostics]:
+        """The diagnostics of the law at the sample's own instant, when asked for."""
+        law, path, ext = self.cfg_law, self.path, self.ext
+
+        def diag() -> MpfDiagnostics:
+            _, dm = guidance_law(law, s, vs, tgt, path, gains, ext, True)
+            assert dm is not None
+            return dm._replace(mode=mode)
+
+        return diag
 
     def _segments(self, t: float, tau: float) -> list[tuple[float, Any]]:
         """The body rates over [t, t + tau]: the PX4 rate setpoints already sent act from

@@ -91,9 +91,9 @@ class VehicleLink:
         self.send(self.link.mav.statustext_encode(dialect.MAV_SEVERITY_INFO, text.encode("ascii")))
 
     def last_tx_record_s(self) -> float | None:
-        """The tlog record time (s) of the latest message sent; None without a tlog."""
-        tl = self.link.tlog
-        return None if tl is None or tl.last_us is None else tl.last_us * 1e-6
+        """The record time (s) of the latest message sent, as a tlog reader computes it."""
+        t: float | None = self.link.last_tx_s
+        return t
 
     def duties(self, now: float) -> None:
         """The companion HEARTBEAT and (PX4, real time) the TIMESYNC requests."""
@@ -115,14 +115,12 @@ class VehicleLink:
             self.link.close()
 
     # -- receiving ---------------------------------------------------------------------------
-    def rx_time(self, msg: Any) -> float | None:
-        """The receive time (s since the epoch) as the tlog recorded it: the link logs each
-        message just before handing it over, so the last record is this one. The same float
-        as a tlog reader computes (us * 1e-6), so replay sees exactly what we saw."""
-        tl = self.link.tlog if self.link is not None else None
-        if tl is not None and tl.last_packet is msg.get_msgbuf() and tl.last_us is not None:
-            return tl.last_us * 1e-6
-        t = getattr(msg, "_timestamp", None)  # no tlog record for it: quantise alike
+    @staticmethod
+    def rx_time(msg: Any) -> float | None:
+        """The receive time (s since the epoch) as the tlog records it: the link stamps each
+        message with its record time, quantised to the tlog's microseconds, so replay sees
+        exactly what we saw (and a run without a tlog sees the same)."""
+        t = getattr(msg, "_timestamp", None)
         return None if t is None else round(t * 1e6) * 1e-6
 
     def dispatch(self, msg: Any) -> None:

@@ -25,7 +25,8 @@ LEAN_ROW_EVERY = 5
 
 
 def is_lean(m: Any) -> bool:
-    return getattr(m, "recording", "full") == "lean"
+    """``mavlink.recording: lean`` (campaigns)."""
+    return bool(m.recording == "lean")
 
 
 class Recorder:

@@ -108,6 +108,7 @@ class MavlinkConfig:
     origin_alt_m: float | None = None
     tlog_fsync_every_s: float | None = field(default=1.0, metadata=_nonneg())
     plots: bool = True
+    recording: Literal["full", "lean"] = "full"  # lean (campaigns): no plots, 1 row in 5, no tlog
     # What an operator's ground station sees of the guidance (bridge/operator.py): NAMED_VALUE_FLOAT
     # MPF_pt, MPF_psi, MPF_sdot, MPF_state at operator_display_hz (vehicle time), sent after the
     # setpoint, and a STATUSTEXT "MPF: ..." on every state change and on the reason it stops

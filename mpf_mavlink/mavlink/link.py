@@ -120,6 +120,7 @@ class Link:
         self._signing_counts_itself = False  # set by signing.enable_signing(hardened=True)
         self._closed = False
         self._udp = isinstance(conn, mavutil.mavudp)  # read datagram by datagram (_recv_udp)
+        self.last_tx_s: float | None = None  # record time (s) of the latest packet sent
 
     # -- identity ---------------------------------------------------------------------------
     @property
@@ -218,6 +219,8 @@ class Link:
             if isinstance(tb, int) and msg.get_srcSystem() == self.vehicle_sysid:
                 tb_s = tb * 1e-3
             t_rec = round(vt.stamp(tb_s) * 1e6) * 1e-6
+        # the receive time a consumer sees, with or without a tlog: the record's time exactly
+        msg._timestamp = t_rec
         if self.tlog is not None:
             try:
                 self.tlog.write(msg.get_msgbuf(), t_rec)
@@ -323,11 +326,15 @@ class Link:
         self.counters.tx_by_type[msg.get_type()] += 1
 
     def _log_tx(self, packet: bytes | bytearray) -> None:
+        vt = self.vehicle_time
+        t = self._clock() if vt is None else vt.now()
+        # the record time of the latest packet sent (s): what a tlog reader computes from its
+        # microseconds, kept with or without a tlog
+        self.last_tx_s = round(t * 1e6) * 1e-6
         if self.tlog is None:
             return
         try:
-            vt = self.vehicle_time
-            self.tlog.write(packet, self._clock() if vt is None else vt.now())
+            self.tlog.write(packet, t)
         except (OSError, ValueError):
             self.counters.io_errors += 1
             self.counters.tlog_write_errors += 1
