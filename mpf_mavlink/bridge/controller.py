@@ -119,10 +119,12 @@ class Step:
         self.t, self.t_boot_s, self.time_boot_ms, self.dt = t, t_boot_s, time_boot_ms, dt
         self.estimate, self.target, self.cmd, self.setpoint = estimate, target, cmd, setpoint
         self.w1, self.w1_prev = w1, w1_prev
+        self._diag: MpfDiagnostics | None = None
+        self._diag_of: Callable[[], MpfDiagnostics] | None = None
         if callable(diag):
-            self._diag, self._diag_of = None, diag
+            self._diag_of = diag
         else:
-            self._diag, self._diag_of = diag, None
+            self._diag = diag
 
     @property
     def diag(self) -> MpfDiagnostics:
@@ -591,6 +593,8 @@ class Controller:
         if not math.isfinite(cmd.sdot):
             sp = safe_setpoint(self.ad_params)
         if self.rates_pipeline:
+            if self.sent and t <= self.sent[-1][0]:  # a restarted clock: the old ones are moot
+                self.sent.clear()
             self.sent.append((t, sp.body_rates_frd))
             self.tx_due = est.t_boot_s
         self.t_prev = t
@@ -628,12 +632,16 @@ class Controller:
         now = t
         end = t + tau
         qb = self.ad_state.q_bias  # the autopilot flies the pitch rate sent plus its bias
-        for ts, (p_, q_, r_) in self.sent:
-            r = (p_, q_ + qb, r_)
+        # ``sent`` is in time order: walk back to the latest setpoint acting now (those before
+        # it matter no more), then forward through those that start within the horizon
+        later: list[tuple[float, tuple[float, float, float]]] = []
+        for ts, (p_, q_, r_) in reversed(self.sent):
             a = ts + d  # when that setpoint starts acting
             if a <= now:
-                rates = r  # acting now (the latest that started)
-                continue
+                rates = (p_, q_ + qb, r_)  # acting now (the latest that started)
+                break
+            later.append((a, (p_, q_ + qb, r_)))
+        for a, r in reversed(later):
             if a >= end:
                 break
             segs.append((a - now, rates))

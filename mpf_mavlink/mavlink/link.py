@@ -121,6 +121,7 @@ class Link:
         self._closed = False
         self._udp = isinstance(conn, mavutil.mavudp)  # read datagram by datagram (_recv_udp)
         self.last_tx_s: float | None = None  # record time (s) of the latest packet sent
+        self._tx_file: _LogThenWrite | None = None  # mav.file during a send (send)
 
     # -- identity ---------------------------------------------------------------------------
     @property
@@ -163,8 +164,10 @@ class Link:
         when its CRC then fails, that whole stretch (up to 280 bytes of good telemetry, a
         COMMAND_ACK) is thrown away. Here such a leftover is dropped (counted in ``bad_data``)
         before the next datagram is parsed."""
+        # mavudp's pre_message does nothing, and post_message keeps pymavlink's own per-system
+        # tables (last messages, modes, loss counts) that nothing here reads: both skipped,
+        # they cost a quarter of a message's receive
         conn, mav = self.conn, self.conn.mav
-        conn.pre_message()
         msg = mav.parse_char(b"")
         if msg is None:
             if mav.buf_len() > 0:
@@ -177,8 +180,6 @@ class Link:
             if conn.first_byte:
                 conn.auto_mavlink_version(data)
             msg = mav.parse_char(data)
-        if msg is not None:
-            conn.post_message(msg)
         return msg
 
     def _read_one(self) -> tuple[bool, Any]:
@@ -314,7 +315,10 @@ class Link:
         # leaves a packet the vehicle received out of the tlog (write-ahead; a packet the socket
         # then refuses stays in the tlog, counted in io_errors)
         file = mav.file
-        mav.file = _LogThenWrite(file, self._log_tx)
+        tx = self._tx_file
+        if tx is None or tx._file is not file:
+            tx = self._tx_file = _LogThenWrite(file, self._log_tx)
+        mav.file = tx
         try:
             mav.send(msg)
         except OSError:
