@@ -86,15 +86,17 @@ class BridgeResult:
             f"exit              {self.exit_reason} (code {self.exit_code})",
             f"autopilot         {self.flavour}",
             f"tracked           {self.tracked_s:.2f} s",
-            f"hand-back         {'confirmed' if self.handback_confirmed else ('requested, not confirmed' if self.handback_requested else 'not requested')}",
-            f"setpoints sent    {c.get('setpoints_sent', 0)} (re-sent {c.get('setpoints_resent', 0)}, safe {c.get('safe_setpoints', 0)})",
+            f"hand-back         {self._handback_word()}",
+            f"setpoints sent    {c.get('setpoints_sent', 0)} (re-sent "
+            f"{c.get('setpoints_resent', 0)}, safe {c.get('safe_setpoints', 0)})",
             f"law evaluations   {c.get('law_evals', 0)}",
             f"re-engagements    {c.get('reengagements', 0)}",
             f"stream rates      {self._streams_line()}",
             f"fallback          {self.fallback or 'not set'}",
             f"rx/tx packets     {c.get('rx_packets', 0)}/{c.get('tx_packets', 0)}; rejected: "
             f"{c.get('rejected_sysid', 0)} foreign ids, {c.get('rejected_unsigned', 0)} unsigned, "
-            f"{c.get('rejected_bad_signature', 0)} bad signatures, {c.get('bad_data', 0)} bad frames",
+            f"{c.get('rejected_bad_signature', 0)} bad signatures, "
+            f"{c.get('bad_data', 0)} bad frames",
         ]
         m = self.metrics
         for k, label, unit in (
@@ -112,7 +114,8 @@ class BridgeResult:
         dc = m.get("delay_compensation")
         if isinstance(dc, dict) and dc.get("loop_delay_s") is not None:
             lines.append(
-                f"loop delay        {1e3 * float(dc['loop_delay_s']):.1f} ms ({dc.get('loop_delay_source')}"
+                f"loop delay        {1e3 * float(dc['loop_delay_s']):.1f} ms "
+                f"({dc.get('loop_delay_source')}"
                 f"{', off' if not dc.get('enabled') else ''})"
             )
         if self.out_dir is not None:
@@ -124,6 +127,11 @@ class BridgeResult:
             what = self.records_error or "run directory written"
             lines.append(f"RECORDS LOST      {lost} tlog records not written; {what}")
         return "\n".join(lines)
+
+    def _handback_word(self) -> str:
+        if self.handback_confirmed:
+            return "confirmed"
+        return "requested, not confirmed" if self.handback_requested else "not requested"
 
     def _streams_line(self) -> str:
         st = self.streams

@@ -95,8 +95,10 @@ class FallbackSetup:
         lat, lon, alt, _r, _ccw = got
         vl.acks.clear()
         try:
-            vl.send(encode_do_reposition(
-                vl.link.mav, vl.sysid, vl.compid, lat, lon, alt, 100.0, False, px4=True))  # fmt: skip
+            msg = encode_do_reposition(
+                vl.link.mav, vl.sysid, vl.compid, lat, lon, alt, 100.0, False, px4=True
+            )
+            vl.send(msg)
         except ValueError as e:
             self.log(f"fallback: no reposition point ({e})")
             return

@@ -2,7 +2,8 @@
 wrapped in the offboard life cycle.
 
 States (``BridgeResult.state_reached`` is the furthest one):
-  CONNECTING -> WAIT_HEARTBEAT -> CHECKS -> INIT -> PRESTREAM -> ENGAGE -> TRACKING -> HANDBACK -> DONE
+  CONNECTING -> WAIT_HEARTBEAT -> CHECKS -> INIT -> PRESTREAM -> ENGAGE -> TRACKING -> HANDBACK
+  -> DONE
 
 - CHECKS runs :func:`mpf_mavlink.bridge.preflight.run_checks` from the vehicle's first estimate; a
   failure refuses to engage (no mode request is ever sent) and exits 3.

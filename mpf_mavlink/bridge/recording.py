@@ -148,14 +148,15 @@ def delay_metrics(ctl: Controller, enabled: bool) -> dict[str, Any]:
     measured from the autopilot's ATTITUDE_TARGET echoes or TIMESYNC (controller.py), or
     mavlink.known_delay_s; the ATTITUDE period, the control-step period (shorter with position
     instants: the multi-rate loop), the prediction horizon and the look-ahead they gave."""
+    d = ctl.delay
     return {
         "enabled": enabled,
-        "loop_delay_s": ctl.delay_s,
-        "loop_delay_source": ctl.delay_source(),  # echo, timesync or mavlink.known_delay_s
-        "echoes_in_median": len(ctl.delays),  # the last 9 at most
-        "echoes_frozen": ctl.echoes_frozen,  # ATTITUDE_TARGET stamps that had not moved
-        "timesync_delays_in_median": len(ctl.ts_delays),
-        "timesync_rtt_min_s": min(r for _, r, _ in ctl.timesync) if ctl.timesync else None,
+        "loop_delay_s": d.delay_s,
+        "loop_delay_source": d.delay_source(),  # echo, timesync or mavlink.known_delay_s
+        "echoes_in_median": len(d.delays),  # the last 9 at most
+        "echoes_frozen": d.echoes_frozen,  # ATTITUDE_TARGET stamps that had not moved
+        "timesync_delays_in_median": len(d.ts_delays),
+        "timesync_rtt_min_s": min(r for _, r, _ in d.timesync) if d.timesync else None,
         "attitude_period_s": ctl.att_period_s,
         "attitude_source": ctl.est.att_source,  # chosen once per flight (estimator.py)
         "attitude_samples_ignored": ctl.est.att_ignored,  # of the other source

@@ -93,8 +93,9 @@ class StreamNegotiator:
             while True:
                 vl.spin(0.1)
                 now = time.monotonic()
+                interval = MAV_CMD_SET_MESSAGE_INTERVAL
                 refused += [a.result_name for a in vl.acks
-                            if a.command == MAV_CMD_SET_MESSAGE_INTERVAL and not a.accepted]  # fmt: skip
+                            if a.command == interval and not a.accepted]  # fmt: skip
                 vl.acks.clear()
                 if (
                     vl.flavour is Flavour.ARDUPILOT
