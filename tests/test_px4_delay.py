@@ -173,7 +173,7 @@ def test_attitude_source_is_one_per_flight_whatever_the_boot_order():
         assert ctl.est.att_source == "ATTITUDE"
         # the first quaternion (before any ATTITUDE) may count once; the rest never
         assert steps in (100, 101) and ctl.est.att_ignored >= 99
-        assert ctl.att_period_s == pytest.approx(0.02, rel=1e-6)
+        assert ctl.instants.att_period_s == pytest.approx(0.02, rel=1e-6)
     ctl = Controller(load_config(DEMO))
     for k in range(10):
         ctl.feed_vehicle(AttitudeSample(5.0 + 0.02 * k, R, np.zeros(3), "ATTITUDE_QUATERNION"), 1.0)

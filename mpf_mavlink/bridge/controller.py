@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from mpf_mavlink.bridge.estimator import Estimate, Estimator, EstimatorParams
+from mpf_mavlink.bridge.instants import ControlInstants
 from mpf_mavlink.bridge.loop_delay import LoopDelay
 from mpf_mavlink.bridge.target_sources import ExtrapolatedTarget, LiveTarget, ScriptedTarget
 from mpf_mavlink.config.schema import Config
@@ -199,17 +200,6 @@ def estimator_params(m: Any) -> EstimatorParams:
     )  # fmt: skip
 
 
-def _period(T: float, prev: Any, sample: Any) -> float:
-    """A stream's period (s) filtered over ~10 samples, from the time since its previous sample
-    ``prev`` (None: the first); gaps of 1 s or more and repeated times leave it as it was."""
-    if prev is None:
-        return T
-    dt = float(sample.t_boot_s) - float(prev.t_boot_s)
-    if not 0.0 < dt < 1.0:
-        return T
-    return dt if T == 0.0 else T + 0.1 * (dt - T)
-
-
 class Controller:
     """Estimator + target + s + law + adapter for one run (see the module docstring).
 
@@ -252,22 +242,16 @@ class Controller:
         self.alpha_m = self.gains.alpha  # the look-ahead of the latest step (guidance/predict.py)
         if not self.rates_pipeline:  # body rates not sent: no pitch-rate bias to take off them
             self.ad_params = dataclasses.replace(self.ad_params, rate_bias_tau_s=0.0)
-        # multi-rate loop (step): a LOCAL_POSITION_NED between two ATTITUDE samples is a
-        # control instant too; the periods (s, filtered) of both streams decide which are
-        self.position_instants = self.rates_pipeline and bool(
-            getattr(m, "position_instants", False)
+        # multi-rate loop: which samples are control instants (instants.py)
+        self.instants = ControlInstants(
+            self.est, self.rates_pipeline and bool(getattr(m, "position_instants", False))
         )
-        self.att_period_s = 0.0
-        self.pos_period_s = 0.0
-        self.at_position = False  # the latest control instant is a position sample's
-        self.t_prev_boot: float | None = None  # autopilot time (s) of the latest step
-        self.position_steps = 0  # steps made at position instants
 
     # -- feeding ----------------------------------------------------------------------------
     def feed_vehicle(self, sample: Any, rx: float | None) -> bool:
         """A decoded sample of the vehicle; True when it is a control instant: an ATTITUDE, or
         with ``mavlink.position_instants`` a LOCAL_POSITION_NED between two of them
-        (:meth:`_position_instant`)."""
+        (:class:`~mpf_mavlink.bridge.instants.ControlInstants`)."""
         name = type(sample).__name__
         if name == "AttitudeTargetSample":
             self.delay.echo(sample, self.est.t0)
@@ -277,33 +261,8 @@ class Controller:
             return False
         est = self.est
         prev_att, prev_loc = est.att, est.local
-        if est.update(sample, rx):
-            self.att_period_s = _period(self.att_period_s, prev_att, sample)
-            self.at_position = False
-            return True
-        if name != "LocalPositionSample" or est.local is not sample:
-            return False
-        self.pos_period_s = _period(self.pos_period_s, prev_loc, sample)
-        if self.position_instants and self._position_instant(sample.t_boot_s):
-            self.at_position = True
-            return True
-        return False
-
-    def _position_instant(self, tp: float) -> bool:
-        """Whether a position sample of autopilot time tp (s) is a control instant: at least
-        half a position period after the latest ATTITUDE and the latest step, and earlier than
-        the next ATTITUDE is due by more than half a position period. A position that comes
-        with (about) the same instant as an ATTITUDE (the streams share a clock: 50 Hz each, or
-        every fifth position at 10 Hz ATTITUDE) leaves the step to that ATTITUDE, whichever of
-        the two arrives first; so with both streams at one rate, in phase or not (a real PX4
-        samples each stream on its own schedule), this never steps: the ATTITUDE-only loop."""
-        a = self.est.att
-        T = self.att_period_s
-        if a is None or not T > 0.0:
-            return False
-        half = 0.5 * self.pos_period_s
-        last = a.t_boot_s if self.t_prev_boot is None else max(a.t_boot_s, self.t_prev_boot)
-        return tp - last >= half and tp - a.t_boot_s < T - half
+        attitude = est.update(sample, rx)
+        return self.instants.after_update(sample, attitude, prev_att, prev_loc)
 
     def feed_target(self, sample: Any, rx: float | None) -> None:
         """A decoded sample of the live target (ignored with a scripted target)."""
@@ -372,7 +331,7 @@ class Controller:
             s0 = self.path.closest(tgt.R_T_I.T @ (vs.position - tgt.position))
         self.s = float(s0)
         self.t_prev = None
-        self.t_prev_boot = None
+        self.instants.t_prev_boot = None
         self.sdot_prev = 0.0
         self.w1_prev = None
         # the airframe's learned trim and turn stay; thrust starts from the autopilot's own
@@ -408,7 +367,7 @@ class Controller:
         """One control step at the latest control instant (ATTITUDE, or a position instant:
         :meth:`feed_vehicle`); None (``why_not`` set) when the state or the target is not
         usable, or when the sample is not newer than the previous step."""
-        est, why = self.est.estimate(self.at_position)
+        est, why = self.est.estimate(self.instants.at_position)
         if est is None:
             self.why_not = why
             return None
@@ -426,35 +385,13 @@ class Controller:
                     f"no new ATTITUDE instant (t {t:.3f} s, last step at {self.t_prev:.3f} s)"
                 )
                 return None
-            self.s += self.sdot_prev * dt
-            # the step period (how long a setpoint is held: the ATTITUDE period, or shorter
-            # with position instants), filtered over ~10 steps (gaps excluded)
-            if dt < 1.0:
-                self.period_s = (
-                    dt if self.period_s == 0.0 else self.period_s + 0.1 * (dt - self.period_s)
-                )
+            self._advance(dt)
         # The law acts on the state when its setpoint acts (guidance/predict.py)
-        vl: VehicleState = vs
-        R_B_N = est.R_B_N
-        s_law = self.s
-        tgt_law = tgt
-        tau = 0.0
-        hold = 0.0  # how long the setpoint is held (s), for the adapter's roll loop
-        if getattr(self.m, "delay_compensation", False):
-            tau = prediction_horizon(self.delay_s)
-            hold = self.period_s
-            if tau > 0.0:
-                att = self.est.att
-                rates = att.rates_frd if att is not None else (0.0, 0.0, 0.0)
-                segs = self.delay.segments(t, tau, rates, self.ad_state.q_bias)
-                vl, R_B_N = predict_segments(vs, est.R_B_N, segs)
-                tp = self.target.state(t + tau)
-                if not isinstance(tp, str):
-                    tgt_law = tp
-                s_law = self.s + self.sdot_prev * tau
+        vl, R_B_N, s_law, tgt_law, tau = self._predicted(est, tgt)
+        hold = self.period_s if self.m.delay_compensation else 0.0  # for the adapter's roll loop
         self.tau_s = tau
         gains = self.gains
-        if getattr(self.m, "delay_compensation", False):
+        if self.m.delay_compensation:
             a = look_ahead(gains.alpha, gains.K_R, vs.airspeed, self.delay_s, self.period_s)
             if a > gains.alpha:
                 gains = dataclasses.replace(gains, alpha=a)
@@ -481,13 +418,41 @@ class Controller:
         if self.rates_pipeline:
             self.delay.sent_rates(t, sp.body_rates_frd, est.t_boot_s)
         self.t_prev = t
-        self.t_prev_boot = est.t_boot_s
-        self.position_steps += self.at_position
+        self.instants.stepped(est.t_boot_s)
         self.sdot_prev = cmd.sdot if math.isfinite(cmd.sdot) else 0.0
         w1_prev, self.w1_prev = self.w1_prev, w1
         tb_ms = int(round(est.t_boot_s * 1000.0))
         self.why_not = ""  # a step was made: nothing is missing now
         return Step(t, est.t_boot_s, tb_ms, dt, est, tgt, cmd, diag, sp, w1, w1_prev)
+
+    def _advance(self, dt: float) -> None:
+        """s over the dt (s) since the previous step, and the step period (how long a setpoint
+        is held: the ATTITUDE period, or shorter with position instants), filtered over ~10
+        steps (gaps excluded)."""
+        self.s += self.sdot_prev * dt
+        if dt < 1.0:
+            T = self.period_s
+            self.period_s = dt if T == 0.0 else T + 0.1 * (dt - T)
+
+    def _predicted(
+        self, est: Estimate, tgt: TargetState
+    ) -> tuple[VehicleState, Any, float, TargetState, float]:
+        """(vehicle state, R_B_N, s, target, horizon tau s) the law acts on: predicted tau
+        ahead with delay compensation (the rates in flight, the target there, s moved on by
+        sdot), else those of the sample."""
+        vs = est.vehicle
+        if not self.m.delay_compensation:
+            return vs, est.R_B_N, self.s, tgt, 0.0
+        tau = prediction_horizon(self.delay_s)
+        if not tau > 0.0:
+            return vs, est.R_B_N, self.s, tgt, tau
+        t = vs.t
+        att = self.est.att
+        rates = att.rates_frd if att is not None else (0.0, 0.0, 0.0)
+        segs = self.delay.segments(t, tau, rates, self.ad_state.q_bias)
+        vl, R_B_N = predict_segments(vs, est.R_B_N, segs)
+        tp = self.target.state(t + tau)
+        return vl, R_B_N, self.s + self.sdot_prev * tau, tgt if isinstance(tp, str) else tp, tau
 
     def _diag_at_sample(
         self, s: float, vs: VehicleState, tgt: TargetState, gains: Any, mode: str

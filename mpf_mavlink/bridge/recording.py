@@ -157,12 +157,12 @@ def delay_metrics(ctl: Controller, enabled: bool) -> dict[str, Any]:
         "echoes_frozen": d.echoes_frozen,  # ATTITUDE_TARGET stamps that had not moved
         "timesync_delays_in_median": len(d.ts_delays),
         "timesync_rtt_min_s": min(r for _, r, _ in d.timesync) if d.timesync else None,
-        "attitude_period_s": ctl.att_period_s,
+        "attitude_period_s": ctl.instants.att_period_s,
         "attitude_source": ctl.est.att_source,  # chosen once per flight (estimator.py)
         "attitude_samples_ignored": ctl.est.att_ignored,  # of the other source
         "step_period_s": ctl.period_s,
-        "position_instants": bool(ctl.position_instants),
-        "position_steps": ctl.position_steps,
+        "position_instants": bool(ctl.instants.position_instants),
+        "position_steps": ctl.instants.position_steps,
         "horizon_s": ctl.tau_s,
         "look_ahead_m": ctl.alpha_m,
         "look_ahead_configured_m": ctl.gains.alpha,

@@ -197,16 +197,7 @@ class Link:
         c = self.counters
         mtype = msg.get_type()
         if mtype == "BAD_DATA":
-            reason = str(getattr(msg, "reason", ""))
-            if reason == "Invalid signature":
-                data = bytes(getattr(msg, "data", b"") or b"")
-                signed = len(data) > 2 and data[0] == 0xFD and bool(data[2] & 0x01)
-                if not signed:
-                    c.rejected_unsigned += 1
-                elif not self._signing_counts_itself:
-                    c.rejected_bad_signature += 1
-            else:
-                c.bad_data += 1
+            self._count_bad(msg)
             return True, None
         c.rx_packets += 1
         # one receive time for the record and the clock gate, quantised as the tlog stores it
@@ -261,6 +252,20 @@ class Link:
                     return True, None
         c.rx_by_type[mtype] += 1
         return True, msg
+
+    def _count_bad(self, msg: Any) -> None:
+        """Count a BAD_DATA: an unsigned or badly signed packet while signing is on, or a bad
+        frame."""
+        c = self.counters
+        if str(getattr(msg, "reason", "")) != "Invalid signature":
+            c.bad_data += 1
+            return
+        data = bytes(getattr(msg, "data", b"") or b"")
+        signed = len(data) > 2 and data[0] == 0xFD and bool(data[2] & 0x01)
+        if not signed:
+            c.rejected_unsigned += 1
+        elif not self._signing_counts_itself:
+            c.rejected_bad_signature += 1
 
     def recv(self, timeout_s: float = 0.0) -> Any:
         """Next accepted message, waiting at most ``timeout_s`` (0 = poll). Never raises on
