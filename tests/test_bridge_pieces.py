@@ -305,3 +305,35 @@ def test_watchdog_stops_when_attitude_stops(clock: FakeClock) -> None:
     # the watchdog fires within one wait slice of telemetry_timeout_s
     assert 0.0 <= clock.t - t0 - vl.m.telemetry_timeout_s <= link_io.MAX_WAIT_S + 1e-9
     assert loop.n["setpoints_sent"] == 0  # nothing to re-send before a first step
+
+
+# -- receive times ---------------------------------------------------------------------------
+def test_receive_time_is_the_tlog_record_time_exactly(tmp_path: Path) -> None:
+    """The loop's receive time is the link's stamp, which is the tlog record's time to the
+    bit: a replay of the tlog sees the same floats, and a run without a tlog (lean) the same
+    stamps as with one."""
+    import socket
+
+    from mpf_mavlink.mavlink import iter_tlog, open_link
+
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    tl = tmp_path / "rx.tlog"
+    link = open_link(f"udpin:127.0.0.1:{port}", vehicle_sysid=1, tlog_path=tl)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    enc = d.MAVLink(None, srcSystem=1, srcComponent=1)
+    stamps: dict[int, float | None] = {}
+    try:
+        for k in range(40):
+            tx.sendto(bytes(enc.attitude_encode(1000 + 20 * k, 0, 0, 0, 0, 0, 0).pack(enc)),
+                      ("127.0.0.1", port))  # fmt: skip
+            msg = link.recv(0.2)  # None while the boot-clock gate settles
+            if msg is not None:
+                stamps[msg.time_boot_ms] = VehicleLink.rx_time(msg)
+    finally:
+        link.close()
+        tx.close()
+    recorded = {m.time_boot_ms: t for t, m in iter_tlog(str(tl)) if m.get_type() == "ATTITUDE"}
+    assert len(stamps) >= 20 and all(recorded[ms] == t for ms, t in stamps.items())
