@@ -116,7 +116,7 @@ def test_loop_delay_is_measured_from_the_attitude_target_echo():
     assert ctl.delay_s == 0.0  # mavlink.known_delay_s until measured
     ctl.est.t0 = 100.0
     for k in range(12):
-        ctl.sent.append((1.0 + 0.02 * k, (0.1 + 0.01 * k, -0.2, 0.3)))
+        ctl.delay.sent.append((1.0 + 0.02 * k, (0.1 + 0.01 * k, -0.2, 0.3)))
     for k in range(12):
         rates = tuple(float(np.float32(v)) for v in (0.1 + 0.01 * k, -0.2, 0.3))
         late = 0.065 if k != 5 else 0.4  # one late echo does not move the median

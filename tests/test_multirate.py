@@ -113,7 +113,9 @@ def test_position_instants_fall_between_attitude_samples_only():
     assert att_ms == list(range(0, 1000, 100))
     # the first period has no instants (period unknown until the second ATTITUDE)
     assert pos_ms == [a + d for a in range(100, 1000, 100) for d in (20, 40, 60, 80)]
-    assert ctl.att_period_s == pytest.approx(0.1) and ctl.pos_period_s == pytest.approx(0.02)
+    assert ctl.instants.att_period_s == pytest.approx(
+        0.1
+    ) and ctl.instants.pos_period_s == pytest.approx(0.02)
     ctl = Controller(load_config(DEMO))
     inst = _feed(ctl, 25.0, 50.0, 1.0)
     assert [ms for kind, ms in inst if kind == "pos"] == list(range(60, 1000, 40))

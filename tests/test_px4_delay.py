@@ -83,8 +83,8 @@ def test_frozen_echo_stamps_never_measure_and_timesync_does():
     so their sum is tc1 - ts1, the request's own uplink latency plus the clocks' offset."""
     ctl = Controller(load_config(DEMO, ["mavlink.known_delay_s=0.1"]))
     used = _fly_px4_like(ctl, 4.0)
-    assert not ctl.delays and ctl.echoes_frozen == len(used) - 1
-    assert ctl.delay_source() == "timesync"
+    assert not ctl.delay.delays and ctl.delay.echoes_frozen == len(used) - 1
+    assert ctl.delay.delay_source() == "timesync"
     want = DOWN + COMPUTE + UP
     # float64 of times ~1.7e9 s resolve 0.24 us
     assert ctl.delay_s == pytest.approx(want, abs=1e-6)
@@ -100,7 +100,7 @@ def test_a_drifting_px4_clock_is_followed():
     rate = 0.989
     ctl = Controller(load_config(DEMO))
     used = _fly_px4_like(ctl, 20.0, rate=rate)
-    assert ctl.delay_source() == "timesync"
+    assert ctl.delay.delay_source() == "timesync"
     want = rate * (DOWN + COMPUTE + UP)
     assert max(abs(d - want) for d in used[-100:]) < 2e-4
 
@@ -109,7 +109,7 @@ def test_without_timesync_the_configured_delay_stays_and_says_so():
     ctl = Controller(load_config(DEMO, ["mavlink.known_delay_s=0.03"]))
     used = _fly_px4_like(ctl, 1.0, timesync=False)
     assert used and all(d == 0.03 for d in used)
-    assert ctl.delay_source() == "mavlink.known_delay_s" and ctl.echoes_frozen > 0
+    assert ctl.delay.delay_source() == "mavlink.known_delay_s" and ctl.delay.echoes_frozen > 0
 
 
 def test_a_moving_echo_stamp_is_preferred_over_timesync():
@@ -118,12 +118,12 @@ def test_a_moving_echo_stamp_is_preferred_over_timesync():
     ctl = Controller(load_config(DEMO))
     _fly_px4_like(ctl, 0.5)
     ctl.est.t0 = 0.0
-    ctl.sent.clear()
+    ctl.delay.sent.clear()
     for k in range(9):
-        ctl.sent.append((50.0 + 0.02 * k, (0.1 + 0.01 * k, 0.0, 0.0)))
+        ctl.delay.sent.append((50.0 + 0.02 * k, (0.1 + 0.01 * k, 0.0, 0.0)))
         rates = (float(np.float32(0.1 + 0.01 * k)), 0.0, 0.0)
         ctl.feed_vehicle(AttitudeTargetSample(50.0 + 0.02 * k + 0.013, rates, 0.5, 128), None)
-    assert ctl.delay_source() == "echo"
+    assert ctl.delay.delay_source() == "echo"
     assert ctl.delay_s == pytest.approx(0.013, abs=1e-9)
 
 
@@ -133,7 +133,7 @@ def test_answers_to_other_requests_are_ignored():
     ctl = Controller(load_config(DEMO))
     ctl.feed_vehicle(TimesyncSample(5_000_000_000, 123_456_789), BOOT)
     ctl.feed_vehicle(TimesyncSample(5_000_000_000, round((BOOT + 5.0) * 1e9)), BOOT)
-    assert not ctl.timesync
+    assert not ctl.delay.timesync
 
 
 def test_the_clock_gate_accepts_old_setpoint_stamps_and_counts_nothing():
@@ -173,7 +173,7 @@ def test_attitude_source_is_one_per_flight_whatever_the_boot_order():
         assert ctl.est.att_source == "ATTITUDE"
         # the first quaternion (before any ATTITUDE) may count once; the rest never
         assert steps in (100, 101) and ctl.est.att_ignored >= 99
-        assert ctl.att_period_s == pytest.approx(0.02, rel=1e-6)
+        assert ctl.instants.att_period_s == pytest.approx(0.02, rel=1e-6)
     ctl = Controller(load_config(DEMO))
     for k in range(10):
         ctl.feed_vehicle(AttitudeSample(5.0 + 0.02 * k, R, np.zeros(3), "ATTITUDE_QUATERNION"), 1.0)

@@ -1,32 +1,15 @@
-"""The bridge's run state: options, results, life-cycle states, exits, and the attributes
-every concern of :class:`mpf_mavlink.bridge.live.Bridge` reads (:class:`BridgeBase`)."""
+"""The bridge's vocabulary: options, results, life-cycle states (:class:`Phase`) and exits."""
 
 from __future__ import annotations
 
 import dataclasses
 import enum
-import math
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from mpf_mavlink.bridge.controller import Controller
-from mpf_mavlink.bridge.operator import OperatorDisplay
 from mpf_mavlink.config.schema import Config
-from mpf_mavlink.core.adapter import Setpoint
-from mpf_mavlink.mavlink import Flavour
-from mpf_mavlink.runs.rundir import RunTable
-
-MAV_CMD_DO_SET_MODE = 176
-MAV_CMD_COMPONENT_ARM_DISARM = 400
-MAV_CMD_SET_MESSAGE_INTERVAL = 511
-MAV_CMD_DO_REPOSITION = 192
-# ArduPilot's REQUEST_DATA_STREAM groups (MAV_DATA_STREAM_*) holding the messages we need
-# (libraries/GCS_MAVLink/GCS_MAVLink_Parameters.cpp, STREAM_*_msgs)
-_AP_STREAM_POSITION, _AP_STREAM_EXTRA1, _AP_STREAM_EXTRA2, _AP_STREAM_EXTRA3 = 6, 10, 11, 12
-# PX4 parameters that say what happens when our setpoints stop (read and printed before engaging)
 
 
 class State(enum.IntEnum):
@@ -103,15 +86,17 @@ class BridgeResult:
             f"exit              {self.exit_reason} (code {self.exit_code})",
             f"autopilot         {self.flavour}",
             f"tracked           {self.tracked_s:.2f} s",
-            f"hand-back         {'confirmed' if self.handback_confirmed else ('requested, not confirmed' if self.handback_requested else 'not requested')}",
-            f"setpoints sent    {c.get('setpoints_sent', 0)} (re-sent {c.get('setpoints_resent', 0)}, safe {c.get('safe_setpoints', 0)})",
+            f"hand-back         {self._handback_word()}",
+            f"setpoints sent    {c.get('setpoints_sent', 0)} (re-sent "
+            f"{c.get('setpoints_resent', 0)}, safe {c.get('safe_setpoints', 0)})",
             f"law evaluations   {c.get('law_evals', 0)}",
             f"re-engagements    {c.get('reengagements', 0)}",
             f"stream rates      {self._streams_line()}",
             f"fallback          {self.fallback or 'not set'}",
             f"rx/tx packets     {c.get('rx_packets', 0)}/{c.get('tx_packets', 0)}; rejected: "
             f"{c.get('rejected_sysid', 0)} foreign ids, {c.get('rejected_unsigned', 0)} unsigned, "
-            f"{c.get('rejected_bad_signature', 0)} bad signatures, {c.get('bad_data', 0)} bad frames",
+            f"{c.get('rejected_bad_signature', 0)} bad signatures, "
+            f"{c.get('bad_data', 0)} bad frames",
         ]
         m = self.metrics
         for k, label, unit in (
@@ -129,7 +114,8 @@ class BridgeResult:
         dc = m.get("delay_compensation")
         if isinstance(dc, dict) and dc.get("loop_delay_s") is not None:
             lines.append(
-                f"loop delay        {1e3 * float(dc['loop_delay_s']):.1f} ms ({dc.get('loop_delay_source')}"
+                f"loop delay        {1e3 * float(dc['loop_delay_s']):.1f} ms "
+                f"({dc.get('loop_delay_source')}"
                 f"{', off' if not dc.get('enabled') else ''})"
             )
         if self.out_dir is not None:
@@ -142,6 +128,11 @@ class BridgeResult:
             lines.append(f"RECORDS LOST      {lost} tlog records not written; {what}")
         return "\n".join(lines)
 
+    def _handback_word(self) -> str:
+        if self.handback_confirmed:
+            return "confirmed"
+        return "requested, not confirmed" if self.handback_requested else "not requested"
+
     def _streams_line(self) -> str:
         st = self.streams
         if not st:
@@ -153,95 +144,34 @@ class BridgeResult:
         return f"asked ({st.get('method', '?')}): " + ", ".join(parts) + " Hz"
 
 
-class BridgeBase:
-    """Attributes shared by the bridge's concerns (link, control step, streams, session, recording)."""
+def resolve_mavlink(cfg: Config, opts: BridgeOptions) -> Any:
+    """The config's ``mavlink`` section with the command line's overrides applied."""
+    m = cfg.section("mavlink")
+    overrides = {
+        "flavour": opts.flavour,
+        "mission_duration_s": None if opts.duration_s is None else float(opts.duration_s),
+        "heartbeat_timeout_s": (
+            None if opts.heartbeat_timeout_s is None else float(opts.heartbeat_timeout_s)
+        ),
+        "arm": None if opts.arm is None else bool(opts.arm),
+        "plots": None if opts.plots is None else bool(opts.plots),
+        "reengage_max": None if opts.reengage is None else int(opts.reengage),
+    }
+    given: dict[str, Any] = {k: v for k, v in overrides.items() if v is not None}
+    return dataclasses.replace(m, **given) if given else m
 
-    def __init__(
-        self, cfg: Config, opts: BridgeOptions, log: Callable[[str], None] = print
-    ) -> None:
-        self.cfg = cfg
-        self.opts = opts
-        self.log = log
-        m = cfg.section("mavlink")
-        if opts.flavour is not None:
-            m = dataclasses.replace(m, flavour=opts.flavour)
-        if opts.duration_s is not None:
-            m = dataclasses.replace(m, mission_duration_s=float(opts.duration_s))
-        if opts.heartbeat_timeout_s is not None:
-            m = dataclasses.replace(m, heartbeat_timeout_s=float(opts.heartbeat_timeout_s))
-        if opts.arm is not None:
-            m = dataclasses.replace(m, arm=bool(opts.arm))
-        if opts.plots is not None:
-            m = dataclasses.replace(m, plots=bool(opts.plots))
-        if opts.reengage is not None:
-            m = dataclasses.replace(m, reengage_max=int(opts.reengage))
-        self.m = m
-        self.ctl = Controller(cfg, m)
-        self.ad_params = self.ctl.ad_params
-        self.est = self.ctl.est
-        self.live = self.ctl.live
-        self.target: Any = self.ctl.target
-        self.path = self.ctl.path
 
-        self.link: Any = None
+class Phase:
+    """The life-cycle state, the furthest one reached before HANDBACK/DONE, and who is told
+    of a change (the log and the operator's ground station)."""
+
+    def __init__(self, on_change: Callable[[State], None]) -> None:
         self.state = State.CONNECTING
-        self.furthest = State.CONNECTING  # furthest life-cycle state before HANDBACK/DONE
-        self.flavour = Flavour.UNKNOWN
-        self.vehicle_compid = 1
-        self.hb: Any = None  # latest autopilot HeartbeatSample
-        self.acks: list[Any] = []
-        self.streaming = False
-        self.engaged = False
-        self.last_sp: Setpoint | None = None
-        self.last_time_boot_ms = 0
-        self.last_att_mono = -math.inf
-        self.last_good_mono = -math.inf
-        # the vehicle's clock (s since its boot): the newest time stamp it sent, and its value
-        # at the last ATTITUDE and the last good control step (the lockstep timeouts)
-        self.vehicle_t: float | None = None
-        self.last_att_vt: float | None = None
-        self.last_good_vt: float | None = None
-        self.last_send_mono = -math.inf
-        self.last_hb_tx_mono = -math.inf
-        self.last_ts_tx_mono = -math.inf  # the latest TIMESYNC request (PX4's loop delay)
-        self.first_send_mono: float | None = None
-        self.prestream_sends = 0
-        self.t_engage: float | None = None
-        self.t_last: float | None = None
-        self.table = RunTable()
-        self.sp_rows: list[tuple[float, ...]] = []
-        # arrival times (monotonic s) per message type while the stream rates are measured
-        self._arrivals: dict[str, deque[float]] | None = None
-        self.params: dict[str, float] = {}  # PARAM_VALUE answers (name -> value)
-        self.param_types: dict[str, int] = {}  # name -> MAV_PARAM_TYPE
-        self.judge_rows: list[tuple[float, float, float, float]] = []  # alt, airspeed, roll, pitch
-        # guidance values and state texts for a ground station (after each setpoint, rate-limited)
-        self.display = OperatorDisplay(m.operator_display, m.operator_display_hz)
-        self.n = {
-            "setpoints_sent": 0,
-            "setpoints_resent": 0,
-            "safe_setpoints": 0,
-            "law_evals": 0,
-            "mode_requests": 0,
-            "reengagements": 0,
-        }
+        self.furthest = State.CONNECTING
+        self._on_change = on_change
 
-    @property
-    def why_not(self) -> str:
-        """Why the last control step (or the wait for a state) did not produce a setpoint."""
-        return self.ctl.why_not
-
-    def _set_state(self, s: State) -> None:
+    def set(self, s: State) -> None:
         self.state = s
         if s <= State.TRACKING:
             self.furthest = max(self.furthest, s)
-        self.log(f"[{s.name}]")
-        if self.link is not None:
-            self.display.text(self.link, s.name)
-
-    def _ready(self) -> bool:
-        return self.ctl.ready()
-
-    def _close(self) -> None:
-        if self.link is not None:
-            self.link.close()
+        self._on_change(s)

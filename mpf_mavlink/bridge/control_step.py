@@ -1,127 +1,166 @@
-"""The bridge's control step: one :class:`~mpf_mavlink.bridge.controller.Controller` step per
-ATTITUDE sample, its recording (time series, setpoints, verdict rows) and the setpoint on the wire."""
+"""The bridge's control loop (:class:`ControlLoop`): one
+:class:`~mpf_mavlink.bridge.controller.Controller` step per control instant while setpoints
+stream, the setpoint on the wire, its re-sends, and the telemetry watchdog."""
 
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
-from mpf_mavlink.bridge.base import BridgeBase, State, _Stop
-from mpf_mavlink.bridge.controller import Step
+from mpf_mavlink.bridge.base import Phase, State, _Stop
+from mpf_mavlink.bridge.controller import Controller, Step
+from mpf_mavlink.bridge.link_io import VehicleLink
 from mpf_mavlink.core.adapter import Setpoint, safe_setpoint
 from mpf_mavlink.mavlink import (
     Flavour,
-    dialect,
     encode_set_attitude_target_quat,
     encode_set_attitude_target_rates,
 )
 
 
-class ControlStep(BridgeBase):
-    """One control step per ATTITUDE sample, what it records and the setpoint it sends."""
+class ControlLoop:
+    """Controller steps, setpoints and the watchdog. ``record(step)`` is called for each step
+    while TRACKING, ``show(step)`` after each setpoint (the operator's display)."""
 
-    def _send_text(self, text: str) -> None:
-        """A STATUSTEXT (severity INFO) from us: the tlog's record of a decision."""
-        self._send(self.link.mav.statustext_encode(dialect.MAV_SEVERITY_INFO, text.encode("ascii")))
+    def __init__(
+        self,
+        ctl: Controller,
+        vl: VehicleLink,
+        phase: Phase,
+        record: Callable[[Step], None],
+        show: Callable[[Step], None],
+    ) -> None:
+        self.ctl, self.vl, self.phase = ctl, vl, phase
+        self.m = m = vl.m
+        self._record, self._show = record, show
+        self.period_s = 1.0 / m.min_setpoint_rate_hz  # the longest a setpoint goes unrepeated
+        self.streaming = False
+        self.last_sp: Setpoint | None = None
+        self.last_time_boot_ms = 0
+        # the latest ATTITUDE and the latest good control step, on both clocks (wall, vehicle)
+        self.last_att_mono = self.last_good_mono = -math.inf
+        self.last_att_vt: float | None = None
+        self.last_good_vt: float | None = None
+        self.last_send_mono = -math.inf
+        self.first_send_mono: float | None = None
+        self.prestream_sends = 0
+        self.t_engage: float | None = None  # mission time (s) tracking started
+        self.t_last: float | None = None  # mission time (s) of the latest step
+        self.n = {"setpoints_sent": 0, "setpoints_resent": 0, "safe_setpoints": 0, "law_evals": 0}
 
-    def _send(self, msg: Any) -> None:
-        self.link.send(msg)
+    # -- the hooks of VehicleLink -------------------------------------------------------------
+    def on_vehicle(self, sample: Any, rx: float | None) -> None:
+        """A decoded vehicle sample: into the controller; a control instant steps."""
+        if not self.ctl.feed_vehicle(sample, rx):
+            return
+        if type(sample).__name__ == "AttitudeSample":  # the telemetry timeout counts ATTITUDE
+            self.last_att_mono, self.last_att_vt = time.monotonic(), self.vl.vehicle_t
+        if self.streaming and self.phase.state < State.HANDBACK:
+            self.step()
 
-    # -- timeouts ----------------------------------------------------------------------------
-    def _left(
-        self, since_mono: float, since_vt: float | None, timeout_s: float, wall_s: float = 0.0
-    ) -> float:
-        """Seconds left until ``timeout_s`` has passed since an instant (``since_mono`` on the
-        wall clock, ``since_vt`` on the vehicle's); negative once it has. A real link: wall
-        time. Lockstep (``mavlink.lockstep``): the vehicle's time, which stands still while the
-        simulation is starved, bounded by ``wall_s`` (default ``lockstep_wall_timeout_s``) of
-        wall time for a vehicle that sends nothing at all."""
-        wall = time.monotonic() - since_mono
-        if not self.m.lockstep:
-            return timeout_s - wall
-        bound = wall_s or self.m.lockstep_wall_timeout_s
-        return min(timeout_s - self._vehicle_since(since_vt), bound - wall)
+    def due(self, now: float) -> float:
+        """When the next re-send may be due (monotonic s): the link's wait ends by then."""
+        return self.last_send_mono + self.period_s if self.streaming else math.inf
 
-    def _vehicle_since(self, since_vt: float | None) -> float:
-        """Vehicle seconds since ``since_vt``; 0 before any time stamp or after a reboot (its
-        clock restarted: the mode change it comes back in, or the wall bound, ends the run)."""
-        if self.vehicle_t is None or since_vt is None:
-            return 0.0
-        return max(0.0, self.vehicle_t - since_vt)
+    def tick(self, now: float) -> None:
+        """While streaming: re-send the last setpoint when telemetry is slower than
+        ``min_setpoint_rate_hz``, and stop (raise :class:`_Stop`) when it is lost."""
+        if not self.streaming:
+            return
+        vl, timeout = self.vl, self.m.telemetry_timeout_s
+        # re-send only while the last ATTITUDE is young enough that the last re-send still
+        # falls within telemetry_timeout_s of it: commands never outlive the telemetry by more
+        att_left = vl.left(self.last_att_mono, self.last_att_vt, timeout)
+        if self.phase.state != State.HANDBACK:  # HANDBACK: wings level until the hold is confirmed
+            self._watchdog(att_left, timeout)
+        if att_left >= self.period_s and self.last_sp is not None:
+            if now - self.last_send_mono >= self.period_s:
+                self.send_setpoint(self.last_sp, self.last_time_boot_ms)
+                self.n["setpoints_resent"] += 1
 
-    def _since(self, since_mono: float, since_vt: float | None) -> str:
-        """How long ago an instant was, for a log line (in lockstep both clocks)."""
-        wall = time.monotonic() - since_mono
-        if not self.m.lockstep:
-            return f"{wall:.2f} s"
-        return f"{self._vehicle_since(since_vt):.2f} s of vehicle time ({wall:.2f} s wall)"
+    def _watchdog(self, att_left: float, timeout: float) -> None:
+        vl = self.vl
+        if att_left < 0.0:
+            since = vl.since(self.last_att_mono, self.last_att_vt)
+            raise _Stop(f"telemetry lost: no ATTITUDE for {since}; stopped commanding", "telemetry")
+        if vl.left(self.last_good_mono, self.last_good_vt, timeout) < 0.0:
+            # ATTITUDE still arrives but none made a control step: the cause is the controller's
+            why = self.ctl.why_not or "no control step"
+            if "target" in why:
+                raise _Stop(f"{why}; stopped commanding", "target")
+            since = vl.since(self.last_good_mono, self.last_good_vt)
+            raise _Stop(
+                f"telemetry lost: no usable state for {since} ({why}); stopped commanding",
+                "telemetry",
+            )
+
+    # -- streaming ---------------------------------------------------------------------------
+    def start(self) -> None:
+        """Start streaming, the staleness clocks afresh (the checks did not pump messages)."""
+        self.first_send_mono, self.prestream_sends = None, 0
+        self.streaming = True
+        self.last_good_mono = self.last_att_mono = time.monotonic()
+        self.last_good_vt = self.last_att_vt = self.vl.vehicle_t
+
+    def prestreamed(self) -> bool:
+        """Setpoints have streamed for ``prestream_s`` at ``min_setpoint_rate_hz`` or faster."""
+        if self.first_send_mono is None:
+            return False
+        span = self.last_send_mono - self.first_send_mono  # first to last setpoint sent
+        return span >= self.m.prestream_s and (self.prestream_sends - 1) / span >= (
+            self.m.min_setpoint_rate_hz
+        )
+
+    def hold_wings_level(self) -> None:
+        """From now on re-send a wings-level setpoint (the hand-back's)."""
+        if self.last_sp is not None:
+            self.last_sp = safe_setpoint(self.ctl.ad_params, self.ctl.roll())
+            self.streaming = True
 
     # -- control -----------------------------------------------------------------------------
-    def _control_step(self) -> None:
-        st = self.ctl.step()
+    def step(self) -> None:
+        ctl = self.ctl
+        st = ctl.step()
         if st is None:
             return
         self.n["law_evals"] += 1
         self.t_last = st.t
-        self._send_setpoint(st.setpoint, st.time_boot_ms)
-        tl = self.link.tlog
-        if tl is not None and tl.last_us is not None:  # its record time, as replay reads it
-            self.ctl.note_sent(tl.last_us * 1e-6)
+        self.send_setpoint(st.setpoint, st.time_boot_ms)
+        t_tx = self.vl.last_tx_record_s()
+        if t_tx is not None:  # its record time, as replay reads it
+            ctl.note_sent(t_tx)
         self.last_sp, self.last_time_boot_ms = st.setpoint, st.time_boot_ms
-        self.last_good_mono, self.last_good_vt = time.monotonic(), self.vehicle_t
-        self.display.values(self.link, st, int(self.state))  # after the setpoint: off its path
-        if self.state == State.TRACKING:
+        self.last_good_mono, self.last_good_vt = time.monotonic(), self.vl.vehicle_t
+        self._show(st)  # after the setpoint: off its path
+        if self.phase.state == State.TRACKING:
             self._record(st)
             if self.t_engage is not None and st.t - self.t_engage >= self.m.mission_duration_s:
                 raise _Stop(f"mission duration {self.m.mission_duration_s:g} s reached", "duration")
 
-    def _record(self, st: Step) -> None:
-        self.table.append(st.row())
-        self.sp_rows.append(tuple(st.setpoint_row()))
-        e = st.estimate
-        R2 = e.R_B_N[2]
-        self.judge_rows.append(
-            (
-                -float(e.vehicle.position[2]),
-                float(e.vehicle.airspeed),
-                math.atan2(float(R2[1]), float(R2[2])),
-                math.asin(max(-1.0, min(1.0, -float(R2[0])))),
-            )
-        )
-
-    def _send_setpoint(self, sp: Setpoint, time_boot_ms: int) -> None:
+    def send_setpoint(self, sp: Setpoint, time_boot_ms: int) -> None:
+        vl = self.vl
         if sp.safe:
             self.n["safe_setpoints"] += 1
         try:
-            if self.flavour is Flavour.PX4:
+            if vl.flavour is Flavour.PX4:
                 msg = encode_set_attitude_target_rates(
-                    self.link.mav,
-                    time_boot_ms,
-                    self.m.vehicle_sysid,
-                    self.vehicle_compid,
-                    *sp.body_rates_frd,
-                    sp.thrust,
+                    vl.link.mav, time_boot_ms, vl.sysid, vl.compid, *sp.body_rates_frd, sp.thrust
                 )
             else:
                 msg = encode_set_attitude_target_quat(
-                    self.link.mav,
-                    time_boot_ms,
-                    self.m.vehicle_sysid,
-                    self.vehicle_compid,
-                    sp.q_wxyz,
-                    sp.thrust,
-                    sp.body_rates_frd,
-                )
+                    vl.link.mav, time_boot_ms, vl.sysid, vl.compid,
+                    sp.q_wxyz, sp.thrust, sp.body_rates_frd,
+                )  # fmt: skip
         except ValueError:  # the adapter already guarantees finite values; belt and braces
-            sp = safe_setpoint(self.ad_params)
             self.n["safe_setpoints"] += 1
-            return self._send_setpoint(sp, time_boot_ms)
-        self._send(msg)
+            return self.send_setpoint(safe_setpoint(self.ctl.ad_params), time_boot_ms)
+        vl.send(msg)
         now = time.monotonic()
         self.last_send_mono = now
         self.n["setpoints_sent"] += 1
-        if self.state == State.PRESTREAM:
+        if self.phase.state == State.PRESTREAM:
             if self.first_send_mono is None:
                 self.first_send_mono = now
             self.prestream_sends += 1

@@ -28,14 +28,16 @@ the tlog as STATUSTEXT (:func:`origin_texts`, :data:`STREAM_TEXT`) for replay to
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import math
-from typing import Any, NamedTuple
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from mpf_mavlink.bridge.estimator import Estimate, Estimator, EstimatorParams
+from mpf_mavlink.bridge.instants import ControlInstants
+from mpf_mavlink.bridge.loop_delay import LoopDelay
 from mpf_mavlink.bridge.target_sources import ExtrapolatedTarget, LiveTarget, ScriptedTarget
 from mpf_mavlink.config.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.config.schema import Config
@@ -85,25 +87,52 @@ def parse_marker(text: str) -> tuple[str, float | None] | None:
     return None
 
 
-class Step(NamedTuple):
+class Step:
     """One control step: what the law saw and the setpoint it produced.
 
     t: mission time (s); t_boot_s: the ATTITUDE sample's autopilot time (s);
     time_boot_ms: what the setpoint carries; dt: time since the previous step (s, 0 first);
     w1_prev: w1 (NED) of the previous step, for the achieved-rate column of the logs.
+    ``diag``: the law's diagnostics at the sample's own instant. With delay compensation the
+    command comes from the predicted state, and the diagnostics the logs need are a second
+    evaluation of the (pure) law, made only when a record or the display asks for them.
     """
 
-    t: float
-    t_boot_s: float
-    time_boot_ms: int
-    dt: float
-    estimate: Estimate
-    target: TargetState
-    cmd: MpfCommand
-    diag: MpfDiagnostics
-    setpoint: Setpoint
-    w1: tuple[float, float, float]
-    w1_prev: tuple[float, float, float] | None
+    __slots__ = (
+        "t", "t_boot_s", "time_boot_ms", "dt", "estimate", "target", "cmd", "setpoint",
+        "w1", "w1_prev", "_diag", "_diag_of",
+    )  # fmt: skip
+
+    def __init__(
+        self,
+        t: float,
+        t_boot_s: float,
+        time_boot_ms: int,
+        dt: float,
+        estimate: Estimate,
+        target: TargetState,
+        cmd: MpfCommand,
+        diag: MpfDiagnostics | Callable[[], MpfDiagnostics],
+        setpoint: Setpoint,
+        w1: tuple[float, float, float],
+        w1_prev: tuple[float, float, float] | None,
+    ) -> None:
+        self.t, self.t_boot_s, self.time_boot_ms, self.dt = t, t_boot_s, time_boot_ms, dt
+        self.estimate, self.target, self.cmd, self.setpoint = estimate, target, cmd, setpoint
+        self.w1, self.w1_prev = w1, w1_prev
+        self._diag: MpfDiagnostics | None = None
+        self._diag_of: Callable[[], MpfDiagnostics] | None = None
+        if callable(diag):
+            self._diag_of = diag
+        else:
+            self._diag = diag
+
+    @property
+    def diag(self) -> MpfDiagnostics:
+        if self._diag is None:
+            assert self._diag_of is not None
+            self._diag, self._diag_of = self._diag_of(), None
+        return self._diag
 
     def row(self) -> list[float]:
         """The run directory's timeseries row (:data:`mpf_mavlink.runs.rundir.COLUMNS`)."""
@@ -164,22 +193,11 @@ def estimator_params(m: Any) -> EstimatorParams:
     origin = None
     if m.origin_lat_deg is not None and m.origin_lon_deg is not None and m.origin_alt_m is not None:
         origin = (m.origin_lat_deg, m.origin_lon_deg, m.origin_alt_m)
-    return EstimatorParams(m.attitude_stale_s, m.position_stale_s, m.airspeed_stale_s, m.wind_stale_s, m.wind_filter_tau_s, origin=origin, airspeed_is_eas=m.airspeed_is_eas, airspeed_from_wind=m.airspeed_from_wind)  # fmt: skip
-
-
-#: TIMESYNC answers kept for the clock offset (the bridge asks every 0.5 s: 8 s of them)
-TIMESYNC_WINDOW = 16
-
-
-def _period(T: float, prev: Any, sample: Any) -> float:
-    """A stream's period (s) filtered over ~10 samples, from the time since its previous sample
-    ``prev`` (None: the first); gaps of 1 s or more and repeated times leave it as it was."""
-    if prev is None:
-        return T
-    dt = float(sample.t_boot_s) - float(prev.t_boot_s)
-    if not 0.0 < dt < 1.0:
-        return T
-    return dt if T == 0.0 else T + 0.1 * (dt - T)
+    return EstimatorParams(
+        m.attitude_stale_s, m.position_stale_s, m.airspeed_stale_s, m.wind_stale_s,
+        m.wind_filter_tau_s, origin=origin, airspeed_is_eas=m.airspeed_is_eas,
+        airspeed_from_wind=m.airspeed_from_wind,
+    )  # fmt: skip
 
 
 class Controller:
@@ -216,192 +234,35 @@ class Controller:
         self.ad_state = AdapterState()
         self.why_not = ""
         self.law_evals = 0
-        # delay compensation: the ATTITUDE period (s, filtered) and the loop delay (s) in use
+        # delay compensation: the step period (s, filtered), the loop delay (loop_delay.py)
         self.period_s = 0.0
-        self.delay_s = float(getattr(m, "known_delay_s", 0.0))
+        self.rates_pipeline = getattr(m, "flavour", "auto") == "px4"
+        self.delay = LoopDelay(getattr(m, "known_delay_s", 0.0), self.rates_pipeline)
         self.tau_s = 0.0  # the prediction horizon of the latest step
         self.alpha_m = self.gains.alpha  # the look-ahead of the latest step (guidance/predict.py)
-        # body rates sent (PX4 rate setpoints): (mission time of the ATTITUDE answered, p, q, r)
-        self.sent: collections.deque[tuple[float, tuple[float, float, float]]] = collections.deque(
-            maxlen=64
-        )
-        self.rates_pipeline = getattr(m, "flavour", "auto") == "px4"
         if not self.rates_pipeline:  # body rates not sent: no pitch-rate bias to take off them
             self.ad_params = dataclasses.replace(self.ad_params, rate_bias_tau_s=0.0)
-        # the loop delay measured (s), median of the last 9 of each source (_echo, note_sent)
-        self.delays: collections.deque[float] = collections.deque(maxlen=9)  # echoes
-        self.ts_delays: collections.deque[float] = collections.deque(maxlen=9)  # TIMESYNC
-        self.echo_tb: float | None = None  # the stamp of the latest echo (s, autopilot time)
-        self.echoes_frozen = 0  # echoes whose stamp had not moved: no measurement
-        # TIMESYNC answers: (receive time s, round trip s, vehicle clock minus ours s)
-        self.timesync: collections.deque[tuple[float, float, float]] = collections.deque(
-            maxlen=TIMESYNC_WINDOW
+        # multi-rate loop: which samples are control instants (instants.py)
+        self.instants = ControlInstants(
+            self.est, self.rates_pipeline and bool(getattr(m, "position_instants", False))
         )
-        self.tx_due: float | None = None  # the autopilot time of the step not yet sent
-        # multi-rate loop (step): a LOCAL_POSITION_NED between two ATTITUDE samples is a
-        # control instant too; the periods (s, filtered) of both streams decide which are
-        self.position_instants = self.rates_pipeline and bool(
-            getattr(m, "position_instants", False)
-        )
-        self.att_period_s = 0.0
-        self.pos_period_s = 0.0
-        self.at_position = False  # the latest control instant is a position sample's
-        self.t_prev_boot: float | None = None  # autopilot time (s) of the latest step
-        self.position_steps = 0  # steps made at position instants
 
     # -- feeding ----------------------------------------------------------------------------
     def feed_vehicle(self, sample: Any, rx: float | None) -> bool:
         """A decoded sample of the vehicle; True when it is a control instant: an ATTITUDE, or
         with ``mavlink.position_instants`` a LOCAL_POSITION_NED between two of them
-        (:meth:`_position_instant`)."""
+        (:class:`~mpf_mavlink.bridge.instants.ControlInstants`)."""
         name = type(sample).__name__
         if name == "AttitudeTargetSample":
-            self._echo(sample)
+            self.delay.echo(sample, self.est.t0)
             return False
         if name == "TimesyncSample":
-            self._timesync(sample, rx)
+            self.delay.timesync_answer(sample, rx)
             return False
         est = self.est
         prev_att, prev_loc = est.att, est.local
-        if est.update(sample, rx):
-            self.att_period_s = _period(self.att_period_s, prev_att, sample)
-            self.at_position = False
-            return True
-        if name != "LocalPositionSample" or est.local is not sample:
-            return False
-        self.pos_period_s = _period(self.pos_period_s, prev_loc, sample)
-        if self.position_instants and self._position_instant(sample.t_boot_s):
-            self.at_position = True
-            return True
-        return False
-
-    def _position_instant(self, tp: float) -> bool:
-        """Whether a position sample of autopilot time tp (s) is a control instant: at least
-        half a position period after the latest ATTITUDE and the latest step, and earlier than
-        the next ATTITUDE is due by more than half a position period. A position that comes
-        with (about) the same instant as an ATTITUDE (the streams share a clock: 50 Hz each, or
-        every fifth position at 10 Hz ATTITUDE) leaves the step to that ATTITUDE, whichever of
-        the two arrives first; so with both streams at one rate, in phase or not (a real PX4
-        samples each stream on its own schedule), this never steps: the ATTITUDE-only loop."""
-        a = self.est.att
-        T = self.att_period_s
-        if a is None or not T > 0.0:
-            return False
-        half = 0.5 * self.pos_period_s
-        last = a.t_boot_s if self.t_prev_boot is None else max(a.t_boot_s, self.t_prev_boot)
-        return tp - last >= half and tp - a.t_boot_s < T - half
-
-    # -- the loop delay ------------------------------------------------------------------------
-    # The delay d from an ATTITUDE sample's time to when the setpoint answering it acts, both on
-    # the autopilot's clock, is measured two ways:
-    #
-    # 1. The ATTITUDE_TARGET echo, when its stamp moves: an autopilot that stamps the set-point
-    #    it uses with the time it received it (PX4 with attitude set-points, our SIL) gives d
-    #    directly, everything included. It is preferred whenever it exists.
-    # 2. TIMESYNC (PX4 body rates): PX4 v1.16 in body-rate OFFBOARD stamps ATTITUDE_TARGET with
-    #    the last attitude set-point from before OFFBOARD, frozen for the whole flight (its body
-    #    rates move, its time does not), so (1) never measures. PX4 answers TIMESYNC with its
-    #    boot clock (the clock of time_boot_ms, in ns): the instant a setpoint reaches PX4, on
-    #    PX4's clock, is its send time plus the clocks' offset plus the uplink latency, and d
-    #    is that minus the ATTITUDE's time. Each answer gives an offset assuming half its
-    #    round trip each way; the uplink latency added back is half the median round trip: on
-    #    a steady link their sum is tc1 - ts1, the request's own uplink latency plus the
-    #    offset, so an asymmetric link does not bias it. The clocks drift: PX4 SITL's lockstep
-    #    clock ran 1.1 % slow on a loaded host (11 ms/s), so the offset is a straight line
-    #    fitted to the last answers (queued ones, round trip beyond twice the median, left
-    #    out) and read at the send time. It
-    #    covers the telemetry's age when sent, the link both ways and the bridge's own time;
-    #    what it leaves out is PX4's receiver-to-rate-controller hop (one uORB publication,
-    #    at most a rate-loop period, a few ms): a lower bound by that much.
-    #    The other candidate, the ATTITUDE body rates' response to the rates sent, measures the
-    #    delay plus the rate loop's own lag, which the prediction must not add (the rate loop
-    #    is modelled as tracking the setpoint), and needs excitation a circle does not give.
-    # Both are deterministic functions of the tlog (record times and message contents), so a
-    # replay measures the same delays: the send time is the tlog record time of the step's
-    # first SET_ATTITUDE_TARGET (:meth:`note_sent`).
-    def delay_source(self) -> str:
-        """Where :attr:`delay_s` comes from: "echo", "timesync" or "mavlink.known_delay_s"."""
-        return "echo" if self.delays else "timesync" if self.ts_delays else "mavlink.known_delay_s"
-
-    def _use_delay(self) -> None:
-        q = self.delays or self.ts_delays
-        if q:
-            self.delay_s = sorted(q)[len(q) // 2]
-
-    def _timesync(self, sample: Any, rx: float | None) -> None:
-        """A TIMESYNC answer to one of our requests (ts1 = our clock when sent, ns): its round
-        trip and the offset of the vehicle's clock from ours (s), assuming a symmetric link.
-        An answer to someone else's request (a round trip outside [0, 1] s) is ignored."""
-        if rx is None or not self.rates_pipeline:
-            return
-        ts = sample.ts1_ns * 1e-9
-        rtt = rx - ts
-        if not 0.0 <= rtt <= 1.0:
-            return
-        self.timesync.append((rx, rtt, sample.tc1_ns * 1e-9 - 0.5 * (ts + rx)))
-
-    def clock_offset(self, t: float) -> tuple[float, float] | None:
-        """(vehicle clock minus ours at our time t, half the median round trip), both s, from
-        the TIMESYNC answers kept; None without any."""
-        if not self.timesync:
-            return None
-        rtts = sorted(r for _, r, _ in self.timesync)
-        med = rtts[len(rtts) // 2]
-        good = [(x, o) for x, r, o in self.timesync if r <= 2.0 * med + 1e-4]
-        n = len(good)
-        tl, ol = good[-1]
-        if n < 3 or tl - good[0][0] < 1.0:
-            return ol, 0.5 * med
-        # least squares o = a + b (x - tl), centred on the latest answer
-        mx = sum(x - tl for x, _ in good) / n
-        mo = sum(o for _, o in good) / n
-        sxx = sum((x - tl - mx) ** 2 for x, _ in good)
-        b = sum((x - tl - mx) * (o - mo) for x, o in good) / sxx
-        return mo + b * (t - tl - mx), 0.5 * med
-
-    def note_sent(self, t_tx: float) -> None:
-        """The latest step's setpoint was sent at t_tx (s, the tlog record time of its first
-        SET_ATTITUDE_TARGET): with TIMESYNC answers, one measurement of the loop delay (see
-        above). Re-sends of the same setpoint do not count."""
-        tb, self.tx_due = self.tx_due, None
-        got = None if tb is None else self.clock_offset(t_tx)
-        if tb is None or got is None:
-            return
-        off, one_way = got
-        d = t_tx + off + one_way - tb
-        if 0.0 <= d <= 0.5:  # beyond: a clock jump, not a link to mend
-            self.ts_delays.append(d)
-            self._use_delay()
-
-    def _echo(self, sample: Any) -> None:
-        """The autopilot's ATTITUDE_TARGET: when our setpoint reached it. Only an echo whose
-        stamp moved since the previous one measures (a frozen stamp, PX4 v1.16's body-rate
-        OFFBOARD, says nothing about when). The setpoint is found by its body rates (float32
-        on the wire) among those sent; the loop delay is the echo's time minus the time of the
-        ATTITUDE that setpoint answered, both on the autopilot's clock. The delay in use is
-        the median of the last 9 (one late echo does not move it)."""
-        prev, self.echo_tb = self.echo_tb, sample.t_boot_s
-        if prev is not None and sample.t_boot_s <= prev:
-            self.echoes_frozen += 1
-            return
-        t0 = self.est.t0
-        if not self.sent or not math.isfinite(t0):
-            return
-        te = sample.t_boot_s - t0
-        a, b, c = sample.rates_frd
-        for ts, (p, q, r) in reversed(self.sent):
-            if ts > te:
-                continue
-            if (
-                abs(p - a) <= 1e-6 * max(1.0, abs(p))
-                and abs(q - b) <= 1e-6 * max(1.0, abs(q))
-                and abs(r - c) <= 1e-6 * max(1.0, abs(r))
-            ):
-                d = te - ts
-                if 0.0 <= d <= 0.5:  # beyond: not this setpoint's echo, or not a link to mend
-                    self.delays.append(d)
-                    self._use_delay()
-                return
+        attitude = est.update(sample, rx)
+        return self.instants.after_update(sample, attitude, prev_att, prev_loc)
 
     def feed_target(self, sample: Any, rx: float | None) -> None:
         """A decoded sample of the live target (ignored with a scripted target)."""
@@ -470,7 +331,7 @@ class Controller:
             s0 = self.path.closest(tgt.R_T_I.T @ (vs.position - tgt.position))
         self.s = float(s0)
         self.t_prev = None
-        self.t_prev_boot = None
+        self.instants.t_prev_boot = None
         self.sdot_prev = 0.0
         self.w1_prev = None
         # the airframe's learned trim and turn stay; thrust starts from the autopilot's own
@@ -487,6 +348,15 @@ class Controller:
             return None
         return float(thr)
 
+    def note_sent(self, t_tx: float) -> None:
+        """The latest step's setpoint left at record time t_tx (s): :meth:`LoopDelay.note_sent`."""
+        self.delay.note_sent(t_tx)
+
+    @property
+    def delay_s(self) -> float:
+        """The loop delay in use (s)."""
+        return self.delay.delay_s
+
     def initial_state(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(position NED m, R_W^I) of the latest estimate, for the pre-flight checks."""
         est, _ = self.est.estimate()
@@ -497,7 +367,7 @@ class Controller:
         """One control step at the latest control instant (ATTITUDE, or a position instant:
         :meth:`feed_vehicle`); None (``why_not`` set) when the state or the target is not
         usable, or when the sample is not newer than the previous step."""
-        est, why = self.est.estimate(self.at_position)
+        est, why = self.est.estimate(self.instants.at_position)
         if est is None:
             self.why_not = why
             return None
@@ -515,46 +385,26 @@ class Controller:
                     f"no new ATTITUDE instant (t {t:.3f} s, last step at {self.t_prev:.3f} s)"
                 )
                 return None
-            self.s += self.sdot_prev * dt
-            # the step period (how long a setpoint is held: the ATTITUDE period, or shorter
-            # with position instants), filtered over ~10 steps (gaps excluded)
-            if dt < 1.0:
-                self.period_s = (
-                    dt if self.period_s == 0.0 else self.period_s + 0.1 * (dt - self.period_s)
-                )
+            self._advance(dt)
         # The law acts on the state when its setpoint acts (guidance/predict.py)
-        vl: VehicleState = vs
-        R_B_N = est.R_B_N
-        s_law = self.s
-        tgt_law = tgt
-        tau = 0.0
-        hold = 0.0  # how long the setpoint is held (s), for the adapter's roll loop
-        if getattr(self.m, "delay_compensation", False):
-            tau = prediction_horizon(self.delay_s)
-            hold = self.period_s
-            if tau > 0.0:
-                vl, R_B_N = predict_segments(vs, est.R_B_N, self._segments(t, tau))
-                tp = self.target.state(t + tau)
-                if not isinstance(tp, str):
-                    tgt_law = tp
-                s_law = self.s + self.sdot_prev * tau
+        vl, R_B_N, s_law, tgt_law, tau = self._predicted(est, tgt)
+        hold = self.period_s if self.m.delay_compensation else 0.0  # for the adapter's roll loop
         self.tau_s = tau
         gains = self.gains
-        if getattr(self.m, "delay_compensation", False):
+        if self.m.delay_compensation:
             a = look_ahead(gains.alpha, gains.K_R, vs.airspeed, self.delay_s, self.period_s)
             if a > gains.alpha:
                 gains = dataclasses.replace(gains, alpha=a)
         self.alpha_m = gains.alpha
         law = self.cfg_law
-        cmd, diag = guidance_law(law, s_law, vl, tgt_law, self.path, gains, self.ext, True)
-        assert diag is not None
+        cmd, diag_law = guidance_law(law, s_law, vl, tgt_law, self.path, gains, self.ext, True)
+        assert diag_law is not None
+        diag: MpfDiagnostics | Callable[[], MpfDiagnostics] = diag_law
         if tau > 0.0:
             # The logs describe the sample's own instant (errors, frames, the relative position:
             # replay and the SIL truth align on them); the command and its saturation flag are
             # the predicted evaluation's, which is what was sent.
-            _, dm = guidance_law(law, self.s, vs, tgt, self.path, gains, self.ext, True)
-            assert dm is not None
-            diag = dm._replace(mode=diag.mode)
+            diag = self._diag_at_sample(self.s, vs, tgt, gains, diag_law.mode)
         self.law_evals += 1
         w10, w11, w12 = vs.R_W_I[:, 0].tolist()
         w1 = (w10, w11, w12)  # measured: the logs' achieved rate
@@ -566,42 +416,56 @@ class Controller:
         if not math.isfinite(cmd.sdot):
             sp = safe_setpoint(self.ad_params)
         if self.rates_pipeline:
-            self.sent.append((t, sp.body_rates_frd))
-            self.tx_due = est.t_boot_s
+            self.delay.sent_rates(t, sp.body_rates_frd, est.t_boot_s)
         self.t_prev = t
-        self.t_prev_boot = est.t_boot_s
-        self.position_steps += self.at_position
+        self.instants.stepped(est.t_boot_s)
         self.sdot_prev = cmd.sdot if math.isfinite(cmd.sdot) else 0.0
         w1_prev, self.w1_prev = self.w1_prev, w1
         tb_ms = int(round(est.t_boot_s * 1000.0))
         self.why_not = ""  # a step was made: nothing is missing now
         return Step(t, est.t_boot_s, tb_ms, dt, est, tgt, cmd, diag, sp, w1, w1_prev)
 
-    def _segments(self, t: float, tau: float) -> list[tuple[float, Any]]:
-        """The body rates over [t, t + tau]: the PX4 rate setpoints already sent act from
-        their ATTITUDE's time + the loop delay, one period each (the rate loop tracks them);
-        before the first of them and for ArduPlane (attitude setpoints) the measured rates."""
-        est = self.est
-        rates = est.att.rates_frd if est.att is not None else (0.0, 0.0, 0.0)
-        if not self.rates_pipeline or not self.sent:
-            return [(tau, rates)]
-        d = self.delay_s
-        segs: list[tuple[float, Any]] = []
-        now = t
-        end = t + tau
-        qb = self.ad_state.q_bias  # the autopilot flies the pitch rate sent plus its bias
-        for ts, (p_, q_, r_) in self.sent:
-            r = (p_, q_ + qb, r_)
-            a = ts + d  # when that setpoint starts acting
-            if a <= now:
-                rates = r  # acting now (the latest that started)
-                continue
-            if a >= end:
-                break
-            segs.append((a - now, rates))
-            now, rates = a, r
-        segs.append((end - now, rates))
-        return segs
+    def _advance(self, dt: float) -> None:
+        """s over the dt (s) since the previous step, and the step period (how long a setpoint
+        is held: the ATTITUDE period, or shorter with position instants), filtered over ~10
+        steps (gaps excluded)."""
+        self.s += self.sdot_prev * dt
+        if dt < 1.0:
+            T = self.period_s
+            self.period_s = dt if T == 0.0 else T + 0.1 * (dt - T)
+
+    def _predicted(
+        self, est: Estimate, tgt: TargetState
+    ) -> tuple[VehicleState, Any, float, TargetState, float]:
+        """(vehicle state, R_B_N, s, target, horizon tau s) the law acts on: predicted tau
+        ahead with delay compensation (the rates in flight, the target there, s moved on by
+        sdot), else those of the sample."""
+        vs = est.vehicle
+        if not self.m.delay_compensation:
+            return vs, est.R_B_N, self.s, tgt, 0.0
+        tau = prediction_horizon(self.delay_s)
+        if not tau > 0.0:
+            return vs, est.R_B_N, self.s, tgt, tau
+        t = vs.t
+        att = self.est.att
+        rates = att.rates_frd if att is not None else (0.0, 0.0, 0.0)
+        segs = self.delay.segments(t, tau, rates, self.ad_state.q_bias)
+        vl, R_B_N = predict_segments(vs, est.R_B_N, segs)
+        tp = self.target.state(t + tau)
+        return vl, R_B_N, self.s + self.sdot_prev * tau, tgt if isinstance(tp, str) else tp, tau
+
+    def _diag_at_sample(
+        self, s: float, vs: VehicleState, tgt: TargetState, gains: Any, mode: str
+    ) -> Callable[[], MpfDiagnostics]:
+        """The diagnostics of the law at the sample's own instant, when asked for."""
+        law, path, ext = self.cfg_law, self.path, self.ext
+
+        def diag() -> MpfDiagnostics:
+            _, dm = guidance_law(law, s, vs, tgt, path, gains, ext, True)
+            assert dm is not None
+            return dm._replace(mode=mode)
+
+        return diag
 
     def roll(self) -> float:
         """Roll (rad) of the latest ATTITUDE, 0 without one (for the wings-level setpoint)."""

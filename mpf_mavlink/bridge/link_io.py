@@ -1,5 +1,6 @@
-"""The bridge's link loop: receive and dispatch messages (tlog time stamps), periodic duties
-(companion heartbeat, setpoint re-sends) and the bounded wait every life-cycle step spins in."""
+"""The bridge's link to one vehicle (:class:`VehicleLink`): what the vehicle tells us
+(heartbeat, acks, parameters, its clock, arrival times), what we send, the timeouts on the
+wall or the vehicle's clock, and the bounded wait every life-cycle step spins in."""
 
 from __future__ import annotations
 
@@ -10,14 +11,15 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from mpf_mavlink.bridge.base import State, _Stop
-from mpf_mavlink.bridge.control_step import ControlStep
-from mpf_mavlink.mavlink import Flavour, decode, dialect, is_offboard, mode_name
+from mpf_mavlink.mavlink import Flavour, decode, dialect
 
 #: How often the bridge asks PX4 for TIMESYNC (s): the 16 answers kept (controller.py) span
 #: 8 s, over which a line follows the clocks' drift.
 TIMESYNC_PERIOD_S = 0.5
-
+#: How often the companion HEARTBEAT goes out (s): MAVLink's 1 Hz convention.
+HEARTBEAT_PERIOD_S = 1.0
+#: The longest single wait for a message (s): duties (heartbeat, re-sends) run at least this often.
+MAX_WAIT_S = 0.01
 
 _INT_PARAM_TYPES = frozenset({1, 2, 3, 4, 5, 6})  # MAV_PARAM_TYPE_(U)INT8/16/32
 
@@ -38,76 +40,64 @@ def param_set_value(value: float, param_type: int, bytewise: bool) -> float:
     return float(value)
 
 
-class LinkIO(ControlStep):
-    """Receive, dispatch, periodic sends and the bounded wait (:meth:`_spin`)."""
+def _ignore_sample(sample: Any, rx: float | None) -> None:
+    return None
 
-    # -- I/O helpers -------------------------------------------------------------------------
-    def _rx_time(self, msg: Any) -> float | None:
-        """The receive time (s since the epoch) as the tlog recorded it: the link logs each
-        message just before handing it over, so the last record is this one. The same float
-        as a tlog reader computes (us * 1e-6), so replay sees exactly what we saw."""
-        tl = self.link.tlog if self.link is not None else None
-        if tl is not None and tl.last_packet is msg.get_msgbuf() and tl.last_us is not None:
-            return tl.last_us * 1e-6
-        t = getattr(msg, "_timestamp", None)  # no tlog record for it: quantise alike
-        return None if t is None else round(t * 1e6) * 1e-6
 
-    def _dispatch(self, msg: Any) -> None:
-        src = msg.get_srcSystem()
-        if src == self.m.vehicle_sysid:
-            if self._arrivals is not None:
-                self._arrivals.setdefault(msg.get_type(), deque(maxlen=400)).append(
-                    time.monotonic()
-                )
-            if msg.get_type() == "PARAM_VALUE":
-                name = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else ""
-                v = param_value(msg, self.flavour is Flavour.PX4)
-                if v is not None:
-                    self.params[name] = v
-                    self.param_types[name] = int(msg.param_type)
-                return
-        rx = self._rx_time(msg)
-        msg._timestamp = rx  # decoders copy it into the samples (VFR_HUD, WIND, HEARTBEAT)
-        sample = decode(msg)
-        if sample is None:
-            return
-        name = type(sample).__name__
-        if src == self.m.vehicle_sysid:
-            if name == "HeartbeatSample":
-                if sample.autopilot == dialect.MAV_AUTOPILOT_INVALID:
-                    return  # a GCS or companion on the same system id
-                self.hb = sample
-                if self.engaged and not is_offboard(self.flavour, sample):
-                    mode = mode_name(self.flavour, sample)
-                    if rx is not None and self.link.clock_gate.restarting(rx):
-                        # a vehicle that reboots faster than the telemetry timeout comes back
-                        # in its start-up mode: that is no pilot, and the log should say so
-                        raise _Stop(
-                            f"the vehicle rebooted (its boot clock restarted) and came back in {mode}: stopped commanding",
-                            "pilot",
-                        )
-                    raise _Stop(
-                        f"mode changed to {mode} by someone else: stopped commanding, not fighting it",
-                        "pilot",
-                    )
-                return
-            if name == "CommandAckSample":
-                self.acks.append(sample)
-                return
-            t_boot = getattr(sample, "t_boot_s", None)
-            if t_boot is not None:
-                self.vehicle_t = t_boot
-            if self.ctl.feed_vehicle(sample, rx):  # a control instant
-                if name == "AttitudeSample":  # the telemetry timeout counts ATTITUDE only
-                    self.last_att_mono, self.last_att_vt = time.monotonic(), self.vehicle_t
-                if self.streaming and self.state < State.HANDBACK:
-                    self._control_step()
-        elif self.live and src == self.m.target_sysid:
-            self.ctl.feed_target(sample, rx)
+def _nothing() -> None:
+    return None
 
-    def _periodic(self) -> None:
-        now = time.monotonic()
-        if now - self.last_hb_tx_mono >= 1.0:
+
+def _never(now: float) -> float:
+    return math.inf
+
+
+class VehicleLink:
+    """One vehicle over one MAVLink link (``link``: :class:`~mpf_mavlink.mavlink.link.Link`,
+    opened by the bridge). Hooks the bridge wires: ``on_heartbeat(sample, rx)`` for the
+    autopilot's HEARTBEATs, ``on_vehicle(sample, rx)`` for its other decoded samples,
+    ``on_target(sample, rx)`` for the live target's, ``on_tick()`` after every receive or wait,
+    ``due(now)`` the monotonic time by which ``on_tick`` must run next."""
+
+    def __init__(self, m: Any, live_target: bool = False) -> None:
+        self.m = m
+        self.sysid: int = m.vehicle_sysid
+        self.target_sysid: int | None = m.target_sysid if live_target else None
+        self.link: Any = None
+        self.flavour = Flavour.UNKNOWN
+        self.compid = 1
+        self.hb: Any = None  # latest autopilot HeartbeatSample
+        self.acks: list[Any] = []
+        self.params: dict[str, float] = {}  # PARAM_VALUE answers (name -> value)
+        self.param_types: dict[str, int] = {}  # name -> MAV_PARAM_TYPE
+        # arrival times (monotonic s) per message type while the stream rates are measured
+        self.arrivals: dict[str, deque[float]] | None = None
+        # the vehicle's clock (s since its boot): the newest time stamp it sent
+        self.vehicle_t: float | None = None
+        self.last_hb_tx_mono = -math.inf
+        self.last_ts_tx_mono = -math.inf  # the latest TIMESYNC request (PX4's loop delay)
+        self.on_heartbeat: Callable[[Any, float | None], None] = _ignore_sample
+        self.on_vehicle: Callable[[Any, float | None], None] = _ignore_sample
+        self.on_target: Callable[[Any, float | None], None] = _ignore_sample
+        self.on_tick: Callable[[], None] = _nothing
+        self.due: Callable[[float], float] = _never
+
+    # -- sending -----------------------------------------------------------------------------
+    def send(self, msg: Any) -> None:
+        self.link.send(msg)
+
+    def send_text(self, text: str) -> None:
+        """A STATUSTEXT (severity INFO) from us: the tlog's record of a decision."""
+        self.send(self.link.mav.statustext_encode(dialect.MAV_SEVERITY_INFO, text.encode("ascii")))
+
+    def last_tx_record_s(self) -> float | None:
+        """The record time (s) of the latest message sent, as a tlog reader computes it."""
+        t: float | None = self.link.last_tx_s
+        return t
+
+    def duties(self, now: float) -> None:
+        """The companion HEARTBEAT and (PX4, real time) the TIMESYNC requests."""
+        if now - self.last_hb_tx_mono >= HEARTBEAT_PERIOD_S:
             self.last_hb_tx_mono = now
             self.link.send_heartbeat()
         if (
@@ -118,54 +108,109 @@ class LinkIO(ControlStep):
             # a request (tc1 = 0) stamped with the link's clock, which stamps the tlog too:
             # the answer measures the loop delay (Controller.note_sent)
             self.last_ts_tx_mono = now
-            self._send(self.link.mav.timesync_encode(0, int(round(self.link.clock() * 1e9))))
-        if not self.streaming:
-            return
-        period = 1.0 / self.m.min_setpoint_rate_hz
-        timeout = self.m.telemetry_timeout_s
-        # re-send only while the last ATTITUDE is young enough that the last re-send still
-        # falls within telemetry_timeout_s of it: commands never outlive the telemetry by more
-        att_left = self._left(self.last_att_mono, self.last_att_vt, timeout)
-        fresh = att_left >= period
-        if self.state == State.HANDBACK:  # wings-level setpoints until the hold mode is confirmed
-            if fresh and self.last_sp is not None and now - self.last_send_mono >= period:
-                self._send_setpoint(self.last_sp, self.last_time_boot_ms)
-                self.n["setpoints_resent"] += 1
-            return
-        if att_left < 0.0:
-            raise _Stop(
-                f"telemetry lost: no ATTITUDE for {self._since(self.last_att_mono, self.last_att_vt)}; stopped commanding",
-                "telemetry",
-            )
-        if self._left(self.last_good_mono, self.last_good_vt, timeout) < 0.0:
-            # ATTITUDE still arrives but none made a control step: the cause is the controller's
-            why = self.why_not or "no control step"
-            if "target" in why:
-                raise _Stop(f"{why}; stopped commanding", "target")
-            since = self._since(self.last_good_mono, self.last_good_vt)
-            raise _Stop(
-                f"telemetry lost: no usable state for {since} ({why}); stopped commanding",
-                "telemetry",
-            )
-        if fresh and self.last_sp is not None and now - self.last_send_mono >= period:
-            self._send_setpoint(self.last_sp, self.last_time_boot_ms)
-            self.n["setpoints_resent"] += 1
+            self.send(self.link.mav.timesync_encode(0, int(round(self.link.clock() * 1e9))))
 
-    def _spin(self, timeout_s: float, until: Callable[[], bool] | None = None) -> bool:
-        """Pump messages (streaming setpoints when on) until ``until()`` or the timeout."""
+    def close(self) -> None:
+        if self.link is not None:
+            self.link.close()
+
+    # -- receiving ---------------------------------------------------------------------------
+    @staticmethod
+    def rx_time(msg: Any) -> float | None:
+        """The receive time (s since the epoch) as the tlog records it: the link stamps each
+        message with its record time, quantised to the tlog's microseconds, so replay sees
+        exactly what we saw (and a run without a tlog sees the same)."""
+        t = getattr(msg, "_timestamp", None)
+        return None if t is None else round(t * 1e6) * 1e-6
+
+    def dispatch(self, msg: Any) -> None:
+        """One received message: bookkeeping here, decoded samples to the hooks."""
+        src = msg.get_srcSystem()
+        own = src == self.sysid
+        if own:
+            if self.arrivals is not None:
+                q = self.arrivals.setdefault(msg.get_type(), deque(maxlen=400))
+                q.append(time.monotonic())
+            if msg.get_type() == "PARAM_VALUE":
+                self._param(msg)
+                return
+        elif src != self.target_sysid:
+            return
+        rx = self.rx_time(msg)
+        msg._timestamp = rx  # decoders copy it into the samples (VFR_HUD, WIND, HEARTBEAT)
+        sample = decode(msg)
+        if sample is None:
+            return
+        if not own:
+            self.on_target(sample, rx)
+            return
+        name = type(sample).__name__
+        if name == "HeartbeatSample":
+            if sample.autopilot != dialect.MAV_AUTOPILOT_INVALID:  # not a GCS on our system id
+                self.hb = sample
+                self.on_heartbeat(sample, rx)
+            return
+        if name == "CommandAckSample":
+            self.acks.append(sample)
+            return
+        t_boot = getattr(sample, "t_boot_s", None)
+        if t_boot is not None:
+            self.vehicle_t = t_boot
+        self.on_vehicle(sample, rx)
+
+    def _param(self, msg: Any) -> None:
+        name = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else ""
+        v = param_value(msg, self.flavour is Flavour.PX4)
+        if v is not None:
+            self.params[name] = v
+            self.param_types[name] = int(msg.param_type)
+
+    def drain(self) -> None:
+        """Take in what is waiting, without waiting (nor the periodic duties)."""
+        while (msg := self.link.recv(0.0)) is not None:
+            self.dispatch(msg)
+
+    def spin(self, timeout_s: float, until: Callable[[], bool] | None = None) -> bool:
+        """Pump messages and duties until ``until()`` (True) or the timeout (False)."""
         t_end = time.monotonic() + timeout_s
+        link, due = self.link, self.due
         while True:
             if until is not None and until():
                 return True
             now = time.monotonic()
             if now >= t_end:
                 return False
-            wait = min(t_end - now, 0.01)
-            if self.streaming:
-                wait = min(
-                    wait, max(0.0, self.last_send_mono + 1.0 / self.m.min_setpoint_rate_hz - now)
-                )
-            msg = self.link.recv(wait)
+            wait = min(t_end - now, MAX_WAIT_S, max(0.0, due(now) - now))
+            msg = link.recv(wait)
             if msg is not None:
-                self._dispatch(msg)
-            self._periodic()
+                self.dispatch(msg)
+            self.on_tick()
+
+    # -- timeouts ----------------------------------------------------------------------------
+    def left(
+        self, since_mono: float, since_vt: float | None, timeout_s: float, wall_s: float = 0.0
+    ) -> float:
+        """Seconds left until ``timeout_s`` has passed since an instant (``since_mono`` on the
+        wall clock, ``since_vt`` on the vehicle's); negative once it has. A real link: wall
+        time. Lockstep (``mavlink.lockstep``): the vehicle's time, which stands still while the
+        simulation is starved, bounded by ``wall_s`` (default ``lockstep_wall_timeout_s``) of
+        wall time for a vehicle that sends nothing at all."""
+        wall = time.monotonic() - since_mono
+        if not self.m.lockstep:
+            return timeout_s - wall
+        bound = wall_s or self.m.lockstep_wall_timeout_s
+        return min(timeout_s - self.vehicle_since(since_vt), bound - wall)
+
+    def vehicle_since(self, since_vt: float | None) -> float:
+        """Vehicle seconds since ``since_vt``; 0 before any time stamp or after a reboot (its
+        clock restarted: the mode change it comes back in, or the wall bound, ends the run)."""
+        if self.vehicle_t is None or since_vt is None:
+            return 0.0
+        return max(0.0, self.vehicle_t - since_vt)
+
+    def since(self, since_mono: float, since_vt: float | None) -> str:
+        """How long ago an instant was, for a log line (in lockstep both clocks)."""
+        wall = time.monotonic() - since_mono
+        if not self.m.lockstep:
+            return f"{wall:.2f} s"
+        return f"{self.vehicle_since(since_vt):.2f} s of vehicle time ({wall:.2f} s wall)"

@@ -2,7 +2,8 @@
 wrapped in the offboard life cycle.
 
 States (``BridgeResult.state_reached`` is the furthest one):
-  CONNECTING -> WAIT_HEARTBEAT -> CHECKS -> INIT -> PRESTREAM -> ENGAGE -> TRACKING -> HANDBACK -> DONE
+  CONNECTING -> WAIT_HEARTBEAT -> CHECKS -> INIT -> PRESTREAM -> ENGAGE -> TRACKING -> HANDBACK
+  -> DONE
 
 - CHECKS runs :func:`mpf_mavlink.bridge.preflight.run_checks` from the vehicle's first estimate; a
   failure refuses to engage (no mode request is ever sent) and exits 3.
@@ -54,166 +55,234 @@ from mpf_mavlink.bridge.base import (
     EXIT_SIGTERM,
     BridgeOptions,
     BridgeResult,
+    Phase,
     State,
     _Stop,
     _Terminated,
+    resolve_mavlink,
 )
-from mpf_mavlink.bridge.controller import HALT_TEXT, STREAM_TEXT, LiveTarget, ScriptedTarget
-from mpf_mavlink.bridge.recording import Recording
-from mpf_mavlink.config import bridge as bridge_config  # noqa: F401  (registers the mavlink/adapter sections)
+from mpf_mavlink.bridge.control_step import ControlLoop
+from mpf_mavlink.bridge.controller import (
+    HALT_TEXT,
+    STREAM_TEXT,
+    Controller,
+    LiveTarget,
+    ScriptedTarget,
+    Step,
+)
+from mpf_mavlink.bridge.fallback import FallbackSetup
+from mpf_mavlink.bridge.link_io import VehicleLink
+from mpf_mavlink.bridge.operator import OperatorDisplay
+from mpf_mavlink.bridge.recording import Recorder, is_lean
+from mpf_mavlink.bridge.session import Session
+from mpf_mavlink.bridge.streams import StreamNegotiator
+from mpf_mavlink.config import bridge as bridge_config  # noqa: F401  (registers the sections)
 from mpf_mavlink.config.bridge import hold_mode_error
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.mavlink import (
     Flavour,
+    dialect,
     enable_signing,
     encode_arm,
     flavour_from_heartbeat,
-    is_offboard,
     load_signing_key,
     open_link,
     wait_heartbeat,
 )
+from mpf_mavlink.mavlink.wire_limits import MAV_CMD_COMPONENT_ARM_DISARM
 from mpf_mavlink.runs.rundir import COLUMNS, prepare_out_dir
 
 
-# ----------------------------------------------------------------------------- the bridge
-class Bridge(Recording):
+class _Refused(Exception):
+    """The bridge refuses to engage (exit 3) for this reason; ``log``: say it (the checks
+    have printed theirs)."""
+
+    def __init__(self, reason: str, log: bool = True) -> None:
+        super().__init__(reason)
+        self.log = log
+
+
+class Bridge:
     """One run against one vehicle. Use :func:`run_bridge`.
 
-    The concerns are layered classes, each using only those below it: :class:`BridgeBase`
-    (state), :class:`~.control_step.ControlStep`, :class:`~.link_io.LinkIO`,
-    :class:`~.streams.Streams`, :class:`~.session.Session`, :class:`~.recording.Recording`;
-    this class is the life cycle that strings them together (:meth:`run`)."""
+    Wires the pieces, each owning its state: :class:`~.link_io.VehicleLink` (the link, what
+    the vehicle says, the bounded wait), :class:`~.controller.Controller` (the per-sample
+    computation), :class:`~.control_step.ControlLoop` (steps, setpoints, watchdog),
+    :class:`~.streams.StreamNegotiator`, :class:`~.fallback.FallbackSetup`,
+    :class:`~.session.Session` (modes, checks, hand-back, re-engagement) and
+    :class:`~.recording.Recorder`; :meth:`run` is the life cycle that strings them together."""
+
+    def __init__(
+        self, cfg: Config, opts: BridgeOptions, log: Callable[[str], None] = print
+    ) -> None:
+        self.cfg, self.opts, self.log = cfg, opts, log
+        self.m = m = resolve_mavlink(cfg, opts)
+        self.ctl = Controller(cfg, m)
+        self.display = OperatorDisplay(m.operator_display, m.operator_display_hz)
+        self.vl = VehicleLink(m, live_target=self.ctl.live)
+        self.phase = Phase(self._on_state)
+        self.rec = Recorder(cfg, m, opts.url, Path(opts.out_dir))
+        self.loop = ControlLoop(self.ctl, self.vl, self.phase, self.rec.record, self._show)
+        self.session = Session(cfg, self.loop, self.phase, self.display, log)
+        self.streams = StreamNegotiator(self.vl, log)
+        self.fallback = FallbackSetup(self.vl, self.ctl, cfg.path, log)
+        vl = self.vl
+        vl.on_heartbeat = self.session.on_heartbeat
+        vl.on_vehicle = self.loop.on_vehicle
+        vl.on_target = self.ctl.feed_target
+        vl.due = self.loop.due
+        vl.on_tick = self._tick
+
+    def _tick(self) -> None:
+        now = time.monotonic()
+        self.vl.duties(now)
+        self.loop.tick(now)
+
+    def _on_state(self, s: State) -> None:
+        self.log(f"[{s.name}]")
+        if self.vl.link is not None:
+            self.display.text(self.vl.link, s.name)
+
+    def _show(self, st: Step) -> None:
+        self.display.values(self.vl.link, st, int(self.phase.state))
 
     # -- life cycle --------------------------------------------------------------------------
     def run(self) -> BridgeResult:
         out = Path(self.opts.out_dir)
         res = BridgeResult("CONNECTING", "", EXIT_SAFETY, out_dir=out)
         pending: BaseException | None = None
-        m = self.m
         try:
             prepare_out_dir(out)
-            signing_key = load_signing_key(m.signing_key_file) if m.signing_key_file else None
-            allowed = [m.target_sysid] if (self.live and m.target_sysid is not None) else []
-            self.link = open_link(
-                self.opts.url, source_system=m.source_system, source_component=m.source_component,
-                vehicle_sysid=m.vehicle_sysid, allowed_sysids=allowed, tlog_path=out / "mavlink.tlog",
-                tlog_fsync_every_s=m.tlog_fsync_every_s, timeout_s=m.heartbeat_timeout_s,
-                vehicle_time=m.lockstep,  # lockstep: the tlog carries the simulation's time
-            )  # fmt: skip
-            if signing_key is not None:
-                enable_signing(self.link, signing_key, m.signing_link_id)
-            self._set_state(State.WAIT_HEARTBEAT)
-            hb = wait_heartbeat(self.link, m.heartbeat_timeout_s)
-            self.vehicle_compid = hb.get_srcComponent()
-            self._dispatch(hb)
-            seen = flavour_from_heartbeat(hb)
-            want = Flavour(m.flavour) if m.flavour != "auto" else seen
-            if want is Flavour.UNKNOWN:
-                raise MpfError(
-                    f"unknown autopilot (HEARTBEAT.autopilot = {hb.autopilot}); use --flavour px4|ardupilot"
-                )
-            if m.flavour != "auto" and seen is not Flavour.UNKNOWN and seen is not want:
-                raise MpfError(
-                    f"--flavour {m.flavour} but the vehicle's HEARTBEAT says {seen.value}"
-                )
-            if m.hold_mode and (
-                why := hold_mode_error(m.hold_mode, want.value)
-            ):  # before anything is sent
-                raise MpfError(f"{self.cfg.source}: mavlink.hold_mode: {why}")
-            self.flavour = want
-            res.flavour = want.value
-            self.log(
-                f"heartbeat from system {m.vehicle_sysid}: {want.value}, mode {self._mode_str()}"
-            )
-            if m.request_streams:
-                why = self._negotiate_streams(res)
-                if why is not None:
-                    res.exit_reason = f"refused to engage: {why}"
-                    res.exit_code = EXIT_CHECK
-                    self.log(res.exit_reason)
-                    return self._finish(res)
-            need_home = self.live or (self.flavour is Flavour.ARDUPILOT and m.set_fallback)
-            if need_home and self.est.geodetic_origin() is None:
-                if not self._await_home() and self.live:
-                    res.exit_reason = (
-                        f"refused to engage: no HOME_POSITION within {m.home_timeout_s:g} s "
-                        "(the live target is placed about it; or set mavlink.origin_*)"
-                    )
-                    res.exit_code = EXIT_CHECK
-                    self.log(res.exit_reason)
-                    return self._finish(res)
-            if self.flavour is Flavour.PX4 and m.set_fallback:
-                why = self._px4_fallback(res)
-                self.log(f"fallback if the bridge dies: {res.fallback}")
-                if why is not None:
-                    res.exit_reason = f"refused to engage: {why}"
-                    res.exit_code = EXIT_CHECK
-                    self.log(res.exit_reason)
-                    return self._finish(res)
-            elif self.flavour is Flavour.PX4:
-                res.fallback = (
-                    "not read or set (mavlink.set_fallback: false): PX4's COM_OBL_RC_ACT decides "
-                    "(stock 0: Position mode, which on a fixed-wing flies straight on, not a hold)"
-                )
-            # wait for a complete state (and the live target) before checking anything
-            ok = self._spin(m.heartbeat_timeout_s, self._ready)
-            if not ok:
-                raise MpfError(
-                    f"no usable telemetry within {m.heartbeat_timeout_s:g} s: {self.why_not or 'no attitude'}"
-                )
-            self._set_state(State.CHECKS)
-            failed = self._checks(res)
-            if failed and self.opts.force:
-                self.log(f"[FORCED] engaging despite the failed check: {', '.join(failed)}")
-                failed = []
-            if failed:
-                res.exit_reason = f"refused to engage: check failed: {', '.join(failed)}"
-                res.exit_code = EXIT_CHECK
-                return self._finish(res)
-            while True:
-                try:
-                    self._fly(res)
-                except _Stop as e:
-                    if not self._may_reengage(e):
-                        raise
-                    self._send_text(HALT_TEXT)  # for replay: control steps stop here
-                    self._handback(res, e.kind)
-                    why_not = self._await_reengage(res, e)
-                    if why_not is not None:
-                        raise _Stop(f"{e.reason}; not re-engaged: {why_not}", e.kind) from None
+            self._connect(res)
+            self._prepare(res)
+            self._fly_until_stopped(res)
+        except _Refused as e:
+            res.exit_reason, res.exit_code = f"refused to engage: {e}", EXIT_CHECK
+            if e.log:
+                self.log(res.exit_reason)
         except _Stop as e:
             res.exit_reason = e.reason
             res.exit_code = EXIT_OK if e.kind == "duration" else EXIT_SAFETY
-            self._handback(res, e.kind)
+            self.session.handback(res, e.kind)
         except MpfError:
-            self._close()
+            self.vl.close()
             raise
         except KeyboardInterrupt:
             res.exit_reason, res.exit_code = "interrupted (Ctrl-C)", EXIT_SIGINT
-            self._handback(res, "interrupt")
+            self.session.handback(res, "interrupt")
         except _Terminated:
             res.exit_reason, res.exit_code = "terminated (SIGTERM)", EXIT_SIGTERM
-            self._handback(res, "interrupt")
+            self.session.handback(res, "interrupt")
         except Exception as e:  # noqa: BLE001 - hand back first, then let the bug be seen
             res.exit_reason, res.exit_code = f"error: {type(e).__name__}: {e}", 1
             pending = e
-            self._handback(res, "interrupt")
+            self.session.handback(res, "interrupt")
         out_res = self._finish(res)
         if pending is not None:
             raise pending
         return out_res
 
+    def _connect(self, res: BridgeResult) -> None:
+        """Open the link, wait for the autopilot's HEARTBEAT and settle its flavour."""
+        m, vl = self.m, self.vl
+        signing_key = load_signing_key(m.signing_key_file) if m.signing_key_file else None
+        allowed = [m.target_sysid] if (self.ctl.live and m.target_sysid is not None) else []
+        tlog = None if is_lean(m) else Path(self.opts.out_dir) / "mavlink.tlog"
+        vl.link = open_link(
+            self.opts.url, source_system=m.source_system, source_component=m.source_component,
+            vehicle_sysid=m.vehicle_sysid, allowed_sysids=allowed, tlog_path=tlog,
+            tlog_fsync_every_s=m.tlog_fsync_every_s, timeout_s=m.heartbeat_timeout_s,
+            vehicle_time=m.lockstep,  # lockstep: the tlog carries the simulation's time
+        )  # fmt: skip
+        if signing_key is not None:
+            enable_signing(vl.link, signing_key, m.signing_link_id)
+        self.phase.set(State.WAIT_HEARTBEAT)
+        hb = wait_heartbeat(vl.link, m.heartbeat_timeout_s)
+        vl.compid = hb.get_srcComponent()
+        vl.dispatch(hb)
+        seen = flavour_from_heartbeat(hb)
+        want = Flavour(m.flavour) if m.flavour != "auto" else seen
+        if want is Flavour.UNKNOWN:
+            raise MpfError(
+                f"unknown autopilot (HEARTBEAT.autopilot = {hb.autopilot}); "
+                "use --flavour px4|ardupilot"
+            )
+        if m.flavour != "auto" and seen is not Flavour.UNKNOWN and seen is not want:
+            raise MpfError(f"--flavour {m.flavour} but the vehicle's HEARTBEAT says {seen.value}")
+        if m.hold_mode and (why := hold_mode_error(m.hold_mode, want.value)):
+            raise MpfError(f"{self.cfg.source}: mavlink.hold_mode: {why}")  # before any send
+        vl.flavour = want
+        res.flavour = want.value
+        self.log(
+            f"heartbeat from system {m.vehicle_sysid}: {want.value}, mode {self.session.mode_str()}"
+        )
+
+    def _prepare(self, res: BridgeResult) -> None:
+        """Streams, home, the autopilot's fallback, a complete state, the checks; raises
+        :class:`_Refused` when the bridge must not engage."""
+        m, vl, est = self.m, self.vl, self.ctl.est
+        if m.request_streams and (why := self.streams.negotiate(res)) is not None:
+            raise _Refused(why)
+        need_home = self.ctl.live or (vl.flavour is Flavour.ARDUPILOT and m.set_fallback)
+        if need_home and est.geodetic_origin() is None:
+
+            def home() -> str:
+                h = est.home
+                return f"{h.lat_deg:.7f}, {h.lon_deg:.7f}, {h.alt_amsl_m:.2f} m AMSL"
+
+            if not self.streams.await_home(lambda: est.home is not None, home) and self.ctl.live:
+                raise _Refused(
+                    f"no HOME_POSITION within {m.home_timeout_s:g} s "
+                    "(the live target is placed about it; or set mavlink.origin_*)"
+                )
+        if vl.flavour is Flavour.PX4 and m.set_fallback:
+            why = self.fallback.px4_params(res)
+            self.log(f"fallback if the bridge dies: {res.fallback}")
+            if why is not None:
+                raise _Refused(why)
+        elif vl.flavour is Flavour.PX4:
+            res.fallback = (
+                "not read or set (mavlink.set_fallback: false): PX4's COM_OBL_RC_ACT decides "
+                "(stock 0: Position mode, which on a fixed-wing flies straight on, not a hold)"
+            )
+        # wait for a complete state (and the live target) before checking anything
+        if not vl.spin(m.heartbeat_timeout_s, self.ctl.ready):
+            raise MpfError(
+                f"no usable telemetry within {m.heartbeat_timeout_s:g} s: "
+                f"{self.ctl.why_not or 'no attitude'}"
+            )
+        self.phase.set(State.CHECKS)
+        failed = self.session.checks(res, scripted_target=not self.ctl.live)
+        if failed and self.opts.force:
+            self.log(f"[FORCED] engaging despite the failed check: {', '.join(failed)}")
+            failed = []
+        if failed:
+            raise _Refused(f"check failed: {', '.join(failed)}", log=False)
+
+    def _fly_until_stopped(self, res: BridgeResult) -> None:
+        """Fly; after a loss hand back and, when configured, re-engage. Ends by raising."""
+        session = self.session
+        while True:
+            try:
+                self._fly(res)
+            except _Stop as e:
+                if not session.may_reengage(e):
+                    raise
+                self.vl.send_text(HALT_TEXT)  # for replay: control steps stop here
+                session.handback(res, e.kind)
+                why_not = session.await_reengage(res, e)
+                if why_not is not None:
+                    raise _Stop(f"{e.reason}; not re-engaged: {why_not}", e.kind) from None
+
     def _fly(self, res: BridgeResult) -> None:
         """INIT -> PRESTREAM -> ENGAGE -> TRACKING; ends only by raising (_Stop and others).
         Called again for a re-engagement: s starts afresh at the closest point, the mission
         time origin t0 and the mission's end (``t_engage`` + duration) stay."""
-        m = self.m
-        self.first_send_mono, self.prestream_sends = None, 0
-        self._set_state(State.INIT)
-        self._init_s()
-        self._set_state(State.PRESTREAM)
+        m, vl, loop, session = self.m, self.vl, self.loop, self.session
+        self.phase.set(State.INIT)
+        session.init_s()
+        self.phase.set(State.PRESTREAM)
         # Everything allocated so far (modules, the dialect, the path tables) goes to the
         # collector's permanent generation: a full collection of it takes ~25 ms, which
         # would otherwise land inside a control step now and then.
@@ -221,71 +290,79 @@ class Bridge(Recording):
         gc.freeze()
         # the checks (and that collection) take a while without pumping: take the backlog in
         # (state only, no setpoints for old samples), then start the staleness clocks afresh
-        while (msg := self.link.recv(0.0)) is not None:
-            self._dispatch(msg)
-        self._send_text(STREAM_TEXT)  # for replay: control steps start after this record
-        self.streaming = True
-        self.last_good_mono = self.last_att_mono = time.monotonic()
-        self.last_good_vt = self.last_att_vt = self.vehicle_t
+        vl.drain()
+        vl.send_text(STREAM_TEXT)  # for replay: control steps start after this record
+        loop.start()
         rate = m.min_setpoint_rate_hz
-
-        def prestreamed() -> bool:
-            if self.first_send_mono is None:
-                return False
-            span = self.last_send_mono - self.first_send_mono  # first to last setpoint sent
-            return span >= m.prestream_s and (self.prestream_sends - 1) / span >= rate
-
-        if not self._spin(m.prestream_s + 3.0, prestreamed):
+        if not vl.spin(m.prestream_s + 3.0, loop.prestreamed):
             raise _Stop(
                 f"could not stream setpoints at {rate:g} Hz for {m.prestream_s:g} s", "engage"
             )
-        self.log(
-            f"pre-streamed {self.prestream_sends} setpoints in {self.last_send_mono - (self.first_send_mono or self.last_send_mono):.2f} s"
-        )
-        if m.arm and not (self.hb is not None and self.hb.armed):
-            self.acks.clear()
-            self._send(encode_arm(self.link.mav, m.vehicle_sysid, self.vehicle_compid, True))
-            refused: list[str] = []
-
-            def armed_or_refused() -> bool:
-                # a rejected ARM (pre-arm checks failed) ends the wait at once, with its reason
-                for a in self.acks:
-                    if (
-                        a.command == 400 and not a.accepted and a.result != 5
-                    ):  # 5: MAV_RESULT_IN_PROGRESS
-                        refused.append(a.result_name)
-                self.acks.clear()
-                return bool(refused) or (self.hb is not None and self.hb.armed)
-
-            if not self._spin(m.mode_timeout_s * m.mode_retries, armed_or_refused) or refused:
-                why = f"ARM refused ({refused[0]})" if refused else "no armed HEARTBEAT"
-                raise _Stop(f"vehicle did not arm: {why}", "engage")
-        self._set_state(State.ENGAGE)
-        mode = self._offboard_mode()
-        ok, why = self._request_mode(
-            mode, lambda: self.hb is not None and is_offboard(self.flavour, self.hb)
-        )
+        span = loop.last_send_mono - (loop.first_send_mono or loop.last_send_mono)
+        self.log(f"pre-streamed {loop.prestream_sends} setpoints in {span:.2f} s")
+        if m.arm and not (vl.hb is not None and vl.hb.armed):
+            self._arm()
+        self.phase.set(State.ENGAGE)
+        mode = session.offboard_mode()
+        ok, why = session.request_mode(mode, session.in_offboard)
         if not ok:
             raise _Stop(f"vehicle did not enter {mode}: {why}", "engage")
-        self.engaged = True
-        res.engaged = True
-        if self.flavour is Flavour.ARDUPILOT and m.set_fallback and not self.n["reengagements"]:
-            self._set_set_fallback(res)
-        if self.flavour is Flavour.PX4 and m.set_fallback and not self.n["reengagements"]:
-            self._px4_reposition(res)
-        if self.t_engage is None:  # a re-engagement keeps the mission's end
-            self.t_engage = self.t_last if self.t_last is not None else 0.0
-        self._set_state(State.TRACKING)
-        if self.n["reengagements"]:
-            self.log(f"{mode} confirmed: tracking again until the mission's end")
-        else:
-            self.log(f"{mode} confirmed: tracking for {m.mission_duration_s:g} s")
+        session.engaged = res.engaged = True
+        first = not session.n["reengagements"]
+        if vl.flavour is Flavour.ARDUPILOT and m.set_fallback and first:
+            self.fallback.ardupilot_loiter(res)
+        if vl.flavour is Flavour.PX4 and m.set_fallback and first:
+            self.fallback.px4_reposition(res)
+        if loop.t_engage is None:  # a re-engagement keeps the mission's end
+            loop.t_engage = loop.t_last if loop.t_last is not None else 0.0
+        self.phase.set(State.TRACKING)
+        until = "the mission's end" if not first else f"{m.mission_duration_s:g} s"
+        self.log(f"{mode} confirmed: tracking {'again until' if not first else 'for'} {until}")
         # what exists now (modules, config, path tables) lives for the whole flight: keep
         # it out of the cyclic collector, whose full passes would otherwise walk it inside
         # the control loop
         gc.collect()
         gc.freeze()
-        self._spin(math.inf)
+        vl.spin(math.inf)
+
+    def _arm(self) -> None:
+        """ARM, confirmed by an armed HEARTBEAT; a rejected ARM ends the wait at once."""
+        vl, m = self.vl, self.m
+        vl.acks.clear()
+        vl.send(encode_arm(vl.link.mav, vl.sysid, vl.compid, True))
+        refused: list[str] = []
+
+        def armed_or_refused() -> bool:
+            refused.extend(
+                a.result_name for a in vl.acks
+                if a.command == MAV_CMD_COMPONENT_ARM_DISARM and not a.accepted
+                and a.result != dialect.MAV_RESULT_IN_PROGRESS
+            )  # fmt: skip
+            vl.acks.clear()
+            return bool(refused) or (vl.hb is not None and vl.hb.armed)
+
+        if not vl.spin(m.mode_timeout_s * m.mode_retries, armed_or_refused) or refused:
+            why = f"ARM refused ({refused[0]})" if refused else "no armed HEARTBEAT"
+            raise _Stop(f"vehicle did not arm: {why}", "engage")
+
+    def _finish(self, res: BridgeResult) -> BridgeResult:
+        gc.unfreeze()  # run_bridge may be called again in this process (tests, SIL)
+        res.state_reached = self.phase.furthest.name
+        res.final_state = self.phase.state.name
+        loop, vl = self.loop, self.vl
+        if loop.t_engage is not None and loop.t_last is not None:
+            res.tracked_s = max(0.0, loop.t_last - loop.t_engage)
+        counters: dict[str, Any] = {**loop.n, **self.session.n}
+        if vl.link is not None:
+            counters.update(vl.link.counters.as_dict())
+            # a run that ends without a hand-back says why, too
+            self.display.stopped(vl.link, res.exit_reason, res.exit_code == 0)
+        res.counters = counters
+        vl.close()
+        self.rec.finish(res, self.ctl, counters)
+        if res.records_error:
+            self.log(f"could not write the run directory: {res.records_error}")
+        return res
 
 
 def run_bridge(

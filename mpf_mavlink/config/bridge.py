@@ -158,6 +158,13 @@ class MavlinkConfig:
     )
     tlog_fsync_every_s: float | None = field(default=1.0, metadata=_nonneg())
     plots: bool = field(default=True, metadata=_doc("write the run directory's figures"))
+    recording: Literal["full", "lean"] = field(
+        default="full",
+        metadata=_doc(
+            "lean (campaigns): no tlog, no plots, one tracking row in five; every setpoint is "
+            "still sent, so the flight is the same"
+        ),
+    )
     operator_display: bool = field(
         default=True,
         metadata=_doc(

@@ -120,6 +120,8 @@ class Link:
         self._signing_counts_itself = False  # set by signing.enable_signing(hardened=True)
         self._closed = False
         self._udp = isinstance(conn, mavutil.mavudp)  # read datagram by datagram (_recv_udp)
+        self.last_tx_s: float | None = None  # record time (s) of the latest packet sent
+        self._tx_file: _LogThenWrite | None = None  # mav.file during a send (send)
 
     # -- identity ---------------------------------------------------------------------------
     @property
@@ -162,8 +164,10 @@ class Link:
         when its CRC then fails, that whole stretch (up to 280 bytes of good telemetry, a
         COMMAND_ACK) is thrown away. Here such a leftover is dropped (counted in ``bad_data``)
         before the next datagram is parsed."""
+        # mavudp's pre_message does nothing, and post_message keeps pymavlink's own per-system
+        # tables (last messages, modes, loss counts) that nothing here reads: both skipped,
+        # they cost a quarter of a message's receive
         conn, mav = self.conn, self.conn.mav
-        conn.pre_message()
         msg = mav.parse_char(b"")
         if msg is None:
             if mav.buf_len() > 0:
@@ -176,8 +180,6 @@ class Link:
             if conn.first_byte:
                 conn.auto_mavlink_version(data)
             msg = mav.parse_char(data)
-        if msg is not None:
-            conn.post_message(msg)
         return msg
 
     def _read_one(self) -> tuple[bool, Any]:
@@ -195,16 +197,7 @@ class Link:
         c = self.counters
         mtype = msg.get_type()
         if mtype == "BAD_DATA":
-            reason = str(getattr(msg, "reason", ""))
-            if reason == "Invalid signature":
-                data = bytes(getattr(msg, "data", b"") or b"")
-                signed = len(data) > 2 and data[0] == 0xFD and bool(data[2] & 0x01)
-                if not signed:
-                    c.rejected_unsigned += 1
-                elif not self._signing_counts_itself:
-                    c.rejected_bad_signature += 1
-            else:
-                c.bad_data += 1
+            self._count_bad(msg)
             return True, None
         c.rx_packets += 1
         # one receive time for the record and the clock gate, quantised as the tlog stores it
@@ -218,6 +211,8 @@ class Link:
             if isinstance(tb, int) and msg.get_srcSystem() == self.vehicle_sysid:
                 tb_s = tb * 1e-3
             t_rec = round(vt.stamp(tb_s) * 1e6) * 1e-6
+        # the receive time a consumer sees, with or without a tlog: the record's time exactly
+        msg._timestamp = t_rec
         if self.tlog is not None:
             try:
                 self.tlog.write(msg.get_msgbuf(), t_rec)
@@ -257,6 +252,20 @@ class Link:
                     return True, None
         c.rx_by_type[mtype] += 1
         return True, msg
+
+    def _count_bad(self, msg: Any) -> None:
+        """Count a BAD_DATA: an unsigned or badly signed packet while signing is on, or a bad
+        frame."""
+        c = self.counters
+        if str(getattr(msg, "reason", "")) != "Invalid signature":
+            c.bad_data += 1
+            return
+        data = bytes(getattr(msg, "data", b"") or b"")
+        signed = len(data) > 2 and data[0] == 0xFD and bool(data[2] & 0x01)
+        if not signed:
+            c.rejected_unsigned += 1
+        elif not self._signing_counts_itself:
+            c.rejected_bad_signature += 1
 
     def recv(self, timeout_s: float = 0.0) -> Any:
         """Next accepted message, waiting at most ``timeout_s`` (0 = poll). Never raises on
@@ -311,7 +320,10 @@ class Link:
         # leaves a packet the vehicle received out of the tlog (write-ahead; a packet the socket
         # then refuses stays in the tlog, counted in io_errors)
         file = mav.file
-        mav.file = _LogThenWrite(file, self._log_tx)
+        tx = self._tx_file
+        if tx is None or tx._file is not file:
+            tx = self._tx_file = _LogThenWrite(file, self._log_tx)
+        mav.file = tx
         try:
             mav.send(msg)
         except OSError:
@@ -323,11 +335,15 @@ class Link:
         self.counters.tx_by_type[msg.get_type()] += 1
 
     def _log_tx(self, packet: bytes | bytearray) -> None:
+        vt = self.vehicle_time
+        t = self._clock() if vt is None else vt.now()
+        # the record time of the latest packet sent (s): what a tlog reader computes from its
+        # microseconds, kept with or without a tlog
+        self.last_tx_s = round(t * 1e6) * 1e-6
         if self.tlog is None:
             return
         try:
-            vt = self.vehicle_time
-            self.tlog.write(packet, self._clock() if vt is None else vt.now())
+            self.tlog.write(packet, t)
         except (OSError, ValueError):
             self.counters.io_errors += 1
             self.counters.tlog_write_errors += 1

@@ -1,0 +1,185 @@
+"""What the autopilot does when the bridge's setpoints stop (:class:`FallbackSetup`): PX4's
+offboard-loss action made Hold (parameters, before engaging) and its loiter point; ArduPlane's
+GUIDED loiter about the path's centre (after engaging)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from mpf_mavlink.bridge.base import BridgeResult
+from mpf_mavlink.bridge.controller import Controller
+from mpf_mavlink.bridge.link_io import VehicleLink, param_set_value
+from mpf_mavlink.bridge.px4_fallback import PX4_FALLBACK_PARAMS, PX4_OBL_HOLD, describe, detail
+from mpf_mavlink.core.frames import ned_to_geodetic
+from mpf_mavlink.mavlink import dialect, encode_do_reposition
+from mpf_mavlink.mavlink.wire_limits import MAV_CMD_DO_REPOSITION
+
+#: PARAM_REQUEST_READ / PARAM_SET attempts (0.6 s each) for PX4's fallback: with 20 % loss
+#: each way one round trip fails 36 % of the time, six in a row 0.2 %
+FALLBACK_ATTEMPTS = 6
+PARAM_WAIT_S = 0.6
+#: How long a DO_REPOSITION's COMMAND_ACK is waited for (s).
+REPOSITION_ACK_S = 1.5
+#: The loiter radius about the path's centre is the path's extent, within these bounds (m).
+LOITER_RADIUS_M = (50.0, 1000.0)
+
+
+class FallbackSetup:
+    """The autopilot's own fallback, read and set over ``vl``; the path's centre from ``ctl``."""
+
+    def __init__(
+        self, vl: VehicleLink, ctl: Controller, path_cfg: Any, log: Callable[[str], None]
+    ) -> None:
+        self.vl, self.ctl, self.path_cfg, self.log = vl, ctl, path_cfg, log
+        self.set_from: float | None = None  # the COM_OBL_RC_ACT we replaced
+
+    def px4_params(self, res: BridgeResult) -> str | None:
+        """PX4, before engaging: read what an offboard loss does (px4_fallback.py), make it Hold
+        (COM_OBL_RC_ACT = 5 by PARAM_SET, confirmed by the PARAM_VALUE that answers it) and
+        say so in ``res.fallback``. Returns why the bridge must not engage (the Hold could not
+        be confirmed), else None."""
+        vl = self.vl
+        p = vl.params
+        self._read_params()
+        act = p.get("COM_OBL_RC_ACT")
+        if act is not None and int(act) != PX4_OBL_HOLD:
+            self.set_from = act
+            ptype = vl.param_types.get("COM_OBL_RC_ACT", dialect.MAV_PARAM_TYPE_INT32)
+            p.pop("COM_OBL_RC_ACT", None)
+            value = param_set_value(PX4_OBL_HOLD, ptype, True)
+            for _ in range(FALLBACK_ATTEMPTS):  # answered by PARAM_VALUE; a lost one re-sent
+                vl.send(vl.link.mav.param_set_encode(
+                    vl.sysid, vl.compid, b"COM_OBL_RC_ACT", value, ptype))  # fmt: skip
+                if vl.spin(PARAM_WAIT_S, lambda: "COM_OBL_RC_ACT" in p):
+                    break
+        res.fallback = describe(p, self.set_from)
+        res.fallback_detail = detail(p, self.set_from, None)
+        act = p.get("COM_OBL_RC_ACT")
+        if act is None or int(act) != PX4_OBL_HOLD:
+            got = "no answer" if act is None else f"it is {int(act)}"
+            return (
+                f"PX4's offboard-loss action could not be made Hold (COM_OBL_RC_ACT = 5: {got}); "
+                "mavlink.set_fallback: false flies without"
+            )
+        return None
+
+    def _read_params(self) -> None:
+        # a request or its answer lost on a lossy link is asked again (an autopilot without a
+        # parameter stays silent: only the first two are required)
+        vl, p = self.vl, self.vl.params
+        core = PX4_FALLBACK_PARAMS[:2]
+        for attempt in range(FALLBACK_ATTEMPTS):
+            for name in PX4_FALLBACK_PARAMS:
+                if name not in p:
+                    req = vl.link.mav.param_request_read_encode
+                    vl.send(req(vl.sysid, vl.compid, name.encode("ascii"), -1))
+            if vl.spin(PARAM_WAIT_S, lambda: all(n in p for n in PX4_FALLBACK_PARAMS)):
+                break
+            if attempt >= 1 and all(n in p for n in core):
+                break
+
+    def px4_reposition(self, res: BridgeResult) -> None:
+        """PX4 in OFFBOARD: MAV_CMD_DO_REPOSITION to the path's centre at the path's altitude,
+        without a mode change (param2 = 0): the navigator keeps it as the loiter point of the
+        next Hold (the offboard-loss failsafe set above, or our hand-back), instead of where the
+        aircraft happens to be then."""
+        vl = self.vl
+        got = self.path_centre()
+        if isinstance(got, str):
+            res.fallback = describe(vl.params, self.set_from)
+            self.log(f"fallback if the bridge dies: {res.fallback} ({got})")
+            return
+        lat, lon, alt, _r, _ccw = got
+        vl.acks.clear()
+        try:
+            msg = encode_do_reposition(
+                vl.link.mav, vl.sysid, vl.compid, lat, lon, alt, 100.0, False, px4=True
+            )
+            vl.send(msg)
+        except ValueError as e:
+            self.log(f"fallback: no reposition point ({e})")
+            return
+        ack = self._reposition_ack()
+        where = f"the path's centre {lat:.7f}, {lon:.7f} at {alt:.1f} m AMSL"
+        centre = None
+        if ack is not None and ack.accepted:
+            centre = where
+        else:
+            why = ack.result_name if ack is not None else "no COMMAND_ACK"
+            self.log(f"fallback: DO_REPOSITION to {where} not accepted ({why})")
+        point = None if centre is None else {"lat": lat, "lon": lon, "alt_amsl_m": alt}
+        res.fallback = describe(vl.params, self.set_from, centre)
+        res.fallback_detail = detail(vl.params, self.set_from, point)
+        self.log(f"fallback if the bridge dies: {res.fallback}")
+
+    def ardupilot_loiter(self, res: BridgeResult) -> None:
+        """ArduPlane in GUIDED: make its guided target a loiter about the path's centre at the
+        path's altitude (radius and direction of the path when it is a circle), so that the
+        aircraft circles where the mission was when our setpoints stop (GUIDED_TIMEOUT)."""
+        vl = self.vl
+        got = self.path_centre()
+        if isinstance(got, str):
+            if got == "no HOME_POSITION":
+                res.fallback = "ArduPlane's own GUIDED loiter (no HOME_POSITION: none set by us)"
+                self.log(f"fallback if the bridge dies: {res.fallback}")
+            else:
+                res.fallback = f"ArduPlane's own GUIDED loiter ({got})"
+            return
+        lat, lon, alt, radius, ccw = got
+        vl.acks.clear()
+        try:
+            vl.send(encode_do_reposition(
+                vl.link.mav, vl.sysid, vl.compid, lat, lon, alt, radius, ccw))  # fmt: skip
+        except ValueError as e:
+            res.fallback = f"ArduPlane's own GUIDED loiter (reposition not sent: {e})"
+            self.log(f"fallback if the bridge dies: {res.fallback}")
+            return
+        ack = self._reposition_ack()
+        what = (
+            f"ArduPlane GUIDED loiter r = {radius:.0f} m {'CCW' if ccw else 'CW'} about "
+            f"{lat:.7f}, {lon:.7f} at {alt:.1f} m AMSL (the path's centre)"
+        )
+        if ack is not None and ack.accepted:
+            res.fallback = what
+        else:
+            why = ack.result_name if ack is not None else "no COMMAND_ACK"
+            res.fallback = f"NOT set ({why}): ArduPlane's own GUIDED loiter; asked for {what}"
+        self.log(f"fallback if the bridge dies: {res.fallback}")
+
+    def _reposition_ack(self) -> Any | None:
+        """The autopilot's COMMAND_ACK to the DO_REPOSITION just sent, or None."""
+        vl = self.vl
+        acks: list[Any] = []
+
+        def acked() -> bool:
+            acks.extend(a for a in vl.acks if a.command == MAV_CMD_DO_REPOSITION)
+            vl.acks.clear()
+            return bool(acks)
+
+        vl.spin(REPOSITION_ACK_S, acked)
+        return acks[0] if acks else None
+
+    def path_centre(self) -> tuple[float, float, float, float, bool] | str:
+        """(lat, lon, alt AMSL, radius m, counter-clockwise) of the path's centre now, or why
+        not."""
+        ctl = self.ctl
+        o = ctl.est.geodetic_origin()
+        est, _ = ctl.est.estimate()
+        if o is None or est is None:
+            return "no HOME_POSITION"
+        tgt = ctl.target.state(est.vehicle.t)
+        if isinstance(tgt, str):
+            return tgt
+        pts = np.asarray(ctl.path.positions(), float)  # in the target frame
+        centre_T = pts.mean(axis=0)
+        centre = tgt.position + tgt.R_T_I @ centre_T
+        radius = float(np.max(np.linalg.norm((pts - centre_T)[:, :2], axis=1)))
+        radius = min(max(radius, LOITER_RADIUS_M[0]), LOITER_RADIUS_M[1])
+        p = self.path_cfg
+        ccw = p.type in ("circle", "helix") and not p.clockwise
+        lat0, lon0, alt0, off = o
+        lat, lon, alt = ned_to_geodetic(centre - np.asarray(off, float), lat0, lon0, alt0)
+        return float(lat), float(lon), float(alt), radius, bool(ccw)
