@@ -42,13 +42,11 @@ from mpf_mavlink.core.vec3 import (
     Mat3,
     Vec3,
     add,
-    add_scaled,
     cross,
     dot,
     mat_T_vec,
     mat_vec,
     norm,
-    scale,
     sub,
 )
 
@@ -200,14 +198,13 @@ def cross_track_errors(pt_F: Vec3, R_Wd_F: Mat3) -> tuple[float, float]:
 def cross_track_rates(
     pt_F: Vec3, pt_f2_dot: float, pt_f3_dot: float, R_Wd_F: Mat3, omega_WdF_F: Vec3
 ) -> tuple[float, float]:
-    """d/dt of (18)-(19) (m/s): y_w = pt_x . wd2, z_w = pt_x . wd3 in {F}, given the rates of
-    pt_x = (0, pt.f2, pt.f3), while each axis of {W_d} turns at omega = omega_{W_d F}:
-    d(wd_k)/dt = omega x wd_k (written out: pt_x has no f1 component)."""
+    """d/dt of (18)-(19) (m/s): y_w = pt.f2 wd22 and z_w = pt.f2 wd23 + pt.f3 wd33, given the
+    rates of pt.f2, pt.f3, while {W_d} turns at omega = omega_{W_d F}^F = (o1, o2, o3):
+    d(wd_k)/dt = omega x wd_k, of which the components used here are written out."""
     _, x2, x3 = pt_F
-    _, (wd12, wd22, wd32), (wd13, wd23, wd33) = R_Wd_F
+    _, (wd12, wd22, _), (wd13, wd23, wd33) = R_Wd_F
     o1, o2, o3 = omega_WdF_F
-    y_w_dot = pt_f2_dot * wd22 + pt_f3_dot * wd32
-    y_w_dot += x2 * (o3 * wd12 - o1 * wd32) + x3 * (o1 * wd22 - o2 * wd12)
+    y_w_dot = pt_f2_dot * wd22 + x2 * o3 * wd12  # d(wd22)/dt = o3 wd12 (wd32 = 0)
     z_w_dot = pt_f2_dot * wd23 + pt_f3_dot * wd33
     z_w_dot += x2 * (o3 * wd13 - o1 * wd33) + x3 * (o1 * wd23 - o2 * wd13)
     return y_w_dot, z_w_dot
@@ -269,20 +266,21 @@ def feedforward_omega_DT(
     its rate (rad/s^2), p_d, and pt and u (15) in {F}.
     """
     q, c, uu, a_t, omega, omega_dot, p_d, pt_F, u_F = flow
-    omega_FT_F = scale(sdot, rate_F)  # sdot (tau, -kappa_2, kappa_1)
-    p_d_dot = scale(sdot, dp_ds)
-    # (5) in {T}: pt_dot = qdot - p_d_dot with qdot = c - omega_TI x q; and u = uu + v_d with
-    # d(uu)/dt = a_t - omega_TI x uu (eta_hat held), v_d = omega_TI x p_d, so
-    # u_dot = a_t + omega_dot x p_d + omega_TI x (p_d_dot - uu). Elementwise sums written out.
+    tau, m_kappa_2, kappa_1 = rate_F
+    o1, o2, o3 = sdot * tau, sdot * m_kappa_2, sdot * kappa_1  # omega_FT^F
+    # (5) in {T}: pt_dot = qdot - p_d_dot with qdot = c - omega_TI x q and p_d_dot = sdot
+    # dp_d/ds; u = uu + v_d with d(uu)/dt = a_t - omega_TI x uu (eta_hat held) and
+    # v_d = omega_TI x p_d, so u_dot = a_t + omega_dot x p_d + omega_TI x (p_d_dot - uu).
+    # Elementwise sums written out (this is the hot path).
+    pd0, pd1, pd2 = sdot * dp_ds[0], sdot * dp_ds[1], sdot * dp_ds[2]
     wq = cross(omega, q)
-    pt_dot = (c[0] - wq[0] - p_d_dot[0], c[1] - wq[1] - p_d_dot[1], c[2] - wq[2] - p_d_dot[2])
+    pt_dot = (c[0] - wq[0] - pd0, c[1] - wq[1] - pd1, c[2] - wq[2] - pd2)
     wp = cross(omega_dot, p_d)
-    wr = cross(omega, (p_d_dot[0] - uu[0], p_d_dot[1] - uu[1], p_d_dot[2] - uu[2]))
+    wr = cross(omega, (pd0 - uu[0], pd1 - uu[1], pd2 - uu[2]))
     u_dot = (a_t[0] + wp[0] + wr[0], a_t[1] + wp[1] + wr[1], a_t[2] + wp[2] + wr[2])
     # Their f2, f3 components (all that (15), (18), (19) use) in {F}, which turns at
     # omega_FT: d(f_k . x)/dt = f_k . x_dot - (omega_FT^F x x^F)_k.
     _, f2, f3 = R_F_T
-    o1, o2, o3 = omega_FT_F
     x1, x2, x3 = pt_F
     pt_f2_dot = dot(f2, pt_dot) - (o3 * x1 - o1 * x3)
     pt_f3_dot = dot(f3, pt_dot) - (o1 * x2 - o2 * x1)
@@ -369,11 +367,13 @@ def mpf_law(
     omega_TI: Vec3 = target.omega_T.tolist()  # omega_TI^T
     w1, w2, w3 = R_W_I
 
-    # Into {T}, where the path is fixed: the vehicle relative to the target, its velocity (1)
-    # relative to the target's, and the target's velocity less the wind.
+    # Into {T}, where the path is fixed: the vehicle relative to the target, the target's
+    # velocity less the wind, and the vehicle's velocity (1) relative to the target's,
+    # c = R_I^T (v_w w1 + eta_hat - v_t) = v_w w1^T - uu.
     q = mat_vec(R_I_T, sub(vehicle.position.tolist(), p_t))
-    c = mat_vec(R_I_T, sub(add_scaled(eta, v_w, w1), v_t))
     uu = mat_vec(R_I_T, sub(v_t, eta))
+    w1_T = mat_vec(R_I_T, w1)
+    c = (v_w * w1_T[0] - uu[0], v_w * w1_T[1] - uu[1], v_w * w1_T[2] - uu[2])
 
     # The virtual point: p_d(s), R_F^T, dp_d/ds and the rate of {F} per unit s.
     p_d, f1, f2, f3, k1, k2, dp_ds, rate_F = path.eval_with_rate(s)

@@ -38,7 +38,7 @@ _Cell = tuple[Vec3, Vec3, Vec3, Vec3, Vec3, Vec3, float, tuple[float, float, flo
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 
-def _vec(v: tuple[float, ...]) -> Vec3:
+def _vec(v: list[float]) -> Vec3:
     return (v[0], v[1], v[2])
 
 
@@ -191,18 +191,18 @@ class TabulatedPath:
         for i in range(n):
             pa, pb = self._Pl[i], self._Pl[i + 1]
             ta, tb = self._Tl[i], self._Tl[i + 1]
-            a = scale(h, ta)
-            b = tuple(3.0 * (pb[j] - pa[j]) - h * (2.0 * ta[j] + tb[j]) for j in range(3))
-            c = tuple(2.0 * (pa[j] - pb[j]) + h * (ta[j] + tb[j]) for j in range(3))
+            lin = scale(h, ta)
+            quad = _vec([3.0 * (pb[j] - pa[j]) - h * (2.0 * ta[j] + tb[j]) for j in range(3)])
+            cub = _vec([2.0 * (pa[j] - pb[j]) + h * (ta[j] + tb[j]) for j in range(3)])
             k12 = (self._K1l[i], self._K1l[i + 1], self._K2l[i], self._K2l[i + 1])
-            cells.append((pa, a, _vec(b), _vec(c), ta, self._F2l[i], corr[i], k12))
+            cells.append((pa, lin, quad, cub, ta, self._F2l[i], corr[i], k12))
         self._cells = cells
 
     # ------------------------------------------------------------------ evaluation
     def eval(self, s: float) -> PathPoint:
         """(p_d, f1, f2, f3, k1, k2) at arc length s (m), vectors in {T}; k1, k2 (1/m) are the
         nodes' curvatures interpolated linearly."""
-        return self.eval_with_rate(s)[:6]  # type: ignore[return-value]
+        return self.eval_with_rate(s)[:6]
 
     def eval_with_rate(self, s: float) -> PathPointRate:
         """:meth:`eval` and the rates: (p_d, f1, f2, f3, k1, k2, dp_ds, rate_F).
@@ -265,11 +265,15 @@ class TabulatedPath:
         q0 = e1 * r2 - e2 * r1  # f1 x r
         q1 = e2 * r0 - e0 * r2
         q2 = e0 * r1 - e1 * r0
-        # Turned about f1 by this cell's share of the closing angle.
-        ang = w * twist
-        ca, sa = math.cos(ang), math.sin(ang)
-        f2 = (ca * r0 + sa * q0, ca * r1 + sa * q1, ca * r2 + sa * q2)
-        f3 = (ca * q0 - sa * r0, ca * q1 - sa * r1, ca * q2 - sa * r2)
+        # Turned about f1 by this cell's share of the closing angle (exactly 0 on open and
+        # planar paths, which skip the turn).
+        if twist:
+            ang = w * twist
+            ca, sa = math.cos(ang), math.sin(ang)
+            f2 = (ca * r0 + sa * q0, ca * r1 + sa * q1, ca * r2 + sa * q2)
+            f3 = (ca * q0 - sa * r0, ca * q1 - sa * r1, ca * q2 - sa * r2)
+        else:
+            f2, f3 = (r0, r1, r2), (q0, q1, q2)
         # The frame's rate per unit w: f1' = (I - f1 f1^T) p'' / |p'| gives the curvatures
         # f1'.f2 and f1'.f3; the minimal rotation from the fixed t_i turns r about f1 at
         # -(c . f1') / (1 + d) = -(c . p'') / ((1 + d) |p'|); the closing share adds `twist`.
