@@ -7,7 +7,8 @@ Read it beside the paper. Equation numbers are the paper's as its LaTeX source n
 - (5)  [MPFpositionerrorkinematics] the position error's rate, used for the feedforward.
 - (6)  [attitudeErrorFunction] Psi = (1 - Rt11) / 2, Rt = R_W^D.
 - (9)  [ertilde] e = [Rt13, -Rt12] / 2.
-- (10) [ffomega] omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d}.
+- (10) [ffomega] omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d} (where (11)
+  and (23) print omega_{W_d D}^{W_d}, the rate of {W_d} relative to {F} is meant).
 - (15) [wdbasis] the steady-state frame {W_d} in {F}: :func:`steady_state_frame`.
 - (17)-(19) the cross-track error pt_x and y_w, z_w: :func:`cross_track_errors`.
 - (20) R_D^{W_d}, the transient frame {D} in {W_d}: :func:`transient_frame`.
@@ -50,7 +51,7 @@ from mpf_mavlink.core.vec3 import (
     sub,
 )
 
-Vec = Vec3  # kept for importers
+Vec = Vec3  # the records' vector fields
 
 
 @dataclass(frozen=True)
@@ -240,7 +241,7 @@ def transient_frame_rate(
 
 def progression_rate(pt_f1: float, c: Vec3, v_d: Vec3, f1: Vec3, K_p: float) -> float:
     """(22) [sdot] = (K_p pt + v_w w1 + eta_hat - v_t t1 - v_d) . f1 (m/s), in {T}, where
-    pt_f1 = pt . f1 and c = R_T^T (v_w w1 + eta_hat - v_t) is the vehicle's velocity relative
+    pt_f1 = pt . f1 and c = R_I^T (v_w w1 + eta_hat - v_t) is the vehicle's velocity relative
     to the target."""
     return K_p * pt_f1 + dot(sub(c, v_d), f1)
 
@@ -272,12 +273,16 @@ def feedforward_omega_DT(
     # dp_d/ds; u = uu + v_d with d(uu)/dt = a_t - omega_TI x uu (eta_hat held) and
     # v_d = omega_TI x p_d, so u_dot = a_t + omega_dot x p_d + omega_TI x (p_d_dot - uu).
     # Elementwise sums written out (this is the hot path).
-    pd0, pd1, pd2 = sdot * dp_ds[0], sdot * dp_ds[1], sdot * dp_ds[2]
-    wq = cross(omega, q)
-    pt_dot = (c[0] - wq[0] - pd0, c[1] - wq[1] - pd1, c[2] - wq[2] - pd2)
-    wp = cross(omega_dot, p_d)
-    wr = cross(omega, (pd0 - uu[0], pd1 - uu[1], pd2 - uu[2]))
-    u_dot = (a_t[0] + wp[0] + wr[0], a_t[1] + wp[1] + wr[1], a_t[2] + wp[2] + wr[2])
+    g0, g1, g2 = dp_ds
+    pd0, pd1, pd2 = sdot * g0, sdot * g1, sdot * g2
+    c0, c1, c2 = c
+    a0, a1, a2 = cross(omega, q)
+    pt_dot = (c0 - a0 - pd0, c1 - a1 - pd1, c2 - a2 - pd2)
+    u0, u1, u2 = uu
+    a0, a1, a2 = a_t
+    b0, b1, b2 = cross(omega_dot, p_d)
+    r0, r1, r2 = cross(omega, (pd0 - u0, pd1 - u1, pd2 - u2))
+    u_dot = (a0 + b0 + r0, a1 + b1 + r1, a2 + b2 + r2)
     # Their f2, f3 components (all that (15), (18), (19) use) in {F}, which turns at
     # omega_FT: d(f_k . x)/dt = f_k . x_dot - (omega_FT^F x x^F)_k.
     _, f2, f3 = R_F_T
@@ -291,9 +296,9 @@ def feedforward_omega_DT(
     y_w_dot, z_w_dot = cross_track_rates(pt_F, pt_f2_dot, pt_f3_dot, R_Wd_F, omega_WdF_F)
     omega_DWd_Wd = transient_frame_rate(y_w, z_w, y_w_dot, z_w_dot, alpha)
     # Summed in {F}: omega_FT^F + omega_{W_d F}^F + R_{W_d}^F omega_{D W_d}^{W_d}.
-    o_Wd = mat_vec(R_Wd_F, omega_DWd_Wd)
-    a1, a2, a3 = omega_WdF_F
-    return mat_vec(R_F_T, (o1 + a1 + o_Wd[0], o2 + a2 + o_Wd[1], o3 + a3 + o_Wd[2]))
+    a0, a1, a2 = omega_WdF_F
+    b0, b1, b2 = mat_vec(R_Wd_F, omega_DWd_Wd)
+    return mat_vec(R_F_T, (o1 + a0 + b0, o2 + a1 + b1, o3 + a2 + b2))
 
 
 def attitude_error(d1: Vec3, R_W_I: Mat3) -> tuple[float, float, float]:
@@ -370,10 +375,11 @@ def mpf_law(
     # Into {T}, where the path is fixed: the vehicle relative to the target, the target's
     # velocity less the wind, and the vehicle's velocity (1) relative to the target's,
     # c = R_I^T (v_w w1 + eta_hat - v_t) = v_w w1^T - uu.
-    q = mat_vec(R_I_T, sub(vehicle.position.tolist(), p_t))
+    x_I = sub(vehicle.position.tolist(), p_t)  # p - p_t in NED
+    q = mat_vec(R_I_T, x_I)
     uu = mat_vec(R_I_T, sub(v_t, eta))
-    w1_T = mat_vec(R_I_T, w1)
-    c = (v_w * w1_T[0] - uu[0], v_w * w1_T[1] - uu[1], v_w * w1_T[2] - uu[2])
+    a0, a1, a2 = mat_vec(R_I_T, w1)  # w1 in {T}
+    c = (v_w * a0 - uu[0], v_w * a1 - uu[1], v_w * a2 - uu[2])
 
     # The virtual point: p_d(s), R_F^T, dp_d/ds and the rate of {F} per unit s.
     p_d, f1, f2, f3, k1, k2, dp_ds, rate_F = path.eval_with_rate(s)
@@ -419,16 +425,18 @@ def mpf_law(
     cmd: MpfCommand = tuple.__new__(MpfCommand, (t, cmd2, cmd3, sdot, omega_w1_I))
     if not diagnostics:
         return cmd, None
+    # In NED: p_d, p_f = p_t + p_d and pt = (p - p_t) - p_d; wd1 = R_T^I R_F^T wd1^F.
+    p_d_I = mat_T_vec(R_I_T, p_d)
     wd1_T = mat_vec(R_F_T, R_Wd_F[0])
     diag: MpfDiagnostics = tuple.__new__(
         MpfDiagnostics,
         (
             t,
             s,
-            mat_T_vec(R_I_T, pt),
+            sub(x_I, p_d_I),
             norm(pt),
             pt_F,
-            add(p_t, mat_T_vec(R_I_T, p_d)),
+            add(p_t, p_d_I),
             psi,
             (e2, e3),
             y_w,

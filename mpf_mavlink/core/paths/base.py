@@ -5,8 +5,10 @@ regular curve ``c(u)`` is tabulated once at uniform arc-length nodes (ds ~ 0.25 
 unit tangent f1, transported normal f2 (double-reflection rotation-minimising frame, Wang et
 al. 2008) and the curvature components k1 = kappa . f2, k2 = kappa . f3. Between nodes the
 position is a cubic Hermite interpolant (exact tangents), f1 its normalised derivative and f2
-the blend of both neighbouring nodes' f2 carried onto f1 by the minimal rotation, so the frame
-is continuous everywhere.
+the node's f2 carried onto f1 by the minimal rotation, then turned about f1 by a linearly
+growing share of the angle that meets the next node's f2, so the frame is continuous
+everywhere. :meth:`TabulatedPath.eval_with_rate` also gives dp_d/ds and the exact angular
+velocity of this interpolated frame (the cells are C1: its curvature jumps slightly at nodes).
 
 Closed paths: a transported frame generally comes back rotated about f1 after one lap
 (holonomy angle theta). We spread -theta evenly along the lap, so f2/f3 never jump at the
