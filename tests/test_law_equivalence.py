@@ -23,7 +23,11 @@ error. Both bounds are derived here, per state:
   the one of the cell s lies in. We add the jump, measured by the new law at the node +- 1e-9 m.
 
 So |omega - r(h)| <= (8/3) |r(h) - r(h/2)| + 5 rho + jump on every rate (rad/s; the rate
-limits and the psi turn are 1-Lipschitz in the feedforward). A change of the mathematics moves
+limits and the psi turn are 1-Lipschitz in the feedforward). This holds within Assumption 1.
+Outside it (path_speed_margin < 0) both laws hold wd11 at a floor and {W_d} is no longer a
+rotation: the reference differenced that non-orthonormal frame, the analytic rate takes its
+heading and climb; they differ (measured: by up to |omega_DI|) and neither is the paper's law,
+so there we only ask for finite commands (the last test). A change of the mathematics moves
 the numbers far more: K_R * (1 + 1e-4) moves the command by many times the bound (checked).
 """
 
@@ -189,3 +193,23 @@ def test_the_bound_sees_a_change_of_the_law():
         tol = _rate_bound(s, veh, tgt, path, gains, ext, dr, scale, cr.sdot)
         ratios.append(max(abs(c.w2 - cr.w2), abs(c.w3 - cr.w3)) / tol)
     assert float(np.median(ratios)) > 10.0, np.median(ratios)
+
+
+def test_outside_assumption_1_the_command_stays_finite():
+    # A target at 20 m/s on a 100 m circle turning at 0.05 rad/s outruns a 15 m/s vehicle.
+    path = circle((0.0, 0.0, 0.0), 100.0)
+    motion = ConstantTurn((0.0, 0.0, 0.0), 20.0, 0.0, 0.05)
+    rng = np.random.default_rng(5)
+    outside = 0
+    for _ in range(100):
+        tgt = motion.state(float(rng.uniform(0.0, 50.0)))
+        s = float(rng.uniform(0.0, path.length))
+        q = path.sample(s).position + rng.normal(0.0, 5.0, 3)
+        heading = so3.rot_z(float(rng.uniform(-math.pi, math.pi)))
+        veh = VehicleState(tgt.t, tgt.position + tgt.R_T_I @ q, heading, 15.0)
+        c, d = mpf_law(s, veh, tgt, path, Gains(), Extensions(rate_limit=1.0))
+        assert d is not None
+        outside += d.path_speed_margin < 0
+        assert all(math.isfinite(v) for v in (c.w2, c.w3, c.sdot, *c.omega_w1_I, *d.omega_DI))
+        assert max(abs(c.w2), abs(c.w3)) <= 1.0
+    assert outside > 50
