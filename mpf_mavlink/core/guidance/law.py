@@ -339,6 +339,66 @@ def limit_rates(w2: float, w3: float, ext: Extensions) -> tuple[float, float, bo
     return w2, w3, False
 
 
+def apply_extensions(
+    law2: float,
+    law3: float,
+    ff2: float,
+    ff3: float,
+    psi: float,
+    d1: Vec3,
+    R_W_I: Mat3,
+    K_R: float,
+    ext: Extensions,
+) -> tuple[float, float, str]:
+    """The command [w2, w3] (rad/s) after the :class:`Extensions` (the psi turn, then the rate
+    limit) from the law's command and its feedforward, and the mode it was made in."""
+    if not (ext.psi_turn or ext.rate_limit is not None):
+        return law2, law3, "law"
+    cmd2, cmd3 = law2, law3
+    mode = "law"
+    if ext.psi_turn and psi >= ext.psi_turn_threshold:
+        rate = ext.psi_turn_rate if ext.psi_turn_rate is not None else 0.5 * K_R
+        v2, v3 = psi_turn_direction(R_W_I, d1)
+        cmd2, cmd3 = rate * v2 + ff2, rate * v3 + ff3
+        mode = "psi_turn"
+    if ext.rate_limit is not None:
+        cmd2, cmd3, saturated = limit_rates(cmd2, cmd3, ext)
+        if saturated:
+            mode += "+sat"
+    return cmd2, cmd3, mode
+
+
+def _diagnostics(
+    t: float,
+    s: float,
+    frames: tuple[Mat3, Mat3, Mat3, Vec3],
+    errors: tuple[Vec3, Vec3, Vec3, Vec3, Vec3, float, float, float, float, float, float],
+    rates: tuple[Vec3, float, float, float, float],
+    mode: str,
+    k1: float,
+    k2: float,
+) -> MpfDiagnostics:
+    """The record of what :func:`mpf_law` saw, its vectors in NED (see :class:`MpfDiagnostics`).
+
+    frames: R_I^T, R_F^T, R_{W_d}^F and d1 (NED); errors: p - p_t (NED), p_t, p_d, pt and pt in
+    {F} ({T} unless noted), y_w, z_w, Psi, e2, e3 and the Assumption 1 margin; rates: omega_DI
+    (NED), the feedforward and the law's command on w2, w3.
+    """
+    R_I_T, R_F_T, R_Wd_F, d1 = frames
+    x_I, p_t, p_d, pt, pt_F, y_w, z_w, psi, e2, e3, margin = errors
+    omega_DI, ff2, ff3, law2, law3 = rates
+    # p_f = p_t + p_d and pt = (p - p_t) - p_d from one rotation of p_d; wd1 = R_T^I R_F^T wd1^F.
+    p_d_I = mat_T_vec(R_I_T, p_d)
+    wd1 = mat_T_vec(R_I_T, mat_vec(R_F_T, R_Wd_F[0]))
+    f1 = mat_T_vec(R_I_T, R_F_T[0])
+    # tuple.__new__: the NamedTuple without its keyword-parsing constructor (hot path).
+    return tuple.__new__(
+        MpfDiagnostics,
+        (t, s, sub(x_I, p_d_I), norm(pt), pt_F, add(p_t, p_d_I), psi, (e2, e3), y_w, z_w, d1,
+         wd1, f1, omega_DI, (ff2, ff3), (law2, law3), margin, mode, k1, k2),
+    )  # fmt: skip
+
+
 _NO_EXTENSIONS = Extensions()
 
 
@@ -407,17 +467,7 @@ def mpf_law(
     # (23) [omega]: -K_R e + Pi_R Rt^T omega_DI^D, the last term being omega_DI on w2, w3.
     ff2, ff3 = dot(omega_DI, w2), dot(omega_DI, w3)
     law2, law3 = -K_R * e2 + ff2, -K_R * e3 + ff3
-    cmd2, cmd3 = law2, law3
-    mode = "law"
-    if ext.psi_turn and psi >= ext.psi_turn_threshold:
-        rate = ext.psi_turn_rate if ext.psi_turn_rate is not None else 0.5 * K_R
-        v2, v3 = psi_turn_direction(R_W_I, d1)
-        cmd2, cmd3 = rate * v2 + ff2, rate * v3 + ff3
-        mode = "psi_turn"
-    if ext.rate_limit is not None:
-        cmd2, cmd3, saturated = limit_rates(cmd2, cmd3, ext)
-        if saturated:
-            mode += "+sat"
+    cmd2, cmd3, mode = apply_extensions(law2, law3, ff2, ff3, psi, d1, R_W_I, K_R, ext)
     # The command as the angular velocity of w1 in NED: R_W^I [0, w2, w3].
     omega_w1_I = mat_vec(R_W_I, (0.0, cmd2, cmd3))
     # tuple.__new__ builds the NamedTuples without their keyword-parsing constructor (~0.3 us
@@ -425,32 +475,7 @@ def mpf_law(
     cmd: MpfCommand = tuple.__new__(MpfCommand, (t, cmd2, cmd3, sdot, omega_w1_I))
     if not diagnostics:
         return cmd, None
-    # In NED: p_d, p_f = p_t + p_d and pt = (p - p_t) - p_d; wd1 = R_T^I R_F^T wd1^F.
-    p_d_I = mat_T_vec(R_I_T, p_d)
-    wd1_T = mat_vec(R_F_T, R_Wd_F[0])
-    diag: MpfDiagnostics = tuple.__new__(
-        MpfDiagnostics,
-        (
-            t,
-            s,
-            sub(x_I, p_d_I),
-            norm(pt),
-            pt_F,
-            add(p_t, p_d_I),
-            psi,
-            (e2, e3),
-            y_w,
-            z_w,
-            d1,
-            mat_T_vec(R_I_T, wd1_T),
-            mat_T_vec(R_I_T, f1),
-            omega_DI,
-            (ff2, ff3),
-            (law2, law3),
-            v_w - norm(u),  # Assumption 1 holds while > 0
-            mode,
-            k1,
-            k2,
-        ),
-    )
-    return cmd, diag
+    frames = (R_I_T, R_F_T, R_Wd_F, d1)
+    errors = (x_I, p_t, p_d, pt, pt_F, y_w, z_w, psi, e2, e3, v_w - norm(u))
+    rates = (omega_DI, ff2, ff3, law2, law3)
+    return cmd, _diagnostics(t, s, frames, errors, rates, mode, k1, k2)
