@@ -12,9 +12,8 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
+from mpf_mavlink.constants import GRAVITY_M_S2 as GRAVITY_M_S2  # re-exported for importers
 from mpf_mavlink.core.so3 import Mat3, Vec3, rot_x, rot_y, rot_z
-
-GRAVITY_M_S2 = 9.80665
 
 
 def quat_wxyz_to_matrix(q: ArrayLike) -> Mat3:
@@ -121,7 +120,8 @@ def wind_frame_from_velocity(v_air_ned: ArrayLike, roll_ref: float = 0.0) -> Mat
 def geodetic_to_ned(
     lat_deg: float, lon_deg: float, alt_m: float, lat0_deg: float, lon0_deg: float, alt0_m: float
 ) -> Vec3:
-    """WGS-84 geodetic position -> local NED (m) about an origin (pymap3d, exact, not flat-earth)."""
+    """WGS-84 geodetic position -> local NED (m) about an origin (pymap3d: exact, not a
+    flat-earth approximation)."""
     import pymap3d
 
     n, e, d = pymap3d.geodetic2ned(lat_deg, lon_deg, alt_m, lat0_deg, lon0_deg, alt0_m)

@@ -62,7 +62,7 @@ def log(R: ArrayLike) -> Vec3:
 def orthonormalize(R: ArrayLike) -> Mat3:
     """Nearest rotation matrix (polar decomposition via SVD); removes integration drift."""
     U, _, Vt = np.linalg.svd(np.asarray(R, dtype=float))
-    Q = U @ Vt
+    Q: NDArray[np.float64] = U @ Vt
     if np.linalg.det(Q) < 0:
         U[:, -1] = -U[:, -1]
         Q = U @ Vt

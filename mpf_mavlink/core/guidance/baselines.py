@@ -42,6 +42,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from mpf_mavlink.constants import GRAVITY_M_S2
 from mpf_mavlink.core.guidance.law import (
     Extensions,
     Gains,
@@ -54,7 +55,6 @@ from mpf_mavlink.core.paths import TabulatedPath
 from mpf_mavlink.core.target import TargetState
 
 LAWS = ("mpf", "npfg", "npfg_static", "l1_loiter", "pursuit")
-GRAVITY = 9.80665
 EPS = 1e-6
 
 
@@ -351,7 +351,7 @@ def baseline_law(
         a_lat = pursuit_lateral_accel((gv[0], gv[1]), (float(to_c[0]), float(to_c[1])))
     else:
         raise ValueError(f"unknown guidance law {law!r} (one of {', '.join(LAWS)})")
-    a_max = GRAVITY * math.tan(params.max_bank_rad)
+    a_max = GRAVITY_M_S2 * math.tan(params.max_bank_rad)
     mode = law
     if abs(a_lat) > a_max:
         a_lat = math.copysign(a_max, a_lat)

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from mpf_mavlink.constants import GRAVITY_M_S2
 from mpf_mavlink.core.adapter import bank_and_load_factor
-from mpf_mavlink.core.frames import GRAVITY_M_S2
 from mpf_mavlink.core.guidance.law import Gains
 from mpf_mavlink.core.paths import TabulatedPath
 from mpf_mavlink.core.target import TargetMotion

@@ -1,26 +1,36 @@
 """The 3D moving-path-following law (Jain, de Sousa, Aguiar, Theorem 1), pure and exact.
 
-:func:`_frame` builds the paper's frames at one point ([wdbasis] W_d, then the transient frame
-D) and :func:`mpf_law` evaluates [sdot], Psi, e, the feedforward omega_DI and the command
-[omega]. Everything is plain float arithmetic on local variables: the bridge evaluates the law
-once per ATTITUDE sample inside its latency budget, and a Python-level float operation costs
-far less than a numpy call on a 3-vector (one evaluation is ~30 us, three frame evaluations
-of which are the feedforward). No I/O, no clock.
+Read it beside the paper. Equation numbers are the paper's as its LaTeX source numbers them
+(IEEEtran, in order), with its labels in brackets:
 
-Frames (see ../shared/spec/mpf-law.md): {I} NED; {W} wind frame (w1 along the air-relative
-velocity); {T} target; {F} parallel-transport frame at p_d(s); {W_d} steady-state desired
-velocity frame; {D} transient desired frame.
+- (1)  [UAVKinematics] pdot = v_w w1 (plus the wind estimate eta_hat, the paper's Remark).
+- (5)  [MPFpositionerrorkinematics] the position error's rate, used for the feedforward.
+- (6)  [attitudeErrorFunction] Psi = (1 - Rt11) / 2, Rt = R_W^D.
+- (9)  [ertilde] e = [Rt13, -Rt12] / 2.
+- (10) [ffomega] omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d} (where (11)
+  and (23) print omega_{W_d D}^{W_d}, the rate of {W_d} relative to {F} is meant).
+- (15) [wdbasis] the steady-state frame {W_d} in {F}: :func:`steady_state_frame`.
+- (17)-(19) the cross-track error pt_x and y_w, z_w: :func:`cross_track_errors`.
+- (20) R_D^{W_d}, the transient frame {D} in {W_d}: :func:`transient_frame`.
+- (22) [sdot] the virtual point's progression.
+- (23) [omega] -K_R e + Pi_R Rt^T omega_DI^D, the reference for the autopilot: :func:`mpf_law`.
 
-The feedforward omega_DI (angular velocity of {D} relative to {I}) is the exact derivative
-of R_D^I along the closed-loop flow: R_D^I is a pure function of (t, s, p, target) and we
-difference it along the known kinematics (pdot = v_w w1 + eta_hat, sdot from the law, the
-target's velocity, acceleration, angular velocity and its rate), never along telemetry.
+Frames: {I} NED; {W} wind frame (w1 along the air-relative velocity); {T} target; {F}
+parallel-transport frame at p_d(s); {W_d} steady-state desired velocity frame; {D} transient
+desired frame. The frames are built in {T}, where the path is fixed. Vectors and matrices are
+tuples (:mod:`mpf_mavlink.core.vec3`; matrices by columns, so R_F^T = (f1, f2, f3)).
+
+The feedforward omega_DI (10) must be the exact rate of {D} along the closed-loop flow: each
+term is differentiated analytically along the known kinematics (pdot = v_w w1 + eta_hat,
+sdot from (22), the target's velocity, acceleration, angular velocity and its rate), never
+along telemetry. {W_d} in {F} and {D} in {W_d} are each a heading chi then a climb gamma
+from their parent frame (wd32 = 0 in (15), d32 = 0 in (20)), so each turns at chi_dot about
+its parent's third axis and -gamma_dot about its own second axis. No I/O, no clock.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal, NamedTuple
 
@@ -29,8 +39,19 @@ from numpy.typing import NDArray
 
 from mpf_mavlink.core.paths import TabulatedPath
 from mpf_mavlink.core.target import TargetState
+from mpf_mavlink.core.vec3 import (
+    Mat3,
+    Vec3,
+    add,
+    cross,
+    dot,
+    mat_T_vec,
+    mat_vec,
+    norm,
+    sub,
+)
 
-Vec = tuple[float, float, float]
+Vec = Vec3  # the records' vector fields
 
 
 @dataclass(frozen=True)
@@ -128,115 +149,255 @@ class MpfDiagnostics(NamedTuple):
     k2: float  # path curvature along f3 (1/m)
 
 
-def _cross(a: Vec, b: Vec) -> Vec:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+_ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 
-def _dot(a: Vec, b: Vec) -> float:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+def steady_state_frame(u_F: Vec3, v_w: float) -> Mat3:
+    """(15) [wdbasis] R_{W_d}^F = (wd1, wd2, wd3), components in {F}.
 
-
-# Everything the centre evaluation hands on besides R_D^T (see _frame).
-_Extra = tuple[Vec, Vec, Vec, Vec, float, float, Vec, Vec, Vec, float, float, float, float]
-_Frame = tuple[float, float, float, float, float, float, float, float, float, _Extra]
-_PathEval = Callable[[float], tuple[Vec, Vec, Vec, Vec, float, float]]
-
-
-def _frame(
-    s: float,
-    q0: float, q1: float, q2: float,
-    uu0: float, uu1: float, uu2: float,
-    o0: float, o1: float, o2: float,
-    peval: _PathEval,
-    v_w: float,
-    a: float,
-) -> _Frame:  # fmt: skip
-    """[wdbasis] W_d and the transient frame D at one point of the flow, in {T} coordinates.
-
-    q = R_T^T (p - p_t): vehicle position relative to the target (m);
-    uu = R_T^T (v_t - eta_hat): target velocity less the wind estimate (m/s);
-    o = omega_TI^T (rad/s); path point p_d(s), v_d = o x p_d; a = alpha (m).
-    Returns d1, d2, d3 (the columns of R_D^T, 9 floats) and, for the centre evaluation,
-    (p_d, f1, f2, f3, k1, k2, pt, u, wd1 in {F}, pt.f2, pt.f3, y_w, z_w) where
-    u = v_t t1 + v_d - eta_hat.
-    Vectors arrive as scalars and tuples are unpacked once: this runs three times per law
-    evaluation and tuple indexing would cost as much as the arithmetic.
+    u_F: u = v_t t1 + v_d (- eta_hat with wind compensation) in {F}, the velocity the path
+    point asks of the vehicle (m/s); v_w airspeed (m/s).
     """
-    pd, f1, f2, f3, k1, k2 = peval(s)
-    pd0, pd1, pd2 = pd
-    a0, a1_, a2_ = f1
-    b0, b1_, b2_ = f2
-    c0, c1_, c2_ = f3
-    pt0, pt1, pt2 = q0 - pd0, q1 - pd1, q2 - pd2
-    # u = v_t t1 + v_d - eta_hat: v_w times the air-relative direction needed in steady state.
-    u0 = uu0 + o1 * pd2 - o2 * pd1
-    u1 = uu1 + o2 * pd0 - o0 * pd2
-    u2 = uu2 + o0 * pd1 - o1 * pd0
-    iv = 1.0 / v_w
-    wd21 = (u0 * b0 + u1 * b1_ + u2 * b2_) * iv
-    wd31 = (u0 * c0 + u1 * c1_ + u2 * c2_) * iv
-    rad = 1.0 - wd21 * wd21 - wd31 * wd31
-    # Assumption 1 keeps rad > 0; outside it we keep the frame defined (the margin says so).
-    wd11 = math.sqrt(rad) if rad > 1e-12 else 1e-6
-    n = 1.0 / math.sqrt(wd11 * wd11 + wd21 * wd21)
-    wd12, wd22 = -wd21 * n, wd11 * n
-    # wd3 = wd1 x wd2 in {F} components (wd32 = 0).
-    wd13 = -wd31 * wd22
-    wd23 = wd31 * wd12
-    wd33 = wd11 * wd22 - wd21 * wd12
-    pF2 = pt0 * b0 + pt1 * b1_ + pt2 * b2_
-    pF3 = pt0 * c0 + pt1 * c1_ + pt2 * c2_
-    # Cross-track error pt_x = pt - (pt.f1) f1, projected on wd2 and wd3.
-    y_w = pF2 * wd22
-    z_w = pF2 * wd23 + pF3 * wd33
-    n1 = 1.0 / math.sqrt(a * a + y_w * y_w + z_w * z_w)
-    n2 = 1.0 / math.sqrt(a * a + y_w * y_w)
-    x1, y1, z1 = a * n1, -y_w * n1, -z_w * n1  # d1 in {W_d}
-    x2, y2 = y_w * n2, a * n2  # d2 in {W_d} (third component 0)
-    x3, y3, z3 = -z1 * y2, z1 * x2, x1 * y2 - y1 * x2  # d3 = d1 x d2
-    # {W_d} axes in {F}: wd1 = (wd11, wd21, wd31), wd2 = (wd12, wd22, 0), wd3 = (wd13, wd23,
-    # wd33); each d_k goes {W_d} -> {F} (g) -> {T}.
-    g1 = x1 * wd11 + y1 * wd12 + z1 * wd13
-    g2 = x1 * wd21 + y1 * wd22 + z1 * wd23
-    g3 = x1 * wd31 + z1 * wd33
-    h1 = x2 * wd11 + y2 * wd12
-    h2 = x2 * wd21 + y2 * wd22
-    h3 = x2 * wd31
-    k1_ = x3 * wd11 + y3 * wd12 + z3 * wd13
-    k2_ = x3 * wd21 + y3 * wd22 + z3 * wd23
-    k3_ = x3 * wd31 + z3 * wd33
-    return (
-        g1 * a0 + g2 * b0 + g3 * c0,
-        g1 * a1_ + g2 * b1_ + g3 * c1_,
-        g1 * a2_ + g2 * b2_ + g3 * c2_,
-        h1 * a0 + h2 * b0 + h3 * c0,
-        h1 * a1_ + h2 * b1_ + h3 * c1_,
-        h1 * a2_ + h2 * b2_ + h3 * c2_,
-        k1_ * a0 + k2_ * b0 + k3_ * c0,
-        k1_ * a1_ + k2_ * b1_ + k3_ * c1_,
-        k1_ * a2_ + k2_ * b2_ + k3_ * c2_,
-        (
-            pd,
-            f1,
-            f2,
-            f3,
-            k1,
-            k2,
-            (pt0, pt1, pt2),
-            (u0, u1, u2),
-            (wd11, wd21, wd31),
-            pF2,
-            pF3,
-            y_w,
-            z_w,
-        ),
-    )
+    wd21 = u_F[1] / v_w
+    wd31 = u_F[2] / v_w
+    radicand = 1.0 - wd21 * wd21 - wd31 * wd31
+    # Assumption 1 keeps the radicand > 0; outside it the frame stays defined (the
+    # diagnostics' path_speed_margin says so).
+    wd11 = math.sqrt(radicand) if radicand > 1e-12 else 1e-6
+    n = math.sqrt(wd11 * wd11 + wd21 * wd21)
+    wd12, wd22 = -wd21 / n, wd11 / n  # wd32 = 0
+    # wd3 = wd1 x wd2, written out with wd32 = 0.
+    wd13, wd23, wd33 = -wd31 * wd22, wd31 * wd12, wd11 * wd22 - wd21 * wd12
+    return (wd11, wd21, wd31), (wd12, wd22, 0.0), (wd13, wd23, wd33)
 
 
-# Step for differencing R_D^T along the flow (s). Central differences cancel the symmetric
-# second-order terms of a first-order state advance, so the error is O(h^2) ~ 1e-8 relative,
-# and round-off (~1e-16 / h) is smaller still.
-FD_STEP_S = 1e-4
+def steady_state_frame_rate(R_Wd_F: Mat3, wd21_dot: float, wd31_dot: float) -> Vec3:
+    """omega_{W_d F}^F (rad/s): (15) differentiated, given the rates of wd21 and wd31 (1/s).
+
+    wd1 = (cos g cos x, cos g sin x, sin g) and wd2 = (-sin x, cos x, 0): heading x then climb g
+    in {F}, so omega_{W_d F} = x_dot f3 - g_dot wd2.
+    """
+    (wd11, wd21, wd31), (wd12, wd22, _), _ = R_Wd_F
+    # wd11 = sqrt(1 - wd21^2 - wd31^2); held at its floor outside Assumption 1.
+    wd11_dot = -(wd21 * wd21_dot + wd31 * wd31_dot) / wd11 if wd11 > 1e-6 else 0.0
+    nn = wd11 * wd11 + wd21 * wd21  # cos^2 g
+    n = math.sqrt(nn)
+    heading_dot = (wd11 * wd21_dot - wd21 * wd11_dot) / nn
+    n_dot = (wd11 * wd11_dot + wd21 * wd21_dot) / n
+    climb_dot = (n * wd31_dot - wd31 * n_dot) / (nn + wd31 * wd31)
+    return (-climb_dot * wd12, -climb_dot * wd22, heading_dot)
+
+
+def cross_track_errors(pt_F: Vec3, R_Wd_F: Mat3) -> tuple[float, float]:
+    """(17)-(19): y_w = pt_x . wd2 and z_w = pt_x . wd3 (m), where pt_x = (0, pt.f2, pt.f3) in
+    {F} is the cross-track error; pt_F is pt in {F}, and wd32 = 0."""
+    _, pt_f2, pt_f3 = pt_F
+    (_, wd22, _), (_, wd23, wd33) = R_Wd_F[1], R_Wd_F[2]
+    return pt_f2 * wd22, pt_f2 * wd23 + pt_f3 * wd33
+
+
+def cross_track_rates(
+    pt_F: Vec3, pt_f2_dot: float, pt_f3_dot: float, R_Wd_F: Mat3, omega_WdF_F: Vec3
+) -> tuple[float, float]:
+    """d/dt of (18)-(19) (m/s): y_w = pt.f2 wd22 and z_w = pt.f2 wd23 + pt.f3 wd33, given the
+    rates of pt.f2, pt.f3, while {W_d} turns at omega = omega_{W_d F}^F = (o1, o2, o3):
+    d(wd_k)/dt = omega x wd_k, of which the components used here are written out."""
+    _, x2, x3 = pt_F
+    _, (wd12, wd22, _), (wd13, wd23, wd33) = R_Wd_F
+    o1, o2, o3 = omega_WdF_F
+    y_w_dot = pt_f2_dot * wd22 + x2 * o3 * wd12  # d(wd22)/dt = o3 wd12 (wd32 = 0)
+    z_w_dot = pt_f2_dot * wd23 + pt_f3_dot * wd33
+    z_w_dot += x2 * (o3 * wd13 - o1 * wd33) + x3 * (o1 * wd23 - o2 * wd13)
+    return y_w_dot, z_w_dot
+
+
+def transient_frame(y_w: float, z_w: float, alpha: float) -> Mat3:
+    """(20) R_D^{W_d} = (d1, d2, d3), components in {W_d}; alpha (m) the look-ahead."""
+    n1 = math.sqrt(alpha * alpha + y_w * y_w + z_w * z_w)
+    n2 = math.sqrt(alpha * alpha + y_w * y_w)
+    d11, d21, d31 = alpha / n1, -y_w / n1, -z_w / n1
+    d12, d22 = y_w / n2, alpha / n2  # d32 = 0
+    # d3 = d1 x d2, written out with d32 = 0.
+    d3 = (-d31 * d22, d31 * d12, d11 * d22 - d21 * d12)
+    return (d11, d21, d31), (d12, d22, 0.0), d3
+
+
+def transient_frame_rate(
+    y_w: float, z_w: float, y_w_dot: float, z_w_dot: float, alpha: float
+) -> Vec3:
+    """omega_{D W_d}^{W_d} (rad/s): (20) differentiated.
+
+    d1 = (alpha, -y_w, -z_w) / n1 and d2 = (y_w, alpha, 0) / n2 are heading
+    x = atan2(-y_w, alpha) then climb g = atan2(-z_w, n2) in {W_d}, n2 = |(alpha, y_w)|, so
+    omega_{D W_d} = x_dot wd3 - g_dot d2.
+    """
+    nn2 = alpha * alpha + y_w * y_w
+    nn1 = nn2 + z_w * z_w
+    n2 = math.sqrt(nn2)
+    heading_dot = -alpha * y_w_dot / nn2
+    climb_dot = (z_w * y_w * y_w_dot / n2 - n2 * z_w_dot) / nn1
+    return (-climb_dot * y_w / n2, -climb_dot * alpha / n2, heading_dot)
+
+
+def progression_rate(pt_f1: float, c: Vec3, v_d: Vec3, f1: Vec3, K_p: float) -> float:
+    """(22) [sdot] = (K_p pt + v_w w1 + eta_hat - v_t t1 - v_d) . f1 (m/s), in {T}, where
+    pt_f1 = pt . f1 and c = R_I^T (v_w w1 + eta_hat - v_t) is the vehicle's velocity relative
+    to the target."""
+    return K_p * pt_f1 + dot(sub(c, v_d), f1)
+
+
+def feedforward_omega_DT(
+    sdot: float,
+    dp_ds: Vec3,
+    rate_F: Vec3,
+    R_F_T: Mat3,
+    R_Wd_F: Mat3,
+    y_w: float,
+    z_w: float,
+    alpha: float,
+    v_w: float,
+    flow: tuple[Vec3, Vec3, Vec3, Vec3, Vec3, Vec3, Vec3, Vec3, Vec3],
+) -> Vec3:
+    """omega_DT^T (rad/s): (10) less omega_TI, i.e. omega_FT + omega_{W_d F} + omega_{D W_d},
+    each the exact derivative of its frame along the closed-loop flow.
+
+    sdot (22); dp_ds, rate_F from :meth:`TabulatedPath.eval_with_rate`; R_F^T, R_{W_d}^F,
+    y_w, z_w, alpha as in (15)-(20). flow, all in {T}: q = R_I^T (p - p_t), c = R_I^T (pdot -
+    v_t) (m/s), uu = R_I^T (v_t - eta_hat), a_t = R_I^T pddot_t (m/s^2), omega_TI^T (rad/s),
+    its rate (rad/s^2), p_d, and pt and u (15) in {F}.
+    """
+    q, c, uu, a_t, omega, omega_dot, p_d, pt_F, u_F = flow
+    tau, m_kappa_2, kappa_1 = rate_F
+    o1, o2, o3 = sdot * tau, sdot * m_kappa_2, sdot * kappa_1  # omega_FT^F
+    # (5) in {T}: pt_dot = qdot - p_d_dot with qdot = c - omega_TI x q and p_d_dot = sdot
+    # dp_d/ds; u = uu + v_d with d(uu)/dt = a_t - omega_TI x uu (eta_hat held) and
+    # v_d = omega_TI x p_d, so u_dot = a_t + omega_dot x p_d + omega_TI x (p_d_dot - uu).
+    # Elementwise sums written out (this is the hot path).
+    g0, g1, g2 = dp_ds
+    pd0, pd1, pd2 = sdot * g0, sdot * g1, sdot * g2
+    c0, c1, c2 = c
+    a0, a1, a2 = cross(omega, q)
+    pt_dot = (c0 - a0 - pd0, c1 - a1 - pd1, c2 - a2 - pd2)
+    u0, u1, u2 = uu
+    a0, a1, a2 = a_t
+    b0, b1, b2 = cross(omega_dot, p_d)
+    r0, r1, r2 = cross(omega, (pd0 - u0, pd1 - u1, pd2 - u2))
+    u_dot = (a0 + b0 + r0, a1 + b1 + r1, a2 + b2 + r2)
+    # Their f2, f3 components (all that (15), (18), (19) use) in {F}, which turns at
+    # omega_FT: d(f_k . x)/dt = f_k . x_dot - (omega_FT^F x x^F)_k.
+    _, f2, f3 = R_F_T
+    x1, x2, x3 = pt_F
+    pt_f2_dot = dot(f2, pt_dot) - (o3 * x1 - o1 * x3)
+    pt_f3_dot = dot(f3, pt_dot) - (o1 * x2 - o2 * x1)
+    x1, x2, x3 = u_F
+    wd21_dot = (dot(f2, u_dot) - (o3 * x1 - o1 * x3)) / v_w
+    wd31_dot = (dot(f3, u_dot) - (o1 * x2 - o2 * x1)) / v_w
+    omega_WdF_F = steady_state_frame_rate(R_Wd_F, wd21_dot, wd31_dot)
+    y_w_dot, z_w_dot = cross_track_rates(pt_F, pt_f2_dot, pt_f3_dot, R_Wd_F, omega_WdF_F)
+    omega_DWd_Wd = transient_frame_rate(y_w, z_w, y_w_dot, z_w_dot, alpha)
+    # Summed in {F}: omega_FT^F + omega_{W_d F}^F + R_{W_d}^F omega_{D W_d}^{W_d}.
+    a0, a1, a2 = omega_WdF_F
+    b0, b1, b2 = mat_vec(R_Wd_F, omega_DWd_Wd)
+    return mat_vec(R_F_T, (o1 + a0 + b0, o2 + a1 + b1, o3 + a2 + b2))
+
+
+def attitude_error(d1: Vec3, R_W_I: Mat3) -> tuple[float, float, float]:
+    """(6) Psi and (9) e = (e2, e3) from d1 and R_W^I (both in NED).
+
+    Rt = R_W^D = (R_D^I)^T R_W^I; its first row is (d1.w1, d1.w2, d1.w3).
+    """
+    Rt11, Rt12, Rt13 = mat_T_vec(R_W_I, d1)
+    return 0.5 * (1.0 - Rt11), 0.5 * Rt13, -0.5 * Rt12
+
+
+def psi_turn_direction(R_W_I: Mat3, d1: Vec3) -> tuple[float, float]:
+    """Unit direction on (w2, w3) of the turn that brings w1 onto d1: about w1 x d1; at the
+    antipode (w1 = -d1) a right turn about the local vertical (down)."""
+    w1, w2, w3 = R_W_I
+    axis = cross(w1, d1)
+    n = norm(axis)
+    if n > 1e-3:
+        return dot(axis, w2) / n, dot(axis, w3) / n
+    v2, v3 = w2[2], w3[2]  # the vertical (0, 0, 1) on w2, w3
+    nu = math.hypot(v2, v3)
+    return (v2 / nu, v3 / nu) if nu > 1e-6 else (0.0, 1.0)
+
+
+def limit_rates(w2: float, w3: float, ext: Extensions) -> tuple[float, float, bool]:
+    """The rate limit of :class:`Extensions` on the command (rad/s); True when it acted."""
+    lim = ext.rate_limit
+    if lim is None:
+        return w2, w3, False
+    if ext.rate_limit_mode == "per_axis":
+        if abs(w2) > lim or abs(w3) > lim:
+            return max(-lim, min(lim, w2)), max(-lim, min(lim, w3)), True
+        return w2, w3, False
+    mag = math.hypot(w2, w3)
+    if mag > lim:
+        k = lim / mag
+        return w2 * k, w3 * k, True
+    return w2, w3, False
+
+
+def apply_extensions(
+    law2: float,
+    law3: float,
+    ff2: float,
+    ff3: float,
+    psi: float,
+    d1: Vec3,
+    R_W_I: Mat3,
+    K_R: float,
+    ext: Extensions,
+) -> tuple[float, float, str]:
+    """The command [w2, w3] (rad/s) after the :class:`Extensions` (the psi turn, then the rate
+    limit) from the law's command and its feedforward, and the mode it was made in."""
+    if not (ext.psi_turn or ext.rate_limit is not None):
+        return law2, law3, "law"
+    cmd2, cmd3 = law2, law3
+    mode = "law"
+    if ext.psi_turn and psi >= ext.psi_turn_threshold:
+        rate = ext.psi_turn_rate if ext.psi_turn_rate is not None else 0.5 * K_R
+        v2, v3 = psi_turn_direction(R_W_I, d1)
+        cmd2, cmd3 = rate * v2 + ff2, rate * v3 + ff3
+        mode = "psi_turn"
+    if ext.rate_limit is not None:
+        cmd2, cmd3, saturated = limit_rates(cmd2, cmd3, ext)
+        if saturated:
+            mode += "+sat"
+    return cmd2, cmd3, mode
+
+
+def _diagnostics(
+    t: float,
+    s: float,
+    frames: tuple[Mat3, Mat3, Mat3, Vec3],
+    errors: tuple[Vec3, Vec3, Vec3, Vec3, Vec3, float, float, float, float, float, float],
+    rates: tuple[Vec3, float, float, float, float],
+    mode: str,
+    k1: float,
+    k2: float,
+) -> MpfDiagnostics:
+    """The record of what :func:`mpf_law` saw, its vectors in NED (see :class:`MpfDiagnostics`).
+
+    frames: R_I^T, R_F^T, R_{W_d}^F and d1 (NED); errors: p - p_t (NED), p_t, p_d, pt and pt in
+    {F} ({T} unless noted), y_w, z_w, Psi, e2, e3 and the Assumption 1 margin; rates: omega_DI
+    (NED), the feedforward and the law's command on w2, w3.
+    """
+    R_I_T, R_F_T, R_Wd_F, d1 = frames
+    x_I, p_t, p_d, pt, pt_F, y_w, z_w, psi, e2, e3, margin = errors
+    omega_DI, ff2, ff3, law2, law3 = rates
+    # p_f = p_t + p_d and pt = (p - p_t) - p_d from one rotation of p_d; wd1 = R_T^I R_F^T wd1^F.
+    p_d_I = mat_T_vec(R_I_T, p_d)
+    wd1 = mat_T_vec(R_I_T, mat_vec(R_F_T, R_Wd_F[0]))
+    f1 = mat_T_vec(R_I_T, R_F_T[0])
+    # tuple.__new__: the NamedTuple without its keyword-parsing constructor (hot path).
+    return tuple.__new__(
+        MpfDiagnostics,
+        (t, s, sub(x_I, p_d_I), norm(pt), pt_F, add(p_t, p_d_I), psi, (e2, e3), y_w, z_w, d1,
+         wd1, f1, omega_DI, (ff2, ff3), (law2, law3), margin, mode, k1, k2),
+    )  # fmt: skip
+
 
 _NO_EXTENSIONS = Extensions()
 
@@ -250,7 +411,7 @@ def mpf_law(
     ext: Extensions = _NO_EXTENSIONS,
     diagnostics: bool = True,
 ) -> tuple[MpfCommand, MpfDiagnostics | None]:
-    """Evaluate the MPF law [sdot], [omega] at the vehicle's time.
+    """Evaluate the MPF law (22) [sdot], (23) [omega] at the vehicle's time.
 
     s is the virtual point's arc length (m, unwrapped); the target state must be for the same
     time as the vehicle (extrapolate it first: :meth:`TargetState.extrapolate`).
@@ -260,185 +421,61 @@ def mpf_law(
     t = float(vehicle.t)
     s = float(s)
     v_w = float(vehicle.airspeed)
-    # R_W^I: columns w1, w2, w3 (NED). R_T^I: rows r_i, R_T^T v = sum_i v_i r_i.
-    (w10, w20, w30), (w11, w21, w31), (w12, w22, w32) = vehicle.R_W_I.tolist()
-    (T00, T01, T02), (T10, T11, T12), (T20, T21, T22) = target.R_T_I.tolist()
-    if ext.wind_compensation:
-        e0, e1, e2 = vehicle.wind.tolist()
-    else:
-        e0 = e1 = e2 = 0.0
-    p0, p1, p2 = vehicle.position.tolist()
-    tp0, tp1, tp2 = target.position.tolist()
-    tv0, tv1, tv2 = target.velocity.tolist()
-    ta0, ta1, ta2 = target.acceleration.tolist()
-    o0, o1, o2 = target.omega_T.tolist()
-    od0, od1, od2 = target.omega_dot_T.tolist()
-    # The vehicle's ground velocity as the law models it: v_w w1 + eta_hat (NED).
-    gv0, gv1, gv2 = v_w * w10 + e0, v_w * w11 + e1, v_w * w12 + e2
-    # Into {T}: q = R_T^T (p - p_t), c = R_T^T (pdot - v_t), uu = R_T^T (v_t - eta_hat),
-    # at = R_T^T a_t.
-    x0, x1, x2 = p0 - tp0, p1 - tp1, p2 - tp2
-    q0 = T00 * x0 + T10 * x1 + T20 * x2
-    q1 = T01 * x0 + T11 * x1 + T21 * x2
-    q2 = T02 * x0 + T12 * x1 + T22 * x2
-    x0, x1, x2 = gv0 - tv0, gv1 - tv1, gv2 - tv2
-    c0 = T00 * x0 + T10 * x1 + T20 * x2
-    c1 = T01 * x0 + T11 * x1 + T21 * x2
-    c2 = T02 * x0 + T12 * x1 + T22 * x2
-    x0, x1, x2 = tv0 - e0, tv1 - e1, tv2 - e2
-    uu0 = T00 * x0 + T10 * x1 + T20 * x2
-    uu1 = T01 * x0 + T11 * x1 + T21 * x2
-    uu2 = T02 * x0 + T12 * x1 + T22 * x2
-    at0 = T00 * ta0 + T10 * ta1 + T20 * ta2
-    at1 = T01 * ta0 + T11 * ta1 + T21 * ta2
-    at2 = T02 * ta0 + T12 * ta1 + T22 * ta2
-    alpha = gains.alpha
-    peval = path.eval
-    D10, D11, D12, D20, D21, D22, D30, D31, D32, extra = _frame(
-        s, q0, q1, q2, uu0, uu1, uu2, o0, o1, o2, peval, v_w, alpha
-    )
-    pd, f1, f2, f3, k1, k2, pt, u, wdF, pF2, pF3, y_w, z_w = extra
-    pd0, pd1, pd2 = pd
-    f10, f11, f12 = f1
-    pt0, pt1, pt2 = pt
-    # [sdot] = (K_p pt + v_w w1 + eta_hat - v_t t1 - om x p_d) . f1, in {T} coordinates.
-    vd0 = o1 * pd2 - o2 * pd1
-    vd1 = o2 * pd0 - o0 * pd2
-    vd2 = o0 * pd1 - o1 * pd0
-    pF1 = pt0 * f10 + pt1 * f11 + pt2 * f12
-    sdot = gains.K_p * pF1 + ((c0 - vd0) * f10 + (c1 - vd1) * f11 + (c2 - vd2) * f12)
+    K_p, K_R, alpha = gains.K_p, gains.K_R, gains.alpha
+    # ndarray.tolist() gives lists, which the vec3 helpers only index and unpack. Matrices are
+    # by columns: R_W^I's are the rows of its transpose; R_I^T = (R_T^I)^T's are R_T^I's rows.
+    R_W_I: Mat3 = vehicle.R_W_I.T.tolist()  # (w1, w2, w3) in NED
+    R_I_T: Mat3 = target.R_T_I.tolist()  # NED into {T}; mat_T_vec(R_I_T, .) is R_T^I
+    eta: Vec3 = vehicle.wind.tolist() if ext.wind_compensation else _ZERO
+    p_t: Vec3 = target.position.tolist()
+    v_t: Vec3 = target.velocity.tolist()
+    omega_TI: Vec3 = target.omega_T.tolist()  # omega_TI^T
+    w1, w2, w3 = R_W_I
 
-    # Exact feedforward: central differences of R_D^T along the flow, in {T}:
-    # qdot = c - om x q; d/dt uu = R_T^T a_t - om x uu (eta_hat constant); omdot from the target.
-    qd0 = c0 - (o1 * q2 - o2 * q1)
-    qd1 = c1 - (o2 * q0 - o0 * q2)
-    qd2 = c2 - (o0 * q1 - o1 * q0)
-    ud0 = at0 - (o1 * uu2 - o2 * uu1)
-    ud1 = at1 - (o2 * uu0 - o0 * uu2)
-    ud2 = at2 - (o0 * uu1 - o1 * uu0)
-    h = FD_STEP_S
-    A10, A11, A12, A20, A21, A22, A30, A31, A32, _ = _frame(
-        s + h * sdot,
-        q0 + h * qd0, q1 + h * qd1, q2 + h * qd2,
-        uu0 + h * ud0, uu1 + h * ud1, uu2 + h * ud2,
-        o0 + h * od0, o1 + h * od1, o2 + h * od2,
-        peval, v_w, alpha,
-    )  # fmt: skip
-    B10, B11, B12, B20, B21, B22, B30, B31, B32, _ = _frame(
-        s - h * sdot,
-        q0 - h * qd0, q1 - h * qd1, q2 - h * qd2,
-        uu0 - h * ud0, uu1 - h * ud1, uu2 - h * ud2,
-        o0 - h * od0, o1 - h * od1, o2 - h * od2,
-        peval, v_w, alpha,
-    )  # fmt: skip
-    inv = 1.0 / (2.0 * h)
-    # omega^T = vee(dR R^T), R = [d1 d2 d3]: (dR R^T)_ij = sum_k d(d_k)_i (d_k)_j.
-    dA0, dA1, dA2 = A10 - B10, A11 - B11, A12 - B12
-    dB0, dB1, dB2 = A20 - B20, A21 - B21, A22 - B22
-    dC0, dC1, dC2 = A30 - B30, A31 - B31, A32 - B32
-    M21 = (dA2 * D11 + dB2 * D21 + dC2 * D31) * inv
-    M12 = (dA1 * D12 + dB1 * D22 + dC1 * D32) * inv
-    M02 = (dA0 * D12 + dB0 * D22 + dC0 * D32) * inv
-    M20 = (dA2 * D10 + dB2 * D20 + dC2 * D30) * inv
-    M10 = (dA1 * D10 + dB1 * D20 + dC1 * D30) * inv
-    M01 = (dA0 * D11 + dB0 * D21 + dC0 * D31) * inv
-    # omega_DI = omega_DT + omega_TI, then in NED (R_T^I v).
-    x0 = 0.5 * (M21 - M12) + o0
-    x1 = 0.5 * (M02 - M20) + o1
-    x2 = 0.5 * (M10 - M01) + o2
-    oI0 = T00 * x0 + T01 * x1 + T02 * x2
-    oI1 = T10 * x0 + T11 * x1 + T12 * x2
-    oI2 = T20 * x0 + T21 * x1 + T22 * x2
-    d10 = T00 * D10 + T01 * D11 + T02 * D12
-    d11 = T10 * D10 + T11 * D11 + T12 * D12
-    d12 = T20 * D10 + T21 * D11 + T22 * D12
-    # Rt = R_W^D: Rt11 = d1.w1, Rt12 = d1.w2, Rt13 = d1.w3.
-    R12 = d10 * w20 + d11 * w21 + d12 * w22
-    R13 = d10 * w30 + d11 * w31 + d12 * w32
-    psi = 0.5 * (1.0 - (d10 * w10 + d11 * w11 + d12 * w12))
-    e2, e3 = 0.5 * R13, -0.5 * R12
-    # Pi_R Rt^T omega_DI^D is omega_DI expressed on w2, w3.
-    ff2 = oI0 * w20 + oI1 * w21 + oI2 * w22
-    ff3 = oI0 * w30 + oI1 * w31 + oI2 * w32
-    K_R = gains.K_R
-    cm2 = -K_R * e2 + ff2
-    cm3 = -K_R * e3 + ff3
-    law2, law3 = cm2, cm3
-    mode = "law"
-    if ext.psi_turn and psi >= ext.psi_turn_threshold:
-        rate = ext.psi_turn_rate if ext.psi_turn_rate is not None else 0.5 * K_R
-        w1: Vec = (w10, w11, w12)
-        w2: Vec = (w20, w21, w22)
-        w3: Vec = (w30, w31, w32)
-        ax = _cross(w1, (d10, d11, d12))
-        na = math.sqrt(_dot(ax, ax))
-        if na > 1e-3:
-            v2, v3 = _dot(ax, w2) / na, _dot(ax, w3) / na
-        else:
-            # Antipodal: a right turn about the local vertical (down), projected on w2, w3.
-            v2, v3 = w22, w32
-            nu = math.hypot(v2, v3)
-            v2, v3 = (v2 / nu, v3 / nu) if nu > 1e-6 else (0.0, 1.0)
-        cm2, cm3 = rate * v2 + ff2, rate * v3 + ff3
-        mode = "psi_turn"
-    if ext.rate_limit is not None and ext.rate_limit_mode == "per_axis":
-        lim = ext.rate_limit
-        if abs(cm2) > lim or abs(cm3) > lim:
-            cm2, cm3 = max(-lim, min(lim, cm2)), max(-lim, min(lim, cm3))
-            mode += "+sat"
-    elif ext.rate_limit is not None:
-        mag = math.hypot(cm2, cm3)
-        if mag > ext.rate_limit:
-            k = ext.rate_limit / mag
-            cm2, cm3 = cm2 * k, cm3 * k
-            mode += "+sat"
-    omega_w1 = (cm2 * w20 + cm3 * w30, cm2 * w21 + cm3 * w31, cm2 * w22 + cm3 * w32)
-    cmd = MpfCommand(t, cm2, cm3, sdot, omega_w1)
+    # Into {T}, where the path is fixed: the vehicle relative to the target, the target's
+    # velocity less the wind, and the vehicle's velocity (1) relative to the target's,
+    # c = R_I^T (v_w w1 + eta_hat - v_t) = v_w w1^T - uu.
+    x_I = sub(vehicle.position.tolist(), p_t)  # p - p_t in NED
+    q = mat_vec(R_I_T, x_I)
+    uu = mat_vec(R_I_T, sub(v_t, eta))
+    a0, a1, a2 = mat_vec(R_I_T, w1)  # w1 in {T}
+    c = (v_w * a0 - uu[0], v_w * a1 - uu[1], v_w * a2 - uu[2])
+
+    # The virtual point: p_d(s), R_F^T, dp_d/ds and the rate of {F} per unit s.
+    p_d, f1, f2, f3, k1, k2, dp_ds, rate_F = path.eval_with_rate(s)
+    R_F_T: Mat3 = (f1, f2, f3)
+    pt = sub(q, p_d)  # position error pt = p - p_f, in {T}
+    pt_F = mat_T_vec(R_F_T, pt)
+    v_d = cross(omega_TI, p_d)  # the path point's velocity from the target's rotation
+    sdot = progression_rate(pt_F[0], c, v_d, f1, K_p)  # (22)
+
+    # The desired frames (15), (17)-(19), (20).
+    u = add(uu, v_d)  # v_t t1 + v_d - eta_hat
+    u_F = mat_T_vec(R_F_T, u)
+    R_Wd_F = steady_state_frame(u_F, v_w)
+    y_w, z_w = cross_track_errors(pt_F, R_Wd_F)
+    R_D_Wd = transient_frame(y_w, z_w, alpha)
+    d1 = mat_T_vec(R_I_T, mat_vec(R_F_T, mat_vec(R_Wd_F, R_D_Wd[0])))  # in NED
+    psi, e2, e3 = attitude_error(d1, R_W_I)  # (6), (9)
+
+    # (10) omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d}, each term exact.
+    a_t = mat_vec(R_I_T, target.acceleration.tolist())
+    flow = (q, c, uu, a_t, omega_TI, target.omega_dot_T.tolist(), p_d, pt_F, u_F)
+    omega_DT = feedforward_omega_DT(sdot, dp_ds, rate_F, R_F_T, R_Wd_F, y_w, z_w, alpha, v_w, flow)
+    omega_DI = mat_T_vec(R_I_T, add(omega_TI, omega_DT))  # in NED
+
+    # (23) [omega]: -K_R e + Pi_R Rt^T omega_DI^D, the last term being omega_DI on w2, w3.
+    ff2, ff3 = dot(omega_DI, w2), dot(omega_DI, w3)
+    law2, law3 = -K_R * e2 + ff2, -K_R * e3 + ff3
+    cmd2, cmd3, mode = apply_extensions(law2, law3, ff2, ff3, psi, d1, R_W_I, K_R, ext)
+    # The command as the angular velocity of w1 in NED: R_W^I [0, w2, w3].
+    omega_w1_I = mat_vec(R_W_I, (0.0, cmd2, cmd3))
+    # tuple.__new__ builds the NamedTuples without their keyword-parsing constructor (~0.3 us
+    # each, on the hot path).
+    cmd: MpfCommand = tuple.__new__(MpfCommand, (t, cmd2, cmd3, sdot, omega_w1_I))
     if not diagnostics:
         return cmd, None
-    u0, u1, u2 = u
-    wd11, wd21, wd31 = wdF
-    f20, f21, f22 = f2
-    f30, f31, f32 = f3
-    wd0 = wd11 * f10 + wd21 * f20 + wd31 * f30
-    wd1 = wd11 * f11 + wd21 * f21 + wd31 * f31
-    wd2 = wd11 * f12 + wd21 * f22 + wd31 * f32
-    diag = MpfDiagnostics(
-        t,
-        s,
-        (
-            T00 * pt0 + T01 * pt1 + T02 * pt2,
-            T10 * pt0 + T11 * pt1 + T12 * pt2,
-            T20 * pt0 + T21 * pt1 + T22 * pt2,
-        ),
-        math.sqrt(pt0 * pt0 + pt1 * pt1 + pt2 * pt2),
-        (pF1, pF2, pF3),
-        (
-            tp0 + (T00 * pd0 + T01 * pd1 + T02 * pd2),
-            tp1 + (T10 * pd0 + T11 * pd1 + T12 * pd2),
-            tp2 + (T20 * pd0 + T21 * pd1 + T22 * pd2),
-        ),
-        psi,
-        (e2, e3),
-        y_w,
-        z_w,
-        (d10, d11, d12),
-        (
-            T00 * wd0 + T01 * wd1 + T02 * wd2,
-            T10 * wd0 + T11 * wd1 + T12 * wd2,
-            T20 * wd0 + T21 * wd1 + T22 * wd2,
-        ),
-        (
-            T00 * f10 + T01 * f11 + T02 * f12,
-            T10 * f10 + T11 * f11 + T12 * f12,
-            T20 * f10 + T21 * f11 + T22 * f12,
-        ),
-        (oI0, oI1, oI2),
-        (ff2, ff3),
-        (law2, law3),
-        v_w - math.sqrt(u0 * u0 + u1 * u1 + u2 * u2),
-        mode,
-        k1,
-        k2,
-    )
-    return cmd, diag
+    frames = (R_I_T, R_F_T, R_Wd_F, d1)
+    errors = (x_I, p_t, p_d, pt, pt_F, y_w, z_w, psi, e2, e3, v_w - norm(u))
+    rates = (omega_DI, ff2, ff3, law2, law3)
+    return cmd, _diagnostics(t, s, frames, errors, rates, mode, k1, k2)

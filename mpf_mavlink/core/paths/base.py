@@ -5,8 +5,10 @@ regular curve ``c(u)`` is tabulated once at uniform arc-length nodes (ds ~ 0.25 
 unit tangent f1, transported normal f2 (double-reflection rotation-minimising frame, Wang et
 al. 2008) and the curvature components k1 = kappa . f2, k2 = kappa . f3. Between nodes the
 position is a cubic Hermite interpolant (exact tangents), f1 its normalised derivative and f2
-the blend of both neighbouring nodes' f2 carried onto f1 by the minimal rotation, so the frame
-is continuous everywhere.
+the node's f2 carried onto f1 by the minimal rotation, then turned about f1 by a linearly
+growing share of the angle that meets the next node's f2, so the frame is continuous
+everywhere. :meth:`TabulatedPath.eval_with_rate` also gives dp_d/ds and the exact angular
+velocity of this interpolated frame (the cells are C1: its curvature jumps slightly at nodes).
 
 Closed paths: a transported frame generally comes back rotated about f1 after one lap
 (holonomy angle theta). We spread -theta evenly along the lap, so f2/f3 never jump at the
@@ -26,10 +28,20 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from mpf_mavlink.core.vec3 import Vec3, add_scaled, cross, scale
 from mpf_mavlink.errors import ConfigError
 
 CurveFn = Callable[[NDArray[np.float64]], NDArray[np.float64]]
-Tuple3 = tuple[float, float, float]
+Tuple3 = Vec3
+# (p_d, f1, f2, f3, k1, k2) and, with the rate, the frame's angular velocity per metre in {F}.
+PathPoint = tuple[Vec3, Vec3, Vec3, Vec3, float, float]
+PathPointRate = tuple[Vec3, Vec3, Vec3, Vec3, float, float, Vec3, Vec3]
+_Cell = tuple[Vec3, Vec3, Vec3, Vec3, Vec3, Vec3, float, tuple[float, float, float, float]]
+_ZERO: Vec3 = (0.0, 0.0, 0.0)
+
+
+def _vec(v: list[float]) -> Vec3:
+    return (v[0], v[1], v[2])
 
 
 @dataclass(frozen=True)
@@ -173,10 +185,36 @@ class TabulatedPath:
             )
             corr.append(math.atan2(x[0] * t1[0] + x[1] * t1[1] + x[2] * t1[2], cos_))
         self._C = corr
+        # Per cell, what evaluation needs in one tuple: the Hermite cubic in power form
+        # p(w) = p_i + w a + w^2 b + w^3 c (w = (s - s_i) / ds), the node's tangent and f2,
+        # the cell's closing angle and the curvatures at both nodes.
+        h = self.ds
+        cells: list[_Cell] = []
+        for i in range(n):
+            pa, pb = self._Pl[i], self._Pl[i + 1]
+            ta, tb = self._Tl[i], self._Tl[i + 1]
+            lin = scale(h, ta)
+            quad = _vec([3.0 * (pb[j] - pa[j]) - h * (2.0 * ta[j] + tb[j]) for j in range(3)])
+            cub = _vec([2.0 * (pa[j] - pb[j]) + h * (ta[j] + tb[j]) for j in range(3)])
+            k12 = (self._K1l[i], self._K1l[i + 1], self._K2l[i], self._K2l[i + 1])
+            cells.append((pa, lin, quad, cub, ta, self._F2l[i], corr[i], k12))
+        self._cells = cells
 
     # ------------------------------------------------------------------ evaluation
-    def eval(self, s: float) -> tuple[Tuple3, Tuple3, Tuple3, Tuple3, float, float]:
-        """Fast evaluation: (position, f1, f2, f3, k1, k2) at arc length s, in {T}."""
+    def eval(self, s: float) -> PathPoint:
+        """(p_d, f1, f2, f3, k1, k2) at arc length s (m), vectors in {T}; k1, k2 (1/m) are the
+        nodes' curvatures interpolated linearly."""
+        return self.eval_with_rate(s)[:6]
+
+    def eval_with_rate(self, s: float) -> PathPointRate:
+        """:meth:`eval` and the rates: (p_d, f1, f2, f3, k1, k2, dp_ds, rate_F).
+
+        dp_ds = dp_d/ds, f1 times the interpolant's speed (1 to ~1e-8: the cubic is arc-length
+        parameterised only approximately); rate_F = (tau, -kappa_2, kappa_1) (rad/m) is the
+        angular velocity of the interpolated frame {F} per unit s, in {F}: omega_FT^F =
+        sdot rate_F. Both are the exact derivatives of what :meth:`eval` returns (the
+        interpolant's own curvature and twist), so they agree with differencing eval.
+        """
         L = self.length
         if self.closed:
             s = s % L
@@ -185,49 +223,38 @@ class TabulatedPath:
             j = 0 if s <= 0.0 else self.n
             p, t, f2 = self._Pl[j], self._Tl[j], self._F2l[j]
             ds = s if j == 0 else s - L
-            f3 = (
-                t[1] * f2[2] - t[2] * f2[1],
-                t[2] * f2[0] - t[0] * f2[2],
-                t[0] * f2[1] - t[1] * f2[0],
-            )
-            return (p[0] + ds * t[0], p[1] + ds * t[1], p[2] + ds * t[2]), t, f2, f3, 0.0, 0.0
+            return add_scaled(p, ds, t), t, f2, cross(t, f2), 0.0, 0.0, t, _ZERO
         h = self.ds
         x = s / h
         i = int(x)
         if i >= self.n:
             i = self.n - 1
         w = x - i
-        Pl, Tl = self._Pl, self._Tl
-        pa0, pa1, pa2 = Pl[i]
-        pb0, pb1, pb2 = Pl[i + 1]
-        ta0, ta1, ta2 = Tl[i]
-        tb0, tb1, tb2 = Tl[i + 1]
-        w2 = w * w
-        w3 = w2 * w
-        h00 = 2 * w3 - 3 * w2 + 1
-        h10 = (w3 - 2 * w2 + w) * h
-        h01 = -2 * w3 + 3 * w2
-        h11 = (w3 - w2) * h
-        g00 = (6 * w2 - 6 * w) / h
-        g10 = 3 * w2 - 4 * w + 1
-        g01 = (-6 * w2 + 6 * w) / h
-        g11 = 3 * w2 - 2 * w
+        (p0, p1, p2), (a0, a1, a2), (b0, b1, b2), (c0, c1, c2), t_i, f2_i, twist, k12 = self._cells[
+            i
+        ]
+        # Written out on scalars (this runs once per law evaluation): the cell's cubic
+        # p(w) = p_i + w a + w^2 b + w^3 c by Horner, its derivatives dp = dp/dw, ddp.
         p = (
-            h00 * pa0 + h10 * ta0 + h01 * pb0 + h11 * tb0,
-            h00 * pa1 + h10 * ta1 + h01 * pb1 + h11 * tb1,
-            h00 * pa2 + h10 * ta2 + h01 * pb2 + h11 * tb2,
+            p0 + w * (a0 + w * (b0 + w * c0)),
+            p1 + w * (a1 + w * (b1 + w * c1)),
+            p2 + w * (a2 + w * (b2 + w * c2)),
         )
-        dx = g00 * pa0 + g10 * ta0 + g01 * pb0 + g11 * tb0
-        dy = g00 * pa1 + g10 * ta1 + g01 * pb1 + g11 * tb1
-        dz = g00 * pa2 + g10 * ta2 + g01 * pb2 + g11 * tb2
-        nn = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
-        a0, a1, a2 = dx * nn, dy * nn, dz * nn  # f1
-        # _mrot(F2[i], ta, f1) inlined: f2_i carried by the minimal rotation ta -> f1
-        v0, v1, v2 = self._F2l[i]
-        cx = ta1 * a2 - ta2 * a1
-        cy = ta2 * a0 - ta0 * a2
-        cz = ta0 * a1 - ta1 * a0
-        d = ta0 * a0 + ta1 * a1 + ta2 * a2
+        dp0 = a0 + w * (2.0 * b0 + 3.0 * w * c0)
+        dp1 = a1 + w * (2.0 * b1 + 3.0 * w * c1)
+        dp2 = a2 + w * (2.0 * b2 + 3.0 * w * c2)
+        ddp0, ddp1, ddp2 = 2.0 * b0 + 6.0 * w * c0, 2.0 * b1 + 6.0 * w * c1, 2.0 * b2 + 6.0 * w * c2
+        n_dp = math.sqrt(dp0 * dp0 + dp1 * dp1 + dp2 * dp2)
+        g = 1.0 / n_dp
+        e0, e1, e2 = dp0 * g, dp1 * g, dp2 * g  # f1
+        # r: the node's f2 carried by the minimal rotation t_i -> f1 (Rodrigues with
+        # c = t_i x f1, d = t_i . f1: v + c x v + c x (c x v) / (1 + d)).
+        ta0, ta1, ta2 = t_i
+        v0, v1, v2 = f2_i
+        cx = ta1 * e2 - ta2 * e1
+        cy = ta2 * e0 - ta0 * e2
+        cz = ta0 * e1 - ta1 * e0
+        d = ta0 * e0 + ta1 * e1 + ta2 * e2
         ux = cy * v2 - cz * v1
         uy = cz * v0 - cx * v2
         uz = cx * v1 - cy * v0
@@ -237,17 +264,30 @@ class TabulatedPath:
         r2 = v2 + uz + k * (cx * uy - cy * ux)
         nr = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
         r0, r1, r2 = r0 * nr, r1 * nr, r2 * nr
-        q0 = a1 * r2 - a2 * r1
-        q1 = a2 * r0 - a0 * r2
-        q2 = a0 * r1 - a1 * r0
-        ang = w * self._C[i]
-        ca, sa = math.cos(ang), math.sin(ang)
-        f2 = (ca * r0 + sa * q0, ca * r1 + sa * q1, ca * r2 + sa * q2)
-        f3 = (ca * q0 - sa * r0, ca * q1 - sa * r1, ca * q2 - sa * r2)
-        K1, K2 = self._K1l, self._K2l
-        k1 = (1 - w) * K1[i] + w * K1[i + 1]
-        k2 = (1 - w) * K2[i] + w * K2[i + 1]
-        return p, (a0, a1, a2), f2, f3, k1, k2
+        q0 = e1 * r2 - e2 * r1  # f1 x r
+        q1 = e2 * r0 - e0 * r2
+        q2 = e0 * r1 - e1 * r0
+        # Turned about f1 by this cell's share of the closing angle (exactly 0 on open and
+        # planar paths, which skip the turn).
+        if twist:
+            ang = w * twist
+            ca, sa = math.cos(ang), math.sin(ang)
+            f2 = (ca * r0 + sa * q0, ca * r1 + sa * q1, ca * r2 + sa * q2)
+            f3 = (ca * q0 - sa * r0, ca * q1 - sa * r1, ca * q2 - sa * r2)
+        else:
+            f2, f3 = (r0, r1, r2), (q0, q1, q2)
+        # The frame's rate per unit w: f1' = (I - f1 f1^T) p'' / |p'| gives the curvatures
+        # f1'.f2 and f1'.f3; the minimal rotation from the fixed t_i turns r about f1 at
+        # -(c . f1') / (1 + d) = -(c . p'') / ((1 + d) |p'|); the closing share adds `twist`.
+        gh = g / h
+        kappa_1 = (ddp0 * f2[0] + ddp1 * f2[1] + ddp2 * f2[2]) * gh
+        kappa_2 = (ddp0 * f3[0] + ddp1 * f3[1] + ddp2 * f3[2]) * gh
+        tau = twist / h - k * (cx * ddp0 + cy * ddp1 + cz * ddp2) * gh
+        k1a, k1b, k2a, k2b = k12
+        k1 = (1 - w) * k1a + w * k1b
+        k2 = (1 - w) * k2a + w * k2b
+        dp_ds = (dp0 / h, dp1 / h, dp2 / h)
+        return p, (e0, e1, e2), f2, f3, k1, k2, dp_ds, (tau, -kappa_2, kappa_1)
 
     def sample(self, s: float) -> PathSample:
         """The path at arc length s (m) as a :class:`PathSample` (numpy, for callers and tests)."""

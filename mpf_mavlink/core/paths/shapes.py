@@ -19,7 +19,8 @@ def line(start: ArrayLike, end: ArrayLike) -> TabulatedPath:
         raise ConfigError("line: start and end coincide (zero length)")
 
     def c(u: NDArray[np.float64]) -> NDArray[np.float64]:
-        return a[None, :] + u[:, None] * (b - a)[None, :]
+        pts: NDArray[np.float64] = a[None, :] + u[:, None] * (b - a)[None, :]
+        return pts
 
     return TabulatedPath(c, 0.0, 1.0, closed=False, name="line", dense=2000)
 
