@@ -25,7 +25,7 @@ from pymavlink import mavutil  # noqa: E402  (the environment must be set first)
 DIALECT_NAME = "ardupilotmega"
 
 
-def _load_dialect():  # -> module
+def _load_dialect() -> Any:
     mavutil.set_dialect(DIALECT_NAME)
     mod = mavutil.mavlink
     if mod is None or mod.WIRE_PROTOCOL_VERSION != "2.0":  # pragma: no cover - env sabotage
@@ -58,10 +58,11 @@ from mpf_mavlink.mavlink.codec import (  # noqa: E402
     encode_set_message_interval,
     encode_set_mode,
 )
-from mpf_mavlink.mavlink.link import Link, LinkCounters, open_link, parse_url, wait_heartbeat  # noqa: E402
+from mpf_mavlink.mavlink.link import Link, LinkCounters, open_link, wait_heartbeat  # noqa: E402
 from mpf_mavlink.mavlink.modes import Flavour, flavour_from_heartbeat, is_offboard, mode_name  # noqa: E402
 from mpf_mavlink.mavlink.signing import enable_signing, load_signing_key  # noqa: E402
 from mpf_mavlink.mavlink.tlog import TlogReadResult, TlogWriter, iter_tlog, read_tlog  # noqa: E402
+from mpf_mavlink.mavlink.url import parse_url  # noqa: E402
 
 __all__ = [
     "DIALECT_NAME",

@@ -262,7 +262,7 @@ def _ro3(a: float, b: float, c: float) -> np.ndarray:
     return arr
 
 
-def _ro33(rows: tuple) -> np.ndarray:
+def _ro33(rows: tuple[tuple[float, ...], ...]) -> np.ndarray:
     arr = np.array(rows)
     arr.setflags(write=False)
     return arr

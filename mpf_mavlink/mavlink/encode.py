@@ -120,7 +120,11 @@ def encode_set_attitude_target_quat(
 
 
 def encode_set_mode(
-    mav: Any, target_sys: int, target_comp: int, flavour: Flavour | str, mode: str | int | tuple
+    mav: Any,
+    target_sys: int,
+    target_comp: int,
+    flavour: Flavour | str,
+    mode: str | int | tuple[int, ...],
 ) -> Any:
     """COMMAND_LONG MAV_CMD_DO_SET_MODE, param1 = 1 (MAV_MODE_FLAG_CUSTOM_MODE_ENABLED).
 

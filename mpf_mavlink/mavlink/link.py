@@ -50,12 +50,14 @@ class _LogThenWrite:
 @dataclass
 class LinkCounters:
     rx_packets: int = 0  # frames with a good CRC (before filtering)
-    rx_by_type: Counter = field(default_factory=Counter)  # accepted messages by type
+    rx_by_type: Counter[str] = field(default_factory=Counter)  # accepted messages by type
     tx_packets: int = 0
-    tx_by_type: Counter = field(default_factory=Counter)
+    tx_by_type: Counter[str] = field(default_factory=Counter)
     bad_data: int = 0  # framing / CRC / length errors (pymavlink BAD_DATA)
     rejected_sysid: int = 0  # from a system/component we were not told to trust ("spoofed ids")
-    rejected_by_source: Counter = field(default_factory=Counter)  # (sysid, compid) -> count
+    rejected_by_source: Counter[tuple[int, int]] = field(
+        default_factory=Counter
+    )  # (sysid, compid) -> count
     rejected_unsigned: int = 0  # unsigned while signing is on
     rejected_bad_signature: int = 0  # signed, but wrong key / forged
     rejected_replay: int = 0  # right key, timestamp not newer than the stream's last one
@@ -523,7 +525,9 @@ def wait_heartbeat(
     want_comp = compid if compid is not None else link.vehicle_compid
     want_comp = MAV_COMP_ID_AUTOPILOT1 if want_comp is None else want_comp
     allowed = None if autopilots is None else frozenset(int(a) for a in autopilots)
-    ignored: Counter = Counter()  # (compid, autopilot) of HEARTBEATs from the vehicle not taken
+    ignored: Counter[tuple[int, int]] = (
+        Counter()
+    )  # (compid, autopilot) of HEARTBEATs from the vehicle not taken
     deadline = time.monotonic() + float(timeout_s)
     next_hb = time.monotonic()
     while True:

@@ -13,7 +13,7 @@ from mpf_mavlink.mavlink import mavutil
 # ---------------------------------------------------------------------------------------------
 # Transports that pymavlink's own classes do not cover the way we need
 # ---------------------------------------------------------------------------------------------
-class _Serial(mavutil.mavfile):
+class _Serial(mavutil.mavfile):  # type: ignore[misc, unused-ignore]  # pymavlink is untyped
     """An 8N1 serial port through pyserial (what pymavlink's own ``mavserial`` and every MAVLink
     ground tool use; Linux, macOS and Windows alike). Non-blocking reads; writes bounded by a
     0.5 s timeout so that a stuck port drops a frame instead of stalling the control loop;
@@ -64,7 +64,7 @@ class _Serial(mavutil.mavfile):
         self.port.close()
 
 
-class _TcpClient(mavutil.mavtcp):
+class _TcpClient(mavutil.mavtcp):  # type: ignore[misc, unused-ignore]  # pymavlink is untyped
     """pymavlink's TCP client with one connection attempt bounded by a timeout (no retries,
     no sleeps, no prints)."""
 

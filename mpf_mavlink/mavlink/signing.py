@@ -21,7 +21,7 @@ import hashlib
 import os
 import string
 import struct
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from mpf_mavlink.errors import MpfError
@@ -52,7 +52,7 @@ def load_signing_key(path: str | os.PathLike[str]) -> bytes:
     )
 
 
-def _hardened_check_signature(link: Link):  # -> Callable[[bytearray, int, int], bool]
+def _hardened_check_signature(link: Link) -> Callable[[bytearray, int, int], bool]:
     mav = link.conn.mav
     signing = mav.signing
     counters = link.counters

@@ -152,7 +152,7 @@ class TlogStats:
     skipped_bytes: int = 0  # bytes inside those stretches, the truncated tail included
     truncated_tail_bytes: int = 0  # bytes at the end too short to hold the record they start
     unknown_msgids: int = 0  # records whose message id this dialect does not know (no CRC check)
-    counts: Counter = field(default_factory=Counter)  # message type -> good records
+    counts: Counter[str] = field(default_factory=Counter)  # message type -> good records
     t_first_s: float | None = None
     t_last_s: float | None = None
 
@@ -206,7 +206,7 @@ def _crc_ok(pkt: bytes, msgid: int) -> bool | None:
     end = len(pkt) - 2 - sig
     crc = x25crc(pkt[1:end])
     crc.accumulate(bytes((cls.crc_extra,)))
-    return crc.crc == (pkt[end] | (pkt[end + 1] << 8))
+    return bool(crc.crc == (pkt[end] | (pkt[end + 1] << 8)))
 
 
 def _valid_header(data: bytes, i: int, n: int) -> tuple[int, int] | None:
