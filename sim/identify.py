@@ -334,6 +334,131 @@ def fit_wind_estimator(circles: list[dict[str, float]]) -> dict[str, float]:
     return best
 
 
+ULOG_SKIP_S = 20.0  # s of OFFBOARD left out of the EKF fit: the capture's transient
+
+
+def _gm_fit(x: np.ndarray, dt: float) -> tuple[float, float]:
+    """(sigma, tau_s) of a first-order Gauss-Markov process fitted to a series sampled every
+    dt: sigma its standard deviation, tau the lag where the fitted exp(-lag / tau) matches its
+    autocorrelation over the first 30 s (least squares, scipy)."""
+    from scipy.optimize import curve_fit
+
+    x = x - x.mean()
+    v = float(np.mean(x * x))
+    n = min(len(x) // 3, int(round(30.0 / dt)))
+    r = np.array([np.mean(x[: len(x) - k] * x[k:]) / v for k in range(1, n)])
+    lag = np.arange(1, n) * dt
+    (tau,), _ = curve_fit(lambda k, tau: np.exp(-k / tau), lag, r, p0=(5.0,),
+                          bounds=((0.05,), (500.0,)))  # fmt: skip
+    return math.sqrt(v), float(tau)
+
+
+def ekf_errors(ulog: Path, dt: float = 0.1) -> dict[str, Any]:
+    """PX4's estimate against SIH's ground truth in one ULog (``vehicle_attitude`` vs
+    ``vehicle_attitude_groundtruth``, ``vehicle_local_position`` vs its ground truth,
+    ``vehicle_angular_velocity`` vs its ground truth, EKF2's ``wind``), over the OFFBOARD flight
+    from ULOG_SKIP_S: a Gauss-Markov (sigma, tau) per channel, the gyro's white noise, and the
+    turn per bank (ground truth heading rate against g tan(bank) / V)."""
+    try:
+        from pyulog import ULog
+    except ImportError:
+        raise SystemExit("identify: --ulog needs pyulog (pip install pyulog)") from None
+    from scipy.spatial.transform import Rotation
+
+    u = ULog(str(ulog))
+
+    def topic(name: str) -> dict[str, np.ndarray]:
+        for d in u.data_list:
+            if d.name == name:
+                return d.data
+        raise SystemExit(f"identify: {ulog}: no {name} topic")
+
+    vs = topic("vehicle_status")
+    off = vs["timestamp"][vs["nav_state"] == 14] / 1e6  # NAVIGATION_STATE_OFFBOARD
+    if len(off) == 0:
+        raise SystemExit(f"identify: {ulog}: never in OFFBOARD")
+    tt = np.arange(off[0] + ULOG_SKIP_S, off[-1], dt)
+    if len(tt) < 600:
+        raise SystemExit(f"identify: {ulog}: under {ULOG_SKIP_S + 60 * dt * 10:g} s of OFFBOARD")
+
+    def euler(d: dict[str, np.ndarray]) -> np.ndarray:
+        q = np.c_[d["q[1]"], d["q[2]"], d["q[3]"], d["q[0]"]]
+        e = Rotation.from_quat(q).as_euler("ZYX")[:, ::-1]
+        e[:, 2] = np.unwrap(e[:, 2])
+        return e
+
+    def at(d: dict[str, np.ndarray], x: np.ndarray) -> np.ndarray:
+        return np.interp(tt, d["timestamp"] / 1e6, x)
+
+    a, ag = topic("vehicle_attitude"), topic("vehicle_attitude_groundtruth")
+    ea, eg = euler(a), euler(ag)
+    lp, lg = topic("vehicle_local_position"), topic("vehicle_local_position_groundtruth")
+    av, avg = topic("vehicle_angular_velocity"), topic("vehicle_angular_velocity_groundtruth")
+    w = topic("wind")
+    res: dict[str, Any] = {"ulog": str(ulog), "window_s": float(tt[-1] - tt[0])}
+    for i, k in enumerate(("roll", "pitch", "yaw")):
+        res[k] = _gm_fit(at(a, ea[:, i]) - at(ag, eg[:, i]), dt)
+    for k in ("x", "y", "z", "vx", "vy", "vz"):
+        res[k] = _gm_fit(at(lp, lp[k]) - at(lg, lg[k]), dt)
+    res["wind_n"] = _gm_fit(at(w, w["windspeed_north"]), dt)
+    res["wind_e"] = _gm_fit(at(w, w["windspeed_east"]), dt)
+    mg = (avg["timestamp"] / 1e6 >= tt[0]) & (avg["timestamp"] / 1e6 <= tt[-1])
+    ta = avg["timestamp"][mg] / 1e6
+    res["gyro_noise_rad_s"] = [
+        float(np.std(np.interp(ta, av["timestamp"] / 1e6, av[f"xyz[{i}]"]) - avg[f"xyz[{i}]"][mg]))
+        for i in range(3)
+    ]
+    # the turn per bank of SIH's airplane: ground-truth course rate against g tan(roll) / V
+    vn, ve = at(lg, lg["vx"]), at(lg, lg["vy"])
+    chi_dot = np.gradient(np.unwrap(np.arctan2(ve, vn)), tt)
+    roll = at(ag, eg[:, 0])
+    x = G * np.tan(roll) / np.maximum(np.hypot(vn, ve), 1.0)
+    res["turn_gain"] = float(x @ chi_dot / (x @ x))
+    return res
+
+
+def write_px4_profile(fits: list[dict[str, Any]], base: Path, out: Path, command: str) -> Path:
+    """The PX4 profile: ``base`` (its thrust and anything not identified here) with the EKF2
+    error model of the ULogs (sigma: root mean square over the logs; tau: their mean), the gyro
+    noise and the turn per bank; the empirical roll-rate wander is dropped (the EKF2 errors are
+    what it stood for)."""
+    import yaml
+
+    def comb(k: str) -> tuple[float, float]:
+        sig = math.sqrt(float(np.mean([f[k][0] ** 2 for f in fits])))
+        return round(sig, 4), round(float(np.mean([f[k][1] for f in fits])), 1)
+
+    prof = yaml.safe_load(base.read_text())
+    prof["source"] = f"identified by `{command}` ({time.strftime('%Y-%m-%d')})"
+    prof.pop("attitude", None)
+    (sx, tx), (sy, ty), (sz, tz) = comb("x"), comb("y"), comb("z")
+    (svx, tvx), (svy, tvy), (svz, tvz) = comb("vx"), comb("vy"), comb("vz")
+    att = [comb(k) for k in ("roll", "pitch", "yaw")]
+    (swn, twn), (swe, twe) = comb("wind_n"), comb("wind_e")
+    est = prof.setdefault("estimator", {})
+    for k in ("position_noise_m", "vertical_noise_m", "velocity_noise_m_s"):
+        est.pop(k, None)  # the white noise of the telemetry is in the Gauss-Markov errors now
+    est.update({
+        "rate_noise_rad_s": [round(float(np.sqrt(np.mean([f["gyro_noise_rad_s"][i] ** 2
+                                                           for f in fits]))), 4) for i in range(3)],
+        "horizontal_wander_m": round(math.hypot(sx, sy) / math.sqrt(2.0), 4),
+        "wander_tau_s": round((tx + ty) / 2.0, 1),
+        "vertical_wander_m": sz, "vertical_wander_tau_s": tz,
+        "velocity_wander_m_s": [round(math.hypot(svx, svy) / math.sqrt(2.0), 4), svz],
+        "velocity_wander_tau_s": [round((tvx + tvy) / 2.0, 1), tvz],
+        "attitude_wander_rad": [a[0] for a in att],
+        "attitude_wander_tau_s": [a[1] for a in att],
+        "wind_wander_m_s": round(math.hypot(swn, swe) / math.sqrt(2.0), 4),
+        "wind_wander_tau_s": round((twn + twe) / 2.0, 1),
+    })  # fmt: skip
+    prof.setdefault("turn", {})["turn_gain"] = round(
+        float(np.mean([f["turn_gain"] for f in fits])), 3
+    )
+    path = out / "profile.yaml"
+    path.write_text(yaml.safe_dump(prof, sort_keys=False))
+    return path
+
+
 def write_profile(res: dict[str, Any], autopilot: str, firmware: str, out: Path,
                   command: str) -> Path:  # fmt: skip
     import yaml
@@ -392,8 +517,29 @@ def main(argv: list[str] | None = None) -> int:
         help="a bridge tlog in a steady wind of SPEED m/s (the reported wind's scale)",
     )
     ap.add_argument("--reuse", action="store_true", help="re-fit DIR's last flight, fly nothing")
+    ap.add_argument("--ulog", nargs="+", default=None,
+                    help="PX4: fit the EKF2 error model to these ULogs of OFFBOARD flights "
+                    "(SIH ground truth), fly nothing")  # fmt: skip
+    ap.add_argument("--base", default=str(ROOT / "configs" / "autopilots" / "px4-1.16-sih.yaml"),
+                    help="PX4 with --ulog: the profile whose other sections are kept")  # fmt: skip
     a = ap.parse_args(argv)
     out = Path(a.out).resolve()
+    cmd = "python -m sim.identify " + " ".join(argv if argv is not None else sys.argv[1:])
+    if a.ulog:
+        if a.autopilot != "px4":
+            print("identify: --ulog is for px4", file=sys.stderr)
+            return 2
+        missing = [u for u in [*a.ulog, a.base] if not Path(u).is_file()]
+        if missing:
+            print(f"identify: {missing[0]}: no such file", file=sys.stderr)
+            return 2
+        out.mkdir(parents=True, exist_ok=True)
+        fits = [ekf_errors(Path(u)) for u in a.ulog]
+        (out / "fit.json").write_text(json.dumps(fits, indent=1))
+        path = write_px4_profile(fits, Path(a.base), out, cmd)
+        print(json.dumps(fits, indent=1))
+        print(f"profile: {path}")
+        return 0
     res = _identify(a, out)
     if a.circles:
         circles = [circle_wind_error(Path(t)) for t in a.circles]
@@ -404,7 +550,6 @@ def main(argv: list[str] | None = None) -> int:
         res["wind_scale"] = math.hypot(c["north"], c["east"]) / float(a.wind_flight[1])
     (out / "fit.json").write_text(json.dumps(res, indent=1))
     fw = FIRMWARE[a.autopilot]
-    cmd = "python -m sim.identify " + " ".join(argv if argv is not None else sys.argv[1:])
     path = write_profile(res, a.autopilot, fw, out, cmd)
     print(json.dumps({k: v for k, v in res.items() if k != "turn"}, indent=1))
     print(json.dumps(res["turn"], indent=1))
