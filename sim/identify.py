@@ -233,6 +233,49 @@ def identify_arduplane(out: Path, bundle: Path, instance: int, alt: float) -> di
     return analyse(rec, t_start, ARDUPLANE_SCHEDULE, pitch0, origin, out)
 
 
+def identify_px4(out: Path, bundle: Path, alt: float) -> dict[str, Any]:
+    """Bank steps and steady turns in OFFBOARD attitude (quaternion + thrust) on real PX4 SIH,
+    started and taken off by the rig (:mod:`sim.rigs.px4`, under its /tmp/mpf-px4.lock)."""
+    from types import SimpleNamespace
+
+    from mpf_mavlink.mavlink.modes import Flavour
+    from sim.rigs.gcs import Gcs
+    from sim.rigs.px4 import Firmware
+
+    fw = Firmware(SimpleNamespace(speedup=1.0))
+    fw.start(bundle, out / "firmware")
+    try:
+        g = Gcs(fw.gcs_url, Flavour.PX4)
+        fw.take_off(g, alt)
+        c = g.c
+        for msg_id, hz in ((30, 50), (32, 20), (74, 10)):  # ATTITUDE, LOCAL_POSITION, VFR_HUD
+            g.command(511, msg_id, 1e6 / hz)  # MAV_CMD_SET_MESSAGE_INTERVAL
+        rec = Recorder(c, g.sys)
+        rec.pump(2.0)
+        pitch0 = float(np.mean([r[3] for r in rec.rows["att"][-20:]]))
+        hud = rec.last.get("VFR_HUD")
+        thr = (hud.throttle / 100.0) if hud is not None else 0.8
+
+        def send(roll: float, pitch: float) -> None:
+            c.mav.set_attitude_target_send(int(time.monotonic() * 1e3) & 0xFFFFFFFF, g.sys,
+                                           1, 7, _quat(roll, pitch, 0.0), 0, 0, 0, thr)  # fmt: skip
+
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 1.5:  # stream before asking for OFFBOARD
+            send(0.0, pitch0)
+            rec.pump(0.04)
+        g.set_mode("OFFBOARD")
+        t_start = time.monotonic()
+        fly_schedule(rec, send, ARDUPLANE_SCHEDULE, pitch0)
+        g.set_mode("AUTO.LOITER")
+        rec.pump(1.0)
+        gp = g.last["GLOBAL_POSITION_INT"]
+        origin = (gp.lat * 1e-7, gp.lon * 1e-7)
+    finally:
+        fw.stop()
+    return analyse(rec, t_start, ARDUPLANE_SCHEDULE, pitch0, origin, out)
+
+
 def analyse(rec: Recorder, t_start: float, schedule: list[tuple[float, float, float]],
             pitch0: float, origin: tuple[float, float], out: Path) -> dict[str, Any]:  # fmt: skip
     att = np.array(rec.rows["att"], float)
@@ -571,15 +614,21 @@ def _identify(a: Any, out: Path) -> dict[str, Any]:
         y = np.array([r["chi_dot"] for r in turns])
         res["turn"]["turn_gain"] = float(x @ y / (x @ x))
         return res
-    if a.autopilot == "px4":
-        from sim.px4_harness import identify_px4
+    from sim.calibrate import find_bundle
+    from sim.rigs.bundles import RigError, check_bundle, unpack
 
-        bundle = Path(a.bundle or "/tmp/sitl/px4-sitl-v1.16.0-sih")
+    spec = a.bundle or find_bundle(a.autopilot)
+    if spec is None:
+        raise SystemExit(
+            f"identify: no {a.autopilot} bundle (--bundle, MPF_SITL_DIR or ../shared/sitl)"
+        )
+    try:
+        bundle = unpack(a.autopilot, check_bundle(a.autopilot, str(spec)))
+    except RigError as e:
+        raise SystemExit(f"identify: {e}") from None
+    if a.autopilot == "px4":
         out.mkdir(parents=True, exist_ok=True)
         return identify_px4(out, bundle, a.alt)
-    bundle = Path(a.bundle or "/tmp/sitl/arduplane-sitl-4.7dev")
-    if not (bundle / "bin" / "arduplane").is_file():
-        raise SystemExit(f"identify: {bundle}/bin/arduplane: no such file")
     out.mkdir(parents=True, exist_ok=True)
     return identify_arduplane(out, bundle, a.instance, a.alt)
 
