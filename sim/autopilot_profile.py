@@ -93,6 +93,9 @@ class EstimatorModel:
     velocity_wander_tau_s: tuple[float, float] = (5.0, 5.0)
     attitude_wander_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
     attitude_wander_tau_s: tuple[float, float, float] = (5.0, 5.0, 5.0)
+    # the reported position ahead of the truth along the ground velocity (s): what ArduPlane's
+    # EKF3 output predicts past its own attitude/velocity instant (dataflash POS against SIM)
+    position_lead_s: float = field(default=0.0, metadata={"check": ("range", -1.0, 1.0)})
     wind_wander_m_s: float = field(default=0.0, metadata=_nonneg())
     wind_wander_tau_s: float = field(default=10.0, metadata=_pos())
     # The firmware's wind estimate: a first-order lag (wind_tau_s; None: the vehicle's
@@ -354,6 +357,8 @@ class StateEstimate:
         upd: dict[str, Any] = {}
         t = float(st.t)
         pos = st.position_ned
+        if e.position_lead_s:
+            pos = pos + e.position_lead_s * np.asarray(st.velocity_ned, float)
         if self._pos_gm is not None:
             pos = pos + self._pos_gm(t)
         if e.position_noise_m or e.vertical_noise_m:

@@ -104,8 +104,8 @@ def _metrics(p: Path) -> dict[str, Any]:
     return json.loads(p.read_text()) if p.is_file() else {}
 
 
-def fly_sil(run: Path, autopilot: str, profile: Path | None, tag: str, seed: int = 0
-            ) -> dict[str, Any]:  # fmt: skip
+def fly_sil(run: Path, autopilot: str, profile: Path | None, tag: str, seed: int = 0,
+            reuse: bool = False) -> dict[str, Any]:  # fmt: skip
     """Our SIL on the real flight's mission and start state (the rig's overrides), with or
     without a profile; returns the bridge's own metrics there (as the real flight's are)."""
     m = Mission(**json.loads((run.parent / f"{run.name}.mission.json").read_text()))
@@ -140,6 +140,9 @@ def fly_sil(run: Path, autopilot: str, profile: Path | None, tag: str, seed: int
         )
     dur = round(real.get("tracked_s") or 300.0)
     sil_out = run / (f"sil_{tag}" if seed == 0 else f"sil_{tag}_s{seed}")
+    if reuse and (sil_out / "bridge" / "metrics.json").is_file():
+        return {"bridge": _metrics(sil_out / "bridge" / "metrics.json"),
+                "truth": _metrics(sil_out / "metrics.json")}  # fmt: skip
     cmd = [sys.executable, "-m", "mpf_mavlink.cli", "sim", str(config), "--out", str(sil_out),
            "--set", f"sim.duration_s={dur:g}", *[x for s in sil_sets for x in ("--set", s)]]  # fmt: skip
     with open(sil_out.with_name(sil_out.name + ".log"), "w") as f:
@@ -151,13 +154,13 @@ def fly_sil(run: Path, autopilot: str, profile: Path | None, tag: str, seed: int
     return {"bridge": bm, "truth": tm}
 
 
-def fly_sil_seeds(run: Path, autopilot: str, profile: Path | None, tag: str, seeds: int
-                  ) -> dict[str, Any]:  # fmt: skip
+def fly_sil_seeds(run: Path, autopilot: str, profile: Path | None, tag: str, seeds: int,
+                  reuse: bool = False) -> dict[str, Any]:  # fmt: skip
     """:func:`fly_sil` with seeds 0 .. seeds-1 (every seed its own draw of the profile's random
     processes and the turbulence): the RMS over all of them (root of the mean square), the mean
     radial / vertical averaged, and each seed's RMS. The real flight is one draw; the SIL's
     average is its expectation, so the ratio does not hang on one lucky or unlucky SIL draw."""
-    legs = [fly_sil(run, autopilot, profile, tag, seed) for seed in range(seeds)]
+    legs = [fly_sil(run, autopilot, profile, tag, seed, reuse) for seed in range(seeds)]
     if seeds == 1:
         return legs[0]
     out: dict[str, Any] = {}
@@ -242,6 +245,8 @@ def main(argv: list[str] | None = None) -> int:
     sl.add_argument("--only", default="")
     sl.add_argument("--seeds", type=int, default=3,
                     help="SIL draws per mission, seeds 0..N-1 (default 3)")  # fmt: skip
+    sl.add_argument("--reuse", action="store_true",
+                    help="take a SIL leg already flown under this tag and seed instead of re-flying it")  # fmt: skip
     sl.add_argument("--doc", default=None, help="also write the table to this Markdown file")
     a = ap.parse_args(argv)
     if a.cmd == "sil" and a.seeds < 1:
@@ -262,7 +267,7 @@ def main(argv: list[str] | None = None) -> int:
             if (names and m.name not in names) or not (run / "bridge" / "metrics.json").is_file():
                 continue
             real = _metrics(run / "bridge" / "metrics.json")
-            sil = fly_sil_seeds(run, a.autopilot, prof, tag, a.seeds)
+            sil = fly_sil_seeds(run, a.autopilot, prof, tag, a.seeds, a.reuse)
             rows.append(compare_row(m.name, real, sil))
         if not rows:
             print(f"calibrate: no real runs under {out}", file=sys.stderr)
