@@ -349,6 +349,38 @@ def circle_wind_error(tlog: Path, after_s: float = 90.0) -> dict[str, float]:
     }  # fmt: skip
 
 
+def position_lead(tlog: Path, after_s: float = 60.0) -> dict[str, float]:
+    """How far ahead of the reported velocity the position the bridge uses is (s), from a bridge
+    tlog of a steady circle. The bridge extrapolates LOCAL_POSITION_NED by its velocity to the
+    ATTITUDE stamp; ArduPlane stamps ATTITUDE 20 or 40 ms after the position it follows (its
+    50 Hz loop's send slots), so the position is carried ahead of the velocity by that gap less
+    any lead the velocity already has over the position (its direction against the position's
+    derivative, divided by the turn rate)."""
+    m = mavutil.mavlink_connection(str(tlog))
+    last, gaps, pos = None, [], []
+    while True:
+        x = m.recv_match(type=["LOCAL_POSITION_NED", "ATTITUDE"])
+        if x is None:
+            break
+        if x.get_type() == "LOCAL_POSITION_NED":
+            last = x.time_boot_ms
+            pos.append((x.time_boot_ms / 1e3, x.x, x.y, x.vx, x.vy))
+        elif last is not None:
+            gaps.append((x.time_boot_ms / 1e3, (x.time_boot_ms - last) / 1e3))
+    g, p = np.array(gaps, float), np.array(pos, float)
+    _, i = np.unique(p[:, 0], return_index=True)
+    p = p[i]
+    g, p = g[g[:, 0] > g[0, 0] + after_s], p[p[:, 0] > p[0, 0] + after_s]
+    t = p[:, 0]
+    dx, dy = np.gradient(p[:, 1], t), np.gradient(p[:, 2], t)
+    ang = np.unwrap(np.arctan2(p[:, 4], p[:, 3])) - np.unwrap(np.arctan2(dy, dx))
+    ang = (ang + np.pi) % (2.0 * np.pi) - np.pi
+    omega = float(np.polyfit(t, np.unwrap(np.arctan2(p[:, 4], p[:, 3])), 1)[0])
+    vel_lead = float(np.mean(ang)) / omega if abs(omega) > 1e-3 else 0.0
+    gap = float(np.mean(g[:, 1]))
+    return {"stamp_gap_s": gap, "velocity_lead_s": vel_lead, "position_lead_s": gap - vel_lead}
+
+
 WIND_NOISE_M_S = 0.01  # 1-sigma of a circle's mean reported wind (its WIND std over the orbit)
 
 
@@ -506,8 +538,15 @@ def write_profile(res: dict[str, Any], autopilot: str, firmware: str, out: Path,
                   command: str) -> Path:  # fmt: skip
     import yaml
 
-    r, p = res["roll"], res["pitch"]
+    r, p = dict(res["roll"]), res["pitch"]
     est = res.get("estimator", {})
+    steady = res.get("steady_bank_deg")
+    if steady and len(steady) >= 2:
+        # the steady bank per commanded one over the held turns: what sets the turn the bridge
+        # gets in a circle (the doublets' fit above carries the transients' lag, not this)
+        sb = np.radians(np.array(steady, float))
+        gain, bias = np.linalg.lstsq(np.c_[sb[:, 0], np.ones(len(sb))], sb[:, 1], rcond=None)[0]
+        r["gain"], r["bias_rad"] = float(gain), float(bias)
     prof: dict[str, Any] = {
         "autopilot": autopilot,
         "firmware": firmware,
@@ -532,6 +571,9 @@ def write_profile(res: dict[str, Any], autopilot: str, firmware: str, out: Path,
             "wind_tau_s": round(wf["tau_s"], 2),
         })  # fmt: skip
         prof["fit"]["wind_rms_m_s"] = round(wf["rms_m_s"], 4)
+    if res.get("position_lead"):
+        lead = float(np.mean([x["position_lead_s"] for x in res["position_lead"]]))
+        prof["estimator"]["position_lead_s"] = round(lead, 4)
     if res.get("wind_scale"):
         prof["estimator"]["wind_scale"] = round(res["wind_scale"], 3)
     path = out / "profile.yaml"
@@ -588,6 +630,8 @@ def main(argv: list[str] | None = None) -> int:
         circles = [circle_wind_error(Path(t)) for t in a.circles]
         res["circles"] = circles
         res["wind_estimator"] = fit_wind_estimator(circles)
+        leads = [position_lead(Path(t)) for t in a.circles]
+        res["position_lead"] = leads
     if a.wind_flight:
         c = circle_wind_error(Path(a.wind_flight[0]))
         res["wind_scale"] = math.hypot(c["north"], c["east"]) / float(a.wind_flight[1])
