@@ -26,8 +26,6 @@ ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = [
     pytest.mark.sitl,
-    # one real ArduPlane flight at a time in a pytest run, like tests/test_sitl_arduplane.py
-    pytest.mark.xdist_group("sitl-arduplane"),
     pytest.mark.skipif(
         sitl_dir() is None,
         reason="no SITL bundles: <repo>/../shared/sitl is absent and MPF_SITL_DIR is not set",
@@ -55,6 +53,7 @@ def _assert_band(row: dict, log: str, draw_sigma_m: float = 0.0) -> None:
     assert abs(row["sil_vertical_m"] - row["real_vertical_m"]) <= tol, log
 
 
+# one real flight per autopilot at a time in a pytest run, grouped with tests/sitl_flights.py's
 @pytest.mark.xdist_group("sitl-px4")
 def test_px4_profile_predicts_the_real_firmware(tmp_path):
     bundle = find_bundle("px4")
@@ -90,6 +89,7 @@ def _free_instance() -> int:
     pytest.skip("no free ArduPilot SITL instance")
 
 
+@pytest.mark.xdist_group("sitl-arduplane")
 def test_arduplane_profile_predicts_the_real_firmware(tmp_path):
     bundle = find_bundle("arduplane")
     if bundle is None:
