@@ -81,9 +81,23 @@ class EstimatorModel:
     attitude_noise_rad: float = field(default=0.0, metadata=_nonneg())
     rate_noise_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)  # p, q, r reported, 1-sigma
     vertical_noise_m: float = field(default=0.0, metadata=_nonneg())
+    # first-order Gauss-Markov errors of the estimate (1-sigma, correlation time), as an EKF's
+    # error against the truth: position (horizontal, vertical), velocity (horizontal,
+    # vertical), attitude (roll, pitch, yaw; the attitude the autopilot reports AND controls on,
+    # so a roll error turns the aircraft as a bank error does), the reported wind (N and E)
     horizontal_wander_m: float = field(default=0.0, metadata=_nonneg())
     vertical_wander_m: float = field(default=0.0, metadata=_nonneg())
     wander_tau_s: float = field(default=30.0, metadata=_pos())
+    vertical_wander_tau_s: float | None = field(default=None, metadata=_pos())
+    velocity_wander_m_s: tuple[float, float] = (0.0, 0.0)
+    velocity_wander_tau_s: tuple[float, float] = (5.0, 5.0)
+    attitude_wander_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    attitude_wander_tau_s: tuple[float, float, float] = (5.0, 5.0, 5.0)
+    # the reported position ahead of the truth along the ground velocity (s): what ArduPlane's
+    # EKF3 output predicts past its own attitude/velocity instant (dataflash POS against SIM)
+    position_lead_s: float = field(default=0.0, metadata={"check": ("range", -1.0, 1.0)})
+    wind_wander_m_s: float = field(default=0.0, metadata=_nonneg())
+    wind_wander_tau_s: float = field(default=10.0, metadata=_pos())
     # The firmware's wind estimate: a first-order lag (wind_tau_s; None: the vehicle's
     # sil.wind_estimate_tau_s) of the air mass plus an apparent wind fixed to the ground velocity
     # (along it and to its right, m/s): an airspeed scale error and the sideslip of a turn that
@@ -216,6 +230,27 @@ class AttitudeShaper:
         return roll, pitch
 
 
+class GaussMarkov:
+    """Independent first-order Gauss-Markov processes (1-sigma ``sigma``, correlation times
+    ``tau_s``), advanced by the time stamps they are given (stationary from the first call)."""
+
+    def __init__(self, sigma: Any, tau_s: Any, rng: np.random.Generator) -> None:
+        self.sigma = np.asarray(sigma, float)
+        self.tau = np.maximum(np.asarray(tau_s, float), 1e-6)
+        self.rng = rng
+        self.x = self.sigma * rng.standard_normal(self.sigma.shape)
+        self.t: float | None = None
+
+    def __call__(self, t: float) -> np.ndarray:
+        if self.t is not None and t > self.t:
+            phi = np.exp(-(t - self.t) / self.tau)
+            q = self.sigma * np.sqrt(1.0 - phi * phi)
+            self.x = phi * self.x + q * self.rng.standard_normal(self.sigma.shape)
+        if self.t is None or t > self.t:
+            self.t = t
+        return self.x
+
+
 class StateEstimate:
     """The state the autopilot reports (and controls on) from the plant's truth: the turn-per-bank
     emulation on the bank, noise and a Gauss-Markov wander (:class:`EstimatorModel`). ``seed``:
@@ -226,14 +261,37 @@ class StateEstimate:
         self.slip = prof.turn.slip_per_tan_bank_rad
         self.est = prof.estimator
         self.rng = np.random.default_rng(np.random.SeedSequence([int(seed), 24]))
-        self._walk = np.zeros(3)
-        self._t: float | None = None
         self._w: np.ndarray | None = None
         self._b = 0.0
         self._bt: float | None = None
         self._y = 0.0
         self._yt: float | None = None
         self._wt: float | None = None
+        e = prof.estimator
+        tau_v = e.wander_tau_s if e.vertical_wander_tau_s is None else e.vertical_wander_tau_s
+        self._pos_gm = (
+            GaussMarkov(
+                (e.horizontal_wander_m,) * 2 + (e.vertical_wander_m,),
+                (e.wander_tau_s, e.wander_tau_s, tau_v),
+                self.rng,
+            )  # fmt: skip
+            if e.horizontal_wander_m or e.vertical_wander_m
+            else None
+        )
+        vs, vt = e.velocity_wander_m_s, e.velocity_wander_tau_s
+        self._vel_gm = (
+            GaussMarkov((vs[0], vs[0], vs[1]), (vt[0], vt[0], vt[1]), self.rng) if any(vs) else None
+        )
+        self._att_gm = (
+            GaussMarkov(e.attitude_wander_rad, e.attitude_wander_tau_s, self.rng)
+            if any(e.attitude_wander_rad)
+            else None
+        )
+        self._wind_gm = (
+            GaussMarkov((e.wind_wander_m_s,) * 2, (e.wind_wander_tau_s,) * 2, self.rng)
+            if e.wind_wander_m_s
+            else None
+        )
 
     def _bank_offset(self, st: Any) -> float:
         """What the reported bank adds to the plant's: the bank that turns the plant as it turns
@@ -297,42 +355,62 @@ class StateEstimate:
         if self.slip:
             yaw = yaw + self._yaw_offset(st, roll)
         upd: dict[str, Any] = {}
-        sig = (e.horizontal_wander_m, e.horizontal_wander_m, e.vertical_wander_m)
-        if any(sig):
-            t = float(st.t)
-            dt = 0.0 if self._t is None else max(0.0, t - self._t)
-            self._t = t
-            phi = math.exp(-dt / e.wander_tau_s)
-            self._walk = self._walk * phi + np.asarray(sig) * math.sqrt(
-                max(0.0, 1.0 - phi * phi)
-            ) * self.rng.standard_normal(3)
-        pos = st.position_ned + self._walk
+        t = float(st.t)
+        pos = st.position_ned
+        if e.position_lead_s:
+            pos = pos + e.position_lead_s * np.asarray(st.velocity_ned, float)
+        if self._pos_gm is not None:
+            pos = pos + self._pos_gm(t)
         if e.position_noise_m or e.vertical_noise_m:
             sd = (e.position_noise_m, e.position_noise_m, e.vertical_noise_m)
             pos = pos + np.asarray(sd) * self.rng.standard_normal(3)
-        if any(sig) or e.position_noise_m or e.vertical_noise_m:
+        if pos is not st.position_ned:
             upd["position_ned"] = pos
         if e.wind_tau_s is not None:
             upd["wind_ned"] = self._wind(st, e)
+        if self._wind_gm is not None:
+            w = np.array(upd.get("wind_ned", st.wind_ned), float)
+            w[:2] += self._wind_gm(t)
+            upd["wind_ned"] = w
+        vel = st.velocity_ned
+        if self._vel_gm is not None:
+            vel = vel + self._vel_gm(t)
         if e.velocity_noise_m_s:
-            upd["velocity_ned"] = st.velocity_ned + e.velocity_noise_m_s * self.rng.standard_normal(
-                3
-            )
+            vel = vel + e.velocity_noise_m_s * self.rng.standard_normal(3)
+        if vel is not st.velocity_ned:
+            upd["velocity_ned"] = vel
+        if self._att_gm is not None:
+            da = self._att_gm(t)
+            roll, pitch, yaw = roll + da[0], pitch + da[1], yaw + da[2]
+        pqr = np.asarray(st.pqr, float)
+        if (roll, pitch, yaw) != tuple(st.euler):
+            # the reported gyro rates are the body's angular velocity in the REPORTED body
+            # frame, as a firmware's are consistent with its own attitude: the plant's rates
+            # rotated through the turn emulation's attitude offset (else psi_dot from q, r and
+            # the reported bank reads the plant's bank: the adapter learned the turn gain 1 %
+            # low on the ArduPlane profile)
+            pqr = _euler_to_R(roll, pitch, yaw).T @ (np.asarray(st.R_B_N, float) @ pqr)
+            upd["pqr"] = pqr
         if any(e.rate_noise_rad_s):
-            upd["pqr"] = st.pqr + np.asarray(e.rate_noise_rad_s) * self.rng.standard_normal(3)
+            upd["pqr"] = pqr + np.asarray(e.rate_noise_rad_s) * self.rng.standard_normal(3)
         if e.attitude_noise_rad:
             n = e.attitude_noise_rad * self.rng.standard_normal(3)
             roll, pitch, yaw = roll + n[0], pitch + n[1], yaw + n[2]
         if (roll, pitch, yaw) != tuple(st.euler):
             upd["euler"] = (roll, pitch, yaw)
-            cf, sf = math.cos(roll), math.sin(roll)
-            ct, s_t = math.cos(pitch), math.sin(pitch)
-            cp, sp = math.cos(yaw), math.sin(yaw)
-            upd["R_B_N"] = np.array(
-                (
-                    ct * cp, sf * s_t * cp - cf * sp, cf * s_t * cp + sf * sp,
-                    ct * sp, sf * s_t * sp + cf * cp, cf * s_t * sp - sf * cp,
-                    -s_t, sf * ct, cf * ct,
-                )
-            ).reshape(3, 3)  # fmt: skip
+            upd["R_B_N"] = _euler_to_R(roll, pitch, yaw)
         return dataclasses.replace(st, **upd) if upd else st
+
+
+def _euler_to_R(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """R_B_N (body FRD -> NED) of ZYX Euler angles (rad)."""
+    cf, sf = math.cos(roll), math.sin(roll)
+    ct, s_t = math.cos(pitch), math.sin(pitch)
+    cp, sp = math.cos(yaw), math.sin(yaw)
+    return np.array(
+        (
+            ct * cp, sf * s_t * cp - cf * sp, cf * s_t * cp + sf * sp,
+            ct * sp, sf * s_t * sp + cf * cp, cf * s_t * sp - sf * cp,
+            -s_t, sf * ct, cf * ct,
+        )
+    ).reshape(3, 3)  # fmt: skip

@@ -233,6 +233,49 @@ def identify_arduplane(out: Path, bundle: Path, instance: int, alt: float) -> di
     return analyse(rec, t_start, ARDUPLANE_SCHEDULE, pitch0, origin, out)
 
 
+def identify_px4(out: Path, bundle: Path, alt: float) -> dict[str, Any]:
+    """Bank steps and steady turns in OFFBOARD attitude (quaternion + thrust) on real PX4 SIH,
+    started and taken off by the rig (:mod:`sim.rigs.px4`, under its /tmp/mpf-px4.lock)."""
+    from types import SimpleNamespace
+
+    from mpf_mavlink.mavlink.modes import Flavour
+    from sim.rigs.gcs import Gcs
+    from sim.rigs.px4 import Firmware
+
+    fw = Firmware(SimpleNamespace(speedup=1.0))
+    fw.start(bundle, out / "firmware")
+    try:
+        g = Gcs(fw.gcs_url, Flavour.PX4)
+        fw.take_off(g, alt)
+        c = g.c
+        for msg_id, hz in ((30, 50), (32, 20), (74, 10)):  # ATTITUDE, LOCAL_POSITION, VFR_HUD
+            g.command(511, msg_id, 1e6 / hz)  # MAV_CMD_SET_MESSAGE_INTERVAL
+        rec = Recorder(c, g.sys)
+        rec.pump(2.0)
+        pitch0 = float(np.mean([r[3] for r in rec.rows["att"][-20:]]))
+        hud = rec.last.get("VFR_HUD")
+        thr = (hud.throttle / 100.0) if hud is not None else 0.8
+
+        def send(roll: float, pitch: float) -> None:
+            c.mav.set_attitude_target_send(int(time.monotonic() * 1e3) & 0xFFFFFFFF, g.sys,
+                                           1, 7, _quat(roll, pitch, 0.0), 0, 0, 0, thr)  # fmt: skip
+
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 1.5:  # stream before asking for OFFBOARD
+            send(0.0, pitch0)
+            rec.pump(0.04)
+        g.set_mode("OFFBOARD")
+        t_start = time.monotonic()
+        fly_schedule(rec, send, ARDUPLANE_SCHEDULE, pitch0)
+        g.set_mode("AUTO.LOITER")
+        rec.pump(1.0)
+        gp = g.last["GLOBAL_POSITION_INT"]
+        origin = (gp.lat * 1e-7, gp.lon * 1e-7)
+    finally:
+        fw.stop()
+    return analyse(rec, t_start, ARDUPLANE_SCHEDULE, pitch0, origin, out)
+
+
 def analyse(rec: Recorder, t_start: float, schedule: list[tuple[float, float, float]],
             pitch0: float, origin: tuple[float, float], out: Path) -> dict[str, Any]:  # fmt: skip
     att = np.array(rec.rows["att"], float)
@@ -306,6 +349,38 @@ def circle_wind_error(tlog: Path, after_s: float = 90.0) -> dict[str, float]:
     }  # fmt: skip
 
 
+def position_lead(tlog: Path, after_s: float = 60.0) -> dict[str, float]:
+    """How far ahead of the reported velocity the position the bridge uses is (s), from a bridge
+    tlog of a steady circle. The bridge extrapolates LOCAL_POSITION_NED by its velocity to the
+    ATTITUDE stamp; ArduPlane stamps ATTITUDE 20 or 40 ms after the position it follows (its
+    50 Hz loop's send slots), so the position is carried ahead of the velocity by that gap less
+    any lead the velocity already has over the position (its direction against the position's
+    derivative, divided by the turn rate)."""
+    m = mavutil.mavlink_connection(str(tlog))
+    last, gaps, pos = None, [], []
+    while True:
+        x = m.recv_match(type=["LOCAL_POSITION_NED", "ATTITUDE"])
+        if x is None:
+            break
+        if x.get_type() == "LOCAL_POSITION_NED":
+            last = x.time_boot_ms
+            pos.append((x.time_boot_ms / 1e3, x.x, x.y, x.vx, x.vy))
+        elif last is not None:
+            gaps.append((x.time_boot_ms / 1e3, (x.time_boot_ms - last) / 1e3))
+    g, p = np.array(gaps, float), np.array(pos, float)
+    _, i = np.unique(p[:, 0], return_index=True)
+    p = p[i]
+    g, p = g[g[:, 0] > g[0, 0] + after_s], p[p[:, 0] > p[0, 0] + after_s]
+    t = p[:, 0]
+    dx, dy = np.gradient(p[:, 1], t), np.gradient(p[:, 2], t)
+    ang = np.unwrap(np.arctan2(p[:, 4], p[:, 3])) - np.unwrap(np.arctan2(dy, dx))
+    ang = (ang + np.pi) % (2.0 * np.pi) - np.pi
+    omega = float(np.polyfit(t, np.unwrap(np.arctan2(p[:, 4], p[:, 3])), 1)[0])
+    vel_lead = float(np.mean(ang)) / omega if abs(omega) > 1e-3 else 0.0
+    gap = float(np.mean(g[:, 1]))
+    return {"stamp_gap_s": gap, "velocity_lead_s": vel_lead, "position_lead_s": gap - vel_lead}
+
+
 WIND_NOISE_M_S = 0.01  # 1-sigma of a circle's mean reported wind (its WIND std over the orbit)
 
 
@@ -334,12 +409,144 @@ def fit_wind_estimator(circles: list[dict[str, float]]) -> dict[str, float]:
     return best
 
 
+ULOG_SKIP_S = 20.0  # s of OFFBOARD left out of the EKF fit: the capture's transient
+
+
+def _gm_fit(x: np.ndarray, dt: float) -> tuple[float, float]:
+    """(sigma, tau_s) of a first-order Gauss-Markov process fitted to a series sampled every
+    dt: sigma its standard deviation, tau the lag where the fitted exp(-lag / tau) matches its
+    autocorrelation over the first 30 s (least squares, scipy)."""
+    from scipy.optimize import curve_fit
+
+    x = x - x.mean()
+    v = float(np.mean(x * x))
+    n = min(len(x) // 3, int(round(30.0 / dt)))
+    r = np.array([np.mean(x[: len(x) - k] * x[k:]) / v for k in range(1, n)])
+    lag = np.arange(1, n) * dt
+    (tau,), _ = curve_fit(lambda k, tau: np.exp(-k / tau), lag, r, p0=(5.0,),
+                          bounds=((0.05,), (500.0,)))  # fmt: skip
+    return math.sqrt(v), float(tau)
+
+
+def ekf_errors(ulog: Path, dt: float = 0.1) -> dict[str, Any]:
+    """PX4's estimate against SIH's ground truth in one ULog (``vehicle_attitude`` vs
+    ``vehicle_attitude_groundtruth``, ``vehicle_local_position`` vs its ground truth,
+    ``vehicle_angular_velocity`` vs its ground truth, EKF2's ``wind``), over the OFFBOARD flight
+    from ULOG_SKIP_S: a Gauss-Markov (sigma, tau) per channel, the gyro's white noise, and the
+    turn per bank (ground truth heading rate against g tan(bank) / V)."""
+    try:
+        from pyulog import ULog  # type: ignore[import-untyped]
+    except ImportError:
+        raise SystemExit("identify: --ulog needs pyulog (pip install pyulog)") from None
+    from scipy.spatial.transform import Rotation
+
+    u = ULog(str(ulog))
+
+    def topic(name: str) -> dict[str, np.ndarray]:
+        for d in u.data_list:
+            if d.name == name:
+                return d.data
+        raise SystemExit(f"identify: {ulog}: no {name} topic")
+
+    vs = topic("vehicle_status")
+    off = vs["timestamp"][vs["nav_state"] == 14] / 1e6  # NAVIGATION_STATE_OFFBOARD
+    if len(off) == 0:
+        raise SystemExit(f"identify: {ulog}: never in OFFBOARD")
+    tt = np.arange(off[0] + ULOG_SKIP_S, off[-1], dt)
+    if len(tt) < 600:
+        raise SystemExit(f"identify: {ulog}: under {ULOG_SKIP_S + 60 * dt * 10:g} s of OFFBOARD")
+
+    def euler(d: dict[str, np.ndarray]) -> np.ndarray:
+        q = np.c_[d["q[1]"], d["q[2]"], d["q[3]"], d["q[0]"]]
+        e = Rotation.from_quat(q).as_euler("ZYX")[:, ::-1]
+        e[:, 2] = np.unwrap(e[:, 2])
+        return e
+
+    def at(d: dict[str, np.ndarray], x: np.ndarray) -> np.ndarray:
+        return np.interp(tt, d["timestamp"] / 1e6, x)
+
+    a, ag = topic("vehicle_attitude"), topic("vehicle_attitude_groundtruth")
+    ea, eg = euler(a), euler(ag)
+    lp, lg = topic("vehicle_local_position"), topic("vehicle_local_position_groundtruth")
+    av, avg = topic("vehicle_angular_velocity"), topic("vehicle_angular_velocity_groundtruth")
+    w = topic("wind")
+    res: dict[str, Any] = {"ulog": str(ulog), "window_s": float(tt[-1] - tt[0])}
+    for i, k in enumerate(("roll", "pitch", "yaw")):
+        res[k] = _gm_fit(at(a, ea[:, i]) - at(ag, eg[:, i]), dt)
+    for k in ("x", "y", "z", "vx", "vy", "vz"):
+        res[k] = _gm_fit(at(lp, lp[k]) - at(lg, lg[k]), dt)
+    res["wind_n"] = _gm_fit(at(w, w["windspeed_north"]), dt)
+    res["wind_e"] = _gm_fit(at(w, w["windspeed_east"]), dt)
+    mg = (avg["timestamp"] / 1e6 >= tt[0]) & (avg["timestamp"] / 1e6 <= tt[-1])
+    ta = avg["timestamp"][mg] / 1e6
+    res["gyro_noise_rad_s"] = [
+        float(np.std(np.interp(ta, av["timestamp"] / 1e6, av[f"xyz[{i}]"]) - avg[f"xyz[{i}]"][mg]))
+        for i in range(3)
+    ]
+    # the turn per bank of SIH's airplane: ground-truth course rate against g tan(roll) / V
+    vn, ve = at(lg, lg["vx"]), at(lg, lg["vy"])
+    chi_dot = np.gradient(np.unwrap(np.arctan2(ve, vn)), tt)
+    roll = at(ag, eg[:, 0])
+    x = G * np.tan(roll) / np.maximum(np.hypot(vn, ve), 1.0)
+    res["turn_gain"] = float(x @ chi_dot / (x @ x))
+    return res
+
+
+def write_px4_profile(fits: list[dict[str, Any]], base: Path, out: Path, command: str) -> Path:
+    """The PX4 profile: ``base`` (its thrust and anything not identified here) with the EKF2
+    error model of the ULogs (sigma: root mean square over the logs; tau: their mean), the gyro
+    noise and the turn per bank; the empirical roll-rate wander is dropped (the EKF2 errors are
+    what it stood for)."""
+    import yaml
+
+    def comb(k: str) -> tuple[float, float]:
+        sig = math.sqrt(float(np.mean([f[k][0] ** 2 for f in fits])))
+        return round(sig, 4), round(float(np.mean([f[k][1] for f in fits])), 1)
+
+    prof = yaml.safe_load(base.read_text())
+    prof["source"] = f"identified by `{command}` ({time.strftime('%Y-%m-%d')})"
+    prof.pop("attitude", None)
+    (sx, tx), (sy, ty), (sz, tz) = comb("x"), comb("y"), comb("z")
+    (svx, tvx), (svy, tvy), (svz, tvz) = comb("vx"), comb("vy"), comb("vz")
+    att = [comb(k) for k in ("roll", "pitch", "yaw")]
+    (swn, twn), (swe, twe) = comb("wind_n"), comb("wind_e")
+    est = prof.setdefault("estimator", {})
+    for k in ("position_noise_m", "vertical_noise_m", "velocity_noise_m_s"):
+        est.pop(k, None)  # the white noise of the telemetry is in the Gauss-Markov errors now
+    est.update({
+        "rate_noise_rad_s": [round(float(np.sqrt(np.mean([f["gyro_noise_rad_s"][i] ** 2
+                                                           for f in fits]))), 4) for i in range(3)],
+        "horizontal_wander_m": round(math.hypot(sx, sy) / math.sqrt(2.0), 4),
+        "wander_tau_s": round((tx + ty) / 2.0, 1),
+        "vertical_wander_m": sz, "vertical_wander_tau_s": tz,
+        "velocity_wander_m_s": [round(math.hypot(svx, svy) / math.sqrt(2.0), 4), svz],
+        "velocity_wander_tau_s": [round((tvx + tvy) / 2.0, 1), tvz],
+        "attitude_wander_rad": [a[0] for a in att],
+        "attitude_wander_tau_s": [a[1] for a in att],
+        "wind_wander_m_s": round(math.hypot(swn, swe) / math.sqrt(2.0), 4),
+        "wind_wander_tau_s": round((twn + twe) / 2.0, 1),
+    })  # fmt: skip
+    prof.setdefault("turn", {})["turn_gain"] = round(
+        float(np.mean([f["turn_gain"] for f in fits])), 3
+    )
+    path = out / "profile.yaml"
+    path.write_text(yaml.safe_dump(prof, sort_keys=False))
+    return path
+
+
 def write_profile(res: dict[str, Any], autopilot: str, firmware: str, out: Path,
                   command: str) -> Path:  # fmt: skip
     import yaml
 
-    r, p = res["roll"], res["pitch"]
+    r, p = dict(res["roll"]), res["pitch"]
     est = res.get("estimator", {})
+    steady = res.get("steady_bank_deg")
+    if steady and len(steady) >= 2:
+        # the steady bank per commanded one over the held turns: what sets the turn the bridge
+        # gets in a circle (the doublets' fit above carries the transients' lag, not this)
+        sb = np.radians(np.array(steady, float))
+        gain, bias = np.linalg.lstsq(np.c_[sb[:, 0], np.ones(len(sb))], sb[:, 1], rcond=None)[0]
+        r["gain"], r["bias_rad"] = float(gain), float(bias)
     prof: dict[str, Any] = {
         "autopilot": autopilot,
         "firmware": firmware,
@@ -364,6 +571,9 @@ def write_profile(res: dict[str, Any], autopilot: str, firmware: str, out: Path,
             "wind_tau_s": round(wf["tau_s"], 2),
         })  # fmt: skip
         prof["fit"]["wind_rms_m_s"] = round(wf["rms_m_s"], 4)
+    if res.get("position_lead"):
+        lead = float(np.mean([x["position_lead_s"] for x in res["position_lead"]]))
+        prof["estimator"]["position_lead_s"] = round(lead, 4)
     if res.get("wind_scale"):
         prof["estimator"]["wind_scale"] = round(res["wind_scale"], 3)
     path = out / "profile.yaml"
@@ -392,19 +602,41 @@ def main(argv: list[str] | None = None) -> int:
         help="a bridge tlog in a steady wind of SPEED m/s (the reported wind's scale)",
     )
     ap.add_argument("--reuse", action="store_true", help="re-fit DIR's last flight, fly nothing")
+    ap.add_argument("--ulog", nargs="+", default=None,
+                    help="PX4: fit the EKF2 error model to these ULogs of OFFBOARD flights "
+                    "(SIH ground truth), fly nothing")  # fmt: skip
+    ap.add_argument("--base", default=str(ROOT / "configs" / "autopilots" / "px4-1.16-sih.yaml"),
+                    help="PX4 with --ulog: the profile whose other sections are kept")  # fmt: skip
     a = ap.parse_args(argv)
     out = Path(a.out).resolve()
+    cmd = "python -m sim.identify " + " ".join(argv if argv is not None else sys.argv[1:])
+    if a.ulog:
+        if a.autopilot != "px4":
+            print("identify: --ulog is for px4", file=sys.stderr)
+            return 2
+        missing = [u for u in [*a.ulog, a.base] if not Path(u).is_file()]
+        if missing:
+            print(f"identify: {missing[0]}: no such file", file=sys.stderr)
+            return 2
+        out.mkdir(parents=True, exist_ok=True)
+        fits = [ekf_errors(Path(u)) for u in a.ulog]
+        (out / "fit.json").write_text(json.dumps(fits, indent=1))
+        path = write_px4_profile(fits, Path(a.base), out, cmd)
+        print(json.dumps(fits, indent=1))
+        print(f"profile: {path}")
+        return 0
     res = _identify(a, out)
     if a.circles:
         circles = [circle_wind_error(Path(t)) for t in a.circles]
         res["circles"] = circles
         res["wind_estimator"] = fit_wind_estimator(circles)
+        leads = [position_lead(Path(t)) for t in a.circles]
+        res["position_lead"] = leads
     if a.wind_flight:
         c = circle_wind_error(Path(a.wind_flight[0]))
         res["wind_scale"] = math.hypot(c["north"], c["east"]) / float(a.wind_flight[1])
     (out / "fit.json").write_text(json.dumps(res, indent=1))
     fw = FIRMWARE[a.autopilot]
-    cmd = "python -m sim.identify " + " ".join(argv if argv is not None else sys.argv[1:])
     path = write_profile(res, a.autopilot, fw, out, cmd)
     print(json.dumps({k: v for k, v in res.items() if k != "turn"}, indent=1))
     print(json.dumps(res["turn"], indent=1))
@@ -426,15 +658,21 @@ def _identify(a: Any, out: Path) -> dict[str, Any]:
         y = np.array([r["chi_dot"] for r in turns])
         res["turn"]["turn_gain"] = float(x @ y / (x @ x))
         return res
-    if a.autopilot == "px4":
-        from sim.px4_harness import identify_px4
+    from sim.calibrate import find_bundle
+    from sim.rigs.bundles import RigError, check_bundle, unpack
 
-        bundle = Path(a.bundle or "/tmp/sitl/px4-sitl-v1.16.0-sih")
+    spec = a.bundle or find_bundle(a.autopilot)
+    if spec is None:
+        raise SystemExit(
+            f"identify: no {a.autopilot} bundle (--bundle, MPF_SITL_DIR or ../shared/sitl)"
+        )
+    try:
+        bundle = unpack(a.autopilot, check_bundle(a.autopilot, str(spec)))
+    except RigError as e:
+        raise SystemExit(f"identify: {e}") from None
+    if a.autopilot == "px4":
         out.mkdir(parents=True, exist_ok=True)
         return identify_px4(out, bundle, a.alt)
-    bundle = Path(a.bundle or "/tmp/sitl/arduplane-sitl-4.7dev")
-    if not (bundle / "bin" / "arduplane").is_file():
-        raise SystemExit(f"identify: {bundle}/bin/arduplane: no such file")
     out.mkdir(parents=True, exist_ok=True)
     return identify_arduplane(out, bundle, a.instance, a.alt)
 

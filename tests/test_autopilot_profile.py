@@ -134,3 +134,69 @@ def test_config_key_checks_the_file_and_the_flavour():
         )
     with pytest.raises(ConfigError, match="sil.autopilot_profile.*no such"):
         load_config(cfg, ["sil.link=udp", "sil.autopilot_profile=nowhere.yaml"])
+
+
+def _R(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    from sim.autopilot_profile import _euler_to_R
+
+    return _euler_to_R(roll, pitch, yaw)
+
+
+def test_reported_rates_are_consistent_with_the_reported_bank():
+    # the plant banks less than it reports (its own turn per bank is higher): the reported gyro
+    # rates must be the angular velocity in the REPORTED body frame, so that the heading rate
+    # the bridge's adapter derives from them, (q sin(phi) + r cos(phi)) / cos(theta) with the
+    # reported phi, is the plant's true heading rate
+    prof = AutopilotProfile(turn=TurnResponse(turn_gain=0.745))
+    est = StateEstimate(prof)
+    bank, v, k = math.radians(20.0), 22.0, 0.93
+    psid = k * G * math.tan(bank) / v
+    for i in range(2000):
+        t = i * 0.01
+        st = dataclasses.replace(_turn(t, bank, k, v), R_B_N=_R(bank, 0.0, psid * t))
+        rep = est(st)
+    phi, theta = rep.euler[0], rep.euler[1]
+    q, r = float(rep.pqr[1]), float(rep.pqr[2])
+    assert phi > bank + 0.02  # the emulation reports more bank than the plant flies
+    assert (q * math.sin(phi) + r * math.cos(phi)) / math.cos(theta) == pytest.approx(
+        psid, rel=1e-3
+    )
+
+
+def test_position_lead_moves_the_reported_position_along_the_ground_velocity():
+    est = StateEstimate(AutopilotProfile(estimator=EstimatorModel(position_lead_s=0.025)))
+    st = _turn(3.0, math.radians(24.0), 1.0)
+    rep = est(st)
+    assert np.allclose(rep.position_ned - st.position_ned, 0.025 * st.velocity_ned)
+    assert np.allclose(rep.velocity_ned, st.velocity_ned)  # the velocity is not led
+
+
+def test_gauss_markov_errors_have_their_sigma_and_correlation_time_and_every_seed_its_own():
+    from sim.autopilot_profile import GaussMarkov
+
+    dt, tau, sig = 0.1, 2.0, 0.02
+    gm = GaussMarkov((sig,), (tau,), np.random.default_rng(0))
+    x = np.array([gm(i * dt)[0] for i in range(100000)])  # 5000 correlation times
+    assert float(np.std(x)) == pytest.approx(sig, rel=0.06)  # ~3 / sqrt(2 * 5000 / 2) relative
+    k = int(tau / dt)
+    r = float(np.mean((x[:-k] - x.mean()) * (x[k:] - x.mean())) / np.var(x))
+    assert r == pytest.approx(math.exp(-1.0), abs=0.05)
+    e = EstimatorModel(attitude_wander_rad=(0.017, 0.01, 0.017), horizontal_wander_m=0.2)
+    a = StateEstimate(AutopilotProfile(estimator=e), seed=0)
+    b = StateEstimate(AutopilotProfile(estimator=e), seed=1)
+    st = _turn(1.0, 0.3, 1.0)
+    assert not np.allclose(a(st).euler, b(st).euler)
+    assert not np.allclose(a(st).position_ned, b(st).position_ned)
+
+
+def test_the_ekf_error_fit_recovers_a_gauss_markov_process():
+    from sim.autopilot_profile import GaussMarkov
+    from sim.identify import _gm_fit
+
+    dt, tau, sig = 0.1, 3.0, 0.25
+    gm = GaussMarkov((sig,), (tau,), np.random.default_rng(3))
+    x = np.array([gm(i * dt)[0] for i in range(18000)])  # 30 min, 600 correlation times
+    s, t = _gm_fit(x, dt)
+    # 600 correlation times: sigma to ~3 / sqrt(600) ~ 12 %, tau to ~20 %
+    assert s == pytest.approx(sig, rel=0.15)
+    assert t == pytest.approx(tau, rel=0.25)

@@ -90,6 +90,21 @@ def test_moving_labels_say_what_flies():
         common.validate(common.parser().parse_args(["px4", "--wind", "1,2", "--out", "x"]))
 
 
+def test_moving_px4_flight_sends_the_moving_target(tmp_path):
+    # validate() loads the config with the target overrides already applied; the flight must
+    # send those overrides, not recompute them on the moved config (which then looks moving and
+    # gets none: PX4 --moving flew the still target of bridge_px4.yaml)
+    bundle = tmp_path / "b"
+    bundle.mkdir()
+    (bundle / "px4-sih-airplane").write_text("")
+    a = common.parser().parse_args(["px4", "--bundle", str(bundle), "--moving",
+                                    "--out", str(tmp_path / "run")])  # fmt: skip
+    v = common.validate(a)
+    assert "target.type=constant_turn" in v["tsets"]
+    assert v["target_label"] == "moving 3 m/s heading 90 deg"
+    assert v["cfg"].target.type == "constant_turn"
+
+
 def _circle_run(d: Path, offset: float, cw: bool = True) -> None:
     """A 100 m circle in the target frame and a vehicle ``offset`` m outside it."""
     th = np.linspace(0.0, 2 * math.pi, 721)

@@ -141,7 +141,7 @@ def validate(a: argparse.Namespace) -> dict[str, Any]:
         cfg = load_config(cfg_path, [*a.overrides, "target.position_ned_m=[0,0,-100]"])
     except MpfError as e:
         raise RigError(f"--config {cfg_path}: {e}") from None
-    tsets, _ = target_sets(cfg, a.moving)
+    tsets, label = target_sets(cfg, a.moving)
     try:  # and with the target the rig will give it
         cfg = load_config(cfg_path, [*a.overrides, "target.position_ned_m=[0,0,-100]", *tsets])
     except MpfError as e:
@@ -161,7 +161,10 @@ def validate(a: argparse.Namespace) -> dict[str, Any]:
             raise RigError(f"--bundle {a.bundle}: no Tools/autotest/models/plane.parm")
     else:
         bundle = check_bundle(a.autopilot, a.bundle)
-    return {"mod": mod, "bundle": bundle, "config": cfg_path.resolve(), "cfg": cfg, "out": out}
+    # the target's overrides are kept from the config as given: the cfg above already has them,
+    # and target_sets on it saw a moving target and gave none (PX4 --moving flew stationary)
+    return {"mod": mod, "bundle": bundle, "config": cfg_path.resolve(), "cfg": cfg, "out": out,
+            "tsets": tsets, "target_label": label}  # fmt: skip
 
 
 def place_mission(g: Gcs, radius: float, lead_s: float) -> tuple[list[float], list[float]]:
@@ -269,7 +272,7 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
     fw.take_off(g, a.alt)
     cruise = fw.cruise_airspeed(g)
     radius = float(cfg.path.radius_m) if cfg.path.type == "circle" else 0.0
-    tsets, label = target_sets(cfg, a.moving)
+    tsets, label = v["tsets"], v["target_label"]
     g.pump(0.3)
     centre, start = place_mission(g, radius, a.lead * a.speedup)
     sets = [*a.overrides, f"target.position_ned_m=[{centre[0]:.2f},{centre[1]:.2f},{centre[2]:.2f}]",
