@@ -435,7 +435,7 @@ def ekf_errors(ulog: Path, dt: float = 0.1) -> dict[str, Any]:
     from ULOG_SKIP_S: a Gauss-Markov (sigma, tau) per channel, the gyro's white noise, and the
     turn per bank (ground truth heading rate against g tan(bank) / V)."""
     try:
-        from pyulog import ULog  # type: ignore[import-untyped]
+        from pyulog import ULog
     except ImportError:
         raise SystemExit("identify: --ulog needs pyulog (pip install pyulog)") from None
     from scipy.spatial.transform import Rotation
