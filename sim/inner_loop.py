@@ -458,7 +458,7 @@ def fly_to_trim(
     set to them (the rate-loop integrators are then reset). ``course`` (rad from north): the
     ground course to hold (None: the course of the first state, which is the heading when a
     wind was set after the initial conditions, not the track over the ground).
-    ``plant`` needs ``dt``, ``step(a, e, r, t)`` and ``state()`` (see sim.plant_jsbsim).
+    ``plant`` needs ``dt``, ``step(a, e, r, t)`` and ``state()`` (see sim.plant.jsbsim_plant).
     """
     dt = plant.dt
     n = int(round(seconds / dt))

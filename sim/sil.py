@@ -1,7 +1,7 @@
 """Software-in-the-loop runs: the simulated vehicle and the bridge as two MAVLink peers.
 
 :func:`run_sil` is what ``mpf-mavlink sim CONFIG`` does when ``sil.link: udp``: the vehicle
-(:class:`sim.vehicle.SimVehicle`: the JSBSim aircraft or the kinematic plant, the simulated
+(:class:`sim.vehicle.vehicle.SimVehicle`: the JSBSim aircraft or the kinematic plant, the simulated
 autopilot, PX4 or ArduPlane rules) and the bridge (:func:`mpf_mavlink.bridge.live.run_bridge`, the
 same code that flies a real autopilot) run in two processes - two interpreters, so neither
 waits for the other's GIL - and talk MAVLink over UDP loopback (the vehicle sends to the
@@ -98,13 +98,13 @@ def _start_altitude_m(cfg: Config) -> float:
 
 @functools.lru_cache(maxsize=8)
 def _identify(model: str, root: str | None, v: float, alt: float, controls: tuple[Any, ...]) -> Any:
-    from .airframe_ident import identify
+    from sim.plant.airframe_ident import identify
 
     return identify(model, root, v, alt, dict(controls))
 
 
 def identified(cfg: Config) -> Any:
-    """The identification of the config's aircraft (sim.airframe_ident.AirframeModel) when
+    """The identification of the config's aircraft (sim.plant.airframe_ident.AirframeModel) when
     ``aircraft.gains_from_fdm`` asks for it (JSBSim plant), else None. Errors are ValueErrors
     naming the config key."""
     ac = cfg.section("aircraft")
@@ -130,14 +130,14 @@ def trim_of(cfg: Config) -> tuple[float, float | None]:
         return ident.trim["throttle"], ident.pitch_rad
     if not (ac.trim_from_fdm and cfg.section("sil").plant == "jsbsim"):
         return ac.trim_throttle, ac.attitude_loop.pitch_trim_rad
-    from .airframe_trim import fdm_trim
+    from sim.plant.airframe_trim import fdm_trim
 
     root = ac.resolved_root(cfg.source)
     tr = fdm_trim(ac.model, root, ac.trim_airspeed_m_s, _start_altitude_m(cfg))
     if not tr.ok:
         raise ValueError(
             f"aircraft.trim_airspeed_m_s: JSBSim finds no level-flight trim of {ac.model} at "
-            f"{ac.trim_airspeed_m_s:g} m/s (python -m sim.airframe_trim {ac.model} lists its range)"
+            f"{ac.trim_airspeed_m_s:g} m/s (python -m sim.plant.airframe_trim {ac.model} lists its range)"
         )
     return tr.throttle, tr.pitch_rad
 
@@ -150,7 +150,7 @@ def build_autopilot(cfg: Config) -> Any:
     base = RateLoopGains()
     ident = identified(cfg)
     if ident is not None:
-        from .airframe_ident import derive_gains, trims
+        from sim.plant.airframe_ident import derive_gains, trims
 
         al0 = ac.attitude_loop
         derived = derive_gains(
@@ -188,7 +188,7 @@ def build_autopilot(cfg: Config) -> Any:
 
 
 def vehicle_options(cfg: Config, url: str, clock: str | None = None, **over: Any) -> dict[str, Any]:
-    """Keyword arguments of :class:`sim.vehicle.SimVehicle` for a config (``over`` wins)."""
+    """Keyword arguments of :class:`sim.vehicle.vehicle.SimVehicle` for a config (``over`` wins)."""
     sil, ac, k = cfg.section("sil"), cfg.section("aircraft"), cfg.kinematic
     pos = (
         sil.initial_position_ned_m
@@ -234,7 +234,7 @@ def vehicle_options(cfg: Config, url: str, clock: str | None = None, **over: Any
 
 def build_vehicle(cfg: Config, url: str, clock: str | None = None, **over: Any) -> Any:
     """The config's simulated vehicle on ``url`` (trimmed, in the hold mode, ready to serve)."""
-    from sim.vehicle import SimVehicle
+    from sim.vehicle.vehicle import SimVehicle
 
     opts = vehicle_options(cfg, url, clock, **over)
     flavour = opts.pop("flavour")
@@ -256,7 +256,7 @@ def full_thrust_throttle(cfg: Config, opts: dict[str, Any], airspeed: float) -> 
     """The plant's level-flight throttle at ``airspeed`` (m/s), found by flying it (a trim flight
     of a second plant at the start altitude): what the profile's full offboard thrust maps to."""
     from sim.inner_loop import fly_to_trim
-    from sim.plant_jsbsim import JSBSimPlant
+    from sim.plant.jsbsim_plant import JSBSimPlant
 
     po = dict(opts.get("plant_options") or {})
     alt = -float(opts["position_ned"][2])

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from mpf_mavlink.config import load_config
-from sim.airframe_trim import G, fdm_trim, mission_radius_m
+from sim.plant.airframe_trim import G, fdm_trim, mission_radius_m
 from sim.sil import trim_of
 
 ROOT = Path(__file__).resolve().parents[1]

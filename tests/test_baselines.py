@@ -16,7 +16,7 @@ from mpf_mavlink.core.guidance.baselines import (
 from mpf_mavlink.core.guidance.law import Extensions, Gains
 from mpf_mavlink.core.paths import shapes
 from mpf_mavlink.core.target import ConstantTurn, Stationary
-from sim.kinematic import ClosedLoop, initial_state
+from sim.plant.kinematic import ClosedLoop, initial_state
 
 V = 16.0
 

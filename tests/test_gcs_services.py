@@ -1,4 +1,4 @@
-"""What a ground station asks of the SIL vehicle (sim/gcs_services.py), driven with pymavlink's own
+"""What a ground station asks of the SIL vehicle (sim/vehicle/gcs_services.py), driven with pymavlink's own
 ground-station helpers (mavutil's parameter fetch, mavwp's mission loader) over loopback UDP.
 
 The vehicle is stepped frame by frame in the test's thread (as tests/test_sim_vehicle.py does):
@@ -21,7 +21,7 @@ pytest.importorskip("pymavlink")
 from pymavlink import mavwp  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
-from sim.vehicle import SimVehicle  # noqa: E402
+from sim.vehicle.vehicle import SimVehicle  # noqa: E402
 from tests.test_sim_vehicle import Gcs, ack_for, frames, free_port  # noqa: E402
 
 
@@ -59,7 +59,7 @@ def test_param_fetch_all_streams_every_parameter_once_with_index_and_count(vg):
     frames(v, g, 2)
     pv = g.of("PARAM_VALUE")
     n = len(v.gcs.params)
-    assert n >= 7  # the flavour's tunables (module docstring of sim.gcs_services)
+    assert n >= 7  # the flavour's tunables (module docstring of sim.vehicle.gcs_services)
     assert len(pv) == n and {p.param_count for p in pv} == {n}
     assert sorted(p.param_index for p in pv) == list(range(n))
     for p in pv:  # what the GCS shows is the vehicle's value (float32 on the wire)

@@ -32,9 +32,9 @@ from mpf_mavlink.config.schema import load_config  # noqa: E402
 
 # a lifecycle flight of seconds has no steady window: it ends NOT JUDGED (exit 6), not PASS
 from mpf_mavlink.runs.verdict import EXIT_NOT_JUDGED as NOT_JUDGED  # noqa: E402
-from sim.plant_jsbsim import JSBSimPlant  # noqa: E402
+from sim.plant.jsbsim_plant import JSBSimPlant  # noqa: E402
 from sim.sil import build_vehicle, run_sil  # noqa: E402
-from sim.vehicle import SimVehicle  # noqa: E402
+from sim.vehicle.vehicle import SimVehicle  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = str(ROOT / "configs" / "default.yaml")

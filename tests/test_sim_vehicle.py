@@ -1,4 +1,4 @@
-"""The simulated MAVLink vehicle (sim/vehicle.py) seen from a pymavlink ground station on loopback UDP.
+"""The simulated MAVLink vehicle (sim/vehicle/vehicle.py) seen from a pymavlink ground station on loopback UDP.
 
 Most tests drive the vehicle frame by frame with ``step_once()`` in the test's own thread
 (loopback UDP delivers a datagram before ``sendto`` returns, so the exchange is deterministic);
@@ -25,9 +25,9 @@ from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
 from mpf_mavlink.core.frames import euler_to_quat_wxyz, geodetic_to_ned, matrix_to_quat_wxyz  # noqa: E402
 from mpf_mavlink.core.target import ConstantTurn  # noqa: E402
-from sim.clock import LockstepClock  # noqa: E402
-from sim.plant_kinematic_mav import KinematicMavPlant, ned_to_geodetic_fast  # noqa: E402
-from sim.vehicle import SimVehicle, px4_custom_mode  # noqa: E402
+from sim.plant.kinematic_plant import KinematicMavPlant, ned_to_geodetic_fast  # noqa: E402
+from sim.vehicle.clock import LockstepClock  # noqa: E402
+from sim.vehicle.vehicle import SimVehicle, px4_custom_mode  # noqa: E402
 
 PX4_LOITER = px4_custom_mode(4, 3)  # (4 << 16) | (3 << 24) = 0x03040000
 PX4_OFFBOARD = px4_custom_mode(6)  # 6 << 16 = 0x00060000
@@ -600,7 +600,7 @@ def test_reported_wind_lags_the_true_wind_like_an_estimator():
     exp(-n dt/tau) to ~n ulp (float64, 50 products: 1e-13 is ample)."""
     from types import SimpleNamespace
 
-    from sim.mav_endpoint import MavEndpoint
+    from sim.vehicle.endpoint import MavEndpoint
 
     v = SimpleNamespace(
         _st=SimpleNamespace(wind_ned=np.array([0.0, 4.0, 0.0])),

@@ -34,7 +34,7 @@ Connections (--serve):
   tcpin:0.0.0.0:5760       listen for one TCP client (as ArduPilot SITL does)
 
 Identity: system 1, component 1 (the target: system 2). Ctrl-C (or SIGTERM) stops it cleanly.
-A ground station gets what it asks of an autopilot, per flavour (sim/gcs_services.py): the
+A ground station gets what it asks of an autopilot, per flavour (sim/vehicle/gcs_services.py): the
 parameter list with the firmware's names (setting them changes the run), the mission protocol,
 AUTOPILOT_VERSION, GPS_RAW_INT; MAVLink FTP is refused (NAK) and unknown commands are answered
 UNSUPPORTED. Messages a peer sends not addressed to the vehicle reach its other UDP peers (a

@@ -28,7 +28,7 @@ def _rate(**kw: Any) -> dict[str, Any]:
 @dataclass(frozen=True)
 class TelemetryConfig:
     """Stream rates of the simulated autopilot at power-on (Hz; 0 disables a stream; left out:
-    the stock rate of ``sil.flavour`` on a companion's link, ``sim.vehicle.stock_rates``:
+    the stock rate of ``sil.flavour`` on a companion's link, ``sim.vehicle.vehicle.stock_rates``:
     ArduPlane 1 Hz per stream group and no HOME_POSITION, PX4's onboard link fast). The bridge
     asks for the rates it needs (MAV_CMD_SET_MESSAGE_INTERVAL / REQUEST_DATA_STREAM), which the
     vehicle honours, as the real autopilots do."""
@@ -69,7 +69,7 @@ class OutageConfig:
 
 @dataclass(frozen=True)
 class TargetFeedConfig:
-    """The simulated target reports itself as a real one does (``sim/target_feed.py``): every
+    """The simulated target reports itself as a real one does (``sim/target/feed.py``): every
     ``1 / rate_hz`` s, white noise on the position (``position_noise_m`` per horizontal axis,
     ``vertical_noise_m``, None: the same), the velocity and the turn rate, stamped with its own
     clock (the vehicle's boot clock + ``clock_offset_s``), lost with probability ``dropout`` in
@@ -154,7 +154,7 @@ class SilConfig:
     )
     wind_ned_m_s: Vec3 = (0.0, 0.0, 0.0)
     turbulence: Literal["none", "light", "moderate", "severe"] = "none"
-    # JSBSim's noise engine takes seeds below 2^31 - 2 (sim/plant_jsbsim.py: jsbsim_turbulence_seed)
+    # JSBSim's noise engine takes seeds below 2^31 - 2 (sim/plant/jsbsim_plant.py: jsbsim_turbulence_seed)
     seed: int = field(default=0, metadata={"check": ("range", 0, 2**31 - 3)})
     gusts: list[GustEventConfig] = field(default_factory=list)
     home_lat_deg: float = field(default=47.397742, metadata={"check": ("range", -90.0, 90.0)})
@@ -302,9 +302,9 @@ class AircraftConfig:
     rate loops' airspeed scaling is 1. trim_throttle: first guess for the trim flight (the trim
     found by flying replaces it). trim_from_fdm: take trim_throttle and the hold modes' pitch
     trim from JSBSim's own trim (``simulation/do_simple_trim``) at trim_airspeed_m_s and the
-    start altitude instead (sim/airframe_trim.py). gains_from_fdm: derive the rate loops' gains
+    start altitude instead (sim/plant/airframe_trim.py). gains_from_fdm: derive the rate loops' gains
     and surface trims (and the throttle and pitch trim) from a short identification of the FDM
-    at trim_airspeed_m_s (sim/airframe_ident.py); rate_loop entries given still win.
+    at trim_airspeed_m_s (sim/plant/airframe_ident.py); rate_loop entries given still win.
     airspeed_min_m_s / airspeed_max_m_s: the rate loops' scaling
     limits (FW_AIRSPD_MIN / MAX). controls: command properties and signs.
     """

@@ -19,10 +19,10 @@ os.environ.setdefault("JSBSIM_DEBUG", "0")
 
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
-from sim.relay import DOWN  # noqa: E402
-from sim.soak_checks import Limits, _r, max_gap
-from sim.soak_missions import FLOWN, _completed, _mission_common, _timeseries, _tracking_window
-from sim.soak_rig import (
+from sim.soak.checks import Limits, _r, max_gap
+from sim.soak.missions import FLOWN, _completed, _mission_common, _timeseries, _tracking_window
+from sim.soak.relay import DOWN  # noqa: E402
+from sim.soak.rig import (
     CONFIGS,
     ROOT,
     TARGET_SYSID,
@@ -50,7 +50,7 @@ def scenario_spoof(o: Opts) -> Row:
     telemetry and targets from the vehicle's and the target's own ids; (c) replays of the
     vehicle's own signed datagrams 1 s later; (d) the vehicle's ids signed with a WRONG key.
     Each must be rejected and counted exactly once; the mission must not notice."""
-    from sim.relay import split_frames
+    from sim.soak.relay import split_frames
 
     row = Row("spoofing_signing")
     dur = 20.0 if o.quick else 40.0

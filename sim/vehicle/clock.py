@@ -1,4 +1,4 @@
-"""Clocks for the simulated MAVLink vehicle (:mod:`sim.vehicle`).
+"""Clocks for the simulated MAVLink vehicle (:mod:`sim.vehicle.vehicle`).
 
 The vehicle advances its physics in frames of one telemetry period (default 20 ms of SIMULATED
 time) and, after each frame, asks its clock to wait. The clock calls back into the vehicle:

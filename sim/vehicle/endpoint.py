@@ -1,6 +1,6 @@
 """The simulated vehicle's MAVLink endpoint: receiving (delay queue, the bridge's epoch),
 telemetry streams at the autopilot's rates, the target's own system, datagram batching and the
-lockstep hand-shake. No autopilot decisions here (:mod:`sim.autopilot`)."""
+lockstep hand-shake. No autopilot decisions here (:mod:`sim.autopilot.emulation`)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,8 @@ import time
 from typing import Any
 
 from mpf_mavlink.core.frames import matrix_to_quat_wxyz  # noqa: E402
-from sim.gcs_services import GcsServices  # noqa: E402
-from sim.plant_kinematic_mav import ned_to_geodetic_fast  # noqa: E402
-from sim.vehicle_base import (
+from sim.plant.kinematic_plant import ned_to_geodetic_fast  # noqa: E402
+from sim.vehicle.base import (
     _DATAGRAM_MAX,
     _SPEC,
     _STREAM_ORDER,
@@ -21,6 +20,7 @@ from sim.vehicle_base import (
     VehicleBase,
     eas_factor,
 )
+from sim.vehicle.gcs_services import GcsServices  # noqa: E402
 
 # what the autopilot acts on (through the incoming delay queue); the rest is dropped
 _QUEUED = (

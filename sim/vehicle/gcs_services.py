@@ -1,6 +1,6 @@
 """What a ground station asks of the simulated vehicle besides flying it: the parameter protocol,
 the mission protocol, AUTOPILOT_VERSION and MAVLink FTP, answered per flavour as PX4 v1.16 and
-ArduPlane 4.7 do. One object composed into the vehicle (:attr:`sim.vehicle_base.VehicleBase.gcs`),
+ArduPlane 4.7 do. One object composed into the vehicle (:attr:`sim.vehicle.base.VehicleBase.gcs`),
 reached through a narrow interface: it reads the vehicle's state, sets its tunables through
 :class:`Param` setters, and sends through the vehicle's MAVLink encoder (the outgoing delay queue).
 
@@ -24,7 +24,7 @@ Missions (mission_type 0): a plain mission (waypoints, loiters, take-off, land, 
 changes, DO_JUMP) is stored and served back; anything else is refused with MISSION_ACK
 MAV_MISSION_UNSUPPORTED (or UNSUPPORTED_FRAME / INVALID_SEQUENCE). ArduPlane counts its home as
 item 0 (a MISSION_REQUEST_LIST of a vehicle without a mission answers 1); PX4 answers 0. The
-simulated autopilot does not fly the mission: AUTO loiters (see :mod:`sim.vehicle`). Fence and
+simulated autopilot does not fly the mission: AUTO loiters (see :mod:`sim.vehicle.vehicle`). Fence and
 rally lists are empty and uploads of them are refused (UNSUPPORTED).
 
 MAVLink FTP: every request is answered with a NAK (FileNotFound for an open, UnknownCommand
@@ -188,7 +188,7 @@ def _text(field: Any) -> str:
 class GcsServices:
     """Parameter, mission, version and FTP answers of one simulated vehicle (module docstring).
 
-    ``v`` is the vehicle (:class:`sim.vehicle_base.VehicleBase`): read for its flavour, ids,
+    ``v`` is the vehicle (:class:`sim.vehicle.base.VehicleBase`): read for its flavour, ids,
     home, state and tunables, and its ``_mav`` encoder sends the answers."""
 
     HANDLES = frozenset(

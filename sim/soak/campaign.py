@@ -3,7 +3,7 @@
 Every mission scenario is a real software-in-the-loop flight over real loopback UDP:
 
     python -m sim.soak vehicle ...  (SimVehicle, JSBSim X8, realtime clock, its own process)
-        <-> sim.relay.UdpRelay (this process: impairments, injection, a tap of all traffic)
+        <-> sim.soak.relay.UdpRelay (this process: impairments, injection, a tap of all traffic)
         <-> mpf-mavlink run CONFIG --connect udpin:... (the real bridge CLI, its own process)
 
 The judge of each scenario is the traffic the relay saw (what the vehicle really received and
@@ -35,9 +35,9 @@ os.environ.setdefault("MAVLINK20", "1")
 os.environ.setdefault("JSBSIM_DEBUG", "0")
 
 
-from sim.soak_checks import Limits
-from sim.soak_inputs import scenario_bad_input, scenario_output_dir, scenario_spoof
-from sim.soak_missions import (
+from sim.soak.checks import Limits
+from sim.soak.inputs import scenario_bad_input, scenario_output_dir, scenario_spoof
+from sim.soak.missions import (
     scenario_baseline,
     scenario_blackout_link,
     scenario_blackout_link_reengage,
@@ -51,7 +51,7 @@ from sim.soak_missions import (
     scenario_sigkill,
     scenario_target_loss,
 )
-from sim.soak_rig import Opts, Row, vehicle_main
+from sim.soak.rig import Opts, Row, vehicle_main
 
 SCENARIOS: dict[str, Callable[..., Row]] = {
     "baseline": scenario_baseline,

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from mpf_mavlink.mavlink.codec import TYPE_MASK_ARDUPLANE_ATTITUDE
-from sim.soak_rig import CONFIGS, VEHICLE_COMPID, VEHICLE_SYSID, Tap
+from sim.soak.rig import CONFIGS, VEHICLE_COMPID, VEHICLE_SYSID, Tap
 
 
 @dataclass

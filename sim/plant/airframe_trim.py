@@ -57,7 +57,7 @@ def trimmed_fdm(
     model's). Raises RuntimeError when the model does not load."""
     import jsbsim
 
-    from .plant_jsbsim import _QuietStderr
+    from .jsbsim_plant import _QuietStderr
 
     root = str(root_dir) if root_dir is not None else str(Path(jsbsim.get_default_root_dir()))
     fdm = jsbsim.FGFDMExec(root)
@@ -153,11 +153,11 @@ def mission_radius_m(airspeed_m_s: float, bank_max_rad: float, margin_rad: float
     return airspeed_m_s**2 / (G * math.tan(usable))
 
 
-if __name__ == "__main__":  # python -m sim.airframe_trim c172p c172x c182 pa28
+if __name__ == "__main__":  # python -m sim.plant.airframe_trim c172p c172x c182 pa28
     import argparse
 
     ap = argparse.ArgumentParser(
-        prog="python -m sim.airframe_trim",
+        prog="python -m sim.plant.airframe_trim",
         description="JSBSim's own level-flight trim of stock jsbsim-package aircraft over "
         "25-60 m/s: the trimmable speed range, the minimum-power speed, and throttle / body "
         "pitch at each speed (what aircraft.trim_airspeed_m_s may be).",
@@ -169,7 +169,7 @@ if __name__ == "__main__":  # python -m sim.airframe_trim c172p c172x c182 pa28
         try:
             env = cruise_envelope(m, None, altitude_m=args.altitude_m)
         except RuntimeError as e:
-            ap.exit(2, f"python -m sim.airframe_trim: error: {e}\n")
+            ap.exit(2, f"python -m sim.plant.airframe_trim: error: {e}\n")
         mp = env.min_power
         row = " ".join(
             f"{t.airspeed_m_s:g}:{t.throttle:.3f}/{math.degrees(t.pitch_rad):.1f}deg"

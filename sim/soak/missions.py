@@ -18,9 +18,9 @@ from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
 from mpf_mavlink.mavlink.modes import is_offboard  # noqa: E402
 from mpf_mavlink.runs.verdict import EXIT_NOT_JUDGED  # noqa: E402
-from sim.relay import DOWN, UP, Blackout, Impairment  # noqa: E402
-from sim.soak_checks import Limits, _r, bridge_silence, max_gap, setpoint_violations
-from sim.soak_rig import (
+from sim.soak.checks import Limits, _r, bridge_silence, max_gap, setpoint_violations
+from sim.soak.relay import DOWN, UP, Blackout, Impairment  # noqa: E402
+from sim.soak.rig import (
     TARGET_SYSID,
     VEHICLE_COMPID,
     VEHICLE_SYSID,
@@ -104,7 +104,7 @@ def _tracking_window(tap: Tap) -> tuple[float | None, float | None]:
 
 def scenario_fuzz(o: Opts, n_frames: int | None = None, dur: float | None = None) -> Row:
     """>= 100,000 random and mutated frames into the bridge's link during a mission."""
-    from sim.mavfuzz import FrameFuzzer
+    from sim.soak.mavfuzz import FrameFuzzer
 
     row = Row("fuzz")
     n_frames = n_frames or (12_000 if o.quick else 100_000)

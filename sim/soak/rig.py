@@ -29,7 +29,7 @@ os.environ.setdefault("JSBSIM_DEBUG", "0")
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
 from mpf_mavlink.mavlink.modes import is_offboard, mode_name  # noqa: E402
-from sim.relay import DOWN, Blackout, Impairment, UdpRelay  # noqa: E402
+from sim.soak.relay import DOWN, Blackout, Impairment, UdpRelay  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = {
@@ -66,7 +66,7 @@ def mpf_mavlink_cmd() -> list[str]:
 def vehicle_main(argv: list[str]) -> int:
     """``python -m sim.soak vehicle``: a SimVehicle until SIGTERM, then a JSON report."""
     from mpf_mavlink.core.target import ConstantTurn, Stationary
-    from sim.vehicle import SimVehicle
+    from sim.vehicle.vehicle import SimVehicle
 
     ap = argparse.ArgumentParser(prog="python -m sim.soak vehicle")
     ap.add_argument("--flavour", choices=("px4", "ardupilot"), default="px4")

@@ -1,7 +1,7 @@
 """A simulated fixed-wing MAVLink vehicle (PX4 or ArduPlane flavour) for software-in-the-loop runs.
 
-:class:`SimVehicle` owns a plant (:class:`sim.plant_jsbsim.JSBSimPlant` by default, or the cheap
-:class:`sim.plant_kinematic_mav.KinematicMavPlant`), the simulated autopilot
+:class:`SimVehicle` owns a plant (:class:`sim.plant.jsbsim_plant.JSBSimPlant` by default, or the cheap
+:class:`sim.plant.kinematic_plant.KinematicMavPlant`), the simulated autopilot
 (:class:`sim.inner_loop.FixedWingAutopilot`) and ONE pymavlink connection (``udpin:`` - it listens
 and answers whoever wrote last, ``udpout:`` or ``tcpin:``). It is a separate MAVLink peer and does
 not use :mod:`mpf_mavlink.mavlink`.
@@ -65,8 +65,8 @@ import threading
 import time
 from typing import Any
 
-from sim.autopilot import AutopilotEmulation
-from sim.vehicle_base import (
+from sim.autopilot.emulation import AutopilotEmulation
+from sim.vehicle.base import (
     ARDUPLANE_MODES,
     OFFBOARD,
     PX4_AUTO_SUB,
@@ -236,7 +236,7 @@ class SimVehicle(AutopilotEmulation):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m sim.vehicle --flavour px4 --url udpin:127.0.0.1:14540 --duration 600``."""
+    """``python -m sim.vehicle.vehicle --flavour px4 --url udpin:127.0.0.1:14540 --duration 600``."""
     import argparse
 
     ap = argparse.ArgumentParser(description="Simulated fixed-wing MAVLink vehicle (SIL)")

@@ -1,8 +1,8 @@
 """A cheap kinematic fixed-wing plant with JSBSimPlant's interface (for the MAVLink SIL vehicle).
 
 Same ``step(aileron, elevator, rudder, throttle)`` / ``state() -> PlantState`` / ``dt`` / ``t`` /
-``origin`` / ``set_wind`` interface as :class:`sim.plant_jsbsim.JSBSimPlant`, so
-:class:`sim.vehicle.SimVehicle` and :class:`sim.inner_loop.FixedWingAutopilot` drive it unchanged.
+``origin`` / ``set_wind`` interface as :class:`sim.plant.jsbsim_plant.JSBSimPlant`, so
+:class:`sim.vehicle.vehicle.SimVehicle` and :class:`sim.inner_loop.FixedWingAutopilot` drive it unchanged.
 
 Model (SI, NED, FRD; alpha = beta = 0, so the body x axis is along the air-relative velocity):
 
@@ -18,7 +18,7 @@ Model (SI, NED, FRD; alpha = beta = 0, so the body x axis is along the air-relat
   holds altitude); ``theta = gamma``; ``r = cos(phi) cos(gamma) psi' - sin(phi) gamma'``;
 * position: ``p' = V [cos g cos psi, cos g sin psi, -sin g] + wind``.
 
-Geodetic output uses the exact WGS-84 inverse of :class:`sim.plant_jsbsim.LocalNED`
+Geodetic output uses the exact WGS-84 inverse of :class:`sim.plant.jsbsim_plant.LocalNED`
 (:func:`ned_to_geodetic_fast`, a few microseconds, no pymap3d).
 """
 
@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from sim.plant_jsbsim import _WGS84_A, _WGS84_E2, LocalNED, PlantState
+from sim.plant.jsbsim_plant import _WGS84_A, _WGS84_E2, LocalNED, PlantState
 
 G = 9.80665
 

@@ -30,7 +30,7 @@ No number here is tuned per aircraft. For a model, an airspeed and an altitude:
    positive rudder yaws right, the model yaws left) is an error naming the config key: the loop
    would be a positive feedback.
 
-JSBSim cannot trim a constant-speed propeller with its lever forward (sim.airframe_trim), so the
+JSBSim cannot trim a constant-speed propeller with its lever forward (sim.plant.airframe_trim), so the
 steps start from the lever-at-0 trim; the surfaces' effect does not depend on the propeller,
 and the trim throttle it gives is only the vehicle trim flight's first guess.
 
@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 
 from .airframe_trim import trimmed_fdm
-from .plant_jsbsim import DEFAULT_CONTROLS
+from .jsbsim_plant import DEFAULT_CONTROLS
 
 DT = 0.01  # s, the identification's FDM step (the SIL's physics rate is 100 Hz too)
 # channel -> (step of the rate loop's output, fitted body rate, fit window s, surface per output)
@@ -121,7 +121,7 @@ def fit_first_order(t: np.ndarray, y: np.ndarray, du: float, gain: float | None 
 def _trimmed(
     model: str, root: str | os.PathLike | None, airspeed_m_s: float, altitude_m: float
 ) -> Any:
-    """sim.airframe_trim.trimmed_fdm at the identification's step, the load error named."""
+    """sim.plant.airframe_trim.trimmed_fdm at the identification's step, the load error named."""
     try:
         return trimmed_fdm(model, root, airspeed_m_s, altitude_m, DT)
     except RuntimeError as e:
@@ -147,7 +147,7 @@ def identify(
     if probe is None:
         raise IdentError(
             f"aircraft.trim_airspeed_m_s: JSBSim finds no level-flight trim of {model} at "
-            f"{airspeed_m_s:g} m/s (python -m sim.airframe_trim {model} lists its range)"
+            f"{airspeed_m_s:g} m/s (python -m sim.plant.airframe_trim {model} lists its range)"
         )
     trim: dict[str, float] = {}
     for ch, (prop, sign) in ctl.items():
@@ -254,7 +254,7 @@ def describe(m: AirframeModel, gains: dict[str, float]) -> str:
     return "\n".join(lines)
 
 
-if __name__ == "__main__":  # python -m sim.airframe_ident c172p c172x c182 pa28 [--speed 45]
+if __name__ == "__main__":  # python -m sim.plant.airframe_ident c172p c172x c182 pa28 [--speed 45]
     import argparse
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

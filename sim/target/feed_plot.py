@@ -1,7 +1,7 @@
-"""Truth, raw reports and the estimate of a target feed: ``python -m sim.target_feed_plot``.
+"""Truth, raw reports and the estimate of a target feed: ``python -m sim.target.feed_plot``.
 
 The demo's boat (configs/default.yaml) reports itself through the SIL's feed
-(:mod:`sim.target_feed`: 1 Hz, 2 m and 0.3 m/s noise, 0.3 s latency, 10 % drop-outs, its clock
+(:mod:`sim.target.feed`: 1 Hz, 2 m and 0.3 m/s noise, 0.3 s latency, 10 % drop-outs, its clock
 100 s off ours, seed 7 unless told otherwise); the frames go through the bridge's decoders into
 its live target (the estimator, ``mode: filter``, with the acceptance's tuning
 :data:`mpf_mavlink.bench.target.ESTIMATOR`; ``--set`` overrides it) and, for comparison, the extrapolation of the
@@ -30,9 +30,9 @@ from mpf_mavlink.bridge.estimator import Estimator, EstimatorParams  # noqa: E40
 from mpf_mavlink.config.schema import load_config  # noqa: E402
 from mpf_mavlink.core.scenario import build_target  # noqa: E402
 from mpf_mavlink.mavlink.codec import decode  # noqa: E402
-from sim.plant_jsbsim import LocalNED  # noqa: E402
-from sim.plant_kinematic_mav import ned_to_geodetic_fast  # noqa: E402
-from sim.target_feed import TargetFeed  # noqa: E402
+from sim.plant.jsbsim_plant import LocalNED  # noqa: E402
+from sim.plant.kinematic_plant import ned_to_geodetic_fast  # noqa: E402
+from sim.target.feed import TargetFeed  # noqa: E402
 
 FRAME = 0.02
 
@@ -126,7 +126,7 @@ def plot(res: dict[str, Any], path: str, window: tuple[float, float]) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m sim.target_feed_plot", description=__doc__)
+    p = argparse.ArgumentParser(prog="python -m sim.target.feed_plot", description=__doc__)
     p.add_argument("--config", default="configs/default.yaml")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     p.add_argument("--duration", type=float, default=600.0)

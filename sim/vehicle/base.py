@@ -1,6 +1,6 @@
 """The simulated vehicle's state (:class:`VehicleBase`): construction from the plant, autopilot,
 link and rates; the boot and sim clocks; mode entry; the truth record. Tables of both autopilots'
-modes and stock stream rates. See :mod:`sim.vehicle` for the rules it honours."""
+modes and stock stream rates. See :mod:`sim.vehicle.vehicle` for the rules it honours."""
 
 from __future__ import annotations
 
@@ -20,9 +20,9 @@ os.environ.setdefault("JSBSIM_DEBUG", "0")
 from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
 
-from sim.clock import Clock, make_clock  # noqa: E402
 from sim.inner_loop import FixedWingAutopilot, fly_to_trim  # noqa: E402
-from sim.plant_kinematic_mav import KinematicMavPlant, ned_to_geodetic_fast  # noqa: E402
+from sim.plant.kinematic_plant import KinematicMavPlant, ned_to_geodetic_fast  # noqa: E402
+from sim.vehicle.clock import Clock, make_clock  # noqa: E402
 
 M = mavlink2
 G = 9.80665
@@ -275,7 +275,7 @@ class VehicleBase:
         # ArduPlane's guided fallback (MAV_CMD_DO_REPOSITION in GUIDED): centre, altitude,
         # radius and direction of the loiter it flies when the attitude setpoints stop
         self._guided_loiter: tuple[tuple[float, float], float, float, int] | None = None
-        # tunables a ground station sets through parameters (sim.gcs_services): the cruise
+        # tunables a ground station sets through parameters (sim.vehicle.gcs_services): the cruise
         # airspeed is the trim clamped to min..max (the firmware defaults widened to the trim)
         self.obl_rc_act = 0  # PX4 COM_OBL_RC_ACT: 0 = position (Hold), what the SIL flies
         self.airspeed_trim = self.cruise_airspeed
@@ -303,7 +303,7 @@ class VehicleBase:
                 **(plant_options or {}),
             )  # fmt: skip
             if plant == "jsbsim":
-                from sim.plant_jsbsim import JSBSimPlant
+                from sim.plant.jsbsim_plant import JSBSimPlant
 
                 plant = JSBSimPlant(**kw)
             elif plant == "kinematic":
@@ -419,13 +419,13 @@ class VehicleBase:
         )
         self._fp, self._ftp = _Packer(self._mav), _Packer(self._tmav)
         # parameters, missions, AUTOPILOT_VERSION, FTP: a component of its own
-        from sim.gcs_services import GcsServices
+        from sim.vehicle.gcs_services import GcsServices
 
         self.gcs = GcsServices(self)
-        # a realistic feed (sim/target_feed.py) instead of the exact state at target_rate_hz
+        # a realistic feed (sim/target/feed.py) instead of the exact state at target_rate_hz
         self.target_feed = None
         if target_feed is not None and target is not None:
-            from sim.target_feed import feed_from_options
+            from sim.target.feed import feed_from_options
 
             self.target_feed = feed_from_options(
                 target, self._tmav, ned_to_geodetic_fast, plant.origin, target_feed

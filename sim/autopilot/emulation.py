@@ -1,13 +1,12 @@
 """The simulated vehicle's autopilot emulation (PX4 commander / ArduPlane rules): offboard
 and GUIDED setpoints, their time-outs and failsafes, commands and their ACKs, mode changes.
-The rules are listed in :mod:`sim.vehicle`."""
+The rules are listed in :mod:`sim.vehicle.vehicle`."""
 
 from __future__ import annotations
 
 import math
 
-from sim.mav_endpoint import MavEndpoint
-from sim.vehicle_base import (
+from sim.vehicle.base import (
     _AP_DATA_STREAMS,
     _STREAM_IDS,
     ARDUPILOT_FORCE_DISARM,
@@ -29,6 +28,7 @@ from sim.vehicle_base import (
     px4_custom_mode,
     px4_decode_custom_mode,
 )
+from sim.vehicle.endpoint import MavEndpoint
 
 
 class AutopilotEmulation(MavEndpoint):

@@ -30,7 +30,7 @@ import jsbsim  # noqa: E402
 
 FT = 0.3048  # m per ft
 KTS_PER_MS = 1.0 / 0.514444
-DEFAULT_ROOT = Path(__file__).resolve().parent / "jsbsim_root"
+DEFAULT_ROOT = Path(__file__).resolve().parents[1] / "jsbsim_root"
 # Command channel -> (JSBSim property, sign). The FlightGear/JSBSim convention: aileron > 0 rolls
 # right, elevator > 0 is trailing edge down (nose down), rudder > 0 yaws right, throttle 0..1.
 DEFAULT_CONTROLS: dict[str, tuple[str, float]] = {
