@@ -52,6 +52,7 @@ from mpf_mavlink.runs.verdict import Verdict, assess
 from mpf_mavlink.runs.write import write_limits, write_run
 from sim.sil_progress import _Progress
 from sim.sil_truth import truth_table
+from sim.vehicle.config import VehicleConfig
 
 # custom modes in which the bridge commands the vehicle (PX4 OFFBOARD, ArduPlane GUIDED)
 _ENGAGED_MODES = ("OFFBOARD", "GUIDED")
@@ -187,8 +188,8 @@ def build_autopilot(cfg: Config) -> Any:
     return FixedWingAutopilot(gains, att, hold)
 
 
-def vehicle_options(cfg: Config, url: str, clock: str | None = None, **over: Any) -> dict[str, Any]:
-    """Keyword arguments of :class:`sim.vehicle.vehicle.SimVehicle` for a config (``over`` wins)."""
+def vehicle_config(cfg: Config, url: str, clock: str | None = None, **over: Any) -> VehicleConfig:
+    """The :class:`sim.vehicle.config.VehicleConfig` of a config's SIL vehicle (``over`` wins)."""
     sil, ac, k = cfg.section("sil"), cfg.section("aircraft"), cfg.kinematic
     pos = (
         sil.initial_position_ned_m
@@ -216,12 +217,14 @@ def vehicle_options(cfg: Config, url: str, clock: str | None = None, **over: Any
         flavour=sil.flavour, url=url, plant=sil.plant, clock=clock or sil.clock,
         position_ned=tuple(pos), heading=float(heading), airspeed=ac.trim_airspeed_m_s,
         lat0_deg=sil.home_lat_deg, lon0_deg=sil.home_lon_deg, alt0_m=sil.home_alt_m,
-        target=build_target(cfg.target), target_system=sil.target_system, target_rate_hz=sil.target_rate_hz, target_type=sil.target_type,
-        rates=rates, frame_period=sil.frame_period_s, physics_rate_hz=sil.physics_rate_hz,
-        telemetry_latency_s=sil.telemetry_latency_s, command_latency_s=sil.command_latency_s, wind_estimate_tau_s=sil.wind_estimate_tau_s,
-        answer_timeout_s=sil.answer_timeout_s, realtime_speed=sil.realtime_speed,
-        com_of_loss_t=sil.offboard_loss_timeout_s, guided_timeout=sil.guided_timeout_s,
-        loiter_radius=sil.loiter_radius_m, trim_seconds=sil.trim_s, initial_mode=sil.initial_mode, wind_ned=tuple(sil.wind_ned_m_s),
+        target=build_target(cfg.target), target_system=sil.target_system,
+        target_rate_hz=sil.target_rate_hz, target_type=sil.target_type, rates=rates,
+        frame_period=sil.frame_period_s, physics_rate_hz=sil.physics_rate_hz,
+        telemetry_latency_s=sil.telemetry_latency_s, command_latency_s=sil.command_latency_s,
+        wind_estimate_tau_s=sil.wind_estimate_tau_s, answer_timeout_s=sil.answer_timeout_s,
+        realtime_speed=sil.realtime_speed, com_of_loss_t=sil.offboard_loss_timeout_s,
+        guided_timeout=sil.guided_timeout_s, loiter_radius=sil.loiter_radius_m,
+        trim_seconds=sil.trim_s, initial_mode=sil.initial_mode, wind_ned=tuple(sil.wind_ned_m_s),
         turbulence=sil.turbulence, seed=sil.seed, gusts=[dataclasses.asdict(g) for g in sil.gusts],
         plant_options=plant_options, autopilot=build_autopilot(cfg), realtime_until_engaged=True,
         # the bridge's own scripted target counts from its mission origin: so must the world's
@@ -229,16 +232,15 @@ def vehicle_options(cfg: Config, url: str, clock: str | None = None, **over: Any
         target_feed=None if sil.target_feed is None else dataclasses.asdict(sil.target_feed),
     )  # fmt: skip
     opts.update(over)
-    return opts
+    return VehicleConfig(**opts)
 
 
 def build_vehicle(cfg: Config, url: str, clock: str | None = None, **over: Any) -> Any:
     """The config's simulated vehicle on ``url`` (trimmed, in the hold mode, ready to serve)."""
-    from sim.vehicle.vehicle import SimVehicle
+    from sim.vehicle.vehicle import SimVehicle, use_profile
 
-    opts = vehicle_options(cfg, url, clock, **over)
-    flavour = opts.pop("flavour")
-    v = SimVehicle(flavour, opts.pop("url"), **opts)
+    vc = vehicle_config(cfg, url, clock, **over)
+    v = SimVehicle(vc)
     sil = cfg.section("sil")
     prof_path = sil.profile_path(cfg.source)
     if prof_path is not None:
@@ -247,23 +249,22 @@ def build_vehicle(cfg: Config, url: str, clock: str | None = None, **over: Any) 
         prof = load_profile(prof_path)
         full = None
         if prof.thrust.full_thrust_airspeed_m_s is not None and sil.plant == "jsbsim":
-            full = full_thrust_throttle(cfg, opts, prof.thrust.full_thrust_airspeed_m_s)
-        v.use_profile(prof, seed=sil.seed, full_thrust_throttle=full)
+            full = full_thrust_throttle(cfg, vc, prof.thrust.full_thrust_airspeed_m_s)
+        use_profile(v, prof, seed=sil.seed, full_thrust_throttle=full)
     return v
 
 
-def full_thrust_throttle(cfg: Config, opts: dict[str, Any], airspeed: float) -> float:
+def full_thrust_throttle(cfg: Config, vc: VehicleConfig, airspeed: float) -> float:
     """The plant's level-flight throttle at ``airspeed`` (m/s), found by flying it (a trim flight
     of a second plant at the start altitude): what the profile's full offboard thrust maps to."""
     from sim.inner_loop import fly_to_trim
     from sim.plant.jsbsim_plant import JSBSimPlant
 
-    po = dict(opts.get("plant_options") or {})
-    alt = -float(opts["position_ned"][2])
+    alt = -float(vc.position_ned[2])
+    n_sub = max(1, math.ceil(vc.frame_period * vc.physics_rate_hz - 1e-9))
     plant = JSBSimPlant(
-        dt=opts.get("frame_period", 0.02) / max(1, math.ceil(opts.get("frame_period", 0.02) * opts.get("physics_rate_hz", 120.0) - 1e-9)),
-        lat0_deg=opts["lat0_deg"], lon0_deg=opts["lon0_deg"], alt0_m=opts["alt0_m"],
-        position_ned=(0.0, 0.0, -alt), heading=0.0, airspeed=airspeed, **po,
+        dt=vc.frame_period / n_sub, lat0_deg=vc.lat0_deg, lon0_deg=vc.lon0_deg, alt0_m=vc.alt0_m,
+        position_ned=(0.0, 0.0, -alt), heading=0.0, airspeed=airspeed, **vc.plant_options,
     )  # fmt: skip
     res = fly_to_trim(plant, build_autopilot(cfg), airspeed, alt, seconds=20.0, apply=False)
     return float(res.throttle)
@@ -323,7 +324,8 @@ def _vehicle_run(
         v.run(math.inf)
     finally:
         info = {
-            "mode_log": v.mode_log, "statustexts": v.statustexts, "dropped": v.dropped, "answers": v.answers,
+            "mode_log": v.modes.log, "statustexts": v.link.statustexts,
+            "dropped": v.autopilot.setpoints.dropped, "answers": v.lockstep.answers,
             "frames": v.clock.frames if hasattr(v.clock, "frames") else None,
             "answered_frames": getattr(v.clock, "answered_frames", None),
             "lockstep_timeouts": getattr(v.clock, "timeouts", None),

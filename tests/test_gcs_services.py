@@ -27,7 +27,9 @@ from tests.test_sim_vehicle import Gcs, ack_for, frames, free_port  # noqa: E402
 
 def make(flavour: str, **kw):
     port = free_port()
-    v = SimVehicle(flavour, f"udpin:127.0.0.1:{port}", plant="kinematic", trim_seconds=2.0, **kw)
+    v = SimVehicle.build(
+        flavour, f"udpin:127.0.0.1:{port}", plant="kinematic", trim_seconds=2.0, **kw
+    )
     g = Gcs(port)
     frames(v, g, 2)
     return v, g
@@ -100,10 +102,12 @@ def test_param_set_echoes_and_changes_the_run():
         frames(v, g, 2)
         echo = {p.param_id: p for p in g.of("PARAM_VALUE")}
         assert echo["NAV_LOITER_RAD"].param_value == 150.0  # the NaN left the 150 in force
-        assert v.loiter_radius == 150.0 and v._hold_radius == 150.0  # the hold flown takes it
-        assert v.com_of_loss_t == 2.5 and echo["COM_OF_LOSS_T"].param_value == 2.5
-        assert v.obl_rc_act == 2 and px4_int(echo["COM_OBL_RC_ACT"].param_value) == 2
-        assert v.cruise_airspeed == 20.0 and echo["FW_AIRSPD_TRIM"].param_value == 25.0
+        assert (
+            v.tun.loiter_radius == 150.0 and v.modes.hold_radius == 150.0
+        )  # the hold flown takes it
+        assert v.tun.com_of_loss_t == 2.5 and echo["COM_OF_LOSS_T"].param_value == 2.5
+        assert v.tun.obl_rc_act == 2 and px4_int(echo["COM_OBL_RC_ACT"].param_value) == 2
+        assert v.tun.cruise_airspeed == 20.0 and echo["FW_AIRSPD_TRIM"].param_value == 25.0
     finally:
         g.close()
         v.close()
@@ -118,7 +122,7 @@ def test_arduplane_param_set_wind_and_stream_rates():
         g.c.param_set_send("WP_LOITER_RAD", -5.0)  # out of range: refused, 80 echoed
         frames(v, g, 2)
         echo = {p.param_id: p for p in g.of("PARAM_VALUE")}
-        assert echo["WP_LOITER_RAD"].param_value == 80.0 and v.loiter_radius == 80.0
+        assert echo["WP_LOITER_RAD"].param_value == 80.0 and v.tun.loiter_radius == 80.0
         # 2 s of frames: the plant flies in the new wind, ATTITUDE arrives at 10 Hz
         n0 = len(g.of("ATTITUDE"))
         frames(v, g, 100)
@@ -162,7 +166,7 @@ def test_mission_list_upload_download_and_refusal(vg):
         g.msgs = [m for m in g.msgs if m.get_type() != "MISSION_REQUEST_INT"]
     (ack,) = g.of("MISSION_ACK")
     assert ack.type == M.MAV_MISSION_ACCEPTED
-    assert [it.x for it in v.gcs.items()] == [wp.wp(i).x for i in range(3)]
+    assert [it.x for it in v.gcs.missions.items()] == [wp.wp(i).x for i in range(3)]
 
     # a command the vehicle does not store: refused with UNSUPPORTED, the stored mission stays
     g.msgs.clear()
@@ -175,7 +179,7 @@ def test_mission_list_upload_download_and_refusal(vg):
         assert g.of("MISSION_ACK")[-1].type == M.MAV_MISSION_ACCEPTED
     else:
         assert g.of("MISSION_ACK")[-1].type == M.MAV_MISSION_UNSUPPORTED
-        assert len(v.gcs.items()) == 3
+        assert len(v.gcs.missions.items()) == 3
     # fence and rally: empty, and not taken
     g.msgs.clear()
     c.mav.mission_request_list_send(1, 1, M.MAV_MISSION_TYPE_FENCE)
@@ -211,7 +215,9 @@ def test_autopilot_version_unsupported_commands_and_ftp_nak(vg):
     tk = ack_for(g, M.MAV_CMD_NAV_TAKEOFF).result
     assert tk == (M.MAV_RESULT_ACCEPTED if v.px4 else M.MAV_RESULT_FAILED)
     if v.px4:
-        assert v.mode_name == "AUTO.TAKEOFF" and v._alt_sp == pytest.approx(600.0 - v.home_lla[2])
+        assert v.mode_name == "AUTO.TAKEOFF" and v.modes.alt_sp == pytest.approx(
+            600.0 - v.home_lla[2]
+        )
     (ftp,) = g.of("FILE_TRANSFER_PROTOCOL")
     p = bytes(ftp.payload)
     # seq + 1, NAK (129) of OpenFileRO (4), one data byte: FileNotFound (10)
@@ -233,10 +239,10 @@ def test_reposition_per_flavour(vg):
         return
     assert res == M.MAV_RESULT_ACCEPTED and v.mode_name == "AUTO.LOITER"
     # the hold is about the point (0.01 deg north = 1112 m), at its altitude, radius 120 m
-    assert v._center[0] == pytest.approx(1112.0, rel=0.01) and abs(v._center[1]) < 1.0
+    assert v.modes.center[0] == pytest.approx(1112.0, rel=0.01) and abs(v.modes.center[1]) < 1.0
     # (NED down at 1.1 km includes the earth's curvature, d^2 / 2R = 0.1 m)
-    assert v._alt_sp == pytest.approx(150.0 - 1112.0**2 / 2 / 6.371e6, abs=0.01)
-    assert v._hold_radius == 120.0
+    assert v.modes.alt_sp == pytest.approx(150.0 - 1112.0**2 / 2 / 6.371e6, abs=0.01)
+    assert v.modes.hold_radius == 120.0
 
 
 def test_gps_raw_int_and_sys_status(vg):

@@ -155,7 +155,7 @@ def test_c172x_from_the_jsbsim_package_loads_and_flies_trimmed(capfd):
 
 def test_gust_and_seeded_turbulence():
     kw = dict(plant="jsbsim", trim_seconds=2.0, physics_rate_hz=100.0)
-    v = SimVehicle("px4", f"udpin:127.0.0.1:{free_port()}", **kw,
+    v = SimVehicle.build("px4", f"udpin:127.0.0.1:{free_port()}", **kw,
                    gusts=[{"start_s": 0.5, "direction_ned": (0.0, 1.0, 0.0), "magnitude_m_s": 5.0,
                            "rise_s": 1.0, "hold_s": 1.0, "decay_s": 1.0}])  # fmt: skip
     for _ in range(250):
@@ -171,7 +171,9 @@ def test_gust_and_seeded_turbulence():
     assert we[i] == pytest.approx(2.5, abs=0.3)
 
     def turb(seed: int) -> np.ndarray:
-        v = SimVehicle("px4", f"udpin:127.0.0.1:{free_port()}", **kw, turbulence="light", seed=seed)
+        v = SimVehicle.build(
+            "px4", f"udpin:127.0.0.1:{free_port()}", **kw, turbulence="light", seed=seed
+        )
         for _ in range(100):
             v.step_once()
         w = v.truth()["wind_ned"]

@@ -153,7 +153,7 @@ def test_a_lockstep_vehicle_that_stops_its_attitude_is_lost_on_vehicle_time(tmp_
     # stops: lost after telemetry_timeout_s (0.5 s) of VEHICLE time, long before the wall bound
     def mute(v: Any) -> None:
         after_vehicle_s(v, 1.0)
-        v.rates = dataclasses.replace(v.rates, attitude=0.0)
+        v.telemetry.rates = dataclasses.replace(v.telemetry.rates, attitude=0.0)
 
     res = fly(tmp_path, "lockstep", ["mavlink.lockstep=true"], during=mute, track_s=60.0)
     assert res.exit_code == 4 and "telemetry lost" in res.exit_reason, res.exit_reason

@@ -77,7 +77,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     what = f"JSBSim {ac.model}" if sil.plant == "jsbsim" else "kinematic plant"
     print(
         f"simulated {sil.flavour} vehicle ({what}, {args.clock} clock) on {args.serve}: system 1, "
-        f"target as system {sil.target_system}; {v.mode_name}, {v.cruise_airspeed:g} m/s. Ctrl-C to stop.",
+        f"target as system {sil.target_system}; {v.mode_name}, {v.tun.cruise_airspeed:g} m/s. Ctrl-C to stop.",
         flush=True,
     )
 
@@ -85,21 +85,21 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
         raise KeyboardInterrupt
 
     prev = signal.signal(signal.SIGTERM, on_term)
-    seen = len(v.mode_changes)
+    seen = len(v.modes.changes)
     end = args.duration if args.duration is not None else math.inf
     try:
         while v.t < end:
             v.run(min(1.0, end - v.t))
-            for t, name in v.mode_changes[seen:]:
+            for t, name in v.modes.changes[seen:]:
                 print(f"t = {t:8.2f} s  mode {name}", flush=True)
-            seen = len(v.mode_changes)
+            seen = len(v.modes.changes)
     except KeyboardInterrupt:
         pass
     finally:
         signal.signal(signal.SIGTERM, prev)
         v.close()
     print(
-        f"stopped after {v.t:.1f} s of simulated flight ({v.rx_count} messages received)",
+        f"stopped after {v.t:.1f} s of simulated flight ({v.link.rx_count} messages received)",
         flush=True,
     )
     return 0

@@ -28,7 +28,7 @@ def _rate(**kw: Any) -> dict[str, Any]:
 @dataclass(frozen=True)
 class TelemetryConfig:
     """Stream rates of the simulated autopilot at power-on (Hz; 0 disables a stream; left out:
-    the stock rate of ``sil.flavour`` on a companion's link, ``sim.vehicle.vehicle.stock_rates``:
+    the stock rate of ``sil.flavour`` on a companion's link, ``sim.vehicle.config.stock_rates``:
     ArduPlane 1 Hz per stream group and no HOME_POSITION, PX4's onboard link fast). The bridge
     asks for the rates it needs (MAV_CMD_SET_MESSAGE_INTERVAL / REQUEST_DATA_STREAM), which the
     vehicle honours, as the real autopilots do."""

@@ -96,7 +96,7 @@ def vehicle_main(argv: list[str]) -> int:
         target = ConstantTurn((0.0, 0.0, -100.0), speed=3.0, heading=math.pi / 2)
 
     def make() -> SimVehicle:
-        v = SimVehicle(
+        v = SimVehicle.build(
             a.flavour, a.url, plant=a.plant, clock=a.clock, position_ned=tuple(a.position), heading=a.heading,
             airspeed=a.airspeed, target=target, target_system=TARGET_SYSID, com_of_loss_t=a.com_of_loss_t,
             guided_timeout=a.guided_timeout, record_truth=False,
@@ -105,9 +105,12 @@ def vehicle_main(argv: list[str]) -> int:
         if a.signing_key_hex:
             key = bytes.fromhex(a.signing_key_hex)
             # the vehicle signs what it (and its target system) sends and rejects unsigned input
-            v.conn.setup_signing(key, sign_outgoing=True, allow_unsigned_callback=None)
+            v.link.conn.setup_signing(key, sign_outgoing=True, allow_unsigned_callback=None)
             ticks = int((time.time() - 1420070400) * 100_000)
-            for mav in (v._mav, v._tmav):  # the encoders that write into the vehicle's send queue
+            for mav in (
+                v.link.mav,
+                v.link.tmav,
+            ):  # the encoders that write into the vehicle's send queue
                 mav.signing.secret_key, mav.signing.sign_outgoing = key, True
                 mav.signing.link_id, mav.signing.timestamp = 0, ticks
         return v
@@ -136,9 +139,9 @@ def vehicle_main(argv: list[str]) -> int:
         pass
     finally:
         report = {
-            "t": v.t, "time_boot_s": v.time_boot_s, "mode": v.mode_name, "mode_changes": v.mode_changes,
-            "statustexts": v.statustexts, "dropped": v.dropped, "setpoints_received": v.answers,
-            "rx_count": v.rx_count, "real_time_factor": v.real_time_factor,
+            "t": v.t, "time_boot_s": v.time_boot_s, "mode": v.mode_name, "mode_changes": v.modes.changes,
+            "statustexts": v.link.statustexts, "dropped": v.autopilot.setpoints.dropped, "setpoints_received": v.lockstep.answers,
+            "rx_count": v.link.rx_count, "real_time_factor": v.real_time_factor,
         }  # fmt: skip
         if a.report:
             Path(a.report).write_text(json.dumps(report, default=float))

@@ -114,7 +114,7 @@ class LockstepClock:
                 return
 
 
-def make_clock(clock: str | Clock = "lockstep", **kw) -> Clock:
+def make_clock(clock: str | Clock = "lockstep", **kw: float) -> Clock:
     """``"lockstep"`` (kw: answer_timeout_s), ``"realtime"`` (kw: speed) or a clock object."""
     if not isinstance(clock, str):
         return clock
@@ -123,3 +123,37 @@ def make_clock(clock: str | Clock = "lockstep", **kw) -> Clock:
     if clock == "realtime":
         return RealtimeClock(speed=kw.get("speed", 1.0))
     raise ValueError(f"unknown clock {clock!r}: use 'lockstep' or 'realtime'")
+
+
+class StepClock:
+    """The vehicle's own time: physics steps of ``dt`` since boot (the trim flight included).
+
+    ``boot_s`` is what MAVLink's time_boot_ms carries; ``t`` counts from when the vehicle was
+    ready (``mark_ready``), the time of the truth record and the scripted target."""
+
+    def __init__(self, dt: float, k: int = 0):
+        self.dt = float(dt)
+        self.k = int(k)  # physics steps since boot
+        self.k0 = self.k  # ... when the vehicle was ready
+
+    def mark_ready(self) -> None:
+        self.k0 = self.k
+
+    @property
+    def boot_s(self) -> float:
+        return self.k * self.dt
+
+    @property
+    def t(self) -> float:
+        return (self.k - self.k0) * self.dt
+
+    @property
+    def ready_boot_s(self) -> float:
+        """Boot time (s) of t = 0."""
+        return self.k0 * self.dt
+
+    def ms(self) -> int:
+        return int(round(self.k * self.dt * 1000.0))
+
+    def us(self) -> int:
+        return int(round(self.k * self.dt * 1e6))

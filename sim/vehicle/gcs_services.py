@@ -1,8 +1,8 @@
 """What a ground station asks of the simulated vehicle besides flying it: the parameter protocol,
 the mission protocol, AUTOPILOT_VERSION and MAVLink FTP, answered per flavour as PX4 v1.16 and
-ArduPlane 4.7 do. One object composed into the vehicle (:attr:`sim.vehicle.base.VehicleBase.gcs`),
-reached through a narrow interface: it reads the vehicle's state, sets its tunables through
-:class:`Param` setters, and sends through the vehicle's MAVLink encoder (the outgoing delay queue).
+ArduPlane 4.7 do. One object composed into the vehicle (``SimVehicle.gcs``), reached through a
+narrow interface: it reads the vehicle's state, sets its tunables through :class:`Param`
+setters, and sends through the vehicle's MAVLink encoder (the outgoing delay queue).
 
 Parameters (names and MAV_PARAM_TYPE of the real firmware; checked against ArduPlane 4.7-dev
 SITL's own PARAM_REQUEST_LIST, PX4 from its parameter reference):
@@ -24,8 +24,8 @@ Missions (mission_type 0): a plain mission (waypoints, loiters, take-off, land, 
 changes, DO_JUMP) is stored and served back; anything else is refused with MISSION_ACK
 MAV_MISSION_UNSUPPORTED (or UNSUPPORTED_FRAME / INVALID_SEQUENCE). ArduPlane counts its home as
 item 0 (a MISSION_REQUEST_LIST of a vehicle without a mission answers 1); PX4 answers 0. The
-simulated autopilot does not fly the mission: AUTO loiters (see :mod:`sim.vehicle.vehicle`). Fence and
-rally lists are empty and uploads of them are refused (UNSUPPORTED).
+simulated autopilot does not fly the mission: AUTO loiters (see :mod:`sim.vehicle.vehicle`).
+Fence and rally lists are empty and uploads of them are refused (UNSUPPORTED).
 
 MAVLink FTP: every request is answered with a NAK (FileNotFound for an open, UnknownCommand
 otherwise), so MAVProxy and QGroundControl fall back to PARAM_REQUEST_LIST at once; the
@@ -72,6 +72,11 @@ _GLOBAL_FRAMES = frozenset(
         M.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
     )
 )
+_TO_FLOAT_FRAME = {
+    M.MAV_FRAME_GLOBAL_INT: M.MAV_FRAME_GLOBAL,
+    M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: M.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    M.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT: M.MAV_FRAME_GLOBAL_TERRAIN_ALT,
+}
 _INT_TYPES = frozenset(
     (
         M.MAV_PARAM_TYPE_UINT8,
@@ -99,7 +104,7 @@ class Param:
 
 def _wind_from(v: Any) -> tuple[float, float]:
     """(speed m/s, direction it blows FROM, deg) of the plant's horizontal steady wind."""
-    wn, we = float(v._steady_wind[0]), float(v._steady_wind[1])
+    wn, we = float(v.steady_wind[0]), float(v.steady_wind[1])
     return math.hypot(wn, we), math.degrees(math.atan2(-we, -wn)) % 360.0
 
 
@@ -107,36 +112,38 @@ def _set_wind(v: Any, speed: float | None = None, from_deg: float | None = None)
     s, d = _wind_from(v)
     s = s if speed is None else speed
     d = d if from_deg is None else from_deg
-    wd = float(v._steady_wind[2])
+    wd = float(v.steady_wind[2])
     w = (-s * math.cos(math.radians(d)), -s * math.sin(math.radians(d)), wd)
-    v._steady_wind = w
+    v.steady_wind = w
     v.plant.set_wind(w)
 
 
 def _set_loiter_radius(v: Any, r: float) -> None:
-    v.loiter_radius = float(r)
-    v._hold_radius = float(r)  # the hold being flown takes it too (both autopilots do)
+    v.tun.loiter_radius = float(r)
+    v.modes.hold_radius = float(r)  # the hold being flown takes it too (both autopilots do)
 
 
 def _set_airspeed(v: Any, which: str, x: float) -> None:
-    setattr(v, which, float(x))
-    v.cruise_airspeed = min(max(v.airspeed_trim, v.airspeed_min), v.airspeed_max)
+    tun = v.tun
+    setattr(tun, which, float(x))
+    tun.cruise_airspeed = min(max(tun.airspeed_trim, tun.airspeed_min), tun.airspeed_max)
 
 
 def _rate_param(v: Any, name: str, streams: tuple[str, ...]) -> Param:
     def get() -> float:
-        return float(getattr(v.rates, streams[0]))
+        return float(getattr(v.telemetry.rates, streams[0]))
 
     def put(hz: float) -> None:
         for s in streams:
-            setattr(v.rates, s, float(hz))
-            v._next.pop(s, None)
+            v.telemetry.set_rate(s, float(hz))
 
     return Param(name, M.MAV_PARAM_TYPE_INT16, get, put, 0.0, 50.0)
 
 
 def vehicle_params(v: Any) -> list[Param]:
     """The parameter table of vehicle ``v`` for its flavour (order = PARAM_VALUE index)."""
+    tun = v.tun
+    R32, I16, I32 = M.MAV_PARAM_TYPE_REAL32, M.MAV_PARAM_TYPE_INT16, M.MAV_PARAM_TYPE_INT32
     speed = (
         (lambda x: _set_airspeed(v, "airspeed_trim", x)),
         (lambda x: _set_airspeed(v, "airspeed_min", x)),
@@ -144,37 +151,37 @@ def vehicle_params(v: Any) -> list[Param]:
     )
     if v.px4:
         return [
-            Param("COM_OBL_RC_ACT", M.MAV_PARAM_TYPE_INT32, lambda: v.obl_rc_act,
-                  lambda x: setattr(v, "obl_rc_act", int(x)), 0, 7),
-            Param("COM_OF_LOSS_T", M.MAV_PARAM_TYPE_REAL32, lambda: v.com_of_loss_t,
-                  lambda x: setattr(v, "com_of_loss_t", float(x)), 0.0, 60.0),
-            Param("FW_AIRSPD_MAX", M.MAV_PARAM_TYPE_REAL32, lambda: v.airspeed_max, speed[2], 0.5, 40.0),
-            Param("FW_AIRSPD_MIN", M.MAV_PARAM_TYPE_REAL32, lambda: v.airspeed_min, speed[1], 0.5, 40.0),
-            Param("FW_AIRSPD_TRIM", M.MAV_PARAM_TYPE_REAL32, lambda: v.airspeed_trim, speed[0], 0.5, 40.0),
-            Param("MAV_SYS_ID", M.MAV_PARAM_TYPE_INT32, lambda: float(v.sysid), None),
-            Param("NAV_LOITER_RAD", M.MAV_PARAM_TYPE_REAL32, lambda: v.loiter_radius,
+            Param("COM_OBL_RC_ACT", I32, lambda: tun.obl_rc_act,
+                  lambda x: setattr(v.tun, "obl_rc_act", int(x)), 0, 7),
+            Param("COM_OF_LOSS_T", R32, lambda: tun.com_of_loss_t,
+                  lambda x: setattr(v.tun, "com_of_loss_t", float(x)), 0.0, 60.0),
+            Param("FW_AIRSPD_MAX", R32, lambda: tun.airspeed_max, speed[2], 0.5, 40.0),
+            Param("FW_AIRSPD_MIN", R32, lambda: tun.airspeed_min, speed[1], 0.5, 40.0),
+            Param("FW_AIRSPD_TRIM", R32, lambda: tun.airspeed_trim, speed[0], 0.5, 40.0),
+            Param("MAV_SYS_ID", I32, lambda: float(v.sysid), None),
+            Param("NAV_LOITER_RAD", R32, lambda: tun.loiter_radius,
                   lambda x: _set_loiter_radius(v, x), 25.0, 1000.0),
         ]  # fmt: skip
     wind = [
-        Param("SIM_WIND_DIR", M.MAV_PARAM_TYPE_REAL32, lambda: _wind_from(v)[1],
+        Param("SIM_WIND_DIR", R32, lambda: _wind_from(v)[1],
               lambda x: _set_wind(v, from_deg=x), -360.0, 360.0),
-        Param("SIM_WIND_SPD", M.MAV_PARAM_TYPE_REAL32, lambda: _wind_from(v)[0],
+        Param("SIM_WIND_SPD", R32, lambda: _wind_from(v)[0],
               lambda x: _set_wind(v, speed=x), 0.0, 50.0),
     ]  # fmt: skip
     return [
-        Param("AIRSPEED_CRUISE", M.MAV_PARAM_TYPE_REAL32, lambda: v.airspeed_trim, speed[0], 5.0, 100.0),
-        Param("AIRSPEED_MAX", M.MAV_PARAM_TYPE_INT16, lambda: v.airspeed_max, speed[2], 5.0, 100.0),
-        Param("AIRSPEED_MIN", M.MAV_PARAM_TYPE_INT16, lambda: v.airspeed_min, speed[1], 5.0, 100.0),
-        Param("GUIDED_TIMEOUT", M.MAV_PARAM_TYPE_REAL32, lambda: v.guided_timeout,
-              lambda x: setattr(v, "guided_timeout", float(x)), 0.1, 5.0),
+        Param("AIRSPEED_CRUISE", R32, lambda: tun.airspeed_trim, speed[0], 5.0, 100.0),
+        Param("AIRSPEED_MAX", I16, lambda: tun.airspeed_max, speed[2], 5.0, 100.0),
+        Param("AIRSPEED_MIN", I16, lambda: tun.airspeed_min, speed[1], 5.0, 100.0),
+        Param("GUIDED_TIMEOUT", R32, lambda: tun.guided_timeout,
+              lambda x: setattr(v.tun, "guided_timeout", float(x)), 0.1, 5.0),
         _rate_param(v, "MAV1_EXT_STAT", ("sys_status", "gps_raw")),
         _rate_param(v, "MAV1_EXTRA1", ("attitude",)),
         _rate_param(v, "MAV1_EXTRA2", ("vfr_hud",)),
         _rate_param(v, "MAV1_EXTRA3", ("wind", "system_time")),
         _rate_param(v, "MAV1_POSITION", ("global_position", "local_position")),
         *(wind if hasattr(v.plant, "set_wind") else []),
-        Param("SYSID_THISMAV", M.MAV_PARAM_TYPE_INT16, lambda: float(v.sysid), None),
-        Param("WP_LOITER_RAD", M.MAV_PARAM_TYPE_INT16, lambda: v.loiter_radius,
+        Param("SYSID_THISMAV", I16, lambda: float(v.sysid), None),
+        Param("WP_LOITER_RAD", I16, lambda: tun.loiter_radius,
               lambda x: _set_loiter_radius(v, x), 1.0, 32767.0),
     ]  # fmt: skip
 
@@ -188,7 +195,7 @@ def _text(field: Any) -> str:
 class GcsServices:
     """Parameter, mission, version and FTP answers of one simulated vehicle (module docstring).
 
-    ``v`` is the vehicle (:class:`sim.vehicle.base.VehicleBase`): read for its flavour, ids,
+    ``v`` is the vehicle (:class:`sim.vehicle.vehicle.SimVehicle`): read for its flavour, ids,
     home, state and tunables, and its ``_mav`` encoder sends the answers."""
 
     HANDLES = frozenset(
@@ -202,8 +209,7 @@ class GcsServices:
         self.v = vehicle
         self.params = vehicle_params(vehicle)
         self._by_name = {p.name: i for i, p in enumerate(self.params)}
-        self.mission: list[Any] = []  # MISSION_ITEM_INT messages as uploaded (seq order)
-        self._upload: dict[str, Any] | None = None  # {"count", "items", "src"}
+        self.missions = MissionService(vehicle)
         self.counts: dict[str, int] = {}  # messages answered, by type (diagnostics and tests)
 
     # ------------------------------------------------------------------ dispatch
@@ -213,7 +219,8 @@ class GcsServices:
         if getattr(msg, "target_system", 0) not in (0, self.v.sysid):
             return
         self.counts[mt] = self.counts.get(mt, 0) + 1
-        getattr(self, "_on_" + mt.lower())(msg)
+        owner = self.missions if mt.startswith("MISSION_") else self
+        getattr(owner, "_on_" + mt.lower())(msg)
 
     # ------------------------------------------------------------------ parameters
     def value_of(self, name: str) -> float:
@@ -231,9 +238,10 @@ class GcsServices:
 
     def _send_param(self, i: int, index: int | None = None) -> None:
         p = self.params[i]
-        mav = self.v._mav
+        mav = self.v.link.mav
         mav.send(mav.param_value_encode(p.name.encode("ascii"), self._wire_value(p), p.ptype,
-                                        len(self.params), i if index is None else index))  # fmt: skip
+                                        len(self.params),
+                                        i if index is None else index))  # fmt: skip
 
     def _on_param_request_list(self, msg: Any) -> None:
         for i in range(len(self.params)):
@@ -270,9 +278,61 @@ class GcsServices:
         # the value now in force (unchanged when refused); ArduPilot echoes with index 65535
         self._send_param(i, None if self.v.px4 else 65535)
 
-    # ------------------------------------------------------------------ missions
+    # ------------------------------------------------------------------ version, FTP
+    def capabilities(self) -> int:
+        """MAV_PROTOCOL_CAPABILITY bits of what this vehicle answers (no FTP: it NAKs)."""
+        c = (M.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+             | M.MAV_PROTOCOL_CAPABILITY_MISSION_INT | M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+             | M.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+             | M.MAV_PROTOCOL_CAPABILITY_MAVLINK2)  # fmt: skip
+        if self.v.px4:
+            return c | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+        return c | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+
+    def send_autopilot_version(self) -> None:
+        """AUTOPILOT_VERSION: the firmware the flavour stands for (PX4 v1.16.0 official,
+        ArduPlane 4.7.0-dev), custom version "mpf-sil" so nobody mistakes it for the real one."""
+        if self.v.px4:
+            sw = (1 << 24) | (16 << 16) | (0 << 8) | M.FIRMWARE_VERSION_TYPE_OFFICIAL
+        else:
+            sw = (4 << 24) | (7 << 16) | (0 << 8) | M.FIRMWARE_VERSION_TYPE_DEV
+        custom = list(b"mpf-sil\x00")
+        mav = self.v.link.mav
+        mav.send(mav.autopilot_version_encode(self.capabilities(), sw, 0, 0, 0, custom, [0] * 8,
+                                              [0] * 8, 0, 0, 0))  # fmt: skip
+
+    def _on_file_transfer_protocol(self, msg: Any) -> None:
+        p = bytes(bytearray(msg.payload))
+        if len(p) < 12:
+            return
+        seq = (int.from_bytes(p[0:2], "little") + 1) & 0xFFFF
+        op = p[3]
+        err = (_FTP_ERR_FILE_NOT_FOUND if op in (_FTP_OPEN_RO, _FTP_OPEN_RW, _FTP_CREATE)
+               else _FTP_ERR_UNKNOWN_COMMAND)  # fmt: skip
+        hdr = seq.to_bytes(2, "little") + bytes((p[2], _FTP_NAK, 1, op, 0, 0)) + bytes(4)
+        payload = list(hdr + bytes((err,))) + [0] * (251 - 13)
+        mav = self.v.link.mav
+        mav.send(
+            mav.file_transfer_protocol_encode(
+                0, msg.get_srcSystem(), msg.get_srcComponent(), payload
+            )
+        )
+
+
+__all__ = ["GcsServices", "Param", "vehicle_params"]
+
+
+class MissionService:
+    """The mission protocol (mission_type 0) of one vehicle: upload, download, clear, set
+    current (module docstring). Fence and rally lists are empty and refused."""
+
+    def __init__(self, vehicle: Any) -> None:
+        self.v = vehicle
+        self.mission: list[Any] = []  # MISSION_ITEM_INT messages as uploaded (seq order)
+        self._upload: dict[str, Any] | None = None  # {"count", "items", "src"}
+
     def _ack(self, msg: Any, result: int, mission_type: int = 0) -> None:
-        mav = self.v._mav
+        mav = self.v.link.mav
         mav.send(mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), result,
                                         mission_type))  # fmt: skip
 
@@ -305,7 +365,7 @@ class GcsServices:
     def _on_mission_request_list(self, msg: Any) -> None:
         mt = int(getattr(msg, "mission_type", 0))
         n = len(self.items()) if mt == M.MAV_MISSION_TYPE_MISSION else 0
-        mav = self.v._mav
+        mav = self.v.link.mav
         mav.send(mav.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(), n, mt))
 
     def _send_item(self, msg: Any, as_int: bool) -> None:
@@ -315,16 +375,14 @@ class GcsServices:
         if not 0 <= seq < len(items):
             self._ack(msg, M.MAV_MISSION_INVALID_SEQUENCE, mt)
             return
-        it, mav = items[seq], self.v._mav
+        it, mav = items[seq], self.v.link.mav
         dst = (msg.get_srcSystem(), msg.get_srcComponent())
         common = (seq, it.frame, it.command, int(seq == 0 and self.v.px4), it.autocontinue,
                   it.param1, it.param2, it.param3, it.param4)  # fmt: skip
         if as_int:
             mav.send(mav.mission_item_int_encode(*dst, *common, it.x, it.y, it.z, mt))
         else:
-            frame = {M.MAV_FRAME_GLOBAL_INT: M.MAV_FRAME_GLOBAL,
-                     M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: M.MAV_FRAME_GLOBAL_RELATIVE_ALT,
-                     M.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT: M.MAV_FRAME_GLOBAL_TERRAIN_ALT}.get(it.frame, it.frame)  # fmt: skip
+            frame = _TO_FLOAT_FRAME.get(it.frame, it.frame)
             mav.send(mav.mission_item_encode(*dst, seq, frame, *common[2:], it.x * 1e-7,
                                              it.y * 1e-7, it.z, mt))  # fmt: skip
 
@@ -335,7 +393,7 @@ class GcsServices:
         self._send_item(msg, False)
 
     def _request(self, seq: int) -> None:
-        up, mav = self._upload, self.v._mav
+        up, mav = self._upload, self.v.link.mav
         assert up is not None
         mav.send(mav.mission_request_int_encode(*up["src"], seq, 0))
 
@@ -375,7 +433,8 @@ class GcsServices:
         it = M.MAVLink_mission_item_int_message(
             msg.target_system, msg.target_component, msg.seq, to_int.get(f, f), msg.command,
             msg.current, msg.autocontinue, msg.param1, msg.param2, msg.param3, msg.param4,
-            int(round(msg.x * 1e7)) if glob else int(msg.x), int(round(msg.y * 1e7)) if glob else int(msg.y),
+            int(round(msg.x * 1e7)) if glob else int(msg.x),
+            int(round(msg.y * 1e7)) if glob else int(msg.y),
             msg.z, getattr(msg, "mission_type", 0),
         )  # fmt: skip
         it._header = msg._header
@@ -420,7 +479,7 @@ class GcsServices:
 
     def _on_mission_set_current(self, msg: Any) -> None:
         n = len(self.items())
-        mav = self.v._mav
+        mav = self.v.link.mav
         if 0 <= msg.seq < n:
             mav.send(mav.mission_current_encode(int(msg.seq), n))
         else:
@@ -428,45 +487,3 @@ class GcsServices:
 
     def _on_mission_ack(self, msg: Any) -> None:
         """The end of a download: nothing to answer."""
-
-    # ------------------------------------------------------------------ version, FTP
-    def capabilities(self) -> int:
-        """MAV_PROTOCOL_CAPABILITY bits of what this vehicle answers (no FTP: it NAKs)."""
-        c = (M.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
-             | M.MAV_PROTOCOL_CAPABILITY_MISSION_INT | M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-             | M.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET | M.MAV_PROTOCOL_CAPABILITY_MAVLINK2)  # fmt: skip
-        if self.v.px4:
-            return c | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
-        return c | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
-
-    def send_autopilot_version(self) -> None:
-        """AUTOPILOT_VERSION: the firmware the flavour stands for (PX4 v1.16.0 official,
-        ArduPlane 4.7.0-dev), custom version "mpf-sil" so nobody mistakes it for the real one."""
-        if self.v.px4:
-            sw = (1 << 24) | (16 << 16) | (0 << 8) | M.FIRMWARE_VERSION_TYPE_OFFICIAL
-        else:
-            sw = (4 << 24) | (7 << 16) | (0 << 8) | M.FIRMWARE_VERSION_TYPE_DEV
-        custom = list(b"mpf-sil\x00")
-        mav = self.v._mav
-        mav.send(mav.autopilot_version_encode(self.capabilities(), sw, 0, 0, 0, custom, [0] * 8,
-                                              [0] * 8, 0, 0, 0))  # fmt: skip
-
-    def _on_file_transfer_protocol(self, msg: Any) -> None:
-        p = bytes(bytearray(msg.payload))
-        if len(p) < 12:
-            return
-        seq = (int.from_bytes(p[0:2], "little") + 1) & 0xFFFF
-        op = p[3]
-        err = (_FTP_ERR_FILE_NOT_FOUND if op in (_FTP_OPEN_RO, _FTP_OPEN_RW, _FTP_CREATE)
-               else _FTP_ERR_UNKNOWN_COMMAND)  # fmt: skip
-        hdr = seq.to_bytes(2, "little") + bytes((p[2], _FTP_NAK, 1, op, 0, 0)) + bytes(4)
-        payload = list(hdr + bytes((err,))) + [0] * (251 - 13)
-        mav = self.v._mav
-        mav.send(
-            mav.file_transfer_protocol_encode(
-                0, msg.get_srcSystem(), msg.get_srcComponent(), payload
-            )
-        )
-
-
-__all__ = ["GcsServices", "Param", "vehicle_params"]
