@@ -22,6 +22,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -167,10 +168,42 @@ class _QuietStderr:
             sys.stderr.write(self.text + "\n")
 
 
+def rotation_body_to_ned(phi: float, theta: float, psi: float) -> np.ndarray:
+    """R_B_N (3x3, body FRD -> NED) of ZYX Euler angles (rad)."""
+    cf, sf = math.cos(phi), math.sin(phi)
+    ct, st = math.cos(theta), math.sin(theta)
+    cp, sp = math.cos(psi), math.sin(psi)
+    return np.array(
+        (
+            ct * cp, sf * st * cp - cf * sp, cf * st * cp + sf * sp,
+            ct * sp, sf * st * sp + cf * cp, cf * st * sp - sf * cp,
+            -st, sf * ct, cf * ct,
+        )
+    ).reshape(3, 3)  # fmt: skip
+
+
+class _Snapshot(PlantState):
+    """A :class:`PlantState` built without the frozen dataclass's per-field
+    ``object.__setattr__`` (a third of a snapshot's cost, once per lockstep frame), whose
+    rotation matrix and accelerometer array are made when first read: the vehicle's frame
+    reads neither, tests and estimators do."""
+
+    def __getattr__(self, name: str) -> Any:
+        d = self.__dict__
+        if name == "R_B_N":
+            value: Any = rotation_body_to_ned(*d["_euler"])
+        elif name == "specific_force_body":
+            value = np.array(d["_f_body"])
+        else:
+            raise AttributeError(name)
+        d[name] = value
+        return value
+
+
 def make_state(**fields: object) -> PlantState:
-    """A PlantState without the frozen dataclass's per-field ``object.__setattr__`` (8 us of the
-    ~25 us a snapshot costs, once per lockstep frame); same fields, same type."""
-    st = object.__new__(PlantState)
+    """A snapshot from its fields; ``_euler`` (roll, pitch, yaw rad) and ``_f_body`` (m/s^2)
+    stand in for ``R_B_N`` and ``specific_force_body`` until those are read."""
+    st = object.__new__(_Snapshot)
     st.__dict__.update(fields)
     return st
 
@@ -469,16 +502,6 @@ class JSBSimPlant:
         phi = self._n_phi.get_double_value()
         th = self._n_theta.get_double_value()
         psi = self._n_psi.get_double_value()
-        cf, sf = math.cos(phi), math.sin(phi)
-        ct, st = math.cos(th), math.sin(th)
-        cp, sp = math.cos(psi), math.sin(psi)
-        R = np.array(
-            (
-                ct * cp, sf * st * cp - cf * sp, cf * st * cp + sf * sp,
-                ct * sp, sf * st * sp + cf * cp, cf * st * sp - sf * cp,
-                -st, sf * ct, cf * ct,
-            )
-        ).reshape(3, 3)  # fmt: skip
         return make_state(
             t=self._n_t.get_double_value(),
             position_ned=np.array(self.origin.ned(lat, lon, alt)),
@@ -489,7 +512,7 @@ class JSBSimPlant:
                     self._n_vd.get_double_value() * FT,
                 )
             ),
-            R_B_N=R,
+            _euler=(phi, th, psi),
             euler=(phi, th, psi if psi <= math.pi else psi - 2.0 * math.pi),
             pqr=np.array(
                 (
@@ -511,12 +534,10 @@ class JSBSimPlant:
             lat_deg=lat,
             lon_deg=lon,
             alt_m=alt,
-            specific_force_body=np.array(
-                (
-                    self._n_ax.get_double_value() * FT,
-                    self._n_ay.get_double_value() * FT,
-                    self._n_az.get_double_value() * FT,
-                )
+            _f_body=(
+                self._n_ax.get_double_value() * FT,
+                self._n_ay.get_double_value() * FT,
+                self._n_az.get_double_value() * FT,
             ),
             throttle=self._n_thrpos.get_double_value(),
         )

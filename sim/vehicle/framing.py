@@ -4,8 +4,8 @@ lockstep frame are most of the vehicle's CPU when framed by pymavlink (an object
 CRC byte loop and a header object per message).
 
 The bytes are pymavlink's own (the tests compare them): the message classes' wire layout and
-CRC extra are read from pymavlink; the CRC-16/MCRF4XX is CRCCCITT on bit-reversed bytes
-(``binascii.crc_hqx`` in C). Signed links and messages with array fields go through pymavlink."""
+CRC extra are read from pymavlink; the CRC-16/MCRF4XX is CRC-CCITT on bit-reversed bytes
+(``binascii.crc_hqx`` in C). Signed links and messages with text fields go through pymavlink."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ def crc_mcrf4xx(data: bytes) -> int:
 class _Layout:
     """One message class's wire layout: the field order and the CRC extra byte."""
 
-    __slots__ = ("msgid", "packer", "wire_order", "crc_extra")
+    __slots__ = ("msgid", "packer", "wire_order", "arrays", "in_order", "crc_extra")
 
     def __init__(self, cls: Any) -> None:
         self.msgid = int(cls.id)
@@ -39,7 +39,25 @@ class _Layout:
         for declared, wire in enumerate(cls.orders):
             inv[wire] = declared
         self.wire_order = tuple(inv)
+        # numeric array fields (wire position -> length; pymavlink lists them in wire order) are
+        # flattened into the struct's values
+        self.arrays = {w: k for w, k in enumerate(cls.array_lengths) if k}
+        # the arguments are the struct's values as they are (ATTITUDE, LOCAL_POSITION_NED, ...)
+        self.in_order = not self.arrays and self.wire_order == tuple(range(n))
         self.crc_extra = bytes((cls.crc_extra,))
+
+    def values(self, args: tuple[Any, ...]) -> list[Any]:
+        """The struct's values in wire order from the field values in declared order."""
+        if not self.arrays:
+            return [args[i] for i in self.wire_order]
+        out: list[Any] = []
+        for w, i in enumerate(self.wire_order):
+            k = self.arrays.get(w)
+            if k is None:
+                out.append(args[i])
+            else:
+                out.extend(args[i][:k])
+        return out
 
 
 class Framer:
@@ -51,8 +69,8 @@ class Framer:
         self._layouts: dict[Any, _Layout | None] = {}
 
     def _layout(self, cls: Any) -> _Layout | None:
-        if cls not in self._layouts:
-            self._layouts[cls] = None if max(cls.array_lengths, default=0) else _Layout(cls)
+        if cls not in self._layouts:  # text (char arrays) is pymavlink's to encode
+            self._layouts[cls] = None if "char" in cls.fieldtypes else _Layout(cls)
         return self._layouts[cls]
 
     def pack(self, cls: Any, *args: Any) -> bytes:
@@ -62,7 +80,7 @@ class Framer:
         if lay is None or mav.signing.sign_outgoing:
             buf = bytes(cls(*args).pack(mav))
         else:
-            payload = lay.packer.pack(*[args[i] for i in lay.wire_order])
+            payload = lay.packer.pack(*(args if lay.in_order else lay.values(args)))
             body = payload.rstrip(b"\0") or payload[:1]  # MAVLink 2 trims trailing zeros
             mid = lay.msgid
             head = _HEADER.pack(

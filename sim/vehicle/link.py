@@ -78,6 +78,9 @@ class Link:
         self.framer, self.target_framer = Framer(self.mav), Framer(self.tmav)
         self.statustexts: list[tuple[float, str]] = []  # (t, text) sent
         self.rx_count = 0
+        # True right after a read found nothing more waiting: the frame that follows the
+        # lockstep wait need not read again (a syscall that would find nothing)
+        self.drained = False
         self.on_epoch: Callable[[Any], None] = lambda msg: None
         self.on_new_peer: Callable[[], None] = lambda: None
 
@@ -173,6 +176,7 @@ class Link:
             except (ConnectionError, OSError):
                 return
             if msg is None:
+                self.drained = True
                 return
             self._on_msg(msg)
 
@@ -186,6 +190,7 @@ class Link:
             try:
                 data, addr = port.recvfrom(65535)
             except (BlockingIOError, InterruptedError):
+                self.drained = True
                 return
             except ConnectionRefusedError:  # ICMP for an earlier send (peer not up yet): cleared
                 continue

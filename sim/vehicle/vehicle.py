@@ -326,7 +326,10 @@ class SimVehicle:
         anyway). A velocity one frame old would not do: the bridge's wind frame is the direction
         of ground velocity - wind, and 20 ms more lag in it costs the demo's tight guidance gains
         a factor 2-3 in tracking error."""
-        self.link.poll(0.0)
+        link = self.link
+        if not link.drained:
+            link.poll(0.0)
+        link.drained = False
         self._apply_due()
         plant, ape, clock, dt = self.plant, self.autopilot, self.time, self.dt
         rates, fresh = self._rates, True  # fresh: self._st is the state now
