@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from mpf_mavlink.config import load_config
-from sim.plant.airframe_trim import G, fdm_trim, mission_radius_m
+from mpf_mavlink.constants import GRAVITY_M_S2 as G
+from sim.plant.airframe_trim import fdm_trim, mission_radius_m
 from sim.sil import trim_of
 
 ROOT = Path(__file__).resolve().parents[1]

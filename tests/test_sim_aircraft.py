@@ -15,6 +15,7 @@ import pytest
 os.environ.setdefault("JSBSIM_DEBUG", "0")
 jsbsim = pytest.importorskip("jsbsim")
 
+from mpf_mavlink.constants import FT_TO_M as FT  # noqa: E402
 from sim.inner_loop import (  # noqa: E402
     AttitudeController,
     FixedWingAutopilot,
@@ -22,7 +23,7 @@ from sim.inner_loop import (  # noqa: E402
     RateLoopGains,
     fly_to_trim,
 )
-from sim.plant.jsbsim_plant import DEFAULT_ROOT, FT, JSBSimPlant, LocalNED, PlantState  # noqa: E402
+from sim.plant.jsbsim_plant import DEFAULT_ROOT, JSBSimPlant, LocalNED, PlantState  # noqa: E402
 
 G = 9.80665
 V_TRIM = 16.0

@@ -27,8 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-FT = 0.3048
-G = 9.80665
+from mpf_mavlink.constants import FT_TO_M, GRAVITY_M_S2
 
 
 @dataclass(frozen=True)
@@ -70,8 +69,8 @@ def trimmed_fdm(
         raise RuntimeError(f"JSBSim could not load model {model!r} from {root}")
     if dt is not None:
         fdm.set_dt(dt)
-    fdm["ic/h-sl-ft"] = altitude_m / FT
-    fdm["ic/vt-fps"] = airspeed_m_s / FT
+    fdm["ic/h-sl-ft"] = altitude_m / FT_TO_M
+    fdm["ic/vt-fps"] = airspeed_m_s / FT_TO_M
     fdm["ic/gamma-deg"] = 0.0
     with _QuietStderr():
         fdm.run_ic()
@@ -150,7 +149,7 @@ def mission_radius_m(airspeed_m_s: float, bank_max_rad: float, margin_rad: float
     usable = bank_max_rad - margin_rad
     if not 0.0 < usable < math.pi / 2:
         raise ValueError(f"bank limit {bank_max_rad} less margin {margin_rad} leaves no turn")
-    return airspeed_m_s**2 / (G * math.tan(usable))
+    return airspeed_m_s**2 / (GRAVITY_M_S2 * math.tan(usable))
 
 
 if __name__ == "__main__":  # python -m sim.plant.airframe_trim c172p c172x c182 pa28

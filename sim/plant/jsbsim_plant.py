@@ -29,7 +29,8 @@ import numpy as np
 os.environ.setdefault("JSBSIM_DEBUG", "0")
 import jsbsim  # noqa: E402
 
-FT = 0.3048  # m per ft
+from mpf_mavlink.constants import FT_TO_M, WGS84_A_M, WGS84_F  # noqa: E402
+
 KTS_PER_MS = 1.0 / 0.514444
 DEFAULT_ROOT = Path(__file__).resolve().parents[1] / "jsbsim_root"
 # Command channel -> (JSBSim property, sign). The FlightGear/JSBSim convention: aileron > 0 rolls
@@ -42,9 +43,7 @@ DEFAULT_CONTROLS: dict[str, tuple[str, float]] = {
 }
 
 # WGS-84
-_WGS84_A = 6378137.0
-_WGS84_F = 1.0 / 298.257223563
-_WGS84_E2 = _WGS84_F * (2.0 - _WGS84_F)
+WGS84_E2 = WGS84_F * (2.0 - WGS84_F)  # first eccentricity squared
 
 # Milspec Dryden settings (spec): windspeed at 20 ft AGL (ft/s), severity index.
 TURBULENCE_LEVELS: dict[str, tuple[float, int]] = {
@@ -72,11 +71,11 @@ def jsbsim_turbulence_seed(seed: int) -> int:
 
 def _geodetic_to_ecef(lat_rad: float, lon_rad: float, h: float) -> tuple[float, float, float]:
     s, c = math.sin(lat_rad), math.cos(lat_rad)
-    n = _WGS84_A / math.sqrt(1.0 - _WGS84_E2 * s * s)
+    n = WGS84_A_M / math.sqrt(1.0 - WGS84_E2 * s * s)
     return (
         (n + h) * c * math.cos(lon_rad),
         (n + h) * c * math.sin(lon_rad),
-        (n * (1.0 - _WGS84_E2) + h) * s,
+        (n * (1.0 - WGS84_E2) + h) * s,
     )
 
 
@@ -226,6 +225,25 @@ class PlantConfig:
     throttle: float = 0.3  # initial throttle (propeller spun up to equilibrium at start)
 
 
+def _load(root_dir: Path, model: str, dt: float) -> tuple[Any, str]:
+    """A quiet FGFDMExec with ``model`` loaded from ``root_dir`` and its output directory (a
+    private temporary one, never the aircraft's: often the installed package's)."""
+    fdm = jsbsim.FGFDMExec(str(root_dir))
+    fdm.set_debug_level(0)
+    outdir = tempfile.mkdtemp(prefix="mpf-jsbsim-")
+    fdm.set_output_path(outdir)
+    quiet = _QuietStderr()
+    with quiet:
+        ok = fdm.load_model(model)
+        if ok:
+            fdm.disable_output()  # a plant writes no files
+    if not ok:
+        shutil.rmtree(outdir, ignore_errors=True)
+        raise RuntimeError(f"JSBSim could not load model {model!r} from {root_dir}: {quiet.text}")
+    fdm.set_dt(dt)
+    return fdm, outdir
+
+
 class JSBSimPlant:
     """A JSBSim aircraft driven by normalized commands; see module docstring."""
 
@@ -251,92 +269,33 @@ class JSBSimPlant:
         self.origin = LocalNED(lat0_deg, lon0_deg, alt0_m)
         self.ground_alt_m = alt0_m if ground_alt_m is None else float(ground_alt_m)
 
-        fdm = jsbsim.FGFDMExec(str(self.root_dir))
-        fdm.set_debug_level(0)
-        # Output files a model asks for go to a private directory removed after start-up, never
-        # into the aircraft's (often the installed package's) directory.
-        self._outdir = tempfile.mkdtemp(prefix="mpf-jsbsim-")
-        fdm.set_output_path(self._outdir)
-        quiet = _QuietStderr()
-        with quiet:
-            ok = fdm.load_model(model)
-            if ok:
-                fdm.disable_output()  # a plant writes no files
-        if not ok:
-            raise RuntimeError(
-                f"JSBSim could not load model {model!r} from {self.root_dir}: {quiet.text}"
-            )
-        fdm.set_dt(self.dt)
+        # output files a model asks for go to a private directory removed after start-up
+        fdm, self._outdir = _load(self.root_dir, model, self.dt)
         self.fdm = fdm
         pm = fdm.get_property_manager()
         self._pm = pm
-        self._nodes: dict[str, object] = {}
-
+        self._nodes: dict[str, Any] = {}
         # Initial conditions.
         from mpf_mavlink.core.frames import ned_to_geodetic  # pymap3d, once at start-up only
 
         lat, lon, alt = ned_to_geodetic(position_ned, lat0_deg, lon0_deg, alt0_m)
-        self._set("ic/lat-geod-deg", lat)
-        self._set("ic/long-gc-deg", lon)
-        self._set("ic/terrain-elevation-ft", self.ground_alt_m / FT)
-        self._set("ic/h-sl-ft", alt / FT)
-        self._set("ic/psi-true-deg", math.degrees(heading))
-        self._set("ic/vt-fps", airspeed / FT)
-        self._set("ic/alpha-deg", 0.0)
-        self._set("ic/beta-deg", 0.0)
-        self._set("ic/phi-deg", 0.0)
-        self._set("ic/theta-deg", 0.0)
-        for k, v in (extra or {}).items():
+        ic = {
+            "ic/lat-geod-deg": lat, "ic/long-gc-deg": lon,
+            "ic/terrain-elevation-ft": self.ground_alt_m / FT_TO_M, "ic/h-sl-ft": alt / FT_TO_M,
+            "ic/psi-true-deg": math.degrees(heading), "ic/vt-fps": airspeed / FT_TO_M,
+            "ic/alpha-deg": 0.0, "ic/beta-deg": 0.0, "ic/phi-deg": 0.0, "ic/theta-deg": 0.0,
+            **(extra or {}),
+        }  # fmt: skip
+        for k, v in ic.items():
             self._set(k, v)
         with _QuietStderr():  # run_ic opens the model's output files
             ok = fdm.run_ic()
         if not ok:
             raise RuntimeError("JSBSim run_ic() failed")
-        if pm.hasNode("fcs/mixture-cmd-norm"):
-            self._set("fcs/mixture-cmd-norm", 1.0)  # piston models (c172x) need fuel mixture
-        if pm.hasNode("fcs/advance-cmd-norm"):
-            # propeller lever full forward (maximum RPM), as flown in the pattern: a constant-speed
-            # propeller (pa28) left at 0 governs to its minimum RPM and the engine gives ~2/3 of its
-            # power (118 of 174 hp at full throttle, 45 m/s); fixed-pitch propellers ignore it
-            self._set("fcs/advance-cmd-norm", 1.0)
-        # Start the engines and spin the propeller up. FGPropeller divides the shaft power by
-        # max(omega, 1 rad/s), so throttling up a propeller at 0 RPM gives a huge one-step RPM and
-        # torque spike that wrecks a 3 kg aircraft (and JSBSim's own steady-state spin-up does not
-        # run here). So: one step at 1 % throttle (-> ~1500 RPM for the X8), 0.5 s at the initial
-        # throttle (propeller at its equilibrium RPM), then run_ic() again, which restores the
-        # initial position/attitude/velocity but keeps the propeller RPM; the clock is reset to 0.
         thr_prop, thr_sign = dict(DEFAULT_CONTROLS, **(controls or {}))["throttle"]
-        self._set("propulsion/set-running", -1)
-        self._set(thr_prop, 0.01 * thr_sign)
-        fdm.run()
-        self._set(thr_prop, throttle * thr_sign)
-        for _ in range(int(round(0.5 / self.dt))):
-            fdm.run()
-        with _QuietStderr():  # every run_ic re-opens the model's output files
-            ok = fdm.run_ic()
-        shutil.rmtree(self._outdir, ignore_errors=True)
-        if not ok:
-            raise RuntimeError("JSBSim run_ic() failed")
-        fdm.set_sim_time(0.0)
-
+        self._spin_up(thr_prop, thr_sign, throttle)
+        self._bind_controls(model, controls or {})
         n = self._node
-        # command nodes and signs: the autopilot's convention (aileron > 0 rolls right, elevator
-        # > 0 nose down, rudder > 0 yaws right, throttle 0..1) times the aircraft's sign
-        ctl = dict(DEFAULT_CONTROLS)
-        ctl.update(controls or {})
-        unknown = set(ctl) - set(DEFAULT_CONTROLS)
-        if unknown:
-            raise KeyError(
-                f"unknown control channel(s) {sorted(unknown)}: use {sorted(DEFAULT_CONTROLS)}"
-            )
-        for name, (prop, _) in ctl.items():
-            if not pm.hasNode(prop):
-                raise KeyError(f"JSBSim model {model!r} has no property {prop!r} ({name} command)")
-        self.controls = ctl
-        self._n_ail, self._s_ail = n(ctl["aileron"][0]), float(ctl["aileron"][1])
-        self._n_ele, self._s_ele = n(ctl["elevator"][0]), float(ctl["elevator"][1])
-        self._n_rud, self._s_rud = n(ctl["rudder"][0]), float(ctl["rudder"][1])
-        self._n_thr, self._s_thr = n(ctl["throttle"][0]), float(ctl["throttle"][1])
         # state nodes
         self._n_t = n("simulation/sim-time-sec")
         self._n_lat = n("position/lat-geod-deg")
@@ -362,10 +321,57 @@ class JSBSimPlant:
         self._n_az = n("accelerations/a-pilot-z-ft_sec2")
         self._n_thrpos = n("fcs/throttle-pos-norm")
         self._run = fdm.run
-        self._cmd = (0.0, 0.0, 0.0, 0.0)
+
+    def _bind_controls(self, model: str, controls: dict[str, tuple[str, float]]) -> None:
+        """Command nodes and signs: the autopilot's convention (aileron > 0 rolls right,
+        elevator > 0 nose down, rudder > 0 yaws right, throttle 0..1) times the aircraft's."""
+        n, pm = self._node, self._pm
+        ctl = dict(DEFAULT_CONTROLS)
+        ctl.update(controls)
+        unknown = set(ctl) - set(DEFAULT_CONTROLS)
+        if unknown:
+            raise KeyError(
+                f"unknown control channel(s) {sorted(unknown)}: use {sorted(DEFAULT_CONTROLS)}"
+            )
+        for name, (prop, _) in ctl.items():
+            if not pm.hasNode(prop):
+                raise KeyError(f"JSBSim model {model!r} has no property {prop!r} ({name} command)")
+        self.controls = ctl
+        self._n_ail, self._s_ail = n(ctl["aileron"][0]), float(ctl["aileron"][1])
+        self._n_ele, self._s_ele = n(ctl["elevator"][0]), float(ctl["elevator"][1])
+        self._n_rud, self._s_rud = n(ctl["rudder"][0]), float(ctl["rudder"][1])
+        self._n_thr, self._s_thr = n(ctl["throttle"][0]), float(ctl["throttle"][1])
+
+    def _spin_up(self, thr_prop: str, thr_sign: float, throttle: float) -> None:
+        """Start the engines and spin the propeller up. FGPropeller divides the shaft power by
+        max(omega, 1 rad/s), so throttling up a propeller at 0 RPM gives a huge one-step RPM and
+        torque spike that wrecks a 3 kg aircraft (and JSBSim's own steady-state spin-up does not
+        run here). So: one step at 1 % throttle (-> ~1500 RPM for the X8), 0.5 s at the initial
+        throttle (propeller at its equilibrium RPM), then run_ic() again, which restores the
+        initial position/attitude/velocity but keeps the propeller RPM; the clock is reset to 0."""
+        fdm, pm = self.fdm, self._pm
+        if pm.hasNode("fcs/mixture-cmd-norm"):
+            self._set("fcs/mixture-cmd-norm", 1.0)  # piston models (c172x) need fuel mixture
+        if pm.hasNode("fcs/advance-cmd-norm"):
+            # propeller lever full forward (maximum RPM), as flown in the pattern: a constant-speed
+            # propeller (pa28) left at 0 governs to its minimum RPM and the engine gives ~2/3 of
+            # its power (118 of 174 hp at full throttle, 45 m/s); fixed-pitch propellers ignore it
+            self._set("fcs/advance-cmd-norm", 1.0)
+        self._set("propulsion/set-running", -1)
+        self._set(thr_prop, 0.01 * thr_sign)
+        fdm.run()
+        self._set(thr_prop, throttle * thr_sign)
+        for _ in range(int(round(0.5 / self.dt))):
+            fdm.run()
+        with _QuietStderr():  # every run_ic re-opens the model's output files
+            ok = fdm.run_ic()
+        shutil.rmtree(self._outdir, ignore_errors=True)
+        if not ok:
+            raise RuntimeError("JSBSim run_ic() failed")
+        fdm.set_sim_time(0.0)
 
     # ------------------------------------------------------------------ helpers
-    def _node(self, name: str):
+    def _node(self, name: str) -> Any:
         node = self._nodes.get(name)
         if node is None:
             node = self._pm.get_node(name, True)
@@ -389,9 +395,9 @@ class JSBSimPlant:
     def set_wind(self, wind_ned_m_s) -> None:
         """Steady air-mass velocity (m/s, NED, the direction the air moves TOWARD)."""
         wn, we, wd = (float(v) for v in wind_ned_m_s)
-        self._set("atmosphere/wind-north-fps", wn / FT)
-        self._set("atmosphere/wind-east-fps", we / FT)
-        self._set("atmosphere/wind-down-fps", wd / FT)
+        self._set("atmosphere/wind-north-fps", wn / FT_TO_M)
+        self._set("atmosphere/wind-east-fps", we / FT_TO_M)
+        self._set("atmosphere/wind-down-fps", wd / FT_TO_M)
 
     def set_turbulence(self, kind: str = "none", seed: int = 0) -> None:
         """Milspec Dryden turbulence (JSBSim turb-type 3): none, light, moderate or severe.
@@ -442,7 +448,7 @@ class JSBSimPlant:
         self._set(p + "startup-duration-sec", rise_s)
         self._set(p + "steady-duration-sec", hold_s)
         self._set(p + "end-duration-sec", decay_s)
-        self._set(p + "magnitude-ft_sec", magnitude_m_s / FT)
+        self._set(p + "magnitude-ft_sec", magnitude_m_s / FT_TO_M)
         self._set(p + "frame", 3)  # gfLocal: NED
         self._set(p + "X-velocity-ft_sec", d[0] / nrm)
         self._set(p + "Y-velocity-ft_sec", d[1] / nrm)
@@ -475,7 +481,7 @@ class JSBSimPlant:
             self._n_p.get_double_value(),
             self._n_q.get_double_value(),
             self._n_r.get_double_value(),
-            self._n_vt.get_double_value() * FT,
+            self._n_vt.get_double_value() * FT_TO_M,
         )
 
     def attitude_rates(self) -> tuple[float, float, float, float, float, float]:
@@ -498,7 +504,7 @@ class JSBSimPlant:
         """Snapshot of the truth state (SI units, NED/FRD, rad)."""
         lat = self._n_lat.get_double_value()
         lon = self._n_lon.get_double_value()
-        alt = self._n_alt.get_double_value() * FT
+        alt = self._n_alt.get_double_value() * FT_TO_M
         phi = self._n_phi.get_double_value()
         th = self._n_theta.get_double_value()
         psi = self._n_psi.get_double_value()
@@ -507,9 +513,9 @@ class JSBSimPlant:
             position_ned=np.array(self.origin.ned(lat, lon, alt)),
             velocity_ned=np.array(
                 (
-                    self._n_vn.get_double_value() * FT,
-                    self._n_ve.get_double_value() * FT,
-                    self._n_vd.get_double_value() * FT,
+                    self._n_vn.get_double_value() * FT_TO_M,
+                    self._n_ve.get_double_value() * FT_TO_M,
+                    self._n_vd.get_double_value() * FT_TO_M,
                 )
             ),
             _euler=(phi, th, psi),
@@ -521,23 +527,23 @@ class JSBSimPlant:
                     self._n_r.get_double_value(),
                 )
             ),
-            airspeed=self._n_vt.get_double_value() * FT,
+            airspeed=self._n_vt.get_double_value() * FT_TO_M,
             alpha=self._n_alpha.get_double_value(),
             beta=self._n_beta.get_double_value(),
             wind_ned=np.array(
                 (
-                    self._n_wn.get_double_value() * FT,
-                    self._n_we.get_double_value() * FT,
-                    self._n_wd.get_double_value() * FT,
+                    self._n_wn.get_double_value() * FT_TO_M,
+                    self._n_we.get_double_value() * FT_TO_M,
+                    self._n_wd.get_double_value() * FT_TO_M,
                 )
             ),
             lat_deg=lat,
             lon_deg=lon,
             alt_m=alt,
             _f_body=(
-                self._n_ax.get_double_value() * FT,
-                self._n_ay.get_double_value() * FT,
-                self._n_az.get_double_value() * FT,
+                self._n_ax.get_double_value() * FT_TO_M,
+                self._n_ay.get_double_value() * FT_TO_M,
+                self._n_az.get_double_value() * FT_TO_M,
             ),
             throttle=self._n_thrpos.get_double_value(),
         )

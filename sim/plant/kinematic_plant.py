@@ -28,9 +28,8 @@ import math
 
 import numpy as np
 
-from sim.plant.jsbsim_plant import _WGS84_A, _WGS84_E2, LocalNED, PlantState
-
-G = 9.80665
+from mpf_mavlink.constants import GRAVITY_M_S2, WGS84_A_M
+from sim.plant.jsbsim_plant import WGS84_E2, LocalNED, PlantState
 
 
 def ned_to_geodetic_fast(
@@ -43,14 +42,14 @@ def ned_to_geodetic_fast(
     z = origin._o[2] + rn[2] * n + re[2] * e + rd[2] * d
     lon = math.atan2(y, x)
     p = math.hypot(x, y)
-    lat = math.atan2(z, p * (1.0 - _WGS84_E2))
+    lat = math.atan2(z, p * (1.0 - WGS84_E2))
     h = 0.0
     for _ in range(5):  # converges to < 1e-9 rad near the surface
         s = math.sin(lat)
-        N = _WGS84_A / math.sqrt(1.0 - _WGS84_E2 * s * s)
+        N = WGS84_A_M / math.sqrt(1.0 - WGS84_E2 * s * s)
         c = math.cos(lat)
-        h = p / c - N if abs(c) > 1e-12 else abs(z) - N * (1.0 - _WGS84_E2)
-        lat = math.atan2(z, p * (1.0 - _WGS84_E2 * N / (N + h)))
+        h = p / c - N if abs(c) > 1e-12 else abs(z) - N * (1.0 - WGS84_E2)
+        lat = math.atan2(z, p * (1.0 - WGS84_E2 * N / (N + h)))
     return math.degrees(lat), math.degrees(lon), h
 
 
@@ -116,7 +115,7 @@ class KinematicMavPlant:
         self._q += dt / self.pitch_tau * (-self.pitch_gain * e - self._q)
         phi = self._phi + self._p * dt
         phi = max(-1.4, min(1.4, phi))  # +-80 deg: keeps tan() finite
-        psid = G * math.tan(phi) / self.V
+        psid = GRAVITY_M_S2 * math.tan(phi) / self.V
         cf = max(math.cos(phi), 0.2)
         gamd = (self._q - math.sin(phi) * math.cos(self._gam) * psid) / cf
         gam = max(-1.0, min(1.0, self._gam + gamd * dt))
@@ -158,7 +157,7 @@ class KinematicMavPlant:
         lat, lon, alt = ned_to_geodetic_fast(self.origin, n, e, d)
         va = self._v_air()
         w = np.array(self._wind)
-        f_ned = np.array(self._acc) - np.array([0.0, 0.0, G])
+        f_ned = np.array(self._acc) - np.array([0.0, 0.0, GRAVITY_M_S2])
         return PlantState(
             t=self.t,
             position_ned=np.array(self._pos),
