@@ -5,17 +5,15 @@ does. Stream and version requests are the endpoint's (:mod:`sim.vehicle.telemetr
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, Protocol
+from collections.abc import Callable
+from typing import Any, Protocol
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from mpf_mavlink.core.frames import geodetic_to_ned
 from mpf_mavlink.mavlink.modes import ARDUPLANE_MODES, px4_decode_custom_mode
-from sim.autopilot.modes import GUIDED, PX4_AUTO, PX4_HOLD, PX4_LOITER, Modes
-from sim.autopilot.setpoints import finite
-
-if TYPE_CHECKING:
-    from sim.autopilot.emulation import AutopilotEmulation
+from sim.autopilot.modes import GUIDED, PX4_AUTO, PX4_HOLD, PX4_LOITER, Modes, Tunables
+from sim.autopilot.setpoints import Setpoints, finite
 
 ARDUPILOT_FORCE_DISARM = 21196.0  # param2 magic of MAV_CMD_COMPONENT_ARM_DISARM
 _GLOBAL = (M.MAV_FRAME_GLOBAL, M.MAV_FRAME_GLOBAL_INT)
@@ -31,7 +29,8 @@ class Outbox(Protocol):
 
 
 class Commands:
-    """COMMAND_* and SET_MODE of the flying kind, for one :class:`AutopilotEmulation`."""
+    """COMMAND_* and SET_MODE of the flying kind, answered for the emulation's ``modes`` and
+    ``setpoints``; ``state`` returns the plant's state now."""
 
     HANDLED = frozenset(
         (
@@ -42,35 +41,37 @@ class Commands:
         )
     )
 
-    def __init__(self, ap: AutopilotEmulation, out: Outbox) -> None:
-        self.ap = ap
+    def __init__(self, px4: bool, modes: Modes, setpoints: Setpoints, tunables: Tunables,
+                 home_lla: tuple[float, float, float], state: Callable[[], Any],
+                 out: Outbox) -> None:  # fmt: skip
+        self.px4 = px4
+        self.modes = modes
+        self.setpoints = setpoints
+        self.tun = tunables
+        self.home_lla = home_lla
+        self.state = state
         self.out = out
 
-    @property
-    def modes(self) -> Modes:
-        return self.ap.modes
+    def _offboard_ready(self) -> bool:
+        return self.setpoints.offboard_available(self.modes.clock.boot_s)
 
     def set_mode(self, msg: Any) -> None:
         """SET_MODE: PX4 acks it as DO_SET_MODE, ArduPilot with command 11 (the message id)."""
-        ap = self.ap
-        if ap.px4:
+        ready = self._offboard_ready
+        if self.px4:
             main, sub = px4_decode_custom_mode(msg.custom_mode)
-            res, _ = ap.modes.request(
-                float(msg.base_mode), float(main), float(sub), ap.offboard_ready
-            )
+            res, _ = self.modes.request(float(msg.base_mode), float(main), float(sub), ready)
             self.out.ack(M.MAV_CMD_DO_SET_MODE, res, msg)
         else:
-            res, _ = ap.modes.request(
-                float(msg.base_mode), float(msg.custom_mode), 0.0, ap.offboard_ready
-            )
+            res, _ = self.modes.request(float(msg.base_mode), float(msg.custom_mode), 0.0, ready)
             self.out.ack(M.MAVLINK_MSG_ID_SET_MODE, res, msg)
 
     def command(self, msg: Any) -> None:
         """One command of :attr:`HANDLED`, acknowledged."""
-        cmd, ack, px4 = msg.command, self.out.ack, self.ap.px4
+        cmd, ack, px4 = msg.command, self.out.ack, self.px4
         p1, p2 = msg.param1, msg.param2
         if cmd == M.MAV_CMD_DO_SET_MODE:
-            res, why = self.modes.request(p1, p2, msg.param3, self.ap.offboard_ready)
+            res, why = self.modes.request(p1, p2, msg.param3, self._offboard_ready)
             ack(cmd, res, msg, why)
         elif cmd == M.MAV_CMD_COMPONENT_ARM_DISARM:
             if p1 >= 0.5 or abs(p2 - ARDUPILOT_FORCE_DISARM) < 0.5:
@@ -99,7 +100,7 @@ class Commands:
             return M.MAV_RESULT_DENIED
         alt = float(msg.z)
         if msg.frame in _RELATIVE:
-            alt += self.ap.home_lla[2]
+            alt += self.home_lla[2]
         elif msg.frame not in _GLOBAL:
             return M.MAV_RESULT_DENIED
         modes = self.modes
@@ -107,11 +108,11 @@ class Commands:
             return M.MAV_RESULT_FAILED
         if modes.behaviour != GUIDED:
             modes.set_ardupilot(ARDUPLANE_MODES["GUIDED"])
-        n, e, d = (float(v) for v in geodetic_to_ned(lat, lon, alt, *self.ap.home_lla))
+        n, e, d = (float(v) for v in geodetic_to_ned(lat, lon, alt, *self.home_lla))
         ok = math.isfinite(msg.param3) and msg.param3 > 0
-        r = float(msg.param3) if ok else self.ap.tun.loiter_radius
+        r = float(msg.param3) if ok else self.tun.loiter_radius
         ccw = math.isfinite(msg.param4) and msg.param4 != 0.0
-        self.ap.guided_loiter = ((n, e), -d, r, -1 if ccw else 1)
+        self.setpoints.guided_loiter = ((n, e), -d, r, -1 if ccw else 1)
         return M.MAV_RESULT_ACCEPTED
 
     def _position(self, msg: Any) -> tuple[float, float, float] | None:
@@ -130,9 +131,9 @@ class Commands:
         if lat == 0 and lon == 0:
             return None
         if not math.isfinite(alt):
-            alt = float(self.ap.state().alt_m)
+            alt = float(self.state().alt_m)
         elif rel:
-            alt += self.ap.home_lla[2]
+            alt += self.home_lla[2]
         return lat, lon, alt
 
     def _px4_reposition(self, msg: Any) -> int:
@@ -147,7 +148,7 @@ class Commands:
             return M.MAV_RESULT_ACCEPTED
         if modes.custom_mode != PX4_HOLD:
             modes.set_px4(PX4_AUTO, PX4_LOITER)
-        n, e, d = (float(x) for x in geodetic_to_ned(*pos, *self.ap.home_lla))
+        n, e, d = (float(x) for x in geodetic_to_ned(*pos, *self.home_lla))
         modes.center, modes.alt_sp = (n, e), -d
         if math.isfinite(msg.param3) and msg.param3 > 0:
             modes.hold_radius = float(msg.param3)
@@ -157,10 +158,10 @@ class Commands:
         """MAV_CMD_NAV_TAKEOFF in the air. PX4 accepts it and enters AUTO.TAKEOFF (here: a loiter
         climbing to param7, AMSL, where it is). ArduPlane answers FAILED (4.7 SITL does so from
         the ground; its TAKEOFF is a mode, not this command)."""
-        if not self.ap.px4:
+        if not self.px4:
             return M.MAV_RESULT_FAILED
         alt = float(msg.param7) if msg.get_type() == "COMMAND_LONG" else float(msg.z)
         self.modes.set_px4(PX4_AUTO, 2)  # AUTO.TAKEOFF
         if math.isfinite(alt):
-            self.modes.alt_sp = alt - self.ap.home_lla[2]
+            self.modes.alt_sp = alt - self.home_lla[2]
         return M.MAV_RESULT_ACCEPTED

@@ -45,11 +45,8 @@ class AutopilotEmulation:
         self.home_lla = home_lla
         self.setpoints = Setpoints()
         self.modes = Modes(px4, tunables, clock, state, self._announce)
-        self.modes.on_guided = self._on_guided
-        self.commands = Commands(self, out)
-        # ArduPlane's guided fallback (MAV_CMD_DO_REPOSITION in GUIDED): centre, altitude,
-        # radius and direction of the loiter it flies when the attitude setpoints stop
-        self.guided_loiter: tuple[tuple[float, float], float, float, int] | None = None
+        self.modes.on_guided = self.setpoints.reset_forced
+        self.commands = Commands(px4, self.modes, self.setpoints, tunables, home_lla, state, out)
         # the firmware's identified behaviour (sim/autopilot_profile.py), None: the plain rules
         self.shaper: Any = None  # the attitude set-point as the firmware's loop would fly it
         self.wander: Any = None  # a slow roll-rate error of body-rate offboard
@@ -57,13 +54,6 @@ class AutopilotEmulation:
 
     def _announce(self, text: str) -> None:
         self.out.statustext(M.MAV_SEVERITY_INFO, text)
-
-    def _on_guided(self) -> None:
-        self.setpoints.reset_forced()
-        self.guided_loiter = None  # a new GUIDED entry loiters where it was entered
-
-    def offboard_ready(self) -> bool:
-        return self.setpoints.offboard_available(self.clock.boot_s)
 
     # ------------------------------------------------------------------ input
     def set_attitude_target(self, msg: Any, ms: int) -> None:
@@ -152,7 +142,7 @@ class AutopilotEmulation:
         dt, ap, t, modes, tun = self.ap_dt, self.ap, self.clock.boot_s, self.modes, self.tun
         fv, to = self.setpoints.forced, tun.guided_timeout
         fresh = [x is not None and t - x < to for x in self.setpoints.forced_t]
-        gl = self.guided_loiter
+        gl = self.setpoints.guided_loiter
         center, alt_sp, radius, direction = (
             gl
             if gl is not None

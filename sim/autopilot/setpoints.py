@@ -35,6 +35,9 @@ class Setpoints:
         # ArduPlane GUIDED: roll, pitch, yaw (rad), throttle (0..1) and when each was forced
         self.forced = [0.0, 0.0, 0.0, 0.0]
         self.forced_t: list[float | None] = [None, None, None, None]
+        # ArduPlane's guided fallback (MAV_CMD_DO_REPOSITION in GUIDED): centre, altitude,
+        # radius and direction of the loiter it flies when the attitude setpoints stop
+        self.guided_loiter: tuple[tuple[float, float], float, float, int] | None = None
         self.dropped: dict[str, int] = {
             "nonfinite": 0,
             "not_guided": 0,
@@ -53,8 +56,10 @@ class Setpoints:
         )
 
     def reset_forced(self) -> None:
-        """A new GUIDED entry: no axis is forced until a setpoint says so."""
+        """A new GUIDED entry: no axis is forced until a setpoint says so, and it loiters where
+        it was entered."""
         self.forced_t = [None, None, None, None]
+        self.guided_loiter = None
 
     def take_px4(self, msg: Any, t: float, ms: int, require_thrust: bool) -> None:
         """PX4 offboard: type_mask 128 = body rates + thrust (a rate-ignore bit gives a zero

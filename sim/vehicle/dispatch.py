@@ -4,42 +4,52 @@ parameters / missions / FTP to the ground-station services, TIMESYNC answered he
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from sim.vehicle.telemetry import STREAM_COMMANDS
+from sim.autopilot.emulation import AutopilotEmulation
+from sim.vehicle.clock import StepClock
+from sim.vehicle.gcs_services import GcsServices
+from sim.vehicle.link import Link
+from sim.vehicle.telemetry import STREAM_COMMANDS, Telemetry
 
-if TYPE_CHECKING:
-    from sim.vehicle.vehicle import SimVehicle
 
+class Dispatcher:
+    """Routes due messages for one vehicle (system ``sysid``)."""
 
-def dispatch(v: SimVehicle, msg: Any) -> None:
-    """One incoming message, due now, to the piece that answers it."""
-    mt, me = msg.get_type(), (0, v.sysid)
-    if mt == "SET_ATTITUDE_TARGET":
-        if msg.target_system not in me:
-            v.autopilot.setpoints.dropped["wrong_target"] += 1
-        else:
-            v.autopilot.set_attitude_target(msg, v.time.ms())
-    elif mt in ("COMMAND_LONG", "COMMAND_INT") and msg.target_system in me:
-        try:
-            if msg.command in STREAM_COMMANDS:
-                v.telemetry.command(msg)
+    def __init__(self, sysid: int, autopilot: AutopilotEmulation, telemetry: Telemetry,
+                 gcs: GcsServices, link: Link, clock: StepClock) -> None:  # fmt: skip
+        self.sysid = sysid
+        self.autopilot, self.telemetry, self.gcs = autopilot, telemetry, gcs
+        self.link, self.clock = link, clock
+
+    def __call__(self, msg: Any) -> None:
+        """One incoming message, due now, to the piece that answers it."""
+        mt, me = msg.get_type(), (0, self.sysid)
+        if mt == "SET_ATTITUDE_TARGET":
+            if msg.target_system not in me:
+                self.autopilot.setpoints.dropped["wrong_target"] += 1
             else:
-                v.autopilot.commands.command(msg)
-        except (ValueError, OverflowError):  # a NaN / huge where an integer belongs
-            v.link.ack(msg.command, M.MAV_RESULT_DENIED, msg)
-    elif mt == "SET_MODE" and msg.target_system in me:
-        v.autopilot.commands.set_mode(msg)
-    elif mt == "REQUEST_DATA_STREAM" and msg.target_system in me:
-        v.telemetry.request_data_stream(msg)
-    elif mt in v.gcs.HANDLES:
-        try:
-            v.gcs.handle(msg)
-        except (ValueError, OverflowError, TypeError):  # malformed: no answer, no crash
-            dropped = v.autopilot.setpoints.dropped
-            dropped["malformed"] = dropped.get("malformed", 0) + 1
-    elif mt == "TIMESYNC" and msg.tc1 == 0:
-        mav = v.link.mav
-        mav.send(mav.timesync_encode(int(v.time.boot_s * 1e9), msg.ts1))
+                self.autopilot.set_attitude_target(msg, self.clock.ms())
+        elif mt in ("COMMAND_LONG", "COMMAND_INT") and msg.target_system in me:
+            try:
+                if msg.command in STREAM_COMMANDS:
+                    self.telemetry.command(msg)
+                else:
+                    self.autopilot.commands.command(msg)
+            except (ValueError, OverflowError):  # a NaN / huge where an integer belongs
+                self.link.ack(msg.command, M.MAV_RESULT_DENIED, msg)
+        elif mt == "SET_MODE" and msg.target_system in me:
+            self.autopilot.commands.set_mode(msg)
+        elif mt == "REQUEST_DATA_STREAM" and msg.target_system in me:
+            self.telemetry.request_data_stream(msg)
+        elif mt in self.gcs.HANDLES:
+            try:
+                self.gcs.handle(msg)
+            except (ValueError, OverflowError, TypeError):  # malformed: no answer, no crash
+                dropped = self.autopilot.setpoints.dropped
+                dropped["malformed"] = dropped.get("malformed", 0) + 1
+        elif mt == "TIMESYNC" and msg.tc1 == 0:
+            mav = self.link.mav
+            mav.send(mav.timesync_encode(int(self.clock.boot_s * 1e9), msg.ts1))

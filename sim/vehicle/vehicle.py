@@ -82,7 +82,7 @@ from sim.inner_loop import FixedWingAutopilot, fly_to_trim  # noqa: E402
 from sim.plant.kinematic_plant import KinematicMavPlant  # noqa: E402
 from sim.vehicle.clock import StepClock, make_clock  # noqa: E402
 from sim.vehicle.config import VehicleConfig  # noqa: E402
-from sim.vehicle.dispatch import dispatch  # noqa: E402
+from sim.vehicle.dispatch import Dispatcher  # noqa: E402
 from sim.vehicle.gcs_services import GcsServices  # noqa: E402
 from sim.vehicle.link import Link  # noqa: E402
 from sim.vehicle.lockstep import Lockstep  # noqa: E402
@@ -203,6 +203,8 @@ class SimVehicle:
         self.telemetry.wind.tau_s = float(cfg.wind_estimate_tau_s)
         self.gcs = GcsServices(self)
         self.telemetry.on_version = self.gcs.send_autopilot_version
+        self.dispatch = Dispatcher(self.sysid, self.autopilot, self.telemetry, self.gcs,
+                                   self.link, self.time)  # fmt: skip
         self.link.on_new_peer = self._new_peer
         self.link.on_epoch = self._take_epoch
         self.target: TargetStream | None = None
@@ -309,9 +311,9 @@ class SimVehicle:
                 self.truth_record.forget_target()  # truth() recomputes them on the new clock
 
     def _apply_due(self) -> None:
-        q, t = self.link.incoming, self.time.boot_s + 1e-9
+        q, t, handle = self.link.incoming, self.time.boot_s + 1e-9, self.dispatch
         while q and q[0][0] <= t:
-            dispatch(self, q.popleft()[1])
+            handle(q.popleft()[1])
 
     # ------------------------------------------------------------------ stepping
     def step_once(self) -> float:
