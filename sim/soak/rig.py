@@ -31,7 +31,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 from mpf_mavlink.mavlink.modes import is_offboard, mode_name  # noqa: E402
 from sim.soak.relay import DOWN, Blackout, Impairment, UdpRelay  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]  # the repository (sim/soak/rig.py)
 CONFIGS = {
     "px4": ROOT / "configs" / "bridge_px4.yaml",
     "ardupilot": ROOT / "configs" / "bridge_arduplane.yaml",
