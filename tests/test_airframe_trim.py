@@ -26,7 +26,8 @@ def test_trim_of_a_stock_c172p_is_level_flight_whose_angle_of_attack_falls_with_
 
 
 def test_no_trim_beyond_the_airframes_power():
-    # 90 m/s (175 kt) is far above a c172's maximum level speed (~120 kt): no trim with throttle <= 1.
+    # 90 m/s (175 kt) is far above a c172's maximum level speed (~120 kt): no trim with
+    # throttle <= 1.
     assert not fdm_trim("c172p", None, 90.0).ok
 
 

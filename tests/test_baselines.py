@@ -21,7 +21,15 @@ from sim.plant.kinematic import ClosedLoop, initial_state
 V = 16.0
 
 
-def fly(law: str, path, target, p0, yaw0: float, T: float, dt: float = 0.05):  # noqa: ANN001, ANN201
+def fly(  # noqa: ANN201
+    law: str,
+    path,
+    target,
+    p0,
+    yaw0: float,
+    T: float,
+    dt: float = 0.05,  # noqa: ANN001
+):
     loop = ClosedLoop(path, target, Gains(), Extensions(), V, None, law=law)
     x = initial_state(path, target, np.asarray(p0, float), euler_to_matrix(0.0, 0.0, yaw0), None)
     ts, ps, ss = [], [], []

@@ -1,5 +1,6 @@
-"""What a ground station asks of the SIL vehicle (sim/vehicle/gcs_services.py), driven with pymavlink's own
-ground-station helpers (mavutil's parameter fetch, mavwp's mission loader) over loopback UDP.
+"""What a ground station asks of the SIL vehicle (sim/vehicle/gcs_services.py), driven with
+pymavlink's own ground-station helpers (mavutil's parameter fetch, mavwp's mission loader) over
+loopback UDP.
 
 The vehicle is stepped frame by frame in the test's thread (as tests/test_sim_vehicle.py does):
 loopback UDP delivers a datagram before ``sendto`` returns, so a request sent before a frame is
@@ -95,8 +96,13 @@ def test_param_set_echoes_and_changes_the_run():
         g.c.param_set_send("NAV_LOITER_RAD", 150.0)
         g.c.param_set_send("COM_OF_LOSS_T", 2.5)
         # integer parameters travel byte-wise on PX4 (MAVProxy and QGC encode them so)
-        g.c.mav.param_set_send(1, 1, b"COM_OBL_RC_ACT", struct.unpack("<f", struct.pack("<i", 2))[0],
-                               M.MAV_PARAM_TYPE_INT32)  # fmt: skip
+        g.c.mav.param_set_send(
+            1,
+            1,
+            b"COM_OBL_RC_ACT",
+            struct.unpack("<f", struct.pack("<i", 2))[0],
+            M.MAV_PARAM_TYPE_INT32,
+        )
         g.c.param_set_send("FW_AIRSPD_TRIM", 25.0)  # above FW_AIRSPD_MAX (20): clamped to it
         g.c.param_set_send("NAV_LOITER_RAD", float("nan"))  # not flyable: refused
         frames(v, g, 2)
@@ -154,9 +160,24 @@ def test_mission_list_upload_download_and_refusal(vg):
     wp = mavwp.MAVWPLoader(target_system=1, target_component=1)
     lat, lon, _ = v.home_lla
     for i in range(3):
-        wp.add(M.MAVLink_mission_item_int_message(
-            1, 1, i, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_WAYPOINT, 0, 1,
-            0, 0, 0, math.nan, int((lat + 0.001 * i) * 1e7), int(lon * 1e7), 100.0))  # fmt: skip
+        wp.add(
+            M.MAVLink_mission_item_int_message(
+                1,
+                1,
+                i,
+                M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                M.MAV_CMD_NAV_WAYPOINT,
+                0,
+                1,
+                0,
+                0,
+                0,
+                math.nan,
+                int((lat + 0.001 * i) * 1e7),
+                int(lon * 1e7),
+                100.0,
+            )
+        )
     c.waypoint_count_send(wp.count())
     for _ in range(10):
         frames(v, g, 1)
@@ -172,8 +193,9 @@ def test_mission_list_upload_download_and_refusal(vg):
     g.msgs.clear()
     c.waypoint_count_send(1)
     frames(v, g, 1)
-    c.mav.mission_item_int_send(1, 1, 0, M.MAV_FRAME_MISSION, M.MAV_CMD_DO_DIGICAM_CONTROL, 0, 1,
-                                0, 0, 0, 0, 0, 0, 0)  # fmt: skip
+    c.mav.mission_item_int_send(
+        1, 1, 0, M.MAV_FRAME_MISSION, M.MAV_CMD_DO_DIGICAM_CONTROL, 0, 1, 0, 0, 0, 0, 0, 0, 0
+    )
     frames(v, g, 2)
     if home:  # ArduPilot's item 0 is home whatever it says: the upload completes
         assert g.of("MISSION_ACK")[-1].type == M.MAV_MISSION_ACCEPTED
@@ -266,8 +288,9 @@ def test_malformed_requests_never_stop_the_vehicle(vg):
     c.mav.command_long_send(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, nan, 0, 0, 0, 0, 0, 0)
     c.mav.command_long_send(1, 1, M.MAV_CMD_DO_SET_MODE, 0, nan, nan, 0, 0, 0, 0, 0)
     c.mav.command_long_send(1, 1, M.MAV_CMD_DO_REPOSITION, 0, 0, nan, 0, 0, 47.4, 8.5, nan)
-    c.mav.param_set_send(1, 1, b"COM_OF_LOSS_T" if v.px4 else b"GUIDED_TIMEOUT", math.inf,
-                         M.MAV_PARAM_TYPE_REAL32)  # fmt: skip
+    c.mav.param_set_send(
+        1, 1, b"COM_OF_LOSS_T" if v.px4 else b"GUIDED_TIMEOUT", math.inf, M.MAV_PARAM_TYPE_REAL32
+    )
     c.mav.mission_item_send(1, 1, 0, M.MAV_FRAME_GLOBAL, 16, 0, 1, 0, 0, 0, 0, nan, nan, 100)
     c.mav.file_transfer_protocol_send(0, 1, 1, [255] * 251)
     frames(v, g, 3)

@@ -60,7 +60,8 @@ def test_gate_establishes_the_genuine_clock_whatever_comes_first():
     for k in range(50):  # genuine: boot 20 s, LOCAL_POSITION_NED and ATTITUDE, junk between
         res.append(g.check("LOCAL_POSITION_NED", 20.0 + 0.02 * k, 100.1 + 0.02 * k))
         res.append(g.check("ATTITUDE", 20.0 + 0.02 * k, 100.1 + 0.02 * k + 1e-4))
-        assert g.check("ATTITUDE", rnd.choice(forged), 100.1 + 0.02 * k + 2e-4) != None  # noqa: E711
+        forged_ok = g.check("ATTITUDE", rnd.choice(forged), 100.1 + 0.02 * k + 2e-4)
+        assert forged_ok != None  # noqa: E711
     assert res[:4] == SETTLE and res[4:] == [None] * 96
     assert g.resets == 0
 
@@ -292,16 +293,24 @@ def test_contradictions_are_config_errors(cfg, sets, culprit):
 
 
 def test_hold_modes_that_are_fine():
-    for sets in (["mavlink.hold_mode=LOITER"], ["mavlink.flavour=auto", "mavlink.hold_mode=LOITER"],
-                 ["mavlink.flavour=auto", "mavlink.hold_mode=RTL"], ["mavlink.hold_mode=AUTO.RTL"]):  # fmt: skip
+    for sets in (
+        ["mavlink.hold_mode=LOITER"],
+        ["mavlink.flavour=auto", "mavlink.hold_mode=LOITER"],
+        ["mavlink.flavour=auto", "mavlink.hold_mode=RTL"],
+        ["mavlink.hold_mode=AUTO.RTL"],
+    ):
         load_config(PX4_CFG, sets)  # LOITER and RTL exist in both autopilots' tables
 
 
 def test_cli_errors_are_one_line(capsys):
     from mpf_mavlink.cli.main import main
 
-    for argv, culprit in ((["run", str(PX4_CFG)], "--connect"), (["run", str(PX4_CFG), "--connect", "udpin:1.2.3.4:5", "--duration", "-1"], "--duration"),
-                          (["bogus"], "bogus"), (["check", str(PX4_CFG), "--nope"], "--nope")):  # fmt: skip
+    for argv, culprit in (
+        (["run", str(PX4_CFG)], "--connect"),
+        (["run", str(PX4_CFG), "--connect", "udpin:1.2.3.4:5", "--duration", "-1"], "--duration"),
+        (["bogus"], "bogus"),
+        (["check", str(PX4_CFG), "--nope"], "--nope"),
+    ):
         with pytest.raises(SystemExit) as ei:
             main(argv)
         err = capsys.readouterr().err.strip().splitlines()
@@ -326,8 +335,18 @@ def _row(name: str, tmp_path: Path, probe, **kw) -> soak.Row:
     return row
 
 
-FAST_BAD_INPUTS = ("config_not_yaml", "unknown_key", "non_finite", "set_unknown_key", "url_port_out_of_range", "connect_missing",
-                   "signing_key_wrong_length", "hold_mode_unknown", "thrust_limits_crossed", "target_sysid_is_vehicle")  # fmt: skip
+FAST_BAD_INPUTS = (
+    "config_not_yaml",
+    "unknown_key",
+    "non_finite",
+    "set_unknown_key",
+    "url_port_out_of_range",
+    "connect_missing",
+    "signing_key_wrong_length",
+    "hold_mode_unknown",
+    "thrust_limits_crossed",
+    "target_sysid_is_vehicle",
+)
 
 
 @pytest.mark.slow  # > 8 s of real-time flight: full suite (CI), not the quick loop

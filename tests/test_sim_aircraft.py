@@ -1,4 +1,5 @@
-"""The JSBSim SIL vehicle: the shipped Skywalker X8 model, JSBSimPlant and the simulated inner loops.
+"""The JSBSim SIL vehicle: the shipped Skywalker X8 model, JSBSimPlant and the simulated inner
+loops.
 
 Every threshold has its reason next to it. The whole file runs in a few seconds (JSBSim runs the
 X8 at ~50k steps/s).

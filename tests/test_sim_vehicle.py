@@ -1,4 +1,5 @@
-"""The simulated MAVLink vehicle (sim/vehicle/vehicle.py) seen from a pymavlink ground station on loopback UDP.
+"""The simulated MAVLink vehicle (sim/vehicle/vehicle.py) seen from a pymavlink ground station on
+loopback UDP.
 
 Most tests drive the vehicle frame by frame with ``step_once()`` in the test's own thread
 (loopback UDP delivers a datagram before ``sendto`` returns, so the exchange is deterministic);
@@ -23,7 +24,11 @@ pytest.importorskip("pymavlink")
 from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
-from mpf_mavlink.core.frames import euler_to_quat_wxyz, geodetic_to_ned, matrix_to_quat_wxyz  # noqa: E402
+from mpf_mavlink.core.frames import (  # noqa: E402
+    euler_to_quat_wxyz,
+    geodetic_to_ned,
+    matrix_to_quat_wxyz,
+)
 from mpf_mavlink.core.target import ConstantTurn  # noqa: E402
 from mpf_mavlink.mavlink.modes import px4_custom_mode  # noqa: E402
 from sim.plant.kinematic_plant import KinematicMavPlant, ned_to_geodetic_fast  # noqa: E402
@@ -49,9 +54,11 @@ class Gcs:
 
     def __init__(self, port: int, sysid: int = 255, compid: int = 190):
         self.c = mavutil.mavlink_connection(
-            f"udpout:127.0.0.1:{port}", source_system=sysid, source_component=compid,
+            f"udpout:127.0.0.1:{port}",
+            source_system=sysid,
+            source_component=compid,
             dialect="ardupilotmega",
-        )  # fmt: skip
+        )
         self.msgs: list = []
         self.hello()
 
@@ -163,8 +170,9 @@ def test_heartbeat_identity_and_mode(flavour, autopilot, custom_mode, mode_strin
 
 def test_starts_trimmed_near_requested_point_and_loiters():
     port = free_port()
-    with SimVehicle.build("px4", f"udpin:127.0.0.1:{port}", position_ned=(200.0, -100.0, -120.0),
-                    heading=math.pi / 2) as v:  # fmt: skip
+    with SimVehicle.build(
+        "px4", f"udpin:127.0.0.1:{port}", position_ned=(200.0, -100.0, -120.0), heading=math.pi / 2
+    ) as v:
         tr = v.truth()
         # the trim flight starts behind the point (V * trim_seconds) and ends within a few metres
         assert np.linalg.norm(tr["position_ned"][0] - [200.0, -100.0, -120.0]) < 5.0
@@ -382,12 +390,18 @@ def test_arduplane_stock_rates_and_both_rate_requests(ardu):
     assert 1 <= len(g.of("ATTITUDE")) <= 3 and 1 <= len(g.of("VFR_HUD")) <= 3
     assert len(g.of("HOME_POSITION")) == 0
     g.msgs.clear()
-    g.c.mav.command_long_send(1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_VFR_HUD, 100_000, 0, 0, 0, 0, 0)  # fmt: skip
+    g.c.mav.command_long_send(
+        1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_VFR_HUD, 100_000, 0, 0, 0, 0, 0
+    )
     g.c.mav.request_data_stream_send(1, 1, 10, 25, 1)  # EXTRA1 at 25 Hz
     g.c.mav.request_data_stream_send(1, 1, 6, 50, 1)  # POSITION at 50 Hz: capped at 40
     # 50 Hz by interval is refused: ArduPilot caps intervals at 1.25 loop periods (25 ms)
-    g.c.mav.command_long_send(1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_ATTITUDE, 20_000, 0, 0, 0, 0, 0)  # fmt: skip
-    g.c.mav.command_long_send(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0)  # fmt: skip
+    g.c.mav.command_long_send(
+        1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_ATTITUDE, 20_000, 0, 0, 0, 0, 0
+    )
+    g.c.mav.command_long_send(
+        1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0
+    )
     frames(v, g, 3)
     assert len(g.of("HOME_POSITION")) == 1  # sent once, on request
     denied = [a for a in g.of("COMMAND_ACK") if a.command == M.MAV_CMD_SET_MESSAGE_INTERVAL]
@@ -562,8 +576,13 @@ def test_lockstep_awaits_position_frames_once_the_bridge_answers_them():
     setpoint comes stamped with such a frame's time_boot_ms (a multi-rate bridge,
     mavlink.position_instants), those frames are awaited too, each on its own stamp."""
     port = free_port()
-    v = SimVehicle.build("px4", f"udpin:127.0.0.1:{port}", plant="kinematic", clock="lockstep",
-                   rates={"attitude": 10.0, "local_position": 50.0})  # fmt: skip
+    v = SimVehicle.build(
+        "px4",
+        f"udpin:127.0.0.1:{port}",
+        plant="kinematic",
+        clock="lockstep",
+        rates={"attitude": 10.0, "local_position": 50.0},
+    )
     g = Gcs(port)
 
     def frame() -> tuple[list[int], list[int]]:

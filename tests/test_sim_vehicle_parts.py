@@ -34,18 +34,48 @@ class _Sink:
 FRAMES = [
     (M.MAVLink_attitude_message, (1234, 0.1, -0.2, 3.0, 0.01, 0.0, -0.5)),
     (M.MAVLink_local_position_ned_message, (1234, 1.5, -2.0, -100.0, 16.0, 0.5, 0.0)),
-    (M.MAVLink_global_position_int_message, (20, 473977420, 85455940, 588000, 100000, 1600, -5, 0, 9000)),
+    (
+        M.MAVLink_global_position_int_message,
+        (20, 473977420, 85455940, 588000, 100000, 1600, -5, 0, 9000),
+    ),
     (M.MAVLink_heartbeat_message, (1, 12, 217, 0x03040000, 4, 3)),
-    (M.MAVLink_follow_target_message, (1234, 15, 473977420, 85455940, 500.0, [1.0, 2.0, 0.0],
-                                       [0.1, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.1],
-                                       [0.0, 0.0, 0.0], 7)),
-    (M.MAVLink_home_position_message, (473977420, 85455940, 488000, 0.0, 0.0, 0.0,
-                                       [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 123456789)),
+    (
+        M.MAVLink_follow_target_message,
+        (
+            1234,
+            15,
+            473977420,
+            85455940,
+            500.0,
+            [1.0, 2.0, 0.0],
+            [0.1, 0.0, 0.0],
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 0.0, 0.1],
+            [0.0, 0.0, 0.0],
+            7,
+        ),
+    ),
+    (
+        M.MAVLink_home_position_message,
+        (
+            473977420,
+            85455940,
+            488000,
+            0.0,
+            0.0,
+            0.0,
+            [1.0, 0.0, 0.0, 0.0],
+            0.0,
+            0.0,
+            0.0,
+            123456789,
+        ),
+    ),
     (M.MAVLink_attitude_target_message, (1000, 128, [1.0, 0.5, 0.0, 0.0], 0.1, 0.2, 0.3, 0.5)),
     (M.MAVLink_sys_status_message, (1, 1, 1, 100, 12600, 500, 90, 0, 0, 0, 0, 0, 0, 0, 0, 0)),
     (M.MAVLink_statustext_message, (6, b"pymavlink encodes text", 0, 0)),
     (M.MAVLink_vfr_hud_message, (0.0, 0.0, 0, 0, 0.0, 0.0)),  # all zero: one payload byte kept
-]  # fmt: skip
+]
 
 
 @pytest.mark.parametrize("cls,args", FRAMES, ids=[c.msgname for c, _ in FRAMES])
@@ -73,8 +103,9 @@ def test_crc_is_mavlinks_mcrf4xx():
 
 def test_setpoint_decoder_reads_what_pymavlink_reads():
     mav = M.MAVLink(_Sink(), 255, 190)
-    msg = M.MAVLink_set_attitude_target_message(5000, 1, 1, 128, [1.0, 0.0, 0.0, 0.0], 0.1, -0.2,
-                                                0.0, 0.0)  # fmt: skip
+    msg = M.MAVLink_set_attitude_target_message(
+        5000, 1, 1, 128, [1.0, 0.0, 0.0, 0.0], 0.1, -0.2, 0.0, 0.0
+    )
     buf = bytes(msg.pack(mav))  # trailing zeros (thrust 0) trimmed by MAVLink 2
     ours = decode_set_attitude_target(buf)
     ref = M.MAVLink(None, 1, 1).parse_buffer(buf)[0]
@@ -88,8 +119,9 @@ def test_setpoint_decoder_reads_what_pymavlink_reads():
 def test_setpoint_decoder_leaves_the_rest_to_pymavlink():
     """A bad CRC, a signed frame, another message, two messages or a fragment: None."""
     mav = M.MAVLink(_Sink(), 255, 190)
-    sat = bytes(M.MAVLink_set_attitude_target_message(1, 1, 1, 128, [1, 0, 0, 0], 0, 0, 0, 0.5)
-                .pack(mav))  # fmt: skip
+    sat = bytes(
+        M.MAVLink_set_attitude_target_message(1, 1, 1, 128, [1, 0, 0, 0], 0, 0, 0, 0.5).pack(mav)
+    )
     other = bytes(M.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(mav))
     assert decode_set_attitude_target(sat[:-1] + bytes([sat[-1] ^ 1])) is None
     signed = bytearray(sat)
@@ -139,8 +171,14 @@ def test_lockstep_unstamped_peer_and_multirate_positions():
 
 # ------------------------------------------------------------------------------ setpoints
 def _sat(mask: int, q=(1.0, 0.0, 0.0, 0.0), rates=(0.1, 0.2, 0.3), thrust: float = 0.6):
-    return SimpleNamespace(type_mask=mask, q=list(q), body_roll_rate=rates[0],
-                           body_pitch_rate=rates[1], body_yaw_rate=rates[2], thrust=thrust)  # fmt: skip
+    return SimpleNamespace(
+        type_mask=mask,
+        q=list(q),
+        body_roll_rate=rates[0],
+        body_pitch_rate=rates[1],
+        body_yaw_rate=rates[2],
+        thrust=thrust,
+    )
 
 
 def test_px4_offboard_setpoints_and_their_stream_rule():
@@ -178,8 +216,9 @@ def test_ardupilot_guided_forced_axes():
 # ------------------------------------------------------------------------------ modes
 def _modes(px4: bool) -> tuple[Modes, list[str]]:
     said: list[str] = []
-    st = SimpleNamespace(position_ned=np.array([10.0, 20.0, -100.0]),
-                         velocity_ned=np.array([0.0, 16.0, 0.0]))  # fmt: skip
+    st = SimpleNamespace(
+        position_ned=np.array([10.0, 20.0, -100.0]), velocity_ned=np.array([0.0, 16.0, 0.0])
+    )
     clock = SimpleNamespace(boot_s=30.0, t=18.0)
     return Modes(px4, Tunables(loiter_radius=80.0), clock, lambda: st, said.append), said
 
@@ -207,8 +246,12 @@ def test_ardupilot_modes_and_base_mode():
     modes.hold(announce=False)
     assert modes.custom_mode == 12 and modes.name == "LOITER"
     flags = modes.base_mode()
-    for bit in (M.MAV_MODE_FLAG_SAFETY_ARMED, M.MAV_MODE_FLAG_GUIDED_ENABLED,
-                M.MAV_MODE_FLAG_AUTO_ENABLED, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED):  # fmt: skip
+    for bit in (
+        M.MAV_MODE_FLAG_SAFETY_ARMED,
+        M.MAV_MODE_FLAG_GUIDED_ENABLED,
+        M.MAV_MODE_FLAG_AUTO_ENABLED,
+        M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+    ):
         assert flags & bit
     reset = []
     modes.on_guided = lambda: reset.append(True)
@@ -245,9 +288,14 @@ def test_vehicle_config_checks_and_rates():
 # ------------------------------------------------------------------------------ truth
 def test_truth_rows_and_the_target_on_its_clock():
     rec = TruthRecorder()
-    st = SimpleNamespace(position_ned=np.array([1.0, 2.0, -3.0]), velocity_ned=np.zeros(3),
-                         wind_ned=np.zeros(3), euler=(0.1, 0.2, 0.3), airspeed=16.0,
-                         throttle=0.4)  # fmt: skip
+    st = SimpleNamespace(
+        position_ned=np.array([1.0, 2.0, -3.0]),
+        velocity_ned=np.zeros(3),
+        wind_ned=np.zeros(3),
+        euler=(0.1, 0.2, 0.3),
+        airspeed=16.0,
+        throttle=0.4,
+    )
     rec.record(0.0, 12.0, st, 7)
     rec.record(0.02, 12.02, st, 7)
     target = SimpleNamespace(

@@ -30,8 +30,8 @@ No number here is tuned per aircraft. For a model, an airspeed and an altitude:
    positive rudder yaws right, the model yaws left) is an error naming the config key: the loop
    would be a positive feedback.
 
-JSBSim cannot trim a constant-speed propeller with its lever forward (sim.plant.airframe_trim), so the
-steps start from the lever-at-0 trim; the surfaces' effect does not depend on the propeller,
+JSBSim cannot trim a constant-speed propeller with its lever forward (sim.plant.airframe_trim), so
+the steps start from the lever-at-0 trim; the surfaces' effect does not depend on the propeller,
 and the trim throttle it gives is only the vehicle trim flight's first guess.
 
 Units SI, radians; body rates FRD (p roll right, q nose up, r nose right).
@@ -52,8 +52,8 @@ from .jsbsim_plant import DEFAULT_CONTROLS
 DT = 0.01  # s, the identification's FDM step (the SIL's physics rate is 100 Hz too)
 # channel -> (step of the rate loop's output, fitted body rate, fit window s, surface per output)
 # Elevator: the pitch loop's output is nose-up positive and elevator > 0 is nose down, so its
-# step is a negative elevator command (surface per output -1). The amplitudes are well above the stock
-# c172x elevator actuator's 0.05 rad hysteresis and small enough to stay linear.
+# step is a negative elevator command (surface per output -1). The amplitudes are well above the
+# stock c172x elevator actuator's 0.05 rad hysteresis and small enough to stay linear.
 STEPS: dict[str, tuple[float, int, float, float]] = {
     "aileron": (0.1, 0, 1.0, 1.0),
     "elevator": (0.15, 1, 1.2, -1.0),
@@ -184,9 +184,16 @@ def identify(
         quasi_steady = float(np.mean(y[n // 2 :])) / du if ch == "elevator" else None
         fits[ch] = fit_first_order(t, y, du, quasi_steady)
     return AirframeModel(
-        model, airspeed_m_s, altitude_m, trim, pitch_rad,
-        fits["aileron"], fits["elevator"], fits["rudder"], aileron_yaw,
-    )  # fmt: skip
+        model,
+        airspeed_m_s,
+        altitude_m,
+        trim,
+        pitch_rad,
+        fits["aileron"],
+        fits["elevator"],
+        fits["rudder"],
+        aileron_yaw,
+    )
 
 
 def _check_sign(fit: AxisFit, ch: str, model: str, what: str) -> None:
@@ -243,7 +250,8 @@ def describe(m: AirframeModel, gains: dict[str, float]) -> str:
     lines = [
         f"{m.model} at {m.airspeed_m_s:g} m/s, {m.altitude_m:g} m MSL: throttle "
         f"{m.trim['throttle']:.3f}, pitch {math.degrees(m.pitch_rad):.1f} deg, trims aileron "
-        f"{m.trim['aileron']:+.3f} elevator {m.trim['elevator']:+.3f} rudder {m.trim['rudder']:+.3f}"
+        f"{m.trim['aileron']:+.3f} elevator {m.trim['elevator']:+.3f} "
+        f"rudder {m.trim['rudder']:+.3f}"
     ]
     for name, f in (("roll", m.roll), ("pitch", m.pitch), ("yaw", m.yaw)):
         lines.append(

@@ -174,11 +174,17 @@ def rotation_body_to_ned(phi: float, theta: float, psi: float) -> np.ndarray:
     cp, sp = math.cos(psi), math.sin(psi)
     return np.array(
         (
-            ct * cp, sf * st * cp - cf * sp, cf * st * cp + sf * sp,
-            ct * sp, sf * st * sp + cf * cp, cf * st * sp - sf * cp,
-            -st, sf * ct, cf * ct,
+            ct * cp,
+            sf * st * cp - cf * sp,
+            cf * st * cp + sf * sp,
+            ct * sp,
+            sf * st * sp + cf * cp,
+            cf * st * sp - sf * cp,
+            -st,
+            sf * ct,
+            cf * ct,
         )
-    ).reshape(3, 3)  # fmt: skip
+    ).reshape(3, 3)
 
 
 class _Snapshot(PlantState):
@@ -280,12 +286,18 @@ class JSBSimPlant:
 
         lat, lon, alt = ned_to_geodetic(position_ned, lat0_deg, lon0_deg, alt0_m)
         ic = {
-            "ic/lat-geod-deg": lat, "ic/long-gc-deg": lon,
-            "ic/terrain-elevation-ft": self.ground_alt_m / FT_TO_M, "ic/h-sl-ft": alt / FT_TO_M,
-            "ic/psi-true-deg": math.degrees(heading), "ic/vt-fps": airspeed / FT_TO_M,
-            "ic/alpha-deg": 0.0, "ic/beta-deg": 0.0, "ic/phi-deg": 0.0, "ic/theta-deg": 0.0,
+            "ic/lat-geod-deg": lat,
+            "ic/long-gc-deg": lon,
+            "ic/terrain-elevation-ft": self.ground_alt_m / FT_TO_M,
+            "ic/h-sl-ft": alt / FT_TO_M,
+            "ic/psi-true-deg": math.degrees(heading),
+            "ic/vt-fps": airspeed / FT_TO_M,
+            "ic/alpha-deg": 0.0,
+            "ic/beta-deg": 0.0,
+            "ic/phi-deg": 0.0,
+            "ic/theta-deg": 0.0,
             **(extra or {}),
-        }  # fmt: skip
+        }
         for k, v in ic.items():
             self._set(k, v)
         with _QuietStderr():  # run_ic opens the model's output files
@@ -567,7 +579,8 @@ class JSBSimPlant:
 
 
 def benchmark(seconds: float = 600.0, state_hz: float = 50.0) -> float:
-    """FDM steps per wall-clock second over ``seconds`` of simulated flight for the X8 with state() at ``state_hz`` (returns steps/s)."""
+    """FDM steps per wall-clock second (returned) over ``seconds`` of simulated flight for the X8,
+    with state() at ``state_hz``."""
     import time
 
     plant = JSBSimPlant()

@@ -91,7 +91,9 @@ class ClosedLoop:
         self._tcache = (t, st)
         return st
 
-    def law(self, t: float, p: NDArray[np.float64], R: NDArray[np.float64], s: float, diag: bool):  # noqa: ANN201
+    def law(  # noqa: ANN201
+        self, t: float, p: NDArray[np.float64], R: NDArray[np.float64], s: float, diag: bool
+    ):
         eta = self.wind(t, p)
         veh = VehicleState(t, p, R, self.v_w, eta)
         st = self.target_state(t)
@@ -109,9 +111,17 @@ class ClosedLoop:
         (cmd, diag), eta = self.law(t, pa, Ra, s, keep)
         if keep:
             self.last = Sample(
-                t, pa, Ra, np.array(w), diag, (cmd.w2, cmd.w3), cmd.sdot,
-                self.target_state(t).position, self.target_state(t).R_T_I, eta,
-            )  # fmt: skip
+                t,
+                pa,
+                Ra,
+                np.array(w),
+                diag,
+                (cmd.w2, cmd.w3),
+                cmd.sdot,
+                self.target_state(t).position,
+                self.target_state(t).R_T_I,
+                eta,
+            )
         wc = (cmd.w2, cmd.w3)
         if self.lambda_w is None:
             w = list(wc)

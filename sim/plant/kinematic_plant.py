@@ -2,7 +2,8 @@
 
 Same ``step(aileron, elevator, rudder, throttle)`` / ``state() -> PlantState`` / ``dt`` / ``t`` /
 ``origin`` / ``set_wind`` interface as :class:`sim.plant.jsbsim_plant.JSBSimPlant`, so
-:class:`sim.vehicle.vehicle.SimVehicle` and :class:`sim.inner_loop.FixedWingAutopilot` drive it unchanged.
+:class:`sim.vehicle.vehicle.SimVehicle` and :class:`sim.inner_loop.FixedWingAutopilot` drive it
+unchanged.
 
 Model (SI, NED, FRD; alpha = beta = 0, so the body x axis is along the air-relative velocity):
 
@@ -54,7 +55,8 @@ def ned_to_geodetic_fast(
 
 
 class KinematicMavPlant:
-    """Constant-airspeed bank-to-turn plant (see module docstring). Constructor mirrors JSBSimPlant."""
+    """Constant-airspeed bank-to-turn plant (see module docstring); its constructor mirrors
+    JSBSimPlant's."""
 
     def __init__(
         self,

@@ -123,13 +123,20 @@ def run_campaign(
             log(f"[soak] {name} ...")
             row = run_row(name, o, probe, log)
             log(
-                f"[soak] {name}: {'pass' if not row.failures else 'FAIL ' + '; '.join(row.failures)} ({row.wall_s:.1f} s)"
+                f"[soak] {name}: "
+                f"{'pass' if not row.failures else 'FAIL ' + '; '.join(row.failures)} "
+                f"({row.wall_s:.1f} s)"
             )
             rows.append(row.as_dict())
     finally:
         probe.close()
-    return {"scenarios": rows, "wall_s": round(time.monotonic() - t0, 1), "all_pass": all(r["pass"] for r in rows),
-            "quick": o.quick, "seed": o.seed}  # fmt: skip
+    return {
+        "scenarios": rows,
+        "wall_s": round(time.monotonic() - t0, 1),
+        "all_pass": all(r["pass"] for r in rows),
+        "quick": o.quick,
+        "seed": o.seed,
+    }
 
 
 def run_row(
@@ -191,7 +198,8 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [n for n in names if n not in SCENARIOS]
     if unknown:
         print(
-            f"scripts/soak: error: unknown scenario {', '.join(unknown)} (known: {', '.join(SCENARIOS)})",
+            f"scripts/soak: error: unknown scenario {', '.join(unknown)} "
+            f"(known: {', '.join(SCENARIOS)})",
             file=sys.stderr,
         )
         return 2

@@ -27,13 +27,22 @@ class Limits:
 
     @classmethod
     def for_config(cls, flavour: str, sets: tuple[str, ...] = ()) -> Limits:
-        from mpf_mavlink.config import bridge as bridge_config  # noqa: F401  (registers the sections)
+        # the import registers the bridge's config sections
+        from mpf_mavlink.config import bridge as bridge_config  # noqa: F401
         from mpf_mavlink.config.schema import load_config
 
         cfg = load_config(CONFIGS[flavour], list(sets))
         a = cfg.section("adapter")
-        return cls(a.max_roll_rate_rad_s, a.max_pitch_rate_rad_s, a.max_yaw_rate_rad_s, a.thrust_min, a.thrust_max,
-                   cfg.vehicle.max_bank_rad, a.min_pitch_rad, a.max_pitch_rad)  # fmt: skip
+        return cls(
+            a.max_roll_rate_rad_s,
+            a.max_pitch_rate_rad_s,
+            a.max_yaw_rate_rad_s,
+            a.thrust_min,
+            a.thrust_max,
+            cfg.vehicle.max_bank_rad,
+            a.min_pitch_rad,
+            a.max_pitch_rad,
+        )
 
 
 def setpoint_violations(tap: Tap, flavour: str, lim: Limits, tol: float = 1e-5) -> list[str]:
@@ -62,8 +71,11 @@ def setpoint_violations(tap: Tap, flavour: str, lim: Limits, tol: float = 1e-5) 
         elif flavour == "px4":
             if m.type_mask != 128 or list(m.q) != [1.0, 0.0, 0.0, 0.0]:
                 why = f"type_mask {m.type_mask} q {list(m.q)}"
-            elif abs(m.body_roll_rate) > lim.max_roll_rate + tol or abs(m.body_pitch_rate) > lim.max_pitch_rate + tol \
-                    or abs(m.body_yaw_rate) > lim.max_yaw_rate + tol:  # fmt: skip
+            elif (
+                abs(m.body_roll_rate) > lim.max_roll_rate + tol
+                or abs(m.body_pitch_rate) > lim.max_pitch_rate + tol
+                or abs(m.body_yaw_rate) > lim.max_yaw_rate + tol
+            ):
                 why = f"rates {m.body_roll_rate:.3f} {m.body_pitch_rate:.3f} {m.body_yaw_rate:.3f}"
         else:
             w, x, y, z = m.q

@@ -58,8 +58,17 @@ def scenario_spoof(o: Opts) -> Row:
     kdir = o.workdir / "spoof"
     kdir.mkdir(parents=True, exist_ok=True)
     (kdir / "key.hex").write_text(key.hex() + "\n")
-    spec = MissionSpec.make(o, dur, target="stationary", signing_key=key,
-                            sets=("target.type=mavlink", f"mavlink.target_sysid={TARGET_SYSID}", f"mavlink.signing_key_file={kdir / 'key.hex'}"))  # fmt: skip
+    spec = MissionSpec.make(
+        o,
+        dur,
+        target="stationary",
+        signing_key=key,
+        sets=(
+            "target.type=mavlink",
+            f"mavlink.target_sysid={TARGET_SYSID}",
+            f"mavlink.signing_key_file={kdir / 'key.hex'}",
+        ),
+    )
     n = {"foreign_ids_signed": 0, "unsigned": 0, "replayed": 0, "wrong_key": 0}
     stop = threading.Event()
     with Mission(spec, kdir) as m:
@@ -81,18 +90,35 @@ def scenario_spoof(o: Opts) -> Row:
             while time.monotonic() < t_end and not stop.is_set():
                 ms = m.tap.vehicle_ms() or 0
                 for mav in (ins99,):
-                    for msg in (M.MAVLink_attitude_message(ms, 1.0, 0.5, 2.0, 0, 0, 0),
-                                M.MAVLink_local_position_ned_message(ms, 5000.0, 5000.0, -900.0, 0.0, 30.0, 0.0),
-                                M.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3)):  # fmt: skip
+                    for msg in (
+                        M.MAVLink_attitude_message(ms, 1.0, 0.5, 2.0, 0, 0, 0),
+                        M.MAVLink_local_position_ned_message(
+                            ms, 5000.0, 5000.0, -900.0, 0.0, 30.0, 0.0
+                        ),
+                        M.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3),
+                    ):
                         m.relay.inject(DOWN, msg.pack(mav))
                         n["foreign_ids_signed"] += 1
-                ft = M.MAVLink_follow_target_message(ms, 15, int(lat * 1e7), int(lon * 1e7), alt, [0.0] * 3, [0.0] * 3,
-                                                     [1.0, 0, 0, 0], [0.0] * 3, [0.0] * 3, 0)  # fmt: skip
+                ft = M.MAVLink_follow_target_message(
+                    ms,
+                    15,
+                    int(lat * 1e7),
+                    int(lon * 1e7),
+                    alt,
+                    [0.0] * 3,
+                    [0.0] * 3,
+                    [1.0, 0, 0, 0],
+                    [0.0] * 3,
+                    [0.0] * 3,
+                    0,
+                )
                 m.relay.inject(DOWN, ft.pack(ins77))
                 n["foreign_ids_signed"] += 1
-                for mav, msg in ((plain1, M.MAVLink_attitude_message(ms + 5, 1.0, 0.5, 2.0, 0, 0, 0)),
-                                 (plain1, M.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3)),
-                                 (plain2, ft)):  # fmt: skip
+                for mav, msg in (
+                    (plain1, M.MAVLink_attitude_message(ms + 5, 1.0, 0.5, 2.0, 0, 0, 0)),
+                    (plain1, M.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3)),
+                    (plain2, ft),
+                ):
                     m.relay.inject(DOWN, msg.pack(mav))
                     n["unsigned"] += 1
                 m.relay.inject(
@@ -122,10 +148,18 @@ def scenario_spoof(o: Opts) -> Row:
             th.join(5.0)
     _mission_common(row, m, out, Limits.for_config("px4"))
     c = out.counters
-    got = {"foreign_ids_signed": c.get("rejected_sysid"), "unsigned": c.get("rejected_unsigned"),
-           "replayed": c.get("rejected_replay"), "wrong_key": c.get("rejected_bad_signature")}  # fmt: skip
-    row.figures.update(injected=n, rejected_by_bridge=got, rejected_by_source=c.get("rejected_by_source"),
-                       steady_max_m=_r(out.metrics.get("steady_max_m")))  # fmt: skip
+    got = {
+        "foreign_ids_signed": c.get("rejected_sysid"),
+        "unsigned": c.get("rejected_unsigned"),
+        "replayed": c.get("rejected_replay"),
+        "wrong_key": c.get("rejected_bad_signature"),
+    }
+    row.figures.update(
+        injected=n,
+        rejected_by_bridge=got,
+        rejected_by_source=c.get("rejected_by_source"),
+        steady_max_m=_r(out.metrics.get("steady_max_m")),
+    )
     for k in n:
         row.check(n[k] > 0 and got[k] == n[k], f"{k}: injected {n[k]}, rejected {got[k]}")
     _completed(row, out)
@@ -339,9 +373,16 @@ def _run_bad(case: BadInput, w: Path) -> dict[str, Any]:
         )
         time.sleep(0.1)  # anything still in flight
     err = p.stderr.strip().splitlines()
-    return {"case": case.name, "rc": p.returncode, "lines": len(err), "stderr": err[-1] if err else "",
-            "names_culprit": bool(err) and case.culprit in err[-1], "sent_to_vehicle": beacon.received,
-            "traceback": "Traceback" in p.stderr + p.stdout, "s": round(time.monotonic() - t0, 2)}  # fmt: skip
+    return {
+        "case": case.name,
+        "rc": p.returncode,
+        "lines": len(err),
+        "stderr": err[-1] if err else "",
+        "names_culprit": bool(err) and case.culprit in err[-1],
+        "sent_to_vehicle": beacon.received,
+        "traceback": "Traceback" in p.stderr + p.stdout,
+        "s": round(time.monotonic() - t0, 2),
+    }
 
 
 def scenario_bad_input(o: Opts, only: tuple[str, ...] = ()) -> Row:
@@ -370,21 +411,34 @@ def scenario_bad_input(o: Opts, only: tuple[str, ...] = ()) -> Row:
             "--no-plots",
         )
         control = _run_bad(BadInput("control_good_config", good, ""), w)
-    bad = [r for r in results if not (r["rc"] not in (0, None) and r["lines"] == 1 and r["names_culprit"]
-                                      and r["sent_to_vehicle"] == 0 and not r["traceback"])]  # fmt: skip
+    bad = [
+        r
+        for r in results
+        if not (
+            r["rc"] not in (0, None)
+            and r["lines"] == 1
+            and r["names_culprit"]
+            and r["sent_to_vehicle"] == 0
+            and not r["traceback"]
+        )
+    ]
     row.figures.update(
-        classes=len(cases), passed=len(cases) - len(bad),
+        classes=len(cases),
+        passed=len(cases) - len(bad),
         control_good_config_datagrams_to_vehicle=control["sent_to_vehicle"],
         cases={r["case"]: f"exit {r['rc']}: {r['stderr'][:140]}" for r in results},
-    )  # fmt: skip
+    )
     row.check(len(cases) >= (len(only) if only else 20), "fewer than 20 classes")
     row.check(
         control["sent_to_vehicle"] > 0,
         "the control run sent nothing: the 'nothing sent' proof is void",
     )
     for r in bad:
-        row.check(False, f"{r['case']}: exit {r['rc']}, {r['lines']} lines, names culprit {r['names_culprit']}, "
-                         f"{r['sent_to_vehicle']} datagrams sent: {r['stderr'][:160]}")  # fmt: skip
+        row.check(
+            False,
+            f"{r['case']}: exit {r['rc']}, {r['lines']} lines, names culprit {r['names_culprit']}, "
+            f"{r['sent_to_vehicle']} datagrams sent: {r['stderr'][:160]}",
+        )
     return row
 
 
@@ -417,7 +471,10 @@ def _fs_prefix(mount_dir: Path, mode: str, size_kib: int = 64) -> tuple[tuple[st
             if mode == "full"
             else ""
         )
-        script = f'mount -t tmpfs -o {opts} tmpfs "$0" || exit 97; {fill}"$@"; rc=$?; echo "[soak] $(df -k "$0" | tail -1)"; exit $rc'
+        script = (
+            f'mount -t tmpfs -o {opts} tmpfs "$0" || exit 97; {fill}"$@"; rc=$?; '
+            'echo "[soak] $(df -k "$0" | tail -1)"; exit $rc'
+        )
         return (
             "unshare",
             "--user",
@@ -451,8 +508,24 @@ def scenario_output_dir(o: Opts, in_flight: bool = True) -> Row:
         prefix, method = _fs_prefix(mnt, mode)
         port = free_udp_port()
         with HeartbeatBeacon(port) as beacon:
-            p = subprocess.run([*prefix, *mpf_mavlink_cmd(), "run", str(CONFIGS["px4"]), "--connect", f"udpin:127.0.0.1:{port}",
-                                "--out", str(mnt / "run"), "-q", "--no-plots"], cwd=ROOT, capture_output=True, text=True, timeout=60)  # fmt: skip
+            p = subprocess.run(
+                [
+                    *prefix,
+                    *mpf_mavlink_cmd(),
+                    "run",
+                    str(CONFIGS["px4"]),
+                    "--connect",
+                    f"udpin:127.0.0.1:{port}",
+                    "--out",
+                    str(mnt / "run"),
+                    "-q",
+                    "--no-plots",
+                ],
+                cwd=ROOT,
+                capture_output=True,
+                text=True,
+                timeout=60,
+            )
             time.sleep(0.1)
         err = p.stderr.strip().splitlines()
         refusals[mode] = {
@@ -461,8 +534,14 @@ def scenario_output_dir(o: Opts, in_flight: bool = True) -> Row:
             "stderr": err[-1] if err else "",
             "sent_to_vehicle": beacon.received,
         }
-        row.check(p.returncode == 2 and len(err) == 1 and str(mnt / "run") in err[0] and any(t in err[0] for t in errno_text)
-                  and beacon.received == 0, f"{mode}: not refused cleanly before connecting: {refusals[mode]}")  # fmt: skip
+        row.check(
+            p.returncode == 2
+            and len(err) == 1
+            and str(mnt / "run") in err[0]
+            and any(t in err[0] for t in errno_text)
+            and beacon.received == 0,
+            f"{mode}: not refused cleanly before connecting: {refusals[mode]}",
+        )
     row.figures["refused"] = refusals
     if not in_flight:
         return row
@@ -480,10 +559,16 @@ def scenario_output_dir(o: Opts, in_flight: bool = True) -> Row:
     t_on, t_off = _tracking_window(tap)
     summary = out.stdout
     row.figures["disk_fills_in_flight"] = {
-        "method": method, "rc": out.rc, "df_at_exit": next((ln for ln in summary.splitlines() if ln.startswith("[soak]")), None),
+        "method": method,
+        "rc": out.rc,
+        "df_at_exit": next((ln for ln in summary.splitlines() if ln.startswith("[soak]")), None),
         "max_setpoint_gap_s": _r(max_gap([e.t for e in tap.setpoints], t_on, t_off)),
-        "summary_says": [ln.strip() for ln in summary.splitlines() if "exit" in ln or "RECORDS" in ln or "hand-back" in ln],
-    }  # fmt: skip
+        "summary_says": [
+            ln.strip()
+            for ln in summary.splitlines()
+            if "exit" in ln or "RECORDS" in ln or "hand-back" in ln
+        ],
+    }
     row.check(
         out.rc in FLOWN and "mission duration" in summary,
         f"the full disk ended the flight: exit {out.rc}",

@@ -35,12 +35,16 @@ from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 from pymavlink.generator.mavcrc import x25crc  # noqa: E402
 
 _INT_RANGES = {
-    "int8_t": (-(2**7), 2**7 - 1), "uint8_t": (0, 2**8 - 1),
-    "int16_t": (-(2**15), 2**15 - 1), "uint16_t": (0, 2**16 - 1),
-    "int32_t": (-(2**31), 2**31 - 1), "uint32_t": (0, 2**32 - 1),
-    "int64_t": (-(2**63), 2**63 - 1), "uint64_t": (0, 2**64 - 1),
+    "int8_t": (-(2**7), 2**7 - 1),
+    "uint8_t": (0, 2**8 - 1),
+    "int16_t": (-(2**15), 2**15 - 1),
+    "uint16_t": (0, 2**16 - 1),
+    "int32_t": (-(2**31), 2**31 - 1),
+    "uint32_t": (0, 2**32 - 1),
+    "int64_t": (-(2**63), 2**63 - 1),
+    "uint64_t": (0, 2**64 - 1),
     "uint8_t_mavlink_version": (0, 255),
-}  # fmt: skip
+}
 FLOAT_POOL = (math.nan, math.inf, -math.inf, 1e38, -1e38, 3.4e38, -0.0, 0.0, 1e-45, 1e9, -1e9)
 CLASSES = ("random_bytes", "valid_v2", "valid_v1", "mutated", "own_absurd")
 DEFAULT_WEIGHTS = (0.25, 0.25, 0.10, 0.20, 0.20)
@@ -193,9 +197,11 @@ class FrameFuzzer:
         choices = [0, 1, 2**32 - 1, 2**31, self.rng.randrange(2**32)]
         if now is not None:
             choices += [
-                (now + 3_600_000) % 2**32, max(0, now - 3_600_000), (now + 86_400_000) % 2**32,
+                (now + 3_600_000) % 2**32,
+                max(0, now - 3_600_000),
+                (now + 86_400_000) % 2**32,
                 (now + self.rng.randrange(60_000, 10**9)) % 2**32,
-            ]  # fmt: skip
+            ]
         return self.rng.choice(choices)
 
     def own_absurd(self) -> bytes:
@@ -216,8 +222,15 @@ class FrameFuzzer:
             )
         elif k == 2:
             self._note("own_attitude_time_absurd")
-            msg = M.MAVLink_attitude_message(self._absurd_time_ms(), r.uniform(-0.5, 0.5), r.uniform(-0.2, 0.2),
-                                             r.uniform(-3, 3), r.uniform(-0.3, 0.3), r.uniform(-0.3, 0.3), r.uniform(-0.3, 0.3))  # fmt: skip
+            msg = M.MAVLink_attitude_message(
+                self._absurd_time_ms(),
+                r.uniform(-0.5, 0.5),
+                r.uniform(-0.2, 0.2),
+                r.uniform(-3, 3),
+                r.uniform(-0.3, 0.3),
+                r.uniform(-0.3, 0.3),
+                r.uniform(-0.3, 0.3),
+            )
         elif k == 3:
             self._note("own_attitude_quaternion_absurd")
             q = r.choice(
@@ -234,8 +247,15 @@ class FrameFuzzer:
             msg = M.MAVLink_local_position_ned_message(t_ok, a(), a(), a(), a(), a(), a())
         elif k == 5:
             self._note("own_local_position_time_absurd")
-            msg = M.MAVLink_local_position_ned_message(self._absurd_time_ms(), r.uniform(-500, 500), r.uniform(-500, 500),
-                                                       -100.0, r.uniform(-15, 15), r.uniform(-15, 15), 0.0)  # fmt: skip
+            msg = M.MAVLink_local_position_ned_message(
+                self._absurd_time_ms(),
+                r.uniform(-500, 500),
+                r.uniform(-500, 500),
+                -100.0,
+                r.uniform(-15, 15),
+                r.uniform(-15, 15),
+                0.0,
+            )
         elif k == 6:
             self._note("own_global_position_absurd")
             lat = r.choice((910_000_000, -910_000_000, 0, 2**31 - 1))
@@ -247,8 +267,14 @@ class FrameFuzzer:
             )
         elif k == 7:
             self._note("own_vfr_hud_absurd")
-            msg = M.MAVLink_vfr_hud_message(r.choice((math.nan, -5.0, 1e6, math.inf)), a(), r.randrange(-32768, 32768),
-                                            r.choice((65535, 1000)), a(), a())  # fmt: skip
+            msg = M.MAVLink_vfr_hud_message(
+                r.choice((math.nan, -5.0, 1e6, math.inf)),
+                a(),
+                r.randrange(-32768, 32768),
+                r.choice((65535, 1000)),
+                a(),
+                a(),
+            )
         elif k == 8:
             self._note("own_wind_absurd")
             if r.random() < 0.5:
@@ -259,8 +285,19 @@ class FrameFuzzer:
                 msg = M.MAVLink_wind_message(a(), a(), a())
         elif k == 9:
             self._note("own_home_absurd")
-            msg = M.MAVLink_home_position_message(r.choice((950_000_000, 0)), r.choice((1_900_000_000, 0)), r.choice((2**31 - 1, -(2**31))),
-                                                  a(), a(), a(), [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0)  # fmt: skip
+            msg = M.MAVLink_home_position_message(
+                r.choice((950_000_000, 0)),
+                r.choice((1_900_000_000, 0)),
+                r.choice((2**31 - 1, -(2**31))),
+                a(),
+                a(),
+                a(),
+                [1.0, 0.0, 0.0, 0.0],
+                0.0,
+                0.0,
+                0.0,
+                0,
+            )
         elif k == 10:
             self._note("own_heartbeat_not_the_autopilot")
             choice = r.randrange(3)

@@ -1,5 +1,6 @@
 """The soak campaign's flight scenarios (:mod:`sim.soak`): baseline, fuzzed link, loss and
-jitter, corruption, blackouts, target loss, a pilot taking over, autopilot reboots, a SIGKILLed bridge."""
+jitter, corruption, blackouts, target loss, a pilot taking over, autopilot reboots, a SIGKILLed
+bridge."""
 
 from __future__ import annotations
 
@@ -42,9 +43,12 @@ def _mission_common(row: Row, m: Mission, out: BridgeOutcome, lim: Limits | None
     """Figures every mission row reports, and the invariants every mission must keep."""
     tap = m.tap
     row.figures.update(
-        bridge_exit=out.rc, exit_reason=out.exit_reason, tracked_s=_r(out.metrics.get("tracked_s"), 2),
-        setpoints_at_vehicle=len(tap.setpoints), vehicle_modes=[f"{t:.1f}:{n}" for t, n in tap.mode_changes()],
-    )  # fmt: skip
+        bridge_exit=out.rc,
+        exit_reason=out.exit_reason,
+        tracked_s=_r(out.metrics.get("tracked_s"), 2),
+        setpoints_at_vehicle=len(tap.setpoints),
+        vehicle_modes=[f"{t:.1f}:{n}" for t, n in tap.mode_changes()],
+    )
     t_on, t_off = _tracking_window(tap)
     # the vehicle's own ATTITUDE stream as it left the vehicle: a gap here is the SIL vehicle
     # (or the machine) stalling, not the link or the bridge
@@ -70,8 +74,11 @@ def scenario_baseline(o: Opts) -> Row:
         out = m.finish(dur + 30.0)
     _mission_common(row, m, out, Limits.for_config("px4"))
     mt = out.metrics
-    row.figures.update(steady_rms_m=_r(mt.get("steady_rms_m")), steady_max_m=_r(mt.get("steady_max_m")),
-                       convergence_time_s=_r(mt.get("convergence_time_s"), 1))  # fmt: skip
+    row.figures.update(
+        steady_rms_m=_r(mt.get("steady_rms_m")),
+        steady_max_m=_r(mt.get("steady_max_m")),
+        convergence_time_s=_r(mt.get("convergence_time_s"), 1),
+    )
     row.check(
         out.rc in FLOWN and mt.get("handback_confirmed") is True,
         f"exit {out.rc}: {out.exit_reason}",
@@ -142,13 +149,20 @@ def scenario_fuzz(o: Opts, n_frames: int | None = None, dur: float | None = None
     t_on, t_off = _tracking_window(tap)
     gap = max_gap([e.t for e in tap.setpoints], t_on, t_off)
     row.figures.update(
-        frames_injected=sent["frames"], datagrams_injected=sent["datagrams"], frame_classes=fz.counts,
-        bridge_bad_data=c.get("bad_data"), bridge_rejected_sysid=c.get("rejected_sysid"),
-        bridge_unknown_msgid=c.get("unknown_msgid"), bridge_rx_packets=c.get("rx_packets"),
-        bridge_rejected_time=c.get("rejected_time"), bridge_rejected_stale=c.get("rejected_stale"),
+        frames_injected=sent["frames"],
+        datagrams_injected=sent["datagrams"],
+        frame_classes=fz.counts,
+        bridge_bad_data=c.get("bad_data"),
+        bridge_rejected_sysid=c.get("rejected_sysid"),
+        bridge_unknown_msgid=c.get("unknown_msgid"),
+        bridge_rx_packets=c.get("rx_packets"),
+        bridge_rejected_time=c.get("rejected_time"),
+        bridge_rejected_stale=c.get("rejected_stale"),
         bridge_rejected_identity=c.get("rejected_identity"),
-        max_setpoint_gap_s=_r(gap), steady_rms_m=_r(mt.get("steady_rms_m")), steady_max_m=_r(mt.get("steady_max_m")),
-    )  # fmt: skip
+        max_setpoint_gap_s=_r(gap),
+        steady_rms_m=_r(mt.get("steady_rms_m")),
+        steady_max_m=_r(mt.get("steady_max_m")),
+    )
     row.check(sent["frames"] >= n_frames, f"only {sent['frames']} frames injected")
     row.check(
         out.rc in FLOWN and "mission duration" in out.exit_reason,
@@ -204,11 +218,14 @@ def scenario_loss_jitter(o: Opts) -> Row:
     rc, mt, c = m.relay.counters(), out.metrics, out.counters
     t_on, t_off = _tracking_window(m.tap)
     row.figures.update(
-        relay_down=_pick(rc["down"]), relay_up=_pick(rc["up"]), bridge_rejected_stale=c.get("rejected_stale"),
-        steady_rms_m=_r(mt.get("steady_rms_m")), steady_max_m=_r(mt.get("steady_max_m")),
+        relay_down=_pick(rc["down"]),
+        relay_up=_pick(rc["up"]),
+        bridge_rejected_stale=c.get("rejected_stale"),
+        steady_rms_m=_r(mt.get("steady_rms_m")),
+        steady_max_m=_r(mt.get("steady_max_m")),
         convergence_time_s=_r(mt.get("convergence_time_s"), 1),
         max_setpoint_gap_at_vehicle_s=_r(max_gap([e.t for e in m.tap.setpoints], t_on, t_off)),
-    )  # fmt: skip
+    )
     _completed(row, out)
     row.check(not m.tap.failsafes(), "the vehicle's offboard failsafe fired")
     _tracking_ok(row, o, mt)
@@ -228,10 +245,14 @@ def scenario_corrupt_dup_reorder(o: Opts) -> Row:
     _mission_common(row, m, out, Limits.for_config("px4"))
     rc, c, mt = m.relay.counters(), out.counters, out.metrics
     row.figures.update(
-        relay_down=_pick(rc["down"]), relay_up=_pick(rc["up"]), bridge_bad_data=c.get("bad_data"),
-        bridge_rejected_stale=c.get("rejected_stale"), vehicle_dropped=m.vehicle.report.get("dropped"),
-        steady_rms_m=_r(mt.get("steady_rms_m")), steady_max_m=_r(mt.get("steady_max_m")),
-    )  # fmt: skip
+        relay_down=_pick(rc["down"]),
+        relay_up=_pick(rc["up"]),
+        bridge_bad_data=c.get("bad_data"),
+        bridge_rejected_stale=c.get("rejected_stale"),
+        vehicle_dropped=m.vehicle.report.get("dropped"),
+        steady_rms_m=_r(mt.get("steady_rms_m")),
+        steady_max_m=_r(mt.get("steady_max_m")),
+    )
     _completed(row, out)
     row.check(not m.tap.failsafes(), "the vehicle's offboard failsafe fired")
     row.check(
@@ -288,26 +309,40 @@ def _blackout(o: Opts, name: str, direction: str | None, reengage: bool = False)
     fs_v = vs(fs[0]) - vs(last_deliv) if fs and last_deliv else None
     out_v = vs(t_out) - vs(last_deliv) if t_out and last_deliv else None
     row.figures.update(
-        blackout_s=2.0, direction="both" if direction is None else "telemetry (vehicle -> bridge)",
-        commands_stop_after_s=_r(stop_s), vehicle_failsafe_after_last_command_s=_r(fs_v),
+        blackout_s=2.0,
+        direction="both" if direction is None else "telemetry (vehicle -> bridge)",
+        commands_stop_after_s=_r(stop_s),
+        vehicle_failsafe_after_last_command_s=_r(fs_v),
         vehicle_left_offboard_after_last_command_s=_r(out_v),
         wall_failsafe_after_last_command_s=_r(fs[0] - last_deliv if fs and last_deliv else None),
-        wall_left_offboard_after_last_command_s=_r(t_out - last_deliv if t_out and last_deliv else None),
-        vehicle_mode_after=tap.mode(), handback_confirmed=mt.get("handback_confirmed"),
-        configured="re-engage (mavlink.reengage_max=1)" if reengage else "end (mavlink.reengage_max=0)",
-        bridge_after_blackout=(f"re-engaged {reengaged[0].t - b.end_s:.2f} s after the blackout" if reengaged
-                               else "ended (hand-back requested)"),
+        wall_left_offboard_after_last_command_s=_r(
+            t_out - last_deliv if t_out and last_deliv else None
+        ),
+        vehicle_mode_after=tap.mode(),
+        handback_confirmed=mt.get("handback_confirmed"),
+        configured="re-engage (mavlink.reengage_max=1)"
+        if reengage
+        else "end (mavlink.reengage_max=0)",
+        bridge_after_blackout=(
+            f"re-engaged {reengaged[0].t - b.end_s:.2f} s after the blackout"
+            if reengaged
+            else "ended (hand-back requested)"
+        ),
         setpoints_after_blackout=len(_after(tap.bridge_setpoints, b.end_s)),
-    )  # fmt: skip
+    )
     row.check(
         stop_s is not None and stop_s <= 0.5 + 0.03,
         f"commands went on {stop_s} s into the blackout",
     )
-    row.check(out_v is not None and out_v <= 1.0 + 0.25,
-              "the vehicle did not leave offboard within its 1 s loss timeout")  # fmt: skip
+    row.check(
+        out_v is not None and out_v <= 1.0 + 0.25,
+        "the vehicle did not leave offboard within its 1 s loss timeout",
+    )
     if direction is None:  # nothing reaches the vehicle: its own failsafe must act, on time
-        row.check(fs_v is not None and 0.9 <= fs_v <= 1.0 + 0.25,
-                  "the vehicle's own offboard-loss failsafe did not take over on time")  # fmt: skip
+        row.check(
+            fs_v is not None and 0.9 <= fs_v <= 1.0 + 0.25,
+            "the vehicle's own offboard-loss failsafe did not take over on time",
+        )
     row.check(tap.mode() == "AUTO.LOITER", f"vehicle ended in {tap.mode()}")
     row.check(
         mt.get("handback_confirmed") is True,
@@ -379,7 +414,7 @@ def scenario_target_loss(o: Opts) -> Row:
             f"mavlink.target_sysid={TARGET_SYSID}",
             f"target_estimator.max_position_sigma_m={bound_m}",
             f"target_estimator.manoeuvre_accel_m_s2={accel}",
-        ),  # fmt: skip
+        ),
     )
     b: Blackout | None = None
     with Mission(spec, o.workdir / "target") as m:
@@ -395,11 +430,14 @@ def scenario_target_loss(o: Opts) -> Row:
     stop_s = None if last_sent is None else last_sent - b.start_s
     row.figures.update(
         target_samples_before=len([e for e in tap.target_msgs if e.t < b.start_s]),
-        commands_stop_after_target_loss_s=_r(stop_s), target_bound_m=bound_m,
-        target_unseen_accel_m_s2=accel, telemetry_timeout_s=0.5,
-        frames_cut=m.relay.counters()["down"]["filtered_frames"], vehicle_mode_after=tap.mode(),
+        commands_stop_after_target_loss_s=_r(stop_s),
+        target_bound_m=bound_m,
+        target_unseen_accel_m_s2=accel,
+        telemetry_timeout_s=0.5,
+        frames_cut=m.relay.counters()["down"]["filtered_frames"],
+        vehicle_mode_after=tap.mode(),
         handback_confirmed=out.metrics.get("handback_confirmed"),
-    )  # fmt: skip
+    )
     # stale once sigma_0 + a tau^2 / 2 > bound: no later than sqrt(2 bound / a) (5.2 s) whatever
     # the filter's own sigma_0, and not before sqrt(2 (bound - 2 m) / a) (3.7 s) while its
     # 1-sigma of a fixed target seen at 10 Hz stays below 2 m; then no good law step for
@@ -454,10 +492,12 @@ def scenario_pilot(o: Opts) -> Row:
         tap.bridge_setpoints, (t_fbwa or t_cmd) + 0.05
     )  # in flight when the heartbeat came: ok
     row.figures.update(
-        pilot_mode="FBWA", vehicle_reported_after_s=_r(t_fbwa - t_cmd if t_fbwa else None),
-        bridge_setpoints_after_report=len(late), bridge_mode_requests_after=len(_after(tap.mode_requests(), t_cmd)),
+        pilot_mode="FBWA",
+        vehicle_reported_after_s=_r(t_fbwa - t_cmd if t_fbwa else None),
+        bridge_setpoints_after_report=len(late),
+        bridge_mode_requests_after=len(_after(tap.mode_requests(), t_cmd)),
         vehicle_mode_after=tap.mode(),
-    )  # fmt: skip
+    )
     row.check(t_fbwa is not None, "the vehicle never reported FBWA")
     row.check(not late, f"{len(late)} setpoints after the vehicle reported the pilot's mode")
     row.check(not _after(tap.mode_requests(), t_cmd), "the bridge fought the pilot (mode request)")
@@ -500,12 +540,18 @@ def _reboot(o: Opts, name: str, fast: bool) -> Row:
     last_sent = _last_before(tap.bridge_setpoints, t_r + 10.0)
     to_new = _after(tap.setpoints, t_back) if t_back is not None else []
     row.figures.update(
-        vehicle_silent_s=_r(t_back - t_r if t_back else None), boot_ms_before=old_ms, boot_ms_after=back[0][1] if back else None,
-        commands_stop_after_s=_r(last_sent - t_r if last_sent else None), setpoints_to_new_boot=len(to_new),
-        new_boot_offboard=any(is_offboard(tap.flavour, e.msg) for e in tap.heartbeats if t_back and e.t > t_back),
-        bridge_clock_resets=out.counters.get("clock_resets"), bridge_rejected_time=out.counters.get("rejected_time"),
+        vehicle_silent_s=_r(t_back - t_r if t_back else None),
+        boot_ms_before=old_ms,
+        boot_ms_after=back[0][1] if back else None,
+        commands_stop_after_s=_r(last_sent - t_r if last_sent else None),
+        setpoints_to_new_boot=len(to_new),
+        new_boot_offboard=any(
+            is_offboard(tap.flavour, e.msg) for e in tap.heartbeats if t_back and e.t > t_back
+        ),
+        bridge_clock_resets=out.counters.get("clock_resets"),
+        bridge_rejected_time=out.counters.get("rejected_time"),
         vehicle_mode_after=tap.mode(),
-    )  # fmt: skip
+    )
     row.check(t_back is not None, "the vehicle never came back")
     row.check(
         last_sent is not None and last_sent - t_r <= 0.5 + 0.03,
@@ -566,15 +612,22 @@ def scenario_sigkill(o: Opts) -> Row:
     # on the vehicle's clock, where its loss timeout runs (see _blackout)
     fs_v = tap.vehicle_s(fs[0]) - tap.vehicle_s(last_deliv) if fs and last_deliv else None
     row.figures.update(
-        killed_after_tracking_s=4.0, failsafe_after_last_command_s=_r(fs_v),
+        killed_after_tracking_s=4.0,
+        failsafe_after_last_command_s=_r(fs_v),
         wall_failsafe_after_last_command_s=_r(fs[0] - last_deliv if fs and last_deliv else None),
-        com_of_loss_t_s=1.0, vehicle_mode_after=tap.mode(), tlog_records=r.records if r else None,
+        com_of_loss_t_s=1.0,
+        vehicle_mode_after=tap.mode(),
+        tlog_records=r.records if r else None,
         tlog_last_record_before_kill_s=_r(t_kill_wall - r.t_last_s if r and r.t_last_s else None),
-        tlog_skipped_bytes=r.skipped_bytes if r else None, setpoints_received_not_in_tlog=len(missing),
-    )  # fmt: skip
+        tlog_skipped_bytes=r.skipped_bytes if r else None,
+        setpoints_received_not_in_tlog=len(missing),
+    )
     row.check(out.rc == -signal.SIGKILL, f"bridge exit {out.rc}")
-    row.check(fs_v is not None and 0.9 <= fs_v <= 1.0 + 0.25,
-              f"failsafe {row.figures['failsafe_after_last_command_s']} s after the last command (loss timeout 1 s)")  # fmt: skip
+    row.check(
+        fs_v is not None and 0.9 <= fs_v <= 1.0 + 0.25,
+        f"failsafe {row.figures['failsafe_after_last_command_s']} s after the last command "
+        "(loss timeout 1 s)",
+    )
     row.check(tap.mode() == "AUTO.LOITER", f"vehicle ended in {tap.mode()}")
     row.check(
         r is not None and r.records > 100 and r.skipped_regions == 0, "tlog unreadable or corrupt"

@@ -2,8 +2,8 @@
 
 Topology (both peers keep their ordinary pymavlink URLs)::
 
-    vehicle --udpout:127.0.0.1:V--> [vehicle side  :V]  relay  [bridge side :eph] --> udpin:B  bridge
-            <--------------------- (to the vehicle's last source address)  <------- (replies to :eph)
+    vehicle --udpout:127.0.0.1:V--> [vehicle side :V] relay [bridge side :eph] --> udpin:B bridge
+            <-------------- (to the vehicle's last source address)  <------ (replies to :eph)
 
 The vehicle side is bound to a known port ``V`` and learns the vehicle's address from the last
 datagram it received (a restarted vehicle process comes back from a new source port, as a
@@ -208,7 +208,8 @@ class UdpRelay:
         sysid: int | None = None,
         start_in_s: float = 0.0,
     ) -> Blackout:
-        """Start a blackout ``start_in_s`` from now, lasting ``duration_s``; returns it (relay time)."""
+        """Start a blackout ``start_in_s`` from now, lasting ``duration_s``; returns it (relay
+        time)."""
         t = self.now() + start_in_s
         b = Blackout(t, t + duration_s, direction, sysid)
         with self._lock:

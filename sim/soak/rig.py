@@ -1,5 +1,6 @@
 """The soak campaign's rig (:mod:`sim.soak`): the vehicle and bridge processes, the relay's tap
-of all traffic, a mission (vehicle + relay + bridge), the checks on what the tap saw, result rows."""
+of all traffic, a mission (vehicle + relay + bridge), the checks on what the tap saw, result
+rows."""
 
 from __future__ import annotations
 
@@ -75,8 +76,14 @@ def vehicle_main(argv: list[str]) -> int:
     ap.add_argument("--clock", choices=("lockstep", "realtime"), default="realtime")
     ap.add_argument("--position", type=float, nargs=3, default=START_NED)
     ap.add_argument("--heading", type=float, default=START_HEADING)
-    ap.add_argument("--orbit", type=float, nargs=3, default=None, metavar=("N", "E", "RADIUS"),
-                    help="boot in a hold orbit about (N, E) m at RADIUS m (default: about the start)")  # fmt: skip
+    ap.add_argument(
+        "--orbit",
+        type=float,
+        nargs=3,
+        default=None,
+        metavar=("N", "E", "RADIUS"),
+        help="boot in a hold orbit about (N, E) m at RADIUS m (default: about the start)",
+    )
     ap.add_argument("--airspeed", type=float, default=15.0)
     ap.add_argument("--target", choices=("none", "stationary", "drift"), default="none")
     ap.add_argument("--com-of-loss-t", type=float, default=1.0)
@@ -97,11 +104,20 @@ def vehicle_main(argv: list[str]) -> int:
 
     def make() -> SimVehicle:
         v = SimVehicle.build(
-            a.flavour, a.url, plant=a.plant, clock=a.clock, position_ned=tuple(a.position), heading=a.heading,
-            airspeed=a.airspeed, target=target, target_system=TARGET_SYSID, com_of_loss_t=a.com_of_loss_t,
-            guided_timeout=a.guided_timeout, record_truth=False,
+            a.flavour,
+            a.url,
+            plant=a.plant,
+            clock=a.clock,
+            position_ned=tuple(a.position),
+            heading=a.heading,
+            airspeed=a.airspeed,
+            target=target,
+            target_system=TARGET_SYSID,
+            com_of_loss_t=a.com_of_loss_t,
+            guided_timeout=a.guided_timeout,
+            record_truth=False,
             initial_orbit=tuple(a.orbit) if a.orbit else None,
-        )  # fmt: skip
+        )
         if a.signing_key_hex:
             key = bytes.fromhex(a.signing_key_hex)
             # the vehicle signs what it (and its target system) sends and rejects unsigned input
@@ -139,10 +155,16 @@ def vehicle_main(argv: list[str]) -> int:
         pass
     finally:
         report = {
-            "t": v.t, "time_boot_s": v.time_boot_s, "mode": v.mode_name, "mode_changes": v.modes.changes,
-            "statustexts": v.link.statustexts, "dropped": v.autopilot.setpoints.dropped, "setpoints_received": v.lockstep.answers,
-            "rx_count": v.link.rx_count, "real_time_factor": v.real_time_factor,
-        }  # fmt: skip
+            "t": v.t,
+            "time_boot_s": v.time_boot_s,
+            "mode": v.mode_name,
+            "mode_changes": v.modes.changes,
+            "statustexts": v.link.statustexts,
+            "dropped": v.autopilot.setpoints.dropped,
+            "setpoints_received": v.lockstep.answers,
+            "rx_count": v.link.rx_count,
+            "real_time_factor": v.real_time_factor,
+        }
         if a.report:
             Path(a.report).write_text(json.dumps(report, default=float))
         v.close()
@@ -171,8 +193,21 @@ class VehicleProc:
     def start(self) -> VehicleProc:
         self.boots += 1
         self.report_path = self.workdir / f"vehicle-{self.boots}.json"
-        cmd = [sys.executable, "-m", "sim.soak", "vehicle", "--flavour", self.flavour, "--url", self.url,
-               "--target", self.target, "--report", str(self.report_path), *self.extra]  # fmt: skip
+        cmd = [
+            sys.executable,
+            "-m",
+            "sim.soak",
+            "vehicle",
+            "--flavour",
+            self.flavour,
+            "--url",
+            self.url,
+            "--target",
+            self.target,
+            "--report",
+            str(self.report_path),
+            *self.extra,
+        ]
         if self.signing_key is not None:
             cmd += ["--signing-key-hex", self.signing_key.hex()]
         self.log = open(self.workdir / f"vehicle-{self.boots}.log", "w")  # noqa: SIM115
@@ -233,8 +268,21 @@ class BridgeProc:
         prefix: tuple[str, ...] = (),
     ) -> None:
         self.out_dir = out_dir
-        self.cmd = [*prefix, *mpf_mavlink_cmd(), "run", str(config), "--connect", url, "--out", str(out_dir),
-                    "--duration", f"{duration_s:g}", "--no-plots", "-q", *extra]  # fmt: skip
+        self.cmd = [
+            *prefix,
+            *mpf_mavlink_cmd(),
+            "run",
+            str(config),
+            "--connect",
+            url,
+            "--out",
+            str(out_dir),
+            "--duration",
+            f"{duration_s:g}",
+            "--no-plots",
+            "-q",
+            *extra,
+        ]
         for s in ("mavlink.heartbeat_timeout_s=15", *sets):
             self.cmd += ["--set", s]
         self.proc: subprocess.Popen[str] | None = None
@@ -455,11 +503,23 @@ class Mission:
             seed=spec.seed,
         )
         self.tap = Tap(self.relay, spec.flavour)
-        self.vehicle = VehicleProc(spec.flavour, f"udpout:127.0.0.1:{self.relay.vehicle_port}", workdir, target=spec.target,
-                                   signing_key=spec.signing_key, extra=spec.vehicle_extra)  # fmt: skip
+        self.vehicle = VehicleProc(
+            spec.flavour,
+            f"udpout:127.0.0.1:{self.relay.vehicle_port}",
+            workdir,
+            target=spec.target,
+            signing_key=spec.signing_key,
+            extra=spec.vehicle_extra,
+        )
         self.out_dir = spec.out_dir or workdir / "run"
-        self.bridge = BridgeProc(CONFIGS[spec.flavour], f"udpin:127.0.0.1:{self.bridge_port}", self.out_dir, spec.duration_s,
-                                 spec.sets, prefix=spec.bridge_prefix)  # fmt: skip
+        self.bridge = BridgeProc(
+            CONFIGS[spec.flavour],
+            f"udpin:127.0.0.1:{self.bridge_port}",
+            self.out_dir,
+            spec.duration_s,
+            spec.sets,
+            prefix=spec.bridge_prefix,
+        )
         self.outcome: BridgeOutcome | None = None
 
     def __enter__(self) -> Mission:
@@ -516,8 +576,13 @@ class Row:
         return ok
 
     def as_dict(self) -> dict[str, Any]:
-        return {"scenario": self.scenario, "pass": not self.failures, "wall_s": round(self.wall_s, 1), **self.figures,
-                "failures": self.failures}  # fmt: skip
+        return {
+            "scenario": self.scenario,
+            "pass": not self.failures,
+            "wall_s": round(self.wall_s, 1),
+            **self.figures,
+            "failures": self.failures,
+        }
 
 
 # ----------------------------------------------------------------------------- scenarios

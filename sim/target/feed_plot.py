@@ -4,9 +4,10 @@ The demo's boat (configs/default.yaml) reports itself through the SIL's feed
 (:mod:`sim.target.feed`: 1 Hz, 2 m and 0.3 m/s noise, 0.3 s latency, 10 % drop-outs, its clock
 100 s off ours, seed 7 unless told otherwise); the frames go through the bridge's decoders into
 its live target (the estimator, ``mode: filter``, with the acceptance's tuning
-:data:`mpf_mavlink.bench.target.ESTIMATOR`; ``--set`` overrides it) and, for comparison, the extrapolation of the
-last report (``mode: last_sample``), both queried every 20 ms as the control loop does. Writes
-a PNG with the north-east track over a window, and the position and {T}-yaw errors over time
+:data:`mpf_mavlink.bench.target.ESTIMATOR`; ``--set`` overrides it) and, for comparison, the
+extrapolation of the last report (``mode: last_sample``), both queried every 20 ms as the
+control loop does. Writes a PNG with the north-east track over a window, and the position and
+{T}-yaw errors over time
 (a yaw error of d rad moves a path point r metres from the target by r d: the demo's
 lemniscate reaches 150 m), and prints the RMS figures after ``--steady`` seconds.
 """
@@ -60,8 +61,11 @@ def simulate(cfg: Any, duration_s: float, feed_kw: dict[str, Any]) -> dict[str, 
         row = [t, *tr.position, math.atan2(tr.R_T_I[1, 0], tr.R_T_I[0, 0])]
         for tg in (kf, last):
             st = tg.state(t)
-            row += [math.nan] * 4 if isinstance(st, str) else [
-                *st.position, math.atan2(st.R_T_I[1, 0], st.R_T_I[0, 0])]  # fmt: skip
+            row += (
+                [math.nan] * 4
+                if isinstance(st, str)
+                else [*st.position, math.atan2(st.R_T_I[1, 0], st.R_T_I[0, 0])]
+            )
         rows.append(row)
     A = np.array(rows)
     reps = np.array([(r.t_target, *r.position) for r in feed.sent])
@@ -104,10 +108,23 @@ def plot(res: dict[str, Any], path: str, window: tuple[float, float]) -> None:
     a.legend(fontsize=8)
     t = A[:, 0]
     a = ax[1]
-    a.plot(R[:, 0], np.linalg.norm(R[:, 1:4] - np.array([A[np.searchsorted(t, x), 1:4] for x in R[:, 0]]), axis=1),
-           ".", ms=3, color="tab:orange", label="reports")  # fmt: skip
-    a.plot(t, np.linalg.norm(A[:, 9:12] - A[:, 1:4], axis=1), color="tab:red", lw=0.6,
-           label="last report, extrapolated")  # fmt: skip
+    a.plot(
+        R[:, 0],
+        np.linalg.norm(
+            R[:, 1:4] - np.array([A[np.searchsorted(t, x), 1:4] for x in R[:, 0]]), axis=1
+        ),
+        ".",
+        ms=3,
+        color="tab:orange",
+        label="reports",
+    )
+    a.plot(
+        t,
+        np.linalg.norm(A[:, 9:12] - A[:, 1:4], axis=1),
+        color="tab:red",
+        lw=0.6,
+        label="last report, extrapolated",
+    )
     a.plot(t, np.linalg.norm(A[:, 5:8] - A[:, 1:4], axis=1), color="tab:blue", label="estimate")
     a.set_xlabel("t (s)")
     a.set_ylabel("position error (m)")
@@ -137,8 +154,15 @@ def main(argv: list[str] | None = None) -> int:
     from mpf_mavlink.bench.target import ESTIMATOR
 
     cfg = load_config(a.config, [*ESTIMATOR, *a.set])
-    kw = dict(rate_hz=1.0, position_noise_m=2.0, velocity_noise_m_s=0.3, latency_s=0.3,
-              dropout=0.1, clock_offset_s=100.0, seed=a.seed)  # fmt: skip
+    kw = dict(
+        rate_hz=1.0,
+        position_noise_m=2.0,
+        velocity_noise_m_s=0.3,
+        latency_s=0.3,
+        dropout=0.1,
+        clock_offset_s=100.0,
+        seed=a.seed,
+    )
     res = simulate(cfg, a.duration, kw)
     figs = figures(res, a.steady)
     for k, v in figs.items():
