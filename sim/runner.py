@@ -13,7 +13,7 @@ from mpf_mavlink.config.scenario import build_extensions, build_gains, build_pat
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.frames import euler_to_matrix
 from mpf_mavlink.runs.rundir import RunTable, compute_metrics, row_from
-from sim.kinematic import ClosedLoop, initial_state, record, region_wind
+from sim.plant.kinematic import ClosedLoop, initial_state, record, region_wind
 
 
 @dataclass
@@ -24,7 +24,7 @@ class SimResult:
 
 
 def record_sample(table: RunTable, smp: Any) -> None:
-    """Append one recorded closed-loop step (:class:`sim.kinematic.Sample`) to a run table."""
+    """Append one recorded closed-loop step (:class:`sim.plant.kinematic.Sample`) to a run table."""
     table.append(
         row_from(smp.diag, smp.p, smp.w_cmd, smp.w, smp.sdot, smp.target_p, smp.target_R, smp.wind)
     )

@@ -1,7 +1,7 @@
 """Software-in-the-loop runs: the simulated vehicle and the bridge as two MAVLink peers.
 
 :func:`run_sil` is what ``mpf-mavlink sim CONFIG`` does when ``sil.link: udp``: the vehicle
-(:class:`sim.vehicle.SimVehicle`: the JSBSim aircraft or the kinematic plant, the simulated
+(:class:`sim.vehicle.vehicle.SimVehicle`: the JSBSim aircraft or the kinematic plant, the simulated
 autopilot, PX4 or ArduPlane rules) and the bridge (:func:`mpf_mavlink.bridge.live.run_bridge`, the
 same code that flies a real autopilot) run in two processes - two interpreters, so neither
 waits for the other's GIL - and talk MAVLink over UDP loopback (the vehicle sends to the
@@ -52,6 +52,7 @@ from mpf_mavlink.runs.verdict import Verdict, assess
 from mpf_mavlink.runs.write import write_limits, write_run
 from sim.sil_progress import _Progress
 from sim.sil_truth import truth_table
+from sim.vehicle.config import VehicleConfig
 
 # custom modes in which the bridge commands the vehicle (PX4 OFFBOARD, ArduPlane GUIDED)
 _ENGAGED_MODES = ("OFFBOARD", "GUIDED")
@@ -98,13 +99,13 @@ def _start_altitude_m(cfg: Config) -> float:
 
 @functools.lru_cache(maxsize=8)
 def _identify(model: str, root: str | None, v: float, alt: float, controls: tuple[Any, ...]) -> Any:
-    from .airframe_ident import identify
+    from sim.plant.airframe_ident import identify
 
     return identify(model, root, v, alt, dict(controls))
 
 
 def identified(cfg: Config) -> Any:
-    """The identification of the config's aircraft (sim.airframe_ident.AirframeModel) when
+    """The identification of the config's aircraft (sim.plant.airframe_ident.AirframeModel) when
     ``aircraft.gains_from_fdm`` asks for it (JSBSim plant), else None. Errors are ValueErrors
     naming the config key."""
     ac = cfg.section("aircraft")
@@ -113,9 +114,12 @@ def identified(cfg: Config) -> Any:
     root = ac.resolved_root(cfg.source)
     controls = tuple(sorted(ac.controls.mapping().items()))
     return _identify(
-        ac.model, None if root is None else str(root), ac.trim_airspeed_m_s,
-        _start_altitude_m(cfg), controls,
-    )  # fmt: skip
+        ac.model,
+        None if root is None else str(root),
+        ac.trim_airspeed_m_s,
+        _start_altitude_m(cfg),
+        controls,
+    )
 
 
 def trim_of(cfg: Config) -> tuple[float, float | None]:
@@ -130,27 +134,28 @@ def trim_of(cfg: Config) -> tuple[float, float | None]:
         return ident.trim["throttle"], ident.pitch_rad
     if not (ac.trim_from_fdm and cfg.section("sil").plant == "jsbsim"):
         return ac.trim_throttle, ac.attitude_loop.pitch_trim_rad
-    from .airframe_trim import fdm_trim
+    from sim.plant.airframe_trim import fdm_trim
 
     root = ac.resolved_root(cfg.source)
     tr = fdm_trim(ac.model, root, ac.trim_airspeed_m_s, _start_altitude_m(cfg))
     if not tr.ok:
         raise ValueError(
             f"aircraft.trim_airspeed_m_s: JSBSim finds no level-flight trim of {ac.model} at "
-            f"{ac.trim_airspeed_m_s:g} m/s (python -m sim.airframe_trim {ac.model} lists its range)"
+            f"{ac.trim_airspeed_m_s:g} m/s (python -m sim.plant.airframe_trim {ac.model} lists its "
+            "range)"
         )
     return tr.throttle, tr.pitch_rad
 
 
 def build_autopilot(cfg: Config) -> Any:
     """The simulated autopilot for the config's aircraft (rate loops, attitude loop, hold)."""
-    from sim.inner_loop import AttitudeGains, FixedWingAutopilot, HoldGains, RateLoopGains
+    from sim.autopilot.inner_loop import AttitudeGains, FixedWingAutopilot, HoldGains, RateLoopGains
 
     ac, sil = cfg.section("aircraft"), cfg.section("sil")
     base = RateLoopGains()
     ident = identified(cfg)
     if ident is not None:
-        from .airframe_ident import derive_gains, trims
+        from sim.plant.airframe_ident import derive_gains, trims
 
         al0 = ac.attitude_loop
         derived = derive_gains(
@@ -165,17 +170,23 @@ def build_autopilot(cfg: Config) -> Any:
     # The rate loops' airspeed scaling is s = V_trim / V, limited below by V_min: defaults keep
     # the X8's margins (10 / 16 / 22 m/s) in proportion for another trim airspeed.
     gains = dataclasses.replace(
-        base, **over, trim_throttle=trim_throttle, airspeed_trim=v_trim,
+        base,
+        **over,
+        trim_throttle=trim_throttle,
+        airspeed_trim=v_trim,
         airspeed_min=ac.airspeed_min_m_s or v_trim * base.airspeed_min / base.airspeed_trim,
         airspeed_max=ac.airspeed_max_m_s or v_trim * base.airspeed_max / base.airspeed_trim,
-    )  # fmt: skip
+    )
     al = ac.attitude_loop
     att = AttitudeGains()
     att_over = {
-        "roll_tc": al.roll_tc_s, "pitch_tc": al.pitch_tc_s, "roll_rate_max": al.roll_rate_max_rad_s,
-        "pitch_rate_max": al.pitch_rate_max_rad_s, "yaw_rate_max": al.yaw_rate_max_rad_s,
+        "roll_tc": al.roll_tc_s,
+        "pitch_tc": al.pitch_tc_s,
+        "roll_rate_max": al.roll_rate_max_rad_s,
+        "pitch_rate_max": al.pitch_rate_max_rad_s,
+        "yaw_rate_max": al.yaw_rate_max_rad_s,
         "bank_max": al.bank_max_rad,
-    }  # fmt: skip
+    }
     att = dataclasses.replace(
         att, airspeed_min=gains.airspeed_min, **{k: v for k, v in att_over.items() if v is not None}
     )
@@ -187,8 +198,8 @@ def build_autopilot(cfg: Config) -> Any:
     return FixedWingAutopilot(gains, att, hold)
 
 
-def vehicle_options(cfg: Config, url: str, clock: str | None = None, **over: Any) -> dict[str, Any]:
-    """Keyword arguments of :class:`sim.vehicle.SimVehicle` for a config (``over`` wins)."""
+def vehicle_config(cfg: Config, url: str, clock: str | None = None, **over: Any) -> VehicleConfig:
+    """The :class:`sim.vehicle.config.VehicleConfig` of a config's SIL vehicle (``over`` wins)."""
     sil, ac, k = cfg.section("sil"), cfg.section("aircraft"), cfg.kinematic
     pos = (
         sil.initial_position_ned_m
@@ -213,66 +224,94 @@ def vehicle_options(cfg: Config, url: str, clock: str | None = None, **over: Any
         if root is not None:
             plant_options["root_dir"] = str(root)
     opts: dict[str, Any] = dict(
-        flavour=sil.flavour, url=url, plant=sil.plant, clock=clock or sil.clock,
-        position_ned=tuple(pos), heading=float(heading), airspeed=ac.trim_airspeed_m_s,
-        lat0_deg=sil.home_lat_deg, lon0_deg=sil.home_lon_deg, alt0_m=sil.home_alt_m,
-        target=build_target(cfg.target), target_system=sil.target_system, target_rate_hz=sil.target_rate_hz, target_type=sil.target_type,
-        rates=rates, frame_period=sil.frame_period_s, physics_rate_hz=sil.physics_rate_hz,
-        telemetry_latency_s=sil.telemetry_latency_s, command_latency_s=sil.command_latency_s, wind_estimate_tau_s=sil.wind_estimate_tau_s,
-        answer_timeout_s=sil.answer_timeout_s, realtime_speed=sil.realtime_speed,
-        com_of_loss_t=sil.offboard_loss_timeout_s, guided_timeout=sil.guided_timeout_s,
-        loiter_radius=sil.loiter_radius_m, trim_seconds=sil.trim_s, initial_mode=sil.initial_mode, wind_ned=tuple(sil.wind_ned_m_s),
-        turbulence=sil.turbulence, seed=sil.seed, gusts=[dataclasses.asdict(g) for g in sil.gusts],
-        plant_options=plant_options, autopilot=build_autopilot(cfg), realtime_until_engaged=True,
+        flavour=sil.flavour,
+        url=url,
+        plant=sil.plant,
+        clock=clock or sil.clock,
+        position_ned=tuple(pos),
+        heading=float(heading),
+        airspeed=ac.trim_airspeed_m_s,
+        lat0_deg=sil.home_lat_deg,
+        lon0_deg=sil.home_lon_deg,
+        alt0_m=sil.home_alt_m,
+        target=build_target(cfg.target),
+        target_system=sil.target_system,
+        target_rate_hz=sil.target_rate_hz,
+        target_type=sil.target_type,
+        rates=rates,
+        frame_period=sil.frame_period_s,
+        physics_rate_hz=sil.physics_rate_hz,
+        telemetry_latency_s=sil.telemetry_latency_s,
+        command_latency_s=sil.command_latency_s,
+        wind_estimate_tau_s=sil.wind_estimate_tau_s,
+        answer_timeout_s=sil.answer_timeout_s,
+        realtime_speed=sil.realtime_speed,
+        com_of_loss_t=sil.offboard_loss_timeout_s,
+        guided_timeout=sil.guided_timeout_s,
+        loiter_radius=sil.loiter_radius_m,
+        trim_seconds=sil.trim_s,
+        initial_mode=sil.initial_mode,
+        wind_ned=tuple(sil.wind_ned_m_s),
+        turbulence=sil.turbulence,
+        seed=sil.seed,
+        gusts=[dataclasses.asdict(g) for g in sil.gusts],
+        plant_options=plant_options,
+        autopilot=build_autopilot(cfg),
+        realtime_until_engaged=True,
         # the bridge's own scripted target counts from its mission origin: so must the world's
         target_epoch="ready" if sil.target_live else "bridge",
         target_feed=None if sil.target_feed is None else dataclasses.asdict(sil.target_feed),
-    )  # fmt: skip
+    )
     opts.update(over)
-    return opts
+    return VehicleConfig(**opts)
 
 
 def build_vehicle(cfg: Config, url: str, clock: str | None = None, **over: Any) -> Any:
     """The config's simulated vehicle on ``url`` (trimmed, in the hold mode, ready to serve)."""
-    from sim.vehicle import SimVehicle
+    from sim.vehicle.vehicle import SimVehicle, use_profile
 
-    opts = vehicle_options(cfg, url, clock, **over)
-    flavour = opts.pop("flavour")
-    v = SimVehicle(flavour, opts.pop("url"), **opts)
+    vc = vehicle_config(cfg, url, clock, **over)
+    v = SimVehicle(vc)
     sil = cfg.section("sil")
     prof_path = sil.profile_path(cfg.source)
     if prof_path is not None:
-        from sim.autopilot_profile import load_profile
+        from sim.autopilot.profile import load_profile
 
         prof = load_profile(prof_path)
         full = None
         if prof.thrust.full_thrust_airspeed_m_s is not None and sil.plant == "jsbsim":
-            full = full_thrust_throttle(cfg, opts, prof.thrust.full_thrust_airspeed_m_s)
-        v.use_profile(prof, seed=sil.seed, full_thrust_throttle=full)
+            full = full_thrust_throttle(cfg, vc, prof.thrust.full_thrust_airspeed_m_s)
+        use_profile(v, prof, seed=sil.seed, full_thrust_throttle=full)
     return v
 
 
-def full_thrust_throttle(cfg: Config, opts: dict[str, Any], airspeed: float) -> float:
+def full_thrust_throttle(cfg: Config, vc: VehicleConfig, airspeed: float) -> float:
     """The plant's level-flight throttle at ``airspeed`` (m/s), found by flying it (a trim flight
     of a second plant at the start altitude): what the profile's full offboard thrust maps to."""
-    from sim.inner_loop import fly_to_trim
-    from sim.plant_jsbsim import JSBSimPlant
+    from sim.autopilot.inner_loop import fly_to_trim
+    from sim.plant.jsbsim_plant import JSBSimPlant
 
-    po = dict(opts.get("plant_options") or {})
-    alt = -float(opts["position_ned"][2])
+    alt = -float(vc.position_ned[2])
+    n_sub = max(1, math.ceil(vc.frame_period * vc.physics_rate_hz - 1e-9))
     plant = JSBSimPlant(
-        dt=opts.get("frame_period", 0.02) / max(1, math.ceil(opts.get("frame_period", 0.02) * opts.get("physics_rate_hz", 120.0) - 1e-9)),
-        lat0_deg=opts["lat0_deg"], lon0_deg=opts["lon0_deg"], alt0_m=opts["alt0_m"],
-        position_ned=(0.0, 0.0, -alt), heading=0.0, airspeed=airspeed, **po,
-    )  # fmt: skip
+        dt=vc.frame_period / n_sub,
+        lat0_deg=vc.lat0_deg,
+        lon0_deg=vc.lon0_deg,
+        alt0_m=vc.alt0_m,
+        position_ned=(0.0, 0.0, -alt),
+        heading=0.0,
+        airspeed=airspeed,
+        **vc.plant_options,
+    )
     res = fly_to_trim(plant, build_autopilot(cfg), airspeed, alt, seconds=20.0, apply=False)
     return float(res.throttle)
 
 
-def bridge_config(cfg: Config) -> Config:
-    """The bridge's view of a SIL config: flavour from ``sil``, the live target when asked."""
+def bridge_config(cfg: Config, **mavlink: Any) -> Config:
+    """The bridge's view of a SIL config: flavour from ``sil``, the live target when asked;
+    ``mavlink`` overrides entries of its mavlink section."""
     sil = cfg.section("sil")
-    m = dataclasses.replace(cfg.section("mavlink"), flavour=sil.flavour)
+    m = dataclasses.replace(cfg.section("mavlink"), flavour=sil.flavour, **mavlink)
     target = cfg.target
     if sil.target_live:
         target = dataclasses.replace(cfg.target, type="mavlink")
@@ -323,12 +362,17 @@ def _vehicle_run(
         v.run(math.inf)
     finally:
         info = {
-            "mode_log": v.mode_log, "statustexts": v.statustexts, "dropped": v.dropped, "answers": v.answers,
+            "mode_log": v.modes.log,
+            "statustexts": v.link.statustexts,
+            "dropped": v.autopilot.setpoints.dropped,
+            "answers": v.lockstep.answers,
             "frames": v.clock.frames if hasattr(v.clock, "frames") else None,
             "answered_frames": getattr(v.clock, "answered_frames", None),
             "lockstep_timeouts": getattr(v.clock, "timeouts", None),
-            "sim_time_s": v.t, "wall_time_s": v.wall_time_running, "flavour": v.flavour,
-        }  # fmt: skip
+            "sim_time_s": v.t,
+            "wall_time_s": v.wall_time_running,
+            "flavour": v.flavour,
+        }
         conn.send(("truth", v.truth(), info))
         v.close()
 
@@ -413,33 +457,11 @@ def run_sil(
     sil = cfg.section("sil")
     duration = float(duration_s if duration_s is not None else cfg.sim.duration_s)
     port = sil.port or _free_port()
-    bcfg = bridge_config(cfg)
     # in lockstep the bridge's timeouts count the vehicle's time: a simulation slowed down by
     # a loaded host is not a lost link (mavlink.lockstep)
-    lockstep = (clock or sil.clock) == "lockstep"
-    bm = dataclasses.replace(bcfg.section("mavlink"), plots=plots, lockstep=lockstep)
-    bcfg = dataclasses.replace(bcfg, extra=dict(bcfg.extra, mavlink=bm))
-    ctx = _context()
-    rx, tx = ctx.Pipe(duplex=False)
-    stop = ctx.Event()
-    status = ctx.RawArray("d", 1)
-    q = ctx.Queue()
+    bcfg = bridge_config(cfg, plots=plots, lockstep=(clock or sil.clock) == "lockstep")
     wall0 = time.perf_counter()
-    pb = ctx.Process(
-        target=_bridge_main,
-        args=(bcfg, f"udpin:127.0.0.1:{port}", str(bridge_dir), duration, q, force),
-        name="mpf-bridge",
-        daemon=True,
-    )
-    pv = ctx.Process(
-        target=_vehicle_main,
-        args=(cfg, f"udpout:127.0.0.1:{port}", clock, tx, stop, status, os.getpid()),
-        name="mpf-sil-vehicle",
-        daemon=True,
-    )
-    pb.start()
-    pv.start()
-    tx.close()
+    pb, pv, rx, stop, status, q = _start_peers(cfg, bcfg, port, bridge_dir, duration, clock, force)
     bar = _Progress(duration, progress, log, (pv.pid, pb.pid))
     bres: Any = None
     berr: str | None = None
@@ -453,39 +475,14 @@ def run_sil(
                     f"the SIL vehicle did not start: {ready[1] if ready else 'no answer in 120 s'}"
                 )
             bar.note(
-                f"vehicle ready ({sil.plant}, {sil.flavour}, {clock or sil.clock} clock) in {ready[1]['mode']}"
+                f"vehicle ready ({sil.plant}, {sil.flavour}, {clock or sil.clock} clock) in "
+                f"{ready[1]['mode']}"
             )
-            while bres is None and berr is None:
-                try:
-                    kind, payload = q.get(timeout=0.25)
-                except Exception:  # noqa: BLE001 - queue.Empty
-                    if not pb.is_alive() and q.empty():
-                        berr = f"the bridge process exited (code {pb.exitcode})"
-                    bar.update(status[0])
-                    continue
-                if kind == "log":
-                    bar.event(payload, status[0])
-                elif kind == "result":
-                    bres = payload
-                else:
-                    berr = payload
+            bres, berr = _await_bridge(q, pb, bar, status)
         except KeyboardInterrupt:
             interrupted = True
             bar.note("interrupted: the bridge hands back, then the records are written")
-            if pb.is_alive():
-                os.kill(pb.pid, signal.SIGINT)  # in case the Ctrl-C came only to this process
-            deadline = time.monotonic() + 20.0
-            while bres is None and berr is None and time.monotonic() < deadline:
-                try:
-                    kind, payload = q.get(timeout=0.5)
-                except Exception:  # noqa: BLE001
-                    if not pb.is_alive():
-                        break
-                    continue
-                if kind == "result":
-                    bres = payload
-                elif kind == "error":
-                    berr = payload
+            bres, berr = _hand_back(q, pb)
         stop.set()
         if rx.poll(60.0):
             truth_msg = rx.recv()
@@ -507,16 +504,95 @@ def run_sil(
         raise MpfError("SIL run failed: the vehicle sent no truth")
     truth, vinfo = truth_msg[1], truth_msg[2]
     res = _measure(cfg, truth, vinfo, bres, bridge_dir, wall)
-    if None not in bar.cpu0 + bar.cpu1 and bar.t_end is not None and bar.t_track is not None:
-        frames = max(1.0, (bar.t_end - bar.t_track) / cfg.section("sil").frame_period_s)
-        res.metrics["cpu_us_per_frame_vehicle"] = (bar.cpu1[0] - bar.cpu0[0]) / frames * 1e6  # type: ignore[operator]
-        res.metrics["cpu_us_per_frame_bridge"] = (bar.cpu1[1] - bar.cpu0[1]) / frames * 1e6  # type: ignore[operator]
+    res.metrics.update(_cpu_per_frame(bar, sil.frame_period_s))
     res.metrics["clock"] = clock or sil.clock
     res.out_dir = out
     _write(out, res, truth, plots)
     if interrupted:
         raise KeyboardInterrupt
     return res
+
+
+def _start_peers(
+    cfg: Config,
+    bcfg: Config,
+    port: int,
+    bridge_dir: Path,
+    duration: float,
+    clock: str | None,
+    force: bool,
+) -> tuple[Any, ...]:
+    """The bridge (listening on ``port``) and the vehicle, each a process of its own: (bridge,
+    vehicle, the vehicle's pipe, the stop event, the vehicle's sim time, the bridge's queue)."""
+    ctx = _context()
+    rx, tx = ctx.Pipe(duplex=False)
+    stop = ctx.Event()
+    status = ctx.RawArray("d", 1)
+    q = ctx.Queue()
+    pb = ctx.Process(
+        target=_bridge_main,
+        name="mpf-bridge",
+        daemon=True,
+        args=(bcfg, f"udpin:127.0.0.1:{port}", str(bridge_dir), duration, q, force),
+    )
+    pv = ctx.Process(
+        target=_vehicle_main,
+        name="mpf-sil-vehicle",
+        daemon=True,
+        args=(cfg, f"udpout:127.0.0.1:{port}", clock, tx, stop, status, os.getpid()),
+    )
+    pb.start()
+    pv.start()
+    tx.close()
+    return pb, pv, rx, stop, status, q
+
+
+def _await_bridge(q: Any, pb: Any, bar: Any, status: Any) -> tuple[Any, str | None]:
+    """The bridge's result or error, relaying its log lines to the progress bar meanwhile."""
+    while True:
+        try:
+            kind, payload = q.get(timeout=0.25)
+        except Exception:  # noqa: BLE001 - queue.Empty
+            if not pb.is_alive() and q.empty():
+                return None, f"the bridge process exited (code {pb.exitcode})"
+            bar.update(status[0])
+            continue
+        if kind == "log":
+            bar.event(payload, status[0])
+        elif kind == "result":
+            return payload, None
+        else:
+            return None, payload
+
+
+def _hand_back(q: Any, pb: Any) -> tuple[Any, str | None]:
+    """After a Ctrl-C: the bridge hands back (20 s at most), its result or error."""
+    if pb.is_alive():
+        os.kill(pb.pid, signal.SIGINT)  # in case the Ctrl-C came only to this process
+    deadline = time.monotonic() + 20.0
+    while time.monotonic() < deadline:
+        try:
+            kind, payload = q.get(timeout=0.5)
+        except Exception:  # noqa: BLE001
+            if not pb.is_alive():
+                break
+            continue
+        if kind == "result":
+            return payload, None
+        if kind == "error":
+            return None, payload
+    return None, None
+
+
+def _cpu_per_frame(bar: Any, frame_period_s: float) -> dict[str, float]:
+    """CPU time (us) of each peer per frame while tracking, when the progress bar took it."""
+    if None in bar.cpu0 + bar.cpu1 or bar.t_end is None or bar.t_track is None:
+        return {}
+    frames = max(1.0, (bar.t_end - bar.t_track) / frame_period_s)
+    return {
+        f"cpu_us_per_frame_{who}": (bar.cpu1[i] - bar.cpu0[i]) / frames * 1e6
+        for i, who in enumerate(("vehicle", "bridge"))
+    }
 
 
 def _measure(
@@ -559,42 +635,53 @@ def _measure(
         # the verdict on the plant's truth while the bridge was flying it
         sel = info["rows"]
         eul = truth["euler"][sel]
-        vd = assess(
-            cfg, cols["t"], cols["pt_norm"], -truth["position_ned"][sel, 2],
-            truth["airspeed"][sel], eul[:, 0], eul[:, 1], truth["throttle"][sel], source="truth",
-        )  # fmt: skip
+        vd = assess(cfg, cols["t"], cols["pt_norm"], -truth["position_ned"][sel, 2],
+                    truth["airspeed"][sel], eul[:, 0], eul[:, 1], truth["throttle"][sel],
+                    source="truth")  # fmt: skip
         vd.record(metrics)
         metrics["bridge_verdict"] = bm.get("verdict")
     # real-time factor while the bridge was in control (the lockstep figure) and overall
     ml = vinfo["mode_log"]
-    rtf_track = None
-    for i, (t_in, w_in, name) in enumerate(ml):
-        if name in _ENGAGED_MODES:
-            t_out, w_out = (
-                (ml[i + 1][0], ml[i + 1][1]) if i + 1 < len(ml) else (vinfo["sim_time_s"], None)
-            )
-            if w_out is not None and w_out > w_in:
-                rtf_track = (t_out - t_in) / (w_out - w_in)
-            break
+    rtf_track = _tracking_rtf(ml, float(vinfo["sim_time_s"]))
     sim_total = float(vinfo["sim_time_s"])
     metrics.update(
-        sim_time_s=float(cols["t"][-1]) if len(cols["t"]) else 0.0, wall_time_s=wall,
-        vehicle_sim_time_s=sim_total, real_time_factor_tracking=rtf_track,
+        sim_time_s=float(cols["t"][-1]) if len(cols["t"]) else 0.0,
+        wall_time_s=wall,
+        vehicle_sim_time_s=sim_total,
+        real_time_factor_tracking=rtf_track,
         real_time_factor_overall=sim_total / wall if wall > 0 else None,
-        plant=cfg.section("sil").plant, flavour=cfg.section("sil").flavour,
-        bridge_exit_code=bres.exit_code, bridge_exit_reason=bres.exit_reason, bridge_state_reached=bres.state_reached,
-        handback_confirmed=bres.handback_confirmed, vehicle_answered_frames=vinfo.get("answered_frames"),
-        vehicle_frames=vinfo.get("frames"), vehicle_lockstep_timeouts=vinfo.get("lockstep_timeouts"), statustexts=[t for _, t in vinfo["statustexts"]],
+        plant=cfg.section("sil").plant,
+        flavour=cfg.section("sil").flavour,
+        bridge_exit_code=bres.exit_code,
+        bridge_exit_reason=bres.exit_reason,
+        bridge_state_reached=bres.state_reached,
+        handback_confirmed=bres.handback_confirmed,
+        vehicle_answered_frames=vinfo.get("answered_frames"),
+        vehicle_frames=vinfo.get("frames"),
+        vehicle_lockstep_timeouts=vinfo.get("lockstep_timeouts"),
+        statustexts=[t for _, t in vinfo["statustexts"]],
         vehicle_modes=[[round(t, 3), name] for t, _, name in ml],
-    )  # fmt: skip
+    )
     # The truth's verdict decides a run that otherwise ended normally (the bridge's own, on its
     # estimates, is in bridge/metrics.json); any other exit of the bridge stands.
     code = vd.exit_code(bres.exit_code) if vd is not None else bres.exit_code
     metrics["exit_code"] = code
-    return SilResult(
-        cols, metrics, path.positions(), Path("."), bridge_dir, bridge_dir / "mavlink.tlog",
-        code, bres.exit_reason, truth, bres, info.get("t_vehicle", np.zeros(0)),
-    )  # fmt: skip
+    return SilResult(cols, metrics, path.positions(), Path("."), bridge_dir,
+                     bridge_dir / "mavlink.tlog", code, bres.exit_reason, truth, bres,
+                     info.get("t_vehicle", np.zeros(0)))  # fmt: skip
+
+
+def _tracking_rtf(mode_log: list[Any], sim_end_s: float) -> float | None:
+    """Sim seconds per wall second while the bridge was in control (the lockstep figure), from
+    the vehicle's mode log of (t, wall s, name)."""
+    for i, (t_in, w_in, name) in enumerate(mode_log):
+        if name in _ENGAGED_MODES:
+            nxt = mode_log[i + 1] if i + 1 < len(mode_log) else None
+            t_out, w_out = (nxt[0], nxt[1]) if nxt is not None else (sim_end_s, None)
+            if w_out is not None and w_out > w_in:
+                return float((t_out - t_in) / (w_out - w_in))
+            return None
+    return None
 
 
 def _write_bridge_config(bridge_dir: Path, bcfg: Config) -> None:
@@ -620,14 +707,35 @@ def _write(out: Path, res: SilResult, truth: dict[str, np.ndarray], plots: bool)
     if len(tv) and len(res.cols["t"]) and "euler" in truth:
         # the truth the verdict judged, from the start (t < 0: before engagement) for the plots
         t0 = float(tv[0] - res.cols["t"][0])
-        write_limits(out, np.column_stack([
-            truth["t"] - t0, truth["euler"][:, 0], truth["euler"][:, 1], truth["airspeed"],
-            -truth["position_ned"][:, 2], truth["throttle"],
-        ]))  # fmt: skip
+        write_limits(
+            out,
+            np.column_stack(
+                [
+                    truth["t"] - t0,
+                    truth["euler"][:, 0],
+                    truth["euler"][:, 1],
+                    truth["airspeed"],
+                    -truth["position_ned"][:, 2],
+                    truth["throttle"],
+                ]
+            ),
+        )
     write_run(out, res.cols, res.metrics, res.path_T, plots=plots and len(res.cols["t"]) >= 2)
-    cols = [truth["t"], truth["time_boot_s"], *truth["position_ned"].T, *truth["velocity_ned"].T, *truth["euler"].T,
-            truth["airspeed"], *truth["wind_ned"].T, truth["throttle"], truth["mode"]]  # fmt: skip
-    hdr = "t,time_boot_s,p_n,p_e,p_d,v_n,v_e,v_d,roll,pitch,yaw,airspeed,wind_n,wind_e,wind_d,throttle,custom_mode"
+    cols = [
+        truth["t"],
+        truth["time_boot_s"],
+        *truth["position_ned"].T,
+        *truth["velocity_ned"].T,
+        *truth["euler"].T,
+        truth["airspeed"],
+        *truth["wind_ned"].T,
+        truth["throttle"],
+        truth["mode"],
+    ]
+    hdr = (
+        "t,time_boot_s,p_n,p_e,p_d,v_n,v_e,v_d,roll,pitch,yaw,airspeed,wind_n,wind_e,wind_d,"
+        "throttle,custom_mode"
+    )
     np.savetxt(
         out / "truth.csv", np.column_stack(cols), delimiter=",", header=hdr, comments="", fmt="%.9g"
     )

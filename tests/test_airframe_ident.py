@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from mpf_mavlink.config import load_config
-from sim.airframe_ident import IdentError, derive_gains, fit_first_order, identify, trims
-from sim.inner_loop import AttitudeGains, FixedWingAutopilot, HoldGains, RateLoopGains
-from sim.plant_jsbsim import JSBSimPlant
+from sim.autopilot.inner_loop import AttitudeGains, FixedWingAutopilot, HoldGains, RateLoopGains
+from sim.plant.airframe_ident import IdentError, derive_gains, fit_first_order, identify, trims
+from sim.plant.jsbsim_plant import JSBSimPlant
 from sim.sil import build_autopilot
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from mpf_mavlink.config import load_config
-from sim.airframe_trim import G, fdm_trim, mission_radius_m
+from mpf_mavlink.constants import GRAVITY_M_S2 as G
+from sim.plant.airframe_trim import fdm_trim, mission_radius_m
 from sim.sil import trim_of
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,7 +26,8 @@ def test_trim_of_a_stock_c172p_is_level_flight_whose_angle_of_attack_falls_with_
 
 
 def test_no_trim_beyond_the_airframes_power():
-    # 90 m/s (175 kt) is far above a c172's maximum level speed (~120 kt): no trim with throttle <= 1.
+    # 90 m/s (175 kt) is far above a c172's maximum level speed (~120 kt): no trim with
+    # throttle <= 1.
     assert not fdm_trim("c172p", None, 90.0).ok
 
 

@@ -1,4 +1,4 @@
-"""The autopilot profile (sim/autopilot_profile.py): strict loading, and that each emulation does
+"""The autopilot profile (sim/autopilot/profile.py): strict loading, and that each emulation does
 what its docstring says on synthetic states (no SITL, no JSBSim)."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from mpf_mavlink.errors import ConfigError
-from sim.autopilot_profile import (
+from sim.autopilot.profile import (
     AttitudeResponse,
     AttitudeShaper,
     AutopilotProfile,
@@ -137,7 +137,7 @@ def test_config_key_checks_the_file_and_the_flavour():
 
 
 def _R(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    from sim.autopilot_profile import _euler_to_R
+    from sim.autopilot.profile import _euler_to_R
 
     return _euler_to_R(roll, pitch, yaw)
 
@@ -172,7 +172,7 @@ def test_position_lead_moves_the_reported_position_along_the_ground_velocity():
 
 
 def test_gauss_markov_errors_have_their_sigma_and_correlation_time_and_every_seed_its_own():
-    from sim.autopilot_profile import GaussMarkov
+    from sim.autopilot.profile import GaussMarkov
 
     dt, tau, sig = 0.1, 2.0, 0.02
     gm = GaussMarkov((sig,), (tau,), np.random.default_rng(0))
@@ -190,8 +190,8 @@ def test_gauss_markov_errors_have_their_sigma_and_correlation_time_and_every_see
 
 
 def test_the_ekf_error_fit_recovers_a_gauss_markov_process():
-    from sim.autopilot_profile import GaussMarkov
-    from sim.identify import _gm_fit
+    from sim.autopilot.profile import GaussMarkov
+    from sim.calibration.identify import _gm_fit
 
     dt, tau, sig = 0.1, 3.0, 0.25
     gm = GaussMarkov((sig,), (tau,), np.random.default_rng(3))

@@ -16,12 +16,20 @@ from mpf_mavlink.core.guidance.baselines import (
 from mpf_mavlink.core.guidance.law import Extensions, Gains
 from mpf_mavlink.core.paths import shapes
 from mpf_mavlink.core.target import ConstantTurn, Stationary
-from sim.kinematic import ClosedLoop, initial_state
+from sim.plant.kinematic import ClosedLoop, initial_state
 
 V = 16.0
 
 
-def fly(law: str, path, target, p0, yaw0: float, T: float, dt: float = 0.05):  # noqa: ANN001, ANN201
+def fly(  # noqa: ANN201
+    law: str,
+    path,
+    target,
+    p0,
+    yaw0: float,
+    T: float,
+    dt: float = 0.05,  # noqa: ANN001
+):
     loop = ClosedLoop(path, target, Gains(), Extensions(), V, None, law=law)
     x = initial_state(path, target, np.asarray(p0, float), euler_to_matrix(0.0, 0.0, yaw0), None)
     ts, ps, ss = [], [], []

@@ -109,7 +109,7 @@ def test_mavproxy_param_fetch_set_wp_list_against_the_sil_vehicle(flavour, tmp_p
         t = con.send("param fetch")
         got = con.wait_for(r"Received (\d+) parameters", after=t, timeout=10.0)
         assert got is not None, con.transcript()
-        n = 7 if flavour == "px4" else 13  # sim/gcs_services.py's table for the flavour
+        n = 7 if flavour == "px4" else 13  # sim/vehicle/gcs_services.py's table for the flavour
         assert int(re.search(r"(\d+)", got[1])[1]) == n  # type: ignore[index]
         assert got[0] - t < 5.0, con.transcript()
         name = "NAV_LOITER_RAD" if flavour == "px4" else "WP_LOITER_RAD"

@@ -1,5 +1,6 @@
-"""What a ground station asks of the SIL vehicle (sim/gcs_services.py), driven with pymavlink's own
-ground-station helpers (mavutil's parameter fetch, mavwp's mission loader) over loopback UDP.
+"""What a ground station asks of the SIL vehicle (sim/vehicle/gcs_services.py), driven with
+pymavlink's own ground-station helpers (mavutil's parameter fetch, mavwp's mission loader) over
+loopback UDP.
 
 The vehicle is stepped frame by frame in the test's thread (as tests/test_sim_vehicle.py does):
 loopback UDP delivers a datagram before ``sendto`` returns, so a request sent before a frame is
@@ -21,13 +22,15 @@ pytest.importorskip("pymavlink")
 from pymavlink import mavwp  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
-from sim.vehicle import SimVehicle  # noqa: E402
+from sim.vehicle.vehicle import SimVehicle  # noqa: E402
 from tests.test_sim_vehicle import Gcs, ack_for, frames, free_port  # noqa: E402
 
 
 def make(flavour: str, **kw):
     port = free_port()
-    v = SimVehicle(flavour, f"udpin:127.0.0.1:{port}", plant="kinematic", trim_seconds=2.0, **kw)
+    v = SimVehicle.build(
+        flavour, f"udpin:127.0.0.1:{port}", plant="kinematic", trim_seconds=2.0, **kw
+    )
     g = Gcs(port)
     frames(v, g, 2)
     return v, g
@@ -59,7 +62,7 @@ def test_param_fetch_all_streams_every_parameter_once_with_index_and_count(vg):
     frames(v, g, 2)
     pv = g.of("PARAM_VALUE")
     n = len(v.gcs.params)
-    assert n >= 7  # the flavour's tunables (module docstring of sim.gcs_services)
+    assert n >= 7  # the flavour's tunables (module docstring of sim.vehicle.gcs_services)
     assert len(pv) == n and {p.param_count for p in pv} == {n}
     assert sorted(p.param_index for p in pv) == list(range(n))
     for p in pv:  # what the GCS shows is the vehicle's value (float32 on the wire)
@@ -93,17 +96,24 @@ def test_param_set_echoes_and_changes_the_run():
         g.c.param_set_send("NAV_LOITER_RAD", 150.0)
         g.c.param_set_send("COM_OF_LOSS_T", 2.5)
         # integer parameters travel byte-wise on PX4 (MAVProxy and QGC encode them so)
-        g.c.mav.param_set_send(1, 1, b"COM_OBL_RC_ACT", struct.unpack("<f", struct.pack("<i", 2))[0],
-                               M.MAV_PARAM_TYPE_INT32)  # fmt: skip
+        g.c.mav.param_set_send(
+            1,
+            1,
+            b"COM_OBL_RC_ACT",
+            struct.unpack("<f", struct.pack("<i", 2))[0],
+            M.MAV_PARAM_TYPE_INT32,
+        )
         g.c.param_set_send("FW_AIRSPD_TRIM", 25.0)  # above FW_AIRSPD_MAX (20): clamped to it
         g.c.param_set_send("NAV_LOITER_RAD", float("nan"))  # not flyable: refused
         frames(v, g, 2)
         echo = {p.param_id: p for p in g.of("PARAM_VALUE")}
         assert echo["NAV_LOITER_RAD"].param_value == 150.0  # the NaN left the 150 in force
-        assert v.loiter_radius == 150.0 and v._hold_radius == 150.0  # the hold flown takes it
-        assert v.com_of_loss_t == 2.5 and echo["COM_OF_LOSS_T"].param_value == 2.5
-        assert v.obl_rc_act == 2 and px4_int(echo["COM_OBL_RC_ACT"].param_value) == 2
-        assert v.cruise_airspeed == 20.0 and echo["FW_AIRSPD_TRIM"].param_value == 25.0
+        assert (
+            v.tun.loiter_radius == 150.0 and v.modes.hold_radius == 150.0
+        )  # the hold flown takes it
+        assert v.tun.com_of_loss_t == 2.5 and echo["COM_OF_LOSS_T"].param_value == 2.5
+        assert v.tun.obl_rc_act == 2 and px4_int(echo["COM_OBL_RC_ACT"].param_value) == 2
+        assert v.tun.cruise_airspeed == 20.0 and echo["FW_AIRSPD_TRIM"].param_value == 25.0
     finally:
         g.close()
         v.close()
@@ -118,7 +128,7 @@ def test_arduplane_param_set_wind_and_stream_rates():
         g.c.param_set_send("WP_LOITER_RAD", -5.0)  # out of range: refused, 80 echoed
         frames(v, g, 2)
         echo = {p.param_id: p for p in g.of("PARAM_VALUE")}
-        assert echo["WP_LOITER_RAD"].param_value == 80.0 and v.loiter_radius == 80.0
+        assert echo["WP_LOITER_RAD"].param_value == 80.0 and v.tun.loiter_radius == 80.0
         # 2 s of frames: the plant flies in the new wind, ATTITUDE arrives at 10 Hz
         n0 = len(g.of("ATTITUDE"))
         frames(v, g, 100)
@@ -150,9 +160,24 @@ def test_mission_list_upload_download_and_refusal(vg):
     wp = mavwp.MAVWPLoader(target_system=1, target_component=1)
     lat, lon, _ = v.home_lla
     for i in range(3):
-        wp.add(M.MAVLink_mission_item_int_message(
-            1, 1, i, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_WAYPOINT, 0, 1,
-            0, 0, 0, math.nan, int((lat + 0.001 * i) * 1e7), int(lon * 1e7), 100.0))  # fmt: skip
+        wp.add(
+            M.MAVLink_mission_item_int_message(
+                1,
+                1,
+                i,
+                M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                M.MAV_CMD_NAV_WAYPOINT,
+                0,
+                1,
+                0,
+                0,
+                0,
+                math.nan,
+                int((lat + 0.001 * i) * 1e7),
+                int(lon * 1e7),
+                100.0,
+            )
+        )
     c.waypoint_count_send(wp.count())
     for _ in range(10):
         frames(v, g, 1)
@@ -162,20 +187,21 @@ def test_mission_list_upload_download_and_refusal(vg):
         g.msgs = [m for m in g.msgs if m.get_type() != "MISSION_REQUEST_INT"]
     (ack,) = g.of("MISSION_ACK")
     assert ack.type == M.MAV_MISSION_ACCEPTED
-    assert [it.x for it in v.gcs.items()] == [wp.wp(i).x for i in range(3)]
+    assert [it.x for it in v.gcs.missions.items()] == [wp.wp(i).x for i in range(3)]
 
     # a command the vehicle does not store: refused with UNSUPPORTED, the stored mission stays
     g.msgs.clear()
     c.waypoint_count_send(1)
     frames(v, g, 1)
-    c.mav.mission_item_int_send(1, 1, 0, M.MAV_FRAME_MISSION, M.MAV_CMD_DO_DIGICAM_CONTROL, 0, 1,
-                                0, 0, 0, 0, 0, 0, 0)  # fmt: skip
+    c.mav.mission_item_int_send(
+        1, 1, 0, M.MAV_FRAME_MISSION, M.MAV_CMD_DO_DIGICAM_CONTROL, 0, 1, 0, 0, 0, 0, 0, 0, 0
+    )
     frames(v, g, 2)
     if home:  # ArduPilot's item 0 is home whatever it says: the upload completes
         assert g.of("MISSION_ACK")[-1].type == M.MAV_MISSION_ACCEPTED
     else:
         assert g.of("MISSION_ACK")[-1].type == M.MAV_MISSION_UNSUPPORTED
-        assert len(v.gcs.items()) == 3
+        assert len(v.gcs.missions.items()) == 3
     # fence and rally: empty, and not taken
     g.msgs.clear()
     c.mav.mission_request_list_send(1, 1, M.MAV_MISSION_TYPE_FENCE)
@@ -211,7 +237,9 @@ def test_autopilot_version_unsupported_commands_and_ftp_nak(vg):
     tk = ack_for(g, M.MAV_CMD_NAV_TAKEOFF).result
     assert tk == (M.MAV_RESULT_ACCEPTED if v.px4 else M.MAV_RESULT_FAILED)
     if v.px4:
-        assert v.mode_name == "AUTO.TAKEOFF" and v._alt_sp == pytest.approx(600.0 - v.home_lla[2])
+        assert v.mode_name == "AUTO.TAKEOFF" and v.modes.alt_sp == pytest.approx(
+            600.0 - v.home_lla[2]
+        )
     (ftp,) = g.of("FILE_TRANSFER_PROTOCOL")
     p = bytes(ftp.payload)
     # seq + 1, NAK (129) of OpenFileRO (4), one data byte: FileNotFound (10)
@@ -233,10 +261,10 @@ def test_reposition_per_flavour(vg):
         return
     assert res == M.MAV_RESULT_ACCEPTED and v.mode_name == "AUTO.LOITER"
     # the hold is about the point (0.01 deg north = 1112 m), at its altitude, radius 120 m
-    assert v._center[0] == pytest.approx(1112.0, rel=0.01) and abs(v._center[1]) < 1.0
+    assert v.modes.center[0] == pytest.approx(1112.0, rel=0.01) and abs(v.modes.center[1]) < 1.0
     # (NED down at 1.1 km includes the earth's curvature, d^2 / 2R = 0.1 m)
-    assert v._alt_sp == pytest.approx(150.0 - 1112.0**2 / 2 / 6.371e6, abs=0.01)
-    assert v._hold_radius == 120.0
+    assert v.modes.alt_sp == pytest.approx(150.0 - 1112.0**2 / 2 / 6.371e6, abs=0.01)
+    assert v.modes.hold_radius == 120.0
 
 
 def test_gps_raw_int_and_sys_status(vg):
@@ -260,8 +288,9 @@ def test_malformed_requests_never_stop_the_vehicle(vg):
     c.mav.command_long_send(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, nan, 0, 0, 0, 0, 0, 0)
     c.mav.command_long_send(1, 1, M.MAV_CMD_DO_SET_MODE, 0, nan, nan, 0, 0, 0, 0, 0)
     c.mav.command_long_send(1, 1, M.MAV_CMD_DO_REPOSITION, 0, 0, nan, 0, 0, 47.4, 8.5, nan)
-    c.mav.param_set_send(1, 1, b"COM_OF_LOSS_T" if v.px4 else b"GUIDED_TIMEOUT", math.inf,
-                         M.MAV_PARAM_TYPE_REAL32)  # fmt: skip
+    c.mav.param_set_send(
+        1, 1, b"COM_OF_LOSS_T" if v.px4 else b"GUIDED_TIMEOUT", math.inf, M.MAV_PARAM_TYPE_REAL32
+    )
     c.mav.mission_item_send(1, 1, 0, M.MAV_FRAME_GLOBAL, 16, 0, 1, 0, 0, 0, 0, nan, nan, 100)
     c.mav.file_transfer_protocol_send(0, 1, 1, [255] * 251)
     frames(v, g, 3)

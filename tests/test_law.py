@@ -9,7 +9,7 @@ from mpf_mavlink.core import so3
 from mpf_mavlink.core.guidance import Extensions, Gains, VehicleState, mpf_law
 from mpf_mavlink.core.paths import circle, helix, lemniscate
 from mpf_mavlink.core.target import ConstantTurn, PaperProfile
-from sim.kinematic import ClosedLoop, KinematicState, initial_state
+from sim.plant.kinematic import ClosedLoop, KinematicState, initial_state
 from tests._law_reference import reference_mpf_law
 from tests.test_law_equivalence import _rate_bound
 

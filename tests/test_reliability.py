@@ -1,5 +1,5 @@
 """Reliability and security (issue 6): the link's defences, the fuzzer, bad input, and the
-campaign's scenarios (sim/soak.py) as tests.
+campaign's scenarios (sim/soak/campaign.py) as tests.
 
 Fast: the vehicle-clock gate and identity pinning of the link, the fuzzer, configuration
 cross-checks, one-line CLI errors, and three campaign scenarios in a short form (bad input,
@@ -20,8 +20,8 @@ from mpf_mavlink.config.schema import load_config
 from mpf_mavlink.errors import ConfigError
 from mpf_mavlink.mavlink import decode, dialect, mavutil
 from mpf_mavlink.mavlink.link import BootClockGate, open_link, wait_heartbeat
-from sim import soak
-from sim.mavfuzz import CLASSES, FrameFuzzer
+from sim.soak import campaign as soak
+from sim.soak.mavfuzz import CLASSES, FrameFuzzer
 
 ROOT = Path(__file__).resolve().parents[1]
 PX4_CFG = ROOT / "configs" / "bridge_px4.yaml"
@@ -60,7 +60,8 @@ def test_gate_establishes_the_genuine_clock_whatever_comes_first():
     for k in range(50):  # genuine: boot 20 s, LOCAL_POSITION_NED and ATTITUDE, junk between
         res.append(g.check("LOCAL_POSITION_NED", 20.0 + 0.02 * k, 100.1 + 0.02 * k))
         res.append(g.check("ATTITUDE", 20.0 + 0.02 * k, 100.1 + 0.02 * k + 1e-4))
-        assert g.check("ATTITUDE", rnd.choice(forged), 100.1 + 0.02 * k + 2e-4) != None  # noqa: E711
+        forged_ok = g.check("ATTITUDE", rnd.choice(forged), 100.1 + 0.02 * k + 2e-4)
+        assert forged_ok != None  # noqa: E711
     assert res[:4] == SETTLE and res[4:] == [None] * 96
     assert g.resets == 0
 
@@ -292,16 +293,24 @@ def test_contradictions_are_config_errors(cfg, sets, culprit):
 
 
 def test_hold_modes_that_are_fine():
-    for sets in (["mavlink.hold_mode=LOITER"], ["mavlink.flavour=auto", "mavlink.hold_mode=LOITER"],
-                 ["mavlink.flavour=auto", "mavlink.hold_mode=RTL"], ["mavlink.hold_mode=AUTO.RTL"]):  # fmt: skip
+    for sets in (
+        ["mavlink.hold_mode=LOITER"],
+        ["mavlink.flavour=auto", "mavlink.hold_mode=LOITER"],
+        ["mavlink.flavour=auto", "mavlink.hold_mode=RTL"],
+        ["mavlink.hold_mode=AUTO.RTL"],
+    ):
         load_config(PX4_CFG, sets)  # LOITER and RTL exist in both autopilots' tables
 
 
 def test_cli_errors_are_one_line(capsys):
     from mpf_mavlink.cli.main import main
 
-    for argv, culprit in ((["run", str(PX4_CFG)], "--connect"), (["run", str(PX4_CFG), "--connect", "udpin:1.2.3.4:5", "--duration", "-1"], "--duration"),
-                          (["bogus"], "bogus"), (["check", str(PX4_CFG), "--nope"], "--nope")):  # fmt: skip
+    for argv, culprit in (
+        (["run", str(PX4_CFG)], "--connect"),
+        (["run", str(PX4_CFG), "--connect", "udpin:1.2.3.4:5", "--duration", "-1"], "--duration"),
+        (["bogus"], "bogus"),
+        (["check", str(PX4_CFG), "--nope"], "--nope"),
+    ):
         with pytest.raises(SystemExit) as ei:
             main(argv)
         err = capsys.readouterr().err.strip().splitlines()
@@ -326,8 +335,18 @@ def _row(name: str, tmp_path: Path, probe, **kw) -> soak.Row:
     return row
 
 
-FAST_BAD_INPUTS = ("config_not_yaml", "unknown_key", "non_finite", "set_unknown_key", "url_port_out_of_range", "connect_missing",
-                   "signing_key_wrong_length", "hold_mode_unknown", "thrust_limits_crossed", "target_sysid_is_vehicle")  # fmt: skip
+FAST_BAD_INPUTS = (
+    "config_not_yaml",
+    "unknown_key",
+    "non_finite",
+    "set_unknown_key",
+    "url_port_out_of_range",
+    "connect_missing",
+    "signing_key_wrong_length",
+    "hold_mode_unknown",
+    "thrust_limits_crossed",
+    "target_sysid_is_vehicle",
+)
 
 
 @pytest.mark.slow  # > 8 s of real-time flight: full suite (CI), not the quick loop
@@ -373,7 +392,7 @@ def test_tap_measures_the_vehicles_timeouts_on_its_clock():
     # waiting: 0.6 s of wall time with no simulated time (its ATTITUDEs at 50 Hz stop and go
     # on from the next frame). Its 1 s loss timeout runs on its own clock, which the tap reads
     # from the ATTITUDEs it relayed: 1.0 s there, 1.6 s on the wall clock.
-    from sim.soak_rig import Tap
+    from sim.soak.rig import Tap
 
     tap = Tap(None, "px4")  # type: ignore[arg-type]  # no relay: the records are given
     wall = [0.02 * k for k in range(26)] + [0.6 + 0.02 * k for k in range(26, 80)]

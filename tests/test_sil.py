@@ -32,9 +32,9 @@ from mpf_mavlink.config.schema import load_config  # noqa: E402
 
 # a lifecycle flight of seconds has no steady window: it ends NOT JUDGED (exit 6), not PASS
 from mpf_mavlink.runs.verdict import EXIT_NOT_JUDGED as NOT_JUDGED  # noqa: E402
-from sim.plant_jsbsim import JSBSimPlant  # noqa: E402
+from sim.plant.jsbsim_plant import JSBSimPlant  # noqa: E402
 from sim.sil import build_vehicle, run_sil  # noqa: E402
-from sim.vehicle import SimVehicle  # noqa: E402
+from sim.vehicle.vehicle import SimVehicle  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = str(ROOT / "configs" / "default.yaml")
@@ -155,9 +155,21 @@ def test_c172x_from_the_jsbsim_package_loads_and_flies_trimmed(capfd):
 
 def test_gust_and_seeded_turbulence():
     kw = dict(plant="jsbsim", trim_seconds=2.0, physics_rate_hz=100.0)
-    v = SimVehicle("px4", f"udpin:127.0.0.1:{free_port()}", **kw,
-                   gusts=[{"start_s": 0.5, "direction_ned": (0.0, 1.0, 0.0), "magnitude_m_s": 5.0,
-                           "rise_s": 1.0, "hold_s": 1.0, "decay_s": 1.0}])  # fmt: skip
+    v = SimVehicle.build(
+        "px4",
+        f"udpin:127.0.0.1:{free_port()}",
+        **kw,
+        gusts=[
+            {
+                "start_s": 0.5,
+                "direction_ned": (0.0, 1.0, 0.0),
+                "magnitude_m_s": 5.0,
+                "rise_s": 1.0,
+                "hold_s": 1.0,
+                "decay_s": 1.0,
+            }
+        ],
+    )
     for _ in range(250):
         v.step_once()
     tr = v.truth()
@@ -171,7 +183,9 @@ def test_gust_and_seeded_turbulence():
     assert we[i] == pytest.approx(2.5, abs=0.3)
 
     def turb(seed: int) -> np.ndarray:
-        v = SimVehicle("px4", f"udpin:127.0.0.1:{free_port()}", **kw, turbulence="light", seed=seed)
+        v = SimVehicle.build(
+            "px4", f"udpin:127.0.0.1:{free_port()}", **kw, turbulence="light", seed=seed
+        )
         for _ in range(100):
             v.step_once()
         w = v.truth()["wind_ned"]
@@ -186,8 +200,13 @@ def test_gust_and_seeded_turbulence():
 
 # --------------------------------------------------------------------------- vehicle --serve
 def test_vehicle_help_explains():
-    out = subprocess.run([sys.executable, "-m", "mpf_mavlink.cli", "vehicle", "--help"], capture_output=True,
-                         text=True, check=True, cwd=ROOT).stdout  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-m", "mpf_mavlink.cli", "vehicle", "--help"],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT,
+    ).stdout
     for words in (
         "--serve",
         "udpout:127.0.0.1:14550",
@@ -211,14 +230,26 @@ def test_vehicle_serve_bad_url_is_one_line(capsys):
 def test_vehicle_serve_answers_a_pymavlink_client():
     port = free_port()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "mpf_mavlink.cli", "vehicle", DEMO, "--serve", f"udpin:127.0.0.1:{port}"],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            "-m",
+            "mpf_mavlink.cli",
+            "vehicle",
+            DEMO,
+            "--serve",
+            f"udpin:127.0.0.1:{port}",
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
         # as in a terminal's foreground: a runner started in the background (`cmd &`) passes
         # SIGINT down ignored, and Python then never turns it into KeyboardInterrupt
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-    )  # fmt: skip
-    c = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255, source_component=190,
-                                   dialect="ardupilotmega")  # fmt: skip
+    )
+    c = mavutil.mavlink_connection(
+        f"udpout:127.0.0.1:{port}", source_system=255, source_component=190, dialect="ardupilotmega"
+    )
     try:
         got: dict[tuple[str, int], list] = {}
         requested = False
@@ -308,7 +339,8 @@ def test_full_sil_mission_converges(tmp_path, capsys):
     assert (
         m["alignment_residual_m"] < 1e-3
     )  # the bridge's log matches the truth (float32 positions)
-    # what the bridge believed agrees with the truth within estimation error (live target, telemetry)
+    # what the bridge believed agrees with the truth within estimation error (live target,
+    # telemetry)
     assert abs(m["bridge_steady_rms_m"] - m["steady_rms_m"]) < 0.3
     assert (
         m["vehicle_answered_frames"] > 0.95 * 150 / 0.02
@@ -353,8 +385,10 @@ CIRCLE = """
 name: clocks
 path: {type: circle, radius_m: 100.0, center_m: [0.0, 100.0, -100.0], clockwise: true}
 target: {type: stationary}
-guidance: {K_p: 2.0, K_R: 3.0, alpha_m: 5.0, rate_limit_rad_s: 0.6, psi_turn: true, wind_compensation: true}
-vehicle: {airspeed_m_s: 16.0, airspeed_min_m_s: 14.0, airspeed_max_m_s: 18.0, max_bank_rad: 0.785398}
+guidance: {K_p: 2.0, K_R: 3.0, alpha_m: 5.0, rate_limit_rad_s: 0.6, psi_turn: true,
+           wind_compensation: true}
+vehicle: {airspeed_m_s: 16.0, airspeed_min_m_s: 14.0, airspeed_max_m_s: 18.0,
+          max_bank_rad: 0.785398}
 kinematic: {initial_position_ned_m: [0.0, 0.0, -100.0], initial_attitude_rpy_rad: [0.0, 0.0, 0.0]}
 metrics: {steady_after_s: 30.0}
 checks: {c1_m: 300.0, c2: 0.25}
@@ -377,10 +411,14 @@ def test_lockstep_applies_setpoints_after_the_command_latency_at_10_hz(tmp_path)
 
     out = tmp_path / "run"
     sets = [
-        "sim.duration_s=30", "metrics.steady_after_s=20", "sil.telemetry.attitude_hz=10",
-        "sil.telemetry.local_position_hz=10", "mavlink.attitude_rate_hz=10",
-        "mavlink.attitude_min_hz=8", "mavlink.position_rate_hz=10",
-    ]  # fmt: skip
+        "sim.duration_s=30",
+        "metrics.steady_after_s=20",
+        "sil.telemetry.attitude_hz=10",
+        "sil.telemetry.local_position_hz=10",
+        "mavlink.attitude_rate_hz=10",
+        "mavlink.attitude_min_hz=8",
+        "mavlink.position_rate_hz=10",
+    ]
     rc = main(
         ["sim", DEMO, "--out", str(out), "-q", "--no-plots"]
         + [a for s in sets for a in ("--set", s)]
@@ -407,9 +445,9 @@ def test_lockstep_and_realtime_track_alike(tmp_path):
     # at 10 s and was still at 0.5-0.8 m RMS over 20-25 s, converging by ~28 s to the same
     # steady state (0.15-0.30 m RMS per 5 s window from 30 s, within 0.03 m of the quiet run).
     # The energy control's 2 s filters slow the capture: one lockstep run captured in 34 s, the
-    # realtime one in 9 s. So the runs last 90 s and are compared from t = 50 s. Tolerances: 0.15 m on the RMS and
-    # 0.2 m RMS between the |pt| series on the vehicle's clock; a setpoint delayed by one frame
-    # throughout, or dropped ones, would double the error.
+    # realtime one in 9 s. So the runs last 90 s and are compared from t = 50 s. Tolerances: 0.15 m
+    # on the RMS and 0.2 m RMS between the |pt| series on the vehicle's clock; a setpoint delayed by
+    # one frame throughout, or dropped ones, would double the error.
     f = tmp_path / "circle.yaml"
     f.write_text(CIRCLE)
     res = {}
@@ -436,7 +474,8 @@ def test_lockstep_and_realtime_track_alike(tmp_path):
     )
     rms_diff = float(np.sqrt(np.mean(diff**2)))
     print(
-        f"steady RMS |pt|: lockstep {a:.3f} m, realtime {b:.3f} m; series differ by {rms_diff:.3f} m RMS"
+        f"steady RMS |pt|: lockstep {a:.3f} m, realtime {b:.3f} m; "
+        f"series differ by {rms_diff:.3f} m RMS"
     )
     for c in ("lockstep", "realtime"):
         m = res[c].metrics
@@ -464,10 +503,12 @@ def test_scripted_target_runs_on_the_bridge_clock(tmp_path):
     cfg = load_config(
         DEMO,
         [
-            "sil.target_live=false", "sil.plant=kinematic", "sil.turbulence=none",
+            "sil.target_live=false",
+            "sil.plant=kinematic",
+            "sil.turbulence=none",
             "sim.duration_s=20",
         ],
-    )  # fmt: skip
+    )
     r = run_sil(cfg, tmp_path / "run", progress=False, plots=False, log=lambda s: None)
     assert r.exit_code == NOT_JUDGED, (r.exit_reason, r.metrics.get("verdict"))
     from mpf_mavlink.runs.rundir import read_run

@@ -1,4 +1,5 @@
-"""The JSBSim SIL vehicle: the shipped Skywalker X8 model, JSBSimPlant and the simulated inner loops.
+"""The JSBSim SIL vehicle: the shipped Skywalker X8 model, JSBSimPlant and the simulated inner
+loops.
 
 Every threshold has its reason next to it. The whole file runs in a few seconds (JSBSim runs the
 X8 at ~50k steps/s).
@@ -15,14 +16,15 @@ import pytest
 os.environ.setdefault("JSBSIM_DEBUG", "0")
 jsbsim = pytest.importorskip("jsbsim")
 
-from sim.inner_loop import (  # noqa: E402
+from mpf_mavlink.constants import FT_TO_M as FT  # noqa: E402
+from sim.autopilot.inner_loop import (  # noqa: E402
     AttitudeController,
     FixedWingAutopilot,
     RateController,
     RateLoopGains,
     fly_to_trim,
 )
-from sim.plant_jsbsim import DEFAULT_ROOT, FT, JSBSimPlant, LocalNED, PlantState  # noqa: E402
+from sim.plant.jsbsim_plant import DEFAULT_ROOT, JSBSimPlant, LocalNED, PlantState  # noqa: E402
 
 G = 9.80665
 V_TRIM = 16.0
@@ -307,7 +309,7 @@ def test_every_turbulence_seed_its_own_draw():
     w0, w1, w0b = gusts(0), gusts(1), gusts(0)
     assert np.abs(w0 - w0b).max() == 0.0  # reproducible
     assert np.abs(w0 - w1).max() > 0.1
-    from sim.plant_jsbsim import jsbsim_turbulence_seed
+    from sim.plant.jsbsim_plant import jsbsim_turbulence_seed
 
     assert jsbsim_turbulence_seed(7) == 7  # the demo's turbulence is unchanged
     with pytest.raises(ValueError):

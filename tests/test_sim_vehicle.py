@@ -1,4 +1,5 @@
-"""The simulated MAVLink vehicle (sim/vehicle.py) seen from a pymavlink ground station on loopback UDP.
+"""The simulated MAVLink vehicle (sim/vehicle/vehicle.py) seen from a pymavlink ground station on
+loopback UDP.
 
 Most tests drive the vehicle frame by frame with ``step_once()`` in the test's own thread
 (loopback UDP delivers a datagram before ``sendto`` returns, so the exchange is deterministic);
@@ -23,11 +24,16 @@ pytest.importorskip("pymavlink")
 from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
-from mpf_mavlink.core.frames import euler_to_quat_wxyz, geodetic_to_ned, matrix_to_quat_wxyz  # noqa: E402
+from mpf_mavlink.core.frames import (  # noqa: E402
+    euler_to_quat_wxyz,
+    geodetic_to_ned,
+    matrix_to_quat_wxyz,
+)
 from mpf_mavlink.core.target import ConstantTurn  # noqa: E402
-from sim.clock import LockstepClock  # noqa: E402
-from sim.plant_kinematic_mav import KinematicMavPlant, ned_to_geodetic_fast  # noqa: E402
-from sim.vehicle import SimVehicle, px4_custom_mode  # noqa: E402
+from mpf_mavlink.mavlink.modes import px4_custom_mode  # noqa: E402
+from sim.plant.kinematic_plant import KinematicMavPlant, ned_to_geodetic_fast  # noqa: E402
+from sim.vehicle.clock import LockstepClock  # noqa: E402
+from sim.vehicle.vehicle import SimVehicle  # noqa: E402
 
 PX4_LOITER = px4_custom_mode(4, 3)  # (4 << 16) | (3 << 24) = 0x03040000
 PX4_OFFBOARD = px4_custom_mode(6)  # 6 << 16 = 0x00060000
@@ -48,9 +54,11 @@ class Gcs:
 
     def __init__(self, port: int, sysid: int = 255, compid: int = 190):
         self.c = mavutil.mavlink_connection(
-            f"udpout:127.0.0.1:{port}", source_system=sysid, source_component=compid,
+            f"udpout:127.0.0.1:{port}",
+            source_system=sysid,
+            source_component=compid,
             dialect="ardupilotmega",
-        )  # fmt: skip
+        )
         self.msgs: list = []
         self.hello()
 
@@ -115,7 +123,7 @@ def ack_for(g: Gcs, command: int):
 @pytest.fixture
 def px4():
     port = free_port()
-    v = SimVehicle("px4", f"udpin:127.0.0.1:{port}")
+    v = SimVehicle.build("px4", f"udpin:127.0.0.1:{port}")
     g = Gcs(port)
     yield v, g
     g.close()
@@ -125,7 +133,7 @@ def px4():
 @pytest.fixture
 def ardu():
     port = free_port()
-    v = SimVehicle("ardupilot", f"udpin:127.0.0.1:{port}")
+    v = SimVehicle.build("ardupilot", f"udpin:127.0.0.1:{port}")
     g = Gcs(port)
     yield v, g
     g.close()
@@ -142,7 +150,7 @@ def ardu():
 )
 def test_heartbeat_identity_and_mode(flavour, autopilot, custom_mode, mode_string):
     port = free_port()
-    with SimVehicle(flavour, f"udpin:127.0.0.1:{port}") as v:
+    with SimVehicle.build(flavour, f"udpin:127.0.0.1:{port}") as v:
         g = Gcs(port)
         frames(v, g, 60)  # 1.2 s: at least one 1 Hz heartbeat
         hbs = g.of("HEARTBEAT")
@@ -162,8 +170,9 @@ def test_heartbeat_identity_and_mode(flavour, autopilot, custom_mode, mode_strin
 
 def test_starts_trimmed_near_requested_point_and_loiters():
     port = free_port()
-    with SimVehicle("px4", f"udpin:127.0.0.1:{port}", position_ned=(200.0, -100.0, -120.0),
-                    heading=math.pi / 2) as v:  # fmt: skip
+    with SimVehicle.build(
+        "px4", f"udpin:127.0.0.1:{port}", position_ned=(200.0, -100.0, -120.0), heading=math.pi / 2
+    ) as v:
         tr = v.truth()
         # the trim flight starts behind the point (V * trim_seconds) and ends within a few metres
         assert np.linalg.norm(tr["position_ned"][0] - [200.0, -100.0, -120.0]) < 5.0
@@ -191,7 +200,9 @@ def test_px4_offboard_rules_rates_and_loss(px4):
 
     # 2. NaN setpoints are dropped and do not count as an offboard signal
     frames(v, g, 60, lambda i: g.rates(float("nan"), 0.0, 0.0))
-    assert v.dropped["nonfinite"] == 59  # the 60th is answered after the last frame: still queued
+    assert (
+        v.autopilot.setpoints.dropped["nonfinite"] == 59
+    )  # the 60th is answered after the last frame: still queued
     g.msgs.clear()
     g.set_mode(6)
     frames(v, g, 2)
@@ -239,7 +250,7 @@ def test_px4_offboard_rules_rates_and_loss(px4):
     assert v.custom_mode == PX4_OFFBOARD
     frames(v, g, 15)  # 1.2 s in all
     assert v.custom_mode == PX4_LOITER
-    t_switch = [t for t, name in v.mode_changes if name == "AUTO.LOITER"][-1]
+    t_switch = [t for t, name in v.modes.changes if name == "AUTO.LOITER"][-1]
     assert (
         1.0 - 0.02 <= t_switch - t_last <= 1.0 + 0.03
     )  # within one 20 ms frame of the 1 s timeout
@@ -256,7 +267,7 @@ def test_ardupilot_guided_attitude_timeout_and_loiter(ardu):
     frames(v, g, 2)
     assert ack_for(g, M.MAV_CMD_DO_SET_MODE).result == M.MAV_RESULT_ACCEPTED
     assert v.custom_mode == 15
-    center = np.array(v._center)
+    center = np.array(v.modes.center)
     t0 = v.t
     roll_cmd, pitch_cmd = 30 * DEG, 3 * DEG
     frames(v, g, 150, lambda i: g.attitude(roll_cmd, pitch_cmd, 0.0, thrust=0.3))  # 3 s at 50 Hz
@@ -289,7 +300,9 @@ def test_ardupilot_attitude_target_dropped_outside_guided(ardu):
     assert v.custom_mode == 6
     g.msgs.clear()
     frames(v, g, 75, lambda i: g.attitude(30 * DEG, 0.0))
-    assert v.dropped["not_guided"] == 74  # the 75th answers the last frame: not yet read
+    assert (
+        v.autopilot.setpoints.dropped["not_guided"] == 74
+    )  # the 75th answers the last frame: not yet read
     assert np.max(np.abs(v.truth()["euler"][-75:, 0])) < 3 * DEG  # the 30 deg target had no effect
     # dropped without a reply: the only acks are none (the mode change ack was cleared)
     assert g.of("COMMAND_ACK") == []
@@ -304,21 +317,27 @@ def test_ardupilot_mode_refusal_and_yaw_to_rudder(ardu):
     # yaw 22.5 deg in the quaternion -> half rudder (ArduPlane: +-45 deg = +-4500 cdeg = full)
     frames(v, g, 3, lambda i: g.attitude(0.0, 0.0, 22.5 * DEG))
     st = v._st
-    assert abs(v._guided_control(st)[2] - 0.5) < 1e-6  # q travels as float32
+    assert abs(v.autopilot._guided(st)[2] - 0.5) < 1e-6  # q travels as float32
     # type_mask 134: roll alone from the quaternion (pitch, yaw not forced)
     frames(v, g, 1)  # consume the message answering the last frame
-    v._forced_t = [None, None, None, None]
+    v.autopilot.setpoints.forced_t = [None, None, None, None]
     frames(v, g, 1, lambda i: g.attitude(10 * DEG, 20 * DEG, 30 * DEG, mask=134))
     frames(v, g, 1)
-    assert v._forced_t[0] is not None and v._forced_t[1] is None and v._forced_t[2] is None
-    assert abs(v._forced[0] - 10 * DEG) < 1e-6
+    assert (
+        v.autopilot.setpoints.forced_t[0] is not None
+        and v.autopilot.setpoints.forced_t[1] is None
+        and v.autopilot.setpoints.forced_t[2] is None
+    )
+    assert abs(v.autopilot.setpoints.forced[0] - 10 * DEG) < 1e-6
 
 
 # --------------------------------------------------------------------------- target system
 def test_follow_target_from_system_2_matches_motion():
     port = free_port()
     target = ConstantTurn(position=(150.0, -40.0, 0.0), speed=4.0, heading=0.6, turn_rate=0.05)
-    with SimVehicle("ardupilot", f"udpin:127.0.0.1:{port}", plant="kinematic", target=target) as v:
+    with SimVehicle.build(
+        "ardupilot", f"udpin:127.0.0.1:{port}", plant="kinematic", target=target
+    ) as v:
         g = Gcs(port)
         frames(v, g, 60)
         ft = g.of("FOLLOW_TARGET", src=2)
@@ -371,12 +390,18 @@ def test_arduplane_stock_rates_and_both_rate_requests(ardu):
     assert 1 <= len(g.of("ATTITUDE")) <= 3 and 1 <= len(g.of("VFR_HUD")) <= 3
     assert len(g.of("HOME_POSITION")) == 0
     g.msgs.clear()
-    g.c.mav.command_long_send(1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_VFR_HUD, 100_000, 0, 0, 0, 0, 0)  # fmt: skip
+    g.c.mav.command_long_send(
+        1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_VFR_HUD, 100_000, 0, 0, 0, 0, 0
+    )
     g.c.mav.request_data_stream_send(1, 1, 10, 25, 1)  # EXTRA1 at 25 Hz
     g.c.mav.request_data_stream_send(1, 1, 6, 50, 1)  # POSITION at 50 Hz: capped at 40
     # 50 Hz by interval is refused: ArduPilot caps intervals at 1.25 loop periods (25 ms)
-    g.c.mav.command_long_send(1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_ATTITUDE, 20_000, 0, 0, 0, 0, 0)  # fmt: skip
-    g.c.mav.command_long_send(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0)  # fmt: skip
+    g.c.mav.command_long_send(
+        1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_ATTITUDE, 20_000, 0, 0, 0, 0, 0
+    )
+    g.c.mav.command_long_send(
+        1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0
+    )
     frames(v, g, 3)
     assert len(g.of("HOME_POSITION")) == 1  # sent once, on request
     denied = [a for a in g.of("COMMAND_ACK") if a.command == M.MAV_CMD_SET_MESSAGE_INTERVAL]
@@ -397,7 +422,7 @@ def test_arduplane_stock_rates_and_both_rate_requests(ardu):
 
 def test_telemetry_latency_in_sim_time():
     port = free_port()
-    with SimVehicle(
+    with SimVehicle.build(
         "px4", f"udpin:127.0.0.1:{port}", plant="kinematic", telemetry_latency_s=0.1
     ) as v:
         g = Gcs(port)
@@ -430,7 +455,7 @@ def test_lockstep_frames_advance_on_the_bridges_answers():
     Counted, not timed (a wall-clock factor breaks on a loaded CI box): the speed itself is a
     benchmark figure (scripts/bench --only sil_real_time_factor)."""
     port = free_port()
-    v = SimVehicle("px4", f"udpin:127.0.0.1:{port}", clock="lockstep")
+    v = SimVehicle.build("px4", f"udpin:127.0.0.1:{port}", clock="lockstep")
     g = Gcs(port)
     v.start_in_thread()
     try:
@@ -457,7 +482,7 @@ def test_lockstep_frames_advance_on_the_bridges_answers():
 
 def test_lockstep_silent_bridge_still_advances_and_realtime_is_paced():
     port = free_port()
-    v = SimVehicle("px4", f"udpin:127.0.0.1:{port}", plant="kinematic", answer_timeout_s=0.05)
+    v = SimVehicle.build("px4", f"udpin:127.0.0.1:{port}", plant="kinematic", answer_timeout_s=0.05)
     g = Gcs(port)  # peer known (it said hello) but never answers
     v.start_in_thread()
     hang_guard = time.monotonic() + 60.0  # a hang guard, not a measurement
@@ -470,7 +495,7 @@ def test_lockstep_silent_bridge_still_advances_and_realtime_is_paced():
     assert v.clock.timeouts >= 10 and v.clock.answered_frames == 0 and v.t > 0.0
     v.close()
     g.close()
-    v = SimVehicle(
+    v = SimVehicle.build(
         "ardupilot", f"udpin:127.0.0.1:{free_port()}", plant="kinematic", clock="realtime"
     )
     w0 = time.perf_counter()
@@ -503,7 +528,7 @@ def test_kinematic_plant_geodetic_and_turn():
 
 def test_tcpin_link():
     port = free_port()
-    with SimVehicle("px4", f"tcpin:127.0.0.1:{port}", plant="kinematic") as v:
+    with SimVehicle.build("px4", f"tcpin:127.0.0.1:{port}", plant="kinematic") as v:
         c = mavutil.mavlink_connection(
             f"tcp:127.0.0.1:{port}", source_system=255, dialect="ardupilotmega"
         )
@@ -523,7 +548,7 @@ def test_lockstep_counts_only_the_answer_to_the_last_attitude():
     # A setpoint stamped with an earlier frame's ATTITUDE time (a late answer) must not release
     # the lockstep frame: counting it would keep every later command one frame late.
     port = free_port()
-    v = SimVehicle("px4", f"udpin:127.0.0.1:{port}", plant="kinematic", clock="lockstep")
+    v = SimVehicle.build("px4", f"udpin:127.0.0.1:{port}", plant="kinematic", clock="lockstep")
     g = Gcs(port)
     try:
         att_ms = []
@@ -551,8 +576,13 @@ def test_lockstep_awaits_position_frames_once_the_bridge_answers_them():
     setpoint comes stamped with such a frame's time_boot_ms (a multi-rate bridge,
     mavlink.position_instants), those frames are awaited too, each on its own stamp."""
     port = free_port()
-    v = SimVehicle("px4", f"udpin:127.0.0.1:{port}", plant="kinematic", clock="lockstep",
-                   rates={"attitude": 10.0, "local_position": 50.0})  # fmt: skip
+    v = SimVehicle.build(
+        "px4",
+        f"udpin:127.0.0.1:{port}",
+        plant="kinematic",
+        clock="lockstep",
+        rates={"attitude": 10.0, "local_position": 50.0},
+    )
     g = Gcs(port)
 
     def frame() -> tuple[list[int], list[int]]:
@@ -578,10 +608,12 @@ def test_lockstep_awaits_position_frames_once_the_bridge_answers_them():
         assert v.poll(0.5)
         a, pos = frame()  # 20 ms later: a position-only frame
         assert not a and pos and pos[0] == att[0] + 20
-        assert v.poll(0.0) and not v.answers_positions  # not awaited: the ATTITUDE's answer stands
+        assert (
+            v.poll(0.0) and not v.lockstep.answers_positions
+        )  # not awaited: the ATTITUDE's answer stands
         answer(pos[0])
         v.poll(0.5)
-        assert v.answers_positions
+        assert v.lockstep.answers_positions
         a, pos = frame()
         assert not a and pos and pos[0] == att[0] + 40
         answer(pos[0] - 20)  # a late answer to the previous frame does not release this one
@@ -598,23 +630,16 @@ def test_reported_wind_lags_the_true_wind_like_an_estimator():
     A 5 m/s step seen over 50 frames of 20 ms with tau 1 s has closed 1 - exp(-1) of itself:
     each frame multiplies the remaining error by exp(-dt/tau), so after n frames it is
     exp(-n dt/tau) to ~n ulp (float64, 50 products: 1e-13 is ample)."""
-    from types import SimpleNamespace
+    from sim.vehicle.telemetry import WindEstimate
 
-    from sim.mav_endpoint import MavEndpoint
-
-    v = SimpleNamespace(
-        _st=SimpleNamespace(wind_ned=np.array([0.0, 4.0, 0.0])),
-        wind_estimate_tau_s=1.0,
-        _wind_est=None,
-        _wind_est_t=0.0,
-    )
-    MavEndpoint._update_wind_estimate(v, 0.0)  # starts at the truth
-    assert v._wind_est == (0.0, 4.0, 0.0)
-    v._st.wind_ned = np.array([0.0, 9.0, -1.0])  # a gust of 5 m/s east and 1 m/s up
+    w = WindEstimate(tau_s=1.0)
+    w.update(np.array([0.0, 4.0, 0.0]), 0.0)  # starts at the truth
+    assert w.value == (0.0, 4.0, 0.0)
+    gust = np.array([0.0, 9.0, -1.0])  # a gust of 5 m/s east and 1 m/s up
     for n in range(1, 51):
-        MavEndpoint._update_wind_estimate(v, 0.02 * n)
+        w.update(gust, 0.02 * n)
     left = math.exp(-1.0)
-    assert v._wind_est[1] == pytest.approx(9.0 - 5.0 * left, abs=1e-13)
+    assert w.value[1] == pytest.approx(9.0 - 5.0 * left, abs=1e-13)
     # no autopilot estimates a vertical wind (PX4 EKF2, ArduPilot EKF2/EKF3: z = 0)
-    assert v._wind_est[2] == 0.0
-    assert v._wind_est[0] == 0.0
+    assert w.value[2] == 0.0
+    assert w.value[0] == 0.0

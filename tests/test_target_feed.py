@@ -1,4 +1,4 @@
-"""The SIL's realistic target feed (sim/target_feed.py): what leaves it, decoded by the bridge's
+"""The SIL's realistic target feed (sim/target/feed.py): what leaves it, decoded by the bridge's
 own decoders. Bounds are binomial / chi-square ones for the drawn counts and noise."""
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ from mpf_mavlink.core.frames import geodetic_to_ned  # noqa: E402
 from mpf_mavlink.core.target import ConstantTurn  # noqa: E402
 from mpf_mavlink.errors import ConfigError  # noqa: E402
 from mpf_mavlink.mavlink.codec import decode_follow_target  # noqa: E402
-from sim.plant_jsbsim import LocalNED  # noqa: E402
-from sim.plant_kinematic_mav import ned_to_geodetic_fast  # noqa: E402
-from sim.target_feed import TargetFeed  # noqa: E402
+from sim.plant.jsbsim_plant import LocalNED  # noqa: E402
+from sim.plant.kinematic_plant import ned_to_geodetic_fast  # noqa: E402
+from sim.target.feed import TargetFeed  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 BOAT = ConstantTurn(speed=3.0, turn_rate=0.01)

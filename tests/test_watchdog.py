@@ -1,6 +1,6 @@
 """The bridge's telemetry and mode timeouts against a lockstep simulation (``mavlink.lockstep``).
 
-The SIL vehicle (sim/vehicle.py, kinematic plant) runs in a thread of this process with a
+The SIL vehicle (sim/vehicle/vehicle.py, kinematic plant) runs in a thread of this process with a
 lockstep clock; the bridge (run_bridge, the code that flies real autopilots) runs in the main
 thread and talks to it over UDP loopback. A loaded host is made deliberately: the vehicle's
 clock stalls for longer than the telemetry timeout now and then (a simulation process that the
@@ -27,8 +27,8 @@ from mpf_mavlink.config.schema import load_config
 
 # a lifecycle flight of seconds has no steady window: it ends NOT JUDGED (exit 6), not PASS
 from mpf_mavlink.runs.verdict import EXIT_NOT_JUDGED as NOT_JUDGED  # noqa: E402
-from sim.clock import LockstepClock
 from sim.sil import bridge_config, build_vehicle
+from sim.vehicle.clock import LockstepClock
 
 ROOT = Path(__file__).resolve().parents[1]
 TRACK_S = 3.0  # seconds of tracking (vehicle time): several stalls, a short test
@@ -153,7 +153,7 @@ def test_a_lockstep_vehicle_that_stops_its_attitude_is_lost_on_vehicle_time(tmp_
     # stops: lost after telemetry_timeout_s (0.5 s) of VEHICLE time, long before the wall bound
     def mute(v: Any) -> None:
         after_vehicle_s(v, 1.0)
-        v.rates = dataclasses.replace(v.rates, attitude=0.0)
+        v.telemetry.rates = dataclasses.replace(v.telemetry.rates, attitude=0.0)
 
     res = fly(tmp_path, "lockstep", ["mavlink.lockstep=true"], during=mute, track_s=60.0)
     assert res.exit_code == 4 and "telemetry lost" in res.exit_reason, res.exit_reason

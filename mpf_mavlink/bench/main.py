@@ -54,7 +54,7 @@ def paper_wall_time_s() -> dict[str, Any]:
 def fdm_steps_per_s() -> dict[str, Any]:
     """JSBSim X8 steps per second of wall time with the state read at 50 Hz (the SIL's core;
     was a timed test, which a loaded machine made flaky)."""
-    from sim.plant_jsbsim import benchmark
+    from sim.plant.jsbsim_plant import benchmark
 
     return {"steps_per_s": benchmark(seconds=300.0)}
 

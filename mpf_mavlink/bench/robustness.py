@@ -136,7 +136,7 @@ ROWS: list[Row] = [
 
 # Issue 13 item 4: the stock JSBSim airframes on the c172x mission (45 m/s, 600 m circle, 300 m
 # up), trim and rate-loop gains derived from the FDM itself (aircraft.gains_from_fdm, shipped on
-# in configs/sil_c172x.yaml: sim/airframe_ident.py), and the same
+# in configs/sil_c172x.yaml: sim/plant/airframe_ident.py), and the same
 # mission made infeasible: a 150 m circle at 45 m/s needs atan(45^2 / (g 150)) = 54 deg of bank,
 # beyond the 34 deg limit, so sim must refuse it (exit 3) without --force.
 AIRFRAMES = ("c172p", "c172x", "c182", "pa28")

@@ -2,7 +2,7 @@
 values of the guidance at a low rate, and a STATUSTEXT on every life-cycle state and on the
 reason it stops. Autopilots forward both to their other links (ArduPilot routes messages without
 a target to every link; PX4 with forwarding on), so MAVProxy / QGroundControl on the vehicle's
-telemetry radio see them; the SIL vehicle does the same (sim/mav_endpoint.py).
+telemetry radio see them; the SIL vehicle does the same (sim/vehicle/endpoint.py).
 
 Values (names <= 10 characters, as NAMED_VALUE_FLOAT allows; ``time_boot_ms`` = the vehicle's
 time of the ATTITUDE the step answered):

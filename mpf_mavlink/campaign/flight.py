@@ -1,6 +1,6 @@
 """One flight of a campaign, run where a Dask worker puts it.
 
-- kinematic plant: in-process (the paper's closed loop of ``sim/kinematic.py``), ended early
+- kinematic plant: in-process (the paper's closed loop of ``sim/plant/kinematic.py``), ended early
   once |pt| has stayed below the convergence threshold for ``stop_after_converged_s`` (the
   rest of the flight would only repeat it), and bounded by the flight's wall-clock timeout;
 - SIL plant: ``mpf-mavlink sim`` in a subprocess of its own (its own UDP ports, picked free by
@@ -94,7 +94,7 @@ def _kinematic(
     from mpf_mavlink.config import load_config
     from mpf_mavlink.runs.rundir import RunTable, compute_metrics
     from mpf_mavlink.runs.verdict import assess
-    from sim.kinematic import record
+    from sim.plant.kinematic import record
     from sim.runner import kinematic_loop, record_sample
 
     cfg = load_config(base, sets)

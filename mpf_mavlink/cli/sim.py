@@ -37,7 +37,7 @@ Connections (--serve):
   tcpin:0.0.0.0:5760       listen for one TCP client (as ArduPilot SITL does)
 
 Identity: system 1, component 1 (the target: system 2). Ctrl-C (or SIGTERM) stops it cleanly.
-A ground station gets what it asks of an autopilot, per flavour (sim/gcs_services.py): the
+A ground station gets what it asks of an autopilot, per flavour (sim/vehicle/gcs_services.py): the
 parameter list with the firmware's names (setting them changes the run), the mission protocol,
 AUTOPILOT_VERSION, GPS_RAW_INT; MAVLink FTP is refused (NAK) and unknown commands are answered
 UNSUPPORTED. Messages a peer sends not addressed to the vehicle reach its other UDP peers (a
@@ -80,7 +80,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     what = f"JSBSim {ac.model}" if sil.plant == "jsbsim" else "kinematic plant"
     print(
         f"simulated {sil.flavour} vehicle ({what}, {args.clock} clock) on {args.serve}: system 1, "
-        f"target as system {sil.target_system}; {v.mode_name}, {v.cruise_airspeed:g} m/s. Ctrl-C to stop.",
+        f"target as system {sil.target_system}; {v.mode_name}, {v.tun.cruise_airspeed:g} m/s. Ctrl-C to stop.",
         flush=True,
     )
 
@@ -88,21 +88,21 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
         raise KeyboardInterrupt
 
     prev = signal.signal(signal.SIGTERM, on_term)
-    seen = len(v.mode_changes)
+    seen = len(v.modes.changes)
     end = args.duration if args.duration is not None else math.inf
     try:
         while v.t < end:
             v.run(min(1.0, end - v.t))
-            for t, name in v.mode_changes[seen:]:
+            for t, name in v.modes.changes[seen:]:
                 print(f"t = {t:8.2f} s  mode {name}", flush=True)
-            seen = len(v.mode_changes)
+            seen = len(v.modes.changes)
     except KeyboardInterrupt:
         pass
     finally:
         signal.signal(signal.SIGTERM, prev)
         v.close()
     print(
-        f"stopped after {v.t:.1f} s of simulated flight ({v.rx_count} messages received)",
+        f"stopped after {v.t:.1f} s of simulated flight ({v.link.rx_count} messages received)",
         flush=True,
     )
     return 0

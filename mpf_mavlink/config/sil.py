@@ -30,7 +30,7 @@ def _rate(doc: str = "") -> dict[str, Any]:
 @dataclass(frozen=True)
 class TelemetryConfig:
     """Stream rates of the simulated autopilot at power-on (Hz; 0 disables a stream; left out:
-    the stock rate of ``sil.flavour`` on a companion's link, ``sim.vehicle.stock_rates``:
+    the stock rate of ``sil.flavour`` on a companion's link, ``sim.vehicle.config.stock_rates``:
     ArduPlane 1 Hz per stream group and no HOME_POSITION, PX4's onboard link fast). The bridge
     asks for the rates it needs (MAV_CMD_SET_MESSAGE_INTERVAL / REQUEST_DATA_STREAM), which the
     vehicle honours, as the real autopilots do."""
@@ -72,7 +72,7 @@ class OutageConfig:
 
 @dataclass(frozen=True)
 class TargetFeedConfig:
-    """The simulated target reports itself as a real one does (``sim/target_feed.py``): every
+    """The simulated target reports itself as a real one does (``sim/target/feed.py``): every
     ``1 / rate_hz`` s, white noise on the position (``position_noise_m`` per horizontal axis,
     ``vertical_noise_m``, None: the same), the velocity and the turn rate, stamped with its own
     clock (the vehicle's boot clock + ``clock_offset_s``), lost with probability ``dropout`` in
@@ -173,7 +173,7 @@ class SilConfig:
     autopilot_profile: str | None = field(
         default=None,
         metadata=_doc(
-            "the firmware's identified behaviour the vehicle emulates (sim/autopilot_profile.py): "
+            "the firmware's identified behaviour the vehicle emulates (sim/autopilot/profile.py): "
             "a file absolute, relative to the config file, or to the repository "
             "(configs/autopilots/*.yaml)"
         ),
@@ -199,7 +199,7 @@ class SilConfig:
             return
         prof_path = self.profile_path(src)
         if prof_path is not None:
-            from sim.autopilot_profile import load_profile
+            from sim.autopilot.profile import load_profile
 
             try:
                 prof = load_profile(prof_path)
@@ -319,9 +319,10 @@ class AircraftConfig:
     rate loops' airspeed scaling is 1. trim_throttle: first guess for the trim flight (the trim
     found by flying replaces it). trim_from_fdm: take trim_throttle and the hold modes' pitch
     trim from JSBSim's own trim (``simulation/do_simple_trim``) at trim_airspeed_m_s and the
-    start altitude instead (sim/airframe_trim.py). gains_from_fdm: derive the rate loops' gains
-    and surface trims (and the throttle and pitch trim) from a short identification of the FDM
-    at trim_airspeed_m_s (sim/airframe_ident.py); rate_loop entries given still win.
+    start altitude instead (sim/plant/airframe_trim.py). gains_from_fdm: derive the rate
+    loops' gains and surface trims (and the throttle and pitch trim) from a short
+    identification of the FDM at trim_airspeed_m_s (sim/plant/airframe_ident.py); rate_loop
+    entries given still win.
     airspeed_min_m_s / airspeed_max_m_s: the rate loops' scaling
     limits (FW_AIRSPD_MIN / MAX). controls: command properties and signs.
     """

@@ -135,7 +135,7 @@ class Firmware:
 
 def take_off(g: Gcs, alt_m: float, timeout_s: float = 300.0) -> None:
     """TAKEOFF to alt_m (TKOFF_ALT), then LOITER; arming is retried until pre-arm passes
-    (the rig's and the identification flights' take-off, :mod:`sim.identify`)."""
+    (the rig's and the identification flights' take-off, :mod:`sim.calibration.identify`)."""
     g.set_param("TKOFF_ALT", alt_m)
     g.set_mode("TAKEOFF")
     t_end = time.monotonic() + timeout_s

@@ -1,0 +1,313 @@
+"""Calibration check: the same missions on the real firmware and in our SIL with a profile.
+
+``python -m sim.calibration.calibrate real arduplane --out DIR`` flies the matrix on the ArduPlane SITL bundle
+(one run directory per mission, the rig of :mod:`sim.rigs` on instance ``--instance``);
+``python -m sim.calibration.calibrate sil --out DIR [--profile P]`` re-flies every real run of DIR in our SIL
+from the real flight's start state and writes ``DIR/calibration.json`` and a Markdown table
+(``--doc``). Real flights take real time; the SIL leg takes seconds per mission, so a profile can
+be re-checked against the same real flights as often as needed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sim.rigs.bundles import sitl_dir
+
+ROOT = Path(__file__).resolve().parents[2]
+BAND = (0.67, 1.5)  # real / SIL steady RMS (issue 24's acceptance)
+MEAN_TOL_M = 0.3  # |SIL - real| mean radial and mean vertical
+
+
+@dataclass(frozen=True)
+class Mission:
+    """One row of the matrix: what the rig is told (radius, altitude, moving target, wind)."""
+
+    name: str
+    radius_m: float = 150.0
+    alt_m: float = 100.0
+    moving: bool = False
+    wind_m_s: float = 0.0
+    wind_dir_deg: float = 0.0
+
+
+ARDUPLANE_MATRIX = (
+    Mission("stationary"),
+    Mission("moving", moving=True),
+    # r 100 m at 22 m/s needs 33.5 deg of bank at ArduPlane's turn gain 0.745: the shipped
+    # config's feasibility check refuses it (bank limit 0.61 rad with its margin)
+    Mission("r120_h130", radius_m=120.0, alt_m=130.0),
+    Mission("wind6", wind_m_s=6.0, wind_dir_deg=180.0),
+)
+PX4_MATRIX = (
+    Mission("stationary"),
+    Mission("moving", moving=True),
+    Mission("r120_h130", radius_m=120.0, alt_m=130.0),
+    Mission("r200", radius_m=200.0),
+)
+
+
+def find_bundle(autopilot: str) -> Path | None:
+    """The bundle of ``autopilot`` the rig flies (its tarball in ``MPF_SITL_DIR`` or
+    ``../shared/sitl``; the rig unpacks it into its cache), or None on a bare clone."""
+    from sim.rigs.bundles import TARBALLS, why_missing
+
+    d = sitl_dir()
+    return None if d is None or why_missing(autopilot) else d / TARBALLS[autopilot]
+
+
+def fly_real(autopilot: str, m: Mission, out: Path, bundle: Path, instance: int | None,
+             duration: float) -> int:  # fmt: skip
+    """One real flight with the real-firmware rig (:mod:`sim.rigs`, what ``scripts/sitl`` runs):
+    the mission's radius, altitude, wind (ArduPlane SIM_WIND_*) and target, the shipped bridge
+    config. ArduPlane on ``-I instance`` (None: the rig takes a free one); PX4 under the rig's
+    ``/tmp/mpf-px4.lock``."""
+    from sim.rigs.common import main as rig
+
+    config = ROOT / "configs" / f"bridge_{autopilot}.yaml"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    argv = [autopilot, "--bundle", str(bundle), "--out", str(out), "--duration", f"{duration:g}",
+            "--alt", f"{m.alt_m:g}", "--config", str(config),
+            "--set", f"path.radius_m={m.radius_m:g}"]  # fmt: skip
+    if instance is not None and autopilot == "arduplane":
+        argv += ["--instance", str(instance)]
+    if m.wind_m_s > 0:
+        argv += ["--wind", f"{m.wind_m_s:g},{m.wind_dir_deg:g}"]
+    if m.moving:
+        argv.append("--moving")
+    (out.parent / f"{m.name}.mission.json").write_text(json.dumps(m.__dict__))
+    return rig(argv)
+
+
+def _start_state(run: Path) -> tuple[list[float], float | None]:
+    """The real flight's first bridge sample (NED) and its heading over the first samples."""
+    import numpy as np
+
+    d = np.genfromtxt(run / "bridge" / "timeseries.csv", delimiter=",", names=True, max_rows=30)
+    p0 = [float(d["p_n"][0]), float(d["p_e"][0]), float(d["p_d"][0])]
+    hd = None
+    if len(d) >= 2:
+        hd = float(math.atan2(d["p_e"][-1] - d["p_e"][0], d["p_n"][-1] - d["p_n"][0]))
+    return p0, hd
+
+
+def _metrics(p: Path) -> dict[str, Any]:
+    return json.loads(p.read_text()) if p.is_file() else {}
+
+
+def fly_sil(run: Path, autopilot: str, profile: Path | None, tag: str, seed: int = 0,
+            reuse: bool = False) -> dict[str, Any]:  # fmt: skip
+    """Our SIL on the real flight's mission and start state (the rig's overrides), with or
+    without a profile; returns the bridge's own metrics there (as the real flight's are)."""
+    m = Mission(**json.loads((run.parent / f"{run.name}.mission.json").read_text()))
+    # the rig (sim.rigs) keeps the overrides it flew in summary.json
+    sets = list(json.loads((run / "summary.json").read_text())["mission"]["overrides"])
+    real = _metrics(run / "bridge" / "metrics.json")
+    p0, heading = _start_state(run)
+    cruise = next(
+        (float(s.split("=")[1]) for s in sets if s.startswith("vehicle.airspeed_m_s=")), None
+    )
+    flavour = "ardupilot" if autopilot == "arduplane" else "px4"
+    sil_sets = [*sets, "sil.link=udp", f"sil.flavour={flavour}", "sil.initial_mode=cruise",
+                f"sil.initial_position_ned_m=[{p0[0]:.2f},{p0[1]:.2f},{p0[2]:.2f}]",
+                f"sil.seed={seed}"]  # fmt: skip
+    if cruise is not None:
+        sil_sets.append(f"aircraft.trim_airspeed_m_s={cruise:g}")
+    if heading is not None:
+        sil_sets.append(f"sil.initial_heading_rad={heading:.4f}")
+    if m.wind_m_s > 0:
+        # SIM_WIND_DIR is where the wind comes FROM; sil.wind_ned_m_s is where the air moves TO
+        to = math.radians(m.wind_dir_deg + 180.0)
+        sil_sets.append(f"sil.wind_ned_m_s=[{m.wind_m_s * math.cos(to):.3f},"
+                        f"{m.wind_m_s * math.sin(to):.3f},0.0]")  # fmt: skip
+    if profile is not None:
+        sil_sets.append(f"sil.autopilot_profile={profile}")
+    config = run.parent / f"{m.name}.cfg" / "config_wind.yaml"
+    if not config.is_file():
+        config = (
+            ROOT
+            / "configs"
+            / ("bridge_arduplane.yaml" if flavour == "ardupilot" else "bridge_px4.yaml")
+        )
+    dur = round(real.get("tracked_s") or 300.0)
+    sil_out = run / (f"sil_{tag}" if seed == 0 else f"sil_{tag}_s{seed}")
+    if reuse and (sil_out / "bridge" / "metrics.json").is_file():
+        return {"bridge": _metrics(sil_out / "bridge" / "metrics.json"),
+                "truth": _metrics(sil_out / "metrics.json")}  # fmt: skip
+    # --force: the real flight flew this mission (its own check passed from the real start
+    # state); `sim`'s check, from the kinematic start, refused the 6 m/s wind row's peak bank
+    cmd = [sys.executable, "-m", "mpf_mavlink.cli", "sim", str(config), "--out", str(sil_out), "--no-plots", "--force",
+           "--set", f"sim.duration_s={dur:g}", *[x for s in sil_sets for x in ("--set", s)]]  # fmt: skip
+    with open(sil_out.with_name(sil_out.name + ".log"), "w") as f:
+        f.write(" ".join(shlex.quote(c) for c in cmd) + "\n")
+        f.flush()
+        subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, check=False, cwd=ROOT)
+    bm = _metrics(sil_out / "bridge" / "metrics.json")
+    tm = _metrics(sil_out / "metrics.json")
+    return {"bridge": bm, "truth": tm}
+
+
+def fly_sil_seeds(run: Path, autopilot: str, profile: Path | None, tag: str, seeds: int,
+                  reuse: bool = False) -> dict[str, Any]:  # fmt: skip
+    """:func:`fly_sil` with seeds 0 .. seeds-1 (every seed its own draw of the profile's random
+    processes and the turbulence): the RMS over all of them (root of the mean square), the mean
+    radial / vertical averaged, and each seed's RMS. The real flight is one draw; the SIL's
+    average is its expectation, so the ratio does not hang on one lucky or unlucky SIL draw."""
+    legs = [fly_sil(run, autopilot, profile, tag, seed, reuse) for seed in range(seeds)]
+    if seeds == 1:
+        return legs[0]
+    out: dict[str, Any] = {}
+    for side in ("bridge", "truth"):
+        ms = [leg[side] for leg in legs]
+        rms = [m.get("steady_rms_m") for m in ms]
+        agg: dict[str, Any] = {"seeds_rms_m": rms}
+        if all(v is not None for v in rms):
+            agg["steady_rms_m"] = math.sqrt(sum(v * v for v in rms) / len(rms))
+            for k in ("steady_mean_radial_m", "steady_mean_vertical_m"):
+                vals = [m.get(k) for m in ms]
+                if all(v is not None for v in vals):
+                    agg[k] = sum(vals) / len(vals)
+        out[side] = agg
+    return out
+
+
+def compare_row(name: str, real: dict[str, Any], sil: dict[str, Any]) -> dict[str, Any]:
+    """One row: real and SIL steady RMS, their ratio, mean radial / vertical and the verdict."""
+    b = sil["bridge"]
+    r_rms, s_rms = real.get("steady_rms_m"), b.get("steady_rms_m")
+    ratio = r_rms / s_rms if (r_rms is not None and s_rms) else None
+    keys = ("steady_mean_radial_m", "steady_mean_vertical_m")
+    d = {k: (None if real.get(k) is None or b.get(k) is None else b[k] - real[k]) for k in keys}
+    ok = (
+        ratio is not None and BAND[0] <= ratio <= BAND[1]
+        and all(v is not None and abs(v) <= MEAN_TOL_M for v in d.values())
+    )  # fmt: skip
+    return {"mission": name, "real_rms_m": r_rms, "sil_rms_m": s_rms, "ratio": ratio,
+            "real_radial_m": real.get("steady_mean_radial_m"), "sil_radial_m": b.get("steady_mean_radial_m"),
+            "real_vertical_m": real.get("steady_mean_vertical_m"), "sil_vertical_m": b.get("steady_mean_vertical_m"),
+            "sil_truth_rms_m": sil["truth"].get("steady_rms_m"), "within": ok,
+            "sil_seeds_rms_m": b.get("seeds_rms_m")}  # fmt: skip
+
+
+def _g(v: Any, f: str = ".3f") -> str:
+    return "n/a" if v is None else format(v, f)
+
+
+def _spread(r: dict[str, Any]) -> str:
+    each = r.get("sil_seeds_rms_m")
+    if not each or any(v is None for v in each):
+        return ""
+    return f" ({min(each):.3f}-{max(each):.3f}, {len(each)} seeds)"
+
+
+def table(rows: list[dict[str, Any]], title: str) -> str:
+    head = ("| mission | real RMS (m) | SIL RMS (m) | real / SIL | real radial / vertical (m) "
+            "| SIL radial / vertical (m) | within band |\n|---|---|---|---|---|---|---|")  # fmt: skip
+    lines = [f"**{title}**", "", head]
+    for r in rows:
+        lines.append(
+            f"| {r['mission']} | {_g(r['real_rms_m'])} | {_g(r['sil_rms_m'])}{_spread(r)} "
+            f"| {_g(r['ratio'], '.2f')} "
+            f"| {_g(r['real_radial_m'], '+.2f')} / {_g(r['real_vertical_m'], '+.2f')} "
+            f"| {_g(r['sil_radial_m'], '+.2f')} / {_g(r['sil_vertical_m'], '+.2f')} "
+            f"| {'yes' if r['within'] else 'NO'} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("real", help="fly the matrix on the real firmware")
+    r.add_argument("autopilot", choices=("arduplane", "px4"))
+    r.add_argument("--out", required=True)
+    r.add_argument("--only", default="", help="comma-separated mission names (default: all)")
+    r.add_argument("--duration", type=float, default=300.0)
+    r.add_argument(
+        "--instance",
+        type=int,
+        default=None,
+        help="ArduPlane -I (ports 5760 + 10 I; default: a free one)",
+    )
+    r.add_argument("--bundle", default=None, help="unpacked bundle (default: find_bundle)")
+    sl = sub.add_parser("sil", help="re-fly the real runs of --out in our SIL, print the table")
+    sl.add_argument("autopilot", choices=("arduplane", "px4"))
+    sl.add_argument("--out", required=True)
+    sl.add_argument("--profile", default=None, help="profile YAML (default: none, the plain SIL)")
+    sl.add_argument("--tag", default=None, help="name of this SIL leg (default: profile or plain)")
+    sl.add_argument("--only", default="")
+    sl.add_argument("--seeds", type=int, default=3,
+                    help="SIL draws per mission, seeds 0..N-1 (default 3)")  # fmt: skip
+    sl.add_argument("--reuse", action="store_true",
+                    help="take a SIL leg already flown under this tag and seed instead of re-flying it")  # fmt: skip
+    sl.add_argument("--doc", default=None, help="also write the table to this Markdown file")
+    a = ap.parse_args(argv)
+    if a.cmd == "sil" and a.seeds < 1:
+        print(f"calibrate: --seeds {a.seeds}: expected at least 1", file=sys.stderr)
+        return 2
+    if a.cmd == "sil":
+        out = Path(a.out).resolve()
+        prof = Path(a.profile).resolve() if a.profile else None
+        if prof is not None and not prof.is_file():
+            print(f"calibrate: {prof}: no such profile", file=sys.stderr)
+            return 2
+        tag = a.tag or (prof.stem if prof else "plain")
+        matrix = ARDUPLANE_MATRIX if a.autopilot == "arduplane" else PX4_MATRIX
+        names = [n for n in a.only.split(",") if n]
+        rows = []
+        for m in matrix:
+            run = out / m.name
+            if (names and m.name not in names) or not (run / "bridge" / "metrics.json").is_file():
+                continue
+            real = _metrics(run / "bridge" / "metrics.json")
+            sil = fly_sil_seeds(run, a.autopilot, prof, tag, a.seeds, a.reuse)
+            rows.append(compare_row(m.name, real, sil))
+        if not rows:
+            print(f"calibrate: no real runs under {out}", file=sys.stderr)
+            return 2
+        argv_s = " ".join(argv if argv is not None else sys.argv[1:])
+        title = (
+            f"{a.autopilot}, SIL {tag} (written by `python -m sim.calibration.calibrate {argv_s}`)"
+        )
+        text = table(rows, title)
+        print(text)
+        (out / f"calibration_{tag}.json").write_text(json.dumps(rows, indent=1))
+        if a.doc:
+            Path(a.doc).write_text(text + "\n")
+        return 0 if all(r["within"] for r in rows) else 1
+    if a.cmd == "real":
+        out = Path(a.out).resolve()
+        matrix = ARDUPLANE_MATRIX if a.autopilot == "arduplane" else PX4_MATRIX
+        names = [n for n in a.only.split(",") if n]
+        unknown = [n for n in names if n not in {m.name for m in matrix}]
+        if unknown:
+            print(f"calibrate: unknown mission {unknown[0]!r}", file=sys.stderr)
+            return 2
+        rc = 0
+        for m in matrix:
+            if names and m.name not in names:
+                continue
+            t0 = time.monotonic()
+            bundle = Path(a.bundle) if a.bundle else find_bundle(a.autopilot)
+            if bundle is None:
+                print(f"calibrate: no {a.autopilot} bundle (--bundle, MPF_SITL_DIR or "
+                      "../shared/sitl)", file=sys.stderr)  # fmt: skip
+                return 2
+            code = fly_real(a.autopilot, m, out / m.name, bundle, a.instance, a.duration)
+            print(f"calibrate: {m.name} exit {code} in {time.monotonic() - t0:.0f} s", flush=True)
+            rc = rc or code
+        return rc
+    return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

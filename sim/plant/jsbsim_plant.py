@@ -1,0 +1,600 @@
+"""JSBSim fixed-wing plant for the software-in-the-loop vehicle.
+
+:class:`JSBSimPlant` wraps ``jsbsim.FGFDMExec``: normalized surface/throttle commands in, a frozen
+:class:`PlantState` out (NED inertial, FRD body, SI units, radians; ``R_B_N`` maps body -> NED, as
+in :mod:`mpf_mavlink.core.frames`). The default model is the Skywalker X8 shipped in
+``sim/jsbsim_root`` (see ``aircraft/x8/x8.xml`` for every number and its source); any JSBSim
+aircraft works when its root directory and name are given (e.g. ``c172x`` under
+``jsbsim.get_default_root_dir()``).
+
+Performance: all properties touched per step or per :meth:`JSBSimPlant.state` call are cached
+property nodes; :meth:`step` does four ``set_double_value`` calls and one ``run()``. Geodetic ->
+NED uses the exact WGS-84 ECEF-difference rotation (the same algebra as pymap3d.geodetic2ned,
+coded with :mod:`math` so one conversion costs a few microseconds; agreement with pymap3d is
+at the micrometre level, see the tests).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+os.environ.setdefault("JSBSIM_DEBUG", "0")
+import jsbsim  # noqa: E402
+
+from mpf_mavlink.constants import FT_TO_M, WGS84_A_M, WGS84_F  # noqa: E402
+
+KTS_PER_MS = 1.0 / 0.514444
+DEFAULT_ROOT = Path(__file__).resolve().parents[1] / "jsbsim_root"
+# Command channel -> (JSBSim property, sign). The FlightGear/JSBSim convention: aileron > 0 rolls
+# right, elevator > 0 is trailing edge down (nose down), rudder > 0 yaws right, throttle 0..1.
+DEFAULT_CONTROLS: dict[str, tuple[str, float]] = {
+    "aileron": ("fcs/aileron-cmd-norm", 1.0),
+    "elevator": ("fcs/elevator-cmd-norm", 1.0),
+    "rudder": ("fcs/rudder-cmd-norm", 1.0),
+    "throttle": ("fcs/throttle-cmd-norm", 1.0),
+}
+
+# WGS-84
+WGS84_E2 = WGS84_F * (2.0 - WGS84_F)  # first eccentricity squared
+
+# Milspec Dryden settings (spec): windspeed at 20 ft AGL (ft/s), severity index.
+TURBULENCE_LEVELS: dict[str, tuple[float, int]] = {
+    "none": (0.0, 0),
+    "light": (25.0, 3),
+    "moderate": (50.0, 4),
+    "severe": (75.0, 6),
+}
+
+
+# JSBSim's turbulence generator is a minimal-standard linear congruential engine (modulus
+# 2^31 - 1): a seed is taken modulo 2^31 - 1 and 0 is replaced by 1, so seeds 0 and 1 drew the same
+# turbulence (measured). Accepted seeds are below this limit, and 0 is sent as the one value left.
+TURBULENCE_SEED_LIMIT = 2**31 - 2
+
+
+def jsbsim_turbulence_seed(seed: int) -> int:
+    """The ``atmosphere/randomseed`` for a seed in [0, TURBULENCE_SEED_LIMIT): itself, except 0
+    (which JSBSim's engine would turn into 1) -> 2^31 - 2, a distinct stream no other seed has."""
+    s = int(seed)
+    if not 0 <= s < TURBULENCE_SEED_LIMIT:
+        raise ValueError(f"turbulence seed must be in [0, {TURBULENCE_SEED_LIMIT}), got {seed}")
+    return s if s > 0 else TURBULENCE_SEED_LIMIT
+
+
+def _geodetic_to_ecef(lat_rad: float, lon_rad: float, h: float) -> tuple[float, float, float]:
+    s, c = math.sin(lat_rad), math.cos(lat_rad)
+    n = WGS84_A_M / math.sqrt(1.0 - WGS84_E2 * s * s)
+    return (
+        (n + h) * c * math.cos(lon_rad),
+        (n + h) * c * math.sin(lon_rad),
+        (n * (1.0 - WGS84_E2) + h) * s,
+    )
+
+
+class LocalNED:
+    """Exact WGS-84 geodetic -> local NED about a fixed origin (ECEF difference, rotated)."""
+
+    def __init__(self, lat0_deg: float, lon0_deg: float, alt0_m: float):
+        self.lat0_deg, self.lon0_deg, self.alt0_m = lat0_deg, lon0_deg, alt0_m
+        la, lo = math.radians(lat0_deg), math.radians(lon0_deg)
+        self._o = _geodetic_to_ecef(la, lo, alt0_m)
+        sl, cl, so, co = math.sin(la), math.cos(la), math.sin(lo), math.cos(lo)
+        self._rn = (-sl * co, -sl * so, cl)
+        self._re = (-so, co, 0.0)
+        self._rd = (-cl * co, -cl * so, -sl)
+
+    def ned(self, lat_deg: float, lon_deg: float, alt_m: float) -> tuple[float, float, float]:
+        x, y, z = _geodetic_to_ecef(math.radians(lat_deg), math.radians(lon_deg), alt_m)
+        dx, dy, dz = x - self._o[0], y - self._o[1], z - self._o[2]
+        rn, re, rd = self._rn, self._re, self._rd
+        return (
+            rn[0] * dx + rn[1] * dy + rn[2] * dz,
+            re[0] * dx + re[1] * dy,
+            rd[0] * dx + rd[1] * dy + rd[2] * dz,
+        )
+
+
+@dataclass(frozen=True)
+class PlantState:
+    """Truth state of the simulated aircraft (SI, rad; NED inertial, FRD body)."""
+
+    t: float  # s, simulation time
+    position_ned: np.ndarray  # m, about the plant origin
+    velocity_ned: np.ndarray  # m/s, ground (inertial) velocity
+    R_B_N: np.ndarray  # 3x3, body FRD -> NED
+    euler: tuple[float, float, float]  # (roll, pitch, yaw) rad, ZYX
+    pqr: np.ndarray  # rad/s, body angular rate w.r.t. inertial
+    airspeed: float  # m/s, true airspeed
+    alpha: float  # rad
+    beta: float  # rad
+    wind_ned: np.ndarray  # m/s, total air-mass velocity (steady + turbulence + gusts)
+    lat_deg: float
+    lon_deg: float
+    alt_m: float  # m AMSL (JSBSim position/h-sl-ft; sea level = WGS-84 ellipsoid)
+    specific_force_body: np.ndarray  # m/s^2, accelerometer at the CG/eye point (FRD)
+    throttle: float  # 0..1, throttle position
+
+    @property
+    def velocity_air_ned(self) -> np.ndarray:
+        """Air-relative velocity in NED (m/s) = ground velocity - wind."""
+        return self.velocity_ned - self.wind_ned
+
+    @property
+    def altitude_rel(self) -> float:
+        """Height above the origin (m) = -position_ned[2]."""
+        return -float(self.position_ned[2])
+
+
+class _QuietStderr:
+    """Catch what JSBSim prints while a model loads and initialises (the jsbsim module routes
+    its C++ std::cout / std::cerr to Python's sys.stdout / sys.stderr).
+
+    Models may carry <output> directives (the jsbsim package's c172x writes a CSV) and every
+    run_ic after the first reports that it cannot re-open that file: those lines are dropped;
+    anything else goes on to stderr (and stays in ``text`` for error messages)."""
+
+    _DROP = ("unable to open the file", "Output to this file is disabled")
+
+    def __enter__(self) -> _QuietStderr:
+        import contextlib
+        import io
+
+        self._buf = io.StringIO()
+        self._stack = contextlib.ExitStack()
+        self._stack.enter_context(contextlib.redirect_stdout(self._buf))
+        self._stack.enter_context(contextlib.redirect_stderr(self._buf))
+        self.text = ""
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        import sys
+
+        self._stack.close()
+        raw = self._buf.getvalue()
+        keep = [
+            ln for ln in raw.splitlines() if ln.strip() and not any(d in ln for d in self._DROP)
+        ]
+        self.text = "\n".join(keep)
+        if keep and exc[0] is None:
+            sys.stderr.write(self.text + "\n")
+
+
+def rotation_body_to_ned(phi: float, theta: float, psi: float) -> np.ndarray:
+    """R_B_N (3x3, body FRD -> NED) of ZYX Euler angles (rad)."""
+    cf, sf = math.cos(phi), math.sin(phi)
+    ct, st = math.cos(theta), math.sin(theta)
+    cp, sp = math.cos(psi), math.sin(psi)
+    return np.array(
+        (
+            ct * cp,
+            sf * st * cp - cf * sp,
+            cf * st * cp + sf * sp,
+            ct * sp,
+            sf * st * sp + cf * cp,
+            cf * st * sp - sf * cp,
+            -st,
+            sf * ct,
+            cf * ct,
+        )
+    ).reshape(3, 3)
+
+
+class _Snapshot(PlantState):
+    """A :class:`PlantState` built without the frozen dataclass's per-field
+    ``object.__setattr__`` (a third of a snapshot's cost, once per lockstep frame), whose
+    rotation matrix and accelerometer array are made when first read: the vehicle's frame
+    reads neither, tests and estimators do."""
+
+    def __getattr__(self, name: str) -> Any:
+        d = self.__dict__
+        if name == "R_B_N":
+            value: Any = rotation_body_to_ned(*d["_euler"])
+        elif name == "specific_force_body":
+            value = np.array(d["_f_body"])
+        else:
+            raise AttributeError(name)
+        d[name] = value
+        return value
+
+
+def make_state(**fields: object) -> PlantState:
+    """A snapshot from its fields; ``_euler`` (roll, pitch, yaw rad) and ``_f_body`` (m/s^2)
+    stand in for ``R_B_N`` and ``specific_force_body`` until those are read."""
+    st = object.__new__(_Snapshot)
+    st.__dict__.update(fields)
+    return st
+
+
+@dataclass
+class PlantConfig:
+    """Constructor arguments of :class:`JSBSimPlant` (dataclass-friendly for configs)."""
+
+    root_dir: str | None = None  # None: the shipped sim/jsbsim_root
+    model: str = "x8"
+    dt: float = 1.0 / 120.0
+    lat0_deg: float = 47.397742  # origin (PX4 SITL default home)
+    lon0_deg: float = 8.545594
+    alt0_m: float = 488.0
+    position_ned: tuple[float, float, float] = (0.0, 0.0, -100.0)
+    heading: float = 0.0  # rad
+    airspeed: float = 16.0  # m/s
+    ground_alt_m: float | None = None  # terrain height (m AMSL); None: alt0_m
+    extra: dict[str, float] = field(default_factory=dict)  # extra property -> value before run_ic
+    throttle: float = 0.3  # initial throttle (propeller spun up to equilibrium at start)
+
+
+def _load(root_dir: Path, model: str, dt: float) -> tuple[Any, str]:
+    """A quiet FGFDMExec with ``model`` loaded from ``root_dir`` and its output directory (a
+    private temporary one, never the aircraft's: often the installed package's)."""
+    fdm = jsbsim.FGFDMExec(str(root_dir))
+    fdm.set_debug_level(0)
+    outdir = tempfile.mkdtemp(prefix="mpf-jsbsim-")
+    fdm.set_output_path(outdir)
+    quiet = _QuietStderr()
+    with quiet:
+        ok = fdm.load_model(model)
+        if ok:
+            fdm.disable_output()  # a plant writes no files
+    if not ok:
+        shutil.rmtree(outdir, ignore_errors=True)
+        raise RuntimeError(f"JSBSim could not load model {model!r} from {root_dir}: {quiet.text}")
+    fdm.set_dt(dt)
+    return fdm, outdir
+
+
+class JSBSimPlant:
+    """A JSBSim aircraft driven by normalized commands; see module docstring."""
+
+    def __init__(
+        self,
+        root_dir: str | os.PathLike | None = None,
+        model: str = "x8",
+        dt: float = 1.0 / 120.0,
+        lat0_deg: float = 47.397742,
+        lon0_deg: float = 8.545594,
+        alt0_m: float = 488.0,
+        position_ned: tuple[float, float, float] | np.ndarray = (0.0, 0.0, -100.0),
+        heading: float = 0.0,
+        airspeed: float = 16.0,
+        ground_alt_m: float | None = None,
+        extra: dict[str, float] | None = None,
+        throttle: float = 0.3,
+        controls: dict[str, tuple[str, float]] | None = None,
+    ):
+        self.root_dir = Path(root_dir) if root_dir is not None else DEFAULT_ROOT
+        self.model = model
+        self.dt = float(dt)
+        self.origin = LocalNED(lat0_deg, lon0_deg, alt0_m)
+        self.ground_alt_m = alt0_m if ground_alt_m is None else float(ground_alt_m)
+
+        # output files a model asks for go to a private directory removed after start-up
+        fdm, self._outdir = _load(self.root_dir, model, self.dt)
+        self.fdm = fdm
+        pm = fdm.get_property_manager()
+        self._pm = pm
+        self._nodes: dict[str, Any] = {}
+        # Initial conditions.
+        from mpf_mavlink.core.frames import ned_to_geodetic  # pymap3d, once at start-up only
+
+        lat, lon, alt = ned_to_geodetic(position_ned, lat0_deg, lon0_deg, alt0_m)
+        ic = {
+            "ic/lat-geod-deg": lat,
+            "ic/long-gc-deg": lon,
+            "ic/terrain-elevation-ft": self.ground_alt_m / FT_TO_M,
+            "ic/h-sl-ft": alt / FT_TO_M,
+            "ic/psi-true-deg": math.degrees(heading),
+            "ic/vt-fps": airspeed / FT_TO_M,
+            "ic/alpha-deg": 0.0,
+            "ic/beta-deg": 0.0,
+            "ic/phi-deg": 0.0,
+            "ic/theta-deg": 0.0,
+            **(extra or {}),
+        }
+        for k, v in ic.items():
+            self._set(k, v)
+        with _QuietStderr():  # run_ic opens the model's output files
+            ok = fdm.run_ic()
+        if not ok:
+            raise RuntimeError("JSBSim run_ic() failed")
+        thr_prop, thr_sign = dict(DEFAULT_CONTROLS, **(controls or {}))["throttle"]
+        self._spin_up(thr_prop, thr_sign, throttle)
+        self._bind_controls(model, controls or {})
+        n = self._node
+        # state nodes
+        self._n_t = n("simulation/sim-time-sec")
+        self._n_lat = n("position/lat-geod-deg")
+        self._n_lon = n("position/long-gc-deg")
+        self._n_alt = n("position/h-sl-ft")
+        self._n_vn = n("velocities/v-north-fps")
+        self._n_ve = n("velocities/v-east-fps")
+        self._n_vd = n("velocities/v-down-fps")
+        self._n_phi = n("attitude/phi-rad")
+        self._n_theta = n("attitude/theta-rad")
+        self._n_psi = n("attitude/psi-rad")
+        self._n_p = n("velocities/p-rad_sec")
+        self._n_q = n("velocities/q-rad_sec")
+        self._n_r = n("velocities/r-rad_sec")
+        self._n_vt = n("velocities/vt-fps")
+        self._n_alpha = n("aero/alpha-rad")
+        self._n_beta = n("aero/beta-rad")
+        self._n_wn = n("atmosphere/total-wind-north-fps")
+        self._n_we = n("atmosphere/total-wind-east-fps")
+        self._n_wd = n("atmosphere/total-wind-down-fps")
+        self._n_ax = n("accelerations/a-pilot-x-ft_sec2")
+        self._n_ay = n("accelerations/a-pilot-y-ft_sec2")
+        self._n_az = n("accelerations/a-pilot-z-ft_sec2")
+        self._n_thrpos = n("fcs/throttle-pos-norm")
+        self._run = fdm.run
+
+    def _bind_controls(self, model: str, controls: dict[str, tuple[str, float]]) -> None:
+        """Command nodes and signs: the autopilot's convention (aileron > 0 rolls right,
+        elevator > 0 nose down, rudder > 0 yaws right, throttle 0..1) times the aircraft's."""
+        n, pm = self._node, self._pm
+        ctl = dict(DEFAULT_CONTROLS)
+        ctl.update(controls)
+        unknown = set(ctl) - set(DEFAULT_CONTROLS)
+        if unknown:
+            raise KeyError(
+                f"unknown control channel(s) {sorted(unknown)}: use {sorted(DEFAULT_CONTROLS)}"
+            )
+        for name, (prop, _) in ctl.items():
+            if not pm.hasNode(prop):
+                raise KeyError(f"JSBSim model {model!r} has no property {prop!r} ({name} command)")
+        self.controls = ctl
+        self._n_ail, self._s_ail = n(ctl["aileron"][0]), float(ctl["aileron"][1])
+        self._n_ele, self._s_ele = n(ctl["elevator"][0]), float(ctl["elevator"][1])
+        self._n_rud, self._s_rud = n(ctl["rudder"][0]), float(ctl["rudder"][1])
+        self._n_thr, self._s_thr = n(ctl["throttle"][0]), float(ctl["throttle"][1])
+
+    def _spin_up(self, thr_prop: str, thr_sign: float, throttle: float) -> None:
+        """Start the engines and spin the propeller up. FGPropeller divides the shaft power by
+        max(omega, 1 rad/s), so throttling up a propeller at 0 RPM gives a huge one-step RPM and
+        torque spike that wrecks a 3 kg aircraft (and JSBSim's own steady-state spin-up does not
+        run here). So: one step at 1 % throttle (-> ~1500 RPM for the X8), 0.5 s at the initial
+        throttle (propeller at its equilibrium RPM), then run_ic() again, which restores the
+        initial position/attitude/velocity but keeps the propeller RPM; the clock is reset to 0."""
+        fdm, pm = self.fdm, self._pm
+        if pm.hasNode("fcs/mixture-cmd-norm"):
+            self._set("fcs/mixture-cmd-norm", 1.0)  # piston models (c172x) need fuel mixture
+        if pm.hasNode("fcs/advance-cmd-norm"):
+            # propeller lever full forward (maximum RPM), as flown in the pattern: a constant-speed
+            # propeller (pa28) left at 0 governs to its minimum RPM and the engine gives ~2/3 of
+            # its power (118 of 174 hp at full throttle, 45 m/s); fixed-pitch propellers ignore it
+            self._set("fcs/advance-cmd-norm", 1.0)
+        self._set("propulsion/set-running", -1)
+        self._set(thr_prop, 0.01 * thr_sign)
+        fdm.run()
+        self._set(thr_prop, throttle * thr_sign)
+        for _ in range(int(round(0.5 / self.dt))):
+            fdm.run()
+        with _QuietStderr():  # every run_ic re-opens the model's output files
+            ok = fdm.run_ic()
+        shutil.rmtree(self._outdir, ignore_errors=True)
+        if not ok:
+            raise RuntimeError("JSBSim run_ic() failed")
+        fdm.set_sim_time(0.0)
+
+    # ------------------------------------------------------------------ helpers
+    def _node(self, name: str) -> Any:
+        node = self._nodes.get(name)
+        if node is None:
+            node = self._pm.get_node(name, True)
+            if node is None:
+                raise KeyError(f"JSBSim property {name!r} not found")
+            self._nodes[name] = node
+        return node
+
+    def _set(self, name: str, value: float) -> None:
+        self._node(name).set_double_value(float(value))
+
+    def get(self, name: str) -> float:
+        """Any JSBSim property (cached node)."""
+        return self._node(name).get_double_value()
+
+    def set(self, name: str, value: float) -> None:
+        """Set any JSBSim property (cached node)."""
+        self._set(name, value)
+
+    # ------------------------------------------------------------------ environment
+    def set_wind(self, wind_ned_m_s) -> None:
+        """Steady air-mass velocity (m/s, NED, the direction the air moves TOWARD)."""
+        wn, we, wd = (float(v) for v in wind_ned_m_s)
+        self._set("atmosphere/wind-north-fps", wn / FT_TO_M)
+        self._set("atmosphere/wind-east-fps", we / FT_TO_M)
+        self._set("atmosphere/wind-down-fps", wd / FT_TO_M)
+
+    def set_turbulence(self, kind: str = "none", seed: int = 0) -> None:
+        """Milspec Dryden turbulence (JSBSim turb-type 3): none, light, moderate or severe.
+
+        Windspeed at 20 ft AGL / severity: light 25 fps / 3, moderate 50 fps / 4, severe 75 fps / 6.
+        ``seed`` (0 <= seed < :data:`TURBULENCE_SEED_LIMIT`) picks the turbulence noise: every
+        seed its own draw (:func:`jsbsim_turbulence_seed`).
+
+        JSBSim evaluates the MIL-F-8785C scales at the altitude above SEA LEVEL (FGWinds::Run
+        passes AltitudeASL), not above ground: with a home 488 m AMSL the X8 at 100 m AGL is at
+        1932 ft, in the blend towards the high-altitude model (L_u = L_w ~ 520 m, sigma ~ 2 m/s in
+        every axis for "light"), not the low-altitude one the levels are named after (at 100 m
+        AGL: L_w = 100 m, sigma_w = 0.76 m/s). Its gusts are therefore long and strong: the mean
+        of one 300 s flight can sit ~1 m/s (one sigma of sigma sqrt(2 L / (V T))) off the steady
+        wind.
+        """
+        if kind not in TURBULENCE_LEVELS:
+            raise ValueError(f"turbulence kind must be one of {sorted(TURBULENCE_LEVELS)}")
+        w20, sev = TURBULENCE_LEVELS[kind]
+        self._set("atmosphere/randomseed", jsbsim_turbulence_seed(seed))
+        if kind == "none":
+            self._set("atmosphere/turb-type", 0)
+            self._set("atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps", 0.0)
+            self._set("atmosphere/turbulence/milspec/severity", 0)
+            return
+        self._set("atmosphere/turb-type", 3)
+        self._set("atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps", w20)
+        self._set("atmosphere/turbulence/milspec/severity", sev)
+
+    def trigger_gust(
+        self,
+        direction_ned=(0.0, 1.0, 0.0),
+        magnitude_m_s: float = 5.0,
+        rise_s: float = 1.0,
+        hold_s: float = 2.0,
+        decay_s: float = 1.0,
+    ) -> None:
+        """One-minus-cosine gust (JSBSim ``atmosphere/cosine-gust``), air-mass velocity in NED.
+
+        The air moves along ``direction_ned`` (normalized here) with a (1 - cos) ramp up over
+        ``rise_s``, ``magnitude_m_s`` held for ``hold_s`` and a cosine decay over ``decay_s``.
+        """
+        d = [float(v) for v in direction_ned]
+        nrm = math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+        if nrm < 1e-9:
+            raise ValueError("gust direction must be non-zero")
+        p = "atmosphere/cosine-gust/"
+        self._set(p + "startup-duration-sec", rise_s)
+        self._set(p + "steady-duration-sec", hold_s)
+        self._set(p + "end-duration-sec", decay_s)
+        self._set(p + "magnitude-ft_sec", magnitude_m_s / FT_TO_M)
+        self._set(p + "frame", 3)  # gfLocal: NED
+        self._set(p + "X-velocity-ft_sec", d[0] / nrm)
+        self._set(p + "Y-velocity-ft_sec", d[1] / nrm)
+        self._set(p + "Z-velocity-ft_sec", d[2] / nrm)
+        self._set(p + "start", 1)
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, aileron: float, elevator: float, rudder: float, throttle: float) -> None:
+        """Apply normalized commands (surfaces -1..1, throttle 0..1) and advance one ``dt``."""
+        self._n_ail.set_double_value(aileron * self._s_ail)
+        self._n_ele.set_double_value(elevator * self._s_ele)
+        self._n_rud.set_double_value(rudder * self._s_rud)
+        self._n_thr.set_double_value(throttle * self._s_thr)
+        self._run()
+
+    def run(self, n: int, aileron: float, elevator: float, rudder: float, throttle: float) -> None:
+        """Hold the commands for ``n`` steps."""
+        self._n_ail.set_double_value(aileron * self._s_ail)
+        self._n_ele.set_double_value(elevator * self._s_ele)
+        self._n_rud.set_double_value(rudder * self._s_rud)
+        self._n_thr.set_double_value(throttle * self._s_thr)
+        r = self._run
+        for _ in range(n):
+            r()
+
+    def rates_airspeed(self) -> tuple[float, float, float, float]:
+        """(p, q, r) rad/s (FRD body rates) and the true airspeed (m/s): all a rate loop needs,
+        for a few property reads instead of a whole :meth:`state`."""
+        return (
+            self._n_p.get_double_value(),
+            self._n_q.get_double_value(),
+            self._n_r.get_double_value(),
+            self._n_vt.get_double_value() * FT_TO_M,
+        )
+
+    def attitude_rates(self) -> tuple[float, float, float, float, float, float]:
+        """(roll, pitch, yaw) rad as in :meth:`state` and (p, q, r) rad/s: what ATTITUDE carries."""
+        psi = self._n_psi.get_double_value()
+        return (
+            self._n_phi.get_double_value(),
+            self._n_theta.get_double_value(),
+            psi if psi <= math.pi else psi - 2.0 * math.pi,
+            self._n_p.get_double_value(),
+            self._n_q.get_double_value(),
+            self._n_r.get_double_value(),
+        )
+
+    @property
+    def t(self) -> float:
+        return self._n_t.get_double_value()
+
+    def state(self) -> PlantState:
+        """Snapshot of the truth state (SI units, NED/FRD, rad)."""
+        lat = self._n_lat.get_double_value()
+        lon = self._n_lon.get_double_value()
+        alt = self._n_alt.get_double_value() * FT_TO_M
+        phi = self._n_phi.get_double_value()
+        th = self._n_theta.get_double_value()
+        psi = self._n_psi.get_double_value()
+        return make_state(
+            t=self._n_t.get_double_value(),
+            position_ned=np.array(self.origin.ned(lat, lon, alt)),
+            velocity_ned=np.array(
+                (
+                    self._n_vn.get_double_value() * FT_TO_M,
+                    self._n_ve.get_double_value() * FT_TO_M,
+                    self._n_vd.get_double_value() * FT_TO_M,
+                )
+            ),
+            _euler=(phi, th, psi),
+            euler=(phi, th, psi if psi <= math.pi else psi - 2.0 * math.pi),
+            pqr=np.array(
+                (
+                    self._n_p.get_double_value(),
+                    self._n_q.get_double_value(),
+                    self._n_r.get_double_value(),
+                )
+            ),
+            airspeed=self._n_vt.get_double_value() * FT_TO_M,
+            alpha=self._n_alpha.get_double_value(),
+            beta=self._n_beta.get_double_value(),
+            wind_ned=np.array(
+                (
+                    self._n_wn.get_double_value() * FT_TO_M,
+                    self._n_we.get_double_value() * FT_TO_M,
+                    self._n_wd.get_double_value() * FT_TO_M,
+                )
+            ),
+            lat_deg=lat,
+            lon_deg=lon,
+            alt_m=alt,
+            _f_body=(
+                self._n_ax.get_double_value() * FT_TO_M,
+                self._n_ay.get_double_value() * FT_TO_M,
+                self._n_az.get_double_value() * FT_TO_M,
+            ),
+            throttle=self._n_thrpos.get_double_value(),
+        )
+
+    @classmethod
+    def from_config(cls, cfg: PlantConfig) -> JSBSimPlant:
+        return cls(
+            root_dir=cfg.root_dir,
+            model=cfg.model,
+            dt=cfg.dt,
+            lat0_deg=cfg.lat0_deg,
+            lon0_deg=cfg.lon0_deg,
+            alt0_m=cfg.alt0_m,
+            position_ned=cfg.position_ned,
+            heading=cfg.heading,
+            airspeed=cfg.airspeed,
+            ground_alt_m=cfg.ground_alt_m,
+            extra=dict(cfg.extra),
+            throttle=cfg.throttle,
+        )
+
+
+def benchmark(seconds: float = 600.0, state_hz: float = 50.0) -> float:
+    """FDM steps per wall-clock second (returned) over ``seconds`` of simulated flight for the X8,
+    with state() at ``state_hz``."""
+    import time
+
+    plant = JSBSimPlant()
+    n = int(round(seconds / plant.dt))
+    period, next_state = 1.0 / state_hz, 0.0
+    step, dt = plant.step, plant.dt
+    t0 = time.perf_counter()
+    for i in range(n):
+        step(0.0, 0.0, 0.0, 0.3)
+        if i * dt >= next_state:
+            next_state += period
+            plant.state()
+    return n / (time.perf_counter() - t0)
+
+
+if __name__ == "__main__":
+    print(f"{benchmark():.0f} FDM steps/s (X8, dt 1/120 s, state() at 50 Hz)")

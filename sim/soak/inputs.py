@@ -1,0 +1,583 @@
+"""The soak campaign's security and bad-input scenarios (:mod:`sim.soak`): spoofed and signed
+links, malformed configuration and command lines, unwritable output directories."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import socket
+import subprocess
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("MAVLINK20", "1")
+os.environ.setdefault("JSBSIM_DEBUG", "0")
+
+from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
+
+from sim.soak.checks import Limits, _r, max_gap
+from sim.soak.missions import FLOWN, _completed, _mission_common, _timeseries, _tracking_window
+from sim.soak.relay import DOWN  # noqa: E402
+from sim.soak.rig import (
+    CONFIGS,
+    ROOT,
+    TARGET_SYSID,
+    VEHICLE_COMPID,
+    VEHICLE_SYSID,
+    Mission,
+    MissionSpec,
+    Opts,
+    Row,
+    free_udp_port,
+    mpf_mavlink_cmd,
+)
+
+
+def _signed_mav(key: bytes, sysid: int, compid: int, link_id: int = 3) -> Any:
+    mav = M.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+    mav.signing.secret_key, mav.signing.sign_outgoing, mav.signing.link_id = key, True, link_id
+    mav.signing.timestamp = int((time.time() - 1420070400) * 100_000)
+    return mav
+
+
+def scenario_spoof(o: Opts) -> Row:
+    """Signing on, live target from system 2. Injected toward the bridge: (a) telemetry and a
+    target from other system ids, signed with the RIGHT key (an insider); (b) unsigned
+    telemetry and targets from the vehicle's and the target's own ids; (c) replays of the
+    vehicle's own signed datagrams 1 s later; (d) the vehicle's ids signed with a WRONG key.
+    Each must be rejected and counted exactly once; the mission must not notice."""
+    from sim.soak.relay import split_frames
+
+    row = Row("spoofing_signing")
+    dur = 20.0 if o.quick else 40.0
+    key = os.urandom(32)
+    kdir = o.workdir / "spoof"
+    kdir.mkdir(parents=True, exist_ok=True)
+    (kdir / "key.hex").write_text(key.hex() + "\n")
+    spec = MissionSpec.make(
+        o,
+        dur,
+        target="stationary",
+        signing_key=key,
+        sets=(
+            "target.type=mavlink",
+            f"mavlink.target_sysid={TARGET_SYSID}",
+            f"mavlink.signing_key_file={kdir / 'key.hex'}",
+        ),
+    )
+    n = {"foreign_ids_signed": 0, "unsigned": 0, "replayed": 0, "wrong_key": 0}
+    stop = threading.Event()
+    with Mission(spec, kdir) as m:
+
+        def attack() -> None:
+            from mpf_mavlink.core.frames import ned_to_geodetic
+
+            lat, lon, alt = ned_to_geodetic((2000.0, 2000.0, -100.0), 47.397742, 8.545594, 488.0)
+            ins99, ins77 = _signed_mav(key, 99, 1), _signed_mav(key, 77, 1)
+            plain1, plain2 = (
+                M.MAVLink(None, srcSystem=1, srcComponent=1),
+                M.MAVLink(None, srcSystem=TARGET_SYSID, srcComponent=1),
+            )
+            wrong = _signed_mav(os.urandom(32), 1, 1, link_id=0)
+            t_end = (
+                time.monotonic() + dur - 3.0
+            )  # stop before the bridge closes: every frame counted
+            mark = 0
+            while time.monotonic() < t_end and not stop.is_set():
+                ms = m.tap.vehicle_ms() or 0
+                for mav in (ins99,):
+                    for msg in (
+                        M.MAVLink_attitude_message(ms, 1.0, 0.5, 2.0, 0, 0, 0),
+                        M.MAVLink_local_position_ned_message(
+                            ms, 5000.0, 5000.0, -900.0, 0.0, 30.0, 0.0
+                        ),
+                        M.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3),
+                    ):
+                        m.relay.inject(DOWN, msg.pack(mav))
+                        n["foreign_ids_signed"] += 1
+                ft = M.MAVLink_follow_target_message(
+                    ms,
+                    15,
+                    int(lat * 1e7),
+                    int(lon * 1e7),
+                    alt,
+                    [0.0] * 3,
+                    [0.0] * 3,
+                    [1.0, 0, 0, 0],
+                    [0.0] * 3,
+                    [0.0] * 3,
+                    0,
+                )
+                m.relay.inject(DOWN, ft.pack(ins77))
+                n["foreign_ids_signed"] += 1
+                for mav, msg in (
+                    (plain1, M.MAVLink_attitude_message(ms + 5, 1.0, 0.5, 2.0, 0, 0, 0)),
+                    (plain1, M.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3)),
+                    (plain2, ft),
+                ):
+                    m.relay.inject(DOWN, msg.pack(mav))
+                    n["unsigned"] += 1
+                m.relay.inject(
+                    DOWN, M.MAVLink_attitude_message(ms + 5, 1.0, 0.5, 2.0, 0, 0, 0).pack(wrong)
+                )
+                n["wrong_key"] += 1
+                # a replay: one of the vehicle's own signed datagrams, about 1 s old, verbatim
+                old = [
+                    d
+                    for d in m.relay.datagrams(DOWN, mark)
+                    if d.fate == "delivered" and d.t < m.relay.now() - 1.0
+                ]
+                if old:
+                    mark += len(m.relay.datagrams(start=mark)) // 2
+                    frames = split_frames(old[-1].data) or []
+                    if frames and all(f[0] == 0xFD and f[2] & 0x01 for f in frames):
+                        m.relay.inject(DOWN, old[-1].data)
+                        n["replayed"] += len(frames)
+                time.sleep(0.05)
+
+        th = threading.Thread(target=attack, daemon=True)
+        if row.check(m.wait_engaged(30.0), "never engaged"):
+            th.start()
+        out = m.finish(dur + 40.0)
+        stop.set()
+        if th.is_alive():
+            th.join(5.0)
+    _mission_common(row, m, out, Limits.for_config("px4"))
+    c = out.counters
+    got = {
+        "foreign_ids_signed": c.get("rejected_sysid"),
+        "unsigned": c.get("rejected_unsigned"),
+        "replayed": c.get("rejected_replay"),
+        "wrong_key": c.get("rejected_bad_signature"),
+    }
+    row.figures.update(
+        injected=n,
+        rejected_by_bridge=got,
+        rejected_by_source=c.get("rejected_by_source"),
+        steady_max_m=_r(out.metrics.get("steady_max_m")),
+    )
+    for k in n:
+        row.check(n[k] > 0 and got[k] == n[k], f"{k}: injected {n[k]}, rejected {got[k]}")
+    _completed(row, out)
+    ts = _timeseries(m.out_dir)
+    if ts is not None:
+        far = float(max(abs(ts["tgt_n"]).max(), abs(ts["tgt_e"]).max()))
+        row.figures["max_target_offset_seen_m"] = _r(far)
+        row.check(far < 50.0, f"a spoofed target reached the law ({far:.0f} m)")
+    return row
+
+
+class HeartbeatBeacon:
+    """A PX4 autopilot as far as a starting bridge can tell: HEARTBEATs every 50 ms to
+    127.0.0.1:``port`` (where ``mpf-mavlink run --connect udpin:127.0.0.1:port`` listens) and a
+    count of every datagram that comes back. A bridge that got as far as opening its link
+    answers at once (its companion HEARTBEAT), so ``received == 0`` proves nothing was sent."""
+
+    def __init__(self, port: int) -> None:
+        self.port = port
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.05)
+        mav = M.MAVLink(None, srcSystem=VEHICLE_SYSID, srcComponent=VEHICLE_COMPID)
+        self.hb = mav.heartbeat_encode(
+            M.MAV_TYPE_FIXED_WING, M.MAV_AUTOPILOT_PX4, 129, 4 << 16 | 3 << 24, 4
+        ).pack(mav)
+        self.received = 0
+        self._stop = threading.Event()
+        self._th = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            with contextlib.suppress(OSError):  # nobody listening: ICMP port unreachable
+                self.sock.sendto(self.hb, ("127.0.0.1", self.port))
+            with contextlib.suppress(OSError):
+                self.sock.recvfrom(65536)
+                self.received += 1
+
+    def __enter__(self) -> HeartbeatBeacon:
+        self._th.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._th.join(1.0)
+        self.sock.close()
+
+
+@dataclass(frozen=True)
+class BadInput:
+    name: str
+    argv: tuple[str, ...]  # after "mpf-mavlink"; "{PORT}" and "{W}" are filled in
+    culprit: str  # the error line must name this
+    config: str | None = None  # YAML text for {W}/<name>.yaml (None: the stock PX4 config)
+
+
+def _bad_inputs() -> list[BadInput]:
+    import yaml
+
+    base = yaml.safe_load(CONFIGS["px4"].read_text())
+
+    def variant(**edits: Any) -> str:
+        import copy
+
+        d = copy.deepcopy(base)
+        for dotted, v in edits.items():
+            sec, _, key = dotted.partition("__")
+            if v is None:
+                d[sec].pop(key, None)
+            else:
+                d.setdefault(sec, {})[key] = v
+        return yaml.safe_dump(d)
+
+    run = (
+        "run",
+        "{CFG}",
+        "--connect",
+        "udpin:127.0.0.1:{PORT}",
+        "--out",
+        "{W}/out",
+        "--heartbeat-timeout",
+        "2",
+        "-q",
+        "--no-plots",
+    )
+    ard = str(CONFIGS["ardupilot"])
+    return [
+        BadInput("config_missing", ("run", "{W}/nope.yaml", *run[2:]), "nope.yaml"),
+        BadInput("config_not_yaml", run, "not valid YAML", "path: [unclosed\n"),
+        BadInput("config_top_level_list", run, "top level", "- a\n- b\n"),
+        BadInput("unknown_section", run, "autopilot", variant(autopilot__gain=1.0)),
+        BadInput("unknown_key", run, "guidance.K_x", variant(guidance__K_x=1.0)),
+        BadInput("wrong_type", run, "vehicle.airspeed_m_s", variant(vehicle__airspeed_m_s="fast")),
+        BadInput("non_finite", run, "guidance.K_p", variant(guidance__K_p=float("nan"))),
+        BadInput("out_of_range", run, "vehicle.max_bank_rad", variant(vehicle__max_bank_rad=2.0)),
+        BadInput("missing_required_key", run, "path.radius_m", variant(path__radius_m=None)),
+        BadInput("key_unused_by_path", run, "path.size_m", variant(path__size_m=100.0)),
+        BadInput(
+            "airspeed_outside_limits",
+            run,
+            "vehicle.airspeed_m_s",
+            variant(vehicle__airspeed_min_m_s=16.0),
+        ),
+        BadInput("set_without_equals", (*run, "--set", "guidance.K_p"), "guidance.K_p"),
+        BadInput("set_unknown_key", (*run, "--set", "mavlink.sysid=3"), "mavlink.sysid"),
+        BadInput("set_bad_yaml", (*run, "--set", "guidance.K_p=[1,"), "guidance.K_p"),
+        BadInput("set_non_finite", (*run, "--set", "guidance.K_R=.inf"), "guidance.K_R"),
+        BadInput(
+            "url_unknown_scheme",
+            ("run", "{CFG}", "--connect", "foo:127.0.0.1:{PORT}", *run[4:]),
+            "foo",
+        ),
+        BadInput(
+            "url_port_out_of_range",
+            ("run", "{CFG}", "--connect", "udpin:127.0.0.1:99999", *run[4:]),
+            "99999",
+        ),
+        BadInput(
+            "url_bad_host",
+            ("run", "{CFG}", "--connect", "udpin:no such host!:14540", *run[4:]),
+            "no such host!",
+        ),
+        BadInput(
+            "url_serial_missing",
+            ("run", "{CFG}", "--connect", "/dev/ttyNOPE0:57600", *run[4:]),
+            "/dev/ttyNOPE0",
+        ),
+        BadInput("connect_missing", ("run", "{CFG}", *run[4:]), "--connect"),
+        BadInput("flavour_unknown", (*run, "--flavour", "inav"), "--flavour"),
+        BadInput("duration_negative", (*run, "--duration", "-5"), "--duration"),
+        BadInput(
+            "heartbeat_timeout_zero", (*run[:6], "--heartbeat-timeout", "0"), "--heartbeat-timeout"
+        ),
+        BadInput("unknown_option", (*run, "--bogus"), "--bogus"),
+        BadInput(
+            "signing_key_missing", (*run, "--set", "mavlink.signing_key_file={W}/no.key"), "no.key"
+        ),
+        BadInput(
+            "signing_key_wrong_length",
+            (*run, "--set", "mavlink.signing_key_file={W}/short.key"),
+            "short.key",
+        ),
+        BadInput(
+            "live_target_without_sysid", (*run, "--set", "target.type=mavlink"), "target_sysid"
+        ),
+        BadInput(
+            "sysid_out_of_range",
+            (*run, "--set", "mavlink.vehicle_sysid=300"),
+            "mavlink.vehicle_sysid",
+        ),
+        BadInput(
+            "setpoint_rate_too_low",
+            (*run, "--set", "mavlink.min_setpoint_rate_hz=1"),
+            "mavlink.min_setpoint_rate_hz",
+        ),
+        BadInput(
+            "origin_out_of_range",
+            (*run, "--set", "mavlink.origin_lat_deg=95"),
+            "mavlink.origin_lat_deg",
+        ),
+        BadInput(
+            "mission_duration_zero",
+            (*run, "--set", "mavlink.mission_duration_s=0"),
+            "mavlink.mission_duration_s",
+        ),
+        BadInput(
+            "hold_mode_unknown", (*run, "--set", "mavlink.hold_mode=BOGUS"), "mavlink.hold_mode"
+        ),
+        BadInput(
+            "hold_mode_of_other_autopilot",
+            ("run", ard, *run[2:], "--set", "mavlink.hold_mode=AUTO.LOITER"),
+            "mavlink.hold_mode",
+        ),
+        BadInput(
+            "thrust_limits_crossed",
+            (*run, "--set", "adapter.thrust_min=0.9", "--set", "adapter.thrust_max=0.2"),
+            "adapter.thrust_min",
+        ),
+        BadInput(
+            "target_sysid_is_vehicle",
+            (*run, "--set", "target.type=mavlink", "--set", "mavlink.target_sysid=1"),
+            "mavlink.target_sysid",
+        ),
+        BadInput(
+            "source_ids_are_autopilot",
+            (*run, "--set", "mavlink.source_component=1"),
+            "mavlink.source_component",
+        ),
+        BadInput(
+            "out_is_a_file",
+            ("run", "{CFG}", "--connect", "udpin:127.0.0.1:{PORT}", "--out", "{W}/short.key", "-q"),
+            "short.key",
+        ),
+    ]
+
+
+def _run_bad(case: BadInput, w: Path) -> dict[str, Any]:
+    port = free_udp_port()
+    cfg = str(CONFIGS["px4"])
+    if case.config is not None:
+        cfg = str(w / f"{case.name}.yaml")
+        Path(cfg).write_text(case.config)
+    argv = [
+        a.replace("{PORT}", str(port)).replace("{W}", str(w)).replace("{CFG}", cfg)
+        for a in case.argv
+    ]
+    t0 = time.monotonic()
+    with HeartbeatBeacon(port) as beacon:
+        p = subprocess.run(
+            [*mpf_mavlink_cmd(), *argv], cwd=ROOT, capture_output=True, text=True, timeout=30
+        )
+        time.sleep(0.1)  # anything still in flight
+    err = p.stderr.strip().splitlines()
+    return {
+        "case": case.name,
+        "rc": p.returncode,
+        "lines": len(err),
+        "stderr": err[-1] if err else "",
+        "names_culprit": bool(err) and case.culprit in err[-1],
+        "sent_to_vehicle": beacon.received,
+        "traceback": "Traceback" in p.stderr + p.stdout,
+        "s": round(time.monotonic() - t0, 2),
+    }
+
+
+def scenario_bad_input(o: Opts, only: tuple[str, ...] = ()) -> Row:
+    """Each bad configuration or command line: one line on stderr naming the culprit, a
+    non-zero exit, and not one datagram to a vehicle that is there and talking."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    row = Row("bad_config_and_cli")
+    w = o.workdir / "badcfg"
+    w.mkdir(parents=True, exist_ok=True)
+    (w / "short.key").write_bytes(b"0123456789")
+    cases = [c for c in _bad_inputs() if not only or c.name in only]
+    with ThreadPoolExecutor(3) as ex:
+        results = list(ex.map(lambda c: _run_bad(c, w), cases))
+        # the control: a good config against the same beacon must be heard (the proof can fail)
+        good = (
+            "run",
+            "{CFG}",
+            "--connect",
+            "udpin:127.0.0.1:{PORT}",
+            "--out",
+            "{W}/control",
+            "--heartbeat-timeout",
+            "1",
+            "-q",
+            "--no-plots",
+        )
+        control = _run_bad(BadInput("control_good_config", good, ""), w)
+    bad = [
+        r
+        for r in results
+        if not (
+            r["rc"] not in (0, None)
+            and r["lines"] == 1
+            and r["names_culprit"]
+            and r["sent_to_vehicle"] == 0
+            and not r["traceback"]
+        )
+    ]
+    row.figures.update(
+        classes=len(cases),
+        passed=len(cases) - len(bad),
+        control_good_config_datagrams_to_vehicle=control["sent_to_vehicle"],
+        cases={r["case"]: f"exit {r['rc']}: {r['stderr'][:140]}" for r in results},
+    )
+    row.check(len(cases) >= (len(only) if only else 20), "fewer than 20 classes")
+    row.check(
+        control["sent_to_vehicle"] > 0,
+        "the control run sent nothing: the 'nothing sent' proof is void",
+    )
+    for r in bad:
+        row.check(
+            False,
+            f"{r['case']}: exit {r['rc']}, {r['lines']} lines, names culprit {r['names_culprit']}, "
+            f"{r['sent_to_vehicle']} datagrams sent: {r['stderr'][:160]}",
+        )
+    return row
+
+
+def _userns_available() -> bool:
+    """Whether ``unshare --user --map-root-user --mount`` works here (a private mount namespace
+    without privileges: then a real tmpfs can be mounted full or read-only for the bridge)."""
+    if shutil.which("unshare") is None:
+        return False
+    try:
+        return (
+            subprocess.run(
+                ["unshare", "--user", "--map-root-user", "--mount", "true"],
+                capture_output=True,
+                timeout=10,
+            ).returncode
+            == 0
+        )
+    except (OSError, subprocess.SubprocessError):
+        return False
+
+
+def _fs_prefix(mount_dir: Path, mode: str, size_kib: int = 64) -> tuple[tuple[str, ...], str]:
+    """A command prefix that runs the bridge with ``mount_dir`` on a filesystem that is
+    ``mode``: "readonly", "full" or "small" (``size_kib``, fills up during the flight).
+    Returns (prefix, method)."""
+    if _userns_available():
+        opts = f"size={size_kib}k" + (",ro" if mode == "readonly" else "")
+        fill = (
+            'dd if=/dev/zero of="$0/fill" bs=1k count=100000 2>/dev/null; '
+            if mode == "full"
+            else ""
+        )
+        script = (
+            f'mount -t tmpfs -o {opts} tmpfs "$0" || exit 97; {fill}"$@"; rc=$?; '
+            'echo "[soak] $(df -k "$0" | tail -1)"; exit $rc'
+        )
+        return (
+            "unshare",
+            "--user",
+            "--map-root-user",
+            "--mount",
+            "sh",
+            "-c",
+            script,
+            str(mount_dir),
+        ), f"tmpfs {mode} in a private mount namespace"
+    # no user namespaces: a per-process file size limit (EFBIG instead of ENOSPC / EROFS)
+    limit = {"readonly": 0, "full": 1024, "small": size_kib * 1024}[mode]
+    return (
+        "prlimit",
+        f"--fsize={limit}:{limit}",
+    ), f"RLIMIT_FSIZE={limit} bytes (no user namespaces)"
+
+
+def scenario_output_dir(o: Opts, in_flight: bool = True) -> Row:
+    """The run directory is unwritable or the disk is full: refused before anything is sent;
+    a disk that fills up DURING the flight must not end it."""
+    row = Row("output_dir_unwritable_or_full")
+    w = o.workdir / "outdir"
+    refusals = {}
+    for mode, errno_text in (
+        ("readonly", ("Read-only", "File too large")),
+        ("full", ("No space left", "File too large")),
+    ):
+        mnt = w / mode
+        mnt.mkdir(parents=True, exist_ok=True)
+        prefix, method = _fs_prefix(mnt, mode)
+        port = free_udp_port()
+        with HeartbeatBeacon(port) as beacon:
+            p = subprocess.run(
+                [
+                    *prefix,
+                    *mpf_mavlink_cmd(),
+                    "run",
+                    str(CONFIGS["px4"]),
+                    "--connect",
+                    f"udpin:127.0.0.1:{port}",
+                    "--out",
+                    str(mnt / "run"),
+                    "-q",
+                    "--no-plots",
+                ],
+                cwd=ROOT,
+                capture_output=True,
+                text=True,
+                timeout=60,
+            )
+            time.sleep(0.1)
+        err = p.stderr.strip().splitlines()
+        refusals[mode] = {
+            "method": method,
+            "rc": p.returncode,
+            "stderr": err[-1] if err else "",
+            "sent_to_vehicle": beacon.received,
+        }
+        row.check(
+            p.returncode == 2
+            and len(err) == 1
+            and str(mnt / "run") in err[0]
+            and any(t in err[0] for t in errno_text)
+            and beacon.received == 0,
+            f"{mode}: not refused cleanly before connecting: {refusals[mode]}",
+        )
+    row.figures["refused"] = refusals
+    if not in_flight:
+        return row
+    # the disk fills up mid-flight: 96 KiB hold the first ~10 s of tlog
+    dur = 20.0 if o.quick else 30.0
+    mnt = w / "small"
+    mnt.mkdir(parents=True, exist_ok=True)
+    prefix, method = _fs_prefix(mnt, "small", 96)
+    spec = MissionSpec.make(o, dur, bridge_prefix=prefix, out_dir=mnt / "run")
+    with Mission(spec, w / "mission") as m:
+        row.check(m.wait_engaged(30.0), "never engaged")
+        out = m.finish(dur + 40.0)
+    _mission_common(row, m, out, Limits.for_config("px4"))
+    tap = m.tap
+    t_on, t_off = _tracking_window(tap)
+    summary = out.stdout
+    row.figures["disk_fills_in_flight"] = {
+        "method": method,
+        "rc": out.rc,
+        "df_at_exit": next((ln for ln in summary.splitlines() if ln.startswith("[soak]")), None),
+        "max_setpoint_gap_s": _r(max_gap([e.t for e in tap.setpoints], t_on, t_off)),
+        "summary_says": [
+            ln.strip()
+            for ln in summary.splitlines()
+            if "exit" in ln or "RECORDS" in ln or "hand-back" in ln
+        ],
+    }
+    row.check(
+        out.rc in FLOWN and "mission duration" in summary,
+        f"the full disk ended the flight: exit {out.rc}",
+    )
+    row.check("hand-back         confirmed" in summary, "hand-back not confirmed")
+    row.check("RECORDS LOST" in summary, "the summary does not say that records were lost")
+    row.check(not tap.failsafes(), "the vehicle's offboard failsafe fired")
+    row.check(
+        max_gap([e.t for e in tap.setpoints], t_on, t_off) <= 0.25,
+        "setpoints paused while the disk filled",
+    )
+    return row

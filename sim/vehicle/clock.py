@@ -1,0 +1,159 @@
+"""Clocks for the simulated MAVLink vehicle (:mod:`sim.vehicle.vehicle`).
+
+The vehicle advances its physics in frames of one telemetry period (default 20 ms of SIMULATED
+time) and, after each frame, asks its clock to wait. The clock calls back into the vehicle:
+
+* ``poll(timeout_s) -> bool`` - read incoming MAVLink for up to ``timeout_s`` wall seconds;
+  returns True once "the answer" has arrived (a SET_ATTITUDE_TARGET received after the last
+  telemetry frame was written);
+* ``has_peer() -> bool`` - whether anybody is connected (a ``udpin`` link learns its peer from
+  the first packet it receives).
+
+Two clocks:
+
+* :class:`LockstepClock` - wait for the answer, at most ``answer_timeout_s`` of WALL time, then
+  advance anyway. A bridge that answers every frame drives the simulation as fast as both sides
+  can compute (faster than real time); a dead or silent bridge still sees simulated time pass
+  (at ``frame_period / answer_timeout_s`` of real time, e.g. 20 ms / 50 ms = 0.4x), so its
+  offboard-loss timeout is met in sim time. With nobody connected at all the clock paces at
+  real time (a vehicle alone in the world behaves like a real one). ``answer_timeout_s = 0``
+  gives a free-running simulation (never waits).
+* :class:`RealtimeClock` - paced to the wall clock (``speed`` x real time), polling the link
+  while it waits. If the computation falls more than ``max_lag_s`` behind, the pacing is
+  re-anchored instead of bursting to catch up.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Protocol
+
+PollFn = Callable[[float], bool]
+PeerFn = Callable[[], bool]
+
+
+class Clock(Protocol):
+    mode: str
+
+    def start(self, sim_t: float) -> None: ...
+
+    def wait(self, sim_t: float, poll: PollFn, has_peer: PeerFn) -> None: ...
+
+
+class RealtimeClock:
+    """Paced to the wall clock: sim time ``t`` is released at ``wall0 + (t - t0) / speed``."""
+
+    mode = "realtime"
+
+    def __init__(self, speed: float = 1.0, max_lag_s: float = 0.5):
+        if speed <= 0:
+            raise ValueError("speed must be > 0")
+        self.speed = float(speed)
+        self.max_lag_s = float(max_lag_s)
+        self._wall0: float | None = None
+        self._sim0 = 0.0
+
+    def start(self, sim_t: float) -> None:
+        self._wall0 = time.monotonic()
+        self._sim0 = sim_t
+
+    def wait(self, sim_t: float, poll: PollFn, has_peer: PeerFn) -> None:
+        if self._wall0 is None:
+            self.start(sim_t)
+        assert self._wall0 is not None
+        target = self._wall0 + (sim_t - self._sim0) / self.speed
+        now = time.monotonic()
+        if now - target > self.max_lag_s:  # far behind: re-anchor, do not burst
+            self._wall0, self._sim0 = now, sim_t
+            poll(0.0)
+            return
+        while True:
+            remaining = target - time.monotonic()
+            if remaining <= 0.0:
+                poll(0.0)
+                return
+            if poll(remaining):
+                # poll() returns at once after the frame's answer (the lockstep clock's cue):
+                # realtime pacing must still wait, so read again at most every 2 ms instead of
+                # spinning a core for the rest of the frame
+                time.sleep(min(remaining, 0.002))
+
+
+class LockstepClock:
+    """Wait for the bridge's answer to each telemetry frame, with a wall-clock fallback."""
+
+    mode = "lockstep"
+
+    def __init__(self, answer_timeout_s: float = 0.05):
+        if answer_timeout_s < 0:
+            raise ValueError("answer_timeout_s must be >= 0")
+        self.answer_timeout_s = float(answer_timeout_s)
+        self._rt = RealtimeClock()  # used while nobody is connected
+        self.frames = 0
+        self.answered_frames = 0  # frames that ended with an answer (not the timeout)
+        self.timeouts = 0  # frames a connected peer left unanswered for answer_timeout_s
+
+    def start(self, sim_t: float) -> None:
+        self._rt.start(sim_t)
+
+    def wait(self, sim_t: float, poll: PollFn, has_peer: PeerFn) -> None:
+        self.frames += 1
+        if not has_peer():
+            self._rt.wait(sim_t, poll, has_peer)
+            return
+        self._rt.start(sim_t)  # keep the realtime anchor fresh for a later disconnect
+        deadline = time.monotonic() + self.answer_timeout_s
+        while True:
+            remaining = deadline - time.monotonic()
+            if poll(max(0.0, remaining)):
+                self.answered_frames += 1
+                return
+            if remaining <= 0.0:
+                self.timeouts += 1
+                return
+
+
+def make_clock(clock: str | Clock = "lockstep", **kw: float) -> Clock:
+    """``"lockstep"`` (kw: answer_timeout_s), ``"realtime"`` (kw: speed) or a clock object."""
+    if not isinstance(clock, str):
+        return clock
+    if clock == "lockstep":
+        return LockstepClock(answer_timeout_s=kw.get("answer_timeout_s", 0.05))
+    if clock == "realtime":
+        return RealtimeClock(speed=kw.get("speed", 1.0))
+    raise ValueError(f"unknown clock {clock!r}: use 'lockstep' or 'realtime'")
+
+
+class StepClock:
+    """The vehicle's own time: physics steps of ``dt`` since boot (the trim flight included).
+
+    ``boot_s`` is what MAVLink's time_boot_ms carries; ``t`` counts from when the vehicle was
+    ready (``mark_ready``), the time of the truth record and the scripted target."""
+
+    def __init__(self, dt: float, k: int = 0):
+        self.dt = float(dt)
+        self.k = int(k)  # physics steps since boot
+        self.k0 = self.k  # ... when the vehicle was ready
+
+    def mark_ready(self) -> None:
+        self.k0 = self.k
+
+    @property
+    def boot_s(self) -> float:
+        return self.k * self.dt
+
+    @property
+    def t(self) -> float:
+        return (self.k - self.k0) * self.dt
+
+    @property
+    def ready_boot_s(self) -> float:
+        """Boot time (s) of t = 0."""
+        return self.k0 * self.dt
+
+    def ms(self) -> int:
+        return int(round(self.k * self.dt * 1000.0))
+
+    def us(self) -> int:
+        return int(round(self.k * self.dt * 1e6))

@@ -1,0 +1,259 @@
+"""The vehicle's MAVLink link: one pymavlink connection, the outgoing and incoming delay queues
+(latencies in simulated time), datagram batching, routing between peers, and the lockstep
+hand-shake's bookkeeping of what left and what answered (:mod:`sim.vehicle.lockstep`)."""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from sim.vehicle.clock import StepClock
+from sim.vehicle.framing import Framer, decode_set_attitude_target
+from sim.vehicle.lockstep import Lockstep
+
+_DATAGRAM_MAX = 1400  # a UDP datagram carries several packets (as PX4 does), up to this size
+_READS_MAX = 10000  # datagrams read per poll at most (a flood cannot hold the frame forever)
+
+
+class _QueueWriter:
+    """File-like sink for a pymavlink encoder: packets go to the link's outgoing delay queue."""
+
+    def __init__(self, link: Link) -> None:
+        self.link = link
+
+    def write(self, buf: bytes) -> None:
+        self.link.put(bytes(buf))
+
+
+class Link:
+    """Receive into the incoming delay queue, send from the outgoing one, batch datagrams.
+
+    ``accept`` names the message types the autopilot acts on (the rest is dropped on arrival);
+    ``on_epoch`` takes the bridge's STATUSTEXT (the target's epoch), ``on_new_peer`` is told
+    when a new peer writes (it should hear our HEARTBEAT at once)."""
+
+    def __init__(
+        self,
+        url: str,
+        sysid: int,
+        compid: int,
+        target_ids: tuple[int, int],
+        clock: StepClock,
+        lockstep: Lockstep,
+        *,
+        telemetry_latency_s: float,
+        command_latency_s: float,
+        lockstep_clock: bool,
+        accept: frozenset[str],
+    ) -> None:
+        self.url = url
+        self.sysid, self.compid = sysid, compid
+        self.clock = clock
+        self.lockstep = lockstep
+        self.telemetry_latency_s = float(telemetry_latency_s)
+        self.command_latency_s = float(command_latency_s)
+        self._lockstep_clock = lockstep_clock  # an answer's latency runs from its telemetry
+        self.accept = accept
+        self.conn = mavutil.mavlink_connection(
+            url,
+            source_system=sysid,
+            source_component=compid,
+            dialect="ardupilotmega",
+            autoreconnect=True,
+        )
+        # plain UDP links are read datagram by datagram (the setpoints decoded without pymavlink)
+        self._udp = type(self.conn).__name__ == "mavudp"
+        # (due boot s, packet, ATTITUDE ms or -1, LOCAL_POSITION_NED ms or -1)
+        self._out: deque[tuple[float, bytes, int, int]] = deque()
+        self.incoming: deque[tuple[float, Any]] = deque()  # (due boot s, message)
+        self.mav = M.MAVLink(_QueueWriter(self), srcSystem=sysid, srcComponent=compid)
+        self.tmav = M.MAVLink(
+            _QueueWriter(self), srcSystem=target_ids[0], srcComponent=target_ids[1]
+        )
+        self.framer, self.target_framer = Framer(self.mav), Framer(self.tmav)
+        self.statustexts: list[tuple[float, str]] = []  # (t, text) sent
+        self.rx_count = 0
+        # True right after a read found nothing more waiting: the frame that follows the
+        # lockstep wait need not read again (a syscall that would find nothing)
+        self.drained = False
+        self.on_epoch: Callable[[Any], None] = lambda msg: None
+        self.on_new_peer: Callable[[], None] = lambda: None
+
+    # ------------------------------------------------------------------ output
+    def put(self, buf: bytes, attitude_ms: int = -1, position_ms: int = -1) -> None:
+        """Queue one framed packet; it leaves ``telemetry_latency_s`` of sim time from now.
+        ``attitude_ms``: the time_boot_ms of an ATTITUDE packet (the bridge answers those);
+        ``position_ms``: that of a LOCAL_POSITION_NED (a multi-rate bridge answers those too)."""
+        self._out.append(
+            (self.clock.boot_s + self.telemetry_latency_s, buf, attitude_ms, position_ms)
+        )
+
+    def statustext(self, severity: int, text: str) -> None:
+        self.statustexts.append((self.clock.t, text))
+        self.mav.send(self.mav.statustext_encode(severity, text.encode()[:50]))
+
+    def ack(self, command: int, result: int, msg: Any, reason: str | None = None) -> None:
+        """COMMAND_ACK of ``msg`` to its sender; a STATUSTEXT saying why, when given."""
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        self.mav.send(self.mav.command_ack_encode(command, result, 0, 0, *src))
+        if reason:
+            ok = result == M.MAV_RESULT_ACCEPTED
+            self.statustext(M.MAV_SEVERITY_INFO if ok else M.MAV_SEVERITY_WARNING, reason)
+
+    def flush(self) -> None:
+        """Send the packets that are due, bundled into as few datagrams as fit (PX4 does the same:
+        one datagram per send cycle), so the peer wakes up once per frame, not once per packet.
+        A frame that writes no ATTITUDE still awaits the answer that acts in the next frame (with
+        ATTITUDE at 10 Hz over 20 ms frames the vehicle would otherwise apply each setpoint
+        whenever the bridge's process got to it)."""
+        self._flush_due()
+        self.lockstep.choose(self.clock.boot_s)
+
+    def _flush_due(self) -> None:
+        q, t = self._out, self.clock.boot_s + 1e-9
+        if not q or q[0][0] > t:
+            return
+        wrote = False
+        chunk: list[bytes] = []
+        size = 0
+        att_ms = pos_ms = -1
+        while q and q[0][0] <= t:
+            _, buf, ms, pms = q.popleft()
+            att_ms, pos_ms = max(att_ms, ms), max(pos_ms, pms)
+            if chunk and size + len(buf) > _DATAGRAM_MAX:
+                wrote |= self._write(b"".join(chunk))
+                chunk, size = [], 0
+            chunk.append(buf)
+            size += len(buf)
+        if chunk:
+            wrote |= self._write(b"".join(chunk))
+        if wrote:
+            self.lockstep.written(att_ms, pos_ms, t - 1e-9)
+
+    def _write(self, data: bytes) -> bool:
+        try:
+            self.conn.write(data)
+            return True
+        except OSError:
+            return False
+
+    # ------------------------------------------------------------------ input
+    def has_peer(self) -> bool:
+        c = self.conn
+        if getattr(c, "udp_server", False):  # pymavlink >= 2.4.4x keeps a set of clients
+            return bool(getattr(c, "clients", None)) or getattr(c, "last_address", None) is not None
+        if hasattr(c, "listen"):  # tcpin
+            return getattr(c, "port", None) is not None
+        return True
+
+    def poll(self, timeout: float = 0.0) -> bool:
+        """Read incoming MAVLink (waiting up to ``timeout`` wall s for the first byte).
+        Returns True when the answer the lockstep awaits has arrived."""
+        if self.lockstep.answered:
+            self.drain()
+            return True
+        if timeout > 0.0:
+            try:
+                self.conn.select(timeout)
+            except Exception:  # pragma: no cover
+                time.sleep(min(timeout, 0.001))
+        self.drain()
+        return self.lockstep.answered
+
+    def drain(self) -> None:
+        if self._udp:
+            self._drain_udp()
+            return
+        recv = self.conn.recv_msg
+        for _ in range(_READS_MAX):
+            try:
+                msg = recv()
+            except (ConnectionError, OSError):
+                return
+            if msg is None:
+                self.drained = True
+                return
+            self._on_msg(msg)
+
+    def _drain_udp(self) -> None:
+        """Read whole datagrams; a datagram that is one unsigned SET_ATTITUDE_TARGET (the
+        bridge's answer, 50 per simulated second) is decoded without pymavlink."""
+        conn = self.conn
+        port, server, parse = conn.port, conn.udp_server, conn.mav.parse_buffer
+        fast = conn.mav.signing.secret_key is None  # a signed link: pymavlink checks every frame
+        for _ in range(_READS_MAX):
+            try:
+                data, addr = port.recvfrom(65535)
+            except (BlockingIOError, InterruptedError):
+                self.drained = True
+                return
+            except ConnectionRefusedError:  # ICMP for an earlier send (peer not up yet): cleared
+                continue
+            except OSError:
+                return
+            if server:  # what pymavlink's mavudp.recv does: remember the peer to answer it
+                if addr not in conn.clients:
+                    self.on_new_peer()
+                conn.clients.add(addr)
+                conn.clients_last_alive[addr] = time.time()
+            sat = decode_set_attitude_target(data) if fast else None
+            msgs = (sat,) if sat is not None else (parse(data) or ())
+            for msg in msgs:
+                self._on_msg(msg)
+            if server and len(conn.clients) > 1:
+                self._route(msgs, addr)
+
+    def _route(self, msgs: Any, src: Any) -> None:
+        """Forward what one peer sends to the others, as ArduPilot's MAVLink routing (and PX4's
+        forwarding) does: every message not addressed to this vehicle (no target, or another
+        system's) from another component, so a ground station on the link sees the bridge's
+        NAMED_VALUE_FLOAT and STATUSTEXT. Only with two peers or more (never on the lockstep
+        path of a lone bridge)."""
+        port, me = self.conn.port, (self.sysid, self.compid)
+        for msg in msgs:
+            if msg.get_type() == "BAD_DATA" or (msg.get_srcSystem(), msg.get_srcComponent()) == me:
+                continue
+            if getattr(msg, "target_system", 0) == self.sysid:
+                continue
+            buf = msg.get_msgbuf()
+            for addr in list(self.conn.clients):
+                if addr != src:
+                    try:
+                        port.sendto(buf, addr)
+                    except OSError:
+                        pass
+
+    def _on_msg(self, msg: Any) -> None:
+        mt = msg.get_type()
+        if mt == "BAD_DATA":
+            return
+        self.rx_count += 1
+        now = self.clock.boot_s
+        due = now + self.command_latency_s
+        if mt == "SET_ATTITUDE_TARGET":
+            tw = self.lockstep.on_answer(msg.time_boot_ms)
+            if tw is not None and self._lockstep_clock:
+                # lockstep: the bridge answered at once in vehicle time, the latency runs
+                # from the ATTITUDE it answers (not from when this process got to read it)
+                due = max(now, tw + self.command_latency_s)
+        elif mt == "STATUSTEXT":
+            self.on_epoch(msg)
+            return
+        elif mt not in self.accept:
+            return
+        q = self.incoming
+        i = len(q)
+        while i > 0 and q[i - 1][0] > due:  # kept in order of due time
+            i -= 1
+        q.insert(i, (due, msg))
+
+    def close(self) -> None:
+        try:
+            self.conn.close()
+        except Exception:  # pragma: no cover - closing is best effort
+            pass

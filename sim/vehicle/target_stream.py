@@ -1,0 +1,137 @@
+"""The moving target as its own MAVLink system: HEARTBEAT (rover or boat) at 1 Hz and its
+position (FOLLOW_TARGET + GLOBAL_POSITION_INT at a fixed rate, or a realistic feed:
+:mod:`sim.target.feed`), on the target's clock (its epoch: the vehicle's readiness or the
+mission origin the bridge announces)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from pymavlink.dialects.v20 import ardupilotmega as M
+
+from mpf_mavlink.bridge.controller import parse_marker
+from mpf_mavlink.core.frames import matrix_to_quat_wxyz
+from sim.plant.kinematic_plant import ned_to_geodetic_fast
+from sim.vehicle.clock import StepClock
+from sim.vehicle.link import Link
+from sim.vehicle.telemetry import SPEC
+
+
+class TargetStream:
+    """The target's messages through the vehicle's link. ``motion.state(t)`` gives its truth
+    (:mod:`mpf_mavlink.core.target`); ``epoch_boot_s`` is the boot time of its t = 0."""
+
+    def __init__(
+        self,
+        motion: Any,
+        clock: StepClock,
+        link: Link,
+        origin: Any,
+        home_alt_m: float,
+        rate_hz: float,
+        boat: bool,
+        epoch_from_bridge: bool,
+        feed: dict[str, Any] | None,
+    ) -> None:
+        self.motion = motion
+        self.clock, self.link = clock, link
+        self.origin = origin
+        self.home_alt_m = home_alt_m
+        self.rate_hz = float(rate_hz)
+        self.mav_type = M.MAV_TYPE_SURFACE_BOAT if boat else M.MAV_TYPE_GROUND_ROVER
+        self.epoch_from_bridge = epoch_from_bridge
+        self.epoch_boot_s = clock.ready_boot_s
+        self.epoch_changed = False  # truth rows computed on the old epoch are stale
+        self._next: dict[str, float] = {}
+        self.feed = None
+        if feed is not None:
+            from sim.target.feed import feed_from_options
+
+            self.feed = feed_from_options(motion, link.tmav, ned_to_geodetic_fast, origin, feed)
+
+    @property
+    def t(self) -> float:
+        """The target's time (s): boot time minus its epoch."""
+        return self.clock.boot_s - self.epoch_boot_s
+
+    def take_epoch(self, msg: Any) -> None:
+        """The bridge's mission origin (STATUSTEXT ``MPF t0=``, boot s) as the target's t = 0."""
+        if not self.epoch_from_bridge:
+            return
+        text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode("ascii", "replace")
+        mk = parse_marker(text)
+        if mk is not None and mk[0] == "t0" and mk[1] is not None:
+            self.epoch_boot_s = float(mk[1])
+            self.epoch_changed = True
+
+    def _due(self, name: str, hz: float) -> bool:
+        t, nxt = self.clock.boot_s, self._next.get(name)
+        if nxt is None or t + 1e-9 >= nxt:
+            period = 1.0 / hz
+            self._next[name] = t + period if nxt is None or t - nxt > period else nxt + period
+            return True
+        return False
+
+    def frame(self) -> None:
+        """Queue what is due this frame."""
+        if self._due("heartbeat", 1.0):
+            self.link.put(
+                self.link.target_framer.pack(
+                    SPEC["heartbeat"],
+                    self.mav_type,
+                    M.MAV_AUTOPILOT_INVALID,
+                    0,
+                    0,
+                    M.MAV_STATE_ACTIVE,
+                    3,
+                )
+            )
+        if self.feed is not None:
+            for buf in self.feed.poll(self.clock.boot_s, self.t):
+                self.link.put(buf)
+        elif self.rate_hz > 0 and self._due("position", self.rate_hz):
+            self._send_position()
+
+    def _send_position(self) -> None:
+        ts = self.motion.state(self.t)
+        n, e, d = (float(v) for v in ts.position)
+        lat, lon, alt = ned_to_geodetic_fast(self.origin, n, e, d)
+        q = matrix_to_quat_wxyz(ts.R_T_I)
+        vel = [float(v) for v in ts.velocity]
+        acc = [float(v) for v in ts.acceleration]
+        rates = [float(v) for v in ts.omega_T]
+        pack, ms = self.link.target_framer.pack, self.clock.ms()
+        lat7, lon7 = int(round(lat * 1e7)), int(round(lon * 1e7))
+        put = self.link.put
+        put(
+            pack(
+                SPEC["follow_target"],
+                ms,
+                15,
+                lat7,
+                lon7,
+                alt,
+                vel,
+                acc,
+                list(q),
+                rates,
+                [0.0, 0.0, 0.0],
+                0,
+            )
+        )
+        yaw = math.atan2(ts.R_T_I[1, 0], ts.R_T_I[0, 0])
+        put(
+            pack(
+                SPEC["global_position_int"],
+                ms,
+                lat7,
+                lon7,
+                int(round(alt * 1000)),
+                int(round((alt - self.home_alt_m) * 1000)),
+                int(round(vel[0] * 100)),
+                int(round(vel[1] * 100)),
+                int(round(vel[2] * 100)),
+                int(round(math.degrees(yaw) * 100)) % 36000,
+            )
+        )

@@ -1,0 +1,471 @@
+"""A simulated fixed-wing MAVLink vehicle (PX4 or ArduPlane flavour) for software-in-the-loop runs.
+
+:class:`SimVehicle` composes a plant (:class:`sim.plant.jsbsim_plant.JSBSimPlant` by default, or
+the cheap :class:`sim.plant.kinematic_plant.KinematicMavPlant`), the autopilot emulation
+(:class:`sim.autopilot.emulation.AutopilotEmulation` around the inner loops of
+:class:`sim.autopilot.inner_loop.FixedWingAutopilot`), a MAVLink endpoint on ONE pymavlink connection
+(:class:`sim.vehicle.link.Link`, ``udpin:`` - it listens and answers whoever wrote last,
+``udpout:`` or ``tcpin:``; :class:`sim.vehicle.telemetry.Telemetry`; the target's own system;
+:class:`sim.vehicle.gcs_services.GcsServices`) and clocks (:class:`sim.vehicle.clock.StepClock`,
+a pacing clock), all built from one :class:`sim.vehicle.config.VehicleConfig`. It is a separate
+MAVLink peer and does not use :mod:`mpf_mavlink.mavlink`'s link.
+
+Identity: system 1 / component 1, HEARTBEAT type MAV_TYPE_FIXED_WING, autopilot PX4 (12) or
+ARDUPILOTMEGA (3), base_mode CUSTOM_MODE_ENABLED (+ SAFETY_ARMED when armed, + STABILIZE /
+GUIDED / AUTO flags by mode), custom_mode PX4 ``(main << 16) | (sub << 24)`` or the ArduPlane
+mode number. Power-on: armed, trimmed level flight (``fly_to_trim``), in Hold (PX4 AUTO.LOITER)
+or LOITER (ArduPlane 12), circling about the position where the mode was entered.
+
+Sim time: ``t`` (s) is 0 when :class:`SimVehicle` is ready (after the trim flight); the MAVLink
+boot clock ``time_boot_ms`` counts the trim flight too (``time_boot_s = t + t_trim``), so it never
+reads 0. ``time_usec`` fields use the same boot clock; SYSTEM_TIME's ``time_unix_usec`` is the
+wall time at construction plus the boot clock. The moving target's motion is evaluated at ``t``.
+
+Rules honoured (PX4 v1.16 commander and mavlink receiver, ArduPlane 4.7 GCS_MAVLink):
+
+* PX4: OFFBOARD is accepted (COMMAND_ACK ACCEPTED) only if SET_ATTITUDE_TARGET has been
+  streaming with gaps <= 0.5 s (> 2 Hz) for >= 1 s, else TEMPORARILY_REJECTED (what PX4's
+  commander answers to a refused mode change). type_mask 128 = body rates + thrust; with
+  "throttle ignore" (64) the thrust is ZERO; per-axis rate-ignore bits give a zero rate setpoint
+  on that axis; a used non-finite field drops the message (not counted as signal). With bit 128
+  clear the quaternion's roll/pitch go to the attitude controller (PX4 FW attitude offboard).
+  No setpoint for ``com_of_loss_t`` (1.0 s) of sim time in OFFBOARD -> Hold (AUTO.LOITER about
+  the current position) and a STATUSTEXT "Failsafe: no offboard signal, switching to Hold".
+* ArduPlane: SET_ATTITUDE_TARGET only in GUIDED (15); dropped silently otherwise. Only the
+  quaternion is used; per ArduPlane's handler (inverted mask ``m = ~type_mask & 0x87``): roll is
+  taken if ``m & 0x81``, pitch if ``m & 0x82``, yaw if ``m & 0x84`` (so whenever the attitude is
+  used all three angles are taken; type_mask 134 takes roll alone). The yaw Euler angle goes
+  straight to the rudder as ArduPlane does: rudder = clip(yaw_deg / 45, -1, 1) (ArduPlane
+  constrains the forced yaw in centidegrees to +-4500 = full rudder). Thrust (0..1) is used when
+  "throttle ignore" is clear. Each forced axis times out after ``guided_timeout`` (3 s); then that
+  axis goes back to ArduPlane's own guidance: loiter about the position where GUIDED was entered,
+  TECS pitch/throttle, rudder from the yaw damper - the mode stays GUIDED.
+* Modes without external setpoints: AUTO.* / LOITER / CIRCLE / RTL / AUTO / TAKEOFF -> loiter
+  circle (radius ``loiter_radius``) at the entry altitude and cruise airspeed; POSCTL / ALTCTL /
+  FBWB / CRUISE -> course + altitude hold; MANUAL / STABILIZED / ACRO / FBWA / ... -> wings level
+  at trim pitch and trim throttle (no pilot sticks in the simulation).
+
+Telemetry (rates configurable, :class:`TelemetryRates`): ATTITUDE, LOCAL_POSITION_NED (50 Hz),
+GLOBAL_POSITION_INT, VFR_HUD (10 Hz), WIND (ArduPilot: direction the wind comes FROM, 3-D speed,
+speed_z = down component, as ArduPilot) or WIND_COV (PX4: wind_x/y north/east, wind_z = 0 as PX4)
+at 2 Hz, HOME_POSITION and SYS_STATUS and SYSTEM_TIME at 1 Hz, HEARTBEAT 1 Hz. Latency: outgoing
+and incoming messages can be delayed by a fixed amount of SIM time (delay queues).
+
+The target is its own MAVLink system (default 2/1): HEARTBEAT (MAV_TYPE_GROUND_ROVER or
+SURFACE_BOAT, autopilot MAV_AUTOPILOT_INVALID) at 1 Hz, FOLLOW_TARGET (est_capabilities 15) and
+GLOBAL_POSITION_INT at ``target_rate_hz``; position from ``target.state(t)`` in NED about the
+vehicle's geodetic origin. The target's clock starts when the vehicle is ready
+(``target_epoch="ready"``), or, with ``target_epoch="bridge"``, at the mission origin the bridge
+announces (STATUSTEXT ``MPF t0=<autopilot boot time, s>``): a bridge that flies its own copy of
+a scripted target counts that target's time from its origin, and only that epoch puts the
+simulated target where the bridge believes it is (from the vehicle's readiness it ran ~1 s
+ahead: the bridge takes its origin when its checks pass).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+os.environ.setdefault("MAVLINK20", "1")
+os.environ.setdefault("JSBSIM_DEBUG", "0")
+
+
+from sim.autopilot.emulation import AutopilotEmulation  # noqa: E402
+from sim.autopilot.inner_loop import FixedWingAutopilot, fly_to_trim  # noqa: E402
+from sim.autopilot.modes import Tunables  # noqa: E402
+from sim.plant.kinematic_plant import KinematicMavPlant  # noqa: E402
+from sim.vehicle.clock import StepClock, make_clock  # noqa: E402
+from sim.vehicle.config import VehicleConfig  # noqa: E402
+from sim.vehicle.dispatch import Dispatcher  # noqa: E402
+from sim.vehicle.gcs_services import GcsServices  # noqa: E402
+from sim.vehicle.link import Link  # noqa: E402
+from sim.vehicle.lockstep import Lockstep  # noqa: E402
+from sim.vehicle.target_stream import TargetStream  # noqa: E402
+from sim.vehicle.telemetry import Telemetry  # noqa: E402
+from sim.vehicle.truth import TruthRecorder  # noqa: E402
+
+# what the vehicle acts on (through the incoming delay queue); the rest is dropped on arrival
+_QUEUED = (
+    frozenset(("COMMAND_LONG", "COMMAND_INT", "SET_MODE", "TIMESYNC", "REQUEST_DATA_STREAM"))
+    | GcsServices.HANDLES
+)
+
+
+def build_plant(cfg: VehicleConfig) -> tuple[Any, Any, Any]:
+    """The plant, trimmed where ``cfg`` asks: (plant, trim result or None, inner-loop autopilot).
+    The plant starts behind the requested point along the ground track (heading + wind), so the
+    trim flight ends about there whatever the wind."""
+    heading, v = float(cfg.heading), float(cfg.airspeed)
+    pos, wind = np.asarray(cfg.position_ned, float), np.asarray(cfg.wind_ned, float)
+    ground = v * np.array([math.cos(heading), math.sin(heading), 0.0]) + (wind[0], wind[1], 0.0)
+    shift = ground * cfg.trim_seconds
+    plant = cfg.plant
+    if isinstance(plant, str):
+        n_sub = max(1, math.ceil(cfg.frame_period * cfg.physics_rate_hz - 1e-9))
+        kw = dict(
+            dt=cfg.frame_period / n_sub,
+            lat0_deg=cfg.lat0_deg,
+            lon0_deg=cfg.lon0_deg,
+            alt0_m=cfg.alt0_m,
+            position_ned=tuple(pos - shift),
+            heading=heading,
+            airspeed=v,
+            **cfg.plant_options,
+        )
+        if plant == "jsbsim":
+            from sim.plant.jsbsim_plant import JSBSimPlant
+
+            plant = JSBSimPlant(**kw)
+        else:
+            plant = KinematicMavPlant(**kw)
+    if np.any(wind != 0.0):
+        plant.set_wind(wind)
+    if cfg.turbulence != "none":
+        plant.set_turbulence(cfg.turbulence, cfg.seed)
+    ap = cfg.autopilot or FixedWingAutopilot()
+    if isinstance(plant, KinematicMavPlant):
+        ap.hold.gains.pitch_trim = 0.0  # no angle of attack in the kinematic model
+    trim = None
+    if cfg.trim_seconds > 0:
+        track = math.atan2(shift[1], shift[0]) if np.hypot(shift[0], shift[1]) > 0 else heading
+        trim = fly_to_trim(plant, ap, v, float(-pos[2]), seconds=cfg.trim_seconds, course=track)
+    return plant, trim, ap
+
+
+def tunables(cfg: VehicleConfig) -> Tunables:
+    """The in-flight tunables at boot. The cruise airspeed is the trim clamped to min..max (the
+    firmware's defaults widened to take the trim)."""
+    v = float(cfg.airspeed)
+    return Tunables(
+        com_of_loss_t=float(cfg.com_of_loss_t),
+        guided_timeout=float(cfg.guided_timeout),
+        loiter_radius=float(cfg.loiter_radius),
+        loiter_direction=1 if cfg.loiter_direction >= 0 else -1,
+        cruise_airspeed=v,
+        airspeed_trim=v,
+        airspeed_min=min(10.0, v),
+        airspeed_max=max(20.0 if cfg.flavour == "px4" else 30.0, v),
+        px4_require_thrust=bool(cfg.px4_require_thrust),
+    )
+
+
+class SimVehicle:
+    """A fixed-wing MAVLink vehicle around a plant and the emulated autopilot (module docstring).
+
+    Drive it with :meth:`run` (clock-paced), :meth:`step_once` (one frame, no waiting; call
+    :meth:`poll` in between if you like) or :meth:`start_in_thread` / :meth:`stop`.
+    """
+
+    def __init__(self, config: VehicleConfig) -> None:
+        cfg = self.config = config
+        self.flavour, self.px4 = cfg.flavour, cfg.flavour == "px4"
+        self.sysid, self.compid = int(cfg.system_id), int(cfg.component_id)
+        self.plant, self.trim, inner = build_plant(cfg)
+        self.dt = float(self.plant.dt)
+        self.n_sub = max(1, int(round(cfg.frame_period / self.dt)))
+        self.frame_period = self.n_sub * self.dt
+        self.origin = self.plant.origin
+        self.home_lla = (self.origin.lat0_deg, self.origin.lon0_deg, self.origin.alt0_m)
+        self.steady_wind = tuple(float(w) for w in cfg.wind_ned)
+        # one-minus-cosine gusts: (t_start, trigger_gust kwargs), t in sim s after ready
+        self._gusts = sorted((float(g["start_s"]), {k: x for k, x in g.items() if k != "start_s"})
+                             for g in cfg.gusts)  # fmt: skip
+        self.time = StepClock(self.dt, int(round(self.plant.t / self.dt)))
+        self.clock = make_clock(cfg.clock, answer_timeout_s=cfg.answer_timeout_s,
+                                speed=cfg.realtime_speed)  # fmt: skip
+        self.lockstep = Lockstep(self.frame_period, cfg.command_latency_s)
+        self.link = Link(cfg.url, self.sysid, self.compid,
+                         (int(cfg.target_system), int(cfg.target_component)), self.time,
+                         self.lockstep, telemetry_latency_s=cfg.telemetry_latency_s,
+                         command_latency_s=cfg.command_latency_s,
+                         lockstep_clock=self.clock.mode == "lockstep", accept=_QUEUED)  # fmt: skip
+        self.tun = tunables(cfg)
+        self.autopilot = AutopilotEmulation(self.px4, inner, self.dt, self.tun, self.time,
+                                            self.link, self.plant.state, self.home_lla)  # fmt: skip
+        self.modes = self.autopilot.modes
+        (self.modes.cruise if cfg.initial_mode == "cruise" else self.modes.hold)(announce=False)
+        if cfg.initial_orbit is not None and cfg.initial_mode == "hold":
+            # the operator parked the aircraft in an orbit before the mission (DO_REPOSITION with
+            # a loiter radius, or a loiter mission item): the boot hold circles (north, east) at
+            # that radius; any later hold entry loiters where it happens, as stock
+            n, e, r = cfg.initial_orbit
+            self.modes.center, self.modes.hold_radius = (float(n), float(e)), float(r)
+        self.telemetry = Telemetry(self.px4, cfg.telemetry_rates(), self.time, self.link,
+                                   self.home_lla, self.frame_period,
+                                   lambda: (self.modes.base_mode(), self.modes.custom_mode),
+                                   lambda: self.autopilot.setpoints.echo)  # fmt: skip
+        self.telemetry.wind.tau_s = float(cfg.wind_estimate_tau_s)
+        self.gcs = GcsServices(self)
+        self.telemetry.on_version = self.gcs.send_autopilot_version
+        self.dispatch = Dispatcher(self.sysid, self.autopilot, self.telemetry, self.gcs,
+                                   self.link, self.time)  # fmt: skip
+        self.link.on_new_peer = self._new_peer
+        self.link.on_epoch = self._take_epoch
+        self.target: TargetStream | None = None
+        if cfg.target is not None:
+            self.target = TargetStream(cfg.target, self.time, self.link, self.origin,
+                                       self.home_lla[2], cfg.target_rate_hz,
+                                       cfg.target_type == "boat", cfg.target_epoch == "bridge",
+                                       cfg.target_feed)  # fmt: skip
+        self.truth_record = TruthRecorder(cfg.record_truth)
+        self.profile: Any = None  # the firmware's identified behaviour (see use_profile)
+        self.estimate: Any = None  # truth PlantState -> the state the autopilot has (a profile's)
+        self._truth_st = self._st = self.plant.state()
+        self.telemetry.st = self._st
+        rates_fn = getattr(self.plant, "rates_airspeed", None)
+        self._rates_fn = rates_fn or (
+            lambda: (*self.plant.state().pqr, self.plant.state().airspeed)
+        )
+        self._rates = self._rates_fn()  # (p, q, r) rad/s, airspeed m/s: what the rate loops read
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self.wall_time_running = 0.0  # wall seconds spent in run()
+        self.sim_time_running = 0.0  # sim seconds advanced in run()
+        self._record()
+
+    @classmethod
+    def build(
+        cls, flavour: str = "px4", url: str = "udpin:127.0.0.1:14540", **kw: Any
+    ) -> SimVehicle:
+        """``SimVehicle(VehicleConfig(flavour, url, **kw))``."""
+        return cls(VehicleConfig(flavour=flavour, url=url, **kw))
+
+    # ------------------------------------------------------------------ views
+    @property
+    def t(self) -> float:
+        """Simulated time (s) since the vehicle was ready (0 after the trim flight)."""
+        return self.time.t
+
+    @property
+    def time_boot_s(self) -> float:
+        """The MAVLink boot clock (s): includes the trim flight."""
+        return self.time.boot_s
+
+    @property
+    def mode_name(self) -> str:
+        return self.modes.name
+
+    @property
+    def custom_mode(self) -> int:
+        return self.modes.custom_mode
+
+    @property
+    def real_time_factor(self) -> float:
+        """Sim seconds per wall second spent in :meth:`run` so far."""
+        wall = self.wall_time_running
+        return self.sim_time_running / wall if wall > 0 else float("nan")
+
+    def truth(self) -> dict[str, np.ndarray]:
+        """The plant's truth at frame rate (:meth:`sim.vehicle.truth.TruthRecorder.truth`)."""
+        tgt = self.target
+        epoch = tgt.epoch_boot_s if tgt is not None else self.time.ready_boot_s
+        return self.truth_record.truth(self.config.target, epoch)
+
+    # ------------------------------------------------------------------ the autopilot's view
+    def observe(self) -> Any:
+        """The plant's state as the autopilot has it (the truth without a profile)."""
+        st = self._truth_st = self.plant.state()
+        self._st = st if self.estimate is None else self.estimate(st)
+        self.telemetry.st = self._st
+        return self._st
+
+    def _record(self) -> None:
+        self.truth_record.record(
+            self.time.t, self.time.boot_s, self._truth_st, self.modes.custom_mode
+        )
+
+    # ------------------------------------------------------------------ input
+    def poll(self, timeout: float = 0.0) -> bool:
+        """Read incoming MAVLink (waiting up to ``timeout`` wall s); True once the answer the
+        lockstep awaits has arrived."""
+        return self.link.poll(timeout)
+
+    def has_peer(self) -> bool:
+        return self.link.has_peer()
+
+    def _lockstep_peer(self) -> bool:
+        """With ``realtime_until_engaged``: the lockstep clock treats the peer as present only
+        while it commands the vehicle (OFFBOARD / GUIDED). Until the bridge has taken control its
+        hand-over rules run on wall-clock timers (>= 1 s of setpoints at >= 20 Hz before the mode
+        request) while the autopilot's run on vehicle time; pacing that phase at real time keeps
+        both in one time base, so the engagement happens after the same simulated time whatever
+        the clock (lockstep and realtime runs start tracking from the same state)."""
+        return self.modes.behaviour in ("offboard", "guided") and self.link.has_peer()
+
+    def _new_peer(self) -> None:
+        # a new peer hears who we are first: before our next 1 Hz HEARTBEAT a ground station
+        # would take the target's (system 2) 10 Hz positions for the vehicle's
+        self.telemetry.next.pop("heartbeat", None)
+
+    def _take_epoch(self, msg: Any) -> None:
+        if self.target is not None:
+            self.target.take_epoch(msg)
+            if self.target.epoch_changed:
+                self.target.epoch_changed = False
+                self.truth_record.forget_target()  # truth() recomputes them on the new clock
+
+    def _apply_due(self) -> None:
+        q, t, handle = self.link.incoming, self.time.boot_s + 1e-9, self.dispatch
+        while q and q[0][0] <= t:
+            handle(q.popleft()[1])
+
+    # ------------------------------------------------------------------ stepping
+    def step_once(self) -> float:
+        """One frame: read pending input (no waiting), apply due commands, ``n_sub`` physics
+        steps, due telemetry, truth. Returns the sim time ``t``.
+
+        LOCAL_POSITION_NED and ATTITUDE leave first, in a datagram of their own: a peer that
+        acts on ATTITUDE (the bridge answers each one with a setpoint) starts on it with the
+        position and velocity of the same instant, and the slower streams, encoded after that
+        datagram left, stay off the lockstep path telemetry -> answer -> next frame (they reach
+        the peer at most one frame later, as the phases of independent autopilot streams do
+        anyway). A velocity one frame old would not do: the bridge's wind frame is the direction
+        of ground velocity - wind, and 20 ms more lag in it costs the demo's tight guidance gains
+        a factor 2-3 in tracking error."""
+        link = self.link
+        if not link.drained:
+            link.poll(0.0)
+        link.drained = False
+        self._apply_due()
+        plant, ape, clock, dt = self.plant, self.autopilot, self.time, self.dt
+        rates, fresh = self._rates, True  # fresh: self._st is the state now
+        last, incoming = self.n_sub - 1, self.link.incoming
+        for i in range(self.n_sub):
+            fast = ape.offboard_rates(clock.k * dt)
+            if fast is not None:
+                # PX4 offboard body rates: the rate loops read only p, q, r and the airspeed,
+                # so the full state (geodetic conversion, matrices) is not needed here
+                a, e, r = ape.ap.rates_to_surfaces(dt, fast[0], rates, rates[3])
+                plant.step(a, e, r, fast[1])
+            else:
+                plant.step(*ape.control(self._st if fresh else self.observe()))
+            clock.k += 1
+            rates, fresh = self._rates_fn(), False
+            # what falls due at the frame's end acts from the next frame's start (the same
+            # physics), whether it was read before this frame or during the lockstep wait
+            if incoming and i < last:
+                self._apply_due()
+        self._rates = rates
+        self.observe()
+        tel = self.telemetry
+        if tel.due("attitude", tel.rates.attitude):
+            if tel.due("local_position", tel.rates.local_position):
+                tel.local_position()
+            tel.attitude()
+            self.link.flush()
+        if self._gusts and self.time.t + 1e-9 >= self._gusts[0][0]:
+            plant.trigger_gust(**self._gusts.pop(0)[1])
+        tel.slow_streams()
+        if self.target is not None:
+            self.target.frame()
+        self.link.flush()
+        self._record()
+        return self.time.t
+
+    def run(self, duration_s: float) -> None:
+        """Advance ``duration_s`` of sim time, paced by the clock (lockstep or realtime)."""
+        clock = self.time
+        end_k = clock.k + int(round(duration_s / self.dt)) if math.isfinite(duration_s) else None
+        w0, k0 = time.perf_counter(), clock.k
+        self.clock.start(clock.boot_s)
+        try:
+            peer = self._lockstep_peer if self.config.realtime_until_engaged else self.has_peer
+            while not self._stop.is_set() and (end_k is None or clock.k < end_k):
+                self.step_once()
+                self.clock.wait(clock.boot_s, self.link.poll, peer)
+        finally:
+            self.wall_time_running += time.perf_counter() - w0
+            self.sim_time_running += (clock.k - k0) * self.dt
+
+    def start_in_thread(self, duration_s: float = math.inf) -> threading.Thread:
+        """Run in a daemon thread until :meth:`stop` (or ``duration_s`` of sim time)."""
+        if self._thread is not None and self._thread.is_alive():
+            raise RuntimeError("already running")
+        self._stop.clear()
+        self._thread = threading.Thread(
+            target=self.run, args=(duration_s,), daemon=True, name="SimVehicle"
+        )
+        self._thread.start()
+        return self._thread
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            self._thread = None
+
+    def close(self) -> None:
+        self.stop()
+        self.link.close()
+
+    def __enter__(self) -> SimVehicle:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def use_profile(
+    v: SimVehicle, profile: Any, seed: int = 0, full_thrust_throttle: float | None = None
+) -> None:
+    """Make ``v`` emulate ``profile`` (an :class:`sim.autopilot.profile.AutopilotProfile`):
+    the reported (and controlled-on) state passes through its estimator model, the attitude
+    set-points through its attitude response; the truth record stays the plant's.
+    ``full_thrust_throttle``: the plant throttle that offboard thrust 1 maps to (the plant's
+    level throttle at the profile's full-thrust airspeed; None: the cubic estimate)."""
+    from sim.autopilot.profile import AttitudeShaper, RateWander, StateEstimate, thrust_scale
+
+    ape = v.autopilot
+    v.profile = profile
+    v.estimate = StateEstimate(profile, seed)
+    if profile.attitude.roll_rate_wander_rad_s:
+        ape.wander = RateWander(profile.attitude, v.dt, seed)
+    ape.shaper = AttitudeShaper(profile.attitude, v.dt, native_tau_s=ape.ap.attitude.gains.roll_tc)
+    if full_thrust_throttle is not None:
+        ape.thrust_scale = min(1.0, float(full_thrust_throttle))
+    elif v.trim is not None:
+        ape.thrust_scale = thrust_scale(profile.thrust, v.trim.throttle, v.tun.cruise_airspeed)
+    if profile.estimator.wind_tau_s is not None:
+        v.telemetry.wind.tau_s = 0.0  # the profile's estimate carries its own lag
+    v.observe()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m sim.vehicle --flavour px4 --url udpin:127.0.0.1:14540 --duration 600``."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description="Simulated fixed-wing MAVLink vehicle (SIL)")
+    ap.add_argument("--flavour", choices=("px4", "ardupilot"), default="px4")
+    ap.add_argument("--url", default="udpin:127.0.0.1:14540")
+    ap.add_argument("--plant", choices=("jsbsim", "kinematic"), default="jsbsim")
+    ap.add_argument("--clock", choices=("lockstep", "realtime"), default="lockstep")
+    ap.add_argument(
+        "--duration", type=float, default=math.inf, help="sim seconds (default: forever)"
+    )
+    ap.add_argument("--target", choices=("none", "paper", "stationary"), default="none")
+    a = ap.parse_args(argv)
+    target = None
+    if a.target != "none":
+        from mpf_mavlink.core.target import PaperProfile, Stationary
+
+        target = PaperProfile() if a.target == "paper" else Stationary()
+    cfg = VehicleConfig(a.flavour, a.url, plant=a.plant, clock=a.clock, target=target)
+    v = SimVehicle(cfg)
+    print(f"SimVehicle {a.flavour} on {a.url} ({a.plant}, {a.clock}) in {v.mode_name}", flush=True)
+    try:
+        v.run(a.duration)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        v.close()
+    print(f"sim {v.t:.1f} s, real-time factor {v.real_time_factor:.1f}", flush=True)
+    return 0
+
+
+__all__ = ["SimVehicle", "VehicleConfig", "build_plant", "main", "tunables", "use_profile"]

@@ -1,0 +1,313 @@
+"""The SIL vehicle's pieces alone (sim/vehicle/, sim/autopilot/): framing against pymavlink's
+own bytes, the lockstep bookkeeping, the setpoint and mode rules, the step clock, the config and
+the truth record. No sockets, no plant: each piece is driven by hand."""
+
+from __future__ import annotations
+
+import math
+import os
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+
+from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
+
+from mpf_mavlink.mavlink.modes import px4_custom_mode  # noqa: E402
+from sim.autopilot.modes import GUIDED, LOITER, OFFBOARD, Modes, Tunables  # noqa: E402
+from sim.autopilot.setpoints import PX4_OFFBOARD_MIN_STREAM_S, Setpoints  # noqa: E402
+from sim.vehicle.clock import StepClock  # noqa: E402
+from sim.vehicle.config import TelemetryRates, VehicleConfig, stock_rates  # noqa: E402
+from sim.vehicle.framing import Framer, crc_mcrf4xx, decode_set_attitude_target  # noqa: E402
+from sim.vehicle.lockstep import Lockstep  # noqa: E402
+from sim.vehicle.truth import TruthRecorder  # noqa: E402
+
+
+class _Sink:
+    def write(self, buf: bytes) -> None:
+        pass
+
+
+# ------------------------------------------------------------------------------ framing
+FRAMES = [
+    (M.MAVLink_attitude_message, (1234, 0.1, -0.2, 3.0, 0.01, 0.0, -0.5)),
+    (M.MAVLink_local_position_ned_message, (1234, 1.5, -2.0, -100.0, 16.0, 0.5, 0.0)),
+    (
+        M.MAVLink_global_position_int_message,
+        (20, 473977420, 85455940, 588000, 100000, 1600, -5, 0, 9000),
+    ),
+    (M.MAVLink_heartbeat_message, (1, 12, 217, 0x03040000, 4, 3)),
+    (
+        M.MAVLink_follow_target_message,
+        (
+            1234,
+            15,
+            473977420,
+            85455940,
+            500.0,
+            [1.0, 2.0, 0.0],
+            [0.1, 0.0, 0.0],
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 0.0, 0.1],
+            [0.0, 0.0, 0.0],
+            7,
+        ),
+    ),
+    (
+        M.MAVLink_home_position_message,
+        (
+            473977420,
+            85455940,
+            488000,
+            0.0,
+            0.0,
+            0.0,
+            [1.0, 0.0, 0.0, 0.0],
+            0.0,
+            0.0,
+            0.0,
+            123456789,
+        ),
+    ),
+    (M.MAVLink_attitude_target_message, (1000, 128, [1.0, 0.5, 0.0, 0.0], 0.1, 0.2, 0.3, 0.5)),
+    (M.MAVLink_sys_status_message, (1, 1, 1, 100, 12600, 500, 90, 0, 0, 0, 0, 0, 0, 0, 0, 0)),
+    (M.MAVLink_statustext_message, (6, b"pymavlink encodes text", 0, 0)),
+    (M.MAVLink_vfr_hud_message, (0.0, 0.0, 0, 0, 0.0, 0.0)),  # all zero: one payload byte kept
+]
+
+
+@pytest.mark.parametrize("cls,args", FRAMES, ids=[c.msgname for c, _ in FRAMES])
+def test_framer_writes_pymavlinks_bytes(cls, args):
+    """The framer's bytes are pymavlink's, sequence numbers and counters included: a peer
+    cannot tell the two apart."""
+    ours, ref = M.MAVLink(_Sink(), 1, 1), M.MAVLink(_Sink(), 1, 1)
+    framer = Framer(ours)
+    for seq in range(3):
+        buf = framer.pack(cls, *args)
+        assert buf == bytes(cls(*args).pack(ref)), seq
+        ref.seq = (ref.seq + 1) & 0xFF
+    assert ours.seq == 3 and ours.total_packets_sent == 3
+
+
+def test_crc_is_mavlinks_mcrf4xx():
+    """The C-speed CRC agrees with pymavlink's x25crc on arbitrary bytes."""
+    from pymavlink.dialects.v20.ardupilotmega import x25crc
+
+    rng = np.random.default_rng(0)
+    for n in (0, 1, 7, 40, 255):
+        data = bytes(rng.integers(0, 256, n, dtype=np.uint8))
+        assert crc_mcrf4xx(data) == x25crc(data).crc
+
+
+def test_setpoint_decoder_reads_what_pymavlink_reads():
+    mav = M.MAVLink(_Sink(), 255, 190)
+    msg = M.MAVLink_set_attitude_target_message(
+        5000, 1, 1, 128, [1.0, 0.0, 0.0, 0.0], 0.1, -0.2, 0.0, 0.0
+    )
+    buf = bytes(msg.pack(mav))  # trailing zeros (thrust 0) trimmed by MAVLink 2
+    ours = decode_set_attitude_target(buf)
+    ref = M.MAVLink(None, 1, 1).parse_buffer(buf)[0]
+    assert ours is not None and ours.get_type() == ref.get_type()
+    for f in ref.get_fieldnames():
+        assert getattr(ours, f) == getattr(ref, f), f
+    assert (ours.get_srcSystem(), ours.get_srcComponent()) == (255, 190)
+    assert ours.get_msgbuf() == buf
+
+
+def test_setpoint_decoder_leaves_the_rest_to_pymavlink():
+    """A bad CRC, a signed frame, another message, two messages or a fragment: None."""
+    mav = M.MAVLink(_Sink(), 255, 190)
+    sat = bytes(
+        M.MAVLink_set_attitude_target_message(1, 1, 1, 128, [1, 0, 0, 0], 0, 0, 0, 0.5).pack(mav)
+    )
+    other = bytes(M.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(mav))
+    assert decode_set_attitude_target(sat[:-1] + bytes([sat[-1] ^ 1])) is None
+    signed = bytearray(sat)
+    signed[2] = 1  # MAVLINK_IFLAG_SIGNED
+    assert decode_set_attitude_target(bytes(signed)) is None
+    assert decode_set_attitude_target(other) is None
+    assert decode_set_attitude_target(sat + other) is None
+    assert decode_set_attitude_target(sat[:20]) is None
+
+
+# ------------------------------------------------------------------------------ lockstep
+def test_lockstep_awaits_the_latest_attitude_that_acts_within_the_next_frame():
+    """20 ms frames, 20 ms command latency: the answer to the ATTITUDE written at the end of
+    frame k acts at its end + 20 ms, i.e. at the end of frame k+1 - so at the end of frame k+1
+    the vehicle awaits frame k's answer (written one frame earlier), not its own."""
+    ls = Lockstep(frame_period=0.02, command_latency_s=0.02)
+    ls.written(1000, -1, 1.00)
+    ls.choose(1.00)
+    assert ls.await_ms == -1  # nothing old enough yet: the first frame is not held up
+    ls.written(1020, -1, 1.02)
+    ls.choose(1.02)
+    assert ls.await_ms == 1000
+    assert not ls.answered
+    assert ls.on_answer(1000) == pytest.approx(1.00)  # its latency runs from there
+    assert ls.answered and ls.answers == 1
+    assert ls.on_answer(990) is None  # an answer to a frame never written: no time known
+    assert ls.answer_ms == 1000  # a late answer does not move the mark back
+
+
+def test_lockstep_unstamped_peer_and_multirate_positions():
+    ls = Lockstep(frame_period=0.02, command_latency_s=0.0)
+    ls.written(1000, -1, 1.0)
+    ls.choose(1.0)
+    assert not ls.answered
+    ls.on_answer(0)  # a peer that does not stamp: any answer counts
+    assert ls.answered
+    # a position-only frame is remembered, not awaited, until the peer answers one
+    ls.written(-1, 1010, 1.01)
+    ls.choose(1.01)
+    assert ls.await_ms == 1000 and not ls.answers_positions
+    assert ls.on_answer(1010) == pytest.approx(1.01)
+    assert ls.answers_positions
+    ls.written(-1, 1030, 1.03)
+    ls.choose(1.03)
+    assert ls.await_ms == 1030
+
+
+# ------------------------------------------------------------------------------ setpoints
+def _sat(mask: int, q=(1.0, 0.0, 0.0, 0.0), rates=(0.1, 0.2, 0.3), thrust: float = 0.6):
+    return SimpleNamespace(
+        type_mask=mask,
+        q=list(q),
+        body_roll_rate=rates[0],
+        body_pitch_rate=rates[1],
+        body_yaw_rate=rates[2],
+        thrust=thrust,
+    )
+
+
+def test_px4_offboard_setpoints_and_their_stream_rule():
+    sp = Setpoints()
+    sp.take_px4(_sat(128 | 2), t=10.0, ms=10000, require_thrust=False)  # pitch rate ignored
+    assert sp.sp == ("rates", (0.1, 0.0, 0.3), pytest.approx(0.6))
+    assert sp.echo is not None and sp.echo[0] == 10000
+    assert not sp.offboard_available(10.5)  # streaming, but not for a second yet
+    for k in range(1, 11):  # 10 Hz for a second
+        sp.take_px4(_sat(128), t=10.0 + 0.1 * k, ms=0, require_thrust=False)
+    assert 11.0 - 10.0 >= PX4_OFFBOARD_MIN_STREAM_S and sp.offboard_available(11.0)
+    assert not sp.offboard_available(11.6)  # a gap over 0.5 s ends the stream
+    sp.take_px4(_sat(128 | 64, thrust=math.nan), t=12.0, ms=0, require_thrust=False)
+    assert sp.sp is not None and sp.sp[2] == 0.0  # throttle ignore: zero thrust, NaN unused
+    sp.take_px4(_sat(128, rates=(math.nan, 0.0, 0.0)), t=12.1, ms=0, require_thrust=False)
+    sp.take_px4(_sat(128 | 7), t=12.2, ms=0, require_thrust=False)
+    assert sp.dropped["nonfinite"] == 1 and sp.dropped["no_axes"] == 1
+    sp.take_px4(_sat(0, q=(math.cos(0.1), math.sin(0.1), 0.0, 0.0)), 13.0, 0, False)
+    kind, (roll, pitch), _ = sp.sp
+    assert kind == "att" and roll == pytest.approx(0.2) and pitch == pytest.approx(0.0)
+
+
+def test_ardupilot_guided_forced_axes():
+    """ArduPlane's inverted mask: type_mask 134 (0b10000110) forces roll alone."""
+    sp = Setpoints()
+    half = 0.5 * math.radians(30.0)
+    sp.take_ardupilot(_sat(134, q=(math.cos(half), math.sin(half), 0.0, 0.0)), t=5.0)
+    assert sp.forced_t == [5.0, None, None, 5.0]  # thrust used: bit 64 clear
+    assert sp.forced[0] == pytest.approx(math.radians(30.0))
+    sp.reset_forced()
+    sp.take_ardupilot(_sat(0, thrust=math.nan), t=6.0)
+    assert sp.dropped["nonfinite"] == 1 and sp.forced_t == [None] * 4
+
+
+# ------------------------------------------------------------------------------ modes
+def _modes(px4: bool) -> tuple[Modes, list[str]]:
+    said: list[str] = []
+    st = SimpleNamespace(
+        position_ned=np.array([10.0, 20.0, -100.0]), velocity_ned=np.array([0.0, 16.0, 0.0])
+    )
+    clock = SimpleNamespace(boot_s=30.0, t=18.0)
+    return Modes(px4, Tunables(loiter_radius=80.0), clock, lambda: st, said.append), said
+
+
+def test_px4_mode_requests():
+    modes, said = _modes(px4=True)
+    modes.hold(announce=False)
+    assert modes.behaviour == LOITER and modes.name == "AUTO.LOITER"
+    assert modes.custom_mode == px4_custom_mode(4, 3) and said == []
+    assert modes.center == (10.0, 20.0) and modes.alt_sp == 100.0
+    assert modes.course == pytest.approx(math.pi / 2)
+    res, why = modes.request(1, 6, 0, offboard_ready=lambda: False)
+    assert res == M.MAV_RESULT_TEMPORARILY_REJECTED and "offboard" in why
+    res, why = modes.request(1, 6, 0, offboard_ready=lambda: True)
+    assert res == M.MAV_RESULT_ACCEPTED and why is None and modes.behaviour == OFFBOARD
+    assert said == ["Mode OFFBOARD"] and modes.changes[-1] == (18.0, "OFFBOARD")
+    assert modes.request(1, 8, 0, lambda: True)[0] == M.MAV_RESULT_TEMPORARILY_REJECTED
+    assert modes.request(0, 4, 3, lambda: True)[0] == M.MAV_RESULT_DENIED  # no custom flag
+    modes.request(1, 4, 0, lambda: True)
+    assert modes.name == "AUTO.MISSION"  # AUTO without a sub mode is MISSION
+
+
+def test_ardupilot_modes_and_base_mode():
+    modes, _ = _modes(px4=False)
+    modes.hold(announce=False)
+    assert modes.custom_mode == 12 and modes.name == "LOITER"
+    flags = modes.base_mode()
+    for bit in (
+        M.MAV_MODE_FLAG_SAFETY_ARMED,
+        M.MAV_MODE_FLAG_GUIDED_ENABLED,
+        M.MAV_MODE_FLAG_AUTO_ENABLED,
+        M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+    ):
+        assert flags & bit
+    reset = []
+    modes.on_guided = lambda: reset.append(True)
+    assert modes.request(1, 15, 0, lambda: False)[0] == M.MAV_RESULT_ACCEPTED
+    assert modes.behaviour == GUIDED and reset == [True]
+    assert modes.request(1, 99, 0, lambda: False)[0] == M.MAV_RESULT_FAILED
+    modes.armed = False
+    assert not modes.base_mode() & M.MAV_MODE_FLAG_SAFETY_ARMED
+
+
+# ------------------------------------------------------------------------------ clock, config
+def test_step_clock():
+    c = StepClock(0.01, 1200)  # a 12 s trim flight at 100 Hz
+    c.k += 5
+    assert c.boot_s == pytest.approx(12.05) and c.t == pytest.approx(0.05)
+    assert c.ms() == 12050 and c.us() == 12050000 and c.ready_boot_s == pytest.approx(12.0)
+
+
+def test_vehicle_config_checks_and_rates():
+    with pytest.raises(ValueError, match="flavour"):
+        VehicleConfig(flavour="inav")
+    with pytest.raises(ValueError, match="initial_mode"):
+        VehicleConfig(initial_mode="orbit")
+    with pytest.raises(ValueError, match="plant"):
+        VehicleConfig(plant="xplane")
+    assert VehicleConfig("ardupilot").telemetry_rates() == stock_rates("ardupilot")
+    r = VehicleConfig("px4", rates={"attitude": 50.0, "wind": None}).telemetry_rates()
+    assert r.attitude == 50.0 and r.wind == stock_rates("px4").wind
+    assert VehicleConfig(rates=TelemetryRates()).telemetry_rates() == TelemetryRates()
+    with pytest.raises(ValueError, match="stream"):
+        VehicleConfig(rates={"attitudes": 1.0}).telemetry_rates()
+
+
+# ------------------------------------------------------------------------------ truth
+def test_truth_rows_and_the_target_on_its_clock():
+    rec = TruthRecorder()
+    st = SimpleNamespace(
+        position_ned=np.array([1.0, 2.0, -3.0]),
+        velocity_ned=np.zeros(3),
+        wind_ned=np.zeros(3),
+        euler=(0.1, 0.2, 0.3),
+        airspeed=16.0,
+        throttle=0.4,
+    )
+    rec.record(0.0, 12.0, st, 7)
+    rec.record(0.02, 12.02, st, 7)
+    target = SimpleNamespace(
+        state=lambda t: SimpleNamespace(position=(t, 0, 0), velocity=(1, 0, 0))
+    )
+    T = rec.truth(target, epoch_boot_s=12.0)
+    assert T["position_ned"].shape == (2, 3) and T["mode"].tolist() == [7, 7]
+    assert T["target_position"][:, 0] == pytest.approx([0.0, 0.02])
+    rec.forget_target()  # a new epoch: the target's rows are recomputed on its clock
+    T = rec.truth(target, epoch_boot_s=11.0)
+    assert T["target_position"][:, 0] == pytest.approx([1.0, 1.02])
+    assert T["target_t"] == pytest.approx([1.0, 1.02])
+    off = TruthRecorder(enabled=False)
+    off.record(0.0, 12.0, st, 7)
+    assert off.truth(None, 0.0)["t"].shape == (0,)
