@@ -57,8 +57,14 @@ class _Progress:
             if self.enabled and sys.stderr.isatty():
                 from tqdm import tqdm
 
-                self.bar = tqdm(total=round(self.duration), desc="tracking", unit="s", file=sys.stderr,
-                                mininterval=0.5, bar_format="{desc} {n}/{total} s sim |{bar:24}| {elapsed} wall{postfix}")  # fmt: skip
+                self.bar = tqdm(
+                    total=round(self.duration),
+                    desc="tracking",
+                    unit="s",
+                    file=sys.stderr,
+                    mininterval=0.5,
+                    bar_format="{desc} {n}/{total} s sim |{bar:24}| {elapsed} wall{postfix}",
+                )
         elif text.startswith("[HANDBACK]") or text.startswith("[DONE]"):
             if self.t_end is None and self.t_track is not None:
                 self.cpu1 = [_cpu_s(p) for p in self.pids]
@@ -76,7 +82,8 @@ class _Progress:
                 wall = time.perf_counter() - self.wall_track
                 rtf = (t - self.t_track) / max(wall, 1e-9)
                 self.log(
-                    f"tracking {t - self.t_track:6.0f} / {self.duration:g} s simulated, {rtf:.0f}x real time"
+                    f"tracking {t - self.t_track:6.0f} / {self.duration:g} s simulated, "
+                    f"{rtf:.0f}x real time"
                 )
                 self.next_line = math.floor(done * 10 + 1e-9) / 10 + 0.1
             return

@@ -1,6 +1,7 @@
 """Truth metrics of a SIL run (see :mod:`sim.sil`): the bridge's mission clock matched to the
 vehicle's boot clock by the positions the bridge logged, then the run table of the MPF error
-``pt = p - p_f(s)`` from the plant's TRUE position and the TRUE target at the ``s`` the bridge flew."""
+``pt = p - p_f(s)`` from the plant's TRUE position and the TRUE target at the ``s`` the bridge
+flew."""
 
 from __future__ import annotations
 

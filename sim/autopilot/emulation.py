@@ -21,7 +21,8 @@ Surfaces = tuple[float, float, float, float]  # aileron, elevator, rudder (-1..1
 class AutopilotEmulation:
     """Modes, setpoints and commands of one flavour, and the control of one physics step.
 
-    ``ap`` is the inner-loop autopilot (:class:`sim.autopilot.inner_loop.FixedWingAutopilot`); ``state``
+    ``ap`` is the inner-loop autopilot (:class:`sim.autopilot.inner_loop.FixedWingAutopilot`);
+    ``state``
     returns the state the autopilot has now (the plant's, or a profile's estimate of it)."""
 
     def __init__(

@@ -1,11 +1,11 @@
 """Calibration check: the same missions on the real firmware and in our SIL with a profile.
 
-``python -m sim.calibration.calibrate real arduplane --out DIR`` flies the matrix on the ArduPlane SITL bundle
-(one run directory per mission, the rig of :mod:`sim.rigs` on instance ``--instance``);
-``python -m sim.calibration.calibrate sil --out DIR [--profile P]`` re-flies every real run of DIR in our SIL
-from the real flight's start state and writes ``DIR/calibration.json`` and a Markdown table
-(``--doc``). Real flights take real time; the SIL leg takes seconds per mission, so a profile can
-be re-checked against the same real flights as often as needed.
+``python -m sim.calibration.calibrate real arduplane --out DIR`` flies the matrix on the ArduPlane
+SITL bundle (one run directory per mission, the rig of :mod:`sim.rigs` on instance ``--instance``);
+``python -m sim.calibration.calibrate sil --out DIR [--profile P]`` re-flies every real run of DIR
+in our SIL from the real flight's start state and writes ``DIR/calibration.json`` and a Markdown
+table (``--doc``). Real flights take real time; the SIL leg takes seconds per mission, so a profile
+can be re-checked against the same real flights as often as needed.
 """
 
 from __future__ import annotations
@@ -65,8 +65,9 @@ def find_bundle(autopilot: str) -> Path | None:
     return None if d is None or why_missing(autopilot) else d / TARBALLS[autopilot]
 
 
-def fly_real(autopilot: str, m: Mission, out: Path, bundle: Path, instance: int | None,
-             duration: float) -> int:  # fmt: skip
+def fly_real(
+    autopilot: str, m: Mission, out: Path, bundle: Path, instance: int | None, duration: float
+) -> int:
     """One real flight with the real-firmware rig (:mod:`sim.rigs`, what ``scripts/sitl`` runs):
     the mission's radius, altitude, wind (ArduPlane SIM_WIND_*) and target, the shipped bridge
     config. ArduPlane on ``-I instance`` (None: the rig takes a free one); PX4 under the rig's
@@ -75,9 +76,21 @@ def fly_real(autopilot: str, m: Mission, out: Path, bundle: Path, instance: int 
 
     config = ROOT / "configs" / f"bridge_{autopilot}.yaml"
     out.parent.mkdir(parents=True, exist_ok=True)
-    argv = [autopilot, "--bundle", str(bundle), "--out", str(out), "--duration", f"{duration:g}",
-            "--alt", f"{m.alt_m:g}", "--config", str(config),
-            "--set", f"path.radius_m={m.radius_m:g}"]  # fmt: skip
+    argv = [
+        autopilot,
+        "--bundle",
+        str(bundle),
+        "--out",
+        str(out),
+        "--duration",
+        f"{duration:g}",
+        "--alt",
+        f"{m.alt_m:g}",
+        "--config",
+        str(config),
+        "--set",
+        f"path.radius_m={m.radius_m:g}",
+    ]
     if instance is not None and autopilot == "arduplane":
         argv += ["--instance", str(instance)]
     if m.wind_m_s > 0:
@@ -104,8 +117,9 @@ def _metrics(p: Path) -> dict[str, Any]:
     return json.loads(p.read_text()) if p.is_file() else {}
 
 
-def fly_sil(run: Path, autopilot: str, profile: Path | None, tag: str, seed: int = 0,
-            reuse: bool = False) -> dict[str, Any]:  # fmt: skip
+def fly_sil(
+    run: Path, autopilot: str, profile: Path | None, tag: str, seed: int = 0, reuse: bool = False
+) -> dict[str, Any]:
     """Our SIL on the real flight's mission and start state (the rig's overrides), with or
     without a profile; returns the bridge's own metrics there (as the real flight's are)."""
     m = Mission(**json.loads((run.parent / f"{run.name}.mission.json").read_text()))
@@ -117,9 +131,14 @@ def fly_sil(run: Path, autopilot: str, profile: Path | None, tag: str, seed: int
         (float(s.split("=")[1]) for s in sets if s.startswith("vehicle.airspeed_m_s=")), None
     )
     flavour = "ardupilot" if autopilot == "arduplane" else "px4"
-    sil_sets = [*sets, "sil.link=udp", f"sil.flavour={flavour}", "sil.initial_mode=cruise",
-                f"sil.initial_position_ned_m=[{p0[0]:.2f},{p0[1]:.2f},{p0[2]:.2f}]",
-                f"sil.seed={seed}"]  # fmt: skip
+    sil_sets = [
+        *sets,
+        "sil.link=udp",
+        f"sil.flavour={flavour}",
+        "sil.initial_mode=cruise",
+        f"sil.initial_position_ned_m=[{p0[0]:.2f},{p0[1]:.2f},{p0[2]:.2f}]",
+        f"sil.seed={seed}",
+    ]
     if cruise is not None:
         sil_sets.append(f"aircraft.trim_airspeed_m_s={cruise:g}")
     if heading is not None:
@@ -127,8 +146,10 @@ def fly_sil(run: Path, autopilot: str, profile: Path | None, tag: str, seed: int
     if m.wind_m_s > 0:
         # SIM_WIND_DIR is where the wind comes FROM; sil.wind_ned_m_s is where the air moves TO
         to = math.radians(m.wind_dir_deg + 180.0)
-        sil_sets.append(f"sil.wind_ned_m_s=[{m.wind_m_s * math.cos(to):.3f},"
-                        f"{m.wind_m_s * math.sin(to):.3f},0.0]")  # fmt: skip
+        sil_sets.append(
+            f"sil.wind_ned_m_s=[{m.wind_m_s * math.cos(to):.3f},"
+            f"{m.wind_m_s * math.sin(to):.3f},0.0]"
+        )
     if profile is not None:
         sil_sets.append(f"sil.autopilot_profile={profile}")
     config = run.parent / f"{m.name}.cfg" / "config_wind.yaml"
@@ -141,12 +162,26 @@ def fly_sil(run: Path, autopilot: str, profile: Path | None, tag: str, seed: int
     dur = round(real.get("tracked_s") or 300.0)
     sil_out = run / (f"sil_{tag}" if seed == 0 else f"sil_{tag}_s{seed}")
     if reuse and (sil_out / "bridge" / "metrics.json").is_file():
-        return {"bridge": _metrics(sil_out / "bridge" / "metrics.json"),
-                "truth": _metrics(sil_out / "metrics.json")}  # fmt: skip
+        return {
+            "bridge": _metrics(sil_out / "bridge" / "metrics.json"),
+            "truth": _metrics(sil_out / "metrics.json"),
+        }
     # --force: the real flight flew this mission (its own check passed from the real start
     # state); `sim`'s check, from the kinematic start, refused the 6 m/s wind row's peak bank
-    cmd = [sys.executable, "-m", "mpf_mavlink.cli", "sim", str(config), "--out", str(sil_out), "--no-plots", "--force",
-           "--set", f"sim.duration_s={dur:g}", *[x for s in sil_sets for x in ("--set", s)]]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "mpf_mavlink.cli",
+        "sim",
+        str(config),
+        "--out",
+        str(sil_out),
+        "--no-plots",
+        "--force",
+        "--set",
+        f"sim.duration_s={dur:g}",
+        *[x for s in sil_sets for x in ("--set", s)],
+    ]
     with open(sil_out.with_name(sil_out.name + ".log"), "w") as f:
         f.write(" ".join(shlex.quote(c) for c in cmd) + "\n")
         f.flush()
@@ -156,8 +191,9 @@ def fly_sil(run: Path, autopilot: str, profile: Path | None, tag: str, seed: int
     return {"bridge": bm, "truth": tm}
 
 
-def fly_sil_seeds(run: Path, autopilot: str, profile: Path | None, tag: str, seeds: int,
-                  reuse: bool = False) -> dict[str, Any]:  # fmt: skip
+def fly_sil_seeds(
+    run: Path, autopilot: str, profile: Path | None, tag: str, seeds: int, reuse: bool = False
+) -> dict[str, Any]:
     """:func:`fly_sil` with seeds 0 .. seeds-1 (every seed its own draw of the profile's random
     processes and the turbulence): the RMS over all of them (root of the mean square), the mean
     radial / vertical averaged, and each seed's RMS. The real flight is one draw; the SIL's
@@ -188,14 +224,23 @@ def compare_row(name: str, real: dict[str, Any], sil: dict[str, Any]) -> dict[st
     keys = ("steady_mean_radial_m", "steady_mean_vertical_m")
     d = {k: (None if real.get(k) is None or b.get(k) is None else b[k] - real[k]) for k in keys}
     ok = (
-        ratio is not None and BAND[0] <= ratio <= BAND[1]
+        ratio is not None
+        and BAND[0] <= ratio <= BAND[1]
         and all(v is not None and abs(v) <= MEAN_TOL_M for v in d.values())
-    )  # fmt: skip
-    return {"mission": name, "real_rms_m": r_rms, "sil_rms_m": s_rms, "ratio": ratio,
-            "real_radial_m": real.get("steady_mean_radial_m"), "sil_radial_m": b.get("steady_mean_radial_m"),
-            "real_vertical_m": real.get("steady_mean_vertical_m"), "sil_vertical_m": b.get("steady_mean_vertical_m"),
-            "sil_truth_rms_m": sil["truth"].get("steady_rms_m"), "within": ok,
-            "sil_seeds_rms_m": b.get("seeds_rms_m")}  # fmt: skip
+    )
+    return {
+        "mission": name,
+        "real_rms_m": r_rms,
+        "sil_rms_m": s_rms,
+        "ratio": ratio,
+        "real_radial_m": real.get("steady_mean_radial_m"),
+        "sil_radial_m": b.get("steady_mean_radial_m"),
+        "real_vertical_m": real.get("steady_mean_vertical_m"),
+        "sil_vertical_m": b.get("steady_mean_vertical_m"),
+        "sil_truth_rms_m": sil["truth"].get("steady_rms_m"),
+        "within": ok,
+        "sil_seeds_rms_m": b.get("seeds_rms_m"),
+    }
 
 
 def _g(v: Any, f: str = ".3f") -> str:
@@ -210,8 +255,10 @@ def _spread(r: dict[str, Any]) -> str:
 
 
 def table(rows: list[dict[str, Any]], title: str) -> str:
-    head = ("| mission | real RMS (m) | SIL RMS (m) | real / SIL | real radial / vertical (m) "
-            "| SIL radial / vertical (m) | within band |\n|---|---|---|---|---|---|---|")  # fmt: skip
+    head = (
+        "| mission | real RMS (m) | SIL RMS (m) | real / SIL | real radial / vertical (m) "
+        "| SIL radial / vertical (m) | within band |\n|---|---|---|---|---|---|---|"
+    )
     lines = [f"**{title}**", "", head]
     for r in rows:
         lines.append(
@@ -245,10 +292,14 @@ def main(argv: list[str] | None = None) -> int:
     sl.add_argument("--profile", default=None, help="profile YAML (default: none, the plain SIL)")
     sl.add_argument("--tag", default=None, help="name of this SIL leg (default: profile or plain)")
     sl.add_argument("--only", default="")
-    sl.add_argument("--seeds", type=int, default=3,
-                    help="SIL draws per mission, seeds 0..N-1 (default 3)")  # fmt: skip
-    sl.add_argument("--reuse", action="store_true",
-                    help="take a SIL leg already flown under this tag and seed instead of re-flying it")  # fmt: skip
+    sl.add_argument(
+        "--seeds", type=int, default=3, help="SIL draws per mission, seeds 0..N-1 (default 3)"
+    )
+    sl.add_argument(
+        "--reuse",
+        action="store_true",
+        help="take a SIL leg already flown under this tag and seed instead of re-flying it",
+    )
     sl.add_argument("--doc", default=None, help="also write the table to this Markdown file")
     a = ap.parse_args(argv)
     if a.cmd == "sil" and a.seeds < 1:
@@ -299,8 +350,11 @@ def main(argv: list[str] | None = None) -> int:
             t0 = time.monotonic()
             bundle = Path(a.bundle) if a.bundle else find_bundle(a.autopilot)
             if bundle is None:
-                print(f"calibrate: no {a.autopilot} bundle (--bundle, MPF_SITL_DIR or "
-                      "../shared/sitl)", file=sys.stderr)  # fmt: skip
+                print(
+                    f"calibrate: no {a.autopilot} bundle (--bundle, MPF_SITL_DIR or "
+                    "../shared/sitl)",
+                    file=sys.stderr,
+                )
                 return 2
             code = fly_real(a.autopilot, m, out / m.name, bundle, a.instance, a.duration)
             print(f"calibrate: {m.name} exit {code} in {time.monotonic() - t0:.0f} s", flush=True)

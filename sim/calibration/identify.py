@@ -1,4 +1,6 @@
-"""Identify an autopilot profile from the real firmware: ``python -m sim.calibration.identify arduplane --out DIR``.
+"""Identify an autopilot profile from the real firmware.
+
+``python -m sim.calibration.identify arduplane --out DIR``.
 
 Flies short manoeuvres on the SITL firmware through pymavlink (its ground-station link) and fits
 the parameters :mod:`sim.autopilot.profile` needs (scipy least squares), then writes
@@ -52,14 +54,24 @@ def _quat(roll: float, pitch: float, yaw: float) -> list[float]:
 # (duration s, roll deg, pitch offset deg) segments flown in order
 ARDUPLANE_SCHEDULE: list[tuple[float, float, float]] = [
     (6.0, 0.0, 0.0),
-    (8.0, 20.0, 0.0), (8.0, -20.0, 0.0), (6.0, 0.0, 0.0),     # doublet
-    (5.0, 10.0, 0.0), (5.0, -10.0, 0.0), (5.0, 0.0, 0.0),
-    (6.0, 0.0, 4.0), (6.0, 0.0, -3.0), (6.0, 0.0, 0.0),       # pitch steps
-    (14.0, 10.0, 0.0), (6.0, 0.0, 0.0),                        # steady turns
-    (14.0, 20.0, 0.0), (6.0, 0.0, 0.0),
-    (14.0, 30.0, 0.0), (6.0, 0.0, 0.0),
-    (14.0, -35.0, 0.0), (6.0, 0.0, 0.0),
-]  # fmt: skip
+    (8.0, 20.0, 0.0),
+    (8.0, -20.0, 0.0),
+    (6.0, 0.0, 0.0),  # doublet
+    (5.0, 10.0, 0.0),
+    (5.0, -10.0, 0.0),
+    (5.0, 0.0, 0.0),
+    (6.0, 0.0, 4.0),
+    (6.0, 0.0, -3.0),
+    (6.0, 0.0, 0.0),  # pitch steps
+    (14.0, 10.0, 0.0),
+    (6.0, 0.0, 0.0),  # steady turns
+    (14.0, 20.0, 0.0),
+    (6.0, 0.0, 0.0),
+    (14.0, 30.0, 0.0),
+    (6.0, 0.0, 0.0),
+    (14.0, -35.0, 0.0),
+    (6.0, 0.0, 0.0),
+]
 
 
 class Recorder:
@@ -82,8 +94,18 @@ class Recorder:
             t, mt = time.monotonic(), m.get_type()
             self.last[mt] = m
             if mt == "ATTITUDE":
-                self.rows["att"].append((t, m.time_boot_ms / 1e3, m.roll, m.pitch, m.yaw,
-                                         m.rollspeed, m.pitchspeed, m.yawspeed))  # fmt: skip
+                self.rows["att"].append(
+                    (
+                        t,
+                        m.time_boot_ms / 1e3,
+                        m.roll,
+                        m.pitch,
+                        m.yaw,
+                        m.rollspeed,
+                        m.pitchspeed,
+                        m.yawspeed,
+                    )
+                )
             elif mt == "LOCAL_POSITION_NED":
                 self.rows["pos"].append((t, m.time_boot_ms / 1e3, m.x, m.y, m.z, m.vx, m.vy, m.vz))
             elif mt == "VFR_HUD":
@@ -94,8 +116,13 @@ class Recorder:
                 print(f"  [sitl] {m.text}", flush=True)
 
 
-def fly_schedule(rec: Recorder, send: Any, schedule: list[tuple[float, float, float]],
-                 pitch0: float, rate_hz: float = 25.0) -> None:  # fmt: skip
+def fly_schedule(
+    rec: Recorder,
+    send: Any,
+    schedule: list[tuple[float, float, float]],
+    pitch0: float,
+    rate_hz: float = 25.0,
+) -> None:
     for dur, roll_deg, dpitch_deg in schedule:
         t_end = time.monotonic() + dur
         roll, pitch = math.radians(roll_deg), pitch0 + math.radians(dpitch_deg)
@@ -127,8 +154,9 @@ def fit_axis(t: np.ndarray, cmd: np.ndarray, meas: np.ndarray) -> dict[str, floa
     best = None
     for d0 in (0.02, 0.1, 0.2):
         for tau0 in (0.2, 0.5, 1.0):
-            r = least_squares(res, [d0, tau0, 1.0, 0.0],
-                              bounds=([0.0, 0.01, 0.5, -0.2], [1.0, 5.0, 1.5, 0.2]))  # fmt: skip
+            r = least_squares(
+                res, [d0, tau0, 1.0, 0.0], bounds=([0.0, 0.01, 0.5, -0.2], [1.0, 5.0, 1.5, 0.2])
+            )
             if best is None or r.cost < best.cost:
                 best = r
     assert best is not None
@@ -137,8 +165,9 @@ def fit_axis(t: np.ndarray, cmd: np.ndarray, meas: np.ndarray) -> dict[str, floa
     return {"delay_s": d, "tau_s": tau, "gain": k, "bias_rad": b, "rms_rad": rms}
 
 
-def fit_turn(att: np.ndarray, pos: np.ndarray, hud: np.ndarray, segs: list[tuple[float, float]]
-             ) -> dict[str, Any]:  # fmt: skip
+def fit_turn(
+    att: np.ndarray, pos: np.ndarray, hud: np.ndarray, segs: list[tuple[float, float]]
+) -> dict[str, Any]:
     """Heading rate (ground course rate, still air) per g tan(bank) / V over the steady turns."""
     rows = []
     for t0, t1 in segs:
@@ -154,9 +183,16 @@ def fit_turn(att: np.ndarray, pos: np.ndarray, hud: np.ndarray, segs: list[tuple
         v_air = float(np.mean(hud[hm, 1]))
         v_gnd = float(np.mean(np.hypot(pos[pm, 5], pos[pm, 6])))
         model = G * math.tan(phi) / v_air
-        rows.append({"bank_deg": math.degrees(phi), "chi_dot": chid, "airspeed": v_air,
-                     "groundspeed": v_gnd, "gain_airspeed": chid / model,
-                     "gain_groundspeed": chid / (G * math.tan(phi) / v_gnd)})  # fmt: skip
+        rows.append(
+            {
+                "bank_deg": math.degrees(phi),
+                "chi_dot": chid,
+                "airspeed": v_air,
+                "groundspeed": v_gnd,
+                "gain_airspeed": chid / model,
+                "gain_groundspeed": chid / (G * math.tan(phi) / v_gnd),
+            }
+        )
     # the adapter's V is |ground velocity - wind| (TAS; VFR_HUD reports EAS): in still air the
     # ground speed
     x = np.array([G * math.tan(math.radians(r["bank_deg"])) / r["groundspeed"] for r in rows])
@@ -165,8 +201,9 @@ def fit_turn(att: np.ndarray, pos: np.ndarray, hud: np.ndarray, segs: list[tuple
     return {"turn_gain": k, "turns": rows}
 
 
-def estimator_stats(att: np.ndarray, sim: np.ndarray, pos: np.ndarray,
-                    origin: tuple[float, float]) -> dict[str, float]:  # fmt: skip
+def estimator_stats(
+    att: np.ndarray, sim: np.ndarray, pos: np.ndarray, origin: tuple[float, float]
+) -> dict[str, float]:
     """Reported minus simulator truth: attitude (rad) and horizontal position (m)."""
     out: dict[str, float] = {}
     if len(sim) < 20:
@@ -195,11 +232,18 @@ def identify_arduplane(out: Path, bundle: Path, instance: int, alt: float) -> di
     work = out / "sitl"
     work.mkdir(parents=True, exist_ok=True)
     parm = bundle / "Tools" / "autotest" / "models" / "plane.parm"
-    cmd = [str(bundle / "bin" / "arduplane"), "--model", "plane", "--defaults", str(parm),
-           f"-I{instance}"]  # fmt: skip
+    cmd = [
+        str(bundle / "bin" / "arduplane"),
+        "--model",
+        "plane",
+        "--defaults",
+        str(parm),
+        f"-I{instance}",
+    ]
     log = open(work / "sitl.log", "w")  # noqa: SIM115 - lives as long as the process
-    proc = subprocess.Popen(cmd, cwd=work, stdout=log, stderr=subprocess.STDOUT,
-                            start_new_session=True)  # fmt: skip
+    proc = subprocess.Popen(
+        cmd, cwd=work, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+    )
     try:
         g = Gcs(f"tcp:127.0.0.1:{port}", Flavour.ARDUPILOT)
         take_off(g, alt)
@@ -215,8 +259,17 @@ def identify_arduplane(out: Path, bundle: Path, instance: int, alt: float) -> di
 
         def send(roll: float, pitch: float) -> None:
             # type_mask 7: body rates ignored; 64: throttle ignored (TECS keeps the speed)
-            c.mav.set_attitude_target_send(int(time.monotonic() * 1e3) & 0xFFFFFFFF, g.sys,
-                                           g.comp, 7 | 64, _quat(roll, pitch, 0.0), 0, 0, 0, 0.0)  # fmt: skip
+            c.mav.set_attitude_target_send(
+                int(time.monotonic() * 1e3) & 0xFFFFFFFF,
+                g.sys,
+                g.comp,
+                7 | 64,
+                _quat(roll, pitch, 0.0),
+                0,
+                0,
+                0,
+                0.0,
+            )
 
         t_start = time.monotonic()
         fly_schedule(rec, send, ARDUPLANE_SCHEDULE, pitch0)
@@ -257,8 +310,17 @@ def identify_px4(out: Path, bundle: Path, alt: float) -> dict[str, Any]:
         thr = (hud.throttle / 100.0) if hud is not None else 0.8
 
         def send(roll: float, pitch: float) -> None:
-            c.mav.set_attitude_target_send(int(time.monotonic() * 1e3) & 0xFFFFFFFF, g.sys,
-                                           1, 7, _quat(roll, pitch, 0.0), 0, 0, 0, thr)  # fmt: skip
+            c.mav.set_attitude_target_send(
+                int(time.monotonic() * 1e3) & 0xFFFFFFFF,
+                g.sys,
+                1,
+                7,
+                _quat(roll, pitch, 0.0),
+                0,
+                0,
+                0,
+                thr,
+            )
 
         t0 = time.monotonic()
         while time.monotonic() - t0 < 1.5:  # stream before asking for OFFBOARD
@@ -276,8 +338,14 @@ def identify_px4(out: Path, bundle: Path, alt: float) -> dict[str, Any]:
     return analyse(rec, t_start, ARDUPLANE_SCHEDULE, pitch0, origin, out)
 
 
-def analyse(rec: Recorder, t_start: float, schedule: list[tuple[float, float, float]],
-            pitch0: float, origin: tuple[float, float], out: Path) -> dict[str, Any]:  # fmt: skip
+def analyse(
+    rec: Recorder,
+    t_start: float,
+    schedule: list[tuple[float, float, float]],
+    pitch0: float,
+    origin: tuple[float, float],
+    out: Path,
+) -> dict[str, Any]:
     att = np.array(rec.rows["att"], float)
     pos = np.array(rec.rows["pos"], float)
     hud = np.array(rec.rows["hud"], float)
@@ -309,8 +377,14 @@ def analyse(rec: Recorder, t_start: float, schedule: list[tuple[float, float, fl
         mm = (att[:, 0] >= t0) & (att[:, 0] <= t1)
         steady.append((roll_deg, math.degrees(float(np.mean(att[mm, 2])))))
     est = estimator_stats(att, sim, pos, origin)
-    res = {"roll": roll, "pitch": pitch, "turn": turn, "steady_bank_deg": steady,
-           "estimator": est, "pitch0_rad": pitch0}  # fmt: skip
+    res = {
+        "roll": roll,
+        "pitch": pitch,
+        "turn": turn,
+        "steady_bank_deg": steady,
+        "estimator": est,
+        "pitch0_rad": pitch0,
+    }
     (out / "fit.json").write_text(json.dumps(res, indent=1))
     return res
 
@@ -344,9 +418,10 @@ def circle_wind_error(tlog: Path, after_s: float = 90.0) -> dict[str, float]:
         "along": float(np.mean((wn * vx + we * vy) / v)),
         "right": float(np.mean((-wn * vy + we * vx) / v)),
         "omega": float(np.polyfit(P[:, 3], chi, 1)[0]),
-        "north": float(np.mean(wn)), "east": float(np.mean(we)),
+        "north": float(np.mean(wn)),
+        "east": float(np.mean(we)),
         "bank": float(np.mean(A[A[:, 0] > A[0, 0] + after_s, 1])),
-    }  # fmt: skip
+    }
 
 
 def position_lead(tlog: Path, after_s: float = 60.0) -> dict[str, float]:
@@ -423,8 +498,9 @@ def _gm_fit(x: np.ndarray, dt: float) -> tuple[float, float]:
     n = min(len(x) // 3, int(round(30.0 / dt)))
     r = np.array([np.mean(x[: len(x) - k] * x[k:]) / v for k in range(1, n)])
     lag = np.arange(1, n) * dt
-    (tau,), _ = curve_fit(lambda k, tau: np.exp(-k / tau), lag, r, p0=(5.0,),
-                          bounds=((0.05,), (500.0,)))  # fmt: skip
+    (tau,), _ = curve_fit(
+        lambda k, tau: np.exp(-k / tau), lag, r, p0=(5.0,), bounds=((0.05,), (500.0,))
+    )
     return math.sqrt(v), float(tau)
 
 
@@ -513,19 +589,24 @@ def write_px4_profile(fits: list[dict[str, Any]], base: Path, out: Path, command
     est = prof.setdefault("estimator", {})
     for k in ("position_noise_m", "vertical_noise_m", "velocity_noise_m_s"):
         est.pop(k, None)  # the white noise of the telemetry is in the Gauss-Markov errors now
-    est.update({
-        "rate_noise_rad_s": [round(float(np.sqrt(np.mean([f["gyro_noise_rad_s"][i] ** 2
-                                                           for f in fits]))), 4) for i in range(3)],
-        "horizontal_wander_m": round(math.hypot(sx, sy) / math.sqrt(2.0), 4),
-        "wander_tau_s": round((tx + ty) / 2.0, 1),
-        "vertical_wander_m": sz, "vertical_wander_tau_s": tz,
-        "velocity_wander_m_s": [round(math.hypot(svx, svy) / math.sqrt(2.0), 4), svz],
-        "velocity_wander_tau_s": [round((tvx + tvy) / 2.0, 1), tvz],
-        "attitude_wander_rad": [a[0] for a in att],
-        "attitude_wander_tau_s": [a[1] for a in att],
-        "wind_wander_m_s": round(math.hypot(swn, swe) / math.sqrt(2.0), 4),
-        "wind_wander_tau_s": round((twn + twe) / 2.0, 1),
-    })  # fmt: skip
+    est.update(
+        {
+            "rate_noise_rad_s": [
+                round(float(np.sqrt(np.mean([f["gyro_noise_rad_s"][i] ** 2 for f in fits]))), 4)
+                for i in range(3)
+            ],
+            "horizontal_wander_m": round(math.hypot(sx, sy) / math.sqrt(2.0), 4),
+            "wander_tau_s": round((tx + ty) / 2.0, 1),
+            "vertical_wander_m": sz,
+            "vertical_wander_tau_s": tz,
+            "velocity_wander_m_s": [round(math.hypot(svx, svy) / math.sqrt(2.0), 4), svz],
+            "velocity_wander_tau_s": [round((tvx + tvy) / 2.0, 1), tvz],
+            "attitude_wander_rad": [a[0] for a in att],
+            "attitude_wander_tau_s": [a[1] for a in att],
+            "wind_wander_m_s": round(math.hypot(swn, swe) / math.sqrt(2.0), 4),
+            "wind_wander_tau_s": round((twn + twe) / 2.0, 1),
+        }
+    )
     prof.setdefault("turn", {})["turn_gain"] = round(
         float(np.mean([f["turn_gain"] for f in fits])), 3
     )
@@ -534,8 +615,9 @@ def write_px4_profile(fits: list[dict[str, Any]], base: Path, out: Path, command
     return path
 
 
-def write_profile(res: dict[str, Any], autopilot: str, firmware: str, out: Path,
-                  command: str) -> Path:  # fmt: skip
+def write_profile(
+    res: dict[str, Any], autopilot: str, firmware: str, out: Path, command: str
+) -> Path:
     import yaml
 
     r, p = dict(res["roll"]), res["pitch"]
@@ -552,24 +634,30 @@ def write_profile(res: dict[str, Any], autopilot: str, firmware: str, out: Path,
         "firmware": firmware,
         "source": f"identified by `{command}` ({time.strftime('%Y-%m-%d')})",
         "attitude": {
-            "roll_delay_s": round(r["delay_s"], 3), "roll_tau_s": round(r["tau_s"], 3),
-            "roll_gain": round(r["gain"], 3), "roll_bias_rad": round(r["bias_rad"], 4),
-            "pitch_delay_s": round(p["delay_s"], 3), "pitch_tau_s": round(p["tau_s"], 3),
-            "pitch_gain": round(p["gain"], 3), "pitch_bias_rad": round(p["bias_rad"], 4),
+            "roll_delay_s": round(r["delay_s"], 3),
+            "roll_tau_s": round(r["tau_s"], 3),
+            "roll_gain": round(r["gain"], 3),
+            "roll_bias_rad": round(r["bias_rad"], 4),
+            "pitch_delay_s": round(p["delay_s"], 3),
+            "pitch_tau_s": round(p["tau_s"], 3),
+            "pitch_gain": round(p["gain"], 3),
+            "pitch_bias_rad": round(p["bias_rad"], 4),
         },
         "turn": {"turn_gain": round(res["turn"]["turn_gain"], 3)},
         "estimator": {
             "attitude_noise_rad": round(est.get("roll_err_std_rad", 0.0), 4),
         },
         "fit": {"roll_rms_rad": round(r["rms_rad"], 4), "pitch_rms_rad": round(p["rms_rad"], 4)},
-    }  # fmt: skip
+    }
     wf = res.get("wind_estimator")
     if wf:
-        prof["estimator"].update({
-            "wind_apparent_along_m_s": round(wf["along_m_s"], 3),
-            "wind_apparent_side_m_s": round(wf["side_m_s"], 3),
-            "wind_tau_s": round(wf["tau_s"], 2),
-        })  # fmt: skip
+        prof["estimator"].update(
+            {
+                "wind_apparent_along_m_s": round(wf["along_m_s"], 3),
+                "wind_apparent_side_m_s": round(wf["side_m_s"], 3),
+                "wind_tau_s": round(wf["tau_s"], 2),
+            }
+        )
         prof["fit"]["wind_rms_m_s"] = round(wf["rms_m_s"], 4)
     if res.get("position_lead"):
         lead = float(np.mean([x["position_lead_s"] for x in res["position_lead"]]))
@@ -602,11 +690,18 @@ def main(argv: list[str] | None = None) -> int:
         help="a bridge tlog in a steady wind of SPEED m/s (the reported wind's scale)",
     )
     ap.add_argument("--reuse", action="store_true", help="re-fit DIR's last flight, fly nothing")
-    ap.add_argument("--ulog", nargs="+", default=None,
-                    help="PX4: fit the EKF2 error model to these ULogs of OFFBOARD flights "
-                    "(SIH ground truth), fly nothing")  # fmt: skip
-    ap.add_argument("--base", default=str(ROOT / "configs" / "autopilots" / "px4-1.16-sih.yaml"),
-                    help="PX4 with --ulog: the profile whose other sections are kept")  # fmt: skip
+    ap.add_argument(
+        "--ulog",
+        nargs="+",
+        default=None,
+        help="PX4: fit the EKF2 error model to these ULogs of OFFBOARD flights "
+        "(SIH ground truth), fly nothing",
+    )
+    ap.add_argument(
+        "--base",
+        default=str(ROOT / "configs" / "autopilots" / "px4-1.16-sih.yaml"),
+        help="PX4 with --ulog: the profile whose other sections are kept",
+    )
     a = ap.parse_args(argv)
     out = Path(a.out).resolve()
     cmd = "python -m sim.calibration.identify " + " ".join(

@@ -2,8 +2,8 @@
 
 Same ``step(aileron, elevator, rudder, throttle)`` / ``state() -> PlantState`` / ``dt`` / ``t`` /
 ``origin`` / ``set_wind`` interface as :class:`sim.plant.jsbsim_plant.JSBSimPlant`, so
-:class:`sim.vehicle.vehicle.SimVehicle` and :class:`sim.autopilot.inner_loop.FixedWingAutopilot` drive it
-unchanged.
+:class:`sim.vehicle.vehicle.SimVehicle` and :class:`sim.autopilot.inner_loop.FixedWingAutopilot`
+drive it unchanged.
 
 Model (SI, NED, FRD; alpha = beta = 0, so the body x axis is along the air-relative velocity):
 

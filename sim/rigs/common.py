@@ -86,35 +86,81 @@ def parser() -> argparse.ArgumentParser:
     )
     ap.add_argument("autopilot", choices=sorted(AUTOPILOTS))
     ap.add_argument("--out", required=True, help="run directory (new or empty)")
-    ap.add_argument("--bundle", "--ardupilot", dest="bundle",
-                    help="unpacked bundle or its .tar.xz (default: ../shared/sitl); with --binary: your ArduPilot checkout")  # fmt: skip
+    ap.add_argument(
+        "--bundle",
+        "--ardupilot",
+        dest="bundle",
+        help=(
+            "unpacked bundle or its .tar.xz (default: ../shared/sitl); with --binary: your "
+            "ArduPilot checkout"
+        ),
+    )
     ap.add_argument("--config", help="bridge config (default configs/bridge_<autopilot>.yaml)")
-    ap.add_argument("--duration", type=_number("time > 0 s", 0.0, True), default=300.0,
-                    help="seconds of tracking (autopilot time; default 300)")  # fmt: skip
-    ap.add_argument("--moving", action="store_true",
-                    help="moving target: the config's, or 3 m/s east if the config's is still")  # fmt: skip
+    ap.add_argument(
+        "--duration",
+        type=_number("time > 0 s", 0.0, True),
+        default=300.0,
+        help="seconds of tracking (autopilot time; default 300)",
+    )
+    ap.add_argument(
+        "--moving",
+        action="store_true",
+        help="moving target: the config's, or 3 m/s east if the config's is still",
+    )
     ap.add_argument("--wind", type=_wind, help="SPEED,DIR_DEG (ArduPlane SIM_WIND_SPD/DIR)")
-    ap.add_argument("--turbulence", type=_number("speed >= 0 m/s", 0.0),
-                    help="ArduPlane SIM_WIND_TURB (m/s)")  # fmt: skip
-    ap.add_argument("--kill-after", type=_number("time > 0 s", 0.0, True),
-                    help="SIGKILL the bridge S s into tracking and watch the autopilot's hold")  # fmt: skip
-    ap.add_argument("--watch-s", type=_number("time > 0 s", 0.0, True), default=60.0,
-                    help="seconds watched after the kill (default 60)")  # fmt: skip
+    ap.add_argument(
+        "--turbulence", type=_number("speed >= 0 m/s", 0.0), help="ArduPlane SIM_WIND_TURB (m/s)"
+    )
+    ap.add_argument(
+        "--kill-after",
+        type=_number("time > 0 s", 0.0, True),
+        help="SIGKILL the bridge S s into tracking and watch the autopilot's hold",
+    )
+    ap.add_argument(
+        "--watch-s",
+        type=_number("time > 0 s", 0.0, True),
+        default=60.0,
+        help="seconds watched after the kill (default 60)",
+    )
     ap.add_argument("--sil", action="store_true", help="fly the same mission in our SIL too")
-    ap.add_argument("--speedup", type=_number("factor > 0", 0.0, True), default=1.0,
-                    help="ArduPlane SIM_SPEEDUP / PX4_SIM_SPEED_FACTOR (default 1: real time)")  # fmt: skip
-    ap.add_argument("--serial", action="store_true",
-                    help="ArduPlane: the bridge on a pseudo-terminal relayed to SERIAL1")  # fmt: skip
+    ap.add_argument(
+        "--speedup",
+        type=_number("factor > 0", 0.0, True),
+        default=1.0,
+        help="ArduPlane SIM_SPEEDUP / PX4_SIM_SPEED_FACTOR (default 1: real time)",
+    )
+    ap.add_argument(
+        "--serial",
+        action="store_true",
+        help="ArduPlane: the bridge on a pseudo-terminal relayed to SERIAL1",
+    )
     ap.add_argument("--instance", type=int, help="ArduPlane -I N (default: the first free one)")
     ap.add_argument("--binary", help="ArduPlane: your own arduplane SITL binary instead")
-    ap.add_argument("--alt", type=_number("height > 0 m", 0.0, True), default=100.0,
-                    help="take-off / path altitude above home (m)")  # fmt: skip
-    ap.add_argument("--lead", type=_number("time >= 0 s", 0.0), default=6.0,
-                    help="wall seconds from placing the mission to engaging")  # fmt: skip
-    ap.add_argument("--record", action="store_true",
-                    help="write docs/results/sitl-<flight>.json and regenerate docs/results/sitl.md")  # fmt: skip
-    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                    help="a config override passed to the bridge (repeatable)")  # fmt: skip
+    ap.add_argument(
+        "--alt",
+        type=_number("height > 0 m", 0.0, True),
+        default=100.0,
+        help="take-off / path altitude above home (m)",
+    )
+    ap.add_argument(
+        "--lead",
+        type=_number("time >= 0 s", 0.0),
+        default=6.0,
+        help="wall seconds from placing the mission to engaging",
+    )
+    ap.add_argument(
+        "--record",
+        action="store_true",
+        help="write docs/results/sitl-<flight>.json and regenerate docs/results/sitl.md",
+    )
+    ap.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a config override passed to the bridge (repeatable)",
+    )
     return ap
 
 
@@ -163,8 +209,15 @@ def validate(a: argparse.Namespace) -> dict[str, Any]:
         bundle = check_bundle(a.autopilot, a.bundle)
     # the target's overrides are kept from the config as given: the cfg above already has them,
     # and target_sets on it saw a moving target and gave none (PX4 --moving flew stationary)
-    return {"mod": mod, "bundle": bundle, "config": cfg_path.resolve(), "cfg": cfg, "out": out,
-            "tsets": tsets, "target_label": label}  # fmt: skip
+    return {
+        "mod": mod,
+        "bundle": bundle,
+        "config": cfg_path.resolve(),
+        "cfg": cfg,
+        "out": out,
+        "tsets": tsets,
+        "target_label": label,
+    }
 
 
 def place_mission(g: Gcs, radius: float, lead_s: float) -> tuple[list[float], list[float]]:
@@ -259,12 +312,17 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
     mod, out, cfg = v["mod"], v["out"], v["cfg"]
     bundle_dir = unpack(a.autopilot, v["bundle"])
     summary.update(
-        bundle=bundle_version(bundle_dir), config=str(v["config"].relative_to(ROOT))
-        if v["config"].is_relative_to(ROOT) else str(v["config"]),
-        speedup=a.speedup, commit=_git_commit(), date=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-        wind=list(a.wind) if a.wind else None, turbulence=a.turbulence,
+        bundle=bundle_version(bundle_dir),
+        config=str(v["config"].relative_to(ROOT))
+        if v["config"].is_relative_to(ROOT)
+        else str(v["config"]),
+        speedup=a.speedup,
+        commit=_git_commit(),
+        date=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        wind=list(a.wind) if a.wind else None,
+        turbulence=a.turbulence,
         command=" ".join(["scripts/sitl", *sys.argv[1:]]) if sys.argv else "",
-    )  # fmt: skip
+    )
     print(f"{summary['bundle']}: starting ({bundle_dir})", flush=True)
     fw.start(bundle_dir, out / "firmware")
     g = Gcs(fw.gcs_url, mod.FLAVOUR)
@@ -275,13 +333,21 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
     tsets, label = v["tsets"], v["target_label"]
     g.pump(0.3)
     centre, start = place_mission(g, radius, a.lead * a.speedup)
-    sets = [*a.overrides, f"target.position_ned_m=[{centre[0]:.2f},{centre[1]:.2f},{centre[2]:.2f}]",
-            *tsets, "mavlink.plots=false"]  # fmt: skip
+    sets = [
+        *a.overrides,
+        f"target.position_ned_m=[{centre[0]:.2f},{centre[1]:.2f},{centre[2]:.2f}]",
+        *tsets,
+        "mavlink.plots=false",
+    ]
     summary["mission"] = {
-        "path": cfg.path.type, "radius_m": radius or None, "centre_ned_m": centre,
-        "target": label, "airspeed_m_s": cfg.vehicle.airspeed_m_s,
-        "autopilot_cruise_airspeed_m_s": cruise, "overrides": sets,
-    }  # fmt: skip
+        "path": cfg.path.type,
+        "radius_m": radius or None,
+        "centre_ned_m": centre,
+        "target": label,
+        "airspeed_m_s": cfg.vehicle.airspeed_m_s,
+        "autopilot_cruise_airspeed_m_s": cruise,
+        "overrides": sets,
+    }
     relay = None
     url = fw.bridge_url
     if a.serial:
@@ -290,9 +356,20 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
         relay = PtyRelay(fw.bridge_port)
         url = f"{relay.device}:115200"
         summary["serial"] = {"device": relay.device, "relayed_to": fw.bridge_url}
-    cmd = [sys.executable, "-m", "mpf_mavlink.cli", "run", str(v["config"]), "--connect", url,
-           "--out", str(out / "bridge"), "--duration", f"{a.duration:g}",
-           *[x for s in sets for x in ("--set", s)]]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "mpf_mavlink.cli",
+        "run",
+        str(v["config"]),
+        "--connect",
+        url,
+        "--out",
+        str(out / "bridge"),
+        "--duration",
+        f"{a.duration:g}",
+        *[x for s in sets for x in ("--set", s)],
+    ]
     print("hand-over: mpf-mavlink " + " ".join(cmd[3:]), flush=True)
     with open(out / "bridge.log", "w") as blog:
         bridge = subprocess.Popen(
@@ -306,8 +383,11 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
             if g.mode() == mod.TRACK_MODE and t_engaged is None:
                 t_engaged = g.t_boot_s
                 print(f"{mod.TRACK_MODE} at t_boot {t_engaged:.1f} s", flush=True)
-            if (a.kill_after is not None and t_engaged is not None
-                    and g.t_boot_s - t_engaged >= a.kill_after):  # fmt: skip
+            if (
+                a.kill_after is not None
+                and t_engaged is not None
+                and g.t_boot_s - t_engaged >= a.kill_after
+            ):
                 os.kill(bridge.pid, signal.SIGKILL)
                 bridge.wait()
                 tracked = g.t_boot_s - t_engaged
@@ -322,8 +402,11 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
             with contextlib.suppress(subprocess.TimeoutExpired):
                 bridge.wait(20)
         if relay is not None:
-            summary["serial"].update(bytes_to_autopilot=relay.bytes_up,
-                                     bytes_to_bridge=relay.bytes_down, bytes_dropped=relay.dropped)  # fmt: skip
+            summary["serial"].update(
+                bytes_to_autopilot=relay.bytes_up,
+                bytes_to_bridge=relay.bytes_down,
+                bytes_dropped=relay.dropped,
+            )
             relay.close()
     g.close()
     summary.update(figures_of(out / "bridge", out / "bridge.log", code, kill, cfg, mod))
@@ -365,8 +448,13 @@ def figures_of(
     text = log.read_text(errors="replace") if log.is_file() else ""
     engaged = m.get("state_reached") == "TRACKING" or " confirmed: tracking" in text
     fallback = m.get("fallback") or next(
-        (ln.split(": ", 1)[1] for ln in text.splitlines() if ln.startswith("fallback if the bridge dies: ")), None
-    )  # fmt: skip
+        (
+            ln.split(": ", 1)[1]
+            for ln in text.splitlines()
+            if ln.startswith("fallback if the bridge dies: ")
+        ),
+        None,
+    )
     f: dict[str, Any] = {
         "engaged": engaged,
         "fallback": fallback,
@@ -381,8 +469,10 @@ def figures_of(
         "turn_gain": (m.get("adapter_learned") or {}).get("turn_gain"),
         "loop_delay_s": (m.get("delay_compensation") or {}).get("loop_delay_s"),
         "loop_delay_source": (m.get("delay_compensation") or {}).get("loop_delay_source"),
-        "attitude_hz": (((m.get("streams") or {}).get("messages") or {}).get("ATTITUDE") or {}).get("measured_hz"),
-    }  # fmt: skip
+        "attitude_hz": (((m.get("streams") or {}).get("messages") or {}).get("ATTITUDE") or {}).get(
+            "measured_hz"
+        ),
+    }
     if cfg.path.type == "circle":
         f["steady_mean_radial_m"] = m.get("steady_mean_radial_m")
     f.update(cross_track(run, cfg.metrics.steady_after_s))
@@ -436,14 +526,27 @@ def sil_leg(
         return {"error": "not flown (real run too short)"}
     p0 = [float(d["p_n"][0]), float(d["p_e"][0]), float(d["p_d"][0])]
     hdg = math.atan2(d["p_e"][-1] - d["p_e"][0], d["p_n"][-1] - d["p_n"][0])
-    sil_sets = [*sets, "sil.link=udp", f"sil.flavour={v['mod'].FLAVOUR.value}",
-                "sil.initial_mode=cruise",
-                f"kinematic.initial_position_ned_m=[{p0[0]:.2f},{p0[1]:.2f},{p0[2]:.2f}]",
-                f"kinematic.initial_attitude_rpy_rad=[0,0,{hdg:.4f}]",
-                f"aircraft.trim_airspeed_m_s={v['cfg'].vehicle.airspeed_m_s:g}"]  # fmt: skip
-    cmd = [sys.executable, "-m", "mpf_mavlink.cli", "sim", str(v["config"]), "--out",
-           str(out / "sil"), "--set", f"sim.duration_s={a.duration:g}",
-           *[x for s in sil_sets for x in ("--set", s)]]  # fmt: skip
+    sil_sets = [
+        *sets,
+        "sil.link=udp",
+        f"sil.flavour={v['mod'].FLAVOUR.value}",
+        "sil.initial_mode=cruise",
+        f"kinematic.initial_position_ned_m=[{p0[0]:.2f},{p0[1]:.2f},{p0[2]:.2f}]",
+        f"kinematic.initial_attitude_rpy_rad=[0,0,{hdg:.4f}]",
+        f"aircraft.trim_airspeed_m_s={v['cfg'].vehicle.airspeed_m_s:g}",
+    ]
+    cmd = [
+        sys.executable,
+        "-m",
+        "mpf_mavlink.cli",
+        "sim",
+        str(v["config"]),
+        "--out",
+        str(out / "sil"),
+        "--set",
+        f"sim.duration_s={a.duration:g}",
+        *[x for s in sil_sets for x in ("--set", s)],
+    ]
     with open(out / "sil.log", "w") as f:
         r = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, check=False)
     sm = read_json(out / "sil" / "metrics.json")
@@ -465,11 +568,19 @@ def rows(s: dict[str, Any]) -> list[tuple[str, str]]:
     if ms:
         r += [
             ("mission", f"{ms['path']} r {fmt(ms['radius_m'])} m, {ms['target']}"),
-            ("airspeed: config / autopilot cruise", f"{fmt(ms['airspeed_m_s'])} / {fmt(ms['autopilot_cruise_airspeed_m_s'])} m/s"),
-        ]  # fmt: skip
+            (
+                "airspeed: config / autopilot cruise",
+                f"{fmt(ms['airspeed_m_s'])} / {fmt(ms['autopilot_cruise_airspeed_m_s'])} m/s",
+            ),
+        ]
     if s.get("wind") or s.get("turbulence"):
         w = s.get("wind") or [0, 0]
-        r.append(("wind", f"{w[0]:g} m/s from {w[1]:g} deg, turbulence {fmt(s.get('turbulence') or 0)} m/s"))  # fmt: skip
+        r.append(
+            (
+                "wind",
+                f"{w[0]:g} m/s from {w[1]:g} deg, turbulence {fmt(s.get('turbulence') or 0)} m/s",
+            )
+        )
     if s.get("speedup", 1.0) != 1.0:
         r.append(("speed-up", f"{s['speedup']:g}x"))
     if "serial" in s:
@@ -485,39 +596,76 @@ def rows(s: dict[str, Any]) -> list[tuple[str, str]]:
         r += [
             ("tracked before the kill", f"{fmt(f.get('tracked_s'), '.1f')} s"),
             ("fallback (bridge's word)", fmt(f.get("fallback"))),
-            ("setpoints sent (its tlog)", str(s.get("bridge_sent", {}).get("SET_ATTITUDE_TARGET", 0))),
+            (
+                "setpoints sent (its tlog)",
+                str(s.get("bridge_sent", {}).get("SET_ATTITUDE_TARGET", 0)),
+            ),
             ("after SIGKILL: modes", " -> ".join(h.get("modes", []))),
-            ("after SIGKILL: max from centre", f"{fmt(h.get('max_dist_from_centre_m'), '.1f')} m (last 15 s mean {fmt(h.get('last15_mean_dist_m'), '.1f')} m) over {fmt(h.get('watched_s'), '.0f')} s"),
-            ("after SIGKILL: max |bank| / |alt error|", f"{fmt(h.get('max_bank_deg'), '.1f')} deg / {fmt(h.get('max_alt_error_m'), '.1f')} m"),
+            (
+                "after SIGKILL: max from centre",
+                f"{fmt(h.get('max_dist_from_centre_m'), '.1f')} m "
+                f"(last 15 s mean {fmt(h.get('last15_mean_dist_m'), '.1f')} m) "
+                f"over {fmt(h.get('watched_s'), '.0f')} s",
+            ),
+            (
+                "after SIGKILL: max |bank| / |alt error|",
+                f"{fmt(h.get('max_bank_deg'), '.1f')} deg / "
+                f"{fmt(h.get('max_alt_error_m'), '.1f')} m",
+            ),
             ("after SIGKILL: hold", h.get("hold_verdict", "?")),
             ("verdict", s.get("verdict", "?")),
-        ]  # fmt: skip
+        ]
         return r
     r += [
         ("hand-back confirmed", fmt(f.get("handback_confirmed"))),
         ("tracked", f"{fmt(f.get('tracked_s'), '.1f')} s"),
-        ("first within / stays within", f"{fmt(f.get('first_within_s'), '.1f')} / {fmt(f.get('stays_within_s'), '.1f')} s"),
+        (
+            "first within / stays within",
+            f"{fmt(f.get('first_within_s'), '.1f')} / {fmt(f.get('stays_within_s'), '.1f')} s",
+        ),
         ("steady RMS / max |pt|", f"{fmt(f.get('steady_rms_m'))} / {fmt(f.get('steady_max_m'))} m"),
-        ("steady cross-track RMS / max", f"{fmt(f.get('cross_track_rms_m'))} / {fmt(f.get('cross_track_max_m'))} m"),
+        (
+            "steady cross-track RMS / max",
+            f"{fmt(f.get('cross_track_rms_m'))} / {fmt(f.get('cross_track_max_m'))} m",
+        ),
         ("steady mean cross-track (left +)", f"{fmt(f.get('cross_track_mean_m'))} m"),
         ("steady mean vertical (up +)", f"{fmt(f.get('steady_mean_vertical_m'))} m"),
-    ]  # fmt: skip
+    ]
     if "steady_mean_radial_m" in f:
         r.append(("steady mean radial (out +)", f"{fmt(f.get('steady_mean_radial_m'))} m"))
     r += [
-        ("thrust at ceiling", f"{fmt(f.get('thrust_at_ceiling'), '.1%')}" if f.get("thrust_at_ceiling") is not None else "n/a"),
+        (
+            "thrust at ceiling",
+            f"{fmt(f.get('thrust_at_ceiling'), '.1%')}"
+            if f.get("thrust_at_ceiling") is not None
+            else "n/a",
+        ),
         ("loop delay", f"{fmt(f.get('loop_delay_s'))} s ({f.get('loop_delay_source') or 'n/a'})"),
-        ("ATTITUDE rate / turn gain", f"{fmt(f.get('attitude_hz'), '.1f')} Hz / {fmt(f.get('turn_gain'))}"),
+        (
+            "ATTITUDE rate / turn gain",
+            f"{fmt(f.get('attitude_hz'), '.1f')} Hz / {fmt(f.get('turn_gain'))}",
+        ),
         ("fallback (bridge's word)", fmt(f.get("fallback"))),
-    ]  # fmt: skip
+    ]
     sil = s.get("sil")
     if sil:
         r += [
-            ("our SIL: steady RMS |pt|", f"{fmt(sil.get('steady_rms_m'))} m" if "error" not in sil else sil["error"]),
-            ("our SIL: mean vertical / radial", f"{fmt(sil.get('steady_mean_vertical_m'))} / {fmt(sil.get('steady_mean_radial_m'))} m"),
+            (
+                "our SIL: steady RMS |pt|",
+                f"{fmt(sil.get('steady_rms_m'))} m" if "error" not in sil else sil["error"],
+            ),
+            (
+                "our SIL: mean vertical / radial",
+                f"{fmt(sil.get('steady_mean_vertical_m'))} / "
+                f"{fmt(sil.get('steady_mean_radial_m'))} m",
+            ),
             ("real / our SIL RMS", fmt(sil.get("real_over_sil"))),
-            ("our SIL: check warnings", "; ".join(w.split("]", 1)[1].split(":")[0].strip() for w in sil.get("warnings", [])) or "none"),
-        ]  # fmt: skip
+            (
+                "our SIL: check warnings",
+                "; ".join(w.split("]", 1)[1].split(":")[0].strip() for w in sil.get("warnings", []))
+                or "none",
+            ),
+        ]
     if s.get("bridge_verdict"):
         r.append(("bridge", s["bridge_verdict"]))
     r.append(("verdict", s.get("verdict", "?")))
@@ -537,9 +685,27 @@ def print_table(s: dict[str, Any], out: Path) -> None:
 def record(s: dict[str, Any]) -> None:
     """Write this flight's summary into docs/results and regenerate the results table."""
     RESULTS.mkdir(parents=True, exist_ok=True)
-    keep = {k: s.get(k) for k in ("flight", "autopilot", "bundle", "config", "speedup", "commit", "date",
-                                  "wind", "turbulence", "mission", "figures", "hold", "sil", "verdict",
-                                  "bridge_verdict", "command")}  # fmt: skip
+    keep = {
+        k: s.get(k)
+        for k in (
+            "flight",
+            "autopilot",
+            "bundle",
+            "config",
+            "speedup",
+            "commit",
+            "date",
+            "wind",
+            "turbulence",
+            "mission",
+            "figures",
+            "hold",
+            "sil",
+            "verdict",
+            "bridge_verdict",
+            "command",
+        )
+    }
     (RESULTS / f"sitl-{s['flight']}.json").write_text(
         json.dumps(keep, indent=2, default=str) + "\n"
     )
@@ -553,25 +719,35 @@ def write_results_table() -> Path:
         "Steady figures from t >= 60 s of tracking. Cross-track: horizontal distance to the path,",
         "+ left of travel (outward on a clockwise circle). Hold: after SIGKILL of the bridge.",
         "",
-        "| flight | firmware | config | tracked (s) | steady RMS / max pt (m) | cross-track RMS / mean (m) | mean vertical / radial (m) | thrust at ceiling | our SIL RMS (m), real/SIL | hold after kill | verdict | commit, date |",
+        "| flight | firmware | config | tracked (s) | steady RMS / max pt (m) "
+        "| cross-track RMS / mean (m) | mean vertical / radial (m) | thrust at ceiling "
+        "| our SIL RMS (m), real/SIL | hold after kill | verdict | commit, date |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]  # fmt: skip
+    ]
     for p in sorted(RESULTS.glob("sitl-*.json")):
         s = read_json(p)
         f, h = s.get("figures") or {}, s.get("hold") or {}
-        hold = (f"{fmt(h.get('max_dist_from_centre_m'), '.0f')} m, {fmt(h.get('max_bank_deg'), '.0f')} deg, "
-                f"{fmt(h.get('max_alt_error_m'), '.1f')} m: {h.get('hold_verdict')}") if h else ""  # fmt: skip
+        hold = (
+            (
+                f"{fmt(h.get('max_dist_from_centre_m'), '.0f')} m, "
+                f"{fmt(h.get('max_bank_deg'), '.0f')} deg, "
+                f"{fmt(h.get('max_alt_error_m'), '.1f')} m: {h.get('hold_verdict')}"
+            )
+            if h
+            else ""
+        )
         thr = f.get("thrust_at_ceiling")
         sil = s.get("sil") or {}
         sil_txt = f"{fmt(sil.get('steady_rms_m'))}, {fmt(sil.get('real_over_sil'))}x" if sil else ""
         lines.append(
             f"| {s.get('flight')} | {s.get('bundle', '')} | {s.get('config')} "
-            f"| {fmt(f.get('tracked_s'), '.0f')} | {fmt(f.get('steady_rms_m'))} / {fmt(f.get('steady_max_m'))} "
+            f"| {fmt(f.get('tracked_s'), '.0f')} "
+            f"| {fmt(f.get('steady_rms_m'))} / {fmt(f.get('steady_max_m'))} "
             f"| {fmt(f.get('cross_track_rms_m'))} / {fmt(f.get('cross_track_mean_m'))} "
             f"| {fmt(f.get('steady_mean_vertical_m'))} / {fmt(f.get('steady_mean_radial_m'))} "
             f"| {'n/a' if thr is None else f'{thr:.1%}'} | {sil_txt} | {hold} | {s.get('verdict')} "
             f"| {s.get('commit', '')}, {str(s.get('date', ''))[:10]} |"
-        )  # fmt: skip
+        )
     md = RESULTS / "sitl.md"
     md.write_text("\n".join(lines) + "\n")
     return md
@@ -579,8 +755,13 @@ def write_results_table() -> Path:
 
 def _git_commit() -> str:
     try:
-        r = subprocess.run(["git", "-C", str(ROOT), "describe", "--always", "--dirty"],
-                           capture_output=True, text=True, timeout=10, check=False)  # fmt: skip
+        r = subprocess.run(
+            ["git", "-C", str(ROOT), "describe", "--always", "--dirty"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=False,
+        )
     except OSError:
         return "?"
     return r.stdout.strip() or "?"

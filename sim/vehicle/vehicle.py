@@ -3,8 +3,8 @@
 :class:`SimVehicle` composes a plant (:class:`sim.plant.jsbsim_plant.JSBSimPlant` by default, or
 the cheap :class:`sim.plant.kinematic_plant.KinematicMavPlant`), the autopilot emulation
 (:class:`sim.autopilot.emulation.AutopilotEmulation` around the inner loops of
-:class:`sim.autopilot.inner_loop.FixedWingAutopilot`), a MAVLink endpoint on ONE pymavlink connection
-(:class:`sim.vehicle.link.Link`, ``udpin:`` - it listens and answers whoever wrote last,
+:class:`sim.autopilot.inner_loop.FixedWingAutopilot`), a MAVLink endpoint on ONE pymavlink
+connection (:class:`sim.vehicle.link.Link`, ``udpin:`` - it listens and answers whoever wrote last,
 ``udpout:`` or ``tcpin:``; :class:`sim.vehicle.telemetry.Telemetry`; the target's own system;
 :class:`sim.vehicle.gcs_services.GcsServices`) and clocks (:class:`sim.vehicle.clock.StepClock`,
 a pacing clock), all built from one :class:`sim.vehicle.config.VehicleConfig`. It is a separate
