@@ -268,16 +268,45 @@ def _finite_sample(s) -> bool:
 def test_decoders_never_raise_nor_emit_non_finite(vals, ints):
     a, b, c, d, e, f, g = vals
     fakes = {
-        "ATTITUDE": SimpleNamespace(time_boot_ms=abs(ints[0]), roll=a, pitch=b, yaw=c, rollspeed=d, pitchspeed=e, yawspeed=f),
-        "ATTITUDE_QUATERNION": SimpleNamespace(time_boot_ms=1, q1=a, q2=b, q3=c, q4=d, rollspeed=e, pitchspeed=f, yawspeed=g),
+        "ATTITUDE": SimpleNamespace(
+            time_boot_ms=abs(ints[0]), roll=a, pitch=b, yaw=c, rollspeed=d, pitchspeed=e, yawspeed=f
+        ),
+        "ATTITUDE_QUATERNION": SimpleNamespace(
+            time_boot_ms=1, q1=a, q2=b, q3=c, q4=d, rollspeed=e, pitchspeed=f, yawspeed=g
+        ),
         "LOCAL_POSITION_NED": SimpleNamespace(time_boot_ms=1, x=a, y=b, z=c, vx=d, vy=e, vz=f),
-        "GLOBAL_POSITION_INT": SimpleNamespace(time_boot_ms=1, lat=ints[1], lon=ints[2], alt=ints[3], relative_alt=ints[4], vx=ints[5] % 65536 - 32768, vy=0, vz=0, hdg=ints[6] % 65536),
-        "VFR_HUD": SimpleNamespace(airspeed=a, groundspeed=b, heading=ints[7] % 360, throttle=ints[8] % 200, alt=c, climb=d),
+        "GLOBAL_POSITION_INT": SimpleNamespace(
+            time_boot_ms=1,
+            lat=ints[1],
+            lon=ints[2],
+            alt=ints[3],
+            relative_alt=ints[4],
+            vx=ints[5] % 65536 - 32768,
+            vy=0,
+            vz=0,
+            hdg=ints[6] % 65536,
+        ),
+        "VFR_HUD": SimpleNamespace(
+            airspeed=a, groundspeed=b, heading=ints[7] % 360, throttle=ints[8] % 200, alt=c, climb=d
+        ),
         "WIND": SimpleNamespace(direction=a, speed=b, speed_z=c),
         "WIND_COV": SimpleNamespace(time_usec=abs(ints[0]), wind_x=a, wind_y=b, wind_z=c),
-        "FOLLOW_TARGET": SimpleNamespace(timestamp=1, est_capabilities=ints[8] % 16, lat=ints[1], lon=ints[2], alt=a, vel=[b, c, d], acc=[e, f, g], attitude_q=[a, b, c, d], rates=[e, f, g], position_cov=[0, 0, 0]),
-        "HOME_POSITION": SimpleNamespace(latitude=ints[1], longitude=ints[2], altitude=ints[3], x=a, y=b, z=c),
-    }  # fmt: skip
+        "FOLLOW_TARGET": SimpleNamespace(
+            timestamp=1,
+            est_capabilities=ints[8] % 16,
+            lat=ints[1],
+            lon=ints[2],
+            alt=a,
+            vel=[b, c, d],
+            acc=[e, f, g],
+            attitude_q=[a, b, c, d],
+            rates=[e, f, g],
+            position_cov=[0, 0, 0],
+        ),
+        "HOME_POSITION": SimpleNamespace(
+            latitude=ints[1], longitude=ints[2], altitude=ints[3], x=a, y=b, z=c
+        ),
+    }
     for mtype, fake in fakes.items():
         fake.get_type = lambda t=mtype: t
         s = codec.decode(fake)

@@ -131,8 +131,20 @@ def test_spoofed_system_ids_are_dropped_and_counted(udp_pair):
         for _ in range(3):
             px4_heartbeat(spoofer, main=1)  # a fake vehicle claiming MANUAL
             spoofer.mav.attitude_send(1, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        target.mav.follow_target_send(1000, 3, 473977420, 85455940, 500.0,
-                                      [1, 2, 0], [0, 0, 0], [1, 0, 0, 0], [0, 0, 0], [0, 0, 0], 0)  # fmt: skip
+        target.mav.follow_target_send(
+            1000,
+            3,
+            473977420,
+            85455940,
+            500.0,
+            # fmt: skip
+            [1, 2, 0],
+            [0, 0, 0],
+            [1, 0, 0, 0],
+            [0, 0, 0],
+            [0, 0, 0],
+            0,
+        )
         px4_heartbeat(peer)
         got = []
         t_end = time.monotonic() + 1.0

@@ -2,7 +2,8 @@
 datagram out) and the wall time of a replay of the real tlog.
 
 A minimal PX4-like peer (this process) talks to the real bridge (run_bridge in a forked
-process, so that the two never wait for each other's GIL) over UDP loopback. Each control cycle it sends LOCAL_POSITION_NED (+ VFR_HUD), then
+process, so that the two never wait for each other's GIL) over UDP loopback. Each control cycle it
+sends LOCAL_POSITION_NED (+ VFR_HUD), then
 ATTITUDE, takes time.perf_counter() right after the ATTITUDE datagram leaves, and waits for
 the setpoint carrying that ATTITUDE's time_boot_ms (time taken as the datagram is read,
 before parsing). The figure therefore includes both kernel

@@ -5,7 +5,8 @@ malformed MAVLink can neither crash the loop nor put a NaN into the state. Encod
 (``ValueError``) to put a non-finite number on the wire.
 
 The attitude decoders (one per control step) compute the matrices of
-:func:`mpf_mavlink.core.frames.euler_to_matrix` / :func:`~mpf_mavlink.core.frames.quat_wxyz_to_matrix` in
+:func:`mpf_mavlink.core.frames.euler_to_matrix` /
+:func:`~mpf_mavlink.core.frames.quat_wxyz_to_matrix` in
 scalar arithmetic (same conventions; tests hold them to those functions).
 """
 
@@ -555,7 +556,10 @@ DECODED_TYPES = frozenset(_DECODERS)
 
 
 def decode(msg: Any) -> Any:
-    """Dispatch on ``msg.get_type()``; None for unhandled types or rejected content. Never raises."""
+    """Dispatch on ``msg.get_type()``; None for unhandled types or rejected content.
+
+    Never raises.
+    """
     try:
         fn = _DECODERS.get(msg.get_type())
         return fn(msg) if fn is not None else None

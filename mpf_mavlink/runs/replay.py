@@ -245,7 +245,8 @@ class _Replayer:
             self.s0 = self.ctl.init_s()
             self.origin = "first complete state in the window (no MPF markers)"
             self.notes.append(
-                f"origin taken at {self._t_rel(t):.2f} s: t0 = {t0:.3f} s boot time, s0 = {self.s0:.2f} m"
+                f"origin taken at {self._t_rel(t):.2f} s: t0 = {t0:.3f} s boot time, s0 = "
+                f"{self.s0:.2f} m"
             )
             self.phase = "streaming"
 
@@ -290,7 +291,8 @@ class _Replayer:
                 if est is None or est.t_boot_s != value:
                     seen = "no state" if est is None else repr(est.t_boot_s)
                     self.notes.append(
-                        f"the bridge took t0 = {value!r} s, this replay's state gives {seen}: the tlog and the code/config disagree"
+                        f"the bridge took t0 = {value!r} s, this replay's state gives {seen}: the "
+                        "tlog and the code/config disagree"
                     )
                 self.ctl.set_origin(value)
                 self.origin = "MPF markers of the bridge"
@@ -304,7 +306,8 @@ class _Replayer:
                     self.notes.append(f"at the s0 marker: {e}")
                 if mine is not None and mine != value:
                     self.notes.append(
-                        f"the bridge took s0 = {value!r} m, this config gives {mine!r} m: the tlog and the code/config disagree"
+                        f"the bridge took s0 = {value!r} m, this config gives {mine!r} m: the "
+                        "tlog and the code/config disagree"
                     )
                 self.s0 = self.ctl.init_s(value)
             elif key == "stream":
@@ -323,7 +326,10 @@ class _Replayer:
             return
         c = self.check
         rec = _sat_fields(msg)
-        where = f"SET_ATTITUDE_TARGET #{self._n_sat} (tlog record {i}, t = {self._t_rel(t):.3f} s, time_boot_ms {int(rec['time_boot_ms'])})"
+        where = (
+            f"SET_ATTITUDE_TARGET #{self._n_sat} (tlog record {i}, t = {self._t_rel(t):.3f} s, "
+            f"time_boot_ms {int(rec['time_boot_ms'])})"
+        )
         st = self._pending
         if st is not None and rec["time_boot_ms"] == st.time_boot_ms:
             self.ctl.note_sent(t)  # the step's first send measures the loop delay (TIMESYNC)
@@ -356,7 +362,8 @@ class _Replayer:
         if self._pending_since_match and c.compared > 1:
             c.unsent_steps += self._pending_since_match
             self._difference(
-                f"before {where}: {self._pending_since_match} replayed control step(s) were never sent"
+                f"before {where}: {self._pending_since_match} replayed control step(s) were never "
+                "sent"
             )
         self._pending_since_match = 0
         st = self._pending
@@ -430,14 +437,16 @@ def replay(
     messages = [(stats.records - 1, t, msg) for t, msg in iter_tlog(path, stats=stats)]
     if stats.records == 0 or stats.t_first_s is None or stats.t_last_s is None:
         raise MpfError(
-            f"{path}: not a tlog (no MAVLink record with a valid CRC in {os.path.getsize(path)} bytes)"
+            f"{path}: not a tlog (no MAVLink record with a valid CRC in {os.path.getsize(path)} "
+            "bytes)"
         )
     duration = stats.t_last_s - stats.t_first_s
     a = 0.0 if t_from is None else float(t_from)
     b = duration if t_to is None else float(t_to)
     if not (math.isfinite(a) and math.isfinite(b)) or a < 0.0 or b <= a or a > duration:
         raise MpfError(
-            f"bad window --from {a:g} --to {b:g}: need 0 <= from < to and from <= {duration:.2f} s (the log's length)"
+            f"bad window --from {a:g} --to {b:g}: need 0 <= from < to and from <= {duration:.2f} "
+            "s (the log's length)"
         )
     # only now: a wrong file or window must not leave an empty run directory behind
     out = prepare_out_dir(Path(out_dir)) if out_dir is not None else None
@@ -445,7 +454,8 @@ def replay(
     markers = _has_markers(messages, own)
     rp = _Replayer(cfg, a, b, stats.t_first_s, markers)
     log(
-        f"replaying {len(messages)} messages of {path} ({'with' if markers else 'without'} the bridge's markers)"
+        f"replaying {len(messages)} messages of {path} ({'with' if markers else 'without'} the "
+        "bridge's markers)"
     )
     for i, t, msg in messages:
         rp.feed(i, t, msg)
@@ -462,19 +472,40 @@ def replay(
     gaps, thr = _gaps(rp.att_times, stats.t_first_s, m.telemetry_timeout_s)
     if rp.phase in ("wait_heartbeat",):
         rp.notes.append(
-            f"no autopilot HEARTBEAT from system {m.vehicle_sysid}: nothing was replayed (mavlink.vehicle_sysid?)"
+            f"no autopilot HEARTBEAT from system {m.vehicle_sysid}: nothing was replayed "
+            "(mavlink.vehicle_sysid?)"
         )
     elif rp.ctl.t0 is None:
         rp.notes.append(f"never a complete state: {rp.ctl.why_not}")
     res = ReplayResult(
-        path=path, config=cfg.source, flavour=rp.flavour.value, records=stats.records,
-        skipped_regions=stats.skipped_regions, skipped_bytes=stats.skipped_bytes,
-        truncated_tail_bytes=stats.truncated_tail_bytes, unknown_msgids=stats.unknown_msgids,
-        t_first_s=stats.t_first_s, duration_s=duration, window=(a, b), counts=dict(stats.counts),
-        modes=rp.modes, gaps=gaps, gap_threshold_s=thr, attitude_samples=len(rp.att_times),
-        steps=rp.steps, skipped_steps=dict(rp.skip_reasons), link_rejected=dict(rp.link.rejected), recorded=len(cols["t"]), origin=rp.origin, t0_boot_s=rp.ctl.t0, s0_m=rp.s0,
-        check=rp.check, metrics=metrics, notes=rp.notes, out_dir=out,
-    )  # fmt: skip
+        path=path,
+        config=cfg.source,
+        flavour=rp.flavour.value,
+        records=stats.records,
+        skipped_regions=stats.skipped_regions,
+        skipped_bytes=stats.skipped_bytes,
+        truncated_tail_bytes=stats.truncated_tail_bytes,
+        unknown_msgids=stats.unknown_msgids,
+        t_first_s=stats.t_first_s,
+        duration_s=duration,
+        window=(a, b),
+        counts=dict(stats.counts),
+        modes=rp.modes,
+        gaps=gaps,
+        gap_threshold_s=thr,
+        attitude_samples=len(rp.att_times),
+        steps=rp.steps,
+        skipped_steps=dict(rp.skip_reasons),
+        link_rejected=dict(rp.link.rejected),
+        recorded=len(cols["t"]),
+        origin=rp.origin,
+        t0_boot_s=rp.ctl.t0,
+        s0_m=rp.s0,
+        check=rp.check,
+        metrics=metrics,
+        notes=rp.notes,
+        out_dir=out,
+    )
     c = rp.check
     metrics["replay"] = {
         "tlog": path, "config": cfg.source, "window_s": [a, b], "records": stats.records,
