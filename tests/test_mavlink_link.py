@@ -15,9 +15,8 @@ from mpf_mavlink.core import frames
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.mavlink import dialect as mavlink
 from mpf_mavlink.mavlink import mavutil, read_tlog
-from mpf_mavlink.mavlink.codec import (
-    TYPE_MASK_ARDUPLANE_ATTITUDE,
-    TYPE_MASK_PX4_RATES,
+from mpf_mavlink.mavlink.codec import TYPE_MASK_ARDUPLANE_ATTITUDE, TYPE_MASK_PX4_RATES
+from mpf_mavlink.mavlink.encode import (
     encode_set_attitude_target_quat,
     encode_set_attitude_target_rates,
 )

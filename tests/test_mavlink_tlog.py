@@ -175,7 +175,7 @@ WRITER_SCRIPT = textwrap.dedent(
     """
     import sys, time
     from mpf_mavlink.mavlink import open_link
-    from mpf_mavlink.mavlink.codec import encode_set_attitude_target_rates
+    from mpf_mavlink.mavlink.encode import encode_set_attitude_target_rates
     link = open_link(sys.argv[2], tlog_path=sys.argv[1])
     k = 0
     while True:

@@ -47,6 +47,8 @@ from mpf_mavlink.mavlink.codec import (  # noqa: E402
     VfrHudSample,
     WindSample,
     decode,
+)
+from mpf_mavlink.mavlink.encode import (  # noqa: E402
     encode_arm,
     encode_companion_heartbeat,
     encode_do_reposition,
