@@ -411,6 +411,105 @@ def _gaps(
     return [(float(rec[k] - t_first), float(dt[k])) for k in idx], thr
 
 
+def _read_window(
+    path: str, t_from: float | None, t_to: float | None
+) -> tuple[list[tuple[int, float, Any]], TlogStats, float, float, float]:
+    """(messages, stats, duration, from, to) of the tlog at ``path``: every decoded message as
+    (index of the record among the good ones, time, message), the window in s since the first
+    record. Raises MpfError (one line) for a missing file, no MAVLink record, or a bad window."""
+    if not os.path.isfile(path):
+        raise MpfError(f"{path}: no such tlog file")
+    stats = TlogStats()
+    # iter_tlog counts a record before it yields it. Every type is decoded: the link's clock
+    # gate sees every message of the vehicle that carries a time_boot_ms, so the replay's must
+    # too.
+    messages = [(stats.records - 1, t, msg) for t, msg in iter_tlog(path, stats=stats)]
+    if stats.records == 0 or stats.t_first_s is None or stats.t_last_s is None:
+        raise MpfError(
+            f"{path}: not a tlog (no MAVLink record with a valid CRC in {os.path.getsize(path)} "
+            "bytes)"
+        )
+    duration = stats.t_last_s - stats.t_first_s
+    a = 0.0 if t_from is None else float(t_from)
+    b = duration if t_to is None else float(t_to)
+    if not (math.isfinite(a) and math.isfinite(b)) or a < 0.0 or b <= a or a > duration:
+        raise MpfError(
+            f"bad window --from {a:g} --to {b:g}: need 0 <= from < to and from <= {duration:.2f} "
+            "s (the log's length)"
+        )
+    return messages, stats, duration, a, b
+
+
+def _replay_metrics(cols: dict[str, Any], cfg: Config) -> dict[str, Any]:
+    """The run's metrics (as the bridge's), with the median and final |pt| and the fraction of
+    steps that broke Assumption 1 when anything was replayed."""
+    mc = cfg.metrics
+    metrics = compute_metrics(cols, mc.steady_after_s, mc.converge_threshold_m)
+    if len(cols["t"]):
+        metrics["median_pt_m"] = float(np.median(cols["pt_norm"]))
+        metrics["final_pt_m"] = float(cols["pt_norm"][-1])
+        metrics["assumption1_violated_fraction"] = float(np.mean(cols["margin"] <= 0.0))
+    return metrics
+
+
+def _replay_figures(
+    rp: _Replayer,
+    path: str,
+    cfg: Config,
+    stats: TlogStats,
+    window: tuple[float, float],
+    gaps: list[Any],
+) -> dict[str, Any]:
+    """metrics.json's ``replay`` entry: the log, the window, what was replayed and how the
+    commands compared."""
+    c = rp.check
+    return {
+        "tlog": path, "config": cfg.source, "window_s": list(window), "records": stats.records,
+        "skipped_regions": stats.skipped_regions, "skipped_bytes": stats.skipped_bytes,
+        "truncated_tail_bytes": stats.truncated_tail_bytes, "counts": dict(stats.counts),
+        "modes": [list(x) for x in rp.modes], "attitude_gaps": [list(g) for g in gaps],
+        "origin": rp.origin, "t0_boot_s": rp.ctl.t0, "s0_m": rp.s0, "steps": rp.steps,
+        "skipped_steps": dict(rp.skip_reasons), "link_rejected": dict(rp.link.rejected),
+        "commands": {
+            "markers": c.markers, "sent": c.sent, "compared": c.compared, "resent": c.resent,
+            "safe": c.safe, "differing": c.differing, "unexplained": c.unexplained,
+            "unsent_steps": c.unsent_steps, "max_diff": c.max_diff, "identical": c.identical,
+            "first_difference": c.first_difference,
+        },
+    }  # fmt: skip
+
+
+def _write_replay(
+    out: Path,
+    rp: _Replayer,
+    cfg: Config,
+    cols: dict[str, Any],
+    metrics: dict[str, Any],
+    plots: bool,
+) -> None:
+    """The run directory: setpoints.csv, the recorded flight against the limits (limits.csv,
+    the verdict's figures), then timeseries.csv, metrics.json and the figures."""
+    # setpoints first: the plots draw them too
+    np.savetxt(
+        out / "setpoints.csv",
+        np.array(rp.sp_rows, float).reshape(-1, 13),
+        delimiter=",",
+        header=SETPOINT_COLUMNS,
+        comments="",
+        fmt="%.9g",
+    )
+    if rp.lim_rows:
+        L = np.array(rp.lim_rows, float)
+        L[:, 0] -= L[0, 0]  # s since the first replayed step, as the steady window counts
+        # the recorded flight against the limits (the verdict's figures; replay keeps its
+        # own exit codes)
+        vd = assess(cfg, L[:, 0], cols["pt_norm"], L[:, 4], L[:, 3], L[:, 1], L[:, 2],
+                    L[:, 5], source="telemetry")  # fmt: skip
+        vd.record(metrics)
+        write_limits(out, L)
+    write_run(out, cols, metrics, rp.ctl.path.positions(), plots=plots and len(cols["t"]) >= 2)
+
+
 def replay(
     tlog: str | os.PathLike[str],
     cfg: Config,
@@ -427,27 +526,9 @@ def replay(
     window is empty."""
     wall0 = time.perf_counter()
     path = os.fspath(tlog)
-    if not os.path.isfile(path):
-        raise MpfError(f"{path}: no such tlog file")
     m = cfg.section("mavlink")
-    stats = TlogStats()
-    # (index of the record among the good ones, time, message): iter_tlog counts a record
-    # before it yields it. Every type is decoded: the link's clock gate sees every message of
-    # the vehicle that carries a time_boot_ms, so the replay's must too.
-    messages = [(stats.records - 1, t, msg) for t, msg in iter_tlog(path, stats=stats)]
-    if stats.records == 0 or stats.t_first_s is None or stats.t_last_s is None:
-        raise MpfError(
-            f"{path}: not a tlog (no MAVLink record with a valid CRC in {os.path.getsize(path)} "
-            "bytes)"
-        )
-    duration = stats.t_last_s - stats.t_first_s
-    a = 0.0 if t_from is None else float(t_from)
-    b = duration if t_to is None else float(t_to)
-    if not (math.isfinite(a) and math.isfinite(b)) or a < 0.0 or b <= a or a > duration:
-        raise MpfError(
-            f"bad window --from {a:g} --to {b:g}: need 0 <= from < to and from <= {duration:.2f} "
-            "s (the log's length)"
-        )
+    messages, stats, duration, a, b = _read_window(path, t_from, t_to)
+    assert stats.t_first_s is not None  # _read_window checked it
     # only now: a wrong file or window must not leave an empty run directory behind
     out = prepare_out_dir(Path(out_dir)) if out_dir is not None else None
     own = (m.source_system, m.source_component)
@@ -463,12 +544,7 @@ def replay(
         s0, _, n = rp.modes[-1]
         rp.modes[-1] = (s0, duration, n)
     cols = rp.table.arrays()
-    mc = cfg.metrics
-    metrics = compute_metrics(cols, mc.steady_after_s, mc.converge_threshold_m)
-    if len(cols["t"]):
-        metrics["median_pt_m"] = float(np.median(cols["pt_norm"]))
-        metrics["final_pt_m"] = float(cols["pt_norm"][-1])
-        metrics["assumption1_violated_fraction"] = float(np.mean(cols["margin"] <= 0.0))
+    metrics = _replay_metrics(cols, cfg)
     gaps, thr = _gaps(rp.att_times, stats.t_first_s, m.telemetry_timeout_s)
     if rp.phase in ("wait_heartbeat",):
         rp.notes.append(
@@ -506,44 +582,12 @@ def replay(
         notes=rp.notes,
         out_dir=out,
     )
-    c = rp.check
-    metrics["replay"] = {
-        "tlog": path, "config": cfg.source, "window_s": [a, b], "records": stats.records,
-        "skipped_regions": stats.skipped_regions, "skipped_bytes": stats.skipped_bytes,
-        "truncated_tail_bytes": stats.truncated_tail_bytes, "counts": dict(stats.counts),
-        "modes": [list(x) for x in rp.modes], "attitude_gaps": [list(g) for g in gaps],
-        "origin": rp.origin, "t0_boot_s": rp.ctl.t0, "s0_m": rp.s0, "steps": rp.steps,
-        "skipped_steps": dict(rp.skip_reasons), "link_rejected": dict(rp.link.rejected),
-        "commands": {
-            "markers": c.markers, "sent": c.sent, "compared": c.compared, "resent": c.resent,
-            "safe": c.safe, "differing": c.differing, "unexplained": c.unexplained,
-            "unsent_steps": c.unsent_steps, "max_diff": c.max_diff, "identical": c.identical,
-            "first_difference": c.first_difference,
-        },
-    }  # fmt: skip
+    metrics["replay"] = _replay_figures(rp, path, cfg, stats, (a, b), gaps)
     kf = getattr(rp.ctl.target, "kf", None)  # the live target's estimator: what became of reports
     if kf is not None:
         metrics["replay"]["target_estimator"] = dict(kf.counts)
     if out is not None:
-        # setpoints first: the plots draw them too
-        np.savetxt(
-            out / "setpoints.csv",
-            np.array(rp.sp_rows, float).reshape(-1, 13),
-            delimiter=",",
-            header=SETPOINT_COLUMNS,
-            comments="",
-            fmt="%.9g",
-        )
-        if rp.lim_rows:
-            L = np.array(rp.lim_rows, float)
-            L[:, 0] -= L[0, 0]  # s since the first replayed step, as the steady window counts
-            # the recorded flight against the limits (the verdict's figures; replay keeps its
-            # own exit codes)
-            vd = assess(cfg, L[:, 0], cols["pt_norm"], L[:, 4], L[:, 3], L[:, 1], L[:, 2],
-                        L[:, 5], source="telemetry")  # fmt: skip
-            vd.record(metrics)
-            write_limits(out, L)
-        write_run(out, cols, metrics, rp.ctl.path.positions(), plots=plots and len(cols["t"]) >= 2)
+        _write_replay(out, rp, cfg, cols, metrics, plots)
     res.elapsed_s = time.perf_counter() - wall0
     return res
 
