@@ -217,6 +217,24 @@ class _Deficits:
     need_dn: float
     gust_note: str = ""
 
+    def refusal(
+        self, res_up: float, res_dn: float, v_w: float, v_min: float, v_max: float
+    ) -> str | None:
+        """Why the path is refused (a deficit beyond its reserve, m), or None."""
+        if self.worst_up > res_up:
+            return (
+                f"the path climbs faster than the aircraft can for long: {self.worst_up:.1f} m "
+                f"of height beyond its climb by t = {self.t_up:.1f} s{self.gust_note}, more than "
+                f"the {res_up:.1f} m that slowing from {v_w:g} to {v_min:.1f} m/s buys; "
+            )
+        if self.worst_dn > res_dn:
+            return (
+                f"the path descends faster than the aircraft can at idle: {self.worst_dn:.1f} m "
+                f"beyond its sink by t = {self.t_dn:.1f} s (updrafts included), more than the "
+                f"{res_dn:.1f} m that speeding up to {v_max:.1f} m/s absorbs; "
+            )
+        return None
+
 
 def _steady_deficits(
     ts: np.ndarray,
@@ -323,24 +341,11 @@ def climb_feasibility(
     dfc = _steady_deficits(ts, c, dts, max_climb_m_s, max_sink_m_s, up, dn)
     if gusts is not None:
         _add_gust_deficits(dfc, ts, c, dts, gusts, max_climb_m_s, max_sink_m_s)
-    worst_up, t_up, worst_dn, t_dn = dfc.worst_up, dfc.t_up, dfc.worst_dn, dfc.t_dn
-    need_up, need_dn, gust_note = dfc.need_up, dfc.need_dn, dfc.gust_note
+    worst_up, worst_dn, need_up, need_dn = dfc.worst_up, dfc.worst_dn, dfc.need_up, dfc.need_dn
     figs.update(deficit_climb_m=worst_up, deficit_sink_m=worst_dn, reserve_climb_m=res_up,
                 reserve_sink_m=res_dn)  # fmt: skip
     cap = f" (capability at {v_w:g} m/s: climb {max_climb_m_s:g}, sink {max_sink_m_s:g} m/s)"
-    refused = None
-    if worst_up > res_up:
-        refused = (
-            f"the path climbs faster than the aircraft can for long: {worst_up:.1f} m of "
-            f"height beyond its climb by t = {t_up:.1f} s{gust_note}, more than the "
-            f"{res_up:.1f} m that slowing from {v_w:g} to {v_min:.1f} m/s buys; "
-        )
-    elif worst_dn > res_dn:
-        refused = (
-            f"the path descends faster than the aircraft can at idle: {worst_dn:.1f} m beyond "
-            f"its sink by t = {t_dn:.1f} s (updrafts included), more than the {res_dn:.1f} m "
-            f"that speeding up to {v_max:.1f} m/s absorbs; "
-        )
+    refused = dfc.refusal(res_up, res_dn, v_w, v_min, v_max)
     if refused is not None:
         return CheckResult("climb", "fail", refused + head + cap, figs)
     figs.update(need_climb_m_s=need_up, need_sink_m_s=need_dn)
