@@ -360,11 +360,9 @@ class _Replayer:
         c = self.check
         c.compared += 1
         if self._pending_since_match and c.compared > 1:
-            c.unsent_steps += self._pending_since_match
-            self._difference(
-                f"before {where}: {self._pending_since_match} replayed control step(s) were never "
-                "sent"
-            )
+            unsent = self._pending_since_match
+            c.unsent_steps += unsent
+            self._difference(f"before {where}: {unsent} replayed control step(s) were never sent")
         self._pending_since_match = 0
         st = self._pending
         if st is not None:
