@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.bridge.controller import SETPOINT_COLUMNS, Controller, Step, parse_marker
+from mpf_mavlink.bridge.controller import Controller, Step, parse_marker, write_setpoints
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.adapter import Setpoint, safe_setpoint
 from mpf_mavlink.errors import MpfError
@@ -488,14 +488,7 @@ def _write_replay(
     """The run directory: setpoints.csv, the recorded flight against the limits (limits.csv,
     the verdict's figures), then timeseries.csv, metrics.json and the figures."""
     # setpoints first: the plots draw them too
-    np.savetxt(
-        out / "setpoints.csv",
-        np.array(rp.sp_rows, float).reshape(-1, 13),
-        delimiter=",",
-        header=SETPOINT_COLUMNS,
-        comments="",
-        fmt="%.9g",
-    )
+    write_setpoints(out, rp.sp_rows)
     if rp.lim_rows:
         L = np.array(rp.lim_rows, float)
         L[:, 0] -= L[0, 0]  # s since the first replayed step, as the steady window counts
