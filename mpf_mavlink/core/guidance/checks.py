@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.constants import GRAVITY_M_S2
+from mpf_mavlink.constants import FT_TO_M, GRAVITY_M_S2
 from mpf_mavlink.core.adapter import bank_and_load_factor
 from mpf_mavlink.core.guidance.law import Gains
 from mpf_mavlink.core.paths import TabulatedPath
@@ -168,7 +168,6 @@ _POE_SIGMA_FPS = {
     "severe": (15.6, 17.6, 23.0, 23.6),
 }
 _W20_FPS = {"light": 25.0, "moderate": 50.0, "severe": 75.0}
-_FT = 0.3048
 
 
 def vertical_gust_scale(level: str, h_m: float) -> tuple[float, float]:
@@ -178,7 +177,7 @@ def vertical_gust_scale(level: str, h_m: float) -> tuple[float, float]:
     between. ``none``: (0, 0)."""
     if level not in _W20_FPS:
         return 0.0, 0.0
-    h = max(h_m / _FT, 10.0)
+    h = max(h_m / FT_TO_M, 10.0)
     s_low = 0.1 * _W20_FPS[level]
     s_tab = float(np.interp(h, _POE_ALT_FT, _POE_SIGMA_FPS[level]))
     if h <= 1000.0:
@@ -188,7 +187,7 @@ def vertical_gust_scale(level: str, h_m: float) -> tuple[float, float]:
         sig, L = s_low + f * (s_tab - s_low), 1000.0 + f * 750.0
     else:
         sig, L = s_tab, 1750.0
-    return sig * _FT, L * _FT
+    return sig * FT_TO_M, L * FT_TO_M
 
 
 def vertical_gusts(
