@@ -420,7 +420,6 @@ def test_cli_run_over_a_serial_port(tmp_path):
         "mpf_mavlink.cli",
         "run",
         str(ROOT / "configs/bridge_arduplane.yaml"),
-        # fmt: skip
         "--connect",
         f"{peer.device}:115200",
         "--out",
@@ -593,7 +592,6 @@ def test_absent_vehicle_is_one_line_and_nonzero(tmp_path, capsys):
             str(ROOT / "configs/bridge_px4.yaml"),
             "--connect",
             f"udpin:127.0.0.1:{port}",
-            # fmt: skip
             "--out",
             str(tmp_path),
             "--heartbeat-timeout",

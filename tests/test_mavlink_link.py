@@ -136,7 +136,6 @@ def test_spoofed_system_ids_are_dropped_and_counted(udp_pair):
             473977420,
             85455940,
             500.0,
-            # fmt: skip
             [1, 2, 0],
             [0, 0, 0],
             [1, 0, 0, 0],

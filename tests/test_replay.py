@@ -48,7 +48,6 @@ RUN_FILES = (
     "path_T.csv",
     "metrics.json",
     "trajectory_3d.png",
-    # fmt: skip
     "planar.png",
     "target_relative.png",
     "errors.png",
@@ -384,7 +383,6 @@ def test_a_different_config_names_the_first_differing_message(tmp_path, capsys, 
             "--config",
             str(cfg_file),
             *sum((["--set", s] for s in FAST), []),
-            # fmt: skip
             "--set",
             "guidance.K_R=0.6",
             "--out",
@@ -509,7 +507,6 @@ def test_cli_window_and_plot_of_any_run(tmp_path, arduplane_run):
         "duration          207.61 s; window 85.00 .. 123.00 s",
         "GUIDED 85.0-123.4 s",
         "telemetry gaps",
-        # fmt: skip
         "ATTITUDE",
         "median |pt|",
         "commands          no SET_ATTITUDE_TARGET",
