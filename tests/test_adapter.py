@@ -1,4 +1,7 @@
-"""The setpoint adapter: the law's angular velocity of w1 -> bank, body rates, quaternion, thrust."""
+"""The setpoint adapter.
+
+The law's angular velocity of w1 -> bank, body rates, quaternion, thrust.
+"""
 
 from __future__ import annotations
 

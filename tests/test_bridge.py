@@ -160,7 +160,8 @@ def test_arduplane_full_lifecycle_over_pty_with_global_position(tmp_path):
     guided = [s.msg for s in peer.setpoints if s.mode == 15]
     assert len(guided) >= 30
     for m in peer.setpoints:
-        # ArduPlane attitude: type_mask 132 (roll, pitch and throttle used; rudder left to ArduPlane)
+        # ArduPlane attitude: type_mask 132 (roll, pitch and throttle used; rudder left to
+        # ArduPlane)
         assert m.msg.type_mask == 132
         w, x, y, z = m.msg.q  # MAVLink order (w, x, y, z), unit norm
         assert math.isclose(w * w + x * x + y * y + z * z, 1.0, rel_tol=1e-6)
@@ -370,8 +371,21 @@ def _wait_for_port_ready(peer: MavPeer, timeout: float = 15.0) -> bool:
 def test_sigterm_hands_back_and_reports_exit_code(tmp_path):
     port = free_port()
     peer = MavPeer(PeerOptions(flavour="px4"), port=port).start()
-    cmd = [PY, "-m", "mpf_mavlink.cli", "run", str(ROOT / "configs/bridge_px4.yaml"), "--connect",
-           f"udpin:127.0.0.1:{port}", "--out", str(tmp_path), "--duration", "60", "--no-plots", "-q"]  # fmt: skip
+    cmd = [
+        PY,
+        "-m",
+        "mpf_mavlink.cli",
+        "run",
+        str(ROOT / "configs/bridge_px4.yaml"),
+        "--connect",
+        f"udpin:127.0.0.1:{port}",
+        "--out",
+        str(tmp_path),
+        "--duration",
+        "60",
+        "--no-plots",
+        "-q",
+    ]
     proc = subprocess.Popen(
         cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
@@ -400,8 +414,20 @@ def test_cli_run_over_a_serial_port(tmp_path):
         pty=True,
     ).start()
     sets = [x for s in FAST for x in ("--set", s)]
-    cmd = [PY, "-m", "mpf_mavlink.cli", "run", str(ROOT / "configs/bridge_arduplane.yaml"),
-           "--connect", f"{peer.device}:115200", "--out", str(tmp_path), "--duration", "1", *sets]  # fmt: skip
+    cmd = [
+        PY,
+        "-m",
+        "mpf_mavlink.cli",
+        "run",
+        str(ROOT / "configs/bridge_arduplane.yaml"),
+        "--connect",
+        f"{peer.device}:115200",
+        "--out",
+        str(tmp_path),
+        "--duration",
+        "1",
+        *sets,
+    ]
     try:
         out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=120)
     finally:
@@ -417,8 +443,18 @@ def test_cli_run_over_a_serial_port(tmp_path):
 def test_tlog_survives_sigkill(tmp_path):
     port = free_port()
     peer = MavPeer(PeerOptions(flavour="ardupilot"), port=port).start()
-    cmd = [PY, "-m", "mpf_mavlink.cli", "run", str(ROOT / "configs/bridge_arduplane.yaml"), "--connect",
-           f"udpin:127.0.0.1:{port}", "--out", str(tmp_path), "--no-plots"]  # fmt: skip
+    cmd = [
+        PY,
+        "-m",
+        "mpf_mavlink.cli",
+        "run",
+        str(ROOT / "configs/bridge_arduplane.yaml"),
+        "--connect",
+        f"udpin:127.0.0.1:{port}",
+        "--out",
+        str(tmp_path),
+        "--no-plots",
+    ]
     log = open(tmp_path / "stdout.txt", "w")  # noqa: SIM115
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, text=True)
     try:
@@ -550,8 +586,20 @@ def test_absent_vehicle_is_one_line_and_nonzero(tmp_path, capsys):
 
     port = free_port()
     t = time.monotonic()
-    rc = main(["run", str(ROOT / "configs/bridge_px4.yaml"), "--connect", f"udpin:127.0.0.1:{port}",
-               "--out", str(tmp_path), "--heartbeat-timeout", "0.5", "--no-plots", "-q"])  # fmt: skip
+    rc = main(
+        [
+            "run",
+            str(ROOT / "configs/bridge_px4.yaml"),
+            "--connect",
+            f"udpin:127.0.0.1:{port}",
+            "--out",
+            str(tmp_path),
+            "--heartbeat-timeout",
+            "0.5",
+            "--no-plots",
+            "-q",
+        ]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "no HEARTBEAT" in err[0]
     assert 0.5 <= time.monotonic() - t < 3.0  # after the configured timeout, not before

@@ -232,7 +232,9 @@ def test_global_position_about_home_position_matches_pymap3d_not_flat_earth():
     e, why = f.estimate()
     assert e is not None, why
     lat_q, lon_q, alt_q = round(lat * 1e7) * 1e-7, round(lon * 1e7) * 1e-7, alt  # the wire's degE7
-    n, ea, d = pymap3d.geodetic2ned(lat_q, lon_q, alt_q, round(HOME[0] * 1e7) * 1e-7, round(HOME[1] * 1e7) * 1e-7, HOME[2])  # fmt: skip
+    n, ea, d = pymap3d.geodetic2ned(
+        lat_q, lon_q, alt_q, round(HOME[0] * 1e7) * 1e-7, round(HOME[1] * 1e7) * 1e-7, HOME[2]
+    )
     expected = np.array([n, ea, d]) + home_local
     np.testing.assert_allclose(e.vehicle.position, expected, atol=1e-3)
     assert e.position_source == "global"

@@ -1,4 +1,7 @@
-"""The bridge's live target before the estimator (target_estimator.mode: last_sample: FOLLOW_TARGET / GLOBAL_POSITION_INT from one system, extrapolated).
+"""The bridge's live target before the estimator.
+
+target_estimator.mode: last_sample: FOLLOW_TARGET / GLOBAL_POSITION_INT from one system,
+extrapolated.
 
 The messages are real MAVLink frames (pymavlink's encoder, the bridge's decoder), built from the
 scripted boat of the demo as the SIL vehicle sends them.

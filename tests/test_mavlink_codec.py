@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mpf_mavlink.core import frames
-from mpf_mavlink.mavlink import codec, read_tlog
+from mpf_mavlink.mavlink import codec, encode, read_tlog
 from mpf_mavlink.mavlink import dialect as mavlink
 from mpf_mavlink.mavlink.modes import (
     Flavour,
@@ -268,16 +268,45 @@ def _finite_sample(s) -> bool:
 def test_decoders_never_raise_nor_emit_non_finite(vals, ints):
     a, b, c, d, e, f, g = vals
     fakes = {
-        "ATTITUDE": SimpleNamespace(time_boot_ms=abs(ints[0]), roll=a, pitch=b, yaw=c, rollspeed=d, pitchspeed=e, yawspeed=f),
-        "ATTITUDE_QUATERNION": SimpleNamespace(time_boot_ms=1, q1=a, q2=b, q3=c, q4=d, rollspeed=e, pitchspeed=f, yawspeed=g),
+        "ATTITUDE": SimpleNamespace(
+            time_boot_ms=abs(ints[0]), roll=a, pitch=b, yaw=c, rollspeed=d, pitchspeed=e, yawspeed=f
+        ),
+        "ATTITUDE_QUATERNION": SimpleNamespace(
+            time_boot_ms=1, q1=a, q2=b, q3=c, q4=d, rollspeed=e, pitchspeed=f, yawspeed=g
+        ),
         "LOCAL_POSITION_NED": SimpleNamespace(time_boot_ms=1, x=a, y=b, z=c, vx=d, vy=e, vz=f),
-        "GLOBAL_POSITION_INT": SimpleNamespace(time_boot_ms=1, lat=ints[1], lon=ints[2], alt=ints[3], relative_alt=ints[4], vx=ints[5] % 65536 - 32768, vy=0, vz=0, hdg=ints[6] % 65536),
-        "VFR_HUD": SimpleNamespace(airspeed=a, groundspeed=b, heading=ints[7] % 360, throttle=ints[8] % 200, alt=c, climb=d),
+        "GLOBAL_POSITION_INT": SimpleNamespace(
+            time_boot_ms=1,
+            lat=ints[1],
+            lon=ints[2],
+            alt=ints[3],
+            relative_alt=ints[4],
+            vx=ints[5] % 65536 - 32768,
+            vy=0,
+            vz=0,
+            hdg=ints[6] % 65536,
+        ),
+        "VFR_HUD": SimpleNamespace(
+            airspeed=a, groundspeed=b, heading=ints[7] % 360, throttle=ints[8] % 200, alt=c, climb=d
+        ),
         "WIND": SimpleNamespace(direction=a, speed=b, speed_z=c),
         "WIND_COV": SimpleNamespace(time_usec=abs(ints[0]), wind_x=a, wind_y=b, wind_z=c),
-        "FOLLOW_TARGET": SimpleNamespace(timestamp=1, est_capabilities=ints[8] % 16, lat=ints[1], lon=ints[2], alt=a, vel=[b, c, d], acc=[e, f, g], attitude_q=[a, b, c, d], rates=[e, f, g], position_cov=[0, 0, 0]),
-        "HOME_POSITION": SimpleNamespace(latitude=ints[1], longitude=ints[2], altitude=ints[3], x=a, y=b, z=c),
-    }  # fmt: skip
+        "FOLLOW_TARGET": SimpleNamespace(
+            timestamp=1,
+            est_capabilities=ints[8] % 16,
+            lat=ints[1],
+            lon=ints[2],
+            alt=a,
+            vel=[b, c, d],
+            acc=[e, f, g],
+            attitude_q=[a, b, c, d],
+            rates=[e, f, g],
+            position_cov=[0, 0, 0],
+        ),
+        "HOME_POSITION": SimpleNamespace(
+            latitude=ints[1], longitude=ints[2], altitude=ints[3], x=a, y=b, z=c
+        ),
+    }
     for mtype, fake in fakes.items():
         fake.get_type = lambda t=mtype: t
         s = codec.decode(fake)
@@ -302,7 +331,7 @@ def test_real_tlog_decodes_finite_everywhere():
 
 # --- encoders -------------------------------------------------------------------------------
 def test_encode_rates_wire_values():
-    m = wire(codec.encode_set_attitude_target_rates(MAV, 100, 1, 1, 0.5, -0.25, 0.125, 0.8))
+    m = wire(encode.encode_set_attitude_target_rates(MAV, 100, 1, 1, 0.5, -0.25, 0.125, 0.8))
     assert m.type_mask == 128 and list(m.q) == [1.0, 0.0, 0.0, 0.0]
     # exact in float32 (powers of two)
     assert (m.body_roll_rate, m.body_pitch_rate, m.body_yaw_rate) == (0.5, -0.25, 0.125)
@@ -322,36 +351,36 @@ def test_encode_rates_wire_values():
 )
 def test_encode_rates_refuses_bad_values(args):
     with pytest.raises(ValueError):
-        codec.encode_set_attitude_target_rates(MAV, 1, 1, 1, *args)
+        encode.encode_set_attitude_target_rates(MAV, 1, 1, 1, *args)
 
 
 def test_encode_quat_normalises_and_refuses():
-    m = wire(codec.encode_set_attitude_target_quat(MAV, 1, 1, 1, (2.0, 0.0, 0.0, 0.0), 0.3))
+    m = wire(encode.encode_set_attitude_target_quat(MAV, 1, 1, 1, (2.0, 0.0, 0.0, 0.0), 0.3))
     assert (
         list(m.q) == [1.0, 0.0, 0.0, 0.0] and m.type_mask == 132
     )  # roll+pitch, rudder left to ArduPlane
     for q in [(0, 0, 0, 0), (math.nan, 0, 0, 1), (1, 0, 0)]:
         with pytest.raises(ValueError):
-            codec.encode_set_attitude_target_quat(MAV, 1, 1, 1, q, 0.3)
+            encode.encode_set_attitude_target_quat(MAV, 1, 1, 1, q, 0.3)
     with pytest.raises(ValueError):
-        codec.encode_set_attitude_target_quat(MAV, 1, 1, 1, (1, 0, 0, 0), 0.3, (0, math.nan, 0))
+        encode.encode_set_attitude_target_quat(MAV, 1, 1, 1, (1, 0, 0, 0), 0.3, (0, math.nan, 0))
 
 
 def test_encode_set_mode_px4_and_arduplane():
-    m = wire(codec.encode_set_mode(MAV, 1, 1, Flavour.PX4, "OFFBOARD"))
+    m = wire(encode.encode_set_mode(MAV, 1, 1, Flavour.PX4, "OFFBOARD"))
     assert (m.command, m.param1, m.param2, m.param3) == (176, 1.0, 6.0, 0.0)
-    m = wire(codec.encode_set_mode(MAV, 1, 1, "px4", "AUTO.LOITER"))
+    m = wire(encode.encode_set_mode(MAV, 1, 1, "px4", "AUTO.LOITER"))
     assert (m.param2, m.param3) == (4.0, 3.0)
-    m = wire(codec.encode_set_mode(MAV, 1, 1, "ardupilot", "GUIDED"))
+    m = wire(encode.encode_set_mode(MAV, 1, 1, "ardupilot", "GUIDED"))
     assert (m.command, m.param1, m.param2, m.param3) == (176, 1.0, 15.0, 0.0)
     with pytest.raises(ValueError):
-        codec.encode_set_mode(MAV, 1, 1, "ardupilot", "WARP")
+        encode.encode_set_mode(MAV, 1, 1, "ardupilot", "WARP")
 
 
 def test_encode_arm_and_companion_heartbeat():
-    m = wire(codec.encode_arm(MAV, 1, 1, arm=True))
+    m = wire(encode.encode_arm(MAV, 1, 1, arm=True))
     assert (m.command, m.param1, m.param2) == (400, 1.0, 0.0)
-    m = wire(codec.encode_arm(MAV, 1, 1, arm=False, force=True))
+    m = wire(encode.encode_arm(MAV, 1, 1, arm=False, force=True))
     assert (m.param1, m.param2) == (0.0, 21196.0)  # the force-disarm magic number
-    hb = wire(codec.encode_companion_heartbeat(MAV))
+    hb = wire(encode.encode_companion_heartbeat(MAV))
     assert (hb.type, hb.autopilot) == (18, 8)  # ONBOARD_CONTROLLER, INVALID

@@ -15,9 +15,8 @@ from mpf_mavlink.core import frames
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.mavlink import dialect as mavlink
 from mpf_mavlink.mavlink import mavutil, read_tlog
-from mpf_mavlink.mavlink.codec import (
-    TYPE_MASK_ARDUPLANE_ATTITUDE,
-    TYPE_MASK_PX4_RATES,
+from mpf_mavlink.mavlink.codec import TYPE_MASK_ARDUPLANE_ATTITUDE, TYPE_MASK_PX4_RATES
+from mpf_mavlink.mavlink.encode import (
     encode_set_attitude_target_quat,
     encode_set_attitude_target_rates,
 )
@@ -131,8 +130,19 @@ def test_spoofed_system_ids_are_dropped_and_counted(udp_pair):
         for _ in range(3):
             px4_heartbeat(spoofer, main=1)  # a fake vehicle claiming MANUAL
             spoofer.mav.attitude_send(1, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        target.mav.follow_target_send(1000, 3, 473977420, 85455940, 500.0,
-                                      [1, 2, 0], [0, 0, 0], [1, 0, 0, 0], [0, 0, 0], [0, 0, 0], 0)  # fmt: skip
+        target.mav.follow_target_send(
+            1000,
+            3,
+            473977420,
+            85455940,
+            500.0,
+            [1, 2, 0],
+            [0, 0, 0],
+            [1, 0, 0, 0],
+            [0, 0, 0],
+            [0, 0, 0],
+            0,
+        )
         px4_heartbeat(peer)
         got = []
         t_end = time.monotonic() + 1.0

@@ -1,4 +1,7 @@
-"""tlog reader on the shared real recording (whole, truncated, corrupted) and the writer under SIGKILL."""
+"""tlog reader and writer.
+
+The reader on the shared real recording (whole, truncated, corrupted); the writer under SIGKILL.
+"""
 
 from __future__ import annotations
 
@@ -46,7 +49,8 @@ def shared_result():
 def test_shared_tlog_reads_fully_and_matches_pymavlink(shared_result):
     res = shared_result
     print(
-        f"read_tlog: {res.records} records in {res.elapsed_s:.3f} s, {res.duration_s:.1f} s of flight"
+        f"read_tlog: {res.records} records in {res.elapsed_s:.3f} s, {res.duration_s:.1f} s of "
+        "flight"
     )
     ref = mavutil.mavlink_connection(str(SHARED_TLOG))
     ref_counts: Counter = Counter()
@@ -171,11 +175,12 @@ WRITER_SCRIPT = textwrap.dedent(
     """
     import sys, time
     from mpf_mavlink.mavlink import open_link
-    from mpf_mavlink.mavlink.codec import encode_set_attitude_target_rates
+    from mpf_mavlink.mavlink.encode import encode_set_attitude_target_rates
     link = open_link(sys.argv[2], tlog_path=sys.argv[1])
     k = 0
     while True:
-        link.send(encode_set_attitude_target_rates(link.mav, k, 1, 1, 0.0, 0.0, 0.01 * (k % 100), 0.5))
+        rate = 0.01 * (k % 100)
+        link.send(encode_set_attitude_target_rates(link.mav, k, 1, 1, 0.0, 0.0, rate, 0.5))
         k += 1
         if k % 200 == 0:
             time.sleep(0.001)

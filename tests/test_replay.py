@@ -42,8 +42,18 @@ SHARED_TLOG = Path(__file__).resolve().parent / "data" / "arduplane-quadplane-si
 REPLAY_CFG = ROOT / "configs" / "replay_arduplane_sitl.yaml"
 FAST = ["mavlink.plots=false", "mavlink.heartbeat_timeout_s=3", "mavlink.mode_timeout_s=0.6",
         "mavlink.request_streams=false", "mavlink.set_fallback=false"]  # fmt: skip
-RUN_FILES = ("timeseries.csv", "setpoints.csv", "path_T.csv", "metrics.json", "trajectory_3d.png",
-             "planar.png", "target_relative.png", "errors.png", "sdot_rates.png", "setpoints.png")  # fmt: skip
+RUN_FILES = (
+    "timeseries.csv",
+    "setpoints.csv",
+    "path_T.csv",
+    "metrics.json",
+    "trajectory_3d.png",
+    "planar.png",
+    "target_relative.png",
+    "errors.png",
+    "sdot_rates.png",
+    "setpoints.png",
+)
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -248,7 +258,8 @@ def test_real_tlog_rebuilt_positions_match_simstate_truth(real_replay):
             err.append(math.hypot(row["p_n"] - n, row["p_e"] - e))
     err_a = np.array(err)
     print(
-        f"horizontal |rebuilt - SIMSTATE|: {len(err_a)} steps, median {np.median(err_a):.2f} m, max {err_a.max():.2f} m"
+        f"horizontal |rebuilt - SIMSTATE|: {len(err_a)} steps, median {np.median(err_a):.2f} m, "
+        f"max {err_a.max():.2f} m"
     )
     assert len(err_a) >= 700
     assert np.max(err_a) < 1.5 and np.median(err_a) < 1.0
@@ -365,8 +376,21 @@ def test_a_tampered_tlog_names_the_first_differing_message(tmp_path, px4_run):
 def test_a_different_config_names_the_first_differing_message(tmp_path, capsys, arduplane_run):
     cfg, _, _, out = arduplane_run
     cfg_file = ROOT / "configs" / "bridge_arduplane.yaml"
-    rc = main(["replay", str(out / "mavlink.tlog"), "--config", str(cfg_file), *sum((["--set", s] for s in FAST), []),
-               "--set", "guidance.K_R=0.6", "--out", str(tmp_path / "r"), "--no-plots", "-q"])  # fmt: skip
+    rc = main(
+        [
+            "replay",
+            str(out / "mavlink.tlog"),
+            "--config",
+            str(cfg_file),
+            *sum((["--set", s] for s in FAST), []),
+            "--set",
+            "guidance.K_R=0.6",
+            "--out",
+            str(tmp_path / "r"),
+            "--no-plots",
+            "-q",
+        ]
+    )
     text = capsys.readouterr().out
     assert rc == 1, text
     line = next(x for x in text.splitlines() if x.startswith("commands"))
@@ -377,8 +401,19 @@ def test_a_different_config_names_the_first_differing_message(tmp_path, capsys, 
         and "replayed" in line
     )
     # the same config replays identically through the command line (exit 0)
-    rc = main(["replay", str(out / "mavlink.tlog"), "--config", str(cfg_file), *sum((["--set", s] for s in FAST), []),
-               "--out", str(tmp_path / "same"), "--no-plots", "-q"])  # fmt: skip
+    rc = main(
+        [
+            "replay",
+            str(out / "mavlink.tlog"),
+            "--config",
+            str(cfg_file),
+            *sum((["--set", s] for s in FAST), []),
+            "--out",
+            str(tmp_path / "same"),
+            "--no-plots",
+            "-q",
+        ]
+    )
     assert rc == 0 and "identical:" in capsys.readouterr().out
 
 
@@ -446,13 +481,36 @@ def test_cli_window_and_plot_of_any_run(tmp_path, arduplane_run):
     _, _, _, bridge_out = arduplane_run
     out = tmp_path / "w"
     r = subprocess.run(
-        [sys.executable, "-m", "mpf_mavlink.cli", "replay", str(SHARED_TLOG), "--config", str(REPLAY_CFG),
-         "--from", "85", "--to", "123", "--out", str(out), "--no-plots"],
-        cwd=ROOT, capture_output=True, text=True, env=dict(os.environ),
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "mpf_mavlink.cli",
+            "replay",
+            str(SHARED_TLOG),
+            "--config",
+            str(REPLAY_CFG),
+            "--from",
+            "85",
+            "--to",
+            "123",
+            "--out",
+            str(out),
+            "--no-plots",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        env=dict(os.environ),
+    )
     assert r.returncode == 0, r.stderr
-    for want in ("duration          207.61 s; window 85.00 .. 123.00 s", "GUIDED 85.0-123.4 s", "telemetry gaps",
-                 "ATTITUDE", "median |pt|", "commands          no SET_ATTITUDE_TARGET"):  # fmt: skip
+    for want in (
+        "duration          207.61 s; window 85.00 .. 123.00 s",
+        "GUIDED 85.0-123.4 s",
+        "telemetry gaps",
+        "ATTITUDE",
+        "median |pt|",
+        "commands          no SET_ATTITUDE_TARGET",
+    ):
         assert want in r.stdout, want
     ts = np.genfromtxt(out / "timeseries.csv", delimiter=",", names=True)
     assert 120 <= len(ts) <= 160  # ~38 s of ~4 Hz samples

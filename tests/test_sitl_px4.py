@@ -18,7 +18,9 @@ pytestmark = marks("px4")
 SPEEDUP: list[str] = []  # real time: see the module docstring
 
 
-@pytest.mark.parametrize("moving", [pytest.param(False, id="stationary"), pytest.param(True, id="moving")])  # fmt: skip
+@pytest.mark.parametrize(
+    "moving", [pytest.param(False, id="stationary"), pytest.param(True, id="moving")]
+)
 def test_px4_engages_tracks_and_hands_back(tmp_path, moving):
     """120 s of tracking (steady window 60-120 s).
 

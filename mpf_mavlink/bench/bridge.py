@@ -2,7 +2,8 @@
 datagram out) and the wall time of a replay of the real tlog.
 
 A minimal PX4-like peer (this process) talks to the real bridge (run_bridge in a forked
-process, so that the two never wait for each other's GIL) over UDP loopback. Each control cycle it sends LOCAL_POSITION_NED (+ VFR_HUD), then
+process, so that the two never wait for each other's GIL) over UDP loopback. Each control cycle it
+sends LOCAL_POSITION_NED (+ VFR_HUD), then
 ATTITUDE, takes time.perf_counter() right after the ATTITUDE datagram leaves, and waits for
 the setpoint carrying that ATTITUDE's time_boot_ms (time taken as the datagram is read,
 before parsing). The figure therefore includes both kernel
@@ -48,28 +49,87 @@ _CFG = {
 }
 
 
+def _free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 free a moment ago (for the bridge to listen on)."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = int(s.getsockname()[1])
+    s.close()
+    return port
+
+
+class _ScriptedPx4:
+    """A scripted PX4 for :func:`bridge_latency_ms`: sends its state to the bridge over UDP,
+    answers mode changes, and recognises the set-point that answers a given ATTITUDE."""
+
+    def __init__(self, port: int) -> None:
+        from mpf_mavlink.mavlink import dialect as mavlink
+        from mpf_mavlink.mavlink.modes import px4_custom_mode
+
+        self.d, self._px4_custom_mode = mavlink, px4_custom_mode
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        dest = ("127.0.0.1", port)
+        sock = self.sock
+
+        class _W:
+            def write(self, b: bytes) -> None:
+                sock.sendto(bytes(b), dest)
+
+        self.mav = mavlink.MAVLink(_W(), srcSystem=1, srcComponent=1)
+        self.parser = mavlink.MAVLink(None)
+        self.mode = px4_custom_mode(3, 0)
+
+    def heartbeat(self) -> None:
+        d = self.d
+        self.mav.heartbeat_send(d.MAV_TYPE_FIXED_WING, d.MAV_AUTOPILOT_PX4, 129, self.mode, 4)
+
+    def handle(self, data: bytes, want_ms: int | None) -> bool:
+        """Answer what the bridge sent; True when it holds the set-point for ``want_ms``."""
+        got = False
+        for m in self.parser.parse_buffer(data) or []:
+            t = m.get_type()
+            if t == "SET_ATTITUDE_TARGET" and m.time_boot_ms == want_ms:
+                got = True
+            elif t == "COMMAND_LONG" and m.command == 176:
+                self.mav.command_ack_send(176, 0)
+                self.mode = self._px4_custom_mode(int(m.param2), int(m.param3))
+                self.heartbeat()
+        return got
+
+    def send_state(self, tb: int, x: float, k: int) -> None:
+        """Level flight at 15 m/s north, 100 m up, at boot time tb (ms); VFR_HUD every 5th."""
+        self.mav.local_position_ned_send(tb, x, 0.0, -100.0, 15.0, 0.0, 0.0)
+        if k % 5 == 0:
+            self.mav.vfr_hud_send(15.0, 15.0, 0, 50, 100.0, 0.0)
+        self.mav.attitude_send(tb, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0)
+
+    def await_setpoint(self, tb: int, t_sent: float, deadline: float) -> float | None:
+        """The latency (ms) of the set-point that answers the ATTITUDE of boot time tb sent at
+        t_sent (perf_counter), reading until the cycle's deadline (monotonic); None: none came."""
+        lat = None
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                break
+            self.sock.settimeout(remaining)
+            try:
+                data = self.sock.recv(65536)
+            except (TimeoutError, OSError):
+                break
+            t_rx = time.perf_counter()
+            if self.handle(data, tb) and lat is None:
+                lat = (t_rx - t_sent) * 1e3
+        return lat
+
+
 def bridge_latency_ms(n_samples: int = 300, rate_hz: float = 50.0) -> dict[str, float]:
     """p50 / p99 (ms) of ATTITUDE-sent -> setpoint-received over ``n_samples`` control cycles
     (after the first 20, which warm up caches). Also returns the sample count and max."""
     from mpf_mavlink.bridge.live import BridgeOptions, run_bridge
-    from mpf_mavlink.mavlink import dialect as mavlink
-    from mpf_mavlink.mavlink.modes import px4_custom_mode
 
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.bind(("127.0.0.1", 0))
-    dest = ("127.0.0.1", port)
-
-    class _W:
-        def write(self, b: bytes) -> None:
-            sock.sendto(bytes(b), dest)
-
-    mav = mavlink.MAVLink(_W(), srcSystem=1, srcComponent=1)
-    parser = mavlink.MAVLink(None)
-    mode = [px4_custom_mode(3, 0)]
+    port = _free_udp_port()
+    peer = _ScriptedPx4(port)
     cfg = config_from_dict(dict(_CFG))
     duration = (n_samples + 20) / rate_hz + 1.0
     tmp = tempfile.mkdtemp(prefix="mpf-bench-")
@@ -84,59 +144,26 @@ def bridge_latency_ms(n_samples: int = 300, rate_hz: float = 50.0) -> dict[str, 
     t0 = time.monotonic()
     x, k = -200.0, 0
     try:
-
-        def heartbeat() -> None:
-            mav.heartbeat_send(
-                mavlink.MAV_TYPE_FIXED_WING, mavlink.MAV_AUTOPILOT_PX4, 129, mode[0], 4
-            )
-
-        def handle(data: bytes, want_ms: int | None) -> bool:
-            got = False
-            for m in parser.parse_buffer(data) or []:
-                t = m.get_type()
-                if t == "SET_ATTITUDE_TARGET" and m.time_boot_ms == want_ms:
-                    got = True
-                elif t == "COMMAND_LONG" and m.command == 176:
-                    mav.command_ack_send(176, 0)
-                    mode[0] = px4_custom_mode(int(m.param2), int(m.param3))
-                    heartbeat()
-            return got
-
         next_hb = 0.0
         while th.is_alive() and time.monotonic() - t0 < duration + 10.0:
             now = time.monotonic()
             if now >= next_hb:
-                heartbeat()
+                peer.heartbeat()
                 next_hb = now + 0.5
             tb = int((now - t0) * 1000) + 1000
             x += 15.0 / rate_hz
-            mav.local_position_ned_send(tb, x, 0.0, -100.0, 15.0, 0.0, 0.0)
-            if k % 5 == 0:
-                mav.vfr_hud_send(15.0, 15.0, 0, 50, 100.0, 0.0)
-            mav.attitude_send(tb, 0.0, 0.02, 0.0, 0.0, 0.0, 0.0)
+            peer.send_state(tb, x, k)
             t_sent = time.perf_counter()
             k += 1
-            deadline = now + 1.0 / rate_hz
-            got = False
-            while True:
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    break
-                sock.settimeout(remaining)
-                try:
-                    data = sock.recv(65536)
-                except (TimeoutError, OSError):
-                    break
-                t_rx = time.perf_counter()
-                if handle(data, tb) and not got:
-                    got = True
-                    lat.append((t_rx - t_sent) * 1e3)
+            got = peer.await_setpoint(tb, t_sent, now + 1.0 / rate_hz)
+            if got is not None:
+                lat.append(got)
             if len(lat) >= n_samples + 20:
                 break
     finally:
         th.terminate()  # SIGTERM: the bridge hands back and exits
         th.join(10.0)
-        sock.close()
+        peer.sock.close()
     a = np.array(lat[20:] if len(lat) > 40 else lat)
     if a.size == 0:
         return {"p50": math.nan, "p99": math.nan, "n": 0, "max": math.nan}

@@ -143,7 +143,12 @@ AIRFRAMES = ("c172p", "c172x", "c182", "pa28")
 DERIVED = "aircraft.gains_from_fdm=true"
 for _m in AIRFRAMES:
     ROWS.append(
-        Row(f"{_m}_derived", [f"aircraft.model={_m}", DERIVED], config="configs/sil_c172x.yaml", rms_m=2.0)
+        Row(
+            f"{_m}_derived",
+            [f"aircraft.model={_m}", DERIVED],
+            config="configs/sil_c172x.yaml",
+            rms_m=2.0,
+        )
     )  # fmt: skip
     ROWS.append(
         Row(
@@ -255,7 +260,8 @@ def format_row(name: str, r: dict[str, Any]) -> str:
     ok = {True: "yes", False: "NO", None: "-"}[r.get("pass_")]
     return (
         f"{name:<22} {r['exit']:>4} {_f(r.get('steady_rms_m')):>7} {_f(r.get('steady_max_m')):>7} "
-        f"{_f(r.get('convergence_time_s'), '{:.1f}'):>7} {bound:>12} {ok:>5}  {r.get('verdict', '')[:90]}"
+        f"{_f(r.get('convergence_time_s'), '{:.1f}'):>7} {bound:>12} {ok:>5}  "
+        f"{r.get('verdict', '')[:90]}"
     )
 
 

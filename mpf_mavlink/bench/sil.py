@@ -7,7 +7,8 @@ sil_real_time_factor: the demo as shipped (JSBSim X8, PX4 flavour, lockstep cloc
 times; the median is the figure. ``tracking`` is simulated seconds per wall second while the
 bridge commands the vehicle (OFFBOARD: every 20 ms frame waits for the bridge's answer to the
 frame before, the demo's 20 ms command latency being the lookahead that lets both peers work at
-once); ``overall`` includes start-up, the real-time-paced hand-over and the hand-back. ``cpu_us_per_frame_*``: CPU time of each peer per frame while
+once); ``overall`` includes start-up, the real-time-paced hand-over and the hand-back.
+``cpu_us_per_frame_*``: CPU time of each peer per frame while
 tracking, a figure that depends less on what else the machine runs. Bar: tracking >= 30.
 
 sil_tracking: steady RMS |pt| (t >= 120 s after engagement, 360 s of tracking) in three

@@ -31,6 +31,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -174,6 +175,18 @@ class Step:
 
 
 SETPOINT_COLUMNS = "t,p,q,r,qw,qx,qy,qz,thrust,bank,pitch,load_factor,safe"
+
+
+def write_setpoints(out: Path, rows: list[tuple[float, ...]]) -> None:
+    """setpoints.csv in the run directory ``out``: one :meth:`Step.setpoint_row` a line."""
+    np.savetxt(
+        out / "setpoints.csv",
+        np.array(rows, float).reshape(-1, 13),
+        delimiter=",",
+        header=SETPOINT_COLUMNS,
+        comments="",
+        fmt="%.9g",
+    )
 
 
 def adapter_params(cfg: Config) -> AdapterParams:
@@ -483,6 +496,7 @@ __all__ = [
     "ScriptedTarget",
     "Step",
     "SETPOINT_COLUMNS",
+    "write_setpoints",
     "STREAM_TEXT",
     "HALT_TEXT",
     "origin_texts",

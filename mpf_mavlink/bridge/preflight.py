@@ -124,8 +124,11 @@ def start_altitude(cfg: Config) -> CheckResult:
             "give a start state in the air (kinematic/sil.initial_position_ned_m)", fig,
         )  # fmt: skip
     return CheckResult(
-        "start_altitude", "pass", f"start {max(below, 0.0):.1f} m below the path's lowest point (limit {lim:g} m)", fig
-    )  # fmt: skip
+        "start_altitude",
+        "pass",
+        f"start {max(below, 0.0):.1f} m below the path's lowest point (limit {lim:g} m)",
+        fig,
+    )
 
 
 def climb_check(
@@ -212,7 +215,8 @@ def airspeed_hold(cfg: Config) -> CheckResult | None:
     return CheckResult(
         "airspeed_hold",
         "pass",
-        f"level flight at {v.airspeed_m_s:g} m/s needs thrust {a.trim_thrust:g} of {a.thrust_max:g}",
+        f"level flight at {v.airspeed_m_s:g} m/s needs thrust {a.trim_thrust:g} of "
+        f"{a.thrust_max:g}",
         fig,
     )
 

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from mpf_mavlink.bridge.base import EXIT_OK, BridgeResult
-from mpf_mavlink.bridge.controller import SETPOINT_COLUMNS, Controller, Step
+from mpf_mavlink.bridge.controller import Controller, Step, write_setpoints
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.runs.rundir import RunTable, compute_metrics
 from mpf_mavlink.runs.verdict import assess
@@ -129,14 +129,7 @@ class Recorder:
     ) -> None:
         out = self.out
         # setpoints first: the plots draw them too
-        np.savetxt(
-            out / "setpoints.csv",
-            np.array(self.sp_rows, float).reshape(-1, 13),
-            delimiter=",",
-            header=SETPOINT_COLUMNS,
-            comments="",
-            fmt="%.9g",
-        )
+        write_setpoints(out, self.sp_rows)
         if limits_rows is not None:
             write_limits(out, limits_rows)
         plots = self.plots and len(cols["t"]) >= 2

@@ -154,7 +154,8 @@ class LiveTarget:
     stamped with their own timestamps (the sender's clock); ``update`` passes the receive time
     in mission time for the clock offset. Positions about the estimator's geodetic origin; a
     FOLLOW_TARGET's ``position_cov`` (eph, epv: m, 1-sigma) replaces the configured position
-    noise when both are > 0; its acceleration is not used. The estimate's staleness comes from its uncertainty.
+    noise when both are > 0; its acceleration is not used. The estimate's staleness comes from its
+    uncertainty.
     """
 
     live = True

@@ -8,6 +8,7 @@ import argparse
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
 #: the exit codes of each command (its --help lists them); a flight that ran to its end exits 0
 #: (verdict PASS), 5 (FAIL) or 6 (NOT JUDGED: too short for its steady window)
@@ -83,12 +84,20 @@ def printer(quiet: bool) -> Callable[[str], None]:
     return lambda s: print(s, flush=True)
 
 
+_N = TypeVar("_N", int, float)
+
+
+def _parsed(text: str, conv: Callable[[str], _N], what: str) -> _N:
+    """conv(text), or an argparse error saying the text is not ``what``."""
+    try:
+        return conv(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not {what}") from None
+
+
 def positive(text: str) -> float:
     """argparse type: a number > 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    v = _parsed(text, float, "a number")
     if not v > 0:
         raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
     return v
@@ -96,10 +105,7 @@ def positive(text: str) -> float:
 
 def seconds(text: str) -> float:
     """argparse type: a number of seconds >= 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    v = _parsed(text, float, "a number of seconds")
     if not v >= 0.0:
         raise argparse.ArgumentTypeError(f"must be >= 0 s, got {text}")
     return v
@@ -107,10 +113,7 @@ def seconds(text: str) -> float:
 
 def count(text: str) -> int:
     """argparse type: a whole number >= 0."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    v = _parsed(text, int, "a whole number")
     if v < 0:
         raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
     return v

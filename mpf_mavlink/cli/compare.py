@@ -13,7 +13,7 @@ import dataclasses
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any, NamedTuple, cast
 
 from mpf_mavlink.cli.common import exit_codes_epilog, positive
 from mpf_mavlink.errors import MpfError
@@ -33,6 +33,52 @@ def parse_laws(text: str) -> list[str]:
             f"(one of {', '.join(LAWS_ALL)})"
         )
     return laws
+
+
+class _Flown(NamedTuple):
+    """One law's flight: its time series, exit code and reason, the plant's roll over the
+    bridge's time series (SIL; None otherwise), whether it was flown again, and the SIL run's
+    metrics (with its verdict; None for the kinematic plant, judged here)."""
+
+    cols: dict[str, Any]
+    code: int
+    exit_reason: str
+    roll: Any
+    retried: bool
+    metrics: dict[str, Any] | None
+
+
+def _fly_sil(c: Config, law: str, out: Path, progress: bool, plots: bool, log: Any) -> _Flown:
+    from sim.sil import run_sil
+
+    retried = False
+    res = run_sil(c, out / law, progress=progress, plots=plots, log=lambda s: None)
+    if str(res.exit_reason).startswith("telemetry lost"):
+        # a realtime-clock SIL on a CPU-starved shared machine can trip the bridge's
+        # wall-clock watchdog (no property of the law); fly once more and say so
+        log(
+            f"      {law}: {res.exit_reason} after {res.metrics.get('sim_time_s')} s; "
+            "flying it again"
+        )
+        res = run_sil(c, out / law, progress=progress, plots=plots, log=lambda s: None)
+        retried = True
+    roll = None
+    tv = res.t_vehicle
+    tr = res.truth
+    if len(tv) and "euler" in tr:
+        sel = (tr["t"] >= tv[0]) & (tr["t"] <= tv[-1])
+        roll = tr["euler"][sel, 0]
+    return _Flown(res.cols, res.exit_code, res.exit_reason, roll, retried, res.metrics)
+
+
+def _fly_kinematic(c: Config, law: str, out: Path, progress: bool, plots: bool) -> _Flown:
+    from mpf_mavlink.runs.write import write_run
+    from sim.runner import run_kinematic
+
+    kres = run_kinematic(c, progress=progress)
+    if plots:
+        write_run(out / law, kres.cols, kres.metrics, kres.path_T, plots=False)
+    return _Flown(kres.cols, 0, "duration reached", None, False, None)
 
 
 def run_compare(
@@ -68,47 +114,21 @@ def run_compare(
         c = dataclasses.replace(cfg, guidance=dataclasses.replace(cfg.guidance, law=name))
         log(f"[{i + 1}/{len(laws)}] {law}: {plant}, {c.sim.duration_s:g} s ...")
         w0 = time.perf_counter()
-        roll = None
-        retried = False
         if plant == "sil":
-            from sim.sil import run_sil
-
-            res = run_sil(c, out / law, progress=progress, plots=plots, log=lambda s: None)
-            if str(res.exit_reason).startswith("telemetry lost"):
-                # a realtime-clock SIL on a CPU-starved shared machine can trip the bridge's
-                # wall-clock watchdog (no property of the law); fly once more and say so
-                log(
-                    f"      {law}: {res.exit_reason} after {res.metrics.get('sim_time_s')} s; "
-                    "flying it again"
-                )
-                res = run_sil(c, out / law, progress=progress, plots=plots, log=lambda s: None)
-                retried = True
-            tv = res.t_vehicle
-            tr = res.truth
-            if len(tv) and "euler" in tr:
-                sel = (tr["t"] >= tv[0]) & (tr["t"] <= tv[-1])
-                roll = tr["euler"][sel, 0]
-            cols, code = res.cols, res.exit_code
-            exit_reason = res.exit_reason
+            flown = _fly_sil(c, law, out, progress, plots, log)
         else:
-            from mpf_mavlink.runs.write import write_run
-            from sim.runner import run_kinematic
-
-            kres = run_kinematic(c, progress=progress)
-            if plots:
-                write_run(out / law, kres.cols, kres.metrics, kres.path_T, plots=False)
-            cols, code = kres.cols, 0
-            exit_reason = "duration reached"
+            flown = _fly_kinematic(c, law, out, progress, plots)
+        cols, code, exit_reason, roll, retried, metrics = flown
         if len(cols["t"]) < 2:
             raise MpfError(f"{law}: the run recorded no flight (exit {code})")
         fig = law_figures(
             cols, nodes, closed, c.vehicle.airspeed_m_s, c.metrics.steady_after_s,
             c.metrics.converge_threshold_m, roll,
         )  # fmt: skip
-        if plant == "sil":
-            status = str(res.metrics.get("verdict_status") or "n/a")
-            classes = res.metrics.get("verdict_classes") or []
-            vline = str(res.metrics.get("verdict") or "verdict: n/a (not judged: no flight)")
+        if metrics is not None:
+            status = str(metrics.get("verdict_status") or "n/a")
+            classes = metrics.get("verdict_classes") or []
+            vline = str(metrics.get("verdict") or "verdict: n/a (not judged: no flight)")
         else:  # the kinematic plant has no attitude, airspeed or thrust: tracking alone
             vd = assess(c, cols["t"], cols["pt_norm"])
             status, classes, vline = vd.status, vd.classes, vd.line()

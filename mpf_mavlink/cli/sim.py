@@ -80,7 +80,8 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     what = f"JSBSim {ac.model}" if sil.plant == "jsbsim" else "kinematic plant"
     print(
         f"simulated {sil.flavour} vehicle ({what}, {args.clock} clock) on {args.serve}: system 1, "
-        f"target as system {sil.target_system}; {v.mode_name}, {v.tun.cruise_airspeed:g} m/s. Ctrl-C to stop.",
+        f"target as system {sil.target_system}; {v.mode_name}, {v.tun.cruise_airspeed:g} m/s. "
+        "Ctrl-C to stop.",
         flush=True,
     )
 

@@ -10,7 +10,7 @@ predicted position 1-sigma exceeds ``max_position_sigma_m`` (or after ``max_age_
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Literal
 
 from mpf_mavlink.config.fields import _doc, _fail, _ge, _nonneg, _open, _pos
@@ -80,23 +80,9 @@ class TargetEstimatorConfig:
     )
 
     def params(self) -> TargetFilterParams:
-        """The filter's parameters (every key but ``mode``)."""
+        """The filter's parameters (every key but ``mode``: the filter's fields, by name)."""
         return TargetFilterParams(
-            accel_noise_m_s2=self.accel_noise_m_s2,
-            vertical_accel_noise_m_s2=self.vertical_accel_noise_m_s2,
-            turn_accel_noise_rad_s2=self.turn_accel_noise_rad_s2,
-            position_noise_m=self.position_noise_m,
-            vertical_noise_m=self.vertical_noise_m,
-            velocity_noise_m_s=self.velocity_noise_m_s,
-            turn_rate_noise_rad_s=self.turn_rate_noise_rad_s,
-            gate_probability=self.gate_probability,
-            reinit_after=self.reinit_after,
-            max_position_sigma_m=self.max_position_sigma_m,
-            manoeuvre_accel_m_s2=self.manoeuvre_accel_m_s2,
-            max_age_s=self.max_age_s,
-            latency_s=self.latency_s,
-            history_s=self.history_s,
-            attitude_timeout_s=self.attitude_timeout_s,
+            **{f.name: getattr(self, f.name) for f in fields(TargetFilterParams)}
         )
 
     def validate(self, src: str) -> None:

@@ -291,19 +291,10 @@ def adapt(
     rate is fed forward (:func:`energy_thrust`).
     """
     isf = math.isfinite
-    try:
-        # only row 2 is used (a numpy matrix or nested lists)
-        R2 = R_B_N[2].tolist() if hasattr(R_B_N, "tolist") else R_B_N[2]  # type: ignore[union-attr]
-        roll = math.atan2(R2[1], R2[2])
-        pitch = math.asin(_clip(-R2[0], -1.0, 1.0))
-        ox, oy, oz = omega_w1_I
-        if not (
-            isf(ox) and isf(oy) and isf(oz) and isf(airspeed) and isf(w1[0]) and isf(w1[1])
-            and isf(w1[2]) and isf(dt) and isf(roll) and isf(pitch) and airspeed > 0.0
-        ):  # fmt: skip
-            return safe_setpoint(params, roll), state
-    except (TypeError, ValueError, IndexError):
-        return safe_setpoint(params), state
+    roll, pitch, ok = _roll_pitch_if_finite(omega_w1_I, airspeed, R_B_N, w1, dt)
+    if not ok:
+        return safe_setpoint(params, roll), state
+    ox, oy, oz = omega_w1_I
     v = airspeed
     accel = (
         v * (oy * w1[2] - oz * w1[1]),
@@ -331,6 +322,74 @@ def adapt(
         bank = math.atan(math.tan(_clip(bank, -1.4, 1.4)) / k_turn)
     clipped = abs(bank) > params.max_bank_rad
     bank = _clip(bank, -params.max_bank_rad, params.max_bank_rad)
+    p, q, r, q_bias, q_free = _body_rates(
+        params, state, meas, dt, hold_s, roll, pitch, bank, chid, gamd
+    )
+    trim, pitch_sp = _pitch_setpoint(params, trim_hat, gamma, gamd)
+    thrust, en = _thrust(params, state, v, v_sp, gamma, gamd_law, trim, n, bal, dt, g)
+    qw, qx, qy, qz = quat = _euler_to_quat_wxyz(bank, pitch_sp, 0.0)
+    if not (
+        isf(p) and isf(q) and isf(r) and isf(thrust) and isf(bank) and isf(pitch_sp)
+        and isf(qw) and isf(qx) and isf(qy) and isf(qz)
+    ):  # fmt: skip
+        return safe_setpoint(params, roll), state
+    return Setpoint((p, q, r), quat, thrust, bank, pitch_sp, n), AdapterState(
+        en.integ, trim_hat, k_turn, bank, None if clipped else chid, q_bias,
+        q if q_free else None, en.v_prev, en.v_sp_prev, en.vdot_f, en.gam_f, en.balance,
+        en.gam_m_f, en.thrust_engaged,
+    )  # fmt: skip
+
+
+def _roll_pitch_if_finite(
+    omega_w1_I: Vec, airspeed: float, R_B_N: list[list[float]] | Any, w1: Vec, dt: float
+) -> tuple[float, float, bool]:
+    """(roll, pitch, ok) of the attitude R_B_N (rad); ok: every input of :func:`adapt` is
+    there, finite, and the airspeed positive (roll 0 when it could not be read)."""
+    isf = math.isfinite
+    try:
+        # only row 2 is used (a numpy matrix or nested lists)
+        R2 = R_B_N[2].tolist() if hasattr(R_B_N, "tolist") else R_B_N[2]  # type: ignore[union-attr]
+        roll = math.atan2(R2[1], R2[2])
+        pitch = math.asin(_clip(-R2[0], -1.0, 1.0))
+        ox, oy, oz = omega_w1_I
+        ok = (
+            isf(ox) and isf(oy) and isf(oz) and isf(airspeed) and isf(w1[0]) and isf(w1[1])
+            and isf(w1[2]) and isf(dt) and isf(roll) and isf(pitch) and airspeed > 0.0
+        )  # fmt: skip
+    except (TypeError, ValueError, IndexError):
+        return 0.0, 0.0, False
+    return roll, pitch, ok
+
+
+def _pitch_setpoint(
+    params: AdapterParams, trim_hat: float | None, gamma: float, gamd: float
+) -> tuple[float, float]:
+    """(trim, pitch set-point) rad: the flight-path angle of w1 (= theta - alpha) advanced by
+    tau_pitch, plus the trim angle of attack (learnt when ``adaptive``). Adding the trim to the
+    *measured* pitch would integrate it each cycle."""
+    trim = trim_hat if (params.adaptive and trim_hat is not None) else params.trim_pitch_rad
+    pitch_sp = _clip(
+        gamma + gamd * params.tau_pitch_s + trim,
+        params.min_pitch_rad,
+        params.max_pitch_rad,
+    )
+    return trim, pitch_sp
+
+
+def _body_rates(
+    params: AdapterParams,
+    state: AdapterState,
+    meas: tuple[Any, Any] | None,
+    dt: float,
+    hold_s: float,
+    roll: float,
+    pitch: float,
+    bank: float,
+    chid: float,
+    gamd: float,
+) -> tuple[float, float, float, float, bool]:
+    """(p, q, r) FRD rad/s for the bank set-point and the heading/flight-path rates chid, gamd;
+    with the pitch-rate bias learnt and whether no limit cut q (see :func:`adapt`)."""
     sphi, cphi = math.sin(roll), math.cos(roll)
     sth, cth = math.sin(pitch), math.cos(pitch)
     phid = (bank - roll) * roll_rate_gain(params.tau_roll_s, hold_s)
@@ -350,14 +409,24 @@ def adapt(
     r = _clip(
         -sphi * gamd_b + cphi * cth * chid, -params.max_yaw_rate_rad_s, params.max_yaw_rate_rad_s
     )
-    # Pitch: the flight-path angle of w1 (= theta - alpha) advanced by tau_pitch, plus the trim
-    # angle of attack. (Adding the trim to the *measured* pitch would integrate it each cycle.)
-    trim = trim_hat if (params.adaptive and trim_hat is not None) else params.trim_pitch_rad
-    pitch_sp = _clip(
-        gamma + gamd * params.tau_pitch_s + trim,
-        params.min_pitch_rad,
-        params.max_pitch_rad,
-    )
+    return p, q, r, q_bias, q_free
+
+
+def _thrust(
+    params: AdapterParams,
+    state: AdapterState,
+    v: float,
+    v_sp: float,
+    gamma: float,
+    gamd_law: float,
+    trim: float,
+    n: float,
+    bal: float,
+    dt: float,
+    g: float,
+) -> tuple[float, EnergyState]:
+    """Thrust (0..1) and the energy controller's memory: :func:`energy_thrust` when
+    ``energy_control`` is on, else the airspeed PI; ``n`` the load factor (feed-forward)."""
     ff = params.load_factor_ff * (n - 1.0)
     en = EnergyState(
         state.integ,
@@ -374,21 +443,9 @@ def adapt(
         gamma_c = gamma + gamd_law * params.tau_pitch_s
         gamma_c = _clip(gamma_c, params.min_pitch_rad - trim, params.max_pitch_rad - trim)
         gamma_law = gamma + gamd_law * params.tau_pitch_s
-        thrust, en = energy_thrust(params, en, v, v_sp, gamma, gamma_c, ff, dt, g, gamma_law)
-    else:
-        thrust, integ = _airspeed_pi(params, state.integ, v_sp - v, ff, dt)
-        en = en._replace(integ=integ)
-    qw, qx, qy, qz = quat = _euler_to_quat_wxyz(bank, pitch_sp, 0.0)
-    if not (
-        isf(p) and isf(q) and isf(r) and isf(thrust) and isf(bank) and isf(pitch_sp)
-        and isf(qw) and isf(qx) and isf(qy) and isf(qz)
-    ):  # fmt: skip
-        return safe_setpoint(params, roll), state
-    return Setpoint((p, q, r), quat, thrust, bank, pitch_sp, n), AdapterState(
-        en.integ, trim_hat, k_turn, bank, None if clipped else chid, q_bias,
-        q if q_free else None, en.v_prev, en.v_sp_prev, en.vdot_f, en.gam_f, en.balance,
-        en.gam_m_f, en.thrust_engaged,
-    )  # fmt: skip
+        return energy_thrust(params, en, v, v_sp, gamma, gamma_c, ff, dt, g, gamma_law)
+    thrust, integ = _airspeed_pi(params, state.integ, v_sp - v, ff, dt)
+    return thrust, en._replace(integ=integ)
 
 
 class EnergyState(NamedTuple):
@@ -495,10 +552,19 @@ def energy_thrust(
         integ = _clip(integ + p.energy_ki * e_E * dt, min(lo, 0.0), max(hi, 0.0))
     raw = base + integ
     thrust = _clip(raw, p.thrust_min, p.thrust_max)
-    k = p.thrust_per_gamma + p.energy_kp
-    u = (raw - thrust) / k if k > 0.0 else 0.0
-    # the flight path thrust sustains at its limit, against what the law asks (unclipped)
     law = gamma_c if gamma_law is None else gamma_law
+    bal = _priority_balance(p, bal, raw - thrust, v, gamma_c, law, dt)
+    return thrust, EnergyState(integ, v, v_sp, vdot_f, gam_f, bal, gam_m_f, t_eng)
+
+
+def _priority_balance(
+    p: AdapterParams, bal: float, unmet: float, v: float, gamma_c: float, law: float, dt: float
+) -> float:
+    """The priority's flight-path offset (rad, low-passed) of :func:`energy_thrust`: ``unmet``
+    the thrust its limit cut off (raw - applied), ``law`` the law's flight-path demand."""
+    k = p.thrust_per_gamma + p.energy_kp
+    u = unmet / k if k > 0.0 else 0.0
+    # the flight path thrust sustains at its limit, against what the law asks (unclipped)
     sus = gamma_c - u
     off = min(0.0, sus - law) if u > 0.0 else max(0.0, sus - law) if u < 0.0 else 0.0
     w = 0.0  # height: the flight path never gives way
@@ -512,7 +578,7 @@ def energy_thrust(
         bal += b * (target - bal)
         if abs(bal) < 1e-6 and target == 0.0:
             bal = 0.0
-    return thrust, EnergyState(integ, v, v_sp, vdot_f, gam_f, bal, gam_m_f, t_eng)
+    return bal
 
 
 def _pitch_rate_bias(

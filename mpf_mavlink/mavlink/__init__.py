@@ -47,6 +47,8 @@ from mpf_mavlink.mavlink.codec import (  # noqa: E402
     VfrHudSample,
     WindSample,
     decode,
+)
+from mpf_mavlink.mavlink.encode import (  # noqa: E402
     encode_arm,
     encode_companion_heartbeat,
     encode_do_reposition,
@@ -59,7 +61,12 @@ from mpf_mavlink.mavlink.codec import (  # noqa: E402
     encode_set_mode,
 )
 from mpf_mavlink.mavlink.link import Link, LinkCounters, open_link, wait_heartbeat  # noqa: E402
-from mpf_mavlink.mavlink.modes import Flavour, flavour_from_heartbeat, is_offboard, mode_name  # noqa: E402
+from mpf_mavlink.mavlink.modes import (  # noqa: E402
+    Flavour,
+    flavour_from_heartbeat,
+    is_offboard,
+    mode_name,
+)
 from mpf_mavlink.mavlink.signing import enable_signing, load_signing_key  # noqa: E402
 from mpf_mavlink.mavlink.tlog import TlogReadResult, TlogWriter, iter_tlog, read_tlog  # noqa: E402
 from mpf_mavlink.mavlink.url import parse_url  # noqa: E402

@@ -49,7 +49,8 @@ class BootClockGate:
     The FIRST clock is not simply the first sample's: a forged frame that happens to come first
     would become the reference and every genuine sample after it would be rejected. Until a
     clock is established, samples are sorted into candidate clocks (offsets within
-    ``fwd_tol_s + 0.25`` s, ``t_boot`` increasing per message type); the first to gather ``reset_count``
+    ``fwd_tol_s + 0.25`` s, ``t_boot`` increasing per message type); the first to gather
+    ``reset_count``
     samples is adopted (50 ms of a 50 Hz ATTITUDE + LOCAL_POSITION_NED stream). A repeated
     constant or a random time never forms one. Samples dropped meanwhile return "settling".
 

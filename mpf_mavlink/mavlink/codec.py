@@ -5,7 +5,8 @@ malformed MAVLink can neither crash the loop nor put a NaN into the state. Encod
 (``ValueError``) to put a non-finite number on the wire.
 
 The attitude decoders (one per control step) compute the matrices of
-:func:`mpf_mavlink.core.frames.euler_to_matrix` / :func:`~mpf_mavlink.core.frames.quat_wxyz_to_matrix` in
+:func:`mpf_mavlink.core.frames.euler_to_matrix` /
+:func:`~mpf_mavlink.core.frames.quat_wxyz_to_matrix` in
 scalar arithmetic (same conventions; tests hold them to those functions).
 """
 
@@ -19,29 +20,10 @@ from typing import Any
 import numpy as np
 
 from mpf_mavlink.mavlink import dialect as _d
-from mpf_mavlink.mavlink.encode import (
-    encode_arm,
-    encode_companion_heartbeat,
-    encode_do_reposition,
-    encode_get_home_position,
-    encode_request_data_stream,
-    encode_request_message,
-    encode_set_attitude_target_quat,
-    encode_set_attitude_target_rates,
-    encode_set_message_interval,
-    encode_set_mode,
-)
 from mpf_mavlink.mavlink.modes import (
     is_armed,
 )
 from mpf_mavlink.mavlink.wire_limits import (
-    ARM_FORCE_MAGIC,
-    MAV_CMD_COMPONENT_ARM_DISARM,
-    MAV_CMD_DO_REPOSITION,
-    MAV_CMD_DO_SET_MODE,
-    MAV_CMD_GET_HOME_POSITION,
-    MAV_CMD_REQUEST_MESSAGE,
-    MAV_CMD_SET_MESSAGE_INTERVAL,
     MAX_ACCEL_M_S2,
     MAX_ALT_M,
     MAX_ANGLE_RAD,
@@ -62,10 +44,9 @@ from mpf_mavlink.mavlink.wire_limits import (
     _geodetic_ok,
 )
 
-# The encoders (mpf_mavlink.mavlink.encode) and the wire limits (wire_limits) are re-exported:
-# callers import decoders, encoders and limits from this module.
+# The wire limits the decoders apply (wire_limits) are re-exported: callers import decoders and
+# limits from this module, encoders and command ids from mpf_mavlink.mavlink.encode/wire_limits.
 __all__ = [
-    "ARM_FORCE_MAGIC",
     "AttitudeSample",
     "AttitudeTargetSample",
     "CommandAckSample",
@@ -75,12 +56,6 @@ __all__ = [
     "HeartbeatSample",
     "HomeSample",
     "LocalPositionSample",
-    "MAV_CMD_COMPONENT_ARM_DISARM",
-    "MAV_CMD_DO_REPOSITION",
-    "MAV_CMD_DO_SET_MODE",
-    "MAV_CMD_GET_HOME_POSITION",
-    "MAV_CMD_REQUEST_MESSAGE",
-    "MAV_CMD_SET_MESSAGE_INTERVAL",
     "MAX_ACCEL_M_S2",
     "MAX_ALT_M",
     "MAX_ANGLE_RAD",
@@ -114,16 +89,6 @@ __all__ = [
     "decode_vfr_hud",
     "decode_wind",
     "decode_wind_cov",
-    "encode_arm",
-    "encode_companion_heartbeat",
-    "encode_do_reposition",
-    "encode_get_home_position",
-    "encode_request_data_stream",
-    "encode_request_message",
-    "encode_set_attitude_target_quat",
-    "encode_set_attitude_target_rates",
-    "encode_set_message_interval",
-    "encode_set_mode",
 ]
 
 
@@ -555,7 +520,10 @@ DECODED_TYPES = frozenset(_DECODERS)
 
 
 def decode(msg: Any) -> Any:
-    """Dispatch on ``msg.get_type()``; None for unhandled types or rejected content. Never raises."""
+    """Dispatch on ``msg.get_type()``; None for unhandled types or rejected content.
+
+    Never raises.
+    """
     try:
         fn = _DECODERS.get(msg.get_type())
         return fn(msg) if fn is not None else None

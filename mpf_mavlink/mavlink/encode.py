@@ -243,7 +243,8 @@ def encode_do_reposition(
     _check_ids(0, target_sys, target_comp)
     if not _geodetic_ok(lat_deg, lon_deg, alt_amsl_m) or not (0.0 < radius_m < 1e5):
         raise ValueError(
-            f"bad reposition target {lat_deg!r}, {lon_deg!r}, {alt_amsl_m!r} m, radius {radius_m!r} m"
+            f"bad reposition target {lat_deg!r}, {lon_deg!r}, {alt_amsl_m!r} m, radius "
+            f"{radius_m!r} m"
         )
     p3, p4 = (math.nan, math.nan) if px4 else (float(radius_m), 1.0 if counter_clockwise else 0.0)
     return mav.command_int_encode(

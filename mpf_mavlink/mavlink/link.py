@@ -27,7 +27,7 @@ from typing import Any
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.mavlink import DIALECT_NAME, dialect, mavutil
 from mpf_mavlink.mavlink.boot_clock import BootClockGate
-from mpf_mavlink.mavlink.codec import encode_companion_heartbeat
+from mpf_mavlink.mavlink.encode import encode_companion_heartbeat
 from mpf_mavlink.mavlink.ports import _Serial, _TcpClient
 from mpf_mavlink.mavlink.tlog import TlogWriter
 from mpf_mavlink.mavlink.url import MAV_COMP_ID_ONBOARD_COMPUTER, parse_url
@@ -80,6 +80,77 @@ class LinkCounters:
         return d
 
 
+class DatagramReader:
+    """Reads a pymavlink UDP connection datagram by datagram (:meth:`recv`).
+
+    MAVLink over UDP never splits a frame across datagrams, but pymavlink parses a UDP link
+    as one byte stream: a frame whose length byte points past the end of its datagram (a
+    truncated or corrupted packet) would be completed with the NEXT datagram's packets, and
+    when its CRC then fails, that whole stretch (up to 280 bytes of good telemetry, a
+    COMMAND_ACK) is thrown away. Here such a leftover is dropped (counted in ``bad_data``)
+    before the next datagram is parsed."""
+
+    __slots__ = ("conn", "counters")
+
+    def __init__(self, conn: Any, counters: LinkCounters) -> None:
+        self.conn = conn
+        self.counters = counters
+
+    def recv(self) -> Any:
+        """The next message of the current datagram, else of the next datagram (None: none)."""
+        # mavudp's pre_message does nothing, and post_message keeps pymavlink's own per-system
+        # tables (last messages, modes, loss counts) that nothing here reads: both skipped,
+        # they cost a quarter of a message's receive
+        conn, mav = self.conn, self.conn.mav
+        msg = mav.parse_char(b"")
+        if msg is None:
+            if mav.buf_len() > 0:
+                self.counters.bad_data += 1
+                mav.buf, mav.buf_index = bytearray(), 0
+                mav.expected_length = dialect.HEADER_LEN_V1 + 2
+            data = conn.recv()
+            if not data:
+                return None
+            if conn.first_byte:
+                conn.auto_mavlink_version(data)
+            msg = mav.parse_char(data)
+        return msg
+
+
+def _count_bad(c: LinkCounters, msg: Any, signing_counts_itself: bool) -> None:
+    """Count a BAD_DATA: an unsigned or badly signed packet while signing is on, or a bad
+    frame (a hardened signing setup counts its bad signatures itself)."""
+    if str(getattr(msg, "reason", "")) != "Invalid signature":
+        c.bad_data += 1
+        return
+    data = bytes(getattr(msg, "data", b"") or b"")
+    signed = len(data) > 2 and data[0] == 0xFD and bool(data[2] & 0x01)
+    if not signed:
+        c.rejected_unsigned += 1
+    elif not signing_counts_itself:
+        c.rejected_bad_signature += 1
+
+
+def _wait_readable(conn: Any, timeout_s: float) -> None:
+    """Wait until the connection has data or timeout_s (s) passed."""
+    fd = getattr(conn, "fd", None)
+    if fd is None or getattr(conn, "portdead", False):
+        time.sleep(timeout_s)
+        return
+    try:
+        select.select([fd], [], [], timeout_s)
+    except (OSError, ValueError):
+        time.sleep(timeout_s)
+
+
+def _advance_signing_timestamp(mav: Any) -> None:
+    """MAVLink signing timestamps are 10 us ticks since 2015-01-01 and must follow the wall
+    clock: pymavlink only adds 1 per packet, so a long session would fall behind and a rebooted
+    autopilot would reject us as a stale stream (> 60 s old)."""
+    now_ticks = int((time.time() - 1420070400) * 100_000)
+    mav.signing.timestamp = max(mav.signing.timestamp, now_ticks)
+
+
 class Link:
     """One MAVLink connection, filtered to the vehicle (and the other sources we trust).
 
@@ -121,7 +192,10 @@ class Link:
         self.signing_enabled = False
         self._signing_counts_itself = False  # set by signing.enable_signing(hardened=True)
         self._closed = False
-        self._udp = isinstance(conn, mavutil.mavudp)  # read datagram by datagram (_recv_udp)
+        # a UDP link is read datagram by datagram
+        self._udp = (
+            DatagramReader(conn, self.counters) if isinstance(conn, mavutil.mavudp) else None
+        )
         self.last_tx_s: float | None = None  # record time (s) of the latest packet sent
         self._tx_file: _LogThenWrite | None = None  # mav.file during a send (send)
 
@@ -157,37 +231,10 @@ class Link:
         return sysid in self.allowed_sysids
 
     # -- receive ----------------------------------------------------------------------------
-    def _recv_udp(self) -> Any:
-        """The next message of the current datagram, else of the next datagram.
-
-        MAVLink over UDP never splits a frame across datagrams, but pymavlink parses a UDP link
-        as one byte stream: a frame whose length byte points past the end of its datagram (a
-        truncated or corrupted packet) would be completed with the NEXT datagram's packets, and
-        when its CRC then fails, that whole stretch (up to 280 bytes of good telemetry, a
-        COMMAND_ACK) is thrown away. Here such a leftover is dropped (counted in ``bad_data``)
-        before the next datagram is parsed."""
-        # mavudp's pre_message does nothing, and post_message keeps pymavlink's own per-system
-        # tables (last messages, modes, loss counts) that nothing here reads: both skipped,
-        # they cost a quarter of a message's receive
-        conn, mav = self.conn, self.conn.mav
-        msg = mav.parse_char(b"")
-        if msg is None:
-            if mav.buf_len() > 0:
-                self.counters.bad_data += 1
-                mav.buf, mav.buf_index = bytearray(), 0
-                mav.expected_length = dialect.HEADER_LEN_V1 + 2
-            data = conn.recv()
-            if not data:
-                return None
-            if conn.first_byte:
-                conn.auto_mavlink_version(data)
-            msg = mav.parse_char(data)
-        return msg
-
     def _read_one(self) -> tuple[bool, Any]:
         """(more, msg): msg is an accepted message or None; more=False when no data is left."""
         try:
-            msg = self._recv_udp() if self._udp else self.conn.recv_msg()
+            msg = self._udp.recv() if self._udp is not None else self.conn.recv_msg()
         except OSError:
             self.counters.io_errors += 1
             return False, None
@@ -199,7 +246,7 @@ class Link:
         c = self.counters
         mtype = msg.get_type()
         if mtype == "BAD_DATA":
-            self._count_bad(msg)
+            _count_bad(c, msg, self._signing_counts_itself)
             return True, None
         c.rx_packets += 1
         # one receive time for the record and the clock gate, quantised as the tlog stores it
@@ -255,20 +302,6 @@ class Link:
         c.rx_by_type[mtype] += 1
         return True, msg
 
-    def _count_bad(self, msg: Any) -> None:
-        """Count a BAD_DATA: an unsigned or badly signed packet while signing is on, or a bad
-        frame."""
-        c = self.counters
-        if str(getattr(msg, "reason", "")) != "Invalid signature":
-            c.bad_data += 1
-            return
-        data = bytes(getattr(msg, "data", b"") or b"")
-        signed = len(data) > 2 and data[0] == 0xFD and bool(data[2] & 0x01)
-        if not signed:
-            c.rejected_unsigned += 1
-        elif not self._signing_counts_itself:
-            c.rejected_bad_signature += 1
-
     def recv(self, timeout_s: float = 0.0) -> Any:
         """Next accepted message, waiting at most ``timeout_s`` (0 = poll). Never raises on
         malformed input: bad frames, spoofed ids and rejected signatures are counted instead."""
@@ -284,7 +317,7 @@ class Link:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 return None
-            self._wait_readable(min(remaining, 0.05))
+            _wait_readable(self.conn, min(remaining, 0.05))
 
     def recv_all(self, timeout_s: float = 0.0) -> list[Any]:
         """Every accepted message available now (waiting up to timeout_s for the first)."""
@@ -295,16 +328,6 @@ class Link:
             m = self.recv(0.0)
         return out
 
-    def _wait_readable(self, timeout_s: float) -> None:
-        fd = getattr(self.conn, "fd", None)
-        if fd is None or getattr(self.conn, "portdead", False):
-            time.sleep(timeout_s)
-            return
-        try:
-            select.select([fd], [], [], timeout_s)
-        except (OSError, ValueError):
-            time.sleep(timeout_s)
-
     # -- send -------------------------------------------------------------------------------
     def send(self, msg: Any) -> None:
         """Pack (MAVLink 2, signed if signing is on), write and log one message."""
@@ -312,11 +335,7 @@ class Link:
             raise MpfError(f"link {self.url} is closed")
         mav = self.conn.mav
         if self.signing_enabled:
-            # MAVLink signing timestamps are 10 us ticks since 2015-01-01 and must follow the
-            # wall clock: pymavlink only adds 1 per packet, so a long session would fall behind
-            # and a rebooted autopilot would reject us as a stale stream (> 60 s old).
-            now_ticks = int((time.time() - 1420070400) * 100_000)
-            mav.signing.timestamp = max(mav.signing.timestamp, now_ticks)
+            _advance_signing_timestamp(mav)
         # pymavlink packs (seq, signing) and hands the bytes to mav.file.write: logging them
         # there, before the socket, means a process killed between the two (SIGKILL) never
         # leaves a packet the vehicle received out of the tlog (write-ahead; a packet the socket

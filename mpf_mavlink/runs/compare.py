@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mpf_mavlink.constants import GRAVITY_M_S2
+from mpf_mavlink.runs.rundir import convergence_time_s
 
 
 def distance_to_polyline(
@@ -84,13 +85,7 @@ def law_figures(
     rel = np.column_stack([cols["rel_x"], cols["rel_y"], cols["rel_z"]])
     ct = distance_to_polyline(path_nodes, rel, closed)
     m = t >= steady_after_s
-    above = np.nonzero(ct >= threshold_m)[0]
-    if len(above) == 0:
-        conv: float | None = float(t[0])
-    elif above[-1] == len(t) - 1:
-        conv = None
-    else:
-        conv = float(t[above[-1] + 1])
+    conv = convergence_time_s(t, ct, threshold_m)
     pt = cols["pt_norm"]
     rate = np.hypot(cols["w2_cmd"], cols["w3_cmd"])
     # the bank a coordinated turn at the achieved rate needs (the kinematic plant has no roll)

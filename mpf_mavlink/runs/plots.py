@@ -69,8 +69,9 @@ def _paths_ned(
     return out
 
 
-def _read_setpoints(d: Path) -> dict[str, NDArray[np.float64]] | None:
-    f = d / "setpoints.csv"
+def _read_columns(f: Path, min_rows: int = 1) -> dict[str, NDArray[np.float64]] | None:
+    """The columns of a CSV file with a header line, by name; None when the file is missing,
+    unreadable, ragged or has fewer than ``min_rows`` rows."""
     if not f.is_file():
         return None
     try:
@@ -78,9 +79,13 @@ def _read_setpoints(d: Path) -> dict[str, NDArray[np.float64]] | None:
         A = np.loadtxt(f, delimiter=",", skiprows=1, ndmin=2)
     except (OSError, ValueError):
         return None
-    if A.size == 0 or A.shape[1] != len(header):
+    if A.size == 0 or A.shape[1] != len(header) or A.shape[0] < min_rows:
         return None
     return {c: A[:, i] for i, c in enumerate(header)}
+
+
+def _read_setpoints(d: Path) -> dict[str, NDArray[np.float64]] | None:
+    return _read_columns(d / "setpoints.csv")
 
 
 def _steady_after(metrics: dict[str, Any]) -> float | None:
@@ -147,17 +152,93 @@ def _up_range(
 
 
 def _read_limits(d: Path) -> dict[str, NDArray[np.float64]] | None:
-    f = d / "limits.csv"
-    if not f.is_file():
-        return None
-    try:
-        header = f.open().readline().strip().split(",")
-        A = np.loadtxt(f, delimiter=",", skiprows=1, ndmin=2)
-    except (OSError, ValueError):
-        return None
-    if A.size == 0 or A.shape[1] != len(header) or A.shape[0] < 2:
-        return None
-    return {c: A[:, i] for i, c in enumerate(header)}
+    return _read_columns(d / "limits.csv", min_rows=2)
+
+
+def _hlines(ax: Any, vals: list[float], style: str, color: str, label: str) -> None:
+    """Horizontal lines at vals, labelled once."""
+    for i, v in enumerate(vals):
+        ax.axhline(v, ls=style, color=color, lw=0.9, label=label if i == 0 else None)
+
+
+def _limits_bank(ax: Any, tt: NDArray[np.float64], roll: NDArray[np.float64], vf: Any) -> None:
+    ax.plot(tt, np.degrees(roll), lw=0.8, color="tab:blue", label="bank")
+    bl = vf.get("bank_limit_rad")
+    if bl is not None:
+        b = math.degrees(bl)
+        _hlines(ax, [b, -b], "-", "tab:red", f"limit {b:.1f} deg")
+        tol = math.degrees(float(vf.get("bank_tolerance_rad") or 0.0))
+        if tol > 0:
+            hold = vf.get("limit_hold_s", 1)
+            _hlines(ax, [b + tol, -b - tol], ":", "tab:red",
+                    f"+{tol:.0f} deg: fails held > {hold:g} s")  # fmt: skip
+        band = vf.get("bank_band_rad")
+        if band is not None:
+            _hlines(ax, [math.degrees(band), -math.degrees(band)], "--", "tab:orange",
+                    f"limit less the margin ({math.degrees(band):.0f} deg)")  # fmt: skip
+    ax.set_ylabel("bank [deg]")
+
+
+def _limits_pitch(ax: Any, tt: NDArray[np.float64], pitch: NDArray[np.float64], vf: Any) -> None:
+    ax.plot(tt, np.degrees(pitch), lw=0.8, color="tab:blue", label="pitch")
+    pl = vf.get("pitch_limit_rad")
+    if pl is not None:
+        lim_deg = math.degrees(pl)
+        _hlines(ax, [lim_deg, -lim_deg], "-", "tab:red", f"limit {lim_deg:.0f} deg")
+    ax.set_ylabel("pitch [deg]")
+
+
+def _limits_airspeed(ax: Any, tt: NDArray[np.float64], vas: NDArray[np.float64], vf: Any) -> None:
+    ax.plot(tt, vas, lw=0.8, color="tab:blue", label="airspeed")
+    band_v = vf.get("airspeed_band_m_s")
+    if band_v:
+        _hlines(ax, list(band_v), "-", "tab:red", f"limits {band_v[0]:.1f} / {band_v[1]:.1f} m/s")
+    if vf.get("airspeed_m_s") is not None:
+        v = vf["airspeed_m_s"]
+        _hlines(ax, [float(v)], "--", "tab:green", f"law's airspeed {v:g} m/s")
+    ax.set_ylabel("airspeed [m/s]")
+
+
+def _limits_altitude(
+    ax: Any,
+    tt: NDArray[np.float64],
+    alt: NDArray[np.float64],
+    lim: dict[str, NDArray[np.float64]],
+    cols: dict[str, Any],
+    floor: Any,
+) -> None:
+    ax.plot(tt, alt, lw=0.8, color="tab:blue", label="altitude")
+    if "pf_d" in cols and len(cols["t"]):
+        _, pfu = _gapped(cols["t"], -cols["pf_d"])
+        ax.plot(_gapped(cols["t"], cols["t"])[0], pfu, lw=0.8, color="tab:green", alpha=0.8,
+                label="desired point")  # fmt: skip
+    if floor is not None:
+        _hlines(ax, [float(floor)], "-", "tab:red", f"floor {floor:g} m")
+    lo, hi = _up_range(lim["t"], lim["altitude"], steady_after=None)
+    ax.set_ylim(lo, hi)
+    ax.set_ylabel("altitude [m]")
+
+
+def _limits_thrust(ax: Any, tt: NDArray[np.float64], thr: NDArray[np.float64], vf: Any) -> None:
+    ax.plot(tt, thr, lw=0.8, color="tab:blue", label="thrust")
+    if vf.get("thrust_max") is not None:
+        _hlines(ax, [float(vf["thrust_max"])], "-", "tab:red", f"ceiling {vf['thrust_max']:g}")
+    ax.set_ylabel("thrust [0..1]")
+    ax.set_ylim(-0.05, 1.08)
+    ax.set_xlabel("t [s since engagement]")
+
+
+def _limits_title(metrics: dict[str, Any], vf: Any) -> str:
+    """The figure's title: the source of the figures and the verdict's head (its clauses are in
+    metrics.json and the command's last line)."""
+    src = {"truth": "the plant's truth (SIL)", "telemetry": "telemetry (thrust: as sent)"}.get(
+        str(vf.get("source")), "recorded"
+    )
+    verdict = str(metrics.get("verdict") or "").split(": ", 1)[-1]
+    head = verdict if verdict.startswith(("PASS", "NOT JUDGED")) else verdict.split("):")[0] + ")"
+    head = head if len(head) < 100 else head[:97] + "..."
+    title = f"Against the limits: {src}"
+    return title + (f"\nverdict: {head}" if verdict else "")
 
 
 def _plot_limits(
@@ -170,79 +251,17 @@ def _plot_limits(
 ) -> Path:
     """limits.png: bank, pitch, airspeed, altitude, thrust against time and their limits."""
     vf = metrics.get("verdict_figures") or {}
-    src = {"truth": "the plant's truth (SIL)", "telemetry": "telemetry (thrust: as sent)"}.get(
-        str(vf.get("source")), "recorded"
-    )
     t = lim["t"]
     fig, axs = plt.subplots(5, 1, figsize=(11, 11), sharex=True)
     tt, roll, pitch, vas, alt, thr = _gapped(
         t, lim["roll"], lim["pitch"], lim["airspeed"], lim["altitude"], lim["thrust"]
     )
-
-    def hlines(ax: Any, vals: list[float], style: str, color: str, label: str) -> None:
-        for i, v in enumerate(vals):
-            ax.axhline(v, ls=style, color=color, lw=0.9, label=label if i == 0 else None)
-
-    ax = axs[0]
-    ax.plot(tt, np.degrees(roll), lw=0.8, color="tab:blue", label="bank")
-    bl = vf.get("bank_limit_rad")
-    if bl is not None:
-        b = math.degrees(bl)
-        hlines(ax, [b, -b], "-", "tab:red", f"limit {b:.1f} deg")
-        tol = math.degrees(float(vf.get("bank_tolerance_rad") or 0.0))
-        if tol > 0:
-            hlines(ax, [b + tol, -b - tol], ":", "tab:red",
-                   f"+{tol:.0f} deg: fails held > {vf.get('limit_hold_s', 1):g} s")  # fmt: skip
-        band = vf.get("bank_band_rad")
-        if band is not None:
-            hlines(ax, [math.degrees(band), -math.degrees(band)], "--", "tab:orange",
-                   f"limit less the margin ({math.degrees(band):.0f} deg)")  # fmt: skip
-    ax.set_ylabel("bank [deg]")
-    ax = axs[1]
-    ax.plot(tt, np.degrees(pitch), lw=0.8, color="tab:blue", label="pitch")
-    pl = vf.get("pitch_limit_rad")
-    if pl is not None:
-        hlines(
-            ax,
-            [math.degrees(pl), -math.degrees(pl)],
-            "-",
-            "tab:red",
-            f"limit {math.degrees(pl):.0f} deg",
-        )
-    ax.set_ylabel("pitch [deg]")
-    ax = axs[2]
-    ax.plot(tt, vas, lw=0.8, color="tab:blue", label="airspeed")
-    band_v = vf.get("airspeed_band_m_s")
-    if band_v:
-        hlines(ax, list(band_v), "-", "tab:red", f"limits {band_v[0]:.1f} / {band_v[1]:.1f} m/s")
-    if vf.get("airspeed_m_s") is not None:
-        hlines(
-            ax,
-            [float(vf["airspeed_m_s"])],
-            "--",
-            "tab:green",
-            f"law's airspeed {vf['airspeed_m_s']:g} m/s",
-        )
-    ax.set_ylabel("airspeed [m/s]")
-    ax = axs[3]
-    ax.plot(tt, alt, lw=0.8, color="tab:blue", label="altitude")
-    if "pf_d" in cols and len(cols["t"]):
-        _, pfu = _gapped(cols["t"], -cols["pf_d"])
-        ax.plot(_gapped(cols["t"], cols["t"])[0], pfu, lw=0.8, color="tab:green", alpha=0.8,
-                label="desired point")  # fmt: skip
+    _limits_bank(axs[0], tt, roll, vf)
+    _limits_pitch(axs[1], tt, pitch, vf)
+    _limits_airspeed(axs[2], tt, vas, vf)
     floor = metrics.get("altitude_floor_m") or vf.get("altitude_floor_m")
-    if floor is not None:
-        hlines(ax, [float(floor)], "-", "tab:red", f"floor {floor:g} m")
-    lo, hi = _up_range(t, lim["altitude"], steady_after=None)
-    ax.set_ylim(lo, hi)
-    ax.set_ylabel("altitude [m]")
-    ax = axs[4]
-    ax.plot(tt, thr, lw=0.8, color="tab:blue", label="thrust")
-    if vf.get("thrust_max") is not None:
-        hlines(ax, [float(vf["thrust_max"])], "-", "tab:red", f"ceiling {vf['thrust_max']:g}")
-    ax.set_ylabel("thrust [0..1]")
-    ax.set_ylim(-0.05, 1.08)
-    ax.set_xlabel("t [s since engagement]")
+    _limits_altitude(axs[3], tt, alt, lim, cols, floor)
+    _limits_thrust(axs[4], tt, thr, vf)
     t_end = float(vf.get("tracked_s") or t[-1])
     for ax in axs:
         ax.grid(alpha=0.3)
@@ -250,12 +269,7 @@ def _plot_limits(
         if t_end < t[-1] - 1.0:
             ax.axvline(t_end, color="k", lw=0.8, ls="--", label="handed back")
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
-    # the verdict's head (its clauses are in metrics.json and the command's last line)
-    verdict = str(metrics.get("verdict") or "").split(": ", 1)[-1]
-    head = verdict if verdict.startswith(("PASS", "NOT JUDGED")) else verdict.split("):")[0] + ")"
-    head = head if len(head) < 100 else head[:97] + "..."
-    title = f"Against the limits: {src}"
-    fig.suptitle(title + (f"\nverdict: {head}" if verdict else ""), fontsize=10)
+    fig.suptitle(_limits_title(metrics, vf), fontsize=10)
     fig.subplots_adjust(left=0.08, right=0.74, bottom=0.05, top=0.91, hspace=0.1)
     p = d / "limits.png"
     fig.savefig(p, dpi=100)
@@ -263,185 +277,201 @@ def _plot_limits(
     return p
 
 
-def plot_run(d: str | Path) -> list[Path]:
-    """Draw every figure of the run directory d as PNG files; return their paths."""
-    import matplotlib
+class _Figures:
+    """The figures of one run directory: the columns read, what every figure shares (the path
+    where the target carried it, the steady window, the source of the figures) and the PNG
+    files written so far."""
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    def __init__(
+        self,
+        plt: Any,
+        d: Path,
+        cols: dict[str, Any],
+        path_T: NDArray[np.float64] | None,
+        metrics: dict[str, Any],
+    ) -> None:
+        self.plt, self.d, self.cols, self.path_T, self.metrics = plt, d, cols, path_T, metrics
+        self.t: NDArray[np.float64] = cols["t"]
+        self.out: list[Path] = []
+        self.paths = _paths_ned(cols, path_T)
+        self.steady_after = _steady_after(metrics)
+        vf = metrics.get("verdict_figures") or {}
+        self.src = {"truth": " (plant truth)", "telemetry": " (telemetry)"}.get(
+            str(vf.get("source")), ""
+        )
+        col = self.col
+        self.stationary = bool(
+            np.all(
+                np.ptp(np.column_stack([col("tgt_n"), col("tgt_e"), col("tgt_d")]), axis=0) < 1e-6
+            )
+        )
 
-    from mpf_mavlink.runs.rundir import read_run
+    def col(self, name: str) -> NDArray[np.float64]:
+        """A column, or NaN where the run directory has none (an older layout)."""
+        return self.cols[name] if name in self.cols else np.full(len(self.t), np.nan)
 
-    d = Path(d)
-    cols, path_T, metrics = read_run(d)
-    need = ("t", "p_n", "p_e", "p_d", "pt_norm")
-    missing = [c for c in need if c not in cols]
-    if missing:
-        raise MpfError(f"{d / 'timeseries.csv'}: not a run time series (no column {missing[0]!r})")
-    t = cols["t"]
-    out: list[Path] = []
-    if len(t) == 0:
-        return out
-
-    def col(name: str) -> NDArray[np.float64]:
-        return cols[name] if name in cols else np.full(len(t), np.nan)
-
-    def save(fig: Any, name: str, **margins: float) -> None:
+    def save(self, fig: Any, name: str, **margins: float) -> None:
         # Fixed margins instead of tight_layout, which draws every figure twice (a third of
         # the plotting time of a replay)
         fig.subplots_adjust(**{"left": 0.09, "right": 0.97, "bottom": 0.1, "top": 0.93, **margins})
-        p = d / name
+        p = self.d / name
         fig.savefig(p, dpi=110)
-        plt.close(fig)
-        out.append(p)
+        self.plt.close(fig)
+        self.out.append(p)
 
-    paths = _paths_ned(cols, path_T)
-    steady_after = _steady_after(metrics)
-    vf = metrics.get("verdict_figures") or {}
-    _src = {"truth": " (plant truth)", "telemetry": " (telemetry)"}.get(str(vf.get("source")), "")
-    stationary = bool(
-        np.all(np.ptp(np.column_stack([col("tgt_n"), col("tgt_e"), col("tgt_d")]), axis=0) < 1e-6)
-    )
-
-    # 1. 3D view (north, east, up) of the vehicle, the target, the desired point and the path.
-    fig = plt.figure(figsize=(7, 6))
-    ax = fig.add_subplot(projection="3d")
-    _, pn, pe, pd = _gapped(t, cols["p_n"], cols["p_e"], cols["p_d"])
-    ax.plot(pe, pn, -pd, lw=1.0, label="vehicle")
-    for i, (tk, P) in enumerate(paths):
-        ax.plot(P[:, 1], P[:, 0], -P[:, 2], "r-", lw=1.5, alpha=0.25 + 0.5 * (i + 1) / len(paths),
-                label=f"desired path at t = {tk:.0f} s")  # fmt: skip
-    if stationary:
-        ax.plot(col("tgt_e")[:1], col("tgt_n")[:1], -col("tgt_d")[:1], "k^", label="target")
-    else:
-        ax.plot(col("tgt_e"), col("tgt_n"), -col("tgt_d"), "k--", lw=1.0, label="target")
-    _, fn, fe, fd = _gapped(t, col("pf_n"), col("pf_e"), col("pf_d"))
-    ax.plot(fe, fn, -fd, lw=0.6, alpha=0.6, label="desired point p_f")
-    ax.set_xlabel("east [m]")
-    ax.set_ylabel("north [m]")
-    ax.set_zlabel("up [m]")
-    ax.legend(loc="upper left", fontsize=8)
-    ax.set_title(f"Moving path following (3D){_src}")
-    save(fig, "trajectory_3d.png", left=0.0, right=1.0, bottom=0.02, top=0.95)
-
-    # 2. Planar views: the vehicle's path against the moving desired path.
-    fig, axs = plt.subplots(1, 3, figsize=(14, 4.5))
-    views = [
-        ("p_e", "p_n", "east", "north", 1, 1, 1, 0),
-        ("p_n", "p_d", "north", "up", 1, -1, 0, 2),
-        ("p_e", "p_d", "east", "up", 1, -1, 1, 2),
-    ]
-    for ax, (a, b, la, lb, sa, sb, ia, ib) in zip(axs, views, strict=True):
-        ta, tb = "tgt_" + a[2:], "tgt_" + b[2:]
+    def trajectory_3d(self) -> None:
+        """3D view (north, east, up) of the vehicle, the target, the desired point and the path."""
+        t, cols, col, paths = self.t, self.cols, self.col, self.paths
+        fig = self.plt.figure(figsize=(7, 6))
+        ax = fig.add_subplot(projection="3d")
+        _, pn, pe, pd = _gapped(t, cols["p_n"], cols["p_e"], cols["p_d"])
+        ax.plot(pe, pn, -pd, lw=1.0, label="vehicle")
         for i, (tk, P) in enumerate(paths):
             alpha = 0.25 + 0.5 * (i + 1) / len(paths)
+            ax.plot(P[:, 1], P[:, 0], -P[:, 2], "r-", lw=1.5, alpha=alpha,
+                    label=f"desired path at t = {tk:.0f} s")  # fmt: skip
+        if self.stationary:
+            ax.plot(col("tgt_e")[:1], col("tgt_n")[:1], -col("tgt_d")[:1], "k^", label="target")
+        else:
+            ax.plot(col("tgt_e"), col("tgt_n"), -col("tgt_d"), "k--", lw=1.0, label="target")
+        _, fn, fe, fd = _gapped(t, col("pf_n"), col("pf_e"), col("pf_d"))
+        ax.plot(fe, fn, -fd, lw=0.6, alpha=0.6, label="desired point p_f")
+        ax.set_xlabel("east [m]")
+        ax.set_ylabel("north [m]")
+        ax.set_zlabel("up [m]")
+        ax.legend(loc="upper left", fontsize=8)
+        ax.set_title(f"Moving path following (3D){self.src}")
+        self.save(fig, "trajectory_3d.png", left=0.0, right=1.0, bottom=0.02, top=0.95)
+
+    def _planar_view(self, ax: Any, view: tuple[Any, ...]) -> None:
+        """One planar view: axes a, b (columns p_*, labels, signs, indices into the path)."""
+        t, cols, col = self.t, self.cols, self.col
+        a, b, la, lb, sa, sb, ia, ib = view
+        ta, tb = "tgt_" + a[2:], "tgt_" + b[2:]
+        for i, (tk, P) in enumerate(self.paths):
+            alpha = 0.25 + 0.5 * (i + 1) / len(self.paths)
             ax.plot(sa * P[:, ia], sb * P[:, ib], "r-", lw=1.5, alpha=alpha,
                     label=f"desired path at t = {tk:.0f} s")  # fmt: skip
         _, xa, xb = _gapped(t, cols[a], cols[b])
         ax.plot(sa * xa, sb * xb, lw=1.0, color="tab:blue", label="vehicle")
         _, fa, fb = _gapped(t, col("pf_" + a[2:]), col("pf_" + b[2:]))
-        ax.plot(
-            sa * fa,
-            sb * fb,
-            lw=0.8,
-            ls="--",
-            color="tab:orange",
-            zorder=3,
-            label="desired point p_f",
-        )
-        if stationary:
+        ax.plot(sa * fa, sb * fb, lw=0.8, ls="--", color="tab:orange", zorder=3,
+                label="desired point p_f")  # fmt: skip
+        if self.stationary:
             ax.plot(sa * col(ta)[:1], sb * col(tb)[:1], "k^", label="target")
         else:
             ax.plot(sa * col(ta), sb * col(tb), "k--", lw=1.0, label="target")
         ax.set_xlabel(f"{la} [m]")
         ax.set_ylabel(f"{lb} [m]")
         ax.grid(alpha=0.3)
-    axs[0].set_aspect("equal", adjustable="datalim")
-    axs[0].legend(fontsize=8)
-    # side views: the height scale of the vehicle and its desired point (after the capture when
-    # there is a steady window), so that a height error of a metre is visible; the target (on
-    # the ground under a path 100 m up) is off this scale and said so
-    lo, hi = _up_range(t, -cols["p_d"], -col("pf_d"), steady_after=steady_after)
-    for ax in axs[1:]:
-        ax.set_ylim(lo, hi)
-    tgt_up = -col("tgt_d")
-    if np.all(np.isfinite(tgt_up)) and (np.max(tgt_up) < lo or np.min(tgt_up) > hi):
-        axs[1].set_title(
-            f"side views scaled to the vehicle (target at {np.median(tgt_up):.0f} m up, off scale)",
-            fontsize=9,
+
+    def planar(self) -> None:
+        """Planar views: the vehicle's path against the moving desired path."""
+        t, col = self.t, self.col
+        fig, axs = self.plt.subplots(1, 3, figsize=(14, 4.5))
+        views = [
+            ("p_e", "p_n", "east", "north", 1, 1, 1, 0),
+            ("p_n", "p_d", "north", "up", 1, -1, 0, 2),
+            ("p_e", "p_d", "east", "up", 1, -1, 1, 2),
+        ]
+        for ax, view in zip(axs, views, strict=True):
+            self._planar_view(ax, view)
+        axs[0].set_aspect("equal", adjustable="datalim")
+        axs[0].legend(fontsize=8)
+        # side views: the height scale of the vehicle and its desired point (after the capture
+        # when there is a steady window), so that a height error of a metre is visible; the
+        # target (on the ground under a path 100 m up) is off this scale and said so
+        lo, hi = _up_range(t, -self.cols["p_d"], -col("pf_d"), steady_after=self.steady_after)
+        for ax in axs[1:]:
+            ax.set_ylim(lo, hi)
+        tgt_up = -col("tgt_d")
+        if np.all(np.isfinite(tgt_up)) and (np.max(tgt_up) < lo or np.min(tgt_up) > hi):
+            axs[1].set_title(
+                "side views scaled to the vehicle "
+                f"(target at {np.median(tgt_up):.0f} m up, off scale)",
+                fontsize=9,
+            )
+        fig.suptitle(
+            f"Planar views: vehicle against the moving desired path{self.src}", fontsize=11
         )
-    fig.suptitle(f"Planar views: vehicle against the moving desired path{_src}", fontsize=11)
-    save(fig, "planar.png", left=0.06, right=0.99, bottom=0.12, top=0.88, wspace=0.25)
+        self.save(fig, "planar.png", left=0.06, right=0.99, bottom=0.12, top=0.88, wspace=0.25)
 
-    # 3. Target-relative path: where the vehicle flew in {T}, against the path.
-    fig, ax = plt.subplots(figsize=(6, 6))
-    if path_T is not None and len(path_T):
-        ax.plot(path_T[:, 1], path_T[:, 0], "r-", lw=2, alpha=0.5, label="path p_d (in {T})")
-    if "rel_x" in cols and "rel_y" in cols:
-        _, rx, ry = _gapped(t, cols["rel_x"], cols["rel_y"])
-        ax.plot(ry, rx, lw=0.8, label="vehicle relative to target")
-        ax.plot(cols["rel_y"][:1], cols["rel_x"][:1], "go", label="start")
-    ax.set_xlabel("y_T (right) [m]")
-    ax.set_ylabel("x_T (forward) [m]")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title(f"Path in the target frame {{T}}{_src}", fontsize=10)
-    save(fig, "target_relative.png", left=0.13, bottom=0.09)
-
-    # 4. Errors: |pt| (log scale like the paper's zoom) and Psi.
-    fig, axs = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
-    tt, e, psi = _gapped(t, np.maximum(cols["pt_norm"], 1e-6), col("psi"))
-    axs[0].semilogy(tt, e)
-    axs[0].set_ylabel("|p~| [m]")
-    axs[0].grid(alpha=0.3, which="both")
-    rms = metrics.get("steady_rms_m")
-    conv = metrics.get("convergence_time_s")
-    conv_txt = "never" if conv is None else f"{conv:.3g} s"
-    rms_txt = "n/a (no steady window)" if rms is None else f"{rms:.3g} m"
-    axs[0].set_title(
-        f"Tracking errors{_src}: steady RMS |p~| {rms_txt}, convergence {conv_txt}", fontsize=10
-    )
-    for ax in axs:
-        _mark_window(ax, t, steady_after)
-    axs[1].plot(tt, psi)
-    axs[1].set_ylabel("Psi(R~)")
-    axs[1].set_xlabel("t [s]")
-    axs[1].grid(alpha=0.3)
-    if axs[0].get_legend_handles_labels()[0]:  # the window or the engagement is drawn
-        axs[0].legend(fontsize=8, loc="upper right")
-    save(fig, "errors.png", left=0.12, hspace=0.08)
-
-    # 5. sdot, 6. w2 and w3.
-    fig, axs = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
-    tt, sd, w2c, w3c, w2, w3 = _gapped(
-        t, col("sdot"), col("w2_cmd"), col("w3_cmd"), col("w2"), col("w3")
-    )
-    axs[0].plot(tt, sd)
-    axs[0].set_ylabel("sdot [m/s]")
-    axs[0].set_title(
-        f"Virtual-point speed and wind-frame rates{_src}\ncommanded (dark, on top) against "
-        "achieved (light: 1 s mean of the attitude difference)", fontsize=10,
-    )  # fmt: skip
-    for ax, k, cmd, ach in ((axs[1], "w2", w2c, w2), (axs[2], "w3", w3c, w3)):
-        # the achieved rate is a difference of attitudes at the telemetry rate: its raw noise
-        # (turbulence, quantisation) hides the command, so it is drawn filtered and under it
-        ax.plot(tt, _smooth(tt, ach, 1.0), lw=1.6, color="tab:orange", alpha=0.6, zorder=2,
-                label=f"{k} achieved (1 s mean)")  # fmt: skip
-        ax.plot(tt, cmd, lw=0.8, color="tab:blue", zorder=3, label=f"{k} commanded")
-        ax.set_ylabel(f"{k} [rad/s]")
-        _zoom(ax, cmd)
-        ax.legend(fontsize=8, loc="upper right")
-    for ax in axs:
+    def target_relative(self) -> None:
+        """Target-relative path: where the vehicle flew in {T}, against the path."""
+        cols, path_T = self.cols, self.path_T
+        fig, ax = self.plt.subplots(figsize=(6, 6))
+        if path_T is not None and len(path_T):
+            ax.plot(path_T[:, 1], path_T[:, 0], "r-", lw=2, alpha=0.5, label="path p_d (in {T})")
+        if "rel_x" in cols and "rel_y" in cols:
+            _, rx, ry = _gapped(self.t, cols["rel_x"], cols["rel_y"])
+            ax.plot(ry, rx, lw=0.8, label="vehicle relative to target")
+            ax.plot(cols["rel_y"][:1], cols["rel_x"][:1], "go", label="start")
+        ax.set_xlabel("y_T (right) [m]")
+        ax.set_ylabel("x_T (forward) [m]")
+        ax.set_aspect("equal", adjustable="datalim")
         ax.grid(alpha=0.3)
-        _mark_window(ax, t, steady_after)
-    axs[-1].set_xlabel("t [s]")
-    save(fig, "sdot_rates.png", left=0.12, bottom=0.07, top=0.92, hspace=0.08)
+        ax.legend(fontsize=8)
+        ax.set_title(f"Path in the target frame {{T}}{self.src}", fontsize=10)
+        self.save(fig, "target_relative.png", left=0.13, bottom=0.09)
 
-    # 7. The setpoints sent (bridge) or that would have been sent (replay).
-    sp = _read_setpoints(d)
-    if sp is not None and {"t", "bank", "pitch", "thrust", "p", "q", "r"} <= set(sp):
-        fig, axs = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
+    def errors(self) -> None:
+        """Errors: |pt| (log scale like the paper's zoom) and Psi."""
+        t, metrics = self.t, self.metrics
+        fig, axs = self.plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+        tt, e, psi = _gapped(t, np.maximum(self.cols["pt_norm"], 1e-6), self.col("psi"))
+        axs[0].semilogy(tt, e)
+        axs[0].set_ylabel("|p~| [m]")
+        axs[0].grid(alpha=0.3, which="both")
+        rms = metrics.get("steady_rms_m")
+        conv = metrics.get("convergence_time_s")
+        conv_txt = "never" if conv is None else f"{conv:.3g} s"
+        rms_txt = "n/a (no steady window)" if rms is None else f"{rms:.3g} m"
+        axs[0].set_title(
+            f"Tracking errors{self.src}: steady RMS |p~| {rms_txt}, convergence {conv_txt}",
+            fontsize=10,
+        )
+        for ax in axs:
+            _mark_window(ax, t, self.steady_after)
+        axs[1].plot(tt, psi)
+        axs[1].set_ylabel("Psi(R~)")
+        axs[1].set_xlabel("t [s]")
+        axs[1].grid(alpha=0.3)
+        if axs[0].get_legend_handles_labels()[0]:  # the window or the engagement is drawn
+            axs[0].legend(fontsize=8, loc="upper right")
+        self.save(fig, "errors.png", left=0.12, hspace=0.08)
+
+    def sdot_rates(self) -> None:
+        """sdot, w2 and w3 (commanded against achieved)."""
+        t, col = self.t, self.col
+        fig, axs = self.plt.subplots(3, 1, figsize=(8, 8), sharex=True)
+        tt, sd, w2c, w3c, w2, w3 = _gapped(
+            t, col("sdot"), col("w2_cmd"), col("w3_cmd"), col("w2"), col("w3")
+        )
+        axs[0].plot(tt, sd)
+        axs[0].set_ylabel("sdot [m/s]")
+        axs[0].set_title(
+            f"Virtual-point speed and wind-frame rates{self.src}\ncommanded (dark, on top) "
+            "against achieved (light: 1 s mean of the attitude difference)", fontsize=10,
+        )  # fmt: skip
+        for ax, k, cmd, ach in ((axs[1], "w2", w2c, w2), (axs[2], "w3", w3c, w3)):
+            # the achieved rate is a difference of attitudes at the telemetry rate: its raw
+            # noise (turbulence, quantisation) hides the command, so it is drawn filtered and
+            # under it
+            ax.plot(tt, _smooth(tt, ach, 1.0), lw=1.6, color="tab:orange", alpha=0.6, zorder=2,
+                    label=f"{k} achieved (1 s mean)")  # fmt: skip
+            ax.plot(tt, cmd, lw=0.8, color="tab:blue", zorder=3, label=f"{k} commanded")
+            ax.set_ylabel(f"{k} [rad/s]")
+            _zoom(ax, cmd)
+            ax.legend(fontsize=8, loc="upper right")
+        for ax in axs:
+            ax.grid(alpha=0.3)
+            _mark_window(ax, t, self.steady_after)
+        axs[-1].set_xlabel("t [s]")
+        self.save(fig, "sdot_rates.png", left=0.12, bottom=0.07, top=0.92, hspace=0.08)
+
+    def setpoints(self, sp: dict[str, NDArray[np.float64]]) -> None:
+        """The setpoints sent (bridge) or that would have been sent (replay)."""
+        fig, axs = self.plt.subplots(3, 1, figsize=(8, 8), sharex=True)
         ts, bank, pitch, thr, p, q, r = _gapped(
             sp["t"], sp["bank"], sp["pitch"], sp["thrust"], sp["p"], sp["q"], sp["r"]
         )
@@ -461,11 +491,38 @@ def plot_run(d: str | Path) -> list[Path]:
         )
         for ax in axs:
             ax.grid(alpha=0.3)
-        save(fig, "setpoints.png", left=0.12, bottom=0.07, top=0.95, hspace=0.08)
+        self.save(fig, "setpoints.png", left=0.12, bottom=0.07, top=0.95, hspace=0.08)
 
-    # 8. What the verdict judged against the limits (limits.csv): bank, pitch, airspeed,
-    # altitude and thrust against time, with the limits, the engagement and the steady window.
+
+def plot_run(d: str | Path) -> list[Path]:
+    """Draw every figure of the run directory d as PNG files; return their paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mpf_mavlink.runs.rundir import read_run
+
+    d = Path(d)
+    cols, path_T, metrics = read_run(d)
+    need = ("t", "p_n", "p_e", "p_d", "pt_norm")
+    missing = [c for c in need if c not in cols]
+    if missing:
+        raise MpfError(f"{d / 'timeseries.csv'}: not a run time series (no column {missing[0]!r})")
+    if len(cols["t"]) == 0:
+        return []
+    figs = _Figures(plt, d, cols, path_T, metrics)
+    figs.trajectory_3d()
+    figs.planar()
+    figs.target_relative()
+    figs.errors()
+    figs.sdot_rates()
+    sp = _read_setpoints(d)
+    if sp is not None and {"t", "bank", "pitch", "thrust", "p", "q", "r"} <= set(sp):
+        figs.setpoints(sp)
+    # What the verdict judged against the limits (limits.csv): bank, pitch, airspeed, altitude
+    # and thrust against time, with the limits, the engagement and the steady window.
     lim = _read_limits(d)
     if lim is not None:
-        out.append(_plot_limits(plt, d, lim, metrics, cols, steady_after))
-    return out
+        figs.out.append(_plot_limits(plt, d, lim, metrics, cols, figs.steady_after))
+    return figs.out

@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.bridge.controller import SETPOINT_COLUMNS, Controller, Step, parse_marker
+from mpf_mavlink.bridge.controller import Controller, Step, parse_marker, write_setpoints
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.adapter import Setpoint, safe_setpoint
 from mpf_mavlink.errors import MpfError
@@ -245,7 +245,8 @@ class _Replayer:
             self.s0 = self.ctl.init_s()
             self.origin = "first complete state in the window (no MPF markers)"
             self.notes.append(
-                f"origin taken at {self._t_rel(t):.2f} s: t0 = {t0:.3f} s boot time, s0 = {self.s0:.2f} m"
+                f"origin taken at {self._t_rel(t):.2f} s: t0 = {t0:.3f} s boot time, s0 = "
+                f"{self.s0:.2f} m"
             )
             self.phase = "streaming"
 
@@ -290,7 +291,8 @@ class _Replayer:
                 if est is None or est.t_boot_s != value:
                     seen = "no state" if est is None else repr(est.t_boot_s)
                     self.notes.append(
-                        f"the bridge took t0 = {value!r} s, this replay's state gives {seen}: the tlog and the code/config disagree"
+                        f"the bridge took t0 = {value!r} s, this replay's state gives {seen}: the "
+                        "tlog and the code/config disagree"
                     )
                 self.ctl.set_origin(value)
                 self.origin = "MPF markers of the bridge"
@@ -304,7 +306,8 @@ class _Replayer:
                     self.notes.append(f"at the s0 marker: {e}")
                 if mine is not None and mine != value:
                     self.notes.append(
-                        f"the bridge took s0 = {value!r} m, this config gives {mine!r} m: the tlog and the code/config disagree"
+                        f"the bridge took s0 = {value!r} m, this config gives {mine!r} m: the "
+                        "tlog and the code/config disagree"
                     )
                 self.s0 = self.ctl.init_s(value)
             elif key == "stream":
@@ -323,7 +326,10 @@ class _Replayer:
             return
         c = self.check
         rec = _sat_fields(msg)
-        where = f"SET_ATTITUDE_TARGET #{self._n_sat} (tlog record {i}, t = {self._t_rel(t):.3f} s, time_boot_ms {int(rec['time_boot_ms'])})"
+        where = (
+            f"SET_ATTITUDE_TARGET #{self._n_sat} (tlog record {i}, t = {self._t_rel(t):.3f} s, "
+            f"time_boot_ms {int(rec['time_boot_ms'])})"
+        )
         st = self._pending
         if st is not None and rec["time_boot_ms"] == st.time_boot_ms:
             self.ctl.note_sent(t)  # the step's first send measures the loop delay (TIMESYNC)
@@ -354,10 +360,9 @@ class _Replayer:
         c = self.check
         c.compared += 1
         if self._pending_since_match and c.compared > 1:
-            c.unsent_steps += self._pending_since_match
-            self._difference(
-                f"before {where}: {self._pending_since_match} replayed control step(s) were never sent"
-            )
+            unsent = self._pending_since_match
+            c.unsent_steps += unsent
+            self._difference(f"before {where}: {unsent} replayed control step(s) were never sent")
         self._pending_since_match = 0
         st = self._pending
         if st is not None:
@@ -404,6 +409,98 @@ def _gaps(
     return [(float(rec[k] - t_first), float(dt[k])) for k in idx], thr
 
 
+def _read_window(
+    path: str, t_from: float | None, t_to: float | None
+) -> tuple[list[tuple[int, float, Any]], TlogStats, float, float, float]:
+    """(messages, stats, duration, from, to) of the tlog at ``path``: every decoded message as
+    (index of the record among the good ones, time, message), the window in s since the first
+    record. Raises MpfError (one line) for a missing file, no MAVLink record, or a bad window."""
+    if not os.path.isfile(path):
+        raise MpfError(f"{path}: no such tlog file")
+    stats = TlogStats()
+    # iter_tlog counts a record before it yields it. Every type is decoded: the link's clock
+    # gate sees every message of the vehicle that carries a time_boot_ms, so the replay's must
+    # too.
+    messages = [(stats.records - 1, t, msg) for t, msg in iter_tlog(path, stats=stats)]
+    if stats.records == 0 or stats.t_first_s is None or stats.t_last_s is None:
+        raise MpfError(
+            f"{path}: not a tlog (no MAVLink record with a valid CRC in {os.path.getsize(path)} "
+            "bytes)"
+        )
+    duration = stats.t_last_s - stats.t_first_s
+    a = 0.0 if t_from is None else float(t_from)
+    b = duration if t_to is None else float(t_to)
+    if not (math.isfinite(a) and math.isfinite(b)) or a < 0.0 or b <= a or a > duration:
+        raise MpfError(
+            f"bad window --from {a:g} --to {b:g}: need 0 <= from < to and from <= {duration:.2f} "
+            "s (the log's length)"
+        )
+    return messages, stats, duration, a, b
+
+
+def _replay_metrics(cols: dict[str, Any], cfg: Config) -> dict[str, Any]:
+    """The run's metrics (as the bridge's), with the median and final |pt| and the fraction of
+    steps that broke Assumption 1 when anything was replayed."""
+    mc = cfg.metrics
+    metrics = compute_metrics(cols, mc.steady_after_s, mc.converge_threshold_m)
+    if len(cols["t"]):
+        metrics["median_pt_m"] = float(np.median(cols["pt_norm"]))
+        metrics["final_pt_m"] = float(cols["pt_norm"][-1])
+        metrics["assumption1_violated_fraction"] = float(np.mean(cols["margin"] <= 0.0))
+    return metrics
+
+
+def _replay_figures(
+    rp: _Replayer,
+    path: str,
+    cfg: Config,
+    stats: TlogStats,
+    window: tuple[float, float],
+    gaps: list[Any],
+) -> dict[str, Any]:
+    """metrics.json's ``replay`` entry: the log, the window, what was replayed and how the
+    commands compared."""
+    c = rp.check
+    return {
+        "tlog": path, "config": cfg.source, "window_s": list(window), "records": stats.records,
+        "skipped_regions": stats.skipped_regions, "skipped_bytes": stats.skipped_bytes,
+        "truncated_tail_bytes": stats.truncated_tail_bytes, "counts": dict(stats.counts),
+        "modes": [list(x) for x in rp.modes], "attitude_gaps": [list(g) for g in gaps],
+        "origin": rp.origin, "t0_boot_s": rp.ctl.t0, "s0_m": rp.s0, "steps": rp.steps,
+        "skipped_steps": dict(rp.skip_reasons), "link_rejected": dict(rp.link.rejected),
+        "commands": {
+            "markers": c.markers, "sent": c.sent, "compared": c.compared, "resent": c.resent,
+            "safe": c.safe, "differing": c.differing, "unexplained": c.unexplained,
+            "unsent_steps": c.unsent_steps, "max_diff": c.max_diff, "identical": c.identical,
+            "first_difference": c.first_difference,
+        },
+    }  # fmt: skip
+
+
+def _write_replay(
+    out: Path,
+    rp: _Replayer,
+    cfg: Config,
+    cols: dict[str, Any],
+    metrics: dict[str, Any],
+    plots: bool,
+) -> None:
+    """The run directory: setpoints.csv, the recorded flight against the limits (limits.csv,
+    the verdict's figures), then timeseries.csv, metrics.json and the figures."""
+    # setpoints first: the plots draw them too
+    write_setpoints(out, rp.sp_rows)
+    if rp.lim_rows:
+        L = np.array(rp.lim_rows, float)
+        L[:, 0] -= L[0, 0]  # s since the first replayed step, as the steady window counts
+        # the recorded flight against the limits (the verdict's figures; replay keeps its
+        # own exit codes)
+        vd = assess(cfg, L[:, 0], cols["pt_norm"], L[:, 4], L[:, 3], L[:, 1], L[:, 2],
+                    L[:, 5], source="telemetry")  # fmt: skip
+        vd.record(metrics)
+        write_limits(out, L)
+    write_run(out, cols, metrics, rp.ctl.path.positions(), plots=plots and len(cols["t"]) >= 2)
+
+
 def replay(
     tlog: str | os.PathLike[str],
     cfg: Config,
@@ -420,32 +517,17 @@ def replay(
     window is empty."""
     wall0 = time.perf_counter()
     path = os.fspath(tlog)
-    if not os.path.isfile(path):
-        raise MpfError(f"{path}: no such tlog file")
     m = cfg.section("mavlink")
-    stats = TlogStats()
-    # (index of the record among the good ones, time, message): iter_tlog counts a record
-    # before it yields it. Every type is decoded: the link's clock gate sees every message of
-    # the vehicle that carries a time_boot_ms, so the replay's must too.
-    messages = [(stats.records - 1, t, msg) for t, msg in iter_tlog(path, stats=stats)]
-    if stats.records == 0 or stats.t_first_s is None or stats.t_last_s is None:
-        raise MpfError(
-            f"{path}: not a tlog (no MAVLink record with a valid CRC in {os.path.getsize(path)} bytes)"
-        )
-    duration = stats.t_last_s - stats.t_first_s
-    a = 0.0 if t_from is None else float(t_from)
-    b = duration if t_to is None else float(t_to)
-    if not (math.isfinite(a) and math.isfinite(b)) or a < 0.0 or b <= a or a > duration:
-        raise MpfError(
-            f"bad window --from {a:g} --to {b:g}: need 0 <= from < to and from <= {duration:.2f} s (the log's length)"
-        )
+    messages, stats, duration, a, b = _read_window(path, t_from, t_to)
+    assert stats.t_first_s is not None  # _read_window checked it
     # only now: a wrong file or window must not leave an empty run directory behind
     out = prepare_out_dir(Path(out_dir)) if out_dir is not None else None
     own = (m.source_system, m.source_component)
     markers = _has_markers(messages, own)
     rp = _Replayer(cfg, a, b, stats.t_first_s, markers)
     log(
-        f"replaying {len(messages)} messages of {path} ({'with' if markers else 'without'} the bridge's markers)"
+        f"replaying {len(messages)} messages of {path} ({'with' if markers else 'without'} the "
+        "bridge's markers)"
     )
     for i, t, msg in messages:
         rp.feed(i, t, msg)
@@ -453,66 +535,50 @@ def replay(
         s0, _, n = rp.modes[-1]
         rp.modes[-1] = (s0, duration, n)
     cols = rp.table.arrays()
-    mc = cfg.metrics
-    metrics = compute_metrics(cols, mc.steady_after_s, mc.converge_threshold_m)
-    if len(cols["t"]):
-        metrics["median_pt_m"] = float(np.median(cols["pt_norm"]))
-        metrics["final_pt_m"] = float(cols["pt_norm"][-1])
-        metrics["assumption1_violated_fraction"] = float(np.mean(cols["margin"] <= 0.0))
+    metrics = _replay_metrics(cols, cfg)
     gaps, thr = _gaps(rp.att_times, stats.t_first_s, m.telemetry_timeout_s)
     if rp.phase in ("wait_heartbeat",):
         rp.notes.append(
-            f"no autopilot HEARTBEAT from system {m.vehicle_sysid}: nothing was replayed (mavlink.vehicle_sysid?)"
+            f"no autopilot HEARTBEAT from system {m.vehicle_sysid}: nothing was replayed "
+            "(mavlink.vehicle_sysid?)"
         )
     elif rp.ctl.t0 is None:
         rp.notes.append(f"never a complete state: {rp.ctl.why_not}")
     res = ReplayResult(
-        path=path, config=cfg.source, flavour=rp.flavour.value, records=stats.records,
-        skipped_regions=stats.skipped_regions, skipped_bytes=stats.skipped_bytes,
-        truncated_tail_bytes=stats.truncated_tail_bytes, unknown_msgids=stats.unknown_msgids,
-        t_first_s=stats.t_first_s, duration_s=duration, window=(a, b), counts=dict(stats.counts),
-        modes=rp.modes, gaps=gaps, gap_threshold_s=thr, attitude_samples=len(rp.att_times),
-        steps=rp.steps, skipped_steps=dict(rp.skip_reasons), link_rejected=dict(rp.link.rejected), recorded=len(cols["t"]), origin=rp.origin, t0_boot_s=rp.ctl.t0, s0_m=rp.s0,
-        check=rp.check, metrics=metrics, notes=rp.notes, out_dir=out,
-    )  # fmt: skip
-    c = rp.check
-    metrics["replay"] = {
-        "tlog": path, "config": cfg.source, "window_s": [a, b], "records": stats.records,
-        "skipped_regions": stats.skipped_regions, "skipped_bytes": stats.skipped_bytes,
-        "truncated_tail_bytes": stats.truncated_tail_bytes, "counts": dict(stats.counts),
-        "modes": [list(x) for x in rp.modes], "attitude_gaps": [list(g) for g in gaps],
-        "origin": rp.origin, "t0_boot_s": rp.ctl.t0, "s0_m": rp.s0, "steps": rp.steps,
-        "skipped_steps": dict(rp.skip_reasons), "link_rejected": dict(rp.link.rejected),
-        "commands": {
-            "markers": c.markers, "sent": c.sent, "compared": c.compared, "resent": c.resent,
-            "safe": c.safe, "differing": c.differing, "unexplained": c.unexplained,
-            "unsent_steps": c.unsent_steps, "max_diff": c.max_diff, "identical": c.identical,
-            "first_difference": c.first_difference,
-        },
-    }  # fmt: skip
+        path=path,
+        config=cfg.source,
+        flavour=rp.flavour.value,
+        records=stats.records,
+        skipped_regions=stats.skipped_regions,
+        skipped_bytes=stats.skipped_bytes,
+        truncated_tail_bytes=stats.truncated_tail_bytes,
+        unknown_msgids=stats.unknown_msgids,
+        t_first_s=stats.t_first_s,
+        duration_s=duration,
+        window=(a, b),
+        counts=dict(stats.counts),
+        modes=rp.modes,
+        gaps=gaps,
+        gap_threshold_s=thr,
+        attitude_samples=len(rp.att_times),
+        steps=rp.steps,
+        skipped_steps=dict(rp.skip_reasons),
+        link_rejected=dict(rp.link.rejected),
+        recorded=len(cols["t"]),
+        origin=rp.origin,
+        t0_boot_s=rp.ctl.t0,
+        s0_m=rp.s0,
+        check=rp.check,
+        metrics=metrics,
+        notes=rp.notes,
+        out_dir=out,
+    )
+    metrics["replay"] = _replay_figures(rp, path, cfg, stats, (a, b), gaps)
     kf = getattr(rp.ctl.target, "kf", None)  # the live target's estimator: what became of reports
     if kf is not None:
         metrics["replay"]["target_estimator"] = dict(kf.counts)
     if out is not None:
-        # setpoints first: the plots draw them too
-        np.savetxt(
-            out / "setpoints.csv",
-            np.array(rp.sp_rows, float).reshape(-1, 13),
-            delimiter=",",
-            header=SETPOINT_COLUMNS,
-            comments="",
-            fmt="%.9g",
-        )
-        if rp.lim_rows:
-            L = np.array(rp.lim_rows, float)
-            L[:, 0] -= L[0, 0]  # s since the first replayed step, as the steady window counts
-            # the recorded flight against the limits (the verdict's figures; replay keeps its
-            # own exit codes)
-            vd = assess(cfg, L[:, 0], cols["pt_norm"], L[:, 4], L[:, 3], L[:, 1], L[:, 2],
-                        L[:, 5], source="telemetry")  # fmt: skip
-            vd.record(metrics)
-            write_limits(out, L)
-        write_run(out, cols, metrics, rp.ctl.path.positions(), plots=plots and len(cols["t"]) >= 2)
+        _write_replay(out, rp, cfg, cols, metrics, plots)
     res.elapsed_s = time.perf_counter() - wall0
     return res
 

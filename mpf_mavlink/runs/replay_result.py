@@ -86,7 +86,10 @@ class CommandCheck:
         if self.sent == 0:
             return "no SET_ATTITUDE_TARGET from our ids in this tlog: nothing to compare"
         if not self.markers:
-            return f"{self.sent} SET_ATTITUDE_TARGET from our ids but no MPF markers (not recorded by this bridge): not compared"
+            return (
+                f"{self.sent} SET_ATTITUDE_TARGET from our ids but no MPF markers (not recorded "
+                "by this bridge): not compared"
+            )
         head = (
             f"{self.compared} commands compared (max |diff| {self.max_diff:.3g}), "
             f"{self.resent} re-sends, {self.safe} safe setpoints"
@@ -146,7 +149,8 @@ class ReplayResult:
             f"records           {self.records} good; {skip}; {self.unknown_msgids} unknown ids"
         )
         lines.append(
-            f"duration          {self.duration_s:.2f} s; window {self.window[0]:.2f} .. {self.window[1]:.2f} s"
+            f"duration          {self.duration_s:.2f} s; window {self.window[0]:.2f} .. "
+            f"{self.window[1]:.2f} s"
         )
         top = sorted(self.counts.items(), key=lambda kv: (-kv[1], kv[0]))
         shown = ", ".join(f"{k} {v}" for k, v in top[:12])
@@ -161,11 +165,13 @@ class ReplayResult:
             worst = sorted(self.gaps, key=lambda g: -g[1])[:5]
             txt = ", ".join(f"{b:.2f} s at {a:.1f} s" for a, b in worst)
             lines.append(
-                f"telemetry gaps    {len(self.gaps)} ATTITUDE gaps > {self.gap_threshold_s:.2f} s of autopilot time (longest: {txt})"
+                f"telemetry gaps    {len(self.gaps)} ATTITUDE gaps > {self.gap_threshold_s:.2f} s "
+                f"of autopilot time (longest: {txt})"
             )
         else:
             lines.append(
-                f"telemetry gaps    none > {self.gap_threshold_s:.2f} s in {self.attitude_samples} ATTITUDE samples"
+                f"telemetry gaps    none > {self.gap_threshold_s:.2f} s in "
+                f"{self.attitude_samples} ATTITUDE samples"
             )
         if self.link_rejected:
             why = ", ".join(
@@ -200,7 +206,8 @@ class ReplayResult:
             lines.append(f"note              {n}")
         if self.out_dir is not None:
             lines.append(
-                f"run directory     {self.out_dir}  (timeseries.csv, setpoints.csv, metrics.json, *.png)"
+                f"run directory     {self.out_dir}  (timeseries.csv, setpoints.csv, metrics.json, "
+                "*.png)"
             )
         lines.append(f"replay took       {self.elapsed_s:.2f} s")
         return "\n".join(lines)

@@ -88,6 +88,22 @@ def row_from(
     ]  # fmt: skip
 
 
+def convergence_time_s(
+    t: NDArray[np.float64], err: NDArray[np.float64], threshold: float
+) -> float | None:
+    """The time (s) from which ``err`` stays below ``threshold`` to the end of the run.
+
+    ``t[0]`` if it never reaches the threshold; None if it is still at or above it at the last
+    sample (the run never converged). ``t`` must not be empty.
+    """
+    above = np.nonzero(err >= threshold)[0]
+    if len(above) == 0:
+        return float(t[0])
+    if above[-1] == len(t) - 1:
+        return None
+    return float(t[above[-1] + 1])
+
+
 def compute_metrics(
     cols: dict[str, NDArray[np.float64]], steady_after_s: float, threshold_m: float = 1.0
 ) -> dict[str, Any]:
@@ -107,13 +123,7 @@ def compute_metrics(
     if len(t) == 0:
         return {"convergence_time_s": None, "steady_rms_m": None, "steady_max_m": None,
                 "steady_psi_max": None, "max_rate_cmd_rad_s": None}  # fmt: skip
-    above = np.nonzero(e >= threshold_m)[0]
-    if len(above) == 0:
-        conv: float | None = float(t[0])
-    elif above[-1] == len(t) - 1:
-        conv = None
-    else:
-        conv = float(t[above[-1] + 1])
+    conv = convergence_time_s(t, e, threshold_m)
     inside = np.nonzero(e < threshold_m)[0]
     first = float(t[inside[0]]) if len(inside) else None
     m = t >= steady_after_s

@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.config.schema import Config
+from mpf_mavlink.config.schema import Config, MetricsConfig, VehicleConfig
 
 #: exit code of a flight that ran to its end but failed its verdict (3: refused by the checks,
 #: 4: a safety exit of the bridge)
@@ -163,6 +163,127 @@ class Verdict:
         metrics["verdict_figures"] = self.figures
 
 
+@dataclass
+class _Window:
+    """What every clause of :func:`assess` judges against: the flight's times, its steady
+    window, the hold and fraction limits, and where the failures and figures go."""
+
+    m: MetricsConfig
+    t: np.ndarray
+    steady: np.ndarray
+    steady_s: float
+    judged_steady: bool
+    out: list[tuple[str, str]]
+    fig: dict[str, Any]
+
+    @property
+    def hold(self) -> float:
+        return self.m.limit_hold_s
+
+    @property
+    def frac_lim(self) -> float:
+        return self.m.limit_fraction
+
+
+def _judge_loss_of_control(w: _Window, roll: np.ndarray, pitch: np.ndarray) -> None:
+    r, p = np.abs(np.asarray(roll, float)), np.abs(np.asarray(pitch, float))
+    lost = (r > LOSS_OF_CONTROL_BANK_RAD) | (p > LOSS_OF_CONTROL_PITCH_RAD)
+    if lost.any():
+        k = int(np.argmax(lost))
+        w.out.append(("safety", f"loss of control at t = {w.t[k]:.1f} s (bank "
+                      f"{math.degrees(r[k]):.0f} deg, pitch "
+                      f"{math.degrees(p[k]):.0f} deg)"))  # fmt: skip
+
+
+def _judge_altitude(w: _Window, altitude: np.ndarray) -> None:
+    m = w.m
+    alt = np.asarray(altitude, float)
+    k = int(np.argmin(alt))
+    w.fig["min_altitude_m"] = float(alt[k])
+    w.fig["altitude_floor_m"] = m.altitude_floor_m
+    if alt[k] < m.altitude_floor_m:
+        w.out.append(("safety", f"altitude {alt[k]:.1f} m at t = {w.t[k]:.1f} s, below the "
+                      f"floor {m.altitude_floor_m:g} m (metrics.altitude_floor_m)"))  # fmt: skip
+
+
+def _judge_airspeed(w: _Window, v: VehicleConfig, airspeed: np.ndarray) -> None:
+    m, t, hold = w.m, w.t, w.hold
+    a = np.asarray(airspeed, float)
+    lo, hi = v.v_min * (1.0 - m.airspeed_tolerance), v.v_max * (1.0 + m.airspeed_tolerance)
+    w.fig.update(airspeed_band_m_s=[lo, hi], airspeed_m_s=v.airspeed_m_s,
+                 min_airspeed_m_s=float(np.nanmin(a)),
+                 max_airspeed_m_s=float(np.nanmax(a)))  # fmt: skip
+    dur, t_at = _longest_run((a < lo) | (a > hi), t)
+    if dur > hold:
+        w.out.append(("energy", f"airspeed outside [{lo:.1f}, {hi:.1f}] m/s for {dur:.1f} s "
+                      f"from t = {t_at:.1f} s (limit {hold:g} s)"))  # fmt: skip
+    if w.judged_steady:
+        mean = float(np.nanmean(a[w.steady]))
+        w.fig["steady_mean_airspeed_m_s"] = mean
+        dv = m.airspeed_tolerance * v.airspeed_m_s
+        if not abs(mean - v.airspeed_m_s) <= dv:
+            w.out.append(("energy", f"airspeed not held: mean {mean:.1f} m/s from t = "
+                          f"{m.steady_after_s:g} s for {w.steady_s:.0f} s against the "
+                          f"{v.airspeed_m_s:g} m/s the law assumes "
+                          f"(limit +-{dv:.1f} m/s)"))  # fmt: skip
+
+
+def _judge_thrust(w: _Window, ceil: float, thrust: np.ndarray) -> None:
+    t, steady, frac_lim = w.t, w.steady, w.frac_lim
+    thr = np.asarray(thrust, float)
+    at = thr >= ceil - THRUST_CEILING_EPS
+    w.fig["thrust_max"] = ceil
+    w.fig["thrust_at_ceiling_fraction"] = _time_fraction(at, t)[0]
+    if w.judged_steady:
+        frac, secs, first = _time_fraction(at[steady], t[steady])
+        w.fig["steady_thrust_at_ceiling_fraction"] = frac
+        if frac > frac_lim:
+            w.out.append(("energy", f"thrust at its ceiling {ceil:g} for {100 * frac:.0f} % "
+                          f"of the steady window ({secs:.0f} of {w.steady_s:.0f} s, first at "
+                          f"t = {first:.1f} s; limit {100 * frac_lim:.0f} %)"))  # fmt: skip
+
+
+def _judge_attitude(
+    w: _Window, roll: np.ndarray, pitch: np.ndarray, bank_lim: float, band: float
+) -> None:
+    m, t, hold, fig, steady, frac_lim = w.m, w.t, w.hold, w.fig, w.steady, w.frac_lim
+    r, p = np.abs(np.asarray(roll, float)), np.abs(np.asarray(pitch, float))
+    lim = bank_lim + m.bank_tolerance_rad
+    over = r > lim
+    # reported: the time beyond the limit itself; failed: beyond it + the tolerance, held
+    fig.update(max_bank_rad=float(np.nanmax(r)), max_pitch_rad=float(np.nanmax(p)),
+               bank_beyond_limit_s=_time_fraction(r > bank_lim, t)[1],
+               bank_beyond_limit_longest_s=_longest_run(r > bank_lim, t)[0])  # fmt: skip
+    dur, t_at = _longest_run(over, t)
+    if dur > hold:
+        w.out.append(("attitude", f"bank beyond {math.degrees(lim):.1f} deg for {dur:.1f} s "
+                      f"from t = {t_at:.1f} s (max {math.degrees(fig['max_bank_rad']):.1f} deg; "
+                      f"limit {hold:g} s)"))  # fmt: skip
+    dur, t_at = _longest_run(p > m.pitch_limit_rad, t)
+    if dur > hold:
+        w.out.append(("attitude", f"pitch beyond {math.degrees(m.pitch_limit_rad):.0f} deg for "
+                      f"{dur:.1f} s from t = {t_at:.1f} s (limit {hold:g} s)"))  # fmt: skip
+    if w.judged_steady:
+        frac, secs, first = _time_fraction(r[steady] >= band, t[steady])
+        fig["steady_bank_at_limit_fraction"] = frac
+        if frac > frac_lim:
+            w.out.append(("attitude", f"bank at its limit (>= {math.degrees(band):.1f} of "
+                          f"{math.degrees(bank_lim):.1f} deg) for {100 * frac:.0f} % of the "
+                          f"steady window ({secs:.0f} of {w.steady_s:.0f} s, first at t = "
+                          f"{first:.1f} s; limit {100 * frac_lim:.0f} %): "
+                          "the turn is saturated"))  # fmt: skip
+
+
+def _judge_tracking(w: _Window, pt_norm: np.ndarray) -> None:
+    m, t, steady = w.m, w.t, w.steady
+    pts = np.asarray(pt_norm, float)[steady]
+    k = int(np.argmax(pts))
+    if not pts[k] <= m.fail_pt_m:  # NaN fails too
+        w.out.append(("tracking", f"|pt| {pts[k]:.1f} m at t = {t[steady][k]:.1f} s after "
+                      f"convergence (bound {m.fail_pt_m:g} m from "
+                      f"t = {m.steady_after_s:g} s)"))  # fmt: skip
+
+
 def assess(
     cfg: Config,
     t: np.ndarray,
@@ -181,113 +302,40 @@ def assess(
     flight). Arrays of the same length; None = not judged. ``source`` says what the arrays are
     (``truth`` or ``telemetry``) for the figures.
     """
-    m, v = cfg.metrics, cfg.vehicle
+    m = cfg.metrics
     t = np.asarray(t, float)
     vd = Verdict(figures={"source": source})
-    out = vd.failures
     fig = vd.figures
     if len(t) == 0:
         vd.not_judged = "no flight was recorded"
         return vd
-    hold = m.limit_hold_s
     steady = t >= m.steady_after_s
     steady_s = float(t[-1] - m.steady_after_s) if steady.any() else 0.0
-    min_steady = m.min_steady_s
-    judged_steady = steady_s >= min_steady and steady.sum() >= 2
-    frac_lim = m.limit_fraction
+    judged_steady = steady_s >= m.min_steady_s and steady.sum() >= 2
+    w = _Window(m, t, steady, steady_s, judged_steady, vd.failures, fig)
     fig.update(tracked_s=float(t[-1]), steady_after_s=m.steady_after_s, steady_s=steady_s)
     bank_lim = bank_limit_rad(cfg)
-    margin = cfg.checks.bank_margin_rad
+    band = max(bank_lim - cfg.checks.bank_margin_rad, 0.0)
     fig.update(bank_limit_rad=bank_lim, bank_tolerance_rad=m.bank_tolerance_rad,
-               bank_band_rad=max(bank_lim - margin, 0.0), pitch_limit_rad=m.pitch_limit_rad,
-               limit_hold_s=hold, limit_fraction=frac_lim)  # fmt: skip
+               bank_band_rad=band, pitch_limit_rad=m.pitch_limit_rad,
+               limit_hold_s=m.limit_hold_s, limit_fraction=m.limit_fraction)  # fmt: skip
     if roll is not None and pitch is not None:
-        r, p = np.abs(np.asarray(roll, float)), np.abs(np.asarray(pitch, float))
-        lost = (r > LOSS_OF_CONTROL_BANK_RAD) | (p > LOSS_OF_CONTROL_PITCH_RAD)
-        if lost.any():
-            k = int(np.argmax(lost))
-            out.append(("safety", f"loss of control at t = {t[k]:.1f} s (bank "
-                        f"{math.degrees(r[k]):.0f} deg, pitch "
-                        f"{math.degrees(p[k]):.0f} deg)"))  # fmt: skip
+        _judge_loss_of_control(w, roll, pitch)
     if altitude is not None:
-        alt = np.asarray(altitude, float)
-        k = int(np.argmin(alt))
-        fig["min_altitude_m"] = float(alt[k])
-        fig["altitude_floor_m"] = m.altitude_floor_m
-        if alt[k] < m.altitude_floor_m:
-            out.append(("safety", f"altitude {alt[k]:.1f} m at t = {t[k]:.1f} s, below the "
-                        f"floor {m.altitude_floor_m:g} m (metrics.altitude_floor_m)"))  # fmt: skip
+        _judge_altitude(w, altitude)
     if airspeed is not None:
-        a = np.asarray(airspeed, float)
-        lo, hi = v.v_min * (1.0 - m.airspeed_tolerance), v.v_max * (1.0 + m.airspeed_tolerance)
-        fig.update(airspeed_band_m_s=[lo, hi], airspeed_m_s=v.airspeed_m_s,
-                   min_airspeed_m_s=float(np.nanmin(a)),
-                   max_airspeed_m_s=float(np.nanmax(a)))  # fmt: skip
-        dur, t_at = _longest_run((a < lo) | (a > hi), t)
-        if dur > hold:
-            out.append(("energy", f"airspeed outside [{lo:.1f}, {hi:.1f}] m/s for {dur:.1f} s "
-                        f"from t = {t_at:.1f} s (limit {hold:g} s)"))  # fmt: skip
-        if judged_steady:
-            mean = float(np.nanmean(a[steady]))
-            fig["steady_mean_airspeed_m_s"] = mean
-            dv = m.airspeed_tolerance * v.airspeed_m_s
-            if not abs(mean - v.airspeed_m_s) <= dv:
-                out.append(("energy", f"airspeed not held: mean {mean:.1f} m/s from t = "
-                            f"{m.steady_after_s:g} s for {steady_s:.0f} s against the "
-                            f"{v.airspeed_m_s:g} m/s the law assumes "
-                            f"(limit +-{dv:.1f} m/s)"))  # fmt: skip
+        _judge_airspeed(w, cfg.vehicle, airspeed)
     if thrust is not None:
-        thr = np.asarray(thrust, float)
-        ceil = thrust_ceiling(cfg)
-        at = thr >= ceil - THRUST_CEILING_EPS
-        fig["thrust_max"] = ceil
-        fig["thrust_at_ceiling_fraction"] = _time_fraction(at, t)[0]
-        if judged_steady:
-            frac, secs, first = _time_fraction(at[steady], t[steady])
-            fig["steady_thrust_at_ceiling_fraction"] = frac
-            if frac > frac_lim:
-                out.append(("energy", f"thrust at its ceiling {ceil:g} for {100 * frac:.0f} % "
-                            f"of the steady window ({secs:.0f} of {steady_s:.0f} s, first at "
-                            f"t = {first:.1f} s; limit {100 * frac_lim:.0f} %)"))  # fmt: skip
+        _judge_thrust(w, thrust_ceiling(cfg), thrust)
     if roll is not None and pitch is not None:
-        r, p = np.abs(np.asarray(roll, float)), np.abs(np.asarray(pitch, float))
-        lim = bank_lim + m.bank_tolerance_rad
-        over = r > lim
-        # reported: the time beyond the limit itself; failed: beyond it + the tolerance, held
-        fig.update(max_bank_rad=float(np.nanmax(r)), max_pitch_rad=float(np.nanmax(p)),
-                   bank_beyond_limit_s=_time_fraction(r > bank_lim, t)[1],
-                   bank_beyond_limit_longest_s=_longest_run(r > bank_lim, t)[0])  # fmt: skip
-        dur, t_at = _longest_run(over, t)
-        if dur > hold:
-            out.append(("attitude", f"bank beyond {math.degrees(lim):.1f} deg for {dur:.1f} s "
-                        f"from t = {t_at:.1f} s (max {math.degrees(fig['max_bank_rad']):.1f} deg; "
-                        f"limit {hold:g} s)"))  # fmt: skip
-        dur, t_at = _longest_run(p > m.pitch_limit_rad, t)
-        if dur > hold:
-            out.append(("attitude", f"pitch beyond {math.degrees(m.pitch_limit_rad):.0f} deg for "
-                        f"{dur:.1f} s from t = {t_at:.1f} s (limit {hold:g} s)"))  # fmt: skip
-        if judged_steady:
-            band = max(bank_lim - margin, 0.0)
-            frac, secs, first = _time_fraction(r[steady] >= band, t[steady])
-            fig["steady_bank_at_limit_fraction"] = frac
-            if frac > frac_lim:
-                out.append(("attitude", f"bank at its limit (>= {math.degrees(band):.1f} of "
-                            f"{math.degrees(bank_lim):.1f} deg) for {100 * frac:.0f} % of the "
-                            f"steady window ({secs:.0f} of {steady_s:.0f} s, first at t = "
-                            f"{first:.1f} s; limit {100 * frac_lim:.0f} %): "
-                            "the turn is saturated"))  # fmt: skip
+        _judge_attitude(w, roll, pitch, bank_lim, band)
     if judged_steady:
-        pts = np.asarray(pt_norm, float)[steady]
-        k = int(np.argmax(pts))
-        if not pts[k] <= m.fail_pt_m:  # NaN fails too
-            out.append(("tracking", f"|pt| {pts[k]:.1f} m at t = {t[steady][k]:.1f} s after "
-                        f"convergence (bound {m.fail_pt_m:g} m from "
-                        f"t = {m.steady_after_s:g} s)"))  # fmt: skip
+        _judge_tracking(w, pt_norm)
     else:
         vd.not_judged = (
             f"tracked {t[-1]:.1f} s, steady window {steady_s:.1f} s from t = "
             f"{m.steady_after_s:g} s (metrics.steady_after_s) is shorter than "
-            f"metrics.min_steady_s = {min_steady:g} s: fly longer or lower steady_after_s"
+            f"metrics.min_steady_s = {m.min_steady_s:g} s: fly longer or lower steady_after_s"
         )
     return vd
 

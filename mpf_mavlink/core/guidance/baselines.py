@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from mpf_mavlink.constants import GRAVITY_M_S2
 from mpf_mavlink.core.guidance.law import (
@@ -94,6 +95,56 @@ def _feasibility(w_cross: float, w_dot: float, airspeed: float, wind: float, buf
     return math.sin(0.5 * math.pi * x) ** 2
 
 
+def _npfg_look_ahead(e: float, vg: float, tc: float) -> float:
+    """The look-ahead angle (rad) at track error e (m): the track-error bound at time constant
+    tc (s) normalises e, pi/2 on the path, 0 beyond the bound."""
+    bound = vg * tc if vg > 1.0 else 0.5 * tc * (vg * vg + 1.0)
+    ne = min(max(e / bound, 0.0), 1.0)
+    return 0.5 * math.pi * (ne - 1.0) ** 2
+
+
+def _npfg_period(
+    p: BaselineParams, curvature: float, va: float, vg: float, ws: float, e: float, feas_t: float
+) -> float:
+    """NPFG's period (s): the nominal one within its bounds (lower: the roll time constant;
+    upper: track keeping on curved paths in wind), blended in with the track proximity."""
+    zeta = p.npfg_damping
+    period = p.npfg_period_s
+    if p.npfg_period_lb and p.npfg_roll_tc_s > 0.0:
+        turn = abs(curvature * va)
+        wf = 2.0 if ws > va else 2.0 * (1.0 - math.sqrt(1.0 - min(1.0, ws / va)))
+        lb = math.pi * p.npfg_roll_tc_s / zeta
+        if turn * wf >= EPS and zeta >= 0.5:
+            lb = 4.0 * math.pi * p.npfg_roll_tc_s * zeta * feas_t + (1.0 - feas_t) * lb
+        period = max(lb * 1.5, period)  # PERIOD_SAFETY_FACTOR 1.5
+        if p.npfg_period_ub and turn * wf * feas_t > EPS:
+            ub = 4.0 * math.pi * zeta / (turn * wf * feas_t)
+            if period > ub:
+                adapted = max(lb * 1.5, ub)
+                prox = math.sin(_npfg_look_ahead(e, vg, period * zeta)) ** 2
+                period = adapted * prox + (1.0 - prox) * period
+    return period
+
+
+def _npfg_air_ref(
+    b: tuple[float, float],
+    wind_vel: tuple[float, float],
+    va: float,
+    ws: float,
+    w_cross_b: float,
+    w_dot_b: float,
+) -> tuple[float, float]:
+    """The air velocity (m/s, NE) that makes good the bearing b in the wind; PX4's mitigation
+    law when the bearing is infeasible."""
+    if abs(w_cross_b) < va and (w_dot_b > 0.0 or ws < va):
+        along = math.sqrt(max(va * va - w_cross_b * w_cross_b, 0.0))
+        return (along * b[0] - w_cross_b * b[1], w_cross_b * b[0] + along * b[1])
+    k = math.sqrt(max(ws * ws - va * va, 0.0))
+    r = (k * b[0] - wind_vel[0], k * b[1] - wind_vel[1])
+    n = math.hypot(*r) or 1.0
+    return (r[0] / n * va, r[1] / n * va)
+
+
 def npfg_lateral_accel(
     ground_vel: tuple[float, float],
     wind_vel: tuple[float, float],
@@ -123,30 +174,9 @@ def npfg_lateral_accel(
     w_dot_t = wind_vel[0] * tangent[0] + wind_vel[1] * tangent[1]
     feas_t = _feasibility(w_cross_t, w_dot_t, va, ws, p.npfg_airspeed_buffer_m_s)
     zeta = p.npfg_damping
-    period = p.npfg_period_s
-
-    def bound(tc: float) -> float:
-        return vg * tc if vg > 1.0 else 0.5 * tc * (vg * vg + 1.0)
-
-    def look_ahead(tc: float) -> float:
-        ne = min(max(e / bound(tc), 0.0), 1.0)
-        return 0.5 * math.pi * (ne - 1.0) ** 2
-
-    if p.npfg_period_lb and p.npfg_roll_tc_s > 0.0:
-        turn = abs(curvature * va)
-        wf = 2.0 if ws > va else 2.0 * (1.0 - math.sqrt(1.0 - min(1.0, ws / va)))
-        lb = math.pi * p.npfg_roll_tc_s / zeta
-        if turn * wf >= EPS and zeta >= 0.5:
-            lb = 4.0 * math.pi * p.npfg_roll_tc_s * zeta * feas_t + (1.0 - feas_t) * lb
-        period = max(lb * 1.5, period)  # PERIOD_SAFETY_FACTOR 1.5
-        if p.npfg_period_ub and turn * wf * feas_t > EPS:
-            ub = 4.0 * math.pi * zeta / (turn * wf * feas_t)
-            if period > ub:
-                adapted = max(lb * 1.5, ub)
-                prox = math.sin(look_ahead(period * zeta)) ** 2
-                period = adapted * prox + (1.0 - prox) * period
+    period = _npfg_period(p, curvature, va, vg, ws, e, feas_t)
     k_p = 4.0 * math.pi * zeta / period
-    lam = look_ahead(period * zeta)
+    lam = _npfg_look_ahead(e, vg, period * zeta)
     # bearing: toward the path (against the signed error) blended into the tangent
     nrm = (-tangent[1], tangent[0])
     sgn = -1.0 if signed_track_error >= 0.0 else 1.0
@@ -156,14 +186,7 @@ def npfg_lateral_accel(
     w_cross_b = _cross2(wind_vel, b)
     w_dot_b = wind_vel[0] * b[0] + wind_vel[1] * b[1]
     feas = _feasibility(w_cross_b, w_dot_b, va, ws, p.npfg_airspeed_buffer_m_s)
-    if abs(w_cross_b) < va and (w_dot_b > 0.0 or ws < va):
-        along = math.sqrt(max(va * va - w_cross_b * w_cross_b, 0.0))
-        ref = (along * b[0] - w_cross_b * b[1], w_cross_b * b[0] + along * b[1])
-    else:  # infeasible bearing: PX4's mitigation law
-        k = math.sqrt(max(ws * ws - va * va, 0.0))
-        r = (k * b[0] - wind_vel[0], k * b[1] - wind_vel[1])
-        n = math.hypot(*r) or 1.0
-        ref = (r[0] / n * va, r[1] / n * va)
+    ref = _npfg_air_ref(b, wind_vel, va, ws, w_cross_b, w_dot_b)
     dot = air[0] * ref[0] + air[1] * ref[1]
     cr = _cross2(air, ref)
     if dot < 0.0:
@@ -280,6 +303,74 @@ def _closest_near(path: TabulatedPath, q: tuple[float, float, float], s: float) 
     return s
 
 
+def _baseline_lateral_accel(
+    law: str,
+    params: BaselineParams,
+    path: TabulatedPath,
+    s_c: float,
+    RT: list[list[float]],
+    target: TargetState,
+    p: Any,  # the vehicle's position (NED, m)
+    gv: tuple[float, float, float],
+    wind: tuple[float, ...],
+    vp: tuple[float, ...],
+    tan2: tuple[float, float],
+    pt: tuple[float, float, float],
+    curv: float,
+) -> float:
+    """The baseline's lateral acceleration demand (m/s^2, > 0 to the right, before the bank
+    limit) at the closest point s_c of the moving path (NED, vp its velocity)."""
+    if law in ("npfg", "npfg_static"):
+        # careful user: the path's frame moves with the closest point, so the vehicle's velocity
+        # relative to it and the wind relative to it (the air mass seen from the path) go in
+        if law != "npfg_static":
+            g2 = (gv[0] - vp[0], gv[1] - vp[1])
+            w2d = (wind[0] - vp[0], wind[1] - vp[1])
+        else:
+            g2, w2d = (gv[0], gv[1]), (wind[0], wind[1])
+        ste = _cross2(tan2, (pt[0], pt[1]))  # > 0: vehicle right of the path
+        return npfg_lateral_accel(g2, w2d, tan2, ste, curv, params)
+    if law == "l1_loiter":
+        # the loiter centre: the horizontal centroid of the path's nodes (a circle's centre)
+        c_T, radius = _loiter_circle(path)
+        cI = _mv(RT, c_T)
+        rel = (p[0] - target.position[0] - cI[0], p[1] - target.position[1] - cI[1])
+        direction = 1 if curv >= 0.0 else -1
+        return l1_loiter_lateral_accel(
+            (gv[0], gv[1]), (float(rel[0]), float(rel[1])), radius, direction, params
+        )
+    if law == "pursuit":
+        pc, *_ = path.eval(s_c + params.pursuit_lookahead_m)
+        cI = _mv(RT, pc)
+        to_c = (target.position[0] + cI[0] - p[0], target.position[1] + cI[1] - p[1])
+        return pursuit_lateral_accel((gv[0], gv[1]), (float(to_c[0]), float(to_c[1])))
+    raise ValueError(f"unknown guidance law {law!r} (one of {', '.join(LAWS)})")
+
+
+def _wind_frame_rates(
+    params: BaselineParams,
+    a_lat: float,
+    hdot: float,
+    v_w: float,
+    w1: tuple[float, float, float],
+    w2: tuple[float, float, float],
+    w3: tuple[float, float, float],
+) -> tuple[tuple[float, float, float], float, float]:
+    """(omega of w1 (NED, rad/s), its w2 and w3 components): the turn rate a_lat / v_w about
+    down and the flight-path rate towards the climb rate hdot (m/s, up) about the right axis."""
+    chi_dot = a_lat / max(v_w, EPS)
+    gam_ref = math.asin(max(-1.0, min(1.0, hdot / max(v_w, EPS))))
+    gam_ref = max(-params.max_gamma_rad, min(params.max_gamma_rad, gam_ref))
+    gamma = math.asin(max(-1.0, min(1.0, -w1[2])))
+    gam_dot = (gam_ref - gamma) / params.gamma_tau_s
+    hn = math.hypot(w1[0], w1[1])
+    right = (-w1[1] / hn, w1[0] / hn, 0.0) if hn > EPS else (w2[0], w2[1], w2[2])
+    om_w = (gam_dot * right[0], gam_dot * right[1], chi_dot + gam_dot * right[2])
+    c2 = om_w[0] * w2[0] + om_w[1] * w2[1] + om_w[2] * w2[2]
+    c3 = om_w[0] * w3[0] + om_w[1] * w3[1] + om_w[2] * w3[2]
+    return om_w, c2, c3
+
+
 def baseline_law(
     law: str,
     s: float,
@@ -325,50 +416,18 @@ def baseline_law(
     pt = (p[0] - pf[0], p[1] - pf[1], p[2] - pf[2])
     gv = (v_w * w1[0] + wind[0], v_w * w1[1] + wind[1], v_w * w1[2] + wind[2])
     careful = law != "npfg_static"
-    if law in ("npfg", "npfg_static"):
-        # careful user: the path's frame moves with the closest point, so the vehicle's velocity
-        # relative to it and the wind relative to it (the air mass seen from the path) go in
-        if careful:
-            g2 = (gv[0] - vp[0], gv[1] - vp[1])
-            w2d = (wind[0] - vp[0], wind[1] - vp[1])
-        else:
-            g2, w2d = (gv[0], gv[1]), (wind[0], wind[1])
-        ste = _cross2(tan2, (pt[0], pt[1]))  # > 0: vehicle right of the path
-        a_lat = npfg_lateral_accel(g2, w2d, tan2, ste, curv, params)
-    elif law == "l1_loiter":
-        # the loiter centre: the horizontal centroid of the path's nodes (a circle's centre)
-        c_T, radius = _loiter_circle(path)
-        cI = _mv(RT, c_T)
-        rel = (p[0] - target.position[0] - cI[0], p[1] - target.position[1] - cI[1])
-        direction = 1 if curv >= 0.0 else -1
-        a_lat = l1_loiter_lateral_accel(
-            (gv[0], gv[1]), (float(rel[0]), float(rel[1])), radius, direction, params
-        )
-    elif law == "pursuit":
-        pc, *_ = path.eval(s_c + params.pursuit_lookahead_m)
-        cI = _mv(RT, pc)
-        to_c = (target.position[0] + cI[0] - p[0], target.position[1] + cI[1] - p[1])
-        a_lat = pursuit_lateral_accel((gv[0], gv[1]), (float(to_c[0]), float(to_c[1])))
-    else:
-        raise ValueError(f"unknown guidance law {law!r} (one of {', '.join(LAWS)})")
+    a_lat = _baseline_lateral_accel(
+        law, params, path, s_c, RT, target, p, gv, wind, vp, tan2, pt, curv
+    )
     a_max = GRAVITY_M_S2 * math.tan(params.max_bank_rad)
     mode = law
     if abs(a_lat) > a_max:
         a_lat = math.copysign(a_max, a_lat)
         mode += "+sat"  # the autopilot's roll limit acted (the table's "time saturated")
-    chi_dot = a_lat / max(v_w, EPS)
     # vertical: altitude loop on the closest point's height (+ its climb rate when careful)
     h_err = p[2] - pf[2]  # h_ref - h, heights up: (-pf_d) - (-p_d)
     hdot = h_err / params.vertical_tau_s + (-vp[2] if careful else 0.0)
-    gam_ref = math.asin(max(-1.0, min(1.0, hdot / max(v_w, EPS))))
-    gam_ref = max(-params.max_gamma_rad, min(params.max_gamma_rad, gam_ref))
-    gamma = math.asin(max(-1.0, min(1.0, -w1[2])))
-    gam_dot = (gam_ref - gamma) / params.gamma_tau_s
-    hn = math.hypot(w1[0], w1[1])
-    right = (-w1[1] / hn, w1[0] / hn, 0.0) if hn > EPS else (w2[0], w2[1], w2[2])
-    om_w = (gam_dot * right[0], gam_dot * right[1], chi_dot + gam_dot * right[2])
-    c2 = om_w[0] * w2[0] + om_w[1] * w2[1] + om_w[2] * w2[2]
-    c3 = om_w[0] * w3[0] + om_w[1] * w3[1] + om_w[2] * w3[2]
+    om_w, c2, c3 = _wind_frame_rates(params, a_lat, hdot, v_w, w1, w2, w3)
     # the closest point's progression: relative velocity along the tangent (in {T} arc length)
     # d s_c / dt = (v_rel . f1) / (1 - pt . kappa) for the closest point of a curve (in {T}; the
     # path's own rotation omega x p_d is in vp, the frame's rotation of pt is second order here)

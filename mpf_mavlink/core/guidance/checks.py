@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.constants import GRAVITY_M_S2
+from mpf_mavlink.constants import FT_TO_M, GRAVITY_M_S2
 from mpf_mavlink.core.adapter import bank_and_load_factor
 from mpf_mavlink.core.guidance.law import Gains
 from mpf_mavlink.core.paths import TabulatedPath
@@ -168,7 +168,6 @@ _POE_SIGMA_FPS = {
     "severe": (15.6, 17.6, 23.0, 23.6),
 }
 _W20_FPS = {"light": 25.0, "moderate": 50.0, "severe": 75.0}
-_FT = 0.3048
 
 
 def vertical_gust_scale(level: str, h_m: float) -> tuple[float, float]:
@@ -178,7 +177,7 @@ def vertical_gust_scale(level: str, h_m: float) -> tuple[float, float]:
     between. ``none``: (0, 0)."""
     if level not in _W20_FPS:
         return 0.0, 0.0
-    h = max(h_m / _FT, 10.0)
+    h = max(h_m / FT_TO_M, 10.0)
     s_low = 0.1 * _W20_FPS[level]
     s_tab = float(np.interp(h, _POE_ALT_FT, _POE_SIGMA_FPS[level]))
     if h <= 1000.0:
@@ -188,7 +187,7 @@ def vertical_gust_scale(level: str, h_m: float) -> tuple[float, float]:
         sig, L = s_low + f * (s_tab - s_low), 1000.0 + f * 750.0
     else:
         sig, L = s_tab, 1750.0
-    return sig * _FT, L * _FT
+    return sig * FT_TO_M, L * FT_TO_M
 
 
 def vertical_gusts(
@@ -201,6 +200,94 @@ def vertical_gusts(
         np.array([n_sigma * s for s, _ in sc]),
         np.array([L / max(v_w, 1.0) for _, L in sc]),
     )
+
+
+@dataclass
+class _Deficits:
+    """The largest height deficits (m) of :func:`climb_feasibility` beyond the climb (up) and
+    the sink (dn) capability, the times they peak (s), the climb / sink needed at the worst
+    instant (m/s, gusts included) and the gust that set the climb's."""
+
+    worst_up: float
+    t_up: float
+    worst_dn: float
+    t_dn: float
+    need_up: float
+    need_dn: float
+    gust_note: str = ""
+
+    def refusal(
+        self, res_up: float, res_dn: float, v_w: float, v_min: float, v_max: float
+    ) -> str | None:
+        """Why the path is refused (a deficit beyond its reserve, m), or None."""
+        if self.worst_up > res_up:
+            return (
+                f"the path climbs faster than the aircraft can for long: {self.worst_up:.1f} m "
+                f"of height beyond its climb by t = {self.t_up:.1f} s{self.gust_note}, more than "
+                f"the {res_up:.1f} m that slowing from {v_w:g} to {v_min:.1f} m/s buys; "
+            )
+        if self.worst_dn > res_dn:
+            return (
+                f"the path descends faster than the aircraft can at idle: {self.worst_dn:.1f} m "
+                f"beyond its sink by t = {self.t_dn:.1f} s (updrafts included), more than the "
+                f"{res_dn:.1f} m that speeding up to {v_max:.1f} m/s absorbs; "
+            )
+        return None
+
+
+def _steady_deficits(
+    ts: np.ndarray,
+    c: np.ndarray,
+    dts: np.ndarray,
+    max_climb: float,
+    max_sink: float,
+    up: float,
+    dn: float,
+) -> _Deficits:
+    """D(t) = max(0, D + (c - max_climb) dt) (and likewise for the sink): its peak and when."""
+    d_up = d_dn = 0.0
+    worst_up = worst_dn = 0.0
+    t_up = t_dn = float(ts[0])
+    for k in range(len(ts)):
+        d_up = max(0.0, d_up + (c[k] - max_climb) * dts[k])
+        d_dn = max(0.0, d_dn + (-c[k] - max_sink) * dts[k])
+        if d_up > worst_up:
+            worst_up, t_up = d_up, float(ts[k])
+        if d_dn > worst_dn:
+            worst_dn, t_dn = d_dn, float(ts[k])
+    return _Deficits(worst_up, t_up, worst_dn, t_dn, up, dn)
+
+
+def _add_gust_deficits(
+    dfc: _Deficits,
+    ts: np.ndarray,
+    c: np.ndarray,
+    dts: np.ndarray,
+    gusts: tuple[np.ndarray, np.ndarray],
+    max_climb: float,
+    max_sink: float,
+) -> None:
+    """A gust of w for T from each instant on top of the mean demand over that window: the
+    excess beyond the capability is a deficit like the steady one (dfc updated in place)."""
+    w, T = gusts
+    cum = np.concatenate([[0.0], np.cumsum(c * dts)])
+    for k in range(len(ts)):
+        j = int(np.searchsorted(ts, ts[k] + T[k]))
+        j = min(j, len(ts) - 1)
+        span = float(ts[j] - ts[k])
+        if span <= 0.0:
+            continue
+        mean_c = float(cum[j + 1] - cum[k + 1]) / span
+        # the gust lasts T or until the horizon ends, whichever is first
+        dfc.need_up = max(dfc.need_up, mean_c + w[k])
+        dfc.need_dn = max(dfc.need_dn, -mean_c + w[k])
+        gu = max(0.0, mean_c + w[k] - max_climb) * span
+        gd = max(0.0, -mean_c + w[k] - max_sink) * span
+        if gu > dfc.worst_up:
+            dfc.worst_up, dfc.t_up = gu, float(ts[k])
+            dfc.gust_note = f" (a {w[k]:.1f} m/s downdraft for {T[k]:.0f} s from t = {ts[k]:.0f} s)"
+        if gd > dfc.worst_dn:
+            dfc.worst_dn, dfc.t_dn = gd, float(ts[k])
 
 
 def climb_feasibility(
@@ -250,54 +337,16 @@ def climb_feasibility(
     res_up = max(v_w * v_w - v_min * v_min, 0.0) / (2.0 * g)
     res_dn = max(v_max * v_max - v_w * v_w, 0.0) / (2.0 * g)
     dts = np.diff(ts, prepend=ts[0])
-    d_up = d_dn = 0.0
-    worst_up = worst_dn = 0.0
-    t_up = t_dn = float(ts[0])
-    for k in range(len(ts)):
-        d_up = max(0.0, d_up + (c[k] - max_climb_m_s) * dts[k])
-        d_dn = max(0.0, d_dn + (-c[k] - max_sink_m_s) * dts[k])
-        if d_up > worst_up:
-            worst_up, t_up = d_up, float(ts[k])
-        if d_dn > worst_dn:
-            worst_dn, t_dn = d_dn, float(ts[k])
-    gust_note = ""
-    need_up, need_dn = up, dn  # the climb / sink needed at the worst instant, gusts included
+    dfc = _steady_deficits(ts, c, dts, max_climb_m_s, max_sink_m_s, up, dn)
     if gusts is not None:
-        w, T = gusts
-        cum = np.concatenate([[0.0], np.cumsum(c * dts)])
-        for k in range(len(ts)):
-            j = int(np.searchsorted(ts, ts[k] + T[k]))
-            j = min(j, len(ts) - 1)
-            span = float(ts[j] - ts[k])
-            if span <= 0.0:
-                continue
-            mean_c = float(cum[j + 1] - cum[k + 1]) / span
-            # the gust lasts T or until the horizon ends, whichever is first
-            need_up, need_dn = max(need_up, mean_c + w[k]), max(need_dn, -mean_c + w[k])
-            gu = max(0.0, mean_c + w[k] - max_climb_m_s) * span
-            gd = max(0.0, -mean_c + w[k] - max_sink_m_s) * span
-            if gu > worst_up:
-                worst_up, t_up = gu, float(ts[k])
-                gust_note = f" (a {w[k]:.1f} m/s downdraft for {T[k]:.0f} s from t = {ts[k]:.0f} s)"
-            if gd > worst_dn:
-                worst_dn, t_dn = gd, float(ts[k])
+        _add_gust_deficits(dfc, ts, c, dts, gusts, max_climb_m_s, max_sink_m_s)
+    worst_up, worst_dn, need_up, need_dn = dfc.worst_up, dfc.worst_dn, dfc.need_up, dfc.need_dn
     figs.update(deficit_climb_m=worst_up, deficit_sink_m=worst_dn, reserve_climb_m=res_up,
                 reserve_sink_m=res_dn)  # fmt: skip
     cap = f" (capability at {v_w:g} m/s: climb {max_climb_m_s:g}, sink {max_sink_m_s:g} m/s)"
-    if worst_up > res_up:
-        return CheckResult(
-            "climb", "fail",
-            f"the path climbs faster than the aircraft can for long: {worst_up:.1f} m of "
-            f"height beyond its climb by t = {t_up:.1f} s{gust_note}, more than the {res_up:.1f} m "
-            f"that slowing from {v_w:g} to {v_min:.1f} m/s buys; " + head + cap, figs,
-        )  # fmt: skip
-    if worst_dn > res_dn:
-        return CheckResult(
-            "climb", "fail",
-            f"the path descends faster than the aircraft can at idle: {worst_dn:.1f} m beyond "
-            f"its sink by t = {t_dn:.1f} s (updrafts included), more than the {res_dn:.1f} m that "
-            f"speeding up to {v_max:.1f} m/s absorbs; " + head + cap, figs,
-        )  # fmt: skip
+    refused = dfc.refusal(res_up, res_dn, v_w, v_min, v_max)
+    if refused is not None:
+        return CheckResult("climb", "fail", refused + head + cap, figs)
     figs.update(need_climb_m_s=need_up, need_sink_m_s=need_dn)
     # marginal: the steady demand above ``marginal`` x the capability, a gust's above the
     # capability itself, or half a reserve spent

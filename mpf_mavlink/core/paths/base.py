@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -81,6 +82,112 @@ def _mrot(v: Tuple3, a: Tuple3, b: Tuple3) -> Tuple3:
     return (v[0] + ux + k * wx, v[1] + uy + k * wy, v[2] + uz + k * wz)
 
 
+def _arc_length_table(
+    curve: CurveFn, u0: float, u1: float, dense: int, name: str
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """(u, s(u), du): the cumulative arc length (m) on a dense grid of the parameter and the
+    parameter step of the central differences. Raises ConfigError for a curve that is not
+    finite, has zero length or is not regular."""
+    u = np.linspace(u0, u1, dense + 1)
+    du = (u1 - u0) * 1e-5
+    c = curve(u)
+    d1 = (curve(u + du) - curve(u - du)) / (2 * du)
+    speed = np.linalg.norm(d1, axis=1)
+    if not np.all(np.isfinite(c)) or not np.all(np.isfinite(speed)):
+        raise ConfigError(f"{name}: the curve is not finite everywhere")
+    seg = 0.5 * (speed[1:] + speed[:-1]) * np.diff(u)
+    # Simpson-quality length from the trapezoid on a dense grid is ample (error ~1e-9 L).
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    L = float(cum[-1])
+    if not L > 1e-6:
+        raise ConfigError(f"{name}: the path has zero length")
+    if np.min(speed) < 1e-9 * max(1.0, float(np.max(speed))):
+        raise ConfigError(f"{name}: the curve is not regular (zero speed somewhere)")
+    return u, cum, du
+
+
+def _nodes(
+    curve: CurveFn,
+    u_nodes: NDArray[np.float64],
+    du: float,
+    closed: bool,
+    L: float,
+    name: str,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """(P, T, kappa) at the nodes: positions, unit tangents and curvature vectors (1/m), the
+    last node made the first of a closed path. Raises ConfigError when it does not close."""
+    P = curve(u_nodes)
+    D1 = (curve(u_nodes + du) - curve(u_nodes - du)) / (2 * du)
+    D2 = (curve(u_nodes + du) - 2 * P + curve(u_nodes - du)) / (du * du)
+    sp = np.linalg.norm(D1, axis=1)
+    T = D1 / sp[:, None]
+    kappa = (D2 - np.sum(D2 * T, axis=1)[:, None] * T) / (sp * sp)[:, None]
+    if closed:
+        gap = float(np.linalg.norm(P[-1] - P[0]))
+        if gap > 1e-6 * max(1.0, L):
+            raise ConfigError(f"{name}: closed path does not close (gap {gap:.3g} m)")
+        P[-1], T[-1], kappa[-1] = P[0], T[0], kappa[0]
+    return P, T, kappa
+
+
+def _transported_f2(P: NDArray[np.float64], T: NDArray[np.float64], n: int) -> NDArray[np.float64]:
+    """f2 at the nodes by double reflection (the rotation-minimising frame), from f3 = down
+    projected orthogonal to f1 and f2 = f3 x f1 at the first node."""
+    down = np.array([0.0, 0.0, 1.0])
+    f3 = down - np.dot(down, T[0]) * T[0]
+    if np.linalg.norm(f3) < 1e-6:
+        f3 = np.array([1.0, 0.0, 0.0]) - T[0, 0] * T[0]
+    f3 /= np.linalg.norm(f3)
+    F2 = np.empty_like(T)
+    F2[0] = np.cross(f3, T[0])
+    for i in range(n):
+        v1 = P[i + 1] - P[i]
+        c1 = float(v1 @ v1)
+        if c1 < 1e-30:
+            F2[i + 1] = F2[i]
+            continue
+        rL = F2[i] - (2.0 / c1) * float(v1 @ F2[i]) * v1
+        tL = T[i] - (2.0 / c1) * float(v1 @ T[i]) * v1
+        v2 = T[i + 1] - tL
+        c2 = float(v2 @ v2)
+        r = rL - (2.0 / c2) * float(v2 @ rL) * v2 if c2 > 1e-30 else rL
+        r = r - float(r @ T[i + 1]) * T[i + 1]
+        F2[i + 1] = r / np.linalg.norm(r)
+    return F2
+
+
+def _closing_twist(
+    F2: NDArray[np.float64], T: NDArray[np.float64], s_nodes: NDArray[np.floating[Any]], L: float
+) -> tuple[NDArray[np.float64], float]:
+    """(F2, tau) of a closed path: the transported frame's mismatch after one lap spread
+    evenly along it as a constant twist tau (rad/m), so that the frame closes."""
+    a, b = F2[0], F2[-1]
+    theta = math.atan2(float(np.cross(a, b) @ T[0]), float(a @ b))
+    tau = -theta / L
+    ang = tau * s_nodes
+    F3 = np.cross(T, F2)
+    F2 = np.cos(ang)[:, None] * F2 + np.sin(ang)[:, None] * F3
+    F2[-1] = F2[0]
+    return F2, tau
+
+
+def _closing_angles(Tl: list[Tuple3], F2l: list[Tuple3]) -> list[float]:
+    """Per cell: the angle about f1_{i+1} between f2_i carried to node i+1 and f2_{i+1}.
+    Interpolating it linearly makes the frame continuous at every node with one transport."""
+    corr = []
+    for i in range(len(Tl) - 1):
+        r = _mrot(F2l[i], Tl[i], Tl[i + 1])
+        t1, f2b = Tl[i + 1], F2l[i + 1]
+        cos_ = r[0] * f2b[0] + r[1] * f2b[1] + r[2] * f2b[2]
+        x = (
+            r[1] * f2b[2] - r[2] * f2b[1],
+            r[2] * f2b[0] - r[0] * f2b[2],
+            r[0] * f2b[1] - r[1] * f2b[0],
+        )
+        corr.append(math.atan2(x[0] * t1[0] + x[1] * t1[1] + x[2] * t1[2], cos_))
+    return corr
+
+
 class TabulatedPath:
     """A regular curve re-parameterised by arc length, with a continuous transported frame."""
 
@@ -96,21 +203,8 @@ class TabulatedPath:
     ) -> None:
         self.name = name
         self.closed = closed
-        u = np.linspace(u0, u1, dense + 1)
-        du = (u1 - u0) * 1e-5
-        c = curve(u)
-        d1 = (curve(u + du) - curve(u - du)) / (2 * du)
-        speed = np.linalg.norm(d1, axis=1)
-        if not np.all(np.isfinite(c)) or not np.all(np.isfinite(speed)):
-            raise ConfigError(f"{name}: the curve is not finite everywhere")
-        seg = 0.5 * (speed[1:] + speed[:-1]) * np.diff(u)
-        # Simpson-quality length from the trapezoid on a dense grid is ample (error ~1e-9 L).
-        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        u, cum, du = _arc_length_table(curve, u0, u1, dense, name)
         L = float(cum[-1])
-        if not L > 1e-6:
-            raise ConfigError(f"{name}: the path has zero length")
-        if np.min(speed) < 1e-9 * max(1.0, float(np.max(speed))):
-            raise ConfigError(f"{name}: the curve is not regular (zero speed somewhere)")
         self.length = L
         n = int(min(200000, max(512, math.ceil(L / ds_target))))
         self.n = n
@@ -118,47 +212,11 @@ class TabulatedPath:
         s_nodes = np.arange(n + 1) * self.ds
         u_nodes = np.interp(s_nodes, cum, u)
         # One Newton pass on arc length tightens u(s) from the linear inverse.
-        P = curve(u_nodes)
-        D1 = (curve(u_nodes + du) - curve(u_nodes - du)) / (2 * du)
-        D2 = (curve(u_nodes + du) - 2 * P + curve(u_nodes - du)) / (du * du)
-        sp = np.linalg.norm(D1, axis=1)
-        T = D1 / sp[:, None]
-        kappa = (D2 - np.sum(D2 * T, axis=1)[:, None] * T) / (sp * sp)[:, None]
-        if closed:
-            gap = float(np.linalg.norm(P[-1] - P[0]))
-            if gap > 1e-6 * max(1.0, L):
-                raise ConfigError(f"{name}: closed path does not close (gap {gap:.3g} m)")
-            P[-1], T[-1], kappa[-1] = P[0], T[0], kappa[0]
-        # Initial normal: f3 = down projected orthogonal to f1, f2 = f3 x f1.
-        down = np.array([0.0, 0.0, 1.0])
-        f3 = down - np.dot(down, T[0]) * T[0]
-        if np.linalg.norm(f3) < 1e-6:
-            f3 = np.array([1.0, 0.0, 0.0]) - T[0, 0] * T[0]
-        f3 /= np.linalg.norm(f3)
-        F2 = np.empty_like(T)
-        F2[0] = np.cross(f3, T[0])
-        for i in range(n):  # double reflection (rotation-minimising frame)
-            v1 = P[i + 1] - P[i]
-            c1 = float(v1 @ v1)
-            if c1 < 1e-30:
-                F2[i + 1] = F2[i]
-                continue
-            rL = F2[i] - (2.0 / c1) * float(v1 @ F2[i]) * v1
-            tL = T[i] - (2.0 / c1) * float(v1 @ T[i]) * v1
-            v2 = T[i + 1] - tL
-            c2 = float(v2 @ v2)
-            r = rL - (2.0 / c2) * float(v2 @ rL) * v2 if c2 > 1e-30 else rL
-            r = r - float(r @ T[i + 1]) * T[i + 1]
-            F2[i + 1] = r / np.linalg.norm(r)
+        P, T, kappa = _nodes(curve, u_nodes, du, closed, L, name)
+        F2 = _transported_f2(P, T, n)
         self.tau = 0.0
         if closed:
-            a, b = F2[0], F2[-1]
-            theta = math.atan2(float(np.cross(a, b) @ T[0]), float(a @ b))
-            self.tau = -theta / L
-            ang = self.tau * s_nodes
-            F3 = np.cross(T, F2)
-            F2 = np.cos(ang)[:, None] * F2 + np.sin(ang)[:, None] * F3
-            F2[-1] = F2[0]
+            F2, self.tau = _closing_twist(F2, T, s_nodes, L)
         F3 = np.cross(T, F2)
         self._P = P
         self._T = T
@@ -171,34 +229,24 @@ class TabulatedPath:
         self._F2l: list[Tuple3] = [(float(r[0]), float(r[1]), float(r[2])) for r in F2]
         self._K1l = [float(v) for v in self._K1]
         self._K2l = [float(v) for v in self._K2]
-        # Per cell: the angle about f1_{i+1} between f2_i carried to node i+1 and f2_{i+1}.
-        # Interpolating it linearly makes the frame continuous at every node with one transport.
-        corr = []
-        for i in range(n):
-            r = _mrot(self._F2l[i], self._Tl[i], self._Tl[i + 1])
-            t1, f2b = self._Tl[i + 1], self._F2l[i + 1]
-            cos_ = r[0] * f2b[0] + r[1] * f2b[1] + r[2] * f2b[2]
-            x = (
-                r[1] * f2b[2] - r[2] * f2b[1],
-                r[2] * f2b[0] - r[0] * f2b[2],
-                r[0] * f2b[1] - r[1] * f2b[0],
-            )
-            corr.append(math.atan2(x[0] * t1[0] + x[1] * t1[1] + x[2] * t1[2], cos_))
-        self._C = corr
-        # Per cell, what evaluation needs in one tuple: the Hermite cubic in power form
-        # p(w) = p_i + w a + w^2 b + w^3 c (w = (s - s_i) / ds), the node's tangent and f2,
-        # the cell's closing angle and the curvatures at both nodes.
+        self._C = _closing_angles(self._Tl, self._F2l)
+        self._cells = self._hermite_cells()
+
+    def _hermite_cells(self) -> list[_Cell]:
+        """Per cell, what evaluation needs in one tuple: the Hermite cubic in power form
+        p(w) = p_i + w a + w^2 b + w^3 c (w = (s - s_i) / ds), the node's tangent and f2, the
+        cell's closing angle and the curvatures at both nodes."""
         h = self.ds
         cells: list[_Cell] = []
-        for i in range(n):
+        for i in range(self.n):
             pa, pb = self._Pl[i], self._Pl[i + 1]
             ta, tb = self._Tl[i], self._Tl[i + 1]
             lin = scale(h, ta)
             quad = _vec([3.0 * (pb[j] - pa[j]) - h * (2.0 * ta[j] + tb[j]) for j in range(3)])
             cub = _vec([2.0 * (pa[j] - pb[j]) + h * (ta[j] + tb[j]) for j in range(3)])
             k12 = (self._K1l[i], self._K1l[i + 1], self._K2l[i], self._K2l[i + 1])
-            cells.append((pa, lin, quad, cub, ta, self._F2l[i], corr[i], k12))
-        self._cells = cells
+            cells.append((pa, lin, quad, cub, ta, self._F2l[i], self._C[i], k12))
+        return cells
 
     # ------------------------------------------------------------------ evaluation
     def eval(self, s: float) -> PathPoint:
