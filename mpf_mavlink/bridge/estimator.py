@@ -405,8 +405,8 @@ class Estimator:
             if p.airspeed_is_eas:
                 airspeed *= eas_to_tas(float(self.vfr.alt_amsl_m))
         elif self.vfr is not None:
-            # type: ignore[operator]
-            return None, f"airspeed stale ({self.att_rx - self.vfr_rx:.2f} s behind the attitude)"
+            lag = self.att_rx - self.vfr_rx  # type: ignore[operator]
+            return None, f"airspeed stale ({lag:.2f} s behind the attitude)"
         return _Fused(t, px, py, pz, vg, psrc, R, R.tolist(), airspeed)
 
     def _fused_now(self, at_position: bool = False) -> _Fused | tuple[None, str]:
