@@ -15,28 +15,7 @@ MAVLink 1 (0xFE) and MAVLink 2 (0xFD) frames are parsed; we always *send* MAVLin
 
 from __future__ import annotations
 
-import os
-from typing import Any
-
-os.environ["MAVLINK20"] = "1"
-
-from pymavlink import mavutil  # noqa: E402  (the environment must be set first)
-
-DIALECT_NAME = "ardupilotmega"
-
-
-def _load_dialect() -> Any:
-    mavutil.set_dialect(DIALECT_NAME)
-    mod = mavutil.mavlink
-    if mod is None or mod.WIRE_PROTOCOL_VERSION != "2.0":  # pragma: no cover - env sabotage
-        raise ImportError(f"pymavlink did not load the MAVLink 2 {DIALECT_NAME} dialect")
-    return mod
-
-
-#: the generated pymavlink dialect module (message classes, enums, ``MAVLink`` parser class)
-dialect: Any = _load_dialect()
-
-from mpf_mavlink.mavlink.codec import (  # noqa: E402
+from mpf_mavlink.mavlink.codec import (
     AttitudeSample,
     CommandAckSample,
     FollowTargetSample,
@@ -48,7 +27,7 @@ from mpf_mavlink.mavlink.codec import (  # noqa: E402
     WindSample,
     decode,
 )
-from mpf_mavlink.mavlink.encode import (  # noqa: E402
+from mpf_mavlink.mavlink.encode import (
     encode_arm,
     encode_companion_heartbeat,
     encode_do_reposition,
@@ -60,16 +39,17 @@ from mpf_mavlink.mavlink.encode import (  # noqa: E402
     encode_set_message_interval,
     encode_set_mode,
 )
-from mpf_mavlink.mavlink.link import Link, LinkCounters, open_link, wait_heartbeat  # noqa: E402
-from mpf_mavlink.mavlink.modes import (  # noqa: E402
+from mpf_mavlink.mavlink.link import Link, LinkCounters, open_link, wait_heartbeat
+from mpf_mavlink.mavlink.modes import (
     Flavour,
     flavour_from_heartbeat,
     is_offboard,
     mode_name,
 )
-from mpf_mavlink.mavlink.signing import enable_signing, load_signing_key  # noqa: E402
-from mpf_mavlink.mavlink.tlog import TlogReadResult, TlogWriter, iter_tlog, read_tlog  # noqa: E402
-from mpf_mavlink.mavlink.url import parse_url  # noqa: E402
+from mpf_mavlink.mavlink.pymav import DIALECT_NAME, dialect, mavutil
+from mpf_mavlink.mavlink.signing import enable_signing, load_signing_key
+from mpf_mavlink.mavlink.tlog import TlogReadResult, TlogWriter, iter_tlog, read_tlog
+from mpf_mavlink.mavlink.url import parse_url
 
 __all__ = [
     "DIALECT_NAME",

@@ -19,10 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.mavlink import dialect as _d
 from mpf_mavlink.mavlink.modes import (
     is_armed,
 )
+from mpf_mavlink.mavlink.pymav import dialect as _d
 from mpf_mavlink.mavlink.wire_limits import (
     MAX_ACCEL_M_S2,
     MAX_ALT_M,

@@ -10,13 +10,13 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.mavlink import dialect as _d
 from mpf_mavlink.mavlink.modes import (
     MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
     Flavour,
     arduplane_mode_from_name,
     px4_mode_from_name,
 )
+from mpf_mavlink.mavlink.pymav import dialect as _d
 from mpf_mavlink.mavlink.wire_limits import (
     ARM_FORCE_MAGIC,
     MAV_CMD_COMPONENT_ARM_DISARM,

@@ -25,10 +25,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from mpf_mavlink.errors import MpfError
-from mpf_mavlink.mavlink import DIALECT_NAME, dialect, mavutil
 from mpf_mavlink.mavlink.boot_clock import BootClockGate
 from mpf_mavlink.mavlink.encode import encode_companion_heartbeat
 from mpf_mavlink.mavlink.ports import _Serial, _TcpClient
+from mpf_mavlink.mavlink.pymav import DIALECT_NAME, dialect, mavutil
 from mpf_mavlink.mavlink.tlog import TlogWriter
 from mpf_mavlink.mavlink.url import MAV_COMP_ID_ONBOARD_COMPUTER, parse_url
 

@@ -7,7 +7,7 @@ import socket
 from typing import Any
 
 from mpf_mavlink.errors import MpfError
-from mpf_mavlink.mavlink import mavutil
+from mpf_mavlink.mavlink.pymav import mavutil
 
 
 # ---------------------------------------------------------------------------------------------

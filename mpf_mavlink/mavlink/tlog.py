@@ -22,7 +22,7 @@ from typing import Any
 from pymavlink.generator.mavcrc import x25crc
 
 from mpf_mavlink.errors import MpfError
-from mpf_mavlink.mavlink import dialect as _d
+from mpf_mavlink.mavlink.pymav import dialect as _d
 
 STX_V1 = 0xFE
 STX_V2 = 0xFD
