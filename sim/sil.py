@@ -275,7 +275,7 @@ def build_vehicle(cfg: Config, url: str, clock: str | None = None, **over: Any) 
     sil = cfg.section("sil")
     prof_path = sil.profile_path(cfg.source)
     if prof_path is not None:
-        from sim.autopilot.profile import load_profile
+        from mpf_mavlink.config.autopilot_profile import load_profile
 
         prof = load_profile(prof_path)
         full = None

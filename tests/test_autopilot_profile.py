@@ -10,17 +10,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpf_mavlink.errors import ConfigError
-from sim.autopilot.profile import (
+from mpf_mavlink.config.autopilot_profile import (
     AttitudeResponse,
-    AttitudeShaper,
     AutopilotProfile,
     EstimatorModel,
-    RateWander,
-    StateEstimate,
     TurnResponse,
     load_profile,
 )
+from mpf_mavlink.errors import ConfigError
+from sim.autopilot.profile import AttitudeShaper, RateWander, StateEstimate
 
 ROOT = Path(__file__).resolve().parents[1]
 G = 9.80665

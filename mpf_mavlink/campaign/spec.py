@@ -35,8 +35,8 @@ from typing import Any, Literal
 
 import yaml
 
+from mpf_mavlink.config.build import _build
 from mpf_mavlink.config.fields import _fail, _nonneg, _pos
-from mpf_mavlink.config.schema import _build
 from mpf_mavlink.errors import ConfigError
 
 INITIAL_KEYS = ("initial.distance_m", "initial.bearing_rad", "initial.heading_rad")

@@ -17,7 +17,8 @@ import typing
 from dataclasses import MISSING
 from typing import Any, Literal
 
-from mpf_mavlink.config.schema import SECTIONS, Config, describe_check
+from mpf_mavlink.config.build import describe_check
+from mpf_mavlink.config.schema import SECTIONS, Config
 
 COMMAND = "python -m mpf_mavlink.config.reference > docs/configuration.md"
 

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from mpf_mavlink.config.autopilot_profile import load_profile
 from mpf_mavlink.config.bridge import MavlinkConfig, hold_mode_error
 from mpf_mavlink.config.fields import Vec3, _doc, _fail, _ge, _nonneg, _open, _pos, _rng
 from mpf_mavlink.errors import ConfigError
@@ -199,8 +200,6 @@ class SilConfig:
             return
         prof_path = self.profile_path(src)
         if prof_path is not None:
-            from sim.autopilot.profile import load_profile
-
             try:
                 prof = load_profile(prof_path)
             except ConfigError as e:
