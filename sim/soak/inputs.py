@@ -216,138 +216,138 @@ class BadInput:
     config: str | None = None  # YAML text for {W}/<name>.yaml (None: the stock PX4 config)
 
 
+# A valid command line: each bad input breaks one piece of it.
+_RUN = (
+    "run",
+    "{CFG}",
+    "--connect",
+    "udpin:127.0.0.1:{PORT}",
+    "--out",
+    "{W}/out",
+    "--heartbeat-timeout",
+    "2",
+    "-q",
+    "--no-plots",
+)
+
+# (name, culprit, edits of the stock PX4 config: "section__key" -> value, None deletes the key)
+_CONFIG_EDITS: tuple[tuple[str, str, dict[str, Any]], ...] = (
+    ("unknown_section", "autopilot", {"autopilot__gain": 1.0}),
+    ("unknown_key", "guidance.K_x", {"guidance__K_x": 1.0}),
+    ("wrong_type", "vehicle.airspeed_m_s", {"vehicle__airspeed_m_s": "fast"}),
+    ("non_finite", "guidance.K_p", {"guidance__K_p": float("nan")}),
+    ("out_of_range", "vehicle.max_bank_rad", {"vehicle__max_bank_rad": 2.0}),
+    ("missing_required_key", "path.radius_m", {"path__radius_m": None}),
+    ("key_unused_by_path", "path.size_m", {"path__size_m": 100.0}),
+    ("airspeed_outside_limits", "vehicle.airspeed_m_s", {"vehicle__airspeed_min_m_s": 16.0}),
+)
+
+# (name, culprit, "--set" assignments appended to the valid command line)
+_SETS_OF_VALUES: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    ("set_without_equals", "guidance.K_p", ("guidance.K_p",)),
+    ("set_unknown_key", "mavlink.sysid", ("mavlink.sysid=3",)),
+    ("set_bad_yaml", "guidance.K_p", ("guidance.K_p=[1,",)),
+    ("set_non_finite", "guidance.K_R", ("guidance.K_R=.inf",)),
+)
+
+# (name, culprit, the --connect URL)
+_URLS: tuple[tuple[str, str, str], ...] = (
+    ("url_unknown_scheme", "foo", "foo:127.0.0.1:{PORT}"),
+    ("url_port_out_of_range", "99999", "udpin:127.0.0.1:99999"),
+    ("url_bad_host", "no such host!", "udpin:no such host!:14540"),
+    ("url_serial_missing", "/dev/ttyNOPE0", "/dev/ttyNOPE0:57600"),
+)
+
+# (name, culprit, options appended to the valid command line)
+_OPTIONS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    ("flavour_unknown", "--flavour", ("--flavour", "inav")),
+    ("duration_negative", "--duration", ("--duration", "-5")),
+)
+
+# (name, culprit, "--set" assignments appended to the valid command line)
+_SETS_OF_SETTINGS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    ("signing_key_missing", "no.key", ("mavlink.signing_key_file={W}/no.key",)),
+    ("signing_key_wrong_length", "short.key", ("mavlink.signing_key_file={W}/short.key",)),
+    ("live_target_without_sysid", "target_sysid", ("target.type=mavlink",)),
+    ("sysid_out_of_range", "mavlink.vehicle_sysid", ("mavlink.vehicle_sysid=300",)),
+    (
+        "setpoint_rate_too_low",
+        "mavlink.min_setpoint_rate_hz",
+        ("mavlink.min_setpoint_rate_hz=1",),
+    ),
+    ("origin_out_of_range", "mavlink.origin_lat_deg", ("mavlink.origin_lat_deg=95",)),
+    ("mission_duration_zero", "mavlink.mission_duration_s", ("mavlink.mission_duration_s=0",)),
+    ("hold_mode_unknown", "mavlink.hold_mode", ("mavlink.hold_mode=BOGUS",)),
+)
+
+# (name, culprit, "--set" assignments) that follow the other autopilot's case
+_SETS_OF_PAIRS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    (
+        "thrust_limits_crossed",
+        "adapter.thrust_min",
+        ("adapter.thrust_min=0.9", "adapter.thrust_max=0.2"),
+    ),
+    (
+        "target_sysid_is_vehicle",
+        "mavlink.target_sysid",
+        ("target.type=mavlink", "mavlink.target_sysid=1"),
+    ),
+    ("source_ids_are_autopilot", "mavlink.source_component", ("mavlink.source_component=1",)),
+)
+
+
+def _config_variant(base: dict[str, Any], edits: dict[str, Any]) -> str:
+    """The YAML text of ``base`` with ``edits`` ("section__key" -> value; None deletes) applied."""
+    import copy
+
+    import yaml
+
+    d = copy.deepcopy(base)
+    for dotted, v in edits.items():
+        sec, _, key = dotted.partition("__")
+        if v is None:
+            d[sec].pop(key, None)
+        else:
+            d.setdefault(sec, {})[key] = v
+    return yaml.safe_dump(d)
+
+
+def _with_sets(rows: tuple[tuple[str, str, tuple[str, ...]], ...]) -> list[BadInput]:
+    out = []
+    for name, culprit, assignments in rows:
+        argv = list(_RUN)
+        for a in assignments:
+            argv += ["--set", a]
+        out.append(BadInput(name, tuple(argv), culprit))
+    return out
+
+
 def _bad_inputs() -> list[BadInput]:
     import yaml
 
     base = yaml.safe_load(CONFIGS["px4"].read_text())
-
-    def variant(**edits: Any) -> str:
-        import copy
-
-        d = copy.deepcopy(base)
-        for dotted, v in edits.items():
-            sec, _, key = dotted.partition("__")
-            if v is None:
-                d[sec].pop(key, None)
-            else:
-                d.setdefault(sec, {})[key] = v
-        return yaml.safe_dump(d)
-
-    run = (
-        "run",
-        "{CFG}",
-        "--connect",
-        "udpin:127.0.0.1:{PORT}",
-        "--out",
-        "{W}/out",
-        "--heartbeat-timeout",
-        "2",
-        "-q",
-        "--no-plots",
-    )
+    run = _RUN
     ard = str(CONFIGS["ardupilot"])
     return [
         BadInput("config_missing", ("run", "{W}/nope.yaml", *run[2:]), "nope.yaml"),
         BadInput("config_not_yaml", run, "not valid YAML", "path: [unclosed\n"),
         BadInput("config_top_level_list", run, "top level", "- a\n- b\n"),
-        BadInput("unknown_section", run, "autopilot", variant(autopilot__gain=1.0)),
-        BadInput("unknown_key", run, "guidance.K_x", variant(guidance__K_x=1.0)),
-        BadInput("wrong_type", run, "vehicle.airspeed_m_s", variant(vehicle__airspeed_m_s="fast")),
-        BadInput("non_finite", run, "guidance.K_p", variant(guidance__K_p=float("nan"))),
-        BadInput("out_of_range", run, "vehicle.max_bank_rad", variant(vehicle__max_bank_rad=2.0)),
-        BadInput("missing_required_key", run, "path.radius_m", variant(path__radius_m=None)),
-        BadInput("key_unused_by_path", run, "path.size_m", variant(path__size_m=100.0)),
-        BadInput(
-            "airspeed_outside_limits",
-            run,
-            "vehicle.airspeed_m_s",
-            variant(vehicle__airspeed_min_m_s=16.0),
-        ),
-        BadInput("set_without_equals", (*run, "--set", "guidance.K_p"), "guidance.K_p"),
-        BadInput("set_unknown_key", (*run, "--set", "mavlink.sysid=3"), "mavlink.sysid"),
-        BadInput("set_bad_yaml", (*run, "--set", "guidance.K_p=[1,"), "guidance.K_p"),
-        BadInput("set_non_finite", (*run, "--set", "guidance.K_R=.inf"), "guidance.K_R"),
-        BadInput(
-            "url_unknown_scheme",
-            ("run", "{CFG}", "--connect", "foo:127.0.0.1:{PORT}", *run[4:]),
-            "foo",
-        ),
-        BadInput(
-            "url_port_out_of_range",
-            ("run", "{CFG}", "--connect", "udpin:127.0.0.1:99999", *run[4:]),
-            "99999",
-        ),
-        BadInput(
-            "url_bad_host",
-            ("run", "{CFG}", "--connect", "udpin:no such host!:14540", *run[4:]),
-            "no such host!",
-        ),
-        BadInput(
-            "url_serial_missing",
-            ("run", "{CFG}", "--connect", "/dev/ttyNOPE0:57600", *run[4:]),
-            "/dev/ttyNOPE0",
-        ),
+        *(BadInput(n, run, c, _config_variant(base, e)) for n, c, e in _CONFIG_EDITS),
+        *_with_sets(_SETS_OF_VALUES),
+        *(BadInput(n, ("run", "{CFG}", "--connect", url, *run[4:]), c) for n, c, url in _URLS),
         BadInput("connect_missing", ("run", "{CFG}", *run[4:]), "--connect"),
-        BadInput("flavour_unknown", (*run, "--flavour", "inav"), "--flavour"),
-        BadInput("duration_negative", (*run, "--duration", "-5"), "--duration"),
+        *(BadInput(n, (*run, *extra), c) for n, c, extra in _OPTIONS),
         BadInput(
             "heartbeat_timeout_zero", (*run[:6], "--heartbeat-timeout", "0"), "--heartbeat-timeout"
         ),
         BadInput("unknown_option", (*run, "--bogus"), "--bogus"),
-        BadInput(
-            "signing_key_missing", (*run, "--set", "mavlink.signing_key_file={W}/no.key"), "no.key"
-        ),
-        BadInput(
-            "signing_key_wrong_length",
-            (*run, "--set", "mavlink.signing_key_file={W}/short.key"),
-            "short.key",
-        ),
-        BadInput(
-            "live_target_without_sysid", (*run, "--set", "target.type=mavlink"), "target_sysid"
-        ),
-        BadInput(
-            "sysid_out_of_range",
-            (*run, "--set", "mavlink.vehicle_sysid=300"),
-            "mavlink.vehicle_sysid",
-        ),
-        BadInput(
-            "setpoint_rate_too_low",
-            (*run, "--set", "mavlink.min_setpoint_rate_hz=1"),
-            "mavlink.min_setpoint_rate_hz",
-        ),
-        BadInput(
-            "origin_out_of_range",
-            (*run, "--set", "mavlink.origin_lat_deg=95"),
-            "mavlink.origin_lat_deg",
-        ),
-        BadInput(
-            "mission_duration_zero",
-            (*run, "--set", "mavlink.mission_duration_s=0"),
-            "mavlink.mission_duration_s",
-        ),
-        BadInput(
-            "hold_mode_unknown", (*run, "--set", "mavlink.hold_mode=BOGUS"), "mavlink.hold_mode"
-        ),
+        *_with_sets(_SETS_OF_SETTINGS),
         BadInput(
             "hold_mode_of_other_autopilot",
             ("run", ard, *run[2:], "--set", "mavlink.hold_mode=AUTO.LOITER"),
             "mavlink.hold_mode",
         ),
-        BadInput(
-            "thrust_limits_crossed",
-            (*run, "--set", "adapter.thrust_min=0.9", "--set", "adapter.thrust_max=0.2"),
-            "adapter.thrust_min",
-        ),
-        BadInput(
-            "target_sysid_is_vehicle",
-            (*run, "--set", "target.type=mavlink", "--set", "mavlink.target_sysid=1"),
-            "mavlink.target_sysid",
-        ),
-        BadInput(
-            "source_ids_are_autopilot",
-            (*run, "--set", "mavlink.source_component=1"),
-            "mavlink.source_component",
-        ),
+        *_with_sets(_SETS_OF_PAIRS),
         BadInput(
             "out_is_a_file",
             ("run", "{CFG}", "--connect", "udpin:127.0.0.1:{PORT}", "--out", "{W}/short.key", "-q"),
