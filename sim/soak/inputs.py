@@ -28,6 +28,7 @@ from sim.soak.rig import (
     TARGET_SYSID,
     VEHICLE_COMPID,
     VEHICLE_SYSID,
+    BridgeOutcome,
     Mission,
     MissionSpec,
     Opts,
@@ -44,14 +45,99 @@ def _signed_mav(key: bytes, sysid: int, compid: int, link_id: int = 3) -> Any:
     return mav
 
 
+class _Spoofer:
+    """The attacker of :func:`scenario_spoof`: injects toward the bridge through the relay and
+    counts what it injected, by kind, in ``n``."""
+
+    def __init__(self, m: Mission, key: bytes, n: dict[str, int]) -> None:
+        from mpf_mavlink.core.frames import ned_to_geodetic
+
+        self.m, self.n = m, n
+        self.lat, self.lon, self.alt = ned_to_geodetic(
+            (2000.0, 2000.0, -100.0), 47.397742, 8.545594, 488.0
+        )
+        self.ins99, self.ins77 = _signed_mav(key, 99, 1), _signed_mav(key, 77, 1)
+        self.plain1, self.plain2 = (
+            M.MAVLink(None, srcSystem=1, srcComponent=1),
+            M.MAVLink(None, srcSystem=TARGET_SYSID, srcComponent=1),
+        )
+        self.wrong = _signed_mav(os.urandom(32), 1, 1, link_id=0)
+        self.mark = 0
+
+    def run(self, dur: float, stop: threading.Event) -> None:
+        t_end = time.monotonic() + dur - 3.0  # stop before the bridge closes: every frame counted
+        while time.monotonic() < t_end and not stop.is_set():
+            ms = self.m.tap.vehicle_ms() or 0
+            ft = self._insiders(ms)
+            self._unsigned(ms, ft)
+            self._wrong_key(ms)
+            self._replay()
+            time.sleep(0.05)
+
+    def _inject(self, kind: str, data: bytes, count: int = 1) -> None:
+        self.m.relay.inject(DOWN, data)
+        self.n[kind] += count
+
+    def _insiders(self, ms: int) -> Any:
+        """Telemetry from system 99 and a far target from system 77, signed with the right key;
+        returns the target message for the unsigned round."""
+        for msg in (
+            M.MAVLink_attitude_message(ms, 1.0, 0.5, 2.0, 0, 0, 0),
+            M.MAVLink_local_position_ned_message(ms, 5000.0, 5000.0, -900.0, 0.0, 30.0, 0.0),
+            M.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3),
+        ):
+            self._inject("foreign_ids_signed", msg.pack(self.ins99))
+        ft = M.MAVLink_follow_target_message(
+            ms,
+            15,
+            int(self.lat * 1e7),
+            int(self.lon * 1e7),
+            self.alt,
+            [0.0] * 3,
+            [0.0] * 3,
+            [1.0, 0, 0, 0],
+            [0.0] * 3,
+            [0.0] * 3,
+            0,
+        )
+        self._inject("foreign_ids_signed", ft.pack(self.ins77))
+        return ft
+
+    def _unsigned(self, ms: int, ft: Any) -> None:
+        for mav, msg in (
+            (self.plain1, M.MAVLink_attitude_message(ms + 5, 1.0, 0.5, 2.0, 0, 0, 0)),
+            (self.plain1, M.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3)),
+            (self.plain2, ft),
+        ):
+            self._inject("unsigned", msg.pack(mav))
+
+    def _wrong_key(self, ms: int) -> None:
+        msg = M.MAVLink_attitude_message(ms + 5, 1.0, 0.5, 2.0, 0, 0, 0)
+        self._inject("wrong_key", msg.pack(self.wrong))
+
+    def _replay(self) -> None:
+        """One of the vehicle's own signed datagrams, about 1 s old, verbatim."""
+        from sim.soak.relay import split_frames
+
+        relay = self.m.relay
+        old = [
+            d
+            for d in relay.datagrams(DOWN, self.mark)
+            if d.fate == "delivered" and d.t < relay.now() - 1.0
+        ]
+        if old:
+            self.mark += len(relay.datagrams(start=self.mark)) // 2
+            frames = split_frames(old[-1].data) or []
+            if frames and all(f[0] == 0xFD and f[2] & 0x01 for f in frames):
+                self._inject("replayed", old[-1].data, len(frames))
+
+
 def scenario_spoof(o: Opts) -> Row:
     """Signing on, live target from system 2. Injected toward the bridge: (a) telemetry and a
     target from other system ids, signed with the RIGHT key (an insider); (b) unsigned
     telemetry and targets from the vehicle's and the target's own ids; (c) replays of the
     vehicle's own signed datagrams 1 s later; (d) the vehicle's ids signed with a WRONG key.
     Each must be rejected and counted exactly once; the mission must not notice."""
-    from sim.soak.relay import split_frames
-
     row = Row("spoofing_signing")
     dur = 20.0 if o.quick else 40.0
     key = os.urandom(32)
@@ -72,80 +158,20 @@ def scenario_spoof(o: Opts) -> Row:
     n = {"foreign_ids_signed": 0, "unsigned": 0, "replayed": 0, "wrong_key": 0}
     stop = threading.Event()
     with Mission(spec, kdir) as m:
-
-        def attack() -> None:
-            from mpf_mavlink.core.frames import ned_to_geodetic
-
-            lat, lon, alt = ned_to_geodetic((2000.0, 2000.0, -100.0), 47.397742, 8.545594, 488.0)
-            ins99, ins77 = _signed_mav(key, 99, 1), _signed_mav(key, 77, 1)
-            plain1, plain2 = (
-                M.MAVLink(None, srcSystem=1, srcComponent=1),
-                M.MAVLink(None, srcSystem=TARGET_SYSID, srcComponent=1),
-            )
-            wrong = _signed_mav(os.urandom(32), 1, 1, link_id=0)
-            t_end = (
-                time.monotonic() + dur - 3.0
-            )  # stop before the bridge closes: every frame counted
-            mark = 0
-            while time.monotonic() < t_end and not stop.is_set():
-                ms = m.tap.vehicle_ms() or 0
-                for mav in (ins99,):
-                    for msg in (
-                        M.MAVLink_attitude_message(ms, 1.0, 0.5, 2.0, 0, 0, 0),
-                        M.MAVLink_local_position_ned_message(
-                            ms, 5000.0, 5000.0, -900.0, 0.0, 30.0, 0.0
-                        ),
-                        M.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3),
-                    ):
-                        m.relay.inject(DOWN, msg.pack(mav))
-                        n["foreign_ids_signed"] += 1
-                ft = M.MAVLink_follow_target_message(
-                    ms,
-                    15,
-                    int(lat * 1e7),
-                    int(lon * 1e7),
-                    alt,
-                    [0.0] * 3,
-                    [0.0] * 3,
-                    [1.0, 0, 0, 0],
-                    [0.0] * 3,
-                    [0.0] * 3,
-                    0,
-                )
-                m.relay.inject(DOWN, ft.pack(ins77))
-                n["foreign_ids_signed"] += 1
-                for mav, msg in (
-                    (plain1, M.MAVLink_attitude_message(ms + 5, 1.0, 0.5, 2.0, 0, 0, 0)),
-                    (plain1, M.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3)),
-                    (plain2, ft),
-                ):
-                    m.relay.inject(DOWN, msg.pack(mav))
-                    n["unsigned"] += 1
-                m.relay.inject(
-                    DOWN, M.MAVLink_attitude_message(ms + 5, 1.0, 0.5, 2.0, 0, 0, 0).pack(wrong)
-                )
-                n["wrong_key"] += 1
-                # a replay: one of the vehicle's own signed datagrams, about 1 s old, verbatim
-                old = [
-                    d
-                    for d in m.relay.datagrams(DOWN, mark)
-                    if d.fate == "delivered" and d.t < m.relay.now() - 1.0
-                ]
-                if old:
-                    mark += len(m.relay.datagrams(start=mark)) // 2
-                    frames = split_frames(old[-1].data) or []
-                    if frames and all(f[0] == 0xFD and f[2] & 0x01 for f in frames):
-                        m.relay.inject(DOWN, old[-1].data)
-                        n["replayed"] += len(frames)
-                time.sleep(0.05)
-
-        th = threading.Thread(target=attack, daemon=True)
+        # the attacker is built in its thread, so its signing timestamps start at the attack
+        th = threading.Thread(target=lambda: _Spoofer(m, key, n).run(dur, stop), daemon=True)
         if row.check(m.wait_engaged(30.0), "never engaged"):
             th.start()
         out = m.finish(dur + 40.0)
         stop.set()
         if th.is_alive():
             th.join(5.0)
+    _judge_spoof(row, m, out, n)
+    return row
+
+
+def _judge_spoof(row: Row, m: Mission, out: BridgeOutcome, n: dict[str, int]) -> None:
+    """Every injected frame rejected and counted once by kind; the spoofed target never used."""
     _mission_common(row, m, out, Limits.for_config("px4"))
     c = out.counters
     got = {
@@ -168,7 +194,6 @@ def scenario_spoof(o: Opts) -> Row:
         far = float(max(abs(ts["tgt_n"]).max(), abs(ts["tgt_e"]).max()))
         row.figures["max_target_offset_seen_m"] = _r(far)
         row.check(far < 50.0, f"a spoofed target reached the law ({far:.0f} m)")
-    return row
 
 
 class HeartbeatBeacon:
@@ -503,49 +528,62 @@ def scenario_output_dir(o: Opts, in_flight: bool = True) -> Row:
         ("readonly", ("Read-only", "File too large")),
         ("full", ("No space left", "File too large")),
     ):
-        mnt = w / mode
-        mnt.mkdir(parents=True, exist_ok=True)
-        prefix, method = _fs_prefix(mnt, mode)
-        port = free_udp_port()
-        with HeartbeatBeacon(port) as beacon:
-            p = subprocess.run(
-                [
-                    *prefix,
-                    *mpf_mavlink_cmd(),
-                    "run",
-                    str(CONFIGS["px4"]),
-                    "--connect",
-                    f"udpin:127.0.0.1:{port}",
-                    "--out",
-                    str(mnt / "run"),
-                    "-q",
-                    "--no-plots",
-                ],
-                cwd=ROOT,
-                capture_output=True,
-                text=True,
-                timeout=60,
-            )
-            time.sleep(0.1)
-        err = p.stderr.strip().splitlines()
-        refusals[mode] = {
-            "method": method,
-            "rc": p.returncode,
-            "stderr": err[-1] if err else "",
-            "sent_to_vehicle": beacon.received,
-        }
-        row.check(
-            p.returncode == 2
-            and len(err) == 1
-            and str(mnt / "run") in err[0]
-            and any(t in err[0] for t in errno_text)
-            and beacon.received == 0,
-            f"{mode}: not refused cleanly before connecting: {refusals[mode]}",
-        )
+        refusals[mode] = _refused_before_connecting(row, w / mode, mode, errno_text)
     row.figures["refused"] = refusals
-    if not in_flight:
-        return row
-    # the disk fills up mid-flight: 96 KiB hold the first ~10 s of tlog
+    if in_flight:
+        _disk_fills_in_flight(row, o, w)
+    return row
+
+
+def _refused_before_connecting(
+    row: Row, mnt: Path, mode: str, errno_text: tuple[str, ...]
+) -> dict[str, Any]:
+    """A bridge started on an unwritable run directory (``mode`` of :func:`_fs_prefix`) exits 2
+    with one line naming it, before sending anything to the vehicle."""
+    mnt.mkdir(parents=True, exist_ok=True)
+    prefix, method = _fs_prefix(mnt, mode)
+    port = free_udp_port()
+    with HeartbeatBeacon(port) as beacon:
+        p = subprocess.run(
+            [
+                *prefix,
+                *mpf_mavlink_cmd(),
+                "run",
+                str(CONFIGS["px4"]),
+                "--connect",
+                f"udpin:127.0.0.1:{port}",
+                "--out",
+                str(mnt / "run"),
+                "-q",
+                "--no-plots",
+            ],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        time.sleep(0.1)
+    err = p.stderr.strip().splitlines()
+    refusal = {
+        "method": method,
+        "rc": p.returncode,
+        "stderr": err[-1] if err else "",
+        "sent_to_vehicle": beacon.received,
+    }
+    row.check(
+        p.returncode == 2
+        and len(err) == 1
+        and str(mnt / "run") in err[0]
+        and any(t in err[0] for t in errno_text)
+        and beacon.received == 0,
+        f"{mode}: not refused cleanly before connecting: {refusal}",
+    )
+    return refusal
+
+
+def _disk_fills_in_flight(row: Row, o: Opts, w: Path) -> None:
+    """The disk fills up mid-flight (96 KiB hold the first ~10 s of tlog): the flight goes on,
+    setpoints do not pause, and the summary says records were lost."""
     dur = 20.0 if o.quick else 30.0
     mnt = w / "small"
     mnt.mkdir(parents=True, exist_ok=True)
@@ -580,4 +618,3 @@ def scenario_output_dir(o: Opts, in_flight: bool = True) -> Row:
         max_gap([e.t for e in tap.setpoints], t_on, t_off) <= 0.25,
         "setpoints paused while the disk filled",
     )
-    return row
