@@ -323,10 +323,9 @@ def main(argv: list[str] | None = None) -> int:
     return rc
 
 
-def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, Any]) -> int:
-    mod, out, cfg = v["mod"], v["out"], v["cfg"]
-    bundle_dir = unpack(a.autopilot, v["bundle"])
-    summary.update(
+def _flight_header(a: argparse.Namespace, v: dict[str, Any], bundle_dir: Path) -> dict[str, Any]:
+    """The summary's description of the flight: firmware, config, speed-up, commit, weather."""
+    return dict(
         bundle=bundle_version(bundle_dir),
         config=str(v["config"].relative_to(ROOT))
         if v["config"].is_relative_to(ROOT)
@@ -338,6 +337,64 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
         turbulence=a.turbulence,
         command=" ".join(["scripts/sitl", *sys.argv[1:]]) if sys.argv else "",
     )
+
+
+def _bridge_command(
+    a: argparse.Namespace, v: dict[str, Any], url: str, sets: list[str]
+) -> list[str]:
+    return [
+        sys.executable,
+        "-m",
+        "mpf_mavlink.cli",
+        "run",
+        str(v["config"]),
+        "--connect",
+        url,
+        "--out",
+        str(v["out"] / "bridge"),
+        "--duration",
+        f"{a.duration:g}",
+        *[x for s in sets for x in ("--set", s)],
+    ]
+
+
+def _until_bridge_exits(
+    a: argparse.Namespace,
+    g: Gcs,
+    mod: Any,
+    bridge: subprocess.Popen[str],
+    mission: tuple[list[float], float],
+    out: Path,
+) -> dict[str, Any]:
+    """Pumps the GCS until the bridge exits (or is SIGKILLed ``--kill-after`` s into tracking,
+    then watches the autopilot's hold about ``mission`` (centre, radius)); returns the kill's
+    figures, empty without a kill."""
+    centre, radius = mission
+    t_engaged: float | None = None
+    while bridge.poll() is None:
+        g.pump(0.2)
+        if g.mode() == mod.TRACK_MODE and t_engaged is None:
+            t_engaged = g.t_boot_s
+            print(f"{mod.TRACK_MODE} at t_boot {t_engaged:.1f} s", flush=True)
+        if (
+            a.kill_after is not None
+            and t_engaged is not None
+            and g.t_boot_s - t_engaged >= a.kill_after
+        ):
+            os.kill(bridge.pid, signal.SIGKILL)
+            bridge.wait()
+            tracked = g.t_boot_s - t_engaged
+            print(f"bridge SIGKILLed {tracked:.1f} s into tracking", flush=True)
+            kill = watch_hold(g, a.watch_s, centre, -centre[2], radius, out)
+            kill["killed_after_s"] = tracked
+            return kill
+    return {}
+
+
+def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, Any]) -> int:
+    mod, out, cfg = v["mod"], v["out"], v["cfg"]
+    bundle_dir = unpack(a.autopilot, v["bundle"])
+    summary.update(_flight_header(a, v, bundle_dir))
     print(f"{summary['bundle']}: starting ({bundle_dir})", flush=True)
     fw.start(bundle_dir, out / "firmware")
     g = Gcs(fw.gcs_url, mod.FLAVOUR)
@@ -371,45 +428,15 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
         relay = PtyRelay(fw.bridge_port)
         url = f"{relay.device}:115200"
         summary["serial"] = {"device": relay.device, "relayed_to": fw.bridge_url}
-    cmd = [
-        sys.executable,
-        "-m",
-        "mpf_mavlink.cli",
-        "run",
-        str(v["config"]),
-        "--connect",
-        url,
-        "--out",
-        str(out / "bridge"),
-        "--duration",
-        f"{a.duration:g}",
-        *[x for s in sets for x in ("--set", s)],
-    ]
+    cmd = _bridge_command(a, v, url, sets)
     print("hand-over: mpf-mavlink " + " ".join(cmd[3:]), flush=True)
     with open(out / "bridge.log", "w") as blog:
         bridge = subprocess.Popen(
             cmd, stdout=blog, stderr=subprocess.STDOUT, text=True, preexec_fn=die_with_parent
         )
-    t_engaged: float | None = None
     kill: dict[str, Any] = {}
     try:
-        while bridge.poll() is None:
-            g.pump(0.2)
-            if g.mode() == mod.TRACK_MODE and t_engaged is None:
-                t_engaged = g.t_boot_s
-                print(f"{mod.TRACK_MODE} at t_boot {t_engaged:.1f} s", flush=True)
-            if (
-                a.kill_after is not None
-                and t_engaged is not None
-                and g.t_boot_s - t_engaged >= a.kill_after
-            ):
-                os.kill(bridge.pid, signal.SIGKILL)
-                bridge.wait()
-                tracked = g.t_boot_s - t_engaged
-                print(f"bridge SIGKILLed {tracked:.1f} s into tracking", flush=True)
-                kill = watch_hold(g, a.watch_s, centre, -centre[2], radius, out)
-                kill["killed_after_s"] = tracked
-                break
+        kill = _until_bridge_exits(a, g, mod, bridge, (centre, radius), out)
         code = bridge.wait()
     finally:
         if bridge.poll() is None:
