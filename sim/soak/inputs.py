@@ -14,14 +14,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-os.environ.setdefault("MAVLINK20", "1")
-os.environ.setdefault("JSBSIM_DEBUG", "0")
-
-from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as M
 
 from sim.soak.checks import Limits, _r, max_gap
 from sim.soak.missions import FLOWN, _completed, _mission_common, _timeseries, _tracking_window
-from sim.soak.relay import DOWN  # noqa: E402
+from sim.soak.relay import DOWN
 from sim.soak.rig import (
     CONFIGS,
     ROOT,

@@ -24,15 +24,12 @@ level (only signing can tell them apart) and the bridge is right to act on them.
 from __future__ import annotations
 
 import math
-import os
 import random
 import struct
 from collections.abc import Callable
 
-os.environ.setdefault("MAVLINK20", "1")
-
-from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
-from pymavlink.generator.mavcrc import x25crc  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as M
+from pymavlink.generator.mavcrc import x25crc
 
 _INT_RANGES = {
     "int8_t": (-(2**7), 2**7 - 1),

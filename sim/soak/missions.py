@@ -5,22 +5,18 @@ bridge."""
 from __future__ import annotations
 
 import math
-import os
 import signal
 import threading
 import time
 from pathlib import Path
 from typing import Any
 
-os.environ.setdefault("MAVLINK20", "1")
-os.environ.setdefault("JSBSIM_DEBUG", "0")
+from pymavlink.dialects.v20 import ardupilotmega as M
 
-from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
-
-from mpf_mavlink.mavlink.modes import is_offboard  # noqa: E402
-from mpf_mavlink.runs.verdict import EXIT_NOT_JUDGED  # noqa: E402
+from mpf_mavlink.mavlink.modes import is_offboard
+from mpf_mavlink.runs.verdict import EXIT_NOT_JUDGED
 from sim.soak.checks import Limits, _r, bridge_silence, max_gap, setpoint_violations
-from sim.soak.relay import DOWN, UP, Blackout, Impairment  # noqa: E402
+from sim.soak.relay import DOWN, UP, Blackout, Impairment
 from sim.soak.rig import (
     TARGET_SYSID,
     VEHICLE_COMPID,

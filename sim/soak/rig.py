@@ -9,7 +9,6 @@ import contextlib
 import gc
 import json
 import math
-import os
 import signal
 import socket
 import subprocess
@@ -23,14 +22,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as M
 
-os.environ.setdefault("MAVLINK20", "1")
-os.environ.setdefault("JSBSIM_DEBUG", "0")
-
-from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
-
-from mpf_mavlink.mavlink.modes import is_offboard, mode_name  # noqa: E402
-from sim.soak.relay import DOWN, Blackout, Impairment, UdpRelay  # noqa: E402
+from mpf_mavlink.mavlink.modes import is_offboard, mode_name
+from sim.soak.relay import DOWN, Blackout, Impairment, UdpRelay
 
 if TYPE_CHECKING:
     from mpf_mavlink.core.target import ConstantTurn, Stationary
