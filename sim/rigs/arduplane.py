@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import fcntl
 import math
-import os
-import signal
 import socket
 import subprocess
 import time
@@ -19,7 +17,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from mpf_mavlink.mavlink.modes import Flavour
-from sim.rigs.bundles import ROOT, RigError, die_with_parent
+from sim.rigs.bundles import ROOT, RigError, die_with_parent, stop_process_group
 from sim.rigs.gcs import Gcs
 
 NAME = "arduplane"
@@ -123,13 +121,7 @@ class Firmware:
         return g.get_param("AIRSPEED_CRUISE")
 
     def stop(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            os.killpg(self.proc.pid, signal.SIGTERM)
-            try:
-                self.proc.wait(5)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait(5)
+        stop_process_group(self.proc, 5)
         self.lock.release()
 
 

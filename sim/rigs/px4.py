@@ -14,14 +14,13 @@ from __future__ import annotations
 import fcntl
 import math
 import os
-import signal
 import subprocess
 import time
 from pathlib import Path
 from typing import IO, Any
 
 from mpf_mavlink.mavlink.modes import Flavour
-from sim.rigs.bundles import ROOT, die_with_parent
+from sim.rigs.bundles import ROOT, die_with_parent, stop_process_group
 from sim.rigs.gcs import Gcs
 
 NAME = "px4"
@@ -106,13 +105,7 @@ class Firmware:
         return g.get_param("FW_AIRSPD_TRIM")
 
     def stop(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            os.killpg(self.proc.pid, signal.SIGTERM)
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait(5)
+        stop_process_group(self.proc, 10)
         if self.lock is not None:
             fcntl.flock(self.lock, fcntl.LOCK_UN)
             self.lock.close()
