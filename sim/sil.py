@@ -290,19 +290,10 @@ def full_thrust_throttle(cfg: Config, vc: VehicleConfig, airspeed: float) -> flo
     of a second plant at the start altitude): what the profile's full offboard thrust maps to."""
     from sim.autopilot.inner_loop import fly_to_trim
     from sim.plant.jsbsim_plant import JSBSimPlant
+    from sim.vehicle.vehicle import plant_kwargs
 
     alt = -float(vc.position_ned[2])
-    n_sub = max(1, math.ceil(vc.frame_period * vc.physics_rate_hz - 1e-9))
-    plant = JSBSimPlant(
-        dt=vc.frame_period / n_sub,
-        lat0_deg=vc.lat0_deg,
-        lon0_deg=vc.lon0_deg,
-        alt0_m=vc.alt0_m,
-        position_ned=(0.0, 0.0, -alt),
-        heading=0.0,
-        airspeed=airspeed,
-        **vc.plant_options,
-    )
+    plant = JSBSimPlant(**plant_kwargs(vc, (0.0, 0.0, -alt), 0.0, airspeed))
     res = fly_to_trim(plant, build_autopilot(cfg), airspeed, alt, seconds=20.0, apply=False)
     return float(res.throttle)
 
