@@ -30,7 +30,6 @@ import math
 import multiprocessing
 import os
 import signal
-import socket
 import sys
 import threading
 import time
@@ -42,6 +41,7 @@ import numpy as np
 
 from mpf_mavlink.config.scenario import build_path, build_target
 from mpf_mavlink.config.schema import Config
+from mpf_mavlink.mavlink.url import free_udp_port
 from mpf_mavlink.runs.rundir import (
     RunTable,
     compute_metrics,
@@ -312,14 +312,6 @@ def bridge_config(cfg: Config, **mavlink: Any) -> Config:
 
 
 # --------------------------------------------------------------------------- processes
-def _free_port() -> int:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = int(s.getsockname()[1])
-    s.close()
-    return port
-
-
 def _vehicle_run(
     cfg: Config, url: str, clock: str | None, conn: Any, stop: Any, status: Any, parent: int
 ) -> None:
@@ -447,7 +439,7 @@ def run_sil(
     bridge_dir = out / "bridge"
     sil = cfg.section("sil")
     duration = float(duration_s if duration_s is not None else cfg.sim.duration_s)
-    port = sil.port or _free_port()
+    port = sil.port or free_udp_port()
     # in lockstep the bridge's timeouts count the vehicle's time: a simulation slowed down by
     # a loaded host is not a lost link (mavlink.lockstep)
     bcfg = bridge_config(cfg, plots=plots, lockstep=(clock or sil.clock) == "lockstep")

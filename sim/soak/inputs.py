@@ -16,6 +16,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from mpf_mavlink.mavlink.url import free_udp_port
 from sim.soak.checks import Limits, _r, max_gap
 from sim.soak.missions import FLOWN, _completed, _mission_common, _timeseries, _tracking_window
 from sim.soak.relay import DOWN
@@ -30,7 +31,6 @@ from sim.soak.rig import (
     MissionSpec,
     Opts,
     Row,
-    free_udp_port,
     mpf_mavlink_cmd,
 )
 

@@ -10,7 +10,6 @@ import gc
 import json
 import math
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -25,6 +24,7 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from mpf_mavlink.mavlink.modes import is_offboard, mode_name
+from mpf_mavlink.mavlink.url import free_udp_port
 from sim.soak.relay import DOWN, Blackout, Impairment, UdpRelay
 
 if TYPE_CHECKING:
@@ -45,14 +45,6 @@ START_HEADING = 0.0
 # ... and held there in the orbit the path is (the operator's loiter about the path centre before
 # the mission): the vehicle is on the path however long the bridge takes to engage
 START_ON_PATH = ("--position", "0", "-150", "-100", "--orbit", "0", "0", "150")
-
-
-def free_udp_port() -> int:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def mpf_mavlink_cmd() -> list[str]:
