@@ -79,14 +79,11 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _add_number(
-    ap: argparse.ArgumentParser,
-    flag: str,
-    kind: str,
-    lo_open: bool,
-    help: str,
-    default: float | None = None,
+    ap: argparse.ArgumentParser, flag: str, kind: str, help: str, default: float | None = None
 ) -> None:
-    """A number option >= 0 (> 0 with ``lo_open``); ``kind`` names it in the error."""
+    """A number option bounded below by 0 as ``kind`` says (e.g. "time > 0 s", "speed >= 0
+    m/s"), which also names it in the error."""
+    lo_open = ">=" not in kind
     ap.add_argument(flag, type=_number(kind, 0.0, lo_open), default=default, help=help)
 
 
@@ -105,12 +102,7 @@ def _add_flight_options(ap: argparse.ArgumentParser) -> None:
     )
     ap.add_argument("--config", help="bridge config (default configs/bridge_<autopilot>.yaml)")
     _add_number(
-        ap,
-        "--duration",
-        "time > 0 s",
-        True,
-        "seconds of tracking (autopilot time; default 300)",
-        300.0,
+        ap, "--duration", "time > 0 s", "seconds of tracking (autopilot time; default 300)", 300.0
     )
     ap.add_argument(
         "--moving",
@@ -118,17 +110,14 @@ def _add_flight_options(ap: argparse.ArgumentParser) -> None:
         help="moving target: the config's, or 3 m/s east if the config's is still",
     )
     ap.add_argument("--wind", type=_wind, help="SPEED,DIR_DEG (ArduPlane SIM_WIND_SPD/DIR)")
-    _add_number(ap, "--turbulence", "speed >= 0 m/s", False, "ArduPlane SIM_WIND_TURB (m/s)")
+    _add_number(ap, "--turbulence", "speed >= 0 m/s", "ArduPlane SIM_WIND_TURB (m/s)")
     _add_number(
         ap,
         "--kill-after",
         "time > 0 s",
-        True,
         "SIGKILL the bridge S s into tracking and watch the autopilot's hold",
     )
-    _add_number(
-        ap, "--watch-s", "time > 0 s", True, "seconds watched after the kill (default 60)", 60.0
-    )
+    _add_number(ap, "--watch-s", "time > 0 s", "seconds watched after the kill (default 60)", 60.0)
 
 
 def _add_rig_options(ap: argparse.ArgumentParser) -> None:
@@ -138,7 +127,6 @@ def _add_rig_options(ap: argparse.ArgumentParser) -> None:
         ap,
         "--speedup",
         "factor > 0",
-        True,
         "ArduPlane SIM_SPEEDUP / PX4_SIM_SPEED_FACTOR (default 1: real time)",
         1.0,
     )
@@ -149,9 +137,9 @@ def _add_rig_options(ap: argparse.ArgumentParser) -> None:
     )
     ap.add_argument("--instance", type=int, help="ArduPlane -I N (default: the first free one)")
     ap.add_argument("--binary", help="ArduPlane: your own arduplane SITL binary instead")
-    _add_number(ap, "--alt", "height > 0 m", True, "take-off / path altitude above home (m)", 100.0)
+    _add_number(ap, "--alt", "height > 0 m", "take-off / path altitude above home (m)", 100.0)
     _add_number(
-        ap, "--lead", "time >= 0 s", False, "wall seconds from placing the mission to engaging", 6.0
+        ap, "--lead", "time >= 0 s", "wall seconds from placing the mission to engaging", 6.0
     )
     ap.add_argument(
         "--record",
