@@ -254,17 +254,13 @@ class _OwnAbsurd:
         rate = self.r.choice((60.0, -1e4, 1e20))
         return M.MAVLink_attitude_message(self.t_ok, 0.1, 0.05, 1.0, rate, 0.0, 0.0)
 
+    def _plausible(self, *half_widths: float) -> list[float]:
+        """Uniform draws in +-each half-width: a plausible sample to carry an absurd time."""
+        return [self.r.uniform(-h, h) for h in half_widths]
+
     def attitude_time(self) -> M.MAVLink_message:
-        r = self.r
-        return M.MAVLink_attitude_message(
-            self._time_ms(),
-            r.uniform(-0.5, 0.5),
-            r.uniform(-0.2, 0.2),
-            r.uniform(-3, 3),
-            r.uniform(-0.3, 0.3),
-            r.uniform(-0.3, 0.3),
-            r.uniform(-0.3, 0.3),
-        )
+        t = self._time_ms()  # drawn first: the seed's order
+        return M.MAVLink_attitude_message(t, *self._plausible(0.5, 0.2, 3, 0.3, 0.3, 0.3))
 
     def attitude_quaternion(self) -> M.MAVLink_message:
         q = self.r.choice(
@@ -282,16 +278,9 @@ class _OwnAbsurd:
         return M.MAVLink_local_position_ned_message(self.t_ok, a(), a(), a(), a(), a(), a())
 
     def local_position_time(self) -> M.MAVLink_message:
-        r = self.r
-        return M.MAVLink_local_position_ned_message(
-            self._time_ms(),
-            r.uniform(-500, 500),
-            r.uniform(-500, 500),
-            -100.0,
-            r.uniform(-15, 15),
-            r.uniform(-15, 15),
-            0.0,
-        )
+        t = self._time_ms()
+        n, e, vn, ve = self._plausible(500, 500, 15, 15)
+        return M.MAVLink_local_position_ned_message(t, n, e, -100.0, vn, ve, 0.0)
 
     def global_position(self) -> M.MAVLink_message:
         r = self.r
