@@ -107,6 +107,37 @@ class Gcs:
         hb = self.last.get("HEARTBEAT")
         return bool(hb and hb.base_mode & 128)
 
+    def arm_retrying(self, t_end: float, attempt: Callable[[], None], late: str) -> None:
+        """Runs ``attempt()`` (a take-off request and an arm) every 3 s until the vehicle is
+        armed; RuntimeError(``late``) past ``t_end`` (monotonic s)."""
+        last_try = -math.inf
+        while not self.armed():
+            if time.monotonic() > t_end:
+                raise RuntimeError(late)
+            if time.monotonic() - last_try > 3.0:
+                attempt()
+                last_try = time.monotonic()
+            self.pump(0.5)
+
+    def climb_until(
+        self, t_end: float, reached: Callable[[Any], bool], late: Callable[[], str]
+    ) -> None:
+        """Pumps until ``reached(GLOBAL_POSITION_INT)`` (called with the latest, which is
+        never None); RuntimeError(``late()``) past ``t_end`` (monotonic s)."""
+        while True:
+            if time.monotonic() > t_end:
+                raise RuntimeError(late())
+            self.pump(0.5)
+            gp = self.last.get("GLOBAL_POSITION_INT")
+            if gp is not None and reached(gp):
+                return
+
+    def settle(self, secs: float) -> None:
+        """Waits ``secs`` of the autopilot's time for the loiter to settle and says where."""
+        self.wait_boot(secs)
+        gp = self.last["GLOBAL_POSITION_INT"]
+        print(f"loitering at {gp.relative_alt / 1000.0:.1f} m ({self.mode()})", flush=True)
+
     def command(self, cmd: int, *params: float) -> None:
         p = [*params, *([0.0] * (7 - len(params)))]
         self.c.mav.command_long_send(self.sys, self.comp, cmd, 0, *p)
