@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mpf_mavlink import __version__
-from mpf_mavlink.cli.common import exit_codes_epilog
+from mpf_mavlink.cli.common import TRACKING_ROWS, exit_codes_epilog, figure_lines
 from mpf_mavlink.errors import CheckFailed, MpfError
 
 if TYPE_CHECKING:
@@ -66,11 +66,7 @@ def _default_out(cfg: Config, kind: str) -> Path:
 
 def _summary(metrics: dict[str, Any], out: Path) -> str:
     keys = [
-        ("first_within_s", "first within threshold", "s"),
-        ("convergence_time_s", "stays within threshold", "s"),
-        ("steady_rms_m", "steady RMS |pt|", "m"),
-        ("steady_mean_vertical_m", "steady mean vertical", "m"),
-        ("steady_mean_radial_m", "steady mean radial", "m"),
+        *TRACKING_ROWS,
         ("steady_max_m", "steady max |pt|", "m"),
         ("steady_psi_max", "steady max Psi", ""),
         ("max_rate_cmd_rad_s", "peak rate command", "rad/s"),
@@ -78,10 +74,7 @@ def _summary(metrics: dict[str, Any], out: Path) -> str:
         ("wall_time_s", "wall time", "s"),
     ]
     lines = ["", f"{'figure':<22} {'value':>12}  unit", "-" * 42]
-    for k, label, unit in keys:
-        v = metrics.get(k)
-        val = "n/a" if v is None else (f"{v:.4g}" if isinstance(v, float) else str(v))
-        lines.append(f"{label:<22} {val:>12}  {unit}")
+    lines += figure_lines(metrics, keys, 22, 12)
     lines.append("")
     lines.append(f"run directory: {out}  (timeseries.csv, metrics.json, *.png)")
     return "\n".join(lines)

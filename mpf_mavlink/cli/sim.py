@@ -11,7 +11,13 @@ import signal
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mpf_mavlink.cli.common import check_host, exit_codes_epilog, positive
+from mpf_mavlink.cli.common import (
+    TRACKING_ROWS,
+    check_host,
+    exit_codes_epilog,
+    figure_lines,
+    positive,
+)
 from mpf_mavlink.errors import MpfError
 
 if TYPE_CHECKING:
@@ -147,11 +153,7 @@ def sil_summary(res: Any) -> str:
     """The table printed at the end of a SIL ``sim``: figures, then where everything is."""
     m = res.metrics
     rows = [
-        ("first_within_s", "first within threshold", "s"),
-        ("convergence_time_s", "stays within threshold", "s"),
-        ("steady_rms_m", "steady RMS |pt|", "m"),
-        ("steady_mean_vertical_m", "steady mean vertical", "m"),
-        ("steady_mean_radial_m", "steady mean radial", "m"),
+        *TRACKING_ROWS,
         ("steady_rms_cross_track_m", "steady RMS cross-track", "m"),
         ("bridge_thrust_saturated_fraction", "thrust at ceiling", "frac"),
         ("steady_max_m", "steady max |pt|", "m"),
@@ -169,10 +171,7 @@ def sil_summary(res: Any) -> str:
         f"{'figure':<24} {'value':>10}  unit",
         "-" * 42,
     ]
-    for k, label, unit in rows:
-        v = m.get(k)
-        val = "n/a" if v is None else (f"{v:.4g}" if isinstance(v, float) else str(v))
-        lines.append(f"{label:<24} {val:>10}  {unit}")
+    lines += figure_lines(m, rows, 24, 10)
     hb = "hand-back confirmed" if m.get("handback_confirmed") else "hand-back NOT confirmed"
     lines += [
         "",
