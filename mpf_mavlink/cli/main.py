@@ -9,12 +9,11 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mpf_mavlink import __version__
-from mpf_mavlink.cli.common import TRACKING_ROWS, exit_codes_epilog, figure_lines
+from mpf_mavlink.cli.common import TRACKING_ROWS, default_out, exit_codes_epilog, figure_lines
 from mpf_mavlink.errors import CheckFailed, MpfError
 
 if TYPE_CHECKING:
@@ -57,11 +56,6 @@ def cmd_check(args: argparse.Namespace) -> int:
     if failed:
         raise CheckFailed(f"{cfg.source}: check failed: {', '.join(failed)}")
     return 0
-
-
-def _default_out(cfg: Config, kind: str) -> Path:
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    return Path("runs") / f"{stamp}-{kind}-{cfg.name}"
 
 
 def _summary(metrics: dict[str, Any], out: Path) -> str:
@@ -112,9 +106,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if cfg.sil.link != "none":  # the SIL vehicle and the bridge over MAVLink
         from mpf_mavlink.cli.sim import cmd_sim_sil
 
-        out = prepare_out_dir(args.out or _default_out(cfg, "sil"))
+        out = prepare_out_dir(args.out or default_out("sil", cfg.name))
         return cmd_sim_sil(cfg, out, args.quiet, args.no_plots, args.force)
-    out = prepare_out_dir(args.out or _default_out(cfg, "sim"))
+    out = prepare_out_dir(args.out or default_out("sim", cfg.name))
     from sim.runner import run_kinematic
 
     res = run_kinematic(cfg, progress=not args.quiet)
