@@ -32,16 +32,6 @@ EXIT_CODES = {
 }
 
 
-# the tracking figures a run's summary table opens with: (metrics key, label, unit)
-TRACKING_ROWS = (
-    ("first_within_s", "first within threshold", "s"),
-    ("convergence_time_s", "stays within threshold", "s"),
-    ("steady_rms_m", "steady RMS |pt|", "m"),
-    ("steady_mean_vertical_m", "steady mean vertical", "m"),
-    ("steady_mean_radial_m", "steady mean radial", "m"),
-)
-
-
 def figure_lines(
     metrics: dict[str, Any], rows: list[tuple[str, str, str]], label_w: int, value_w: int
 ) -> list[str]:

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mpf_mavlink import __version__
-from mpf_mavlink.cli.common import TRACKING_ROWS, default_out, exit_codes_epilog, figure_lines
+from mpf_mavlink.cli.common import default_out, exit_codes_epilog, figure_lines
 from mpf_mavlink.errors import CheckFailed, MpfError
 
 if TYPE_CHECKING:
@@ -60,7 +60,11 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 def _summary(metrics: dict[str, Any], out: Path) -> str:
     keys = [
-        *TRACKING_ROWS,
+        ("first_within_s", "first within threshold", "s"),
+        ("convergence_time_s", "stays within threshold", "s"),
+        ("steady_rms_m", "steady RMS |pt|", "m"),
+        ("steady_mean_vertical_m", "steady mean vertical", "m"),
+        ("steady_mean_radial_m", "steady mean radial", "m"),
         ("steady_max_m", "steady max |pt|", "m"),
         ("steady_psi_max", "steady max Psi", ""),
         ("max_rate_cmd_rad_s", "peak rate command", "rad/s"),

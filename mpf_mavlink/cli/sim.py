@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mpf_mavlink.cli.common import (
-    TRACKING_ROWS,
     check_host,
     exit_codes_epilog,
     figure_lines,
@@ -153,7 +152,11 @@ def sil_summary(res: Any) -> str:
     """The table printed at the end of a SIL ``sim``: figures, then where everything is."""
     m = res.metrics
     rows = [
-        *TRACKING_ROWS,
+        ("first_within_s", "first within threshold", "s"),
+        ("convergence_time_s", "stays within threshold", "s"),
+        ("steady_rms_m", "steady RMS |pt|", "m"),
+        ("steady_mean_vertical_m", "steady mean vertical", "m"),
+        ("steady_mean_radial_m", "steady mean radial", "m"),
         ("steady_rms_cross_track_m", "steady RMS cross-track", "m"),
         ("bridge_thrust_saturated_fraction", "thrust at ceiling", "frac"),
         ("steady_max_m", "steady max |pt|", "m"),
