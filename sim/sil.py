@@ -30,7 +30,6 @@ import math
 import multiprocessing
 import os
 import signal
-import socket
 import sys
 import threading
 import time
@@ -42,6 +41,7 @@ import numpy as np
 
 from mpf_mavlink.config.scenario import build_path, build_target
 from mpf_mavlink.config.schema import Config
+from mpf_mavlink.mavlink.url import free_udp_port
 from mpf_mavlink.runs.rundir import (
     RunTable,
     compute_metrics,
@@ -290,19 +290,10 @@ def full_thrust_throttle(cfg: Config, vc: VehicleConfig, airspeed: float) -> flo
     of a second plant at the start altitude): what the profile's full offboard thrust maps to."""
     from sim.autopilot.inner_loop import fly_to_trim
     from sim.plant.jsbsim_plant import JSBSimPlant
+    from sim.vehicle.vehicle import plant_kwargs
 
     alt = -float(vc.position_ned[2])
-    n_sub = max(1, math.ceil(vc.frame_period * vc.physics_rate_hz - 1e-9))
-    plant = JSBSimPlant(
-        dt=vc.frame_period / n_sub,
-        lat0_deg=vc.lat0_deg,
-        lon0_deg=vc.lon0_deg,
-        alt0_m=vc.alt0_m,
-        position_ned=(0.0, 0.0, -alt),
-        heading=0.0,
-        airspeed=airspeed,
-        **vc.plant_options,
-    )
+    plant = JSBSimPlant(**plant_kwargs(vc, (0.0, 0.0, -alt), 0.0, airspeed))
     res = fly_to_trim(plant, build_autopilot(cfg), airspeed, alt, seconds=20.0, apply=False)
     return float(res.throttle)
 
@@ -321,14 +312,6 @@ def bridge_config(cfg: Config, **mavlink: Any) -> Config:
 
 
 # --------------------------------------------------------------------------- processes
-def _free_port() -> int:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = int(s.getsockname()[1])
-    s.close()
-    return port
-
-
 def _vehicle_run(
     cfg: Config, url: str, clock: str | None, conn: Any, stop: Any, status: Any, parent: int
 ) -> None:
@@ -456,7 +439,7 @@ def run_sil(
     bridge_dir = out / "bridge"
     sil = cfg.section("sil")
     duration = float(duration_s if duration_s is not None else cfg.sim.duration_s)
-    port = sil.port or _free_port()
+    port = sil.port or free_udp_port()
     # in lockstep the bridge's timeouts count the vehicle's time: a simulation slowed down by
     # a loaded host is not a lost link (mavlink.lockstep)
     bcfg = bridge_config(cfg, plots=plots, lockstep=(clock or sil.clock) == "lockstep")

@@ -23,6 +23,7 @@ import numpy as np
 
 from mpf_mavlink.config import bridge as bridge_config  # noqa: F401
 from mpf_mavlink.config.schema import config_from_dict
+from mpf_mavlink.mavlink.url import free_udp_port
 
 _CFG = {
     "name": "bench",
@@ -47,15 +48,6 @@ _CFG = {
         "set_fallback": False,  # the scripted peer answers no parameters
     },
 }
-
-
-def _free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 free a moment ago (for the bridge to listen on)."""
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = int(s.getsockname()[1])
-    s.close()
-    return port
 
 
 class _ScriptedPx4:
@@ -128,7 +120,7 @@ def bridge_latency_ms(n_samples: int = 300, rate_hz: float = 50.0) -> dict[str, 
     (after the first 20, which warm up caches). Also returns the sample count and max."""
     from mpf_mavlink.bridge.live import BridgeOptions, run_bridge
 
-    port = _free_udp_port()
+    port = free_udp_port()
     peer = _ScriptedPx4(port)
     cfg = config_from_dict(dict(_CFG))
     duration = (n_samples + 20) / rate_hz + 1.0

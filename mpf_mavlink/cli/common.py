@@ -8,7 +8,7 @@ import argparse
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 #: the exit codes of each command (its --help lists them); a flight that ran to its end exits 0
 #: (verdict PASS), 5 (FAIL) or 6 (NOT JUDGED: too short for its steady window)
@@ -30,6 +30,18 @@ EXIT_CODES = {
     "table's verdict column); 2 bad configuration / arguments, or a flight could not run to its "
     "end (a safety exit, no flight recorded); 130 Ctrl-C",
 }
+
+
+def figure_lines(
+    metrics: dict[str, Any], rows: list[tuple[str, str, str]], label_w: int, value_w: int
+) -> list[str]:
+    """A summary table's lines: label, value (4 significant digits; "n/a" when missing), unit."""
+    lines = []
+    for k, label, unit in rows:
+        v = metrics.get(k)
+        val = "n/a" if v is None else (f"{v:.4g}" if isinstance(v, float) else str(v))
+        lines.append(f"{label:<{label_w}} {val:>{value_w}}  {unit}")
+    return lines
 
 
 def exit_codes_epilog(command: str) -> str:

@@ -9,12 +9,11 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mpf_mavlink import __version__
-from mpf_mavlink.cli.common import exit_codes_epilog
+from mpf_mavlink.cli.common import default_out, exit_codes_epilog, figure_lines
 from mpf_mavlink.errors import CheckFailed, MpfError
 
 if TYPE_CHECKING:
@@ -59,11 +58,6 @@ def cmd_check(args: argparse.Namespace) -> int:
     return 0
 
 
-def _default_out(cfg: Config, kind: str) -> Path:
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    return Path("runs") / f"{stamp}-{kind}-{cfg.name}"
-
-
 def _summary(metrics: dict[str, Any], out: Path) -> str:
     keys = [
         ("first_within_s", "first within threshold", "s"),
@@ -78,10 +72,7 @@ def _summary(metrics: dict[str, Any], out: Path) -> str:
         ("wall_time_s", "wall time", "s"),
     ]
     lines = ["", f"{'figure':<22} {'value':>12}  unit", "-" * 42]
-    for k, label, unit in keys:
-        v = metrics.get(k)
-        val = "n/a" if v is None else (f"{v:.4g}" if isinstance(v, float) else str(v))
-        lines.append(f"{label:<22} {val:>12}  {unit}")
+    lines += figure_lines(metrics, keys, 22, 12)
     lines.append("")
     lines.append(f"run directory: {out}  (timeseries.csv, metrics.json, *.png)")
     return "\n".join(lines)
@@ -119,9 +110,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if cfg.sil.link != "none":  # the SIL vehicle and the bridge over MAVLink
         from mpf_mavlink.cli.sim import cmd_sim_sil
 
-        out = prepare_out_dir(args.out or _default_out(cfg, "sil"))
+        out = prepare_out_dir(args.out or default_out("sil", cfg.name))
         return cmd_sim_sil(cfg, out, args.quiet, args.no_plots, args.force)
-    out = prepare_out_dir(args.out or _default_out(cfg, "sim"))
+    out = prepare_out_dir(args.out or default_out("sim", cfg.name))
     from sim.runner import run_kinematic
 
     res = run_kinematic(cfg, progress=not args.quiet)

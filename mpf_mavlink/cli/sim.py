@@ -11,7 +11,12 @@ import signal
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mpf_mavlink.cli.common import check_host, exit_codes_epilog, positive
+from mpf_mavlink.cli.common import (
+    check_host,
+    exit_codes_epilog,
+    figure_lines,
+    positive,
+)
 from mpf_mavlink.errors import MpfError
 
 if TYPE_CHECKING:
@@ -169,10 +174,7 @@ def sil_summary(res: Any) -> str:
         f"{'figure':<24} {'value':>10}  unit",
         "-" * 42,
     ]
-    for k, label, unit in rows:
-        v = m.get(k)
-        val = "n/a" if v is None else (f"{v:.4g}" if isinstance(v, float) else str(v))
-        lines.append(f"{label:<24} {val:>10}  {unit}")
+    lines += figure_lines(m, rows, 24, 10)
     hb = "hand-back confirmed" if m.get("handback_confirmed") else "hand-back NOT confirmed"
     lines += [
         "",

@@ -6,6 +6,7 @@ from __future__ import annotations
 import ipaddress
 import os
 import re
+import socket
 from dataclasses import dataclass
 
 from mpf_mavlink.errors import MpfError
@@ -92,3 +93,12 @@ def parse_url(url: str, baud: int | None = None) -> ParsedUrl:
     host, port = _parse_host_port(url, scheme, rest)
     kind = "udpin" if scheme == "udp" else scheme
     return ParsedUrl(kind, host=host, port=port)
+
+
+def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 free a moment ago (for a local ``udpin:`` end to listen on)."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = int(s.getsockname()[1])
+    s.close()
+    return port

@@ -271,7 +271,7 @@ def table(rows: list[dict[str, Any]], title: str) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("real", help="fly the matrix on the real firmware")
@@ -301,65 +301,76 @@ def main(argv: list[str] | None = None) -> int:
         help="take a SIL leg already flown under this tag and seed instead of re-flying it",
     )
     sl.add_argument("--doc", default=None, help="also write the table to this Markdown file")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def _sil(a: argparse.Namespace, argv: list[str] | None) -> int:
+    """``sil``: re-fly the real runs of ``--out`` in our SIL and print the comparison table."""
+    out = Path(a.out).resolve()
+    prof = Path(a.profile).resolve() if a.profile else None
+    if prof is not None and not prof.is_file():
+        print(f"calibrate: {prof}: no such profile", file=sys.stderr)
+        return 2
+    tag = a.tag or (prof.stem if prof else "plain")
+    matrix = ARDUPLANE_MATRIX if a.autopilot == "arduplane" else PX4_MATRIX
+    names = [n for n in a.only.split(",") if n]
+    rows = []
+    for m in matrix:
+        run = out / m.name
+        if (names and m.name not in names) or not (run / "bridge" / "metrics.json").is_file():
+            continue
+        real = _metrics(run / "bridge" / "metrics.json")
+        sil = fly_sil_seeds(run, a.autopilot, prof, tag, a.seeds, a.reuse)
+        rows.append(compare_row(m.name, real, sil))
+    if not rows:
+        print(f"calibrate: no real runs under {out}", file=sys.stderr)
+        return 2
+    argv_s = " ".join(argv if argv is not None else sys.argv[1:])
+    title = f"{a.autopilot}, SIL {tag} (written by `python -m sim.calibration.calibrate {argv_s}`)"
+    text = table(rows, title)
+    print(text)
+    (out / f"calibration_{tag}.json").write_text(json.dumps(rows, indent=1))
+    if a.doc:
+        Path(a.doc).write_text(text + "\n")
+    return 0 if all(r["within"] for r in rows) else 1
+
+
+def _real(a: argparse.Namespace) -> int:
+    """``real``: fly the matrix (or ``--only`` its named missions) on the real firmware."""
+    out = Path(a.out).resolve()
+    matrix = ARDUPLANE_MATRIX if a.autopilot == "arduplane" else PX4_MATRIX
+    names = [n for n in a.only.split(",") if n]
+    unknown = [n for n in names if n not in {m.name for m in matrix}]
+    if unknown:
+        print(f"calibrate: unknown mission {unknown[0]!r}", file=sys.stderr)
+        return 2
+    rc = 0
+    for m in matrix:
+        if names and m.name not in names:
+            continue
+        t0 = time.monotonic()
+        bundle = Path(a.bundle) if a.bundle else find_bundle(a.autopilot)
+        if bundle is None:
+            print(
+                f"calibrate: no {a.autopilot} bundle (--bundle, MPF_SITL_DIR or ../shared/sitl)",
+                file=sys.stderr,
+            )
+            return 2
+        code = fly_real(a.autopilot, m, out / m.name, bundle, a.instance, a.duration)
+        print(f"calibrate: {m.name} exit {code} in {time.monotonic() - t0:.0f} s", flush=True)
+        rc = rc or code
+    return rc
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = _parser().parse_args(argv)
     if a.cmd == "sil" and a.seeds < 1:
         print(f"calibrate: --seeds {a.seeds}: expected at least 1", file=sys.stderr)
         return 2
     if a.cmd == "sil":
-        out = Path(a.out).resolve()
-        prof = Path(a.profile).resolve() if a.profile else None
-        if prof is not None and not prof.is_file():
-            print(f"calibrate: {prof}: no such profile", file=sys.stderr)
-            return 2
-        tag = a.tag or (prof.stem if prof else "plain")
-        matrix = ARDUPLANE_MATRIX if a.autopilot == "arduplane" else PX4_MATRIX
-        names = [n for n in a.only.split(",") if n]
-        rows = []
-        for m in matrix:
-            run = out / m.name
-            if (names and m.name not in names) or not (run / "bridge" / "metrics.json").is_file():
-                continue
-            real = _metrics(run / "bridge" / "metrics.json")
-            sil = fly_sil_seeds(run, a.autopilot, prof, tag, a.seeds, a.reuse)
-            rows.append(compare_row(m.name, real, sil))
-        if not rows:
-            print(f"calibrate: no real runs under {out}", file=sys.stderr)
-            return 2
-        argv_s = " ".join(argv if argv is not None else sys.argv[1:])
-        title = (
-            f"{a.autopilot}, SIL {tag} (written by `python -m sim.calibration.calibrate {argv_s}`)"
-        )
-        text = table(rows, title)
-        print(text)
-        (out / f"calibration_{tag}.json").write_text(json.dumps(rows, indent=1))
-        if a.doc:
-            Path(a.doc).write_text(text + "\n")
-        return 0 if all(r["within"] for r in rows) else 1
+        return _sil(a, argv)
     if a.cmd == "real":
-        out = Path(a.out).resolve()
-        matrix = ARDUPLANE_MATRIX if a.autopilot == "arduplane" else PX4_MATRIX
-        names = [n for n in a.only.split(",") if n]
-        unknown = [n for n in names if n not in {m.name for m in matrix}]
-        if unknown:
-            print(f"calibrate: unknown mission {unknown[0]!r}", file=sys.stderr)
-            return 2
-        rc = 0
-        for m in matrix:
-            if names and m.name not in names:
-                continue
-            t0 = time.monotonic()
-            bundle = Path(a.bundle) if a.bundle else find_bundle(a.autopilot)
-            if bundle is None:
-                print(
-                    f"calibrate: no {a.autopilot} bundle (--bundle, MPF_SITL_DIR or "
-                    "../shared/sitl)",
-                    file=sys.stderr,
-                )
-                return 2
-            code = fly_real(a.autopilot, m, out / m.name, bundle, a.instance, a.duration)
-            print(f"calibrate: {m.name} exit {code} in {time.monotonic() - t0:.0f} s", flush=True)
-            rc = rc or code
-        return rc
+        return _real(a)
     return 2
 
 

@@ -35,7 +35,9 @@ import numpy as np
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-G = 9.80665
+from mpf_mavlink.constants import GRAVITY_M_S2 as G  # noqa: E402
+from sim.rigs.gcs import recv_from  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -83,14 +85,7 @@ class Recorder:
         self.last: dict[str, Any] = {}
 
     def pump(self, secs: float) -> None:
-        t_end = time.monotonic() + secs
-        while True:
-            left = t_end - time.monotonic()
-            if left <= 0:
-                return
-            m = self.c.recv_match(blocking=True, timeout=min(left, 0.02))
-            if m is None or m.get_srcSystem() != self.sysid:
-                continue
+        for m in recv_from(self.c, self.sysid, secs, 0.02):
             t, mt = time.monotonic(), m.get_type()
             self.last[mt] = m
             if mt == "ATTITUDE":

@@ -9,9 +9,6 @@ EKF and GPS let it), climb, then LOITER. Wind: SIM_WIND_SPD / SIM_WIND_DIR / SIM
 from __future__ import annotations
 
 import fcntl
-import math
-import os
-import signal
 import socket
 import subprocess
 import time
@@ -19,7 +16,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from mpf_mavlink.mavlink.modes import Flavour
-from sim.rigs.bundles import ROOT, RigError, die_with_parent
+from sim.rigs.bundles import ROOT, RigError, die_with_parent, stop_process_group
 from sim.rigs.gcs import Gcs
 
 NAME = "arduplane"
@@ -123,13 +120,7 @@ class Firmware:
         return g.get_param("AIRSPEED_CRUISE")
 
     def stop(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            os.killpg(self.proc.pid, signal.SIGTERM)
-            try:
-                self.proc.wait(5)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait(5)
+        stop_process_group(self.proc, 5)
         self.lock.release()
 
 
@@ -139,25 +130,18 @@ def take_off(g: Gcs, alt_m: float, timeout_s: float = 300.0) -> None:
     g.set_param("TKOFF_ALT", alt_m)
     g.set_mode("TAKEOFF")
     t_end = time.monotonic() + timeout_s
-    last_arm = -math.inf
-    while not g.armed():
-        if time.monotonic() > t_end:
-            raise RuntimeError("SITL did not arm (pre-arm checks) in time")
-        if time.monotonic() - last_arm > 3.0:
-            if g.mode() != "TAKEOFF":
-                g.set_mode("TAKEOFF")
-            g.arm()
-            last_arm = time.monotonic()
-        g.pump(0.5)
+
+    def attempt() -> None:
+        if g.mode() != "TAKEOFF":
+            g.set_mode("TAKEOFF")
+        g.arm()
+
+    g.arm_retrying(t_end, attempt, "SITL did not arm (pre-arm checks) in time")
     print(f"armed; climbing to {alt_m:g} m", flush=True)
-    while True:
-        if time.monotonic() > t_end:
-            raise RuntimeError("the take-off did not reach the altitude in time")
-        g.pump(0.5)
-        gp = g.last.get("GLOBAL_POSITION_INT")
-        if gp is not None and gp.relative_alt / 1000.0 >= alt_m - 3.0:
-            break
+    g.climb_until(
+        t_end,
+        lambda gp: gp.relative_alt / 1000.0 >= alt_m - 3.0,
+        lambda: "the take-off did not reach the altitude in time",
+    )
     g.set_mode("LOITER")
-    g.wait_boot(15.0)  # settle into the loiter at that altitude
-    gp = g.last["GLOBAL_POSITION_INT"]
-    print(f"loitering at {gp.relative_alt / 1000.0:.1f} m ({g.mode()})", flush=True)
+    g.settle(15.0)  # settle into the loiter at that altitude

@@ -11,9 +11,12 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
+import subprocess
 import tarfile
 import tempfile
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[2]
 CACHE = ROOT / ".cache" / "sitl"
@@ -113,9 +116,20 @@ def die_with_parent() -> None:
     """``preexec_fn`` of the rig's children (firmware, bridge): SIGTERM when the rig dies, even
     by SIGKILL or a test's timeout, so that no SITL keeps flying (and holding its ports)."""
     import ctypes
-    import signal
 
     try:
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
     except OSError:  # not glibc Linux: the rig's own clean-up still stops them
         pass
+
+
+def stop_process_group(proc: subprocess.Popen[Any] | None, term_wait_s: float) -> None:
+    """Stops a firmware started in its own process group: SIGTERM, ``term_wait_s`` s to exit,
+    then SIGKILL."""
+    if proc is not None and proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(term_wait_s)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(5)

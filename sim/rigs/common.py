@@ -78,12 +78,17 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"sitl: {message} (scripts/sitl --help)\n")
 
 
-def parser() -> argparse.ArgumentParser:
-    ap = _Parser(
-        prog="scripts/sitl",
-        description="Fly mpf-mavlink against real PX4 / ArduPlane SITL firmware "
-        "(README 'Flying PX4 SITL', 'Flying ArduPilot SITL').",
-    )
+def _add_number(
+    ap: argparse.ArgumentParser, flag: str, kind: str, help: str, default: float | None = None
+) -> None:
+    """A number option bounded below by 0 as ``kind`` says (e.g. "time > 0 s", "speed >= 0
+    m/s"), which also names it in the error."""
+    lo_open = ">=" not in kind
+    ap.add_argument(flag, type=_number(kind, 0.0, lo_open), default=default, help=help)
+
+
+def _add_flight_options(ap: argparse.ArgumentParser) -> None:
+    """What is flown: autopilot, bundle, config, duration, target, weather, a bridge kill."""
     ap.add_argument("autopilot", choices=sorted(AUTOPILOTS))
     ap.add_argument("--out", required=True, help="run directory (new or empty)")
     ap.add_argument(
@@ -96,11 +101,8 @@ def parser() -> argparse.ArgumentParser:
         ),
     )
     ap.add_argument("--config", help="bridge config (default configs/bridge_<autopilot>.yaml)")
-    ap.add_argument(
-        "--duration",
-        type=_number("time > 0 s", 0.0, True),
-        default=300.0,
-        help="seconds of tracking (autopilot time; default 300)",
+    _add_number(
+        ap, "--duration", "time > 0 s", "seconds of tracking (autopilot time; default 300)", 300.0
     )
     ap.add_argument(
         "--moving",
@@ -108,26 +110,25 @@ def parser() -> argparse.ArgumentParser:
         help="moving target: the config's, or 3 m/s east if the config's is still",
     )
     ap.add_argument("--wind", type=_wind, help="SPEED,DIR_DEG (ArduPlane SIM_WIND_SPD/DIR)")
-    ap.add_argument(
-        "--turbulence", type=_number("speed >= 0 m/s", 0.0), help="ArduPlane SIM_WIND_TURB (m/s)"
-    )
-    ap.add_argument(
+    _add_number(ap, "--turbulence", "speed >= 0 m/s", "ArduPlane SIM_WIND_TURB (m/s)")
+    _add_number(
+        ap,
         "--kill-after",
-        type=_number("time > 0 s", 0.0, True),
-        help="SIGKILL the bridge S s into tracking and watch the autopilot's hold",
+        "time > 0 s",
+        "SIGKILL the bridge S s into tracking and watch the autopilot's hold",
     )
-    ap.add_argument(
-        "--watch-s",
-        type=_number("time > 0 s", 0.0, True),
-        default=60.0,
-        help="seconds watched after the kill (default 60)",
-    )
+    _add_number(ap, "--watch-s", "time > 0 s", "seconds watched after the kill (default 60)", 60.0)
+
+
+def _add_rig_options(ap: argparse.ArgumentParser) -> None:
+    """How it is flown: SIL twin, speed-up, serial link, instance, altitude, lead, record."""
     ap.add_argument("--sil", action="store_true", help="fly the same mission in our SIL too")
-    ap.add_argument(
+    _add_number(
+        ap,
         "--speedup",
-        type=_number("factor > 0", 0.0, True),
-        default=1.0,
-        help="ArduPlane SIM_SPEEDUP / PX4_SIM_SPEED_FACTOR (default 1: real time)",
+        "factor > 0",
+        "ArduPlane SIM_SPEEDUP / PX4_SIM_SPEED_FACTOR (default 1: real time)",
+        1.0,
     )
     ap.add_argument(
         "--serial",
@@ -136,17 +137,9 @@ def parser() -> argparse.ArgumentParser:
     )
     ap.add_argument("--instance", type=int, help="ArduPlane -I N (default: the first free one)")
     ap.add_argument("--binary", help="ArduPlane: your own arduplane SITL binary instead")
-    ap.add_argument(
-        "--alt",
-        type=_number("height > 0 m", 0.0, True),
-        default=100.0,
-        help="take-off / path altitude above home (m)",
-    )
-    ap.add_argument(
-        "--lead",
-        type=_number("time >= 0 s", 0.0),
-        default=6.0,
-        help="wall seconds from placing the mission to engaging",
+    _add_number(ap, "--alt", "height > 0 m", "take-off / path altitude above home (m)", 100.0)
+    _add_number(
+        ap, "--lead", "time >= 0 s", "wall seconds from placing the mission to engaging", 6.0
     )
     ap.add_argument(
         "--record",
@@ -161,6 +154,16 @@ def parser() -> argparse.ArgumentParser:
         metavar="KEY=VALUE",
         help="a config override passed to the bridge (repeatable)",
     )
+
+
+def parser() -> argparse.ArgumentParser:
+    ap = _Parser(
+        prog="scripts/sitl",
+        description="Fly mpf-mavlink against real PX4 / ArduPlane SITL firmware "
+        "(README 'Flying PX4 SITL', 'Flying ArduPilot SITL').",
+    )
+    _add_flight_options(ap)
+    _add_rig_options(ap)
     return ap
 
 
@@ -308,10 +311,9 @@ def main(argv: list[str] | None = None) -> int:
     return rc
 
 
-def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, Any]) -> int:
-    mod, out, cfg = v["mod"], v["out"], v["cfg"]
-    bundle_dir = unpack(a.autopilot, v["bundle"])
-    summary.update(
+def _flight_header(a: argparse.Namespace, v: dict[str, Any], bundle_dir: Path) -> dict[str, Any]:
+    """The summary's description of the flight: firmware, config, speed-up, commit, weather."""
+    return dict(
         bundle=bundle_version(bundle_dir),
         config=str(v["config"].relative_to(ROOT))
         if v["config"].is_relative_to(ROOT)
@@ -323,6 +325,64 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
         turbulence=a.turbulence,
         command=" ".join(["scripts/sitl", *sys.argv[1:]]) if sys.argv else "",
     )
+
+
+def _bridge_command(
+    a: argparse.Namespace, v: dict[str, Any], url: str, sets: list[str]
+) -> list[str]:
+    return [
+        sys.executable,
+        "-m",
+        "mpf_mavlink.cli",
+        "run",
+        str(v["config"]),
+        "--connect",
+        url,
+        "--out",
+        str(v["out"] / "bridge"),
+        "--duration",
+        f"{a.duration:g}",
+        *[x for s in sets for x in ("--set", s)],
+    ]
+
+
+def _until_bridge_exits(
+    a: argparse.Namespace,
+    g: Gcs,
+    mod: Any,
+    bridge: subprocess.Popen[str],
+    mission: tuple[list[float], float],
+    out: Path,
+) -> dict[str, Any]:
+    """Pumps the GCS until the bridge exits (or is SIGKILLed ``--kill-after`` s into tracking,
+    then watches the autopilot's hold about ``mission`` (centre, radius)); returns the kill's
+    figures, empty without a kill."""
+    centre, radius = mission
+    t_engaged: float | None = None
+    while bridge.poll() is None:
+        g.pump(0.2)
+        if g.mode() == mod.TRACK_MODE and t_engaged is None:
+            t_engaged = g.t_boot_s
+            print(f"{mod.TRACK_MODE} at t_boot {t_engaged:.1f} s", flush=True)
+        if (
+            a.kill_after is not None
+            and t_engaged is not None
+            and g.t_boot_s - t_engaged >= a.kill_after
+        ):
+            os.kill(bridge.pid, signal.SIGKILL)
+            bridge.wait()
+            tracked = g.t_boot_s - t_engaged
+            print(f"bridge SIGKILLed {tracked:.1f} s into tracking", flush=True)
+            kill = watch_hold(g, a.watch_s, centre, -centre[2], radius, out)
+            kill["killed_after_s"] = tracked
+            return kill
+    return {}
+
+
+def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, Any]) -> int:
+    mod, out, cfg = v["mod"], v["out"], v["cfg"]
+    bundle_dir = unpack(a.autopilot, v["bundle"])
+    summary.update(_flight_header(a, v, bundle_dir))
     print(f"{summary['bundle']}: starting ({bundle_dir})", flush=True)
     fw.start(bundle_dir, out / "firmware")
     g = Gcs(fw.gcs_url, mod.FLAVOUR)
@@ -356,45 +416,15 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
         relay = PtyRelay(fw.bridge_port)
         url = f"{relay.device}:115200"
         summary["serial"] = {"device": relay.device, "relayed_to": fw.bridge_url}
-    cmd = [
-        sys.executable,
-        "-m",
-        "mpf_mavlink.cli",
-        "run",
-        str(v["config"]),
-        "--connect",
-        url,
-        "--out",
-        str(out / "bridge"),
-        "--duration",
-        f"{a.duration:g}",
-        *[x for s in sets for x in ("--set", s)],
-    ]
+    cmd = _bridge_command(a, v, url, sets)
     print("hand-over: mpf-mavlink " + " ".join(cmd[3:]), flush=True)
     with open(out / "bridge.log", "w") as blog:
         bridge = subprocess.Popen(
             cmd, stdout=blog, stderr=subprocess.STDOUT, text=True, preexec_fn=die_with_parent
         )
-    t_engaged: float | None = None
     kill: dict[str, Any] = {}
     try:
-        while bridge.poll() is None:
-            g.pump(0.2)
-            if g.mode() == mod.TRACK_MODE and t_engaged is None:
-                t_engaged = g.t_boot_s
-                print(f"{mod.TRACK_MODE} at t_boot {t_engaged:.1f} s", flush=True)
-            if (
-                a.kill_after is not None
-                and t_engaged is not None
-                and g.t_boot_s - t_engaged >= a.kill_after
-            ):
-                os.kill(bridge.pid, signal.SIGKILL)
-                bridge.wait()
-                tracked = g.t_boot_s - t_engaged
-                print(f"bridge SIGKILLed {tracked:.1f} s into tracking", flush=True)
-                kill = watch_hold(g, a.watch_s, centre, -centre[2], radius, out)
-                kill["killed_after_s"] = tracked
-                break
+        kill = _until_bridge_exits(a, g, mod, bridge, (centre, radius), out)
         code = bridge.wait()
     finally:
         if bridge.poll() is None:
@@ -562,8 +592,9 @@ def sil_leg(
     }
 
 
-def rows(s: dict[str, Any]) -> list[tuple[str, str]]:
-    f, ms = s.get("figures", {}), s.get("mission", {})
+def _rows_setting(s: dict[str, Any]) -> list[tuple[str, str]]:
+    """What was flown: flight, firmware, mission, wind, speed-up, serial link."""
+    ms = s.get("mission", {})
     r = [("flight", s.get("flight", "?")), ("firmware", s.get("bundle", "?"))]
     if ms:
         r += [
@@ -585,38 +616,38 @@ def rows(s: dict[str, Any]) -> list[tuple[str, str]]:
         r.append(("speed-up", f"{s['speedup']:g}x"))
     if "serial" in s:
         r.append(("serial", f"{s['serial']['device']} <-> {s['serial']['relayed_to']}"))
-    if not f:
-        return r + [("verdict", s.get("verdict", "?"))]
-    h = s.get("hold")
-    r += [
-        ("bridge exit", s.get("bridge_exit", "?")),
-        ("engaged by itself", "yes" if f.get("engaged") else "NO"),
+    return r
+
+
+def _rows_after_kill(
+    s: dict[str, Any], f: dict[str, Any], h: dict[str, Any]
+) -> list[tuple[str, str]]:
+    """A SIGKILLed bridge leaves no run record: what the tlog and the autopilot say."""
+    return [
+        ("tracked before the kill", f"{fmt(f.get('tracked_s'), '.1f')} s"),
+        ("fallback (bridge's word)", fmt(f.get("fallback"))),
+        (
+            "setpoints sent (its tlog)",
+            str(s.get("bridge_sent", {}).get("SET_ATTITUDE_TARGET", 0)),
+        ),
+        ("after SIGKILL: modes", " -> ".join(h.get("modes", []))),
+        (
+            "after SIGKILL: max from centre",
+            f"{fmt(h.get('max_dist_from_centre_m'), '.1f')} m "
+            f"(last 15 s mean {fmt(h.get('last15_mean_dist_m'), '.1f')} m) "
+            f"over {fmt(h.get('watched_s'), '.0f')} s",
+        ),
+        (
+            "after SIGKILL: max |bank| / |alt error|",
+            f"{fmt(h.get('max_bank_deg'), '.1f')} deg / {fmt(h.get('max_alt_error_m'), '.1f')} m",
+        ),
+        ("after SIGKILL: hold", h.get("hold_verdict", "?")),
     ]
-    if h:  # a SIGKILLed bridge leaves no run record: what the tlog and the autopilot say
-        r += [
-            ("tracked before the kill", f"{fmt(f.get('tracked_s'), '.1f')} s"),
-            ("fallback (bridge's word)", fmt(f.get("fallback"))),
-            (
-                "setpoints sent (its tlog)",
-                str(s.get("bridge_sent", {}).get("SET_ATTITUDE_TARGET", 0)),
-            ),
-            ("after SIGKILL: modes", " -> ".join(h.get("modes", []))),
-            (
-                "after SIGKILL: max from centre",
-                f"{fmt(h.get('max_dist_from_centre_m'), '.1f')} m "
-                f"(last 15 s mean {fmt(h.get('last15_mean_dist_m'), '.1f')} m) "
-                f"over {fmt(h.get('watched_s'), '.0f')} s",
-            ),
-            (
-                "after SIGKILL: max |bank| / |alt error|",
-                f"{fmt(h.get('max_bank_deg'), '.1f')} deg / "
-                f"{fmt(h.get('max_alt_error_m'), '.1f')} m",
-            ),
-            ("after SIGKILL: hold", h.get("hold_verdict", "?")),
-            ("verdict", s.get("verdict", "?")),
-        ]
-        return r
-    r += [
+
+
+def _rows_tracking(f: dict[str, Any]) -> list[tuple[str, str]]:
+    """How the bridge engaged, tracked and handed back (its run record's figures)."""
+    r = [
         ("hand-back confirmed", fmt(f.get("handback_confirmed"))),
         ("tracked", f"{fmt(f.get('tracked_s'), '.1f')} s"),
         (
@@ -647,25 +678,45 @@ def rows(s: dict[str, Any]) -> list[tuple[str, str]]:
         ),
         ("fallback (bridge's word)", fmt(f.get("fallback"))),
     ]
+    return r
+
+
+def _rows_sil(sil: dict[str, Any]) -> list[tuple[str, str]]:
+    """The same mission in our SIL, beside the real firmware's figures."""
+    return [
+        (
+            "our SIL: steady RMS |pt|",
+            f"{fmt(sil.get('steady_rms_m'))} m" if "error" not in sil else sil["error"],
+        ),
+        (
+            "our SIL: mean vertical / radial",
+            f"{fmt(sil.get('steady_mean_vertical_m'))} / {fmt(sil.get('steady_mean_radial_m'))} m",
+        ),
+        ("real / our SIL RMS", fmt(sil.get("real_over_sil"))),
+        (
+            "our SIL: check warnings",
+            "; ".join(w.split("]", 1)[1].split(":")[0].strip() for w in sil.get("warnings", []))
+            or "none",
+        ),
+    ]
+
+
+def rows(s: dict[str, Any]) -> list[tuple[str, str]]:
+    f = s.get("figures", {})
+    r = _rows_setting(s)
+    if not f:
+        return r + [("verdict", s.get("verdict", "?"))]
+    h = s.get("hold")
+    r += [
+        ("bridge exit", s.get("bridge_exit", "?")),
+        ("engaged by itself", "yes" if f.get("engaged") else "NO"),
+    ]
+    if h:
+        return r + _rows_after_kill(s, f, h) + [("verdict", s.get("verdict", "?"))]
+    r += _rows_tracking(f)
     sil = s.get("sil")
     if sil:
-        r += [
-            (
-                "our SIL: steady RMS |pt|",
-                f"{fmt(sil.get('steady_rms_m'))} m" if "error" not in sil else sil["error"],
-            ),
-            (
-                "our SIL: mean vertical / radial",
-                f"{fmt(sil.get('steady_mean_vertical_m'))} / "
-                f"{fmt(sil.get('steady_mean_radial_m'))} m",
-            ),
-            ("real / our SIL RMS", fmt(sil.get("real_over_sil"))),
-            (
-                "our SIL: check warnings",
-                "; ".join(w.split("]", 1)[1].split(":")[0].strip() for w in sil.get("warnings", []))
-                or "none",
-            ),
-        ]
+        r += _rows_sil(sil)
     if s.get("bridge_verdict"):
         r.append(("bridge", s["bridge_verdict"]))
     r.append(("verdict", s.get("verdict", "?")))

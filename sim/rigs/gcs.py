@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections.abc import Callable, Iterator
 from typing import Any
 
 os.environ.setdefault("MAVLINK20", "1")
@@ -23,6 +24,22 @@ from mpf_mavlink.mavlink.modes import (  # noqa: E402
 )
 
 MAV_CMD_DO_SET_MODE, MAV_CMD_COMPONENT_ARM_DISARM = 176, 400
+
+
+def recv_from(
+    c: Any, sysid: int, secs: float, poll_s: float, tick: Callable[[], None] = lambda: None
+) -> Iterator[Any]:
+    """The messages of system ``sysid`` that connection ``c`` receives in ``secs`` of wall
+    time, waiting at most ``poll_s`` at a time; ``tick()`` runs before every wait."""
+    t_end = time.monotonic() + secs
+    while True:
+        tick()
+        left = t_end - time.monotonic()
+        if left <= 0:
+            return
+        m = c.recv_match(blocking=True, timeout=min(left, poll_s))
+        if m is not None and m.get_srcSystem() == sysid:
+            yield m
 
 
 class Gcs:
@@ -66,15 +83,7 @@ class Gcs:
 
     def pump(self, secs: float, echo: bool = True) -> None:
         """Read for ``secs`` of wall time, keeping the latest message of each type."""
-        t_end = time.monotonic() + secs
-        while True:
-            self._heartbeat()
-            left = t_end - time.monotonic()
-            if left <= 0:
-                return
-            m = self.c.recv_match(blocking=True, timeout=min(left, 0.1))
-            if m is None or m.get_srcSystem() != self.sys:
-                continue
+        for m in recv_from(self.c, self.sys, secs, 0.1, self._heartbeat):
             if m.get_type() == "HEARTBEAT" and m.get_srcComponent() != self.comp:
                 continue  # the bridge's own HEARTBEAT, routed by the autopilot
             self.last[m.get_type()] = m
@@ -97,6 +106,37 @@ class Gcs:
     def armed(self) -> bool:
         hb = self.last.get("HEARTBEAT")
         return bool(hb and hb.base_mode & 128)
+
+    def arm_retrying(self, t_end: float, attempt: Callable[[], None], late: str) -> None:
+        """Runs ``attempt()`` (a take-off request and an arm) every 3 s until the vehicle is
+        armed; RuntimeError(``late``) past ``t_end`` (monotonic s)."""
+        last_try = -math.inf
+        while not self.armed():
+            if time.monotonic() > t_end:
+                raise RuntimeError(late)
+            if time.monotonic() - last_try > 3.0:
+                attempt()
+                last_try = time.monotonic()
+            self.pump(0.5)
+
+    def climb_until(
+        self, t_end: float, reached: Callable[[Any], bool], late: Callable[[], str]
+    ) -> None:
+        """Pumps until ``reached(GLOBAL_POSITION_INT)`` (called with the latest, which is
+        never None); RuntimeError(``late()``) past ``t_end`` (monotonic s)."""
+        while True:
+            if time.monotonic() > t_end:
+                raise RuntimeError(late())
+            self.pump(0.5)
+            gp = self.last.get("GLOBAL_POSITION_INT")
+            if gp is not None and reached(gp):
+                return
+
+    def settle(self, secs: float) -> None:
+        """Waits ``secs`` of the autopilot's time for the loiter to settle and says where."""
+        self.wait_boot(secs)
+        gp = self.last["GLOBAL_POSITION_INT"]
+        print(f"loitering at {gp.relative_alt / 1000.0:.1f} m ({self.mode()})", flush=True)
 
     def command(self, cmd: int, *params: float) -> None:
         p = [*params, *([0.0] * (7 - len(params)))]

@@ -14,14 +14,13 @@ from __future__ import annotations
 import fcntl
 import math
 import os
-import signal
 import subprocess
 import time
 from pathlib import Path
 from typing import IO, Any
 
 from mpf_mavlink.mavlink.modes import Flavour
-from sim.rigs.bundles import ROOT, die_with_parent
+from sim.rigs.bundles import ROOT, die_with_parent, stop_process_group
 from sim.rigs.gcs import Gcs
 
 NAME = "px4"
@@ -73,46 +72,29 @@ class Firmware:
             if time.monotonic() > t_end:
                 raise RuntimeError("PX4 sent no GLOBAL_POSITION_INT")
             g.pump(0.5)
-        last_try = -math.inf
-        while not g.armed():
-            if time.monotonic() > t_end:
-                raise RuntimeError("PX4 did not arm (pre-flight checks) in time")
-            if time.monotonic() - last_try > 3.0:
-                gp = g.last["GLOBAL_POSITION_INT"]
-                home_amsl = (gp.alt - gp.relative_alt) / 1000.0
-                g.command(MAV_CMD_NAV_TAKEOFF, -1, 0, 0, math.nan, math.nan, math.nan,
-                          home_amsl + alt_m)  # fmt: skip
-                g.pump(0.3)
-                g.arm()
-                last_try = time.monotonic()
-            g.pump(0.5)
+
+        def attempt() -> None:
+            gp = g.last["GLOBAL_POSITION_INT"]
+            home_amsl = (gp.alt - gp.relative_alt) / 1000.0
+            g.command(MAV_CMD_NAV_TAKEOFF, -1, 0, 0, math.nan, math.nan, math.nan,
+                      home_amsl + alt_m)  # fmt: skip
+            g.pump(0.3)
+            g.arm()
+
+        g.arm_retrying(t_end, attempt, "PX4 did not arm (pre-flight checks) in time")
         print(f"armed; climbing to {alt_m:g} m", flush=True)
-        while True:
-            if time.monotonic() > t_end:
-                raise RuntimeError(f"the take-off did not reach AUTO.LOITER ({g.mode()})")
-            g.pump(0.5)
-            gp = g.last.get("GLOBAL_POSITION_INT")
-            if (
-                g.mode() == "AUTO.LOITER"
-                and gp is not None
-                and gp.relative_alt / 1000.0 >= alt_m - 5.0
-            ):
-                break
-        g.wait_boot(10.0)  # settle into the loiter
-        gp = g.last["GLOBAL_POSITION_INT"]
-        print(f"loitering at {gp.relative_alt / 1000.0:.1f} m ({g.mode()})", flush=True)
+        g.climb_until(
+            t_end,
+            lambda gp: g.mode() == "AUTO.LOITER" and gp.relative_alt / 1000.0 >= alt_m - 5.0,
+            lambda: f"the take-off did not reach AUTO.LOITER ({g.mode()})",
+        )
+        g.settle(10.0)  # settle into the loiter
 
     def cruise_airspeed(self, g: Gcs) -> float | None:
         return g.get_param("FW_AIRSPD_TRIM")
 
     def stop(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            os.killpg(self.proc.pid, signal.SIGTERM)
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait(5)
+        stop_process_group(self.proc, 10)
         if self.lock is not None:
             fcntl.flock(self.lock, fcntl.LOCK_UN)
             self.lock.close()

@@ -20,7 +20,6 @@ import argparse
 import contextlib
 import dataclasses
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -30,10 +29,6 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
-
-os.environ.setdefault("MAVLINK20", "1")
-os.environ.setdefault("JSBSIM_DEBUG", "0")
-
 
 from sim.soak.checks import Limits
 from sim.soak.inputs import scenario_bad_input, scenario_output_dir, scenario_spoof

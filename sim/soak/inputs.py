@@ -14,25 +14,23 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-os.environ.setdefault("MAVLINK20", "1")
-os.environ.setdefault("JSBSIM_DEBUG", "0")
+from pymavlink.dialects.v20 import ardupilotmega as M
 
-from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
-
+from mpf_mavlink.mavlink.url import free_udp_port
 from sim.soak.checks import Limits, _r, max_gap
 from sim.soak.missions import FLOWN, _completed, _mission_common, _timeseries, _tracking_window
-from sim.soak.relay import DOWN  # noqa: E402
+from sim.soak.relay import DOWN
 from sim.soak.rig import (
     CONFIGS,
     ROOT,
     TARGET_SYSID,
     VEHICLE_COMPID,
     VEHICLE_SYSID,
+    BridgeOutcome,
     Mission,
     MissionSpec,
     Opts,
     Row,
-    free_udp_port,
     mpf_mavlink_cmd,
 )
 
@@ -44,14 +42,99 @@ def _signed_mav(key: bytes, sysid: int, compid: int, link_id: int = 3) -> Any:
     return mav
 
 
+class _Spoofer:
+    """The attacker of :func:`scenario_spoof`: injects toward the bridge through the relay and
+    counts what it injected, by kind, in ``n``."""
+
+    def __init__(self, m: Mission, key: bytes, n: dict[str, int]) -> None:
+        from mpf_mavlink.core.frames import ned_to_geodetic
+
+        self.m, self.n = m, n
+        self.lat, self.lon, self.alt = ned_to_geodetic(
+            (2000.0, 2000.0, -100.0), 47.397742, 8.545594, 488.0
+        )
+        self.ins99, self.ins77 = _signed_mav(key, 99, 1), _signed_mav(key, 77, 1)
+        self.plain1, self.plain2 = (
+            M.MAVLink(None, srcSystem=1, srcComponent=1),
+            M.MAVLink(None, srcSystem=TARGET_SYSID, srcComponent=1),
+        )
+        self.wrong = _signed_mav(os.urandom(32), 1, 1, link_id=0)
+        self.mark = 0
+
+    def run(self, dur: float, stop: threading.Event) -> None:
+        t_end = time.monotonic() + dur - 3.0  # stop before the bridge closes: every frame counted
+        while time.monotonic() < t_end and not stop.is_set():
+            ms = self.m.tap.vehicle_ms() or 0
+            ft = self._insiders(ms)
+            self._unsigned(ms, ft)
+            self._wrong_key(ms)
+            self._replay()
+            time.sleep(0.05)
+
+    def _inject(self, kind: str, data: bytes, count: int = 1) -> None:
+        self.m.relay.inject(DOWN, data)
+        self.n[kind] += count
+
+    def _insiders(self, ms: int) -> Any:
+        """Telemetry from system 99 and a far target from system 77, signed with the right key;
+        returns the target message for the unsigned round."""
+        for msg in (
+            M.MAVLink_attitude_message(ms, 1.0, 0.5, 2.0, 0, 0, 0),
+            M.MAVLink_local_position_ned_message(ms, 5000.0, 5000.0, -900.0, 0.0, 30.0, 0.0),
+            M.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3),
+        ):
+            self._inject("foreign_ids_signed", msg.pack(self.ins99))
+        ft = M.MAVLink_follow_target_message(
+            ms,
+            15,
+            int(self.lat * 1e7),
+            int(self.lon * 1e7),
+            self.alt,
+            [0.0] * 3,
+            [0.0] * 3,
+            [1.0, 0, 0, 0],
+            [0.0] * 3,
+            [0.0] * 3,
+            0,
+        )
+        self._inject("foreign_ids_signed", ft.pack(self.ins77))
+        return ft
+
+    def _unsigned(self, ms: int, ft: Any) -> None:
+        for mav, msg in (
+            (self.plain1, M.MAVLink_attitude_message(ms + 5, 1.0, 0.5, 2.0, 0, 0, 0)),
+            (self.plain1, M.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3)),
+            (self.plain2, ft),
+        ):
+            self._inject("unsigned", msg.pack(mav))
+
+    def _wrong_key(self, ms: int) -> None:
+        msg = M.MAVLink_attitude_message(ms + 5, 1.0, 0.5, 2.0, 0, 0, 0)
+        self._inject("wrong_key", msg.pack(self.wrong))
+
+    def _replay(self) -> None:
+        """One of the vehicle's own signed datagrams, about 1 s old, verbatim."""
+        from sim.soak.relay import split_frames
+
+        relay = self.m.relay
+        old = [
+            d
+            for d in relay.datagrams(DOWN, self.mark)
+            if d.fate == "delivered" and d.t < relay.now() - 1.0
+        ]
+        if old:
+            self.mark += len(relay.datagrams(start=self.mark)) // 2
+            frames = split_frames(old[-1].data) or []
+            if frames and all(f[0] == 0xFD and f[2] & 0x01 for f in frames):
+                self._inject("replayed", old[-1].data, len(frames))
+
+
 def scenario_spoof(o: Opts) -> Row:
     """Signing on, live target from system 2. Injected toward the bridge: (a) telemetry and a
     target from other system ids, signed with the RIGHT key (an insider); (b) unsigned
     telemetry and targets from the vehicle's and the target's own ids; (c) replays of the
     vehicle's own signed datagrams 1 s later; (d) the vehicle's ids signed with a WRONG key.
     Each must be rejected and counted exactly once; the mission must not notice."""
-    from sim.soak.relay import split_frames
-
     row = Row("spoofing_signing")
     dur = 20.0 if o.quick else 40.0
     key = os.urandom(32)
@@ -72,80 +155,20 @@ def scenario_spoof(o: Opts) -> Row:
     n = {"foreign_ids_signed": 0, "unsigned": 0, "replayed": 0, "wrong_key": 0}
     stop = threading.Event()
     with Mission(spec, kdir) as m:
-
-        def attack() -> None:
-            from mpf_mavlink.core.frames import ned_to_geodetic
-
-            lat, lon, alt = ned_to_geodetic((2000.0, 2000.0, -100.0), 47.397742, 8.545594, 488.0)
-            ins99, ins77 = _signed_mav(key, 99, 1), _signed_mav(key, 77, 1)
-            plain1, plain2 = (
-                M.MAVLink(None, srcSystem=1, srcComponent=1),
-                M.MAVLink(None, srcSystem=TARGET_SYSID, srcComponent=1),
-            )
-            wrong = _signed_mav(os.urandom(32), 1, 1, link_id=0)
-            t_end = (
-                time.monotonic() + dur - 3.0
-            )  # stop before the bridge closes: every frame counted
-            mark = 0
-            while time.monotonic() < t_end and not stop.is_set():
-                ms = m.tap.vehicle_ms() or 0
-                for mav in (ins99,):
-                    for msg in (
-                        M.MAVLink_attitude_message(ms, 1.0, 0.5, 2.0, 0, 0, 0),
-                        M.MAVLink_local_position_ned_message(
-                            ms, 5000.0, 5000.0, -900.0, 0.0, 30.0, 0.0
-                        ),
-                        M.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3),
-                    ):
-                        m.relay.inject(DOWN, msg.pack(mav))
-                        n["foreign_ids_signed"] += 1
-                ft = M.MAVLink_follow_target_message(
-                    ms,
-                    15,
-                    int(lat * 1e7),
-                    int(lon * 1e7),
-                    alt,
-                    [0.0] * 3,
-                    [0.0] * 3,
-                    [1.0, 0, 0, 0],
-                    [0.0] * 3,
-                    [0.0] * 3,
-                    0,
-                )
-                m.relay.inject(DOWN, ft.pack(ins77))
-                n["foreign_ids_signed"] += 1
-                for mav, msg in (
-                    (plain1, M.MAVLink_attitude_message(ms + 5, 1.0, 0.5, 2.0, 0, 0, 0)),
-                    (plain1, M.MAVLink_heartbeat_message(1, 12, 1, 1 << 16, 4, 3)),
-                    (plain2, ft),
-                ):
-                    m.relay.inject(DOWN, msg.pack(mav))
-                    n["unsigned"] += 1
-                m.relay.inject(
-                    DOWN, M.MAVLink_attitude_message(ms + 5, 1.0, 0.5, 2.0, 0, 0, 0).pack(wrong)
-                )
-                n["wrong_key"] += 1
-                # a replay: one of the vehicle's own signed datagrams, about 1 s old, verbatim
-                old = [
-                    d
-                    for d in m.relay.datagrams(DOWN, mark)
-                    if d.fate == "delivered" and d.t < m.relay.now() - 1.0
-                ]
-                if old:
-                    mark += len(m.relay.datagrams(start=mark)) // 2
-                    frames = split_frames(old[-1].data) or []
-                    if frames and all(f[0] == 0xFD and f[2] & 0x01 for f in frames):
-                        m.relay.inject(DOWN, old[-1].data)
-                        n["replayed"] += len(frames)
-                time.sleep(0.05)
-
-        th = threading.Thread(target=attack, daemon=True)
+        # the attacker is built in its thread, so its signing timestamps start at the attack
+        th = threading.Thread(target=lambda: _Spoofer(m, key, n).run(dur, stop), daemon=True)
         if row.check(m.wait_engaged(30.0), "never engaged"):
             th.start()
         out = m.finish(dur + 40.0)
         stop.set()
         if th.is_alive():
             th.join(5.0)
+    _judge_spoof(row, m, out, n)
+    return row
+
+
+def _judge_spoof(row: Row, m: Mission, out: BridgeOutcome, n: dict[str, int]) -> None:
+    """Every injected frame rejected and counted once by kind; the spoofed target never used."""
     _mission_common(row, m, out, Limits.for_config("px4"))
     c = out.counters
     got = {
@@ -168,7 +191,6 @@ def scenario_spoof(o: Opts) -> Row:
         far = float(max(abs(ts["tgt_n"]).max(), abs(ts["tgt_e"]).max()))
         row.figures["max_target_offset_seen_m"] = _r(far)
         row.check(far < 50.0, f"a spoofed target reached the law ({far:.0f} m)")
-    return row
 
 
 class HeartbeatBeacon:
@@ -216,138 +238,138 @@ class BadInput:
     config: str | None = None  # YAML text for {W}/<name>.yaml (None: the stock PX4 config)
 
 
+# A valid command line: each bad input breaks one piece of it.
+_RUN = (
+    "run",
+    "{CFG}",
+    "--connect",
+    "udpin:127.0.0.1:{PORT}",
+    "--out",
+    "{W}/out",
+    "--heartbeat-timeout",
+    "2",
+    "-q",
+    "--no-plots",
+)
+
+# (name, culprit, edits of the stock PX4 config: "section__key" -> value, None deletes the key)
+_CONFIG_EDITS: tuple[tuple[str, str, dict[str, Any]], ...] = (
+    ("unknown_section", "autopilot", {"autopilot__gain": 1.0}),
+    ("unknown_key", "guidance.K_x", {"guidance__K_x": 1.0}),
+    ("wrong_type", "vehicle.airspeed_m_s", {"vehicle__airspeed_m_s": "fast"}),
+    ("non_finite", "guidance.K_p", {"guidance__K_p": float("nan")}),
+    ("out_of_range", "vehicle.max_bank_rad", {"vehicle__max_bank_rad": 2.0}),
+    ("missing_required_key", "path.radius_m", {"path__radius_m": None}),
+    ("key_unused_by_path", "path.size_m", {"path__size_m": 100.0}),
+    ("airspeed_outside_limits", "vehicle.airspeed_m_s", {"vehicle__airspeed_min_m_s": 16.0}),
+)
+
+# (name, culprit, "--set" assignments appended to the valid command line)
+_SETS_OF_VALUES: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    ("set_without_equals", "guidance.K_p", ("guidance.K_p",)),
+    ("set_unknown_key", "mavlink.sysid", ("mavlink.sysid=3",)),
+    ("set_bad_yaml", "guidance.K_p", ("guidance.K_p=[1,",)),
+    ("set_non_finite", "guidance.K_R", ("guidance.K_R=.inf",)),
+)
+
+# (name, culprit, the --connect URL)
+_URLS: tuple[tuple[str, str, str], ...] = (
+    ("url_unknown_scheme", "foo", "foo:127.0.0.1:{PORT}"),
+    ("url_port_out_of_range", "99999", "udpin:127.0.0.1:99999"),
+    ("url_bad_host", "no such host!", "udpin:no such host!:14540"),
+    ("url_serial_missing", "/dev/ttyNOPE0", "/dev/ttyNOPE0:57600"),
+)
+
+# (name, culprit, options appended to the valid command line)
+_OPTIONS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    ("flavour_unknown", "--flavour", ("--flavour", "inav")),
+    ("duration_negative", "--duration", ("--duration", "-5")),
+)
+
+# (name, culprit, "--set" assignments appended to the valid command line)
+_SETS_OF_SETTINGS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    ("signing_key_missing", "no.key", ("mavlink.signing_key_file={W}/no.key",)),
+    ("signing_key_wrong_length", "short.key", ("mavlink.signing_key_file={W}/short.key",)),
+    ("live_target_without_sysid", "target_sysid", ("target.type=mavlink",)),
+    ("sysid_out_of_range", "mavlink.vehicle_sysid", ("mavlink.vehicle_sysid=300",)),
+    (
+        "setpoint_rate_too_low",
+        "mavlink.min_setpoint_rate_hz",
+        ("mavlink.min_setpoint_rate_hz=1",),
+    ),
+    ("origin_out_of_range", "mavlink.origin_lat_deg", ("mavlink.origin_lat_deg=95",)),
+    ("mission_duration_zero", "mavlink.mission_duration_s", ("mavlink.mission_duration_s=0",)),
+    ("hold_mode_unknown", "mavlink.hold_mode", ("mavlink.hold_mode=BOGUS",)),
+)
+
+# (name, culprit, "--set" assignments) that follow the other autopilot's case
+_SETS_OF_PAIRS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    (
+        "thrust_limits_crossed",
+        "adapter.thrust_min",
+        ("adapter.thrust_min=0.9", "adapter.thrust_max=0.2"),
+    ),
+    (
+        "target_sysid_is_vehicle",
+        "mavlink.target_sysid",
+        ("target.type=mavlink", "mavlink.target_sysid=1"),
+    ),
+    ("source_ids_are_autopilot", "mavlink.source_component", ("mavlink.source_component=1",)),
+)
+
+
+def _config_variant(base: dict[str, Any], edits: dict[str, Any]) -> str:
+    """The YAML text of ``base`` with ``edits`` ("section__key" -> value; None deletes) applied."""
+    import copy
+
+    import yaml
+
+    d = copy.deepcopy(base)
+    for dotted, v in edits.items():
+        sec, _, key = dotted.partition("__")
+        if v is None:
+            d[sec].pop(key, None)
+        else:
+            d.setdefault(sec, {})[key] = v
+    return yaml.safe_dump(d)
+
+
+def _with_sets(rows: tuple[tuple[str, str, tuple[str, ...]], ...]) -> list[BadInput]:
+    out = []
+    for name, culprit, assignments in rows:
+        argv = list(_RUN)
+        for a in assignments:
+            argv += ["--set", a]
+        out.append(BadInput(name, tuple(argv), culprit))
+    return out
+
+
 def _bad_inputs() -> list[BadInput]:
     import yaml
 
     base = yaml.safe_load(CONFIGS["px4"].read_text())
-
-    def variant(**edits: Any) -> str:
-        import copy
-
-        d = copy.deepcopy(base)
-        for dotted, v in edits.items():
-            sec, _, key = dotted.partition("__")
-            if v is None:
-                d[sec].pop(key, None)
-            else:
-                d.setdefault(sec, {})[key] = v
-        return yaml.safe_dump(d)
-
-    run = (
-        "run",
-        "{CFG}",
-        "--connect",
-        "udpin:127.0.0.1:{PORT}",
-        "--out",
-        "{W}/out",
-        "--heartbeat-timeout",
-        "2",
-        "-q",
-        "--no-plots",
-    )
+    run = _RUN
     ard = str(CONFIGS["ardupilot"])
     return [
         BadInput("config_missing", ("run", "{W}/nope.yaml", *run[2:]), "nope.yaml"),
         BadInput("config_not_yaml", run, "not valid YAML", "path: [unclosed\n"),
         BadInput("config_top_level_list", run, "top level", "- a\n- b\n"),
-        BadInput("unknown_section", run, "autopilot", variant(autopilot__gain=1.0)),
-        BadInput("unknown_key", run, "guidance.K_x", variant(guidance__K_x=1.0)),
-        BadInput("wrong_type", run, "vehicle.airspeed_m_s", variant(vehicle__airspeed_m_s="fast")),
-        BadInput("non_finite", run, "guidance.K_p", variant(guidance__K_p=float("nan"))),
-        BadInput("out_of_range", run, "vehicle.max_bank_rad", variant(vehicle__max_bank_rad=2.0)),
-        BadInput("missing_required_key", run, "path.radius_m", variant(path__radius_m=None)),
-        BadInput("key_unused_by_path", run, "path.size_m", variant(path__size_m=100.0)),
-        BadInput(
-            "airspeed_outside_limits",
-            run,
-            "vehicle.airspeed_m_s",
-            variant(vehicle__airspeed_min_m_s=16.0),
-        ),
-        BadInput("set_without_equals", (*run, "--set", "guidance.K_p"), "guidance.K_p"),
-        BadInput("set_unknown_key", (*run, "--set", "mavlink.sysid=3"), "mavlink.sysid"),
-        BadInput("set_bad_yaml", (*run, "--set", "guidance.K_p=[1,"), "guidance.K_p"),
-        BadInput("set_non_finite", (*run, "--set", "guidance.K_R=.inf"), "guidance.K_R"),
-        BadInput(
-            "url_unknown_scheme",
-            ("run", "{CFG}", "--connect", "foo:127.0.0.1:{PORT}", *run[4:]),
-            "foo",
-        ),
-        BadInput(
-            "url_port_out_of_range",
-            ("run", "{CFG}", "--connect", "udpin:127.0.0.1:99999", *run[4:]),
-            "99999",
-        ),
-        BadInput(
-            "url_bad_host",
-            ("run", "{CFG}", "--connect", "udpin:no such host!:14540", *run[4:]),
-            "no such host!",
-        ),
-        BadInput(
-            "url_serial_missing",
-            ("run", "{CFG}", "--connect", "/dev/ttyNOPE0:57600", *run[4:]),
-            "/dev/ttyNOPE0",
-        ),
+        *(BadInput(n, run, c, _config_variant(base, e)) for n, c, e in _CONFIG_EDITS),
+        *_with_sets(_SETS_OF_VALUES),
+        *(BadInput(n, ("run", "{CFG}", "--connect", url, *run[4:]), c) for n, c, url in _URLS),
         BadInput("connect_missing", ("run", "{CFG}", *run[4:]), "--connect"),
-        BadInput("flavour_unknown", (*run, "--flavour", "inav"), "--flavour"),
-        BadInput("duration_negative", (*run, "--duration", "-5"), "--duration"),
+        *(BadInput(n, (*run, *extra), c) for n, c, extra in _OPTIONS),
         BadInput(
             "heartbeat_timeout_zero", (*run[:6], "--heartbeat-timeout", "0"), "--heartbeat-timeout"
         ),
         BadInput("unknown_option", (*run, "--bogus"), "--bogus"),
-        BadInput(
-            "signing_key_missing", (*run, "--set", "mavlink.signing_key_file={W}/no.key"), "no.key"
-        ),
-        BadInput(
-            "signing_key_wrong_length",
-            (*run, "--set", "mavlink.signing_key_file={W}/short.key"),
-            "short.key",
-        ),
-        BadInput(
-            "live_target_without_sysid", (*run, "--set", "target.type=mavlink"), "target_sysid"
-        ),
-        BadInput(
-            "sysid_out_of_range",
-            (*run, "--set", "mavlink.vehicle_sysid=300"),
-            "mavlink.vehicle_sysid",
-        ),
-        BadInput(
-            "setpoint_rate_too_low",
-            (*run, "--set", "mavlink.min_setpoint_rate_hz=1"),
-            "mavlink.min_setpoint_rate_hz",
-        ),
-        BadInput(
-            "origin_out_of_range",
-            (*run, "--set", "mavlink.origin_lat_deg=95"),
-            "mavlink.origin_lat_deg",
-        ),
-        BadInput(
-            "mission_duration_zero",
-            (*run, "--set", "mavlink.mission_duration_s=0"),
-            "mavlink.mission_duration_s",
-        ),
-        BadInput(
-            "hold_mode_unknown", (*run, "--set", "mavlink.hold_mode=BOGUS"), "mavlink.hold_mode"
-        ),
+        *_with_sets(_SETS_OF_SETTINGS),
         BadInput(
             "hold_mode_of_other_autopilot",
             ("run", ard, *run[2:], "--set", "mavlink.hold_mode=AUTO.LOITER"),
             "mavlink.hold_mode",
         ),
-        BadInput(
-            "thrust_limits_crossed",
-            (*run, "--set", "adapter.thrust_min=0.9", "--set", "adapter.thrust_max=0.2"),
-            "adapter.thrust_min",
-        ),
-        BadInput(
-            "target_sysid_is_vehicle",
-            (*run, "--set", "target.type=mavlink", "--set", "mavlink.target_sysid=1"),
-            "mavlink.target_sysid",
-        ),
-        BadInput(
-            "source_ids_are_autopilot",
-            (*run, "--set", "mavlink.source_component=1"),
-            "mavlink.source_component",
-        ),
+        *_with_sets(_SETS_OF_PAIRS),
         BadInput(
             "out_is_a_file",
             ("run", "{CFG}", "--connect", "udpin:127.0.0.1:{PORT}", "--out", "{W}/short.key", "-q"),
@@ -503,49 +525,62 @@ def scenario_output_dir(o: Opts, in_flight: bool = True) -> Row:
         ("readonly", ("Read-only", "File too large")),
         ("full", ("No space left", "File too large")),
     ):
-        mnt = w / mode
-        mnt.mkdir(parents=True, exist_ok=True)
-        prefix, method = _fs_prefix(mnt, mode)
-        port = free_udp_port()
-        with HeartbeatBeacon(port) as beacon:
-            p = subprocess.run(
-                [
-                    *prefix,
-                    *mpf_mavlink_cmd(),
-                    "run",
-                    str(CONFIGS["px4"]),
-                    "--connect",
-                    f"udpin:127.0.0.1:{port}",
-                    "--out",
-                    str(mnt / "run"),
-                    "-q",
-                    "--no-plots",
-                ],
-                cwd=ROOT,
-                capture_output=True,
-                text=True,
-                timeout=60,
-            )
-            time.sleep(0.1)
-        err = p.stderr.strip().splitlines()
-        refusals[mode] = {
-            "method": method,
-            "rc": p.returncode,
-            "stderr": err[-1] if err else "",
-            "sent_to_vehicle": beacon.received,
-        }
-        row.check(
-            p.returncode == 2
-            and len(err) == 1
-            and str(mnt / "run") in err[0]
-            and any(t in err[0] for t in errno_text)
-            and beacon.received == 0,
-            f"{mode}: not refused cleanly before connecting: {refusals[mode]}",
-        )
+        refusals[mode] = _refused_before_connecting(row, w / mode, mode, errno_text)
     row.figures["refused"] = refusals
-    if not in_flight:
-        return row
-    # the disk fills up mid-flight: 96 KiB hold the first ~10 s of tlog
+    if in_flight:
+        _disk_fills_in_flight(row, o, w)
+    return row
+
+
+def _refused_before_connecting(
+    row: Row, mnt: Path, mode: str, errno_text: tuple[str, ...]
+) -> dict[str, Any]:
+    """A bridge started on an unwritable run directory (``mode`` of :func:`_fs_prefix`) exits 2
+    with one line naming it, before sending anything to the vehicle."""
+    mnt.mkdir(parents=True, exist_ok=True)
+    prefix, method = _fs_prefix(mnt, mode)
+    port = free_udp_port()
+    with HeartbeatBeacon(port) as beacon:
+        p = subprocess.run(
+            [
+                *prefix,
+                *mpf_mavlink_cmd(),
+                "run",
+                str(CONFIGS["px4"]),
+                "--connect",
+                f"udpin:127.0.0.1:{port}",
+                "--out",
+                str(mnt / "run"),
+                "-q",
+                "--no-plots",
+            ],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        time.sleep(0.1)
+    err = p.stderr.strip().splitlines()
+    refusal = {
+        "method": method,
+        "rc": p.returncode,
+        "stderr": err[-1] if err else "",
+        "sent_to_vehicle": beacon.received,
+    }
+    row.check(
+        p.returncode == 2
+        and len(err) == 1
+        and str(mnt / "run") in err[0]
+        and any(t in err[0] for t in errno_text)
+        and beacon.received == 0,
+        f"{mode}: not refused cleanly before connecting: {refusal}",
+    )
+    return refusal
+
+
+def _disk_fills_in_flight(row: Row, o: Opts, w: Path) -> None:
+    """The disk fills up mid-flight (96 KiB hold the first ~10 s of tlog): the flight goes on,
+    setpoints do not pause, and the summary says records were lost."""
     dur = 20.0 if o.quick else 30.0
     mnt = w / "small"
     mnt.mkdir(parents=True, exist_ok=True)
@@ -580,4 +615,3 @@ def scenario_output_dir(o: Opts, in_flight: bool = True) -> Row:
         max_gap([e.t for e in tap.setpoints], t_on, t_off) <= 0.25,
         "setpoints paused while the disk filled",
     )
-    return row

@@ -24,15 +24,12 @@ level (only signing can tell them apart) and the bridge is right to act on them.
 from __future__ import annotations
 
 import math
-import os
 import random
 import struct
 from collections.abc import Callable
 
-os.environ.setdefault("MAVLINK20", "1")
-
-from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
-from pymavlink.generator.mavcrc import x25crc  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as M
+from pymavlink.generator.mavcrc import x25crc
 
 _INT_RANGES = {
     "int8_t": (-(2**7), 2**7 - 1),
@@ -189,135 +186,17 @@ class FrameFuzzer:
         return bytes(hdr) + payload + struct.pack("<H", crc.crc)
 
     # -- frames from the vehicle's own ids with absurd contents ------------------------------
-    def _absurd(self) -> float:
-        return self.rng.choice((math.nan, math.inf, -math.inf, 1e30, -1e30, 3.4e38, 1e9, -1e9, 7e6))
-
-    def _absurd_time_ms(self) -> int:
-        now = self.now_ms()
-        choices = [0, 1, 2**32 - 1, 2**31, self.rng.randrange(2**32)]
-        if now is not None:
-            choices += [
-                (now + 3_600_000) % 2**32,
-                max(0, now - 3_600_000),
-                (now + 86_400_000) % 2**32,
-                (now + self.rng.randrange(60_000, 10**9)) % 2**32,
-            ]
-        return self.rng.choice(choices)
-
     def own_absurd(self) -> bytes:
         s, c = self.vehicle
-        r = self.rng
         mav = self._mav(s, c)
         now = self.now_ms()
-        t_ok = now if now is not None else r.randrange(2**32)
-        a = self._absurd
-        k = r.randrange(12)
-        if k == 0:
-            self._note("own_attitude_nonfinite")
-            msg = M.MAVLink_attitude_message(t_ok, a(), a(), a(), a(), a(), a())
-        elif k == 1:
-            self._note("own_attitude_rates_absurd")
-            msg = M.MAVLink_attitude_message(
-                t_ok, 0.1, 0.05, 1.0, r.choice((60.0, -1e4, 1e20)), 0.0, 0.0
-            )
-        elif k == 2:
-            self._note("own_attitude_time_absurd")
-            msg = M.MAVLink_attitude_message(
-                self._absurd_time_ms(),
-                r.uniform(-0.5, 0.5),
-                r.uniform(-0.2, 0.2),
-                r.uniform(-3, 3),
-                r.uniform(-0.3, 0.3),
-                r.uniform(-0.3, 0.3),
-                r.uniform(-0.3, 0.3),
-            )
-        elif k == 3:
-            self._note("own_attitude_quaternion_absurd")
-            q = r.choice(
-                (
-                    [0.0, 0.0, 0.0, 0.0],
-                    [2.0, 0.0, 0.0, 0.0],
-                    [a(), 0.0, 0.0, 0.0],
-                    [0.5, 0.5, 0.5, 0.2],
-                )
-            )
-            msg = M.MAVLink_attitude_quaternion_message(t_ok, *q, 0.0, 0.0, 0.0, [0.0] * 4)
-        elif k == 4:
-            self._note("own_local_position_absurd")
-            msg = M.MAVLink_local_position_ned_message(t_ok, a(), a(), a(), a(), a(), a())
-        elif k == 5:
-            self._note("own_local_position_time_absurd")
-            msg = M.MAVLink_local_position_ned_message(
-                self._absurd_time_ms(),
-                r.uniform(-500, 500),
-                r.uniform(-500, 500),
-                -100.0,
-                r.uniform(-15, 15),
-                r.uniform(-15, 15),
-                0.0,
-            )
-        elif k == 6:
-            self._note("own_global_position_absurd")
-            lat = r.choice((910_000_000, -910_000_000, 0, 2**31 - 1))
-            lon = r.choice((1_810_000_000, 0, -(2**31)))
-            alt = r.choice((-(2**31), 2**31 - 1, 60_000_000))
-            vel = r.choice((32767, -32768))
-            msg = M.MAVLink_global_position_int_message(
-                t_ok, lat, lon, alt, alt, vel, vel, vel, r.choice((36001, 65534))
-            )
-        elif k == 7:
-            self._note("own_vfr_hud_absurd")
-            msg = M.MAVLink_vfr_hud_message(
-                r.choice((math.nan, -5.0, 1e6, math.inf)),
-                a(),
-                r.randrange(-32768, 32768),
-                r.choice((65535, 1000)),
-                a(),
-                a(),
-            )
-        elif k == 8:
-            self._note("own_wind_absurd")
-            if r.random() < 0.5:
-                msg = M.MAVLink_wind_cov_message(
-                    r.randrange(2**63), a(), a(), a(), 0.0, 0.0, 0.0, 0.0, 0.0
-                )
-            else:
-                msg = M.MAVLink_wind_message(a(), a(), a())
-        elif k == 9:
-            self._note("own_home_absurd")
-            msg = M.MAVLink_home_position_message(
-                r.choice((950_000_000, 0)),
-                r.choice((1_900_000_000, 0)),
-                r.choice((2**31 - 1, -(2**31))),
-                a(),
-                a(),
-                a(),
-                [1.0, 0.0, 0.0, 0.0],
-                0.0,
-                0.0,
-                0.0,
-                0,
-            )
-        elif k == 10:
-            self._note("own_heartbeat_not_the_autopilot")
-            choice = r.randrange(3)
-            if choice == 0:  # another component of the vehicle claiming to be an autopilot
-                mav = self._mav(s, r.choice([x for x in range(1, 256) if x not in (c, 191)]))
-                ap = r.choice((M.MAV_AUTOPILOT_PX4, M.MAV_AUTOPILOT_ARDUPILOTMEGA))
-            elif choice == 1:  # the autopilot's ids, but an autopilot field it never sends
-                ap = r.choice((M.MAV_AUTOPILOT_GENERIC, 4, 8, 18, 200))
-            else:  # a GCS / companion on the vehicle's system id
-                ap = M.MAV_AUTOPILOT_INVALID
-            msg = M.MAVLink_heartbeat_message(
-                r.randrange(256), ap, r.randrange(256), r.randrange(2**32), r.randrange(256), 3
-            )
-        else:
-            self._note("own_command_ack_random")
-            msg = M.MAVLink_command_ack_message(
-                r.randrange(65536), r.randrange(256), r.randrange(256), r.randrange(2**31), 1, 191
-            )
+        t_ok = now if now is not None else self.rng.randrange(2**32)
+        kind, build = _OwnAbsurd.KINDS[self.rng.randrange(len(_OwnAbsurd.KINDS))]
+        self._note(kind)
+        own = _OwnAbsurd(self, t_ok, mav)
+        msg = build(own)
         try:
-            return msg.pack(mav)
+            return msg.pack(own.mav)
         except (struct.error, OverflowError):  # pragma: no cover - pools are packable
             return self.random_bytes()
 
@@ -342,6 +221,148 @@ class FrameFuzzer:
         real links and exercise the receiver's stream parser). Returns (frame count, bytes)."""
         n = 1 if self.rng.random() < 0.7 else self.rng.randint(2, max_frames)
         return n, b"".join(self.frame()[1] for _ in range(n))
+
+
+class _OwnAbsurd:
+    """The kinds of ``own_absurd`` frame, one builder each: a message from the vehicle's own
+    ids (``mav``, which a builder may swap for another component's) whose contents are absurd.
+    Every value is drawn from the fuzzer's generator, so a seed reproduces the frames."""
+
+    def __init__(self, fz: FrameFuzzer, t_ok: int, mav: M.MAVLink) -> None:
+        self.fz, self.r, self.t_ok, self.mav = fz, fz.rng, t_ok, mav
+
+    def _a(self) -> float:
+        return self.r.choice((math.nan, math.inf, -math.inf, 1e30, -1e30, 3.4e38, 1e9, -1e9, 7e6))
+
+    def _time_ms(self) -> int:
+        now = self.fz.now_ms()
+        choices = [0, 1, 2**32 - 1, 2**31, self.r.randrange(2**32)]
+        if now is not None:
+            choices += [
+                (now + 3_600_000) % 2**32,
+                max(0, now - 3_600_000),
+                (now + 86_400_000) % 2**32,
+                (now + self.r.randrange(60_000, 10**9)) % 2**32,
+            ]
+        return self.r.choice(choices)
+
+    def attitude_nonfinite(self) -> M.MAVLink_message:
+        a = self._a
+        return M.MAVLink_attitude_message(self.t_ok, a(), a(), a(), a(), a(), a())
+
+    def attitude_rates(self) -> M.MAVLink_message:
+        rate = self.r.choice((60.0, -1e4, 1e20))
+        return M.MAVLink_attitude_message(self.t_ok, 0.1, 0.05, 1.0, rate, 0.0, 0.0)
+
+    def _plausible(self, *half_widths: float) -> list[float]:
+        """Uniform draws in +-each half-width: a plausible sample to carry an absurd time."""
+        return [self.r.uniform(-h, h) for h in half_widths]
+
+    def attitude_time(self) -> M.MAVLink_message:
+        t = self._time_ms()  # drawn first: the seed's order
+        return M.MAVLink_attitude_message(t, *self._plausible(0.5, 0.2, 3, 0.3, 0.3, 0.3))
+
+    def attitude_quaternion(self) -> M.MAVLink_message:
+        q = self.r.choice(
+            (
+                [0.0, 0.0, 0.0, 0.0],
+                [2.0, 0.0, 0.0, 0.0],
+                [self._a(), 0.0, 0.0, 0.0],
+                [0.5, 0.5, 0.5, 0.2],
+            )
+        )
+        return M.MAVLink_attitude_quaternion_message(self.t_ok, *q, 0.0, 0.0, 0.0, [0.0] * 4)
+
+    def local_position(self) -> M.MAVLink_message:
+        a = self._a
+        return M.MAVLink_local_position_ned_message(self.t_ok, a(), a(), a(), a(), a(), a())
+
+    def local_position_time(self) -> M.MAVLink_message:
+        t = self._time_ms()
+        n, e, vn, ve = self._plausible(500, 500, 15, 15)
+        return M.MAVLink_local_position_ned_message(t, n, e, -100.0, vn, ve, 0.0)
+
+    def global_position(self) -> M.MAVLink_message:
+        r = self.r
+        lat = r.choice((910_000_000, -910_000_000, 0, 2**31 - 1))
+        lon = r.choice((1_810_000_000, 0, -(2**31)))
+        alt = r.choice((-(2**31), 2**31 - 1, 60_000_000))
+        vel = r.choice((32767, -32768))
+        return M.MAVLink_global_position_int_message(
+            self.t_ok, lat, lon, alt, alt, vel, vel, vel, r.choice((36001, 65534))
+        )
+
+    def vfr_hud(self) -> M.MAVLink_message:
+        r, a = self.r, self._a
+        return M.MAVLink_vfr_hud_message(
+            r.choice((math.nan, -5.0, 1e6, math.inf)),
+            a(),
+            r.randrange(-32768, 32768),
+            r.choice((65535, 1000)),
+            a(),
+            a(),
+        )
+
+    def wind(self) -> M.MAVLink_message:
+        r, a = self.r, self._a
+        if r.random() < 0.5:
+            return M.MAVLink_wind_cov_message(
+                r.randrange(2**63), a(), a(), a(), 0.0, 0.0, 0.0, 0.0, 0.0
+            )
+        return M.MAVLink_wind_message(a(), a(), a())
+
+    def home(self) -> M.MAVLink_message:
+        r, a = self.r, self._a
+        return M.MAVLink_home_position_message(
+            r.choice((950_000_000, 0)),
+            r.choice((1_900_000_000, 0)),
+            r.choice((2**31 - 1, -(2**31))),
+            a(),
+            a(),
+            a(),
+            [1.0, 0.0, 0.0, 0.0],
+            0.0,
+            0.0,
+            0.0,
+            0,
+        )
+
+    def heartbeat_not_the_autopilot(self) -> M.MAVLink_message:
+        r = self.r
+        choice = r.randrange(3)
+        if choice == 0:  # another component of the vehicle claiming to be an autopilot
+            s, c = self.fz.vehicle
+            self.mav = self.fz._mav(s, r.choice([x for x in range(1, 256) if x not in (c, 191)]))
+            ap = r.choice((M.MAV_AUTOPILOT_PX4, M.MAV_AUTOPILOT_ARDUPILOTMEGA))
+        elif choice == 1:  # the autopilot's ids, but an autopilot field it never sends
+            ap = r.choice((M.MAV_AUTOPILOT_GENERIC, 4, 8, 18, 200))
+        else:  # a GCS / companion on the vehicle's system id
+            ap = M.MAV_AUTOPILOT_INVALID
+        return M.MAVLink_heartbeat_message(
+            r.randrange(256), ap, r.randrange(256), r.randrange(2**32), r.randrange(256), 3
+        )
+
+    def command_ack(self) -> M.MAVLink_message:
+        r = self.r
+        return M.MAVLink_command_ack_message(
+            r.randrange(65536), r.randrange(256), r.randrange(256), r.randrange(2**31), 1, 191
+        )
+
+    # the draw picks one of these by index: their order is part of what a seed reproduces
+    KINDS: tuple[tuple[str, Callable[[_OwnAbsurd], M.MAVLink_message]], ...] = (
+        ("own_attitude_nonfinite", attitude_nonfinite),
+        ("own_attitude_rates_absurd", attitude_rates),
+        ("own_attitude_time_absurd", attitude_time),
+        ("own_attitude_quaternion_absurd", attitude_quaternion),
+        ("own_local_position_absurd", local_position),
+        ("own_local_position_time_absurd", local_position_time),
+        ("own_global_position_absurd", global_position),
+        ("own_vfr_hud_absurd", vfr_hud),
+        ("own_wind_absurd", wind),
+        ("own_home_absurd", home),
+        ("own_heartbeat_not_the_autopilot", heartbeat_not_the_autopilot),
+        ("own_command_ack_random", command_ack),
+    )
 
 
 __all__ = ["CLASSES", "FrameFuzzer"]

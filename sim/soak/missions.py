@@ -5,22 +5,18 @@ bridge."""
 from __future__ import annotations
 
 import math
-import os
 import signal
 import threading
 import time
 from pathlib import Path
 from typing import Any
 
-os.environ.setdefault("MAVLINK20", "1")
-os.environ.setdefault("JSBSIM_DEBUG", "0")
+from pymavlink.dialects.v20 import ardupilotmega as M
 
-from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
-
-from mpf_mavlink.mavlink.modes import is_offboard  # noqa: E402
-from mpf_mavlink.runs.verdict import EXIT_NOT_JUDGED  # noqa: E402
+from mpf_mavlink.mavlink.modes import is_offboard
+from mpf_mavlink.runs.verdict import EXIT_NOT_JUDGED
 from sim.soak.checks import Limits, _r, bridge_silence, max_gap, setpoint_violations
-from sim.soak.relay import DOWN, UP, Blackout, Impairment  # noqa: E402
+from sim.soak.relay import DOWN, UP, Blackout, Impairment
 from sim.soak.rig import (
     TARGET_SYSID,
     VEHICLE_COMPID,
@@ -295,7 +291,26 @@ def _blackout(o: Opts, name: str, direction: str | None, reengage: bool = False)
     _mission_common(row, m, out, lim)
     if b is None:
         return row
-    tap, t0 = m.tap, b.start_s
+    reengaged = _blackout_handover(row, m.tap, out, b, direction, reengage)
+    if reengage:
+        _blackout_reengaged(row, m, out, b, reengaged)
+    else:
+        _blackout_ended(row, m.tap, out, b, reengaged)
+    return row
+
+
+def _blackout_handover(
+    row: Row,
+    tap: Tap,
+    out: BridgeOutcome,
+    b: Blackout,
+    direction: str | None,
+    reengage: bool,
+) -> list[Event]:
+    """The bridge stops commanding within 0.5 s of the blackout's start, the vehicle leaves
+    offboard within its 1 s loss timeout and hands back to AUTO.LOITER; returns the bridge's
+    OFFBOARD requests after the blackout's start."""
+    t0 = b.start_s
     last_sent = _last_before(tap.bridge_setpoints, b.end_s)  # the bridge's last command
     last_deliv = _last_before(tap.setpoints, b.end_s)  # the vehicle's last command
     t_out = tap.left_offboard_after(t0)
@@ -348,16 +363,28 @@ def _blackout(o: Opts, name: str, direction: str | None, reengage: bool = False)
         mt.get("handback_confirmed") is True,
         "hand-back to AUTO.LOITER not confirmed after the blackout",
     )
-    if not reengage:
-        row.check(
-            out.rc == 4 and "telemetry lost" in out.exit_reason, f"exit {out.rc}: {out.exit_reason}"
-        )
-        row.check(
-            not reengaged and not _after(tap.bridge_setpoints, b.end_s),
-            "the bridge commanded again after the blackout",
-        )
-        return row
-    # re-engaged: the mission flies on to its original end and tracks again
+    return reengaged
+
+
+def _blackout_ended(
+    row: Row, tap: Tap, out: BridgeOutcome, b: Blackout, reengaged: list[Event]
+) -> None:
+    """Configured to end: exit 4 (telemetry lost) and no command after the blackout."""
+    row.check(
+        out.rc == 4 and "telemetry lost" in out.exit_reason, f"exit {out.rc}: {out.exit_reason}"
+    )
+    row.check(
+        not reengaged and not _after(tap.bridge_setpoints, b.end_s),
+        "the bridge commanded again after the blackout",
+    )
+
+
+def _blackout_reengaged(
+    row: Row, m: Mission, out: BridgeOutcome, b: Blackout, reengaged: list[Event]
+) -> None:
+    """Configured to re-engage: one OFFBOARD request within 10 s of the blackout's end, then
+    the mission flies on to its original end and tracks again."""
+    mt = out.metrics
     n_re = (mt.get("counters") or {}).get("reengagements")
     ts = _timeseries(m.out_dir)
     last5 = None
@@ -383,7 +410,6 @@ def _blackout(o: Opts, name: str, direction: str | None, reengage: bool = False)
         (mt.get("final_pt_m") or math.inf) < 10.0,
         f"not tracking after the re-engagement (final |pt| {mt.get('final_pt_m')})",
     )
-    return row
 
 
 def scenario_blackout_link(o: Opts) -> Row:

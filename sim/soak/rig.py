@@ -9,9 +9,7 @@ import contextlib
 import gc
 import json
 import math
-import os
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -20,17 +18,18 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as M
 
-os.environ.setdefault("MAVLINK20", "1")
-os.environ.setdefault("JSBSIM_DEBUG", "0")
+from mpf_mavlink.mavlink.modes import is_offboard, mode_name
+from mpf_mavlink.mavlink.url import free_udp_port
+from sim.soak.relay import DOWN, Blackout, Impairment, UdpRelay
 
-from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
-
-from mpf_mavlink.mavlink.modes import is_offboard, mode_name  # noqa: E402
-from sim.soak.relay import DOWN, Blackout, Impairment, UdpRelay  # noqa: E402
+if TYPE_CHECKING:
+    from mpf_mavlink.core.target import ConstantTurn, Stationary
+    from sim.vehicle.vehicle import SimVehicle
 
 ROOT = Path(__file__).resolve().parents[2]  # the repository (sim/soak/rig.py)
 CONFIGS = {
@@ -48,14 +47,6 @@ START_HEADING = 0.0
 START_ON_PATH = ("--position", "0", "-150", "-100", "--orbit", "0", "0", "150")
 
 
-def free_udp_port() -> int:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
-
-
 def mpf_mavlink_cmd() -> list[str]:
     """The installed ``mpf-mavlink`` console script next to this interpreter (what a user
     runs), else the module."""
@@ -64,11 +55,7 @@ def mpf_mavlink_cmd() -> list[str]:
 
 
 # ----------------------------------------------------------------------------- the vehicle process
-def vehicle_main(argv: list[str]) -> int:
-    """``python -m sim.soak vehicle``: a SimVehicle until SIGTERM, then a JSON report."""
-    from mpf_mavlink.core.target import ConstantTurn, Stationary
-    from sim.vehicle.vehicle import SimVehicle
-
+def _vehicle_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m sim.soak vehicle")
     ap.add_argument("--flavour", choices=("px4", "ardupilot"), default="px4")
     ap.add_argument("--url", required=True)
@@ -95,41 +82,73 @@ def vehicle_main(argv: list[str]) -> int:
         action="store_true",
         help="build the rebooted vehicle in advance (SIGUSR1 swaps at once)",
     )
-    a = ap.parse_args(argv)
-    target: Stationary | ConstantTurn | None = None
-    if a.target == "stationary":
-        target = Stationary((0.0, 0.0, -100.0))
-    elif a.target == "drift":
-        target = ConstantTurn((0.0, 0.0, -100.0), speed=3.0, heading=math.pi / 2)
+    return ap
+
+
+def _vehicle_target(kind: str) -> Stationary | ConstantTurn | None:
+    """The target system the vehicle simulates (``--target``), 100 m up over the origin."""
+    from mpf_mavlink.core.target import ConstantTurn, Stationary
+
+    if kind == "stationary":
+        return Stationary((0.0, 0.0, -100.0))
+    if kind == "drift":
+        return ConstantTurn((0.0, 0.0, -100.0), speed=3.0, heading=math.pi / 2)
+    return None
+
+
+def _make_vehicle(a: argparse.Namespace, target: Stationary | ConstantTurn | None) -> SimVehicle:
+    from sim.vehicle.vehicle import SimVehicle
+
+    v = SimVehicle.build(
+        a.flavour,
+        a.url,
+        plant=a.plant,
+        clock=a.clock,
+        position_ned=tuple(a.position),
+        heading=a.heading,
+        airspeed=a.airspeed,
+        target=target,
+        target_system=TARGET_SYSID,
+        com_of_loss_t=a.com_of_loss_t,
+        guided_timeout=a.guided_timeout,
+        record_truth=False,
+        initial_orbit=tuple(a.orbit) if a.orbit else None,
+    )
+    if a.signing_key_hex:
+        key = bytes.fromhex(a.signing_key_hex)
+        # the vehicle signs what it (and its target system) sends and rejects unsigned input
+        v.link.conn.setup_signing(key, sign_outgoing=True, allow_unsigned_callback=None)
+        ticks = int((time.time() - 1420070400) * 100_000)
+        for mav in (
+            v.link.mav,
+            v.link.tmav,
+        ):  # the encoders that write into the vehicle's send queue
+            mav.signing.secret_key, mav.signing.sign_outgoing = key, True
+            mav.signing.link_id, mav.signing.timestamp = 0, ticks
+    return v
+
+
+def _vehicle_report(v: SimVehicle) -> dict[str, Any]:
+    return {
+        "t": v.t,
+        "time_boot_s": v.time_boot_s,
+        "mode": v.mode_name,
+        "mode_changes": v.modes.changes,
+        "statustexts": v.link.statustexts,
+        "dropped": v.autopilot.setpoints.dropped,
+        "setpoints_received": v.lockstep.answers,
+        "rx_count": v.link.rx_count,
+        "real_time_factor": v.real_time_factor,
+    }
+
+
+def vehicle_main(argv: list[str]) -> int:
+    """``python -m sim.soak vehicle``: a SimVehicle until SIGTERM, then a JSON report."""
+    a = _vehicle_parser().parse_args(argv)
+    target = _vehicle_target(a.target)
 
     def make() -> SimVehicle:
-        v = SimVehicle.build(
-            a.flavour,
-            a.url,
-            plant=a.plant,
-            clock=a.clock,
-            position_ned=tuple(a.position),
-            heading=a.heading,
-            airspeed=a.airspeed,
-            target=target,
-            target_system=TARGET_SYSID,
-            com_of_loss_t=a.com_of_loss_t,
-            guided_timeout=a.guided_timeout,
-            record_truth=False,
-            initial_orbit=tuple(a.orbit) if a.orbit else None,
-        )
-        if a.signing_key_hex:
-            key = bytes.fromhex(a.signing_key_hex)
-            # the vehicle signs what it (and its target system) sends and rejects unsigned input
-            v.link.conn.setup_signing(key, sign_outgoing=True, allow_unsigned_callback=None)
-            ticks = int((time.time() - 1420070400) * 100_000)
-            for mav in (
-                v.link.mav,
-                v.link.tmav,
-            ):  # the encoders that write into the vehicle's send queue
-                mav.signing.secret_key, mav.signing.sign_outgoing = key, True
-                mav.signing.link_id, mav.signing.timestamp = 0, ticks
-        return v
+        return _make_vehicle(a, target)
 
     v = make()
     spare = make() if a.spare else None  # built now: a SIGUSR1 reboot is then only a swap
@@ -154,17 +173,7 @@ def vehicle_main(argv: list[str]) -> int:
     except KeyboardInterrupt:
         pass
     finally:
-        report = {
-            "t": v.t,
-            "time_boot_s": v.time_boot_s,
-            "mode": v.mode_name,
-            "mode_changes": v.modes.changes,
-            "statustexts": v.link.statustexts,
-            "dropped": v.autopilot.setpoints.dropped,
-            "setpoints_received": v.lockstep.answers,
-            "rx_count": v.link.rx_count,
-            "real_time_factor": v.real_time_factor,
-        }
+        report = _vehicle_report(v)
         if a.report:
             Path(a.report).write_text(json.dumps(report, default=float))
         v.close()

@@ -97,6 +97,25 @@ _QUEUED = (
 )
 
 
+def plant_kwargs(
+    cfg: VehicleConfig, position_ned: tuple[float, ...], heading: float, airspeed: float
+) -> dict[str, Any]:
+    """A plant's constructor arguments for ``cfg``, starting at ``position_ned`` (m),
+    ``heading`` (rad), ``airspeed`` (m/s): a whole number of physics steps per frame, no
+    longer than 1 / physics_rate_hz each."""
+    n_sub = max(1, math.ceil(cfg.frame_period * cfg.physics_rate_hz - 1e-9))
+    return dict(
+        dt=cfg.frame_period / n_sub,
+        lat0_deg=cfg.lat0_deg,
+        lon0_deg=cfg.lon0_deg,
+        alt0_m=cfg.alt0_m,
+        position_ned=position_ned,
+        heading=heading,
+        airspeed=airspeed,
+        **cfg.plant_options,
+    )
+
+
 def build_plant(cfg: VehicleConfig) -> tuple[Any, Any, Any]:
     """The plant, trimmed where ``cfg`` asks: (plant, trim result or None, inner-loop autopilot).
     The plant starts behind the requested point along the ground track (heading + wind), so the
@@ -107,17 +126,7 @@ def build_plant(cfg: VehicleConfig) -> tuple[Any, Any, Any]:
     shift = ground * cfg.trim_seconds
     plant = cfg.plant
     if isinstance(plant, str):
-        n_sub = max(1, math.ceil(cfg.frame_period * cfg.physics_rate_hz - 1e-9))
-        kw = dict(
-            dt=cfg.frame_period / n_sub,
-            lat0_deg=cfg.lat0_deg,
-            lon0_deg=cfg.lon0_deg,
-            alt0_m=cfg.alt0_m,
-            position_ned=tuple(pos - shift),
-            heading=heading,
-            airspeed=v,
-            **cfg.plant_options,
-        )
+        kw = plant_kwargs(cfg, tuple(pos - shift), heading, v)
         if plant == "jsbsim":
             from sim.plant.jsbsim_plant import JSBSimPlant
 
