@@ -35,7 +35,11 @@ class ControlLoop:
         self.ctl, self.vl, self.phase = ctl, vl, phase
         self.m = m = vl.m
         self._record, self._show = record, show
-        self.period_s = 1.0 / m.min_setpoint_rate_hz  # the longest a setpoint goes unrepeated
+        # the longest a setpoint goes unrepeated: 10 % under 1 / min_setpoint_rate_hz, so that the
+        # process's wake-up latency cannot pull the stream below that rate (a re-send exactly on
+        # the period left a 10 Hz telemetry stream at 20 Hz at best, and PRESTREAM's check of it
+        # failed whenever the machine was busy)
+        self.period_s = 0.9 / m.min_setpoint_rate_hz
         self.streaming = False
         self.last_sp: Setpoint | None = None
         self.last_time_boot_ms = 0
