@@ -13,6 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from mpf_mavlink.constants import GRAVITY_M_S2
 from mpf_mavlink.core.adapter import (
     AdapterParams,
     AdapterState,
@@ -20,7 +21,7 @@ from mpf_mavlink.core.adapter import (
     bank_and_load_factor,
     safe_setpoint,
 )
-from mpf_mavlink.core.frames import GRAVITY_M_S2, euler_to_matrix, quat_wxyz_to_matrix
+from mpf_mavlink.core.frames import euler_to_matrix, quat_wxyz_to_matrix
 
 P = AdapterParams()
 LEVEL = np.eye(3)

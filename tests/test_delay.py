@@ -44,8 +44,9 @@ def _roll_loop(predict_to: str, hold: float, T: float = 0.1, d: float = 0.02) ->
     into the period). A level right turn at 0.1 rad/s and 15 m/s wants atan(1.5 / g) of bank;
     the attitude the adapter sees is predicted by the set-point in flight to t + d ("start") or
     t + d + T/2 ("middle")."""
+    from mpf_mavlink.constants import GRAVITY_M_S2
     from mpf_mavlink.core.adapter import AdapterParams, adapt
-    from mpf_mavlink.core.frames import GRAVITY_M_S2, euler_to_matrix
+    from mpf_mavlink.core.frames import euler_to_matrix
 
     P = AdapterParams(tau_roll_s=0.15, adaptive=False)
     bank = math.atan(1.5 / GRAVITY_M_S2)

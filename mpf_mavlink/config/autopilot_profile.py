@@ -9,10 +9,9 @@ errors naming the key and the file. Units SI, radians.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 from mpf_mavlink.config.build import _build
 from mpf_mavlink.config.fields import _nonneg, _pos
@@ -132,7 +131,3 @@ def load_profile(path: str | Path) -> AutopilotProfile:
     if not isinstance(raw, dict):
         raise ConfigError(f"{p}: an autopilot profile is a mapping")
     return _build(AutopilotProfile, raw, str(p), "")
-
-
-def profile_to_dict(prof: AutopilotProfile) -> dict[str, Any]:
-    return dataclasses.asdict(prof)

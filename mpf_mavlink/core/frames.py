@@ -12,7 +12,6 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from mpf_mavlink.constants import GRAVITY_M_S2 as GRAVITY_M_S2  # re-exported for importers
 from mpf_mavlink.core.so3 import Mat3, Vec3, rot_x, rot_y, rot_z
 
 
