@@ -79,10 +79,20 @@ def _optional_groups() -> None:
 
     GROUPS["sil_real_time_factor"] = sil_real_time_factor
     GROUPS["sil_tracking"] = sil_tracking
-    from mpf_mavlink.bench.robustness import sil_airframes, sil_robustness
+    from mpf_mavlink.bench.robustness import (
+        sil_airframes,
+        sil_robustness,
+        sil_robustness_arduplane,
+        sil_robustness_px4,
+    )
 
     GROUPS["sil_robustness"] = sil_robustness
     GROUPS["sil_airframes"] = sil_airframes
+    GROUPS["sil_robustness_px4"] = sil_robustness_px4
+    GROUPS["sil_robustness_arduplane"] = sil_robustness_arduplane
+    from mpf_mavlink.bench.calibration import calibration
+
+    GROUPS["calibration"] = calibration
     from mpf_mavlink.bench.target import target_feed
 
     GROUPS["target_feed"] = target_feed

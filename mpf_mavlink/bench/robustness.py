@@ -9,7 +9,14 @@ rows (latency, telemetry rate, wind) are judged against the demo or calm figure 
 table. Rows the pre-flight gate refuses are flown again with ``--force`` to show what the gate
 spared; the refusal itself is the row's verdict.
 
-Run alone: ``python -m mpf_mavlink.bench.robustness [--rows demo,calm] [--duration S]``.
+With ``--profile NAME`` (``px4``, ``arduplane`` or a profile YAML) every row flies the SIL with
+that identified autopilot profile (``sil.autopilot_profile``, ``sil.flavour`` following its
+autopilot): what the firmware adds to the same X8. The profile's ``thrust`` section is the
+airframe the firmware was identified on (PX4 SIH's airplane), not the X8 these rows fly, so it
+is left out unless ``--profile-thrust``.
+
+Run alone: ``python -m mpf_mavlink.bench.robustness [--rows demo,calm] [--duration S]
+[--profile px4]``.
 """
 
 from __future__ import annotations
@@ -24,7 +31,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+ROOT = Path(__file__).resolve().parents[2]
 DEMO = "configs/default.yaml"
+PROFILES = {
+    "px4": "configs/autopilots/px4-1.16-sih.yaml",
+    "arduplane": "configs/autopilots/arduplane-4.7.yaml",
+}
 CALM = ["sil.wind_ned_m_s=[0,0,0]", "sil.turbulence=none"]
 
 
@@ -174,10 +186,64 @@ def sil_airframes(duration_s: float | None = None, log: Any = None) -> dict[str,
     return sil_robustness(AIRFRAME_ROWS, duration_s, log)
 
 
-def _fly(row: Row, out: Path, duration_s: float | None, force: bool) -> dict[str, Any]:
+def config_flavour(config: str) -> str:
+    """``sil.flavour`` of a row's config file (the SIL's default, px4, when it names none)."""
+    import yaml
+
+    raw = yaml.safe_load((ROOT / config).read_text()) or {}
+    return str((raw.get("sil") or {}).get("flavour", "px4"))
+
+
+def profile_rows(profile: str) -> list[str]:
+    """The rows a profile of ``profile``'s autopilot applies to: those whose config flies that
+    flavour (PX4: the X8 demo family; ArduPlane: the Cessna rows of configs/sil_c172x.yaml and
+    sil_cessna_convoy.yaml). The X8 demo missions flown by the ArduPlane flavour fail even
+    without a profile (the figure-eight saturates its bank), so they are no row of it."""
+    want = "px4" if profile == "px4" else "ardupilot"
+    return [r.name for r in ROWS if config_flavour(r.config) == want]
+
+
+def sil_robustness_px4(duration_s: float | None = None, log: Any = None) -> dict[str, Any]:
+    """The PX4-flavoured rows with PX4 v1.16 SIH's identified profile (scripts/bench --only
+    sil_robustness_px4): EKF2's estimate errors and turn per bank added to the same missions."""
+    return sil_robustness(profile_rows("px4"), duration_s, log, profile="px4")
+
+
+def sil_robustness_arduplane(duration_s: float | None = None, log: Any = None) -> dict[str, Any]:
+    """The ArduPlane-flavoured rows with ArduPlane 4.7's identified profile (scripts/bench
+    --only sil_robustness_arduplane): its attitude loop, turn per bank, reported wind, stamps."""
+    return sil_robustness(profile_rows("arduplane"), duration_s, log, profile="arduplane")
+
+
+def profile_sets(profile: str, workdir: Path, thrust: bool = False) -> list[str]:
+    """The overrides that fly a row with ``profile`` (a name of :data:`PROFILES` or a YAML
+    file): ``sil.autopilot_profile`` (a copy in ``workdir`` without the ``thrust`` section
+    unless ``thrust``) and ``sil.flavour`` of its autopilot. Raises ConfigError on a bad
+    profile (a one-line message naming it)."""
+    import yaml
+
+    from mpf_mavlink.config.autopilot_profile import load_profile
+
+    path = Path(PROFILES.get(profile, profile))
+    if not path.is_absolute():
+        path = ROOT / path if (ROOT / path).is_file() else path.resolve()
+    prof = load_profile(path)  # validated: a bad file fails here, before any row flies
+    if not thrust and prof.thrust.full_thrust_airspeed_m_s is not None:
+        raw = yaml.safe_load(path.read_text())
+        raw.pop("thrust", None)
+        copy = workdir / f"{path.stem}-no-thrust.yaml"
+        copy.write_text(json.dumps(raw))  # JSON is YAML
+        path = copy
+    flavour = "px4" if prof.autopilot == "px4" else "ardupilot"
+    return [f"sil.autopilot_profile={path}", f"sil.flavour={flavour}"]
+
+
+def _fly(
+    row: Row, out: Path, duration_s: float | None, force: bool, extra: list[str] | None = None
+) -> dict[str, Any]:
     cmd = [sys.executable, "-m", "mpf_mavlink.cli", "sim", row.config, "--out", str(out)]
     cmd += ["--no-plots", "-q"]
-    for s in row.sets:
+    for s in [*row.sets, *(extra or [])]:
         cmd += ["--set", s]
     if duration_s is not None:
         cmd += ["--set", f"sim.duration_s={duration_s}"]
@@ -221,26 +287,40 @@ def _judge(
 
 
 def sil_robustness(
-    rows: list[str] | None = None, duration_s: float | None = None, log: Any = None
+    rows: list[str] | None = None,
+    duration_s: float | None = None,
+    log: Any = None,
+    profile: str | None = None,
+    profile_thrust: bool = False,
 ) -> dict[str, Any]:
-    """Fly the rows (all, or those named) in sequence; the figures and verdicts by row."""
+    """Fly the rows (all, or those named) in sequence; the figures and verdicts by row.
+    ``profile``: fly every row with that autopilot profile (module docstring)."""
     table: dict[str, dict[str, Any]] = {}
-    for row in ROWS:
-        if (rows and row.name not in rows) or (not rows and row.name in AIRFRAME_ONLY):
-            continue
-        with tempfile.TemporaryDirectory(prefix="mpf-bench-rob-") as d:
-            if row.expect == "refuse":
-                r0 = _fly(row, Path(d) / "unforced", duration_s, force=False)
-                r = _fly(row, Path(d) / "forced", duration_s, force=True)
-                r["exit_unforced"], r["refusal"] = r0["exit"], r0["verdict"]
-            else:
-                r = _fly(row, Path(d) / "run", duration_s, force=False)
-        bound, ok = _judge(row, r, table)
-        r.update(bound_rms_m=bound, bound_max_m=row.max_m, expect=row.expect, pass_=ok)
-        table[row.name] = r
-        if log is not None:
-            log(format_row(row.name, r))
+    with tempfile.TemporaryDirectory(prefix="mpf-bench-rob-prof-") as pd:
+        extra = profile_sets(profile, Path(pd), profile_thrust) if profile else []
+        for row in ROWS:
+            if (rows and row.name not in rows) or (not rows and row.name in AIRFRAME_ONLY):
+                continue
+            table[row.name] = _row(row, table, duration_s, extra)
+            if log is not None:
+                log(format_row(row.name, table[row.name]))
     return table
+
+
+def _row(
+    row: Row, table: dict[str, dict[str, Any]], duration_s: float | None, extra: list[str]
+) -> dict[str, Any]:
+    """Fly one row (twice when it expects a refusal) and judge it against ``table``."""
+    with tempfile.TemporaryDirectory(prefix="mpf-bench-rob-") as d:
+        if row.expect == "refuse":
+            r0 = _fly(row, Path(d) / "unforced", duration_s, False, extra)
+            r = _fly(row, Path(d) / "forced", duration_s, True, extra)
+            r["exit_unforced"], r["refusal"] = r0["exit"], r0["verdict"]
+        else:
+            r = _fly(row, Path(d) / "run", duration_s, False, extra)
+    bound, ok = _judge(row, r, table)
+    r.update(bound_rms_m=bound, bound_max_m=row.max_m, expect=row.expect, pass_=ok)
+    return r
 
 
 def _f(v: Any, fmt: str = "{:.3f}") -> str:
@@ -270,10 +350,37 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rows", help="comma-separated row names (default: all)")
     p.add_argument("--duration", type=float, help="sim.duration_s of every row (default: config)")
     p.add_argument("--json", type=Path, help="also write the table as JSON here")
+    p.add_argument(
+        "--profile",
+        help=f"fly every row with this autopilot profile ({', '.join(PROFILES)} or a YAML file)",
+    )
+    p.add_argument(
+        "--profile-thrust",
+        action="store_true",
+        help="keep the profile's thrust section (the identified airframe's, not the X8's)",
+    )
     a = p.parse_args(argv)
     names = a.rows.split(",") if a.rows else None
+    if a.profile and names is None:
+        with_autopilot = {"px4": "px4", "arduplane": "arduplane"}.get(a.profile)
+        names = profile_rows(with_autopilot) if with_autopilot else None
+    unknown = [n for n in names or [] if n not in {r.name for r in ROWS}]
+    if unknown:
+        print(f"robustness: unknown row {unknown[0]!r}", file=sys.stderr)
+        return 2
+    if a.profile:
+        from mpf_mavlink.config.autopilot_profile import load_profile
+        from mpf_mavlink.errors import ConfigError
+
+        try:
+            load_profile(ROOT / PROFILES[a.profile] if a.profile in PROFILES else a.profile)
+        except ConfigError as e:
+            print(f"robustness: --profile: {e}", file=sys.stderr)
+            return 2
     print(HEADER, flush=True)
-    table = sil_robustness(names, a.duration, log=lambda s: print(s, flush=True))
+    table = sil_robustness(
+        names, a.duration, lambda s: print(s, flush=True), a.profile, a.profile_thrust
+    )
     if a.json:
         a.json.write_text(json.dumps(table, indent=2, default=str))
     return 0

@@ -117,16 +117,49 @@ def _metrics(p: Path) -> dict[str, Any]:
     return json.loads(p.read_text()) if p.is_file() else {}
 
 
-def fly_sil(
-    run: Path, autopilot: str, profile: Path | None, tag: str, seed: int = 0, reuse: bool = False
-) -> dict[str, Any]:
-    """Our SIL on the real flight's mission and start state (the rig's overrides), with or
-    without a profile; returns the bridge's own metrics there (as the real flight's are)."""
-    m = Mission(**json.loads((run.parent / f"{run.name}.mission.json").read_text()))
-    # the rig (sim.rigs) keeps the overrides it flew in summary.json
-    sets = list(json.loads((run / "summary.json").read_text())["mission"]["overrides"])
+REAL_KEYS = (
+    "steady_rms_m",
+    "steady_max_m",
+    "steady_mean_radial_m",
+    "steady_mean_vertical_m",
+    "convergence_time_s",
+    "tracked_s",
+    "verdict_status",
+)
+FLIGHTS = Path(__file__).resolve().parent / "flights"  # the stored real flights (small JSON)
+
+
+def flight_record(run: Path) -> dict[str, Any]:
+    """What the SIL leg needs of one real flight and what it is compared with: the mission, the
+    rig's overrides, the start state, the bridge's metrics (no tlog, no firmware)."""
+    m = json.loads((run.parent / f"{run.name}.mission.json").read_text())
+    summary = json.loads((run / "summary.json").read_text())
     real = _metrics(run / "bridge" / "metrics.json")
     p0, heading = _start_state(run)
+    return {
+        "mission": m,
+        "overrides": list(summary["mission"]["overrides"]),
+        "start_ned_m": [round(v, 2) for v in p0],
+        "start_heading_rad": None if heading is None else round(heading, 4),
+        "real": {k: real.get(k) for k in REAL_KEYS},
+    }
+
+
+def load_flights(autopilot: str, path: Path | None = None) -> list[dict[str, Any]]:
+    """The stored real flights of ``autopilot`` (``FLIGHTS/<autopilot>.json``, written by
+    ``calibrate store``), in matrix order."""
+    doc = json.loads((path or FLIGHTS / f"{autopilot}.json").read_text())
+    return list(doc["flights"])
+
+
+def sil_command(
+    rec: dict[str, Any], autopilot: str, profile: Path | None, out: Path, seed: int = 0
+) -> list[str]:
+    """The ``sim`` command line of the SIL leg of a real flight's record (its mission, start
+    state, overrides and tracked time; ``profile`` or none)."""
+    m = Mission(**rec["mission"])
+    sets = list(rec["overrides"])
+    p0, heading = rec["start_ned_m"], rec["start_heading_rad"]
     cruise = next(
         (float(s.split("=")[1]) for s in sets if s.startswith("vehicle.airspeed_m_s=")), None
     )
@@ -152,54 +185,61 @@ def fly_sil(
         )
     if profile is not None:
         sil_sets.append(f"sil.autopilot_profile={profile}")
-    config = run.parent / f"{m.name}.cfg" / "config_wind.yaml"
-    if not config.is_file():
-        config = (
-            ROOT
-            / "configs"
-            / ("bridge_arduplane.yaml" if flavour == "ardupilot" else "bridge_px4.yaml")
-        )
-    dur = round(real.get("tracked_s") or 300.0)
-    sil_out = run / (f"sil_{tag}" if seed == 0 else f"sil_{tag}_s{seed}")
-    if reuse and (sil_out / "bridge" / "metrics.json").is_file():
-        return {
-            "bridge": _metrics(sil_out / "bridge" / "metrics.json"),
-            "truth": _metrics(sil_out / "metrics.json"),
-        }
+    config = ROOT / "configs" / f"bridge_{autopilot}.yaml"
+    dur = round(rec["real"].get("tracked_s") or 300.0)
     # --force: the real flight flew this mission (its own check passed from the real start
     # state); `sim`'s check, from the kinematic start, refused the 6 m/s wind row's peak bank
-    cmd = [
+    return [
         sys.executable,
         "-m",
         "mpf_mavlink.cli",
         "sim",
         str(config),
         "--out",
-        str(sil_out),
+        str(out),
         "--no-plots",
         "--force",
         "--set",
         f"sim.duration_s={dur:g}",
         *[x for s in sil_sets for x in ("--set", s)],
     ]
-    with open(sil_out.with_name(sil_out.name + ".log"), "w") as f:
-        f.write(" ".join(shlex.quote(c) for c in cmd) + "\n")
-        f.flush()
-        subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, check=False, cwd=ROOT)
-    bm = _metrics(sil_out / "bridge" / "metrics.json")
-    tm = _metrics(sil_out / "metrics.json")
-    return {"bridge": bm, "truth": tm}
 
 
-def fly_sil_seeds(
-    run: Path, autopilot: str, profile: Path | None, tag: str, seeds: int, reuse: bool = False
+def fly_sil_record(
+    rec: dict[str, Any],
+    autopilot: str,
+    profile: Path | None,
+    out: Path,
+    seed: int = 0,
+    reuse: bool = False,
 ) -> dict[str, Any]:
-    """:func:`fly_sil` with seeds 0 .. seeds-1 (every seed its own draw of the profile's random
-    processes and the turbulence): the RMS over all of them (root of the mean square), the mean
-    radial / vertical averaged, and each seed's RMS. The real flight is one draw; the SIL's
-    average is its expectation, so the ratio does not hang on one lucky or unlucky SIL draw."""
-    legs = [fly_sil(run, autopilot, profile, tag, seed, reuse) for seed in range(seeds)]
-    if seeds == 1:
+    """Our SIL on a real flight's record into ``out`` (its log next to it); the bridge's own
+    metrics there (as the real flight's are) and the truth's."""
+    if not (reuse and (out / "bridge" / "metrics.json").is_file()):
+        cmd = sil_command(rec, autopilot, profile, out, seed)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with open(out.with_name(out.name + ".log"), "w") as f:
+            f.write(" ".join(shlex.quote(c) for c in cmd) + "\n")
+            f.flush()
+            subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, check=False, cwd=ROOT)
+    return {
+        "bridge": _metrics(out / "bridge" / "metrics.json"),
+        "truth": _metrics(out / "metrics.json"),
+    }
+
+
+def fly_sil(
+    run: Path, autopilot: str, profile: Path | None, tag: str, seed: int = 0, reuse: bool = False
+) -> dict[str, Any]:
+    """:func:`fly_sil_record` on a real run directory (``run/sil_<tag>[_s<seed>]``)."""
+    sil_out = run / (f"sil_{tag}" if seed == 0 else f"sil_{tag}_s{seed}")
+    return fly_sil_record(flight_record(run), autopilot, profile, sil_out, seed, reuse)
+
+
+def aggregate_seeds(legs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Several SIL draws as one: the RMS over all (root of the mean square), the mean radial /
+    vertical averaged, and each seed's RMS."""
+    if len(legs) == 1:
         return legs[0]
     out: dict[str, Any] = {}
     for side in ("bridge", "truth"):
@@ -214,6 +254,17 @@ def fly_sil_seeds(
                     agg[k] = sum(vals) / len(vals)
         out[side] = agg
     return out
+
+
+def fly_sil_seeds(
+    run: Path, autopilot: str, profile: Path | None, tag: str, seeds: int, reuse: bool = False
+) -> dict[str, Any]:
+    """:func:`fly_sil` with seeds 0 .. seeds-1 (every seed its own draw of the profile's random
+    processes and the turbulence), as :func:`aggregate_seeds`. The real flight is one draw; the
+    SIL's average is its expectation, so the ratio does not hang on one SIL draw."""
+    return aggregate_seeds(
+        [fly_sil(run, autopilot, profile, tag, seed, reuse) for seed in range(seeds)]
+    )
 
 
 def compare_row(name: str, real: dict[str, Any], sil: dict[str, Any]) -> dict[str, Any]:
@@ -301,7 +352,72 @@ def _parser() -> argparse.ArgumentParser:
         help="take a SIL leg already flown under this tag and seed instead of re-flying it",
     )
     sl.add_argument("--doc", default=None, help="also write the table to this Markdown file")
+    sl.add_argument(
+        "--stored",
+        action="store_true",
+        help="compare with the stored real flights (sim/calibration/flights/, written by "
+        "`store`) instead of real runs under --out; the SIL legs go under --out",
+    )
+    st = sub.add_parser("store", help="keep the real runs of --out as a small JSON summary")
+    st.add_argument("autopilot", choices=("arduplane", "px4"))
+    st.add_argument("--out", required=True, help="the real runs (as `real` wrote them)")
+    st.add_argument("--firmware", required=True, help="what flew them (bundle, parameters)")
+    st.add_argument("--to", default=None, help="file (default sim/calibration/flights/AP.json)")
     return ap
+
+
+def _store(a: argparse.Namespace) -> int:
+    """``store``: the real runs of ``--out`` as the records :func:`load_flights` reads."""
+    out = Path(a.out).resolve()
+    matrix = ARDUPLANE_MATRIX if a.autopilot == "arduplane" else PX4_MATRIX
+    recs = [
+        flight_record(out / m.name)
+        for m in matrix
+        if (out / m.name / "bridge" / "metrics.json").is_file()
+    ]
+    if not recs:
+        print(f"calibrate: no real runs under {out}", file=sys.stderr)
+        return 2
+    to = Path(a.to) if a.to else FLIGHTS / f"{a.autopilot}.json"
+    to.parent.mkdir(parents=True, exist_ok=True)
+    doc = {"autopilot": a.autopilot, "firmware": a.firmware, "flights": recs}
+    to.write_text(json.dumps(doc, indent=1) + "\n")
+    print(f"calibrate: {len(recs)} flights -> {to}")
+    return 0
+
+
+def sil_rows(
+    autopilot: str,
+    profile: Path | None,
+    out: Path,
+    seeds: int,
+    names: list[str] | None = None,
+    reuse: bool = False,
+    log: Any = None,
+) -> list[dict[str, Any]]:
+    """The stored real flights of ``autopilot`` against our SIL (legs under ``out``): one
+    :func:`compare_row` per flight, ``seeds`` SIL draws each."""
+    tag = profile.stem if profile else "plain"
+    rows = []
+    for rec in load_flights(autopilot):
+        name = rec["mission"]["name"]
+        if names and name not in names:
+            continue
+        legs = [
+            fly_sil_record(
+                rec,
+                autopilot,
+                profile,
+                out / name / (f"sil_{tag}" if seed == 0 else f"sil_{tag}_s{seed}"),
+                seed,
+                reuse,
+            )
+            for seed in range(seeds)
+        ]
+        rows.append(compare_row(name, rec["real"], aggregate_seeds(legs)))
+        if log is not None:
+            log(rows[-1])
+    return rows
 
 
 def _sil(a: argparse.Namespace, argv: list[str] | None) -> int:
@@ -312,9 +428,12 @@ def _sil(a: argparse.Namespace, argv: list[str] | None) -> int:
         print(f"calibrate: {prof}: no such profile", file=sys.stderr)
         return 2
     tag = a.tag or (prof.stem if prof else "plain")
-    matrix = ARDUPLANE_MATRIX if a.autopilot == "arduplane" else PX4_MATRIX
+    matrix: tuple[Mission, ...] = ARDUPLANE_MATRIX if a.autopilot == "arduplane" else PX4_MATRIX
     names = [n for n in a.only.split(",") if n]
     rows = []
+    if a.stored:
+        rows = sil_rows(a.autopilot, prof, out, a.seeds, names, a.reuse)
+        matrix = ()
     for m in matrix:
         run = out / m.name
         if (names and m.name not in names) or not (run / "bridge" / "metrics.json").is_file():
@@ -325,6 +444,7 @@ def _sil(a: argparse.Namespace, argv: list[str] | None) -> int:
     if not rows:
         print(f"calibrate: no real runs under {out}", file=sys.stderr)
         return 2
+    out.mkdir(parents=True, exist_ok=True)
     argv_s = " ".join(argv if argv is not None else sys.argv[1:])
     title = f"{a.autopilot}, SIL {tag} (written by `python -m sim.calibration.calibrate {argv_s}`)"
     text = table(rows, title)
@@ -371,6 +491,8 @@ def main(argv: list[str] | None = None) -> int:
         return _sil(a, argv)
     if a.cmd == "real":
         return _real(a)
+    if a.cmd == "store":
+        return _store(a)
     return 2
 
 
