@@ -68,9 +68,9 @@ def test_reported_bank_gives_the_profiles_turn_per_bank():
     prof = AutopilotProfile(turn=TurnResponse(turn_gain=0.745))
     est = StateEstimate(prof)
     bank = math.radians(20.0)
-    for i in range(2000):  # 20 s at 100 Hz: ten time constants of the offset's low-pass
+    for i in range(8000):  # 80 s at 100 Hz: ten KP_TAU_S of learning the plant's own gain
         rep = est(_turn(i * 0.01, bank, 0.93))
-    st = _turn(20.0, bank, 0.93)
+    st = _turn(80.0, bank, 0.93)
     psid = st.pqr[1] * math.sin(bank) + st.pqr[2] * math.cos(bank)
     k_seen = psid / (G * math.tan(rep.euler[0]) / st.airspeed)
     assert k_seen == pytest.approx(0.745, rel=1e-3)
@@ -100,12 +100,66 @@ def test_attitude_shaper_settles_at_gain_times_command_plus_bias_after_the_dead_
     assert out[-1] == pytest.approx(0.95 * 0.3 + 0.01)  # first sample initialises at the command
     sh = AttitudeShaper(r, 0.01, native_tau_s=0.4)
     sh(0.0, 0.0)
-    ys = [sh(0.3, 0.0)[0] for _ in range(800)]
+    ys = [sh(0.3, 0.0)[0] for _ in range(2000)]
     assert ys[15] == pytest.approx(0.01)  # still inside the dead time
     assert ys[-1] == pytest.approx(0.95 * 0.3 + 0.01, abs=1e-6)
-    # the remaining lag is the firmware's minus the SIL loop's own: 0.5 s -> 63 % 0.5 s later
-    i63 = next(i for i, y in enumerate(ys) if y - 0.01 >= 0.632 * 0.95 * 0.3)
-    assert (i63 + 1) * 0.01 == pytest.approx(0.2 + 0.5, abs=0.02)
+
+
+def _through_native_loop(ys: list[float], tau: float, dt: float) -> list[float]:
+    """The SIL's own attitude loop as a first-order lag of time constant ``tau``."""
+    out, y = [], ys[0]
+    for x in ys:
+        y += (1.0 - math.exp(-dt / tau)) * (x - y)
+        out.append(y)
+    return out
+
+
+@pytest.mark.parametrize("tau_fw", [0.15, 0.9])
+def test_shaper_and_the_sil_loop_together_follow_the_firmwares_lag(tau_fw):
+    # the shaper's lead-lag cancels the SIL loop's own 0.4 s lag and leaves the firmware's:
+    # a step reaches 63 % one firmware time constant after the dead time, whether the firmware
+    # is faster than the SIL's loop (ArduPlane's roll, 0.15 s) or slower
+    dt, delay, tau_n = 0.002, 0.24, 0.4
+    r = AttitudeResponse(roll_delay_s=delay, roll_tau_s=tau_fw)
+    sh = AttitudeShaper(r, dt, native_tau_s=tau_n)
+    sh(0.0, 0.0)
+    ys = _through_native_loop([0.0] + [sh(0.3, 0.0)[0] for _ in range(8000)], tau_n, dt)
+    i63 = next(i for i, y in enumerate(ys) if y >= 0.632 * 0.3)
+    # one sample of discretisation each for the delay line, the lead-lag and the loop
+    assert i63 * dt == pytest.approx(delay + tau_fw, abs=3 * dt + 0.01 * tau_fw)
+    assert ys[-1] == pytest.approx(0.3, abs=1e-4)
+
+
+def test_turn_emulation_holds_the_turn_per_bank_at_every_instant_of_a_varying_turn():
+    # an orbit in wind: the bank swings 14-35 deg once per ~43 s orbit; the firmware's airframe
+    # turns 0.745x the textbook at every instant, so the reported bank must give that turn gain
+    # all the way round (a low-passed offset lagged it, +-3 % around a wind orbit)
+    prof = AutopilotProfile(turn=TurnResponse(turn_gain=0.745))
+    est = StateEstimate(prof)
+    dt, k_plant, v = 0.02, 0.93, 22.0
+    ks = []
+    for i in range(int(130 / dt)):
+        t = i * dt
+        bank = math.radians(24.5 + 10.5 * math.sin(2 * math.pi * t / 43.0))
+        st = _turn(t, bank, k_plant, v)
+        rep = est(st)
+        psid = st.pqr[1] * math.sin(bank) + st.pqr[2] * math.cos(bank)
+        if t > 80:  # ten KP_TAU_S of learning the plant's own gain (in the slow roll)
+            ks.append(psid / (G * math.tan(rep.euler[0]) / v))
+    assert max(ks) == pytest.approx(0.745, rel=2e-3)
+    assert min(ks) == pytest.approx(0.745, rel=2e-3)
+
+
+def test_airspeed_scale_changes_the_report_not_what_the_autopilot_flies():
+    # real ArduPlane reports 0.936 of the true airspeed where the SIL's EAS is 0.972 of it: the
+    # report is scaled, and the emulated autopilot's loops undo the scale (they fly the truth)
+    from sim.autopilot.emulation import flown_state
+
+    e = EstimatorModel(airspeed_scale=0.963)
+    rep = StateEstimate(AutopilotProfile(estimator=e))(_turn(1.0, 0.2, 1.0, 22.0))
+    assert rep.airspeed == pytest.approx(0.963 * 22.0)
+    assert flown_state(rep, 0.963).airspeed == pytest.approx(22.0)
+    assert flown_state(rep, 1.0) is rep
 
 
 def test_rate_wander_has_the_configured_sigma_and_every_seed_its_own_draw():
@@ -198,3 +252,9 @@ def test_the_ekf_error_fit_recovers_a_gauss_markov_process():
     # 600 correlation times: sigma to ~3 / sqrt(600) ~ 12 %, tau to ~20 %
     assert s == pytest.approx(sig, rel=0.15)
     assert t == pytest.approx(tau, rel=0.25)
+
+
+def test_shaper_without_an_identified_attitude_loop_passes_the_command_through():
+    # the PX4 profile identifies no attitude loop (body-rate offboard): the SIL's own stays
+    sh = AttitudeShaper(AttitudeResponse(), 0.01, native_tau_s=0.4)
+    assert [sh(x, -x) for x in (0.0, 0.3, 0.1)] == [(0.0, -0.0), (0.3, -0.3), (0.1, -0.1)]

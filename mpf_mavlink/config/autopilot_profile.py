@@ -79,6 +79,9 @@ class EstimatorModel:
     # the reported position ahead of the truth along the ground velocity (s): what ArduPlane's
     # EKF3 output predicts past its own attitude/velocity instant (dataflash POS against SIM)
     position_lead_s: float = field(default=0.0, metadata={"check": ("range", -1.0, 1.0)})
+    # the reported airspeed (VFR_HUD) over the SIL's equivalent airspeed of the same flight: the
+    # firmware flies its airspeed as the SIL does, and reports this much of it
+    airspeed_scale: float = field(default=1.0, metadata={"check": ("range", 0.8, 1.2)})
     wind_wander_m_s: float = field(default=0.0, metadata=_nonneg())
     wind_wander_tau_s: float = field(default=10.0, metadata=_pos())
     # The firmware's wind estimate: a first-order lag (wind_tau_s; None: the vehicle's

@@ -5,6 +5,7 @@ The rules are listed in :mod:`sim.vehicle.vehicle`."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from typing import Any
@@ -16,6 +17,14 @@ from sim.autopilot.modes import CRUISE, GUIDED, LOITER, OFFBOARD, Modes, Time, T
 from sim.autopilot.setpoints import Setpoints, clip
 
 Surfaces = tuple[float, float, float, float]  # aileron, elevator, rudder (-1..1), throttle 0..1
+
+
+def flown_state(st: Any, airspeed_scale: float) -> Any:
+    """The reported state ``st`` with the airspeed the firmware flies on: the report's
+    ``airspeed_scale`` (profile) undone; ``st`` itself when there is none."""
+    if airspeed_scale == 1.0:
+        return st
+    return dataclasses.replace(st, airspeed=st.airspeed / airspeed_scale)
 
 
 class AutopilotEmulation:
@@ -52,6 +61,9 @@ class AutopilotEmulation:
         self.shaper: Any = None  # the attitude set-point as the firmware's loop would fly it
         self.wander: Any = None  # a slow roll-rate error of body-rate offboard
         self.thrust_scale = 1.0  # plant throttle per unit of offboard thrust
+        # reported airspeed / the airspeed the firmware flies on (profile estimator
+        # airspeed_scale): the loops below undo it, so only the report changes
+        self.airspeed_scale = 1.0
 
     def _announce(self, text: str) -> None:
         self.out.statustext(M.MAV_SEVERITY_INFO, text)
@@ -90,6 +102,7 @@ class AutopilotEmulation:
     def control(self, st: Any) -> Surfaces:
         """The surfaces and throttle of one physics step from the state ``st``."""
         dt, ap, modes = self.ap_dt, self.ap, self.modes
+        st = flown_state(st, self.airspeed_scale)
         if modes.behaviour == OFFBOARD:
             out = self._offboard(st)
             if out is not None:

@@ -38,7 +38,13 @@ from mpf_mavlink.config.autopilot_profile import (
 )
 from mpf_mavlink.constants import GRAVITY_M_S2 as G
 
-TURN_TAU_S = 2.0  # s, the low-pass of the reported bank's offset (StateEstimate._bank_offset)
+TURN_TAU_S = 2.0  # s, the low-pass of the reported heading's offset (StateEstimate._yaw_offset)
+# s, the low-pass of the plant's own turn per bank (StateEstimate._bank_offset): several seconds of
+# turning, so that the yaw's lag behind a roll transient averages out
+KP_TAU_S = 8.0
+MIN_LEARN_BANK_RAD = 0.05  # below this bank the heading rate per bank is mostly noise
+MAX_LEARN_ROLL_RATE_RAD_S = 0.05  # a held turn: rolling faster, the heading rate lags the bank
+MAX_LEAD = 5.0  # largest high-frequency gain of the attitude shaper's lead-lag
 
 
 def _clip(x: float, lo: float, hi: float) -> float:
@@ -94,20 +100,56 @@ def thrust_scale(resp: ThrustResponse, trim_throttle: float, trim_airspeed: floa
     return min(1.0, trim_throttle * (v / trim_airspeed) ** 3)
 
 
+class _LeadLag:
+    """``(1 + tau_num s) / (1 + tau_den s)`` sampled at dt (backward Euler on the lag's state):
+    through a first-order loop of time constant ``tau_num`` it leaves a first-order lag
+    ``tau_den``. ``tau_den`` is held at or above ``tau_num / MAX_LEAD`` (a command step is
+    amplified at most MAX_LEAD times); ``tau_den`` 0 (a profile without an identified attitude
+    loop) passes the command through: the SIL's own loop stays as it is."""
+
+    def __init__(self, tau_num: float, tau_den: float, dt: float) -> None:
+        self.through = tau_den <= 0.0
+        self.tn = max(0.0, tau_num)
+        self.td = max(tau_den, self.tn / MAX_LEAD, dt)
+        self.a = 1.0 - math.exp(-dt / self.td)
+        self.z: float | None = None
+
+    def __call__(self, x: float) -> float:
+        if self.through:
+            return x
+        if self.z is None:
+            self.z = x
+        else:
+            self.z += self.a * (x - self.z)
+        return self.z + self.tn / self.td * (x - self.z)
+
+
 class AttitudeShaper:
     """The set-point the SIL's own attitude loop is given so that its bank and pitch follow the
-    command as the firmware's do (:class:`AttitudeResponse`). ``native_tau_s``: the lag of the
-    SIL's own loop (its roll/pitch time constant), taken off the firmware's lag."""
+    command as the firmware's do (:class:`AttitudeResponse`): the firmware's dead time, then a
+    lead-lag that trades the SIL loop's own first-order lag (``native_tau_s``, its roll/pitch
+    time constant) for the firmware's. (Only adding the difference of the lags, as before, left
+    the SIL's 0.4 s loop in place of ArduPlane's 0.15 s: the slow orbit-rate bank of a wind
+    circle followed the command 0.56 s late in the SIL, 0.28 s on the firmware.)"""
 
-    def __init__(self, resp: AttitudeResponse, dt: float, native_tau_s: float = 0.4) -> None:
+    def __init__(
+        self,
+        resp: AttitudeResponse,
+        dt: float,
+        native_tau_s: float = 0.4,
+        native_pitch_tau_s: float | None = None,
+    ) -> None:
         self.resp = resp
-        self._roll = _Lag(resp.roll_delay_s, max(0.0, resp.roll_tau_s - native_tau_s), dt)
-        self._pitch = _Lag(resp.pitch_delay_s, max(0.0, resp.pitch_tau_s - native_tau_s), dt)
+        tp = native_tau_s if native_pitch_tau_s is None else native_pitch_tau_s
+        self._roll = _Lag(resp.roll_delay_s, 0.0, dt)
+        self._pitch = _Lag(resp.pitch_delay_s, 0.0, dt)
+        self._roll_ll = _LeadLag(native_tau_s, resp.roll_tau_s, dt)
+        self._pitch_ll = _LeadLag(tp, resp.pitch_tau_s, dt)
 
     def __call__(self, roll_sp: float, pitch_sp: float) -> tuple[float, float]:
         r = self.resp
-        roll = r.roll_gain * self._roll(roll_sp) + r.roll_bias_rad
-        pitch = r.pitch_gain * self._pitch(pitch_sp) + r.pitch_bias_rad
+        roll = r.roll_gain * self._roll_ll(self._roll(roll_sp)) + r.roll_bias_rad
+        pitch = r.pitch_gain * self._pitch_ll(self._pitch(pitch_sp)) + r.pitch_bias_rad
         return roll, pitch
 
 
@@ -143,8 +185,9 @@ class StateEstimate:
         self.est = prof.estimator
         self.rng = np.random.default_rng(np.random.SeedSequence([int(seed), 24]))
         self._w: np.ndarray | None = None
-        self._b = 0.0
-        self._bt: float | None = None
+        # the plant's own turn gain, from the profile's (no offset) until turns have taught it
+        self._kp = self.k_turn
+        self._kt: float | None = None
         self._y = 0.0
         self._yt: float | None = None
         self._wt: float | None = None
@@ -175,24 +218,25 @@ class StateEstimate:
         )
 
     def _bank_offset(self, st: Any) -> float:
-        """What the reported bank adds to the plant's: the bank that turns the plant as it turns
-        with the profile's turn gain, ``atan(V psi_dot / (g k))``, minus the plant's own, low-passed
-        (TURN_TAU_S) so that a roll transient shows the plant's roll and a steady turn the
-        profile's turn per bank whatever the plant's own (the X8 turns ~0.93x the textbook)."""
+        """What the reported bank adds to the plant's: the bank the profile's turn gain needs for
+        the plant's turn, ``atan((k_plant / k) tan(roll))``, minus the plant's own. A static map
+        of the plant's roll (a real airframe's turn per bank is the same at every instant of a
+        varying turn), with the plant's own turn gain ``k_plant`` (the X8 turns ~0.93x the
+        textbook) learned from its heading rate per bank in held turns over KP_TAU_S, from the
+        profile's own (no offset) at the start."""
         roll, pitch, _ = st.euler
-        p, q, r = (float(x) for x in st.pqr)
-        psid = (q * math.sin(roll) + r * math.cos(roll)) / max(math.cos(pitch), 0.2)
-        v = max(float(st.airspeed), 1.0)
-        target = math.atan(v * psid / (G * self.k_turn))
-        d = _clip(target - roll, -0.3, 0.3) if abs(roll) > 0.03 else 0.0
         t = float(st.t)
-        if self._bt is None:
-            self._b = d
-        else:
-            k = 1.0 - math.exp(-max(0.0, t - self._bt) / TURN_TAU_S)
-            self._b += k * (d - self._b)
-        self._bt = t
-        return self._b
+        p, q, r = (float(x) for x in st.pqr)
+        dt = 0.0 if self._kt is None else max(0.0, t - self._kt)
+        self._kt = t
+        # learn in held turns only: in a roll transient the heading rate lags the bank
+        if abs(roll) > MIN_LEARN_BANK_RAD and abs(p) < MAX_LEARN_ROLL_RATE_RAD_S:
+            psid = (q * math.sin(roll) + r * math.cos(roll)) / max(math.cos(pitch), 0.2)
+            v = max(float(st.airspeed), 1.0)
+            kp = _clip(v * psid / (G * math.tan(roll)), 0.5, 1.5)
+            self._kp += (1.0 - math.exp(-dt / KP_TAU_S)) * (kp - self._kp)
+        rc = _clip(roll, -1.2, 1.2)
+        return _clip(math.atan(self._kp / self.k_turn * math.tan(rc)) - rc, -0.3, 0.3)
 
     def _yaw_offset(self, st: Any, roll_rep: float) -> float:
         """What the reported heading adds to the plant's: the profile's sideslip for the reported
@@ -236,6 +280,8 @@ class StateEstimate:
         if self.slip:
             yaw = yaw + self._yaw_offset(st, roll)
         upd: dict[str, Any] = {}
+        if e.airspeed_scale != 1.0:
+            upd["airspeed"] = e.airspeed_scale * float(st.airspeed)
         t = float(st.t)
         pos = st.position_ned
         if e.position_lead_s:

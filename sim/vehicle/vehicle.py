@@ -440,6 +440,7 @@ def use_profile(
         ape.thrust_scale = min(1.0, float(full_thrust_throttle))
     elif v.trim is not None:
         ape.thrust_scale = thrust_scale(profile.thrust, v.trim.throttle, v.tun.cruise_airspeed)
+    ape.airspeed_scale = profile.estimator.airspeed_scale  # the report only (calib, issue 24)
     if profile.estimator.wind_tau_s is not None:
         v.telemetry.wind.tau_s = 0.0  # the profile's estimate carries its own lag
     v.observe()
