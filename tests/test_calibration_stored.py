@@ -136,9 +136,10 @@ def test_calibrate_store_writes_what_load_flights_reads(tmp_path):
     (run / "bridge" / "metrics.json").write_text(
         json.dumps({"steady_rms_m": 0.17, "tracked_s": 240.0, "steady_mean_radial_m": -0.1})
     )
-    (run / "bridge" / "timeseries.csv").write_text(
-        "t,p_n,p_e,p_d\n0,0,0,-100\n0.02,0.44,0,-100\n0.04,0.88,0,-100\n"
-    )
+    cols = "t,p_n,p_e,p_d,tgt_yaw,pt_n,pt_e,pt_d,rel_x,rel_y"
+    rows = [f"{0.5 * i:g},{11.0 * i:g},0,-100,0,0,0,0.1,{150 * math.cos(i / 20):.3f},"
+            f"{150 * math.sin(i / 20):.3f}" for i in range(400)]  # fmt: skip
+    (run / "bridge" / "timeseries.csv").write_text("\n".join([cols, *rows]) + "\n")
     to = tmp_path / "flights.json"
     r = subprocess.run(
         [sys.executable, "-m", "sim.calibration.calibrate", "store", "arduplane",
@@ -149,6 +150,7 @@ def test_calibrate_store_writes_what_load_flights_reads(tmp_path):
     (rec,) = load_flights("arduplane", to)
     assert rec["real"]["steady_rms_m"] == 0.17 and rec["start_ned_m"] == [0.0, 0.0, -100.0]
     assert rec["start_heading_rad"] == pytest.approx(0.0)  # flying north
+    assert rec["real"]["steady_mean_radial_se_m"] == pytest.approx(0.0, abs=1e-6)  # on the circle
     r = subprocess.run(
         [sys.executable, "-m", "sim.calibration.calibrate", "store", "arduplane",
          "--out", str(tmp_path / "none"), "--firmware", "x", "--to", str(tmp_path / "f2.json")],
@@ -156,3 +158,28 @@ def test_calibrate_store_writes_what_load_flights_reads(tmp_path):
     )  # fmt: skip
     assert r.returncode == 2 and "no real runs" in r.stderr
     assert not (tmp_path / "f2.json").exists()
+
+
+def test_mean_standard_error_counts_the_independent_samples_of_a_correlated_series():
+    import numpy as np
+
+    from sim.calibration.calibrate import mean_standard_error
+
+    rng = np.random.default_rng(5)
+    dt, n = 0.02, 60000  # 1200 s at 50 Hz
+    t = np.arange(n) * dt
+    white = rng.standard_normal(n)
+    # white noise: every sample independent, s.e. = sd / sqrt(N) (to the sum's noise, ~10 %)
+    assert mean_standard_error(t, white) == pytest.approx(1.0 / math.sqrt(n), rel=0.15)
+    # a first-order Gauss-Markov series of correlation time tau: integrated time 2 tau, so
+    # s.e. = sd sqrt(2 tau / T) (the sum truncated at the first negative lag: within ~25 %)
+    tau = 6.0
+    phi = math.exp(-dt / tau)
+    x = np.empty(n)
+    x[0] = 0.0
+    q = math.sqrt(1 - phi * phi)
+    for i in range(1, n):
+        x[i] = phi * x[i - 1] + q * white[i]
+    want = float(np.std(x)) * math.sqrt(2 * tau / (t[-1] - t[0]))
+    assert mean_standard_error(t, x) == pytest.approx(want, rel=0.35)
+    assert mean_standard_error(t[:5], x[:5]) is None  # too short to say

@@ -126,22 +126,73 @@ REAL_KEYS = (
     "tracked_s",
     "verdict_status",
 )
+# one flight's steady mean radial / vertical is a draw: its standard error (mean_standard_error)
+MEAN_SE_KEYS = ("steady_mean_radial_se_m", "steady_mean_vertical_se_m")
 FLIGHTS = Path(__file__).resolve().parent / "flights"  # the stored real flights (small JSON)
 
 
-def flight_record(run: Path) -> dict[str, Any]:
+def mean_standard_error(t: Any, x: Any) -> float | None:
+    """The standard error (m) of the mean of a correlated series ``x`` sampled at ``t``: its
+    standard deviation times sqrt(integrated correlation time / duration), the correlation
+    summed up to its first negative lag. What one flight's steady mean radial or vertical is
+    good to: PX4's EKF2 errors wander with a ~7 s correlation, so a 120 s window holds ~10
+    independent samples of them."""
+    import numpy as np
+
+    x = np.asarray(x, float)
+    t = np.asarray(t, float)
+    if len(x) < 20 or t[-1] <= t[0]:
+        return None
+    x0 = x - x.mean()
+    var = float(np.mean(x0 * x0))
+    if var <= 0.0:
+        return 0.0
+    dt = float(np.median(np.diff(t)))
+    n = len(x0)
+    f = np.fft.rfft(x0, 2 * n)  # zero-padded: the linear, not circular, autocorrelation
+    ac = np.fft.irfft(f * np.conj(f))[:n] / (np.arange(n, 0, -1) * var)
+    neg = np.nonzero(ac[1 : n // 2] <= 0.0)[0]
+    acc = float(np.sum(ac[1 : 1 + (neg[0] if len(neg) else n // 2 - 1)]))
+    tau = dt * (1.0 + 2.0 * acc)
+    return float(math.sqrt(var * tau / (t[-1] - t[0])))
+
+
+def _steady_series(run: Path, steady_after_s: float) -> dict[str, Any]:
+    """The bridge's steady radial and vertical series of a run (as rundir's metrics have them:
+    radial about the centroid of the desired points in the target frame, vertical -pt_d)."""
+    import numpy as np
+
+    d = np.genfromtxt(run / "bridge" / "timeseries.csv", delimiter=",", names=True)
+    yaw = d["tgt_yaw"]
+    c, sn = np.cos(yaw), np.sin(yaw)
+    ptx, pty = c * d["pt_n"] + sn * d["pt_e"], -sn * d["pt_n"] + c * d["pt_e"]
+    dx, dy = d["rel_x"] - ptx, d["rel_y"] - pty
+    cx, cy = float(np.mean(dx)), float(np.mean(dy))
+    rad = np.hypot(d["rel_x"] - cx, d["rel_y"] - cy) - np.hypot(dx - cx, dy - cy)
+    m = d["t"] >= steady_after_s
+    return {"t": d["t"][m], "radial": rad[m], "vertical": -d["pt_d"][m]}
+
+
+def flight_record(run: Path, autopilot: str) -> dict[str, Any]:
     """What the SIL leg needs of one real flight and what it is compared with: the mission, the
     rig's overrides, the start state, the bridge's metrics (no tlog, no firmware)."""
     m = json.loads((run.parent / f"{run.name}.mission.json").read_text())
     summary = json.loads((run / "summary.json").read_text())
     real = _metrics(run / "bridge" / "metrics.json")
     p0, heading = _start_state(run)
+    from mpf_mavlink.config.schema import load_config
+
+    cfg = load_config(ROOT / "configs" / f"bridge_{autopilot}.yaml")
+    ser = _steady_series(run, float(cfg.metrics.steady_after_s))
+    for k in ("radial", "vertical"):
+        se = mean_standard_error(ser["t"], ser[k])
+        real[f"steady_mean_{k}_se_m"] = None if se is None else round(se, 4)
     return {
         "mission": m,
         "overrides": list(summary["mission"]["overrides"]),
         "start_ned_m": [round(v, 2) for v in p0],
         "start_heading_rad": None if heading is None else round(heading, 4),
-        "real": {k: real.get(k) for k in REAL_KEYS},
+        "real": {k: real.get(k) for k in REAL_KEYS + MEAN_SE_KEYS},
     }
 
 
@@ -233,7 +284,7 @@ def fly_sil(
 ) -> dict[str, Any]:
     """:func:`fly_sil_record` on a real run directory (``run/sil_<tag>[_s<seed>]``)."""
     sil_out = run / (f"sil_{tag}" if seed == 0 else f"sil_{tag}_s{seed}")
-    return fly_sil_record(flight_record(run), autopilot, profile, sil_out, seed, reuse)
+    return fly_sil_record(flight_record(run, autopilot), autopilot, profile, sil_out, seed, reuse)
 
 
 def aggregate_seeds(legs: list[dict[str, Any]]) -> dict[str, Any]:
@@ -289,6 +340,8 @@ def compare_row(name: str, real: dict[str, Any], sil: dict[str, Any]) -> dict[st
         "real_vertical_m": real.get("steady_mean_vertical_m"),
         "sil_vertical_m": b.get("steady_mean_vertical_m"),
         "sil_truth_rms_m": sil["truth"].get("steady_rms_m"),
+        "real_radial_se_m": real.get("steady_mean_radial_se_m"),
+        "real_vertical_se_m": real.get("steady_mean_vertical_se_m"),
         "within": ok,
         "sil_seeds_rms_m": b.get("seeds_rms_m"),
     }
@@ -308,7 +361,8 @@ def _spread(r: dict[str, Any]) -> str:
 def table(rows: list[dict[str, Any]], title: str) -> str:
     head = (
         "| mission | real RMS (m) | SIL RMS (m) | real / SIL | real radial / vertical (m) "
-        "| SIL radial / vertical (m) | within band |\n|---|---|---|---|---|---|---|"
+        "| SIL radial / vertical (m) | real means' s.e. (m) | within band |"
+        "\n|---|---|---|---|---|---|---|---|"
     )
     lines = [f"**{title}**", "", head]
     for r in rows:
@@ -317,6 +371,7 @@ def table(rows: list[dict[str, Any]], title: str) -> str:
             f"| {_g(r['ratio'], '.2f')} "
             f"| {_g(r['real_radial_m'], '+.2f')} / {_g(r['real_vertical_m'], '+.2f')} "
             f"| {_g(r['sil_radial_m'], '+.2f')} / {_g(r['sil_vertical_m'], '+.2f')} "
+            f"| {_g(r.get('real_radial_se_m'), '.2f')} / {_g(r.get('real_vertical_se_m'), '.2f')} "
             f"| {'yes' if r['within'] else 'NO'} |"
         )
     return "\n".join(lines)
@@ -371,7 +426,7 @@ def _store(a: argparse.Namespace) -> int:
     out = Path(a.out).resolve()
     matrix = ARDUPLANE_MATRIX if a.autopilot == "arduplane" else PX4_MATRIX
     recs = [
-        flight_record(out / m.name)
+        flight_record(out / m.name, a.autopilot)
         for m in matrix
         if (out / m.name / "bridge" / "metrics.json").is_file()
     ]
