@@ -9,9 +9,10 @@ rows (latency, telemetry rate, wind) are judged against the demo or calm figure 
 table. Rows the pre-flight gate refuses are flown again with ``--force`` to show what the gate
 spared; the refusal itself is the row's verdict.
 
-With ``--profile NAME`` (``px4``, ``arduplane`` or a profile YAML) every row flies the SIL with
-that identified autopilot profile (``sil.autopilot_profile``, ``sil.flavour`` following its
-autopilot): what the firmware adds to the same X8. The profile's ``thrust`` section is the
+With ``--profile NAME`` (``px4``, ``arduplane`` or a profile YAML) the rows whose config flies
+that profile's autopilot (:func:`profile_rows`; ``--rows`` names others) fly the SIL with that
+identified autopilot profile (``sil.autopilot_profile``, ``sil.flavour`` following its
+autopilot): what the firmware adds to the same mission. The profile's ``thrust`` section is the
 airframe the firmware was identified on (PX4 SIH's airplane), not the X8 these rows fly, so it
 is left out unless ``--profile-thrust``.
 
@@ -361,22 +362,21 @@ def main(argv: list[str] | None = None) -> int:
     )
     a = p.parse_args(argv)
     names = a.rows.split(",") if a.rows else None
-    if a.profile and names is None:
-        with_autopilot = {"px4": "px4", "arduplane": "arduplane"}.get(a.profile)
-        names = profile_rows(with_autopilot) if with_autopilot else None
-    unknown = [n for n in names or [] if n not in {r.name for r in ROWS}]
-    if unknown:
-        print(f"robustness: unknown row {unknown[0]!r}", file=sys.stderr)
-        return 2
     if a.profile:
         from mpf_mavlink.config.autopilot_profile import load_profile
         from mpf_mavlink.errors import ConfigError
 
         try:
-            load_profile(ROOT / PROFILES[a.profile] if a.profile in PROFILES else a.profile)
+            prof = load_profile(ROOT / PROFILES[a.profile] if a.profile in PROFILES else a.profile)
         except ConfigError as e:
             print(f"robustness: --profile: {e}", file=sys.stderr)
             return 2
+        if names is None:  # the rows of the profile's autopilot's flavour
+            names = profile_rows(prof.autopilot)
+    unknown = [n for n in names or [] if n not in {r.name for r in ROWS}]
+    if unknown:
+        print(f"robustness: unknown row {unknown[0]!r}", file=sys.stderr)
+        return 2
     print(HEADER, flush=True)
     table = sil_robustness(
         names, a.duration, lambda s: print(s, flush=True), a.profile, a.profile_thrust
