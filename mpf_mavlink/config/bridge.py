@@ -361,6 +361,18 @@ class AdapterSection:
         ),
     )
     balance_tau_s: float = field(default=1.0, metadata=_nonneg())
+    reserve_gust_m_s: float = field(
+        default=0.0,
+        metadata=_nonneg(
+            "energy reserve: the downdraft (m/s) to carry speed for when the path's sustained "
+            "climb leaves less than this of vehicle.max_climb_rate_m_s; 0: off"
+        ),
+    )
+    reserve_gust_s: float = field(default=10.0, metadata=_pos("how long that downdraft lasts"))
+    reserve_tau_s: float = field(default=20.0, metadata=_pos("low-pass of the path's climb"))
+    reserve_rate_m_s2: float = field(
+        default=0.1, metadata=_pos("how fast the reserve moves the airspeed set-point")
+    )
 
     def k_thrust(self, v: _Climb) -> float:
         """thrust_per_gamma, or its value derived from the vehicle's climb (see the field)."""
