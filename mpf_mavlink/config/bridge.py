@@ -362,10 +362,12 @@ class AdapterSection:
     )
     balance_tau_s: float = field(default=1.0, metadata=_nonneg())
     reserve_gust_m_s: float = field(
-        default=0.0,
+        default=3.0,
         metadata=_nonneg(
-            "energy reserve: the downdraft (m/s) to carry speed for when the path's sustained "
-            "climb leaves less than this of vehicle.max_climb_rate_m_s; 0: off"
+            "energy reserve: a downdraft (m/s) that the path's sustained climb must leave room "
+            "for in vehicle.max_climb_rate_m_s, or the airspeed set-point rises (up to "
+            "vehicle.airspeed_max_m_s) to pay the rest from speed; 0: off. 3 m/s for 10 s is "
+            "2.5 sigma of the 10 s mean of light turbulence at 400-600 m (MIL-F-8785C)"
         ),
     )
     reserve_gust_s: float = field(default=10.0, metadata=_pos("how long that downdraft lasts"))
