@@ -121,16 +121,20 @@ class PaperProfile:
     pdot_t^T = [3 sqrt((cos 0.1t + 1)^2 + 1), 0, 0],
     omega_TI^T = [0, -0.001 cos 0.03t, -sin 0.1t / (10 ((cos 0.1t + 1)^2 + 1)^1.5)],
     p_t(0) = position, R_T^I(0) = Rz(yaw). Position and attitude have no closed form: they
-    are integrated by RK4 on a 0.01 s grid (kept as it grows) and one RK4 step of the
-    remaining fraction, so state(t) is a deterministic pure function of t.
+    are integrated by RK4 on a 0.01 s grid (kept as it grows) and one step from the nearest
+    node to t (RK4; a first-order step when t is within 1e-6 s of the node, whose error,
+    ~1e-13 m, is below the RK4's own), so state(t) is a deterministic pure function of t.
     """
 
     DT = 0.01
+    # Below this distance (s) from a node one Euler step is exact to rounding in practice.
+    _NEAR_NODE_S = 1e-6
 
     def __init__(self, position: ArrayLike = (0.0, 0.0, 5.0), yaw: float = math.pi / 4) -> None:
         # Grid of (position, row-major R_T^I) every DT seconds, as plain floats for speed.
-        self._grid_p: list[list[float]] = [[float(v) for v in np.asarray(position, float)]]
-        self._grid_R: list[list[float]] = [so3.rot_z(yaw).ravel().tolist()]
+        p0 = np.asarray(position, float).tolist()
+        self._grid_p: list[tuple[float, ...]] = [tuple(p0)]
+        self._grid_R: list[tuple[float, ...]] = [tuple(so3.rot_z(yaw).ravel().tolist())]
 
     @staticmethod
     def speed(t: float) -> tuple[float, float]:
@@ -140,66 +144,118 @@ class PaperProfile:
         return 3.0 * math.sqrt(g), -0.3 * (c + 1.0) * s / math.sqrt(g)
 
     @staticmethod
-    def omega(t: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """omega_TI^T (rad/s) and its time derivative (rad/s^2)."""
+    def _omega(t: float) -> tuple[float, float, float, float]:
+        """omega_TI^T = (0, wy, wz) (rad/s) and its rate (0, wy_dot, wz_dot) (rad/s^2)."""
         c, s = math.cos(0.1 * t), math.sin(0.1 * t)
         g = (c + 1.0) ** 2 + 1.0
         gdot = -0.2 * (c + 1.0) * s
         w3 = -s / (10.0 * g**1.5)
         w3dot = -(0.1 * c) / (10.0 * g**1.5) + s * 1.5 * gdot / (10.0 * g**2.5)
-        w = np.array([0.0, -0.001 * math.cos(0.03 * t), w3])
-        wd = np.array([0.0, 0.00003 * math.sin(0.03 * t), w3dot])
-        return w, wd
+        return -0.001 * math.cos(0.03 * t), w3, 0.00003 * math.sin(0.03 * t), w3dot
 
-    def _f(self, t: float, R: list[float]) -> tuple[list[float], list[float]]:
-        """(pdot, Rdot) with R a row-major list of 9 floats: pdot = R e1 v, Rdot = R hat(w)."""
+    @classmethod
+    def omega(cls, t: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """omega_TI^T (rad/s) and its time derivative (rad/s^2)."""
+        wy, wz, wy_dot, wz_dot = cls._omega(t)
+        return np.array([0.0, wy, wz]), np.array([0.0, wy_dot, wz_dot])
+
+    @staticmethod
+    def _vw(t: float) -> tuple[float, float, float]:
+        """(v, wy, wz): the speed and omega_TI^T = (0, wy, wz) the ODE needs at t."""
         c, s = math.cos(0.1 * t), math.sin(0.1 * t)
         g = (c + 1.0) ** 2 + 1.0
-        v = 3.0 * math.sqrt(g)
-        wy = -0.001 * math.cos(0.03 * t)
-        wz = -s / (10.0 * g**1.5)
-        pd = [R[0] * v, R[3] * v, R[6] * v]
-        # R hat(w) with w = (0, wy, wz): columns [R2 wz - R3 wy, -R1 wz, R1 wy].
-        Rd = []
-        for i in (0, 3, 6):
-            r0, r1, r2 = R[i], R[i + 1], R[i + 2]
-            Rd += [r1 * wz - r2 * wy, -r0 * wz, r0 * wy]
-        return pd, Rd
+        return 3.0 * math.sqrt(g), -0.001 * math.cos(0.03 * t), -s / (10.0 * g**1.5)
+
+    @staticmethod
+    def _f(
+        R: tuple[float, ...], v: float, wy: float, wz: float
+    ) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(pdot, Rdot) with R row-major (9 floats): pdot = R e1 v, Rdot = R hat(w),
+        w = (0, wy, wz), whose columns are [R2 wz - R3 wy, -R1 wz, R1 wy]."""
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
+        return (r0 * v, r3 * v, r6 * v), (
+            r1 * wz - r2 * wy, -r0 * wz, r0 * wy,
+            r4 * wz - r5 * wy, -r3 * wz, r3 * wy,
+            r7 * wz - r8 * wy, -r6 * wz, r6 * wy,
+        )  # fmt: skip
 
     def _rk4(
-        self, t: float, p: list[float], R: list[float], h: float
-    ) -> tuple[list[float], list[float]]:
-        k1p, k1R = self._f(t, R)
-        k2p, k2R = self._f(t + h / 2, [R[i] + h / 2 * k1R[i] for i in range(9)])
-        k3p, k3R = self._f(t + h / 2, [R[i] + h / 2 * k2R[i] for i in range(9)])
-        k4p, k4R = self._f(t + h, [R[i] + h * k3R[i] for i in range(9)])
-        c = h / 6
-        p2 = [p[i] + c * (k1p[i] + 2 * k2p[i] + 2 * k3p[i] + k4p[i]) for i in range(3)]
-        R2 = [R[i] + c * (k1R[i] + 2 * k2R[i] + 2 * k3R[i] + k4R[i]) for i in range(9)]
-        return p2, R2
+        self, t: float, p: tuple[float, ...], R: tuple[float, ...], h: float
+    ) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """One classical RK4 step of h (s) of (p, R) from t, written out on scalars: each row
+        r of R obeys r' = r hat(w) on its own, and p' = v R e1 takes the rows' first
+        elements at the same stages."""
+        h2, h6 = 0.5 * h, h / 6.0
+        va, ya, za = self._vw(t)
+        vb, yb, zb = self._vw(t + h2)
+        vc, yc, zc = self._vw(t + h)
+        p2: list[float] = []
+        R2: list[float] = []
+        for i in range(3):
+            r0, r1, r2 = R[3 * i], R[3 * i + 1], R[3 * i + 2]
+            a0, a1, a2 = r1 * za - r2 * ya, -r0 * za, r0 * ya  # k1
+            s0, s1, s2 = r0 + h2 * a0, r1 + h2 * a1, r2 + h2 * a2
+            b0, b1, b2 = s1 * zb - s2 * yb, -s0 * zb, s0 * yb  # k2
+            u0, u1, u2 = r0 + h2 * b0, r1 + h2 * b1, r2 + h2 * b2
+            c0, c1, c2 = u1 * zb - u2 * yb, -u0 * zb, u0 * yb  # k3
+            x0, x1, x2 = r0 + h * c0, r1 + h * c1, r2 + h * c2
+            d0, d1, d2 = x1 * zc - x2 * yc, -x0 * zc, x0 * yc  # k4
+            p2.append(p[i] + h6 * (va * r0 + 2 * vb * s0 + 2 * vb * u0 + vc * x0))
+            R2 += (
+                r0 + h6 * (a0 + 2 * b0 + 2 * c0 + d0),
+                r1 + h6 * (a1 + 2 * b1 + 2 * c1 + d1),
+                r2 + h6 * (a2 + 2 * b2 + 2 * c2 + d2),
+            )
+        return tuple(p2), tuple(R2)
 
     def state(self, t: float) -> TargetState:
         if t < 0:
             raise ValueError("the paper's target profile starts at t = 0")
-        x = t / self.DT
-        k = int(round(x))
-        if abs(x - k) > 1e-9:  # not on the grid (up to float round-off)
-            k = int(x)
-        while len(self._grid_p) <= k:
-            j = len(self._grid_p) - 1
-            p2, R2 = self._rk4(j * self.DT, self._grid_p[j], self._grid_R[j], self.DT)
+        k = int(round(t / self.DT))  # the nearest node
+        gp, gR = self._grid_p, self._grid_R
+        while len(gp) <= k:
+            j = len(gp) - 1
+            p_next, R_next = self._rk4(j * self.DT, gp[j], gR[j], self.DT)
             if j % 100 == 0:
-                R2 = so3.orthonormalize(np.array(R2).reshape(3, 3)).ravel().tolist()
-            self._grid_p.append(p2)
-            self._grid_R.append(R2)
-        h = t - k * self.DT
-        p, R = self._grid_p[k], self._grid_R[k]
-        if h > 1e-12:
+                R_next = tuple(so3.orthonormalize(np.reshape(R_next, (3, 3))).ravel().tolist())
+            gp.append(p_next)
+            gR.append(R_next)
+        h = t - k * self.DT  # |h| <= DT / 2, either sign
+        p, R = gp[k], gR[k]
+        near = abs(h) <= self._NEAR_NODE_S
+        if not near:
             p, R = self._rk4(k * self.DT, p, R, h)
-        v, vdot = self.speed(t)
-        w, wd = self.omega(t)
-        Rm = np.array(R).reshape(3, 3)
-        vel = Rm[:, 0] * v
-        # a = R (vdot e1 + omega x (v e1)) in body components.
-        acc = Rm @ np.array([vdot, w[2] * v, -w[1] * v])
-        return TargetState(t, np.array(p), vel, acc, Rm, w, wd)
+        # speed(t) and _omega(t) on one evaluation of the trigonometry.
+        c, s = math.cos(0.1 * t), math.sin(0.1 * t)
+        g = (c + 1.0) ** 2 + 1.0
+        sg = math.sqrt(g)
+        g15 = 10.0 * g * sg
+        v, vdot = 3.0 * sg, -0.3 * (c + 1.0) * s / sg
+        wy, wz = -0.001 * math.cos(0.03 * t), -s / g15
+        wy_dot = 0.00003 * math.sin(0.03 * t)
+        wz_dot = -(0.1 * c) / g15 + s * 1.5 * (-0.2 * (c + 1.0) * s) / (g15 * g)
+        p0, p1, p2 = p
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
+        if near and h != 0.0:
+            # One Euler step: p' = v R e1, each row r' = r hat(w) (w = (0, wy, wz)).
+            p0, p1, p2 = p0 + h * v * r0, p1 + h * v * r3, p2 + h * v * r6
+            r0, r1, r2 = r0 + h * (r1 * wz - r2 * wy), r1 - h * r0 * wz, r2 + h * r0 * wy
+            r3, r4, r5 = r3 + h * (r4 * wz - r5 * wy), r4 - h * r3 * wz, r5 + h * r3 * wy
+            r6, r7, r8 = r6 + h * (r7 * wz - r8 * wy), r7 - h * r6 * wz, r8 + h * r6 * wy
+        # a = R (vdot e1 + omega x (v e1)) in body components (vdot, wz v, -wy v).
+        b0, b1, b2 = vdot, wz * v, -wy * v
+        return TargetState(
+            t,
+            np.array((p0, p1, p2)),
+            np.array((r0 * v, r3 * v, r6 * v)),
+            np.array(
+                (
+                    r0 * b0 + r1 * b1 + r2 * b2,
+                    r3 * b0 + r4 * b1 + r5 * b2,
+                    r6 * b0 + r7 * b1 + r8 * b2,
+                )
+            ),
+            np.array((r0, r1, r2, r3, r4, r5, r6, r7, r8)).reshape(3, 3),
+            np.array((0.0, wy, wz)),
+            np.array((0.0, wy_dot, wz_dot)),
+        )
