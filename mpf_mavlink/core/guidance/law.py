@@ -11,7 +11,8 @@ Read it beside the paper. Equation numbers are the paper's as its LaTeX source n
   and (23) print omega_{W_d D}^{W_d}, the rate of {W_d} relative to {F} is meant).
 - (15) [wdbasis] the steady-state frame {W_d} in {F}: :func:`steady_state_frame`.
 - (17)-(19) the cross-track error pt_x and y_w, z_w: :func:`cross_track_errors`.
-- (20) R_D^{W_d}, the transient frame {D} in {W_d}: :func:`transient_frame`.
+- (20) R_D^{W_d}, the transient frame {D} in {W_d}: :func:`transient_direction` (its d1)
+  and :func:`transient_frame_rate`.
 - (22) [sdot] the virtual point's progression.
 - (23) [omega] -K_R e + Pi_R Rt^T omega_DI^D, the reference for the autopilot: :func:`mpf_law`.
 
@@ -44,8 +45,6 @@ from mpf_mavlink.core.vec3 import (
     Vec3,
     cross,
     dot,
-    mat_T_vec,
-    mat_vec,
     norm,
 )
 
@@ -209,15 +208,12 @@ def cross_track_rates(
     return y_w_dot, z_w_dot
 
 
-def transient_frame(y_w: float, z_w: float, alpha: float) -> Mat3:
-    """(20) R_D^{W_d} = (d1, d2, d3), components in {W_d}; alpha (m) the look-ahead."""
+def transient_direction(y_w: float, z_w: float, alpha: float) -> Vec3:
+    """(20) d1, the first column of R_D^{W_d} (components in {W_d}; alpha (m) the look-ahead):
+    all that (6) and (9) use. The frame's other columns, d2 = (y_w, alpha, 0) / |(alpha, y_w)|
+    and d3 = d1 x d2, enter only through its rate (:func:`transient_frame_rate`)."""
     n1 = math.sqrt(alpha * alpha + y_w * y_w + z_w * z_w)
-    n2 = math.sqrt(alpha * alpha + y_w * y_w)
-    d11, d21, d31 = alpha / n1, -y_w / n1, -z_w / n1
-    d12, d22 = y_w / n2, alpha / n2  # d32 = 0
-    # d3 = d1 x d2, written out with d32 = 0.
-    d3 = (-d31 * d22, d31 * d12, d11 * d22 - d21 * d12)
-    return (d11, d21, d31), (d12, d22, 0.0), d3
+    return alpha / n1, -y_w / n1, -z_w / n1
 
 
 def transient_frame_rate(
@@ -490,22 +486,33 @@ def mpf_law(
     p_d, f1, f2, f3, k1, k2, dp_ds, rate_F = path.eval_with_rate(s)
     R_F_T: Mat3 = (f1, f2, f3)
     a0, a1, a2 = p_d
-    pt = (q[0] - a0, q[1] - a1, q[2] - a2)  # position error pt = p - p_f, in {T}
-    pt_F = mat_T_vec(R_F_T, pt)
+    x0, x1, x2 = pt = (q[0] - a0, q[1] - a1, q[2] - a2)  # position error pt = p - p_f, in {T}
+    pt_F = (  # (f1 . pt, f2 . pt, f3 . pt)
+        f1[0] * x0 + f1[1] * x1 + f1[2] * x2,
+        f2[0] * x0 + f2[1] * x1 + f2[2] * x2,
+        f3[0] * x0 + f3[1] * x1 + f3[2] * x2,
+    )
     b0, b1, b2 = omega_TI
     v_d = (b1 * a2 - b2 * a1, b2 * a0 - b0 * a2, b0 * a1 - b1 * a0)  # omega_TI x p_d
     sdot = progression_rate(pt_F[0], c, v_d, f1, K_p)  # (22)
 
     # The desired frames (15), (17)-(19), (20).
-    u_F = mat_T_vec(R_F_T, (uu[0] + v_d[0], uu[1] + v_d[1], uu[2] + v_d[2]))  # u in {F}
+    x0, x1, x2 = uu[0] + v_d[0], uu[1] + v_d[1], uu[2] + v_d[2]  # u = v_t t1 + v_d - eta_hat
+    u_F = (
+        f1[0] * x0 + f1[1] * x1 + f1[2] * x2,
+        f2[0] * x0 + f2[1] * x1 + f2[2] * x2,
+        f3[0] * x0 + f3[1] * x1 + f3[2] * x2,
+    )
     R_Wd_F = steady_state_frame(u_F, v_w)
     y_w, z_w = cross_track_errors(pt_F, R_Wd_F)
-    R_D_Wd = transient_frame(y_w, z_w, alpha)
+    d1_Wd = transient_direction(y_w, z_w, alpha)
     # d1 = R_T^I R_F^T R_{W_d}^F d1^{W_d}, in NED (wd32 = 0).
     (a0, a1, a2), (b0, b1, _), (g0, g1, g2) = R_Wd_F
-    x0, x1, x2 = R_D_Wd[0]
+    x0, x1, x2 = d1_Wd
     a0, a1, a2 = x0 * a0 + x1 * b0 + x2 * g0, x0 * a1 + x1 * b1 + x2 * g1, x0 * a2 + x2 * g2
-    b0, b1, b2 = mat_vec(R_F_T, (a0, a1, a2))
+    b0 = a0 * f1[0] + a1 * f2[0] + a2 * f3[0]
+    b1 = a0 * f1[1] + a1 * f2[1] + a2 * f3[1]
+    b2 = a0 * f1[2] + a1 * f2[2] + a2 * f3[2]
     d1_I = (n0 * b0 + n1 * b1 + n2 * b2, e0 * b0 + e1 * b1 + e2 * b2, d0 * b0 + d1 * b1 + d2 * b2)
     psi, e_2, e_3 = attitude_error(d1_I, R_W_I)  # (6), (9)
 

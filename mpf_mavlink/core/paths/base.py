@@ -295,21 +295,22 @@ class TabulatedPath:
         ddp0, ddp1, ddp2 = b0 + x2 * c0, b1 + x2 * c1, b2 + x2 * c2
         g = 1.0 / math.sqrt(dp0 * dp0 + dp1 * dp1 + dp2 * dp2)
         e0, e1, e2 = dp0 * g, dp1 * g, dp2 * g  # f1
-        # r: the node's f2 carried by the minimal rotation t_i -> f1 (Rodrigues with
-        # c = t_i x f1, d = t_i . f1: v + c x v + c x (c x v) / (1 + d)).
+        # r: the node's f2 (v, orthogonal to t_i) carried by the minimal rotation t_i -> f1,
+        # I + C + C^2 / (1 + d) with C = [c]x, c = t_i x f1, d = t_i . f1; for v orthogonal
+        # to t_i it reduces to v - (v . f1) (t_i + f1) / (1 + d).
         cx = ta1 * e2 - ta2 * e1
         cy = ta2 * e0 - ta0 * e2
         cz = ta0 * e1 - ta1 * e0
         d = ta0 * e0 + ta1 * e1 + ta2 * e2
-        ux = cy * v2 - cz * v1
-        uy = cz * v0 - cx * v2
-        uz = cx * v1 - cy * v0
-        k = 1.0 / (1.0 + d) if d > -0.999999 else 0.0
-        r0 = v0 + ux + k * (cy * uz - cz * uy)
-        r1 = v1 + uy + k * (cz * ux - cx * uz)
-        r2 = v2 + uz + k * (cx * uy - cy * ux)
-        nr = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-        r0, r1, r2 = r0 * nr, r1 * nr, r2 * nr
+        if d > -0.999999:
+            k = 1.0 / (1.0 + d)
+            m = (v0 * e0 + v1 * e1 + v2 * e2) * k
+            r0, r1, r2 = v0 - m * (ta0 + e0), v1 - m * (ta1 + e1), v2 - m * (ta2 + e2)
+        else:  # f1 opposite t_i (not in a regular path's cell): v + c x v, re-normalised
+            k = 0.0
+            r0, r1, r2 = v0 + cy * v2 - cz * v1, v1 + cz * v0 - cx * v2, v2 + cx * v1 - cy * v0
+            nr = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+            r0, r1, r2 = r0 * nr, r1 * nr, r2 * nr
         q0 = e1 * r2 - e2 * r1  # f1 x r
         q1 = e2 * r0 - e0 * r2
         q2 = e0 * r1 - e1 * r0
@@ -318,19 +319,20 @@ class TabulatedPath:
         if twist:
             ang = x * twist
             ca, sa = math.cos(ang), math.sin(ang)
-            f2 = (ca * r0 + sa * q0, ca * r1 + sa * q1, ca * r2 + sa * q2)
-            f3 = (ca * q0 - sa * r0, ca * q1 - sa * r1, ca * q2 - sa * r2)
-        else:
-            f2, f3 = (r0, r1, r2), (q0, q1, q2)
-        # The frame's rate per metre: f1' = (I - f1 f1^T) p'' / |p'| gives the curvatures
-        # f1'.f2 and f1'.f3; the minimal rotation from the fixed t_i turns r about f1 at
-        # -(c . f1') / (1 + d) = -(c . p'') / ((1 + d) |p'|); the closing share adds `twist`.
-        kappa_1 = (ddp0 * f2[0] + ddp1 * f2[1] + ddp2 * f2[2]) * g
-        kappa_2 = (ddp0 * f3[0] + ddp1 * f3[1] + ddp2 * f3[2]) * g
+            r0, r1, r2, q0, q1, q2 = (
+                ca * r0 + sa * q0, ca * r1 + sa * q1, ca * r2 + sa * q2,
+                ca * q0 - sa * r0, ca * q1 - sa * r1, ca * q2 - sa * r2,
+            )  # fmt: skip
+        # f2 = r, f3 = q. The frame's rate per metre: f1' = (I - f1 f1^T) p'' / |p'| gives the
+        # curvatures f1'.f2 and f1'.f3; the minimal rotation from the fixed t_i turns r about
+        # f1 at -(c . f1') / (1 + d) = -(c . p'') / ((1 + d) |p'|); the closing share adds
+        # `twist`.
+        kappa_1 = (ddp0 * r0 + ddp1 * r1 + ddp2 * r2) * g
+        kappa_2 = (ddp0 * q0 + ddp1 * q1 + ddp2 * q2) * g
         tau = twist - k * (cx * ddp0 + cy * ddp1 + cz * ddp2) * g
         return (
-            p, (e0, e1, e2), f2, f3, k1a + x * k1s, k2a + x * k2s, (dp0, dp1, dp2),
-            (tau, -kappa_2, kappa_1),
+            p, (e0, e1, e2), (r0, r1, r2), (q0, q1, q2), k1a + x * k1s, k2a + x * k2s,
+            (dp0, dp1, dp2), (tau, -kappa_2, kappa_1),
         )  # fmt: skip
 
     def sample(self, s: float) -> PathSample:
