@@ -23,6 +23,7 @@ from mpf_mavlink.core.guidance.law import (
     Gains,
     MpfDiagnostics,
     VehicleState,
+    mpf_law,
 )
 from mpf_mavlink.core.paths import TabulatedPath
 from mpf_mavlink.core.target import TargetMotion
@@ -116,10 +117,18 @@ class ClosedLoop:
         them, so a recorded step costs no extra law evaluation)."""
         pa = np.array(X[0:3])
         Ra = np.array(X[3:12]).reshape(3, 3)
-        (cmd, diag), eta = self.law(t, pa, Ra, X[14], keep)
+        # What self.law does, without its call (this runs four times per step).
+        eta = self.wind(t, pa)
+        st = self.target_state(t)
+        veh = VehicleState(t, pa, Ra, self.v_w, eta)
+        if self.law_name == "mpf":
+            cmd, diag = mpf_law(X[14], veh, st, self.path, self.gains, self.ext, keep)
+        else:
+            name, s = self.law_name, X[14]
+            cmd, diag = guidance_law(name, s, veh, st, self.path, self.gains, self.ext, keep)
         wc = (cmd.w2, cmd.w3)
         if keep:
-            st = self.target_state(t)
+            assert diag is not None
             self.last = Sample(
                 t, pa, Ra, np.array(X[12:14]), diag, wc, cmd.sdot, st.position, st.R_T_I, eta
             )
