@@ -536,7 +536,10 @@ def mpf_law(
     ff2 = a0 * w2[0] + a1 * w2[1] + a2 * w2[2]
     ff3 = a0 * w3[0] + a1 * w3[1] + a2 * w3[2]
     law2, law3 = -K_R * e_2 + ff2, -K_R * e_3 + ff3
-    cmd2, cmd3, mode = apply_extensions(law2, law3, ff2, ff3, psi, d1_I, R_W_I, K_R, ext)
+    if ext.psi_turn or ext.rate_limit is not None:
+        cmd2, cmd3, mode = apply_extensions(law2, law3, ff2, ff3, psi, d1_I, R_W_I, K_R, ext)
+    else:  # the paper's law as it is (apply_extensions would return it unchanged)
+        cmd2, cmd3, mode = law2, law3, "law"
     # The command as the angular velocity of w1 in NED: R_W^I [0, w2, w3].
     omega_w1_I = (
         cmd2 * w2[0] + cmd3 * w3[0],
