@@ -209,8 +209,9 @@ class PaperProfile:
             )
         return tuple(p2), tuple(R2)
 
-    def _extend(self, k: int) -> None:
-        """Extend the grid past node k by RK4 steps of DT, at least _CHUNK nodes at a time.
+    def _extend(self) -> None:
+        """Extend the grid by _CHUNK RK4 steps of DT (always the same chunks, from node 0, so
+        every node has the same bits whatever the order of the queries).
 
         The ODE is linear in (p, R) with coefficients that depend on t only, so one RK4 step
         is (p, R) -> (p + R b, R Phi) exactly (the rows' stages R M_i, M_1 = I, M_2 = I +
@@ -220,7 +221,7 @@ class PaperProfile:
         """
         gp, gR = self._grid_p, self._grid_R
         j0 = len(gp) - 1
-        n = max(k - j0, self._CHUNK)
+        n = self._CHUNK
         h = self.DT
         t: NDArray[np.float64] = (j0 + np.arange(n, dtype=float)) * h
 
@@ -275,8 +276,8 @@ class PaperProfile:
             raise ValueError("the paper's target profile starts at t = 0")
         k = int(round(t / self.DT))  # the nearest node
         gp, gR = self._grid_p, self._grid_R
-        if len(gp) <= k:
-            self._extend(k)
+        while len(gp) <= k:
+            self._extend()
         h = t - k * self.DT  # |h| <= DT / 2, either sign
         p, R = gp[k], gR[k]
         near = abs(h) <= self._NEAR_NODE_S

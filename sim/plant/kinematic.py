@@ -89,8 +89,9 @@ class ClosedLoop:
         self.law_name = law  # guidance.law: MPF or a baseline, the same command type
         self._tcache: tuple[float, object] | None = None
         self.last: Sample | None = None
-        # The flat state of the last step's result, so the next step need not convert it.
-        self._x_cache: tuple[KinematicState, list[float]] | None = None
+        # The last step's result, its fields and its flat state, so that the next step need
+        # not convert it back.
+        self._x_cache: tuple[KinematicState, tuple[object, ...], list[float]] | None = None
 
     def target_state(self, t: float):  # noqa: ANN201
         c = self._tcache
@@ -157,8 +158,13 @@ class ClosedLoop:
         """One classical RK4 step of (p, R, w, s); R re-orthonormalised afterwards."""
         t = x.t
         cached = self._x_cache
-        if cached is not None and cached[0] is x:
-            X = cached[1]
+        if (
+            cached is not None
+            and cached[0] is x
+            and all(a is b for a, b in zip(cached[1], (x.p, x.R, x.w), strict=True))
+            and cached[2][14] == x.s
+        ):
+            X = cached[2]
         else:
             X = x.p.tolist() + x.R.ravel().tolist() + x.w.tolist() + [float(x.s)]
         h2 = 0.5 * dt
@@ -186,10 +192,12 @@ class ClosedLoop:
             a1, b1, a2 * b0 - a0 * b2,
             a2, b2, a0 * b1 - a1 * b0,
         )  # fmt: skip
-        x2 = KinematicState(
-            t + dt, np.array(X2[0:3]), np.array(X2[3:12]).reshape(3, 3), np.array(X2[12:14]), X2[14]
-        )
-        self._x_cache = (x2, X2)
+        p, R, w = np.array(X2[0:3]), np.array(X2[3:12]).reshape(3, 3), np.array(X2[12:14])
+        # Read-only: the next step reads the flat copy, so an edit in place must fail loudly
+        # (replacing a field, or passing a new state, is seen).
+        p.flags.writeable = R.flags.writeable = w.flags.writeable = False
+        x2 = KinematicState(t + dt, p, R, w, X2[14])
+        self._x_cache = (x2, (p, R, w), X2)
         return x2
 
 
