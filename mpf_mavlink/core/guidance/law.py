@@ -404,21 +404,21 @@ def _diagnostics(
     omega_DI, ff2, ff3, law2, law3 = rates
     # Into NED by R_T^I (written out, as in mpf_law): p_d (p_f = p_t + p_d and pt = (p - p_t)
     # - p_d), wd1 = R_T^I R_F^T wd1^F and f1.
-    (n0, n1, n2), (e0, e1, e2_), (d0, d1_, d2) = R_I_T
+    (xn, yn, zn), (xe, ye, ze), (xd, yd, zd) = R_I_T
     f1, f2, f3 = R_F_T
     a0, a1, a2 = p_d
     p_d_I = (
-        n0 * a0 + n1 * a1 + n2 * a2,
-        e0 * a0 + e1 * a1 + e2_ * a2,
-        d0 * a0 + d1_ * a1 + d2 * a2,
+        xn * a0 + yn * a1 + zn * a2,
+        xe * a0 + ye * a1 + ze * a2,
+        xd * a0 + yd * a1 + zd * a2,
     )
     x0, x1, x2 = wd1_F
     a0 = x0 * f1[0] + x1 * f2[0] + x2 * f3[0]
     a1 = x0 * f1[1] + x1 * f2[1] + x2 * f3[1]
     a2 = x0 * f1[2] + x1 * f2[2] + x2 * f3[2]
-    wd1 = (n0 * a0 + n1 * a1 + n2 * a2, e0 * a0 + e1 * a1 + e2_ * a2, d0 * a0 + d1_ * a1 + d2 * a2)
+    wd1 = (xn * a0 + yn * a1 + zn * a2, xe * a0 + ye * a1 + ze * a2, xd * a0 + yd * a1 + zd * a2)
     a0, a1, a2 = f1
-    f1 = (n0 * a0 + n1 * a1 + n2 * a2, e0 * a0 + e1 * a1 + e2_ * a2, d0 * a0 + d1_ * a1 + d2 * a2)
+    f1 = (xn * a0 + yn * a1 + zn * a2, xe * a0 + ye * a1 + ze * a2, xd * a0 + yd * a1 + zd * a2)
     a0, a1, a2 = p_d_I
     x0, x1, x2 = pt
     # tuple.__new__: the NamedTuple without its keyword-parsing constructor (hot path).
@@ -458,7 +458,7 @@ def mpf_law(
     # Rotations are written out on scalars (this is the hot path; vec3 says what they are).
     R_W_I: Mat3 = vehicle.R_W_I.T.tolist()  # (w1, w2, w3) in NED
     R_I_T: Mat3 = target.R_T_I.tolist()  # NED into {T}; mat_T_vec(R_I_T, .) is R_T^I
-    (n0, n1, n2), (e0, e1, e2), (d0, d1, d2) = R_I_T  # north, east, down in {T}
+    (xn, yn, zn), (xe, ye, ze), (xd, yd, zd) = R_I_T  # north, east, down axes in {T}
     p_t: Vec3 = target.position.tolist()
     omega_TI: Vec3 = target.omega_T.tolist()  # omega_TI^T
     w1, w2, w3 = R_W_I
@@ -469,17 +469,17 @@ def mpf_law(
     a0, a1, a2 = vehicle.position.tolist()
     x_I = (a0 - p_t[0], a1 - p_t[1], a2 - p_t[2])  # p - p_t in NED
     a0, a1, a2 = x_I
-    q = (n0 * a0 + e0 * a1 + d0 * a2, n1 * a0 + e1 * a1 + d1 * a2, n2 * a0 + e2 * a1 + d2 * a2)
+    q = (xn * a0 + xe * a1 + xd * a2, yn * a0 + ye * a1 + yd * a2, zn * a0 + ze * a1 + zd * a2)
     a0, a1, a2 = target.velocity.tolist()
     if ext.wind_compensation:
         b0, b1, b2 = vehicle.wind.tolist()
         a0, a1, a2 = a0 - b0, a1 - b1, a2 - b2
-    uu = (n0 * a0 + e0 * a1 + d0 * a2, n1 * a0 + e1 * a1 + d1 * a2, n2 * a0 + e2 * a1 + d2 * a2)
+    uu = (xn * a0 + xe * a1 + xd * a2, yn * a0 + ye * a1 + yd * a2, zn * a0 + ze * a1 + zd * a2)
     a0, a1, a2 = w1
     c = (
-        v_w * (n0 * a0 + e0 * a1 + d0 * a2) - uu[0],
-        v_w * (n1 * a0 + e1 * a1 + d1 * a2) - uu[1],
-        v_w * (n2 * a0 + e2 * a1 + d2 * a2) - uu[2],
+        v_w * (xn * a0 + xe * a1 + xd * a2) - uu[0],
+        v_w * (yn * a0 + ye * a1 + yd * a2) - uu[1],
+        v_w * (zn * a0 + ze * a1 + zd * a2) - uu[2],
     )
 
     # The virtual point: p_d(s), R_F^T, dp_d/ds and the rate of {F} per unit s.
@@ -506,19 +506,19 @@ def mpf_law(
     R_Wd_F = steady_state_frame(u_F, v_w)
     y_w, z_w = cross_track_errors(pt_F, R_Wd_F)
     d1_Wd = transient_direction(y_w, z_w, alpha)
-    # d1 = R_T^I R_F^T R_{W_d}^F d1^{W_d}, in NED (wd32 = 0).
+    # yd = R_T^I R_F^T R_{W_d}^F yd^{W_d}, in NED (wd32 = 0).
     (a0, a1, a2), (b0, b1, _), (g0, g1, g2) = R_Wd_F
     x0, x1, x2 = d1_Wd
     a0, a1, a2 = x0 * a0 + x1 * b0 + x2 * g0, x0 * a1 + x1 * b1 + x2 * g1, x0 * a2 + x2 * g2
     b0 = a0 * f1[0] + a1 * f2[0] + a2 * f3[0]
     b1 = a0 * f1[1] + a1 * f2[1] + a2 * f3[1]
     b2 = a0 * f1[2] + a1 * f2[2] + a2 * f3[2]
-    d1_I = (n0 * b0 + n1 * b1 + n2 * b2, e0 * b0 + e1 * b1 + e2 * b2, d0 * b0 + d1 * b1 + d2 * b2)
-    psi, e_2, e_3 = attitude_error(d1_I, R_W_I)  # (6), (9)
+    d1_I = (xn * b0 + yn * b1 + zn * b2, xe * b0 + ye * b1 + ze * b2, xd * b0 + yd * b1 + zd * b2)
+    psi, e2, e3 = attitude_error(d1_I, R_W_I)  # (6), (9)
 
     # (10) omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d}, each term exact.
     a0, a1, a2 = target.acceleration.tolist()
-    a_t = (n0 * a0 + e0 * a1 + d0 * a2, n1 * a0 + e1 * a1 + d1 * a2, n2 * a0 + e2 * a1 + d2 * a2)
+    a_t = (xn * a0 + xe * a1 + xd * a2, yn * a0 + ye * a1 + yd * a2, zn * a0 + ze * a1 + zd * a2)
     flow = (q, c, uu, a_t, omega_TI, target.omega_dot_T.tolist(), p_d, pt_F, u_F)
     b0, b1, b2 = feedforward_omega_DT(
         sdot, dp_ds, rate_F, R_F_T, R_Wd_F, y_w, z_w, alpha, v_w, flow
@@ -526,16 +526,16 @@ def mpf_law(
     a0, a1, a2 = omega_TI
     a0, a1, a2 = a0 + b0, a1 + b1, a2 + b2
     omega_DI = (  # in NED
-        n0 * a0 + n1 * a1 + n2 * a2,
-        e0 * a0 + e1 * a1 + e2 * a2,
-        d0 * a0 + d1 * a1 + d2 * a2,
+        xn * a0 + yn * a1 + zn * a2,
+        xe * a0 + ye * a1 + ze * a2,
+        xd * a0 + yd * a1 + zd * a2,
     )
 
     # (23) [omega]: -K_R e + Pi_R Rt^T omega_DI^D, the last term being omega_DI on w2, w3.
     a0, a1, a2 = omega_DI
     ff2 = a0 * w2[0] + a1 * w2[1] + a2 * w2[2]
     ff3 = a0 * w3[0] + a1 * w3[1] + a2 * w3[2]
-    law2, law3 = -K_R * e_2 + ff2, -K_R * e_3 + ff3
+    law2, law3 = -K_R * e2 + ff2, -K_R * e3 + ff3
     if ext.psi_turn or ext.rate_limit is not None:
         cmd2, cmd3, mode = apply_extensions(law2, law3, ff2, ff3, psi, d1_I, R_W_I, K_R, ext)
     else:  # the paper's law as it is (apply_extensions would return it unchanged)
@@ -554,6 +554,6 @@ def mpf_law(
     u0, u1, u2 = u_F  # |u| = |u_F|
     margin = v_w - math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
     frames = (R_I_T, R_F_T, R_Wd_F[0], d1_I)
-    errors = (x_I, p_t, p_d, pt, pt_F, y_w, z_w, psi, e_2, e_3, margin)
+    errors = (x_I, p_t, p_d, pt, pt_F, y_w, z_w, psi, e2, e3, margin)
     rates = (omega_DI, ff2, ff3, law2, law3)
     return cmd, _diagnostics(t, s, frames, errors, rates, mode, k1, k2)
