@@ -384,24 +384,18 @@ def apply_extensions(
 
 
 def _diagnostics(
-    t: float,
-    s: float,
-    frames: tuple[Mat3, Mat3, Vec3, Vec3],
-    errors: tuple[Vec3, Vec3, Vec3, Vec3, Vec3, float, float, float, float, float, float],
-    rates: tuple[Vec3, float, float, float, float],
-    mode: str,
-    k1: float,
-    k2: float,
-) -> MpfDiagnostics:
+    t: float, s: float, R_I_T: Mat3, R_F_T: Mat3, wd1_F: Vec3, d1: Vec3, x_I: Vec3, p_t: Vec3,
+    p_d: Vec3, pt: Vec3, pt_F: Vec3, y_w: float, z_w: float, psi: float, e2: float, e3: float,
+    margin: float, omega_DI: Vec3, ff2: float, ff3: float, law2: float, law3: float, mode: str,
+    k1: float, k2: float,
+) -> MpfDiagnostics:  # fmt: skip
     """The record of what :func:`mpf_law` saw, its vectors in NED (see :class:`MpfDiagnostics`).
 
-    frames: R_I^T, R_F^T, wd1 in {F} and d1 (NED); errors: p - p_t (NED), p_t, p_d, pt and pt
-    in {F} ({T} unless noted), y_w, z_w, Psi, e2, e3 and the Assumption 1 margin; rates:
-    omega_DI (NED), the feedforward and the law's command on w2, w3.
+    Given (positional, this runs at every bridge frame): the frames R_I^T, R_F^T, wd1 in {F}
+    and d1 (NED); the errors p - p_t (NED), p_t, p_d, pt and pt in {F} ({T} unless noted),
+    y_w, z_w, Psi, e2, e3 and the Assumption 1 margin; the rates omega_DI (NED), the
+    feedforward and the law's command on w2, w3; the mode and the curvatures k1, k2.
     """
-    R_I_T, R_F_T, wd1_F, d1 = frames
-    x_I, p_t, p_d, pt, pt_F, y_w, z_w, psi, e2, e3, margin = errors
-    omega_DI, ff2, ff3, law2, law3 = rates
     # Into NED by R_T^I (written out, as in mpf_law): p_d (p_f = p_t + p_d and pt = (p - p_t)
     # - p_d), wd1 = R_T^I R_F^T wd1^F and f1.
     (xn, yn, zn), (xe, ye, ze), (xd, yd, zd) = R_I_T
@@ -553,7 +547,7 @@ def mpf_law(
         return cmd, None
     u0, u1, u2 = u_F  # |u| = |u_F|
     margin = v_w - math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-    frames = (R_I_T, R_F_T, R_Wd_F[0], d1_I)
-    errors = (x_I, p_t, p_d, pt, pt_F, y_w, z_w, psi, e2, e3, margin)
-    rates = (omega_DI, ff2, ff3, law2, law3)
-    return cmd, _diagnostics(t, s, frames, errors, rates, mode, k1, k2)
+    return cmd, _diagnostics(
+        t, s, R_I_T, R_F_T, R_Wd_F[0], d1_I, x_I, p_t, p_d, pt, pt_F, y_w, z_w, psi, e2, e3,
+        margin, omega_DI, ff2, ff3, law2, law3, mode, k1, k2,
+    )  # fmt: skip
