@@ -500,7 +500,7 @@ def mpf_law(
     R_Wd_F = steady_state_frame(u_F, v_w)
     y_w, z_w = cross_track_errors(pt_F, R_Wd_F)
     d1_Wd = transient_direction(y_w, z_w, alpha)
-    # yd = R_T^I R_F^T R_{W_d}^F yd^{W_d}, in NED (wd32 = 0).
+    # d1 = R_T^I R_F^T R_{W_d}^F d1^{W_d}, in NED (wd32 = 0).
     (a0, a1, a2), (b0, b1, _), (g0, g1, g2) = R_Wd_F
     x0, x1, x2 = d1_Wd
     a0, a1, a2 = x0 * a0 + x1 * b0 + x2 * g0, x0 * a1 + x1 * b1 + x2 * g1, x0 * a2 + x2 * g2
