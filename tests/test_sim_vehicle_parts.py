@@ -82,13 +82,14 @@ FRAMES = [
 def test_framer_writes_pymavlinks_bytes(cls, args):
     """The framer's bytes are pymavlink's, sequence numbers and counters included: a peer
     cannot tell the two apart."""
-    ours, ref = M.MAVLink(_Sink(), 1, 1), M.MAVLink(_Sink(), 1, 1)
-    framer = Framer(ours)
-    for seq in range(3):
-        buf = framer.pack(cls, *args)
-        assert buf == bytes(cls(*args).pack(ref)), seq
-        ref.seq = (ref.seq + 1) & 0xFF
-    assert ours.seq == 3 and ours.total_packets_sent == 3
+    for ids in ((1, 1), (2, 191)):  # the vehicle's and the target's system
+        ours, ref = M.MAVLink(_Sink(), *ids), M.MAVLink(_Sink(), *ids)
+        framer = Framer(ours)
+        for seq in range(3):
+            buf = framer.pack(cls, *args)
+            assert buf == bytes(cls(*args).pack(ref)), (ids, seq)
+            ref.seq = (ref.seq + 1) & 0xFF
+        assert ours.seq == 3 and ours.total_packets_sent == 3
 
 
 def test_crc_is_mavlinks_mcrf4xx():

@@ -108,3 +108,73 @@ def sil_tracking(duration_s: float = 360.0) -> dict[str, Any]:
             "real_time_factor": m.get("real_time_factor_tracking"),
         }
     return out
+
+
+def sil_vehicle_frame_us(frames: int = 3000) -> dict[str, Any]:
+    """The demo's SIL vehicle alone: wall time (us) per 20 ms lockstep frame in OFFBOARD
+    (``step_once`` + reading the answer), with a scripted peer (:mod:`sim.sil_peer`) answering
+    every ATTITUDE in the same thread, outside the timed calls. The vehicle's part of
+    ``cpu_us_per_frame_vehicle`` without the bridge's process and the lockstep wait. Quantiles
+    over the frames, and the JSBSim steps' share: on a loaded machine the 10th-50th
+    percentiles move least (a frame preempted by another process lands in the tail)."""
+    import time
+
+    import numpy as np
+    from pymavlink.dialects.v20 import ardupilotmega as M
+
+    from mpf_mavlink.config.schema import load_config
+    from sim.sil import build_vehicle
+    from sim.sil_peer import ScriptedPeer
+
+    cfg = load_config(DEMO)
+    peer = ScriptedPeer()
+    v = build_vehicle(cfg, f"udpout:127.0.0.1:{peer.port}", "lockstep")
+    try:
+        for _ in range(60):  # > 1 s of setpoints: PX4 accepts OFFBOARD
+            v.step_once()
+            peer.pump()
+            v.poll(0.05)
+        peer.send(peer.mav.command_long_encode(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 1, 6, 0, 0, 0, 0, 0))
+        for _ in range(5):
+            v.step_once()
+            peer.pump()
+            v.poll(0.05)
+        if v.modes.behaviour != "offboard":
+            raise RuntimeError(f"the vehicle did not enter OFFBOARD: {v.mode_name}")
+        clock = time.perf_counter
+        plant, fdm_step = v.plant, v.plant.step
+        fdm = [0.0]
+
+        def timed_step(*a: float) -> None:
+            t = clock()
+            fdm_step(*a)
+            fdm[0] += clock() - t
+
+        plant.step = timed_step
+        total, physics = np.empty(frames), np.empty(frames)
+        for i in range(frames):
+            fdm[0] = 0.0
+            c0 = clock()
+            v.step_once()
+            c1 = clock()
+            peer.pump()
+            c2 = clock()
+            v.poll(0.05)
+            c3 = clock()
+            total[i], physics[i] = c1 - c0 + c3 - c2, fdm[0]
+
+        def stats(a: Any) -> dict[str, float]:
+            p10, p50 = np.percentile(a * 1e6, [10, 50])
+            return {"p10": float(p10), "p50": float(p50), "mean": float(np.mean(a) * 1e6)}
+
+        return {
+            "frame_us": stats(total),
+            "jsbsim_us": stats(physics),
+            "rest_us": stats(total - physics),
+            "frames": frames,
+            "mode": v.mode_name,
+            "goal_us": 150.0,
+        }
+    finally:
+        v.close()
+        peer.close()
