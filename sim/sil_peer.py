@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import socket
+import time
 from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as M
@@ -96,10 +97,19 @@ class _Sink:
         pass
 
 
-def serve_forever(port_out: Any, stop: Any) -> None:
-    """Child process body: bind a peer, tell the parent its port, answer until ``stop`` is set."""
+def serve_forever(port_out: Any, stop: Any, delay_s: float = 0.0) -> None:
+    """Child process body: bind a peer, tell the parent its port, answer until ``stop`` is set,
+    sleeping ``delay_s`` (wall s) before handling each datagram (a peer that takes its time)."""
     peer = ScriptedPeer()
     port_out.send(peer.port)
+    if delay_s > 0.0:
+        handle = peer.handle
+
+        def slow(data: bytes, addr: Any) -> None:
+            time.sleep(delay_s)
+            handle(data, addr)
+
+        peer.handle = slow  # type: ignore[method-assign]
     while not stop.is_set():
         peer.serve(0.2)
     peer.close()

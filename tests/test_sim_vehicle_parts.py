@@ -152,6 +152,20 @@ def test_lockstep_awaits_the_latest_attitude_that_acts_within_the_next_frame():
     assert ls.answer_ms == 1000  # a late answer does not move the mark back
 
 
+def test_lockstep_without_overlap_awaits_the_last_attitude_whatever_the_latency():
+    ls = Lockstep(frame_period=0.02, command_latency_s=0.02, overlap=False)
+    for k, ms in enumerate((1000, 1020, 1040)):
+        ls.written(ms, -1, 1.0 + 0.02 * k)
+        ls.choose(1.0 + 0.02 * k)
+        assert ls.await_ms == ms  # its own frame's answer, not an earlier one's
+    assert ls.overlapped == 0
+    on = Lockstep(frame_period=0.02, command_latency_s=0.02)
+    for k, ms in enumerate((1000, 1020, 1040)):
+        on.written(ms, -1, 1.0 + 0.02 * k)
+        on.choose(1.0 + 0.02 * k)
+    assert on.await_ms == 1020 and on.overlapped == 2
+
+
 def test_lockstep_unstamped_peer_and_multirate_positions():
     ls = Lockstep(frame_period=0.02, command_latency_s=0.0)
     ls.written(1000, -1, 1.0)
