@@ -36,6 +36,7 @@ SPEC = {
     )
 }
 _ATTITUDE, _LOCAL_POSITION = SPEC["attitude"], SPEC["local_position_ned"]
+_GLOBAL_POSITION = SPEC["global_position_int"]
 # streams after ATTITUDE within a frame (see Telemetry.frame)
 STREAM_ORDER = (
     "heartbeat",
@@ -260,6 +261,8 @@ class Telemetry:
 
     def _message(self, name: str) -> bytes | None:
         st, ms, us, pack = self.st, self.clock.ms(), self.clock.us(), self.link.framer.pack
+        if name == "global_position":  # first: the one due every frame at PX4's stock rates
+            return pack(_GLOBAL_POSITION, *_global_position(st, ms, self.home_lla[2]))
         if name == "heartbeat":
             ap = M.MAV_AUTOPILOT_PX4 if self.px4 else M.MAV_AUTOPILOT_ARDUPILOTMEGA
             base, custom = self._heartbeat()
@@ -282,8 +285,6 @@ class Telemetry:
             return pack(SPEC["attitude_target"], t_ms, tm, list(q), *rates, thrust)
         if name == "system_time":
             return pack(SPEC["system_time"], self.unix0_us + us, ms)
-        if name == "global_position":
-            return pack(SPEC["global_position_int"], *_global_position(st, ms, self.home_lla[2]))
         if name == "vfr_hud":
             return pack(SPEC["vfr_hud"], *_vfr_hud(st))
         if name == "home_position":
