@@ -63,6 +63,10 @@ class ScriptedPeer:
             )
             self.answers += 1
 
+    def request_offboard(self) -> None:
+        """MAV_CMD_DO_SET_MODE to PX4's OFFBOARD (custom main mode 6) for system 1."""
+        self.send(self.mav.command_long_encode(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 1, 6, 0, 0, 0, 0, 0))
+
     def send(self, msg: Any) -> None:
         buf = bytes(msg.pack(self.mav))
         self.sock.sendto(buf, self.addr)

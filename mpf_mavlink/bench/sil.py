@@ -126,7 +126,6 @@ def sil_vehicle_frame_us(frames: int = 3000) -> dict[str, Any]:
     import time
 
     import numpy as np
-    from pymavlink.dialects.v20 import ardupilotmega as M
 
     from mpf_mavlink.config.schema import load_config
     from sim.sil import build_vehicle
@@ -140,7 +139,7 @@ def sil_vehicle_frame_us(frames: int = 3000) -> dict[str, Any]:
             v.step_once()
             peer.pump()
             v.poll(0.05)
-        peer.send(peer.mav.command_long_encode(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 1, 6, 0, 0, 0, 0, 0))
+        peer.request_offboard()
         for _ in range(5):
             v.step_once()
             peer.pump()
