@@ -81,6 +81,9 @@ def _optional_groups() -> None:
 
     GROUPS["sil_real_time_factor"] = sil_real_time_factor
     GROUPS["sil_tracking"] = sil_tracking
+    from mpf_mavlink.bench.sil import sil_vehicle_frame_us
+
+    GROUPS["sil_vehicle_frame_us"] = sil_vehicle_frame_us
     from mpf_mavlink.bench.robustness import sil_airframes, sil_robustness
 
     GROUPS["sil_robustness"] = sil_robustness
