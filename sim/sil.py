@@ -313,13 +313,20 @@ def bridge_config(cfg: Config, **mavlink: Any) -> Config:
 
 # --------------------------------------------------------------------------- processes
 def _vehicle_run(
-    cfg: Config, url: str, clock: str | None, conn: Any, stop: Any, status: Any, parent: int
+    cfg: Config,
+    url: str,
+    clock: str | None,
+    conn: Any,
+    stop: Any,
+    status: Any,
+    parent: int,
+    over: dict[str, Any],
 ) -> None:
     """Child process: build the vehicle, run it until ``stop`` (or the parent is gone), then send
     its truth. Ctrl-C is ignored here: the bridge must be able to hand back to a live vehicle."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        v = build_vehicle(cfg, url, clock)
+        v = build_vehicle(cfg, url, clock, **over)
     except Exception as e:  # noqa: BLE001 - reported to the parent as one line
         conn.send(("error", f"{type(e).__name__}: {e}"))
         return
@@ -352,6 +359,7 @@ def _vehicle_run(
             "frames": v.clock.frames if hasattr(v.clock, "frames") else None,
             "answered_frames": getattr(v.clock, "answered_frames", None),
             "lockstep_timeouts": getattr(v.clock, "timeouts", None),
+            "lockstep_overlapped": v.lockstep.overlapped,
             "sim_time_s": v.t,
             "wall_time_s": v.wall_time_running,
             "flavour": v.flavour,
@@ -426,12 +434,15 @@ def run_sil(
     duration_s: float | None = None,
     log: Any = print,
     force: bool = False,
+    vehicle: dict[str, Any] | None = None,
 ) -> SilResult:
     """Fly the config's mission with the SIL vehicle and the bridge over UDP loopback.
 
     ``duration_s`` (default ``sim.duration_s``): seconds of tracking, after the bridge has taken
-    control; ``clock`` overrides ``sil.clock``. Raises MpfError when a peer fails to start and
-    KeyboardInterrupt after a Ctrl-C (once the bridge has handed back and the records are written).
+    control; ``clock`` overrides ``sil.clock``; ``vehicle``: :class:`VehicleConfig` fields that
+    win over the config's (e.g. ``{"lockstep_overlap": False}``). Raises MpfError when a peer
+    fails to start and KeyboardInterrupt after a Ctrl-C (once the bridge has handed back and the
+    records are written).
     """
     from mpf_mavlink.errors import MpfError
 
@@ -444,7 +455,9 @@ def run_sil(
     # a loaded host is not a lost link (mavlink.lockstep)
     bcfg = bridge_config(cfg, plots=plots, lockstep=(clock or sil.clock) == "lockstep")
     wall0 = time.perf_counter()
-    pb, pv, rx, stop, status, q = _start_peers(cfg, bcfg, port, bridge_dir, duration, clock, force)
+    pb, pv, rx, stop, status, q = _start_peers(
+        cfg, bcfg, port, bridge_dir, duration, clock, force, vehicle or {}
+    )
     bar = _Progress(duration, progress, log, (pv.pid, pb.pid))
     bres: Any = None
     berr: str | None = None
@@ -504,6 +517,7 @@ def _start_peers(
     duration: float,
     clock: str | None,
     force: bool,
+    over: dict[str, Any],
 ) -> tuple[Any, ...]:
     """The bridge (listening on ``port``) and the vehicle, each a process of its own: (bridge,
     vehicle, the vehicle's pipe, the stop event, the vehicle's sim time, the bridge's queue)."""
@@ -522,7 +536,7 @@ def _start_peers(
         target=_vehicle_main,
         name="mpf-sil-vehicle",
         daemon=True,
-        args=(cfg, f"udpout:127.0.0.1:{port}", clock, tx, stop, status, os.getpid()),
+        args=(cfg, f"udpout:127.0.0.1:{port}", clock, tx, stop, status, os.getpid(), over),
     )
     pb.start()
     pv.start()
@@ -642,6 +656,7 @@ def _measure(
         vehicle_answered_frames=vinfo.get("answered_frames"),
         vehicle_frames=vinfo.get("frames"),
         vehicle_lockstep_timeouts=vinfo.get("lockstep_timeouts"),
+        vehicle_lockstep_overlapped=vinfo.get("lockstep_overlapped"),
         statustexts=[t for _, t in vinfo["statustexts"]],
         vehicle_modes=[[round(t, 3), name] for t, _, name in ml],
     )

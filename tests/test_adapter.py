@@ -19,6 +19,7 @@ from mpf_mavlink.core.adapter import (
     AdapterState,
     adapt,
     bank_and_load_factor,
+    reserve_airspeed,
     safe_setpoint,
 )
 from mpf_mavlink.core.frames import euler_to_matrix, quat_wxyz_to_matrix
@@ -431,3 +432,67 @@ def test_energy_reengagement_starts_from_the_autopilots_thrust():
     s2 = AdapterState(integ=0.4).for_reengage(None)
     sp2, _ = adapt((0.0, 0.0, 0.0), 16.0, R, w1, 0.02, E, AdapterState(trim_hat=0.05))
     assert s2.integ == 0.0 and sp2.thrust == pytest.approx(E.trim_thrust, abs=1e-9)
+
+
+# ------------------------------------------------------------------ energy reserve (issue 25)
+def test_reserve_airspeed_carries_the_design_gusts_height_as_kinetic_energy():
+    g = GRAVITY_M_S2
+    # a 1.5 m/s climb leaves 4.1 - 1.5 = 2.6 m/s of the full-thrust climb: a 3.0 m/s downdraft
+    # for 10 s is (3.0 - 2.6) 10 = 4 m beyond it, which (V^2 - 16^2) / (2 g) = 4 m pays
+    v = reserve_airspeed(16.0, 25.0, 1.5, 4.1, 3.0, 10.0, g)
+    assert (v * v - 16.0**2) / (2.0 * g) == pytest.approx(4.0, abs=1e-9)
+    assert reserve_airspeed(16.0, 18.0, 1.5, 4.1, 3.0, 10.0, g) == 18.0  # within v_max
+    # a spare that covers the gust, a descent, or figures that are not finite: the set-point
+    assert reserve_airspeed(16.0, 18.0, 0.5, 4.1, 3.0, 10.0, g) == 16.0
+    assert reserve_airspeed(16.0, 18.0, -3.0, 4.1, 3.0, 10.0, g) == 16.0
+    assert reserve_airspeed(16.0, 18.0, 1.5, math.inf, 3.0, 10.0, g) == 16.0
+    assert reserve_airspeed(16.0, 18.0, math.nan, 4.1, 3.0, 10.0, g) == 16.0
+
+
+R_ = dataclasses.replace(E, max_climb_m_s=4.1, reserve_gust_m_s=3.0, reserve_gust_s=10.0)
+
+
+def _fly_path(params, climb, seconds, dt=0.02, v=16.0):
+    """Level flight at v under a path point that climbs ``climb`` m/s: (set-points, states)."""
+    w1, R = _climb(0.0)
+    s = AdapterState(trim_hat=0.05)
+    sps, sts = [], []
+    for k in range(int(round(seconds / dt))):
+        sp, s = adapt((0.0, 0.0, 0.0), v, R, w1, dt, params, s, path_down_m=-100.0 - climb * k * dt)
+        sps.append(sp)
+        sts.append(s)
+    return sps, sts
+
+
+def test_reserve_raises_the_set_point_for_a_sustained_climb_at_its_rate_limit():
+    dt, n = 0.02, 1500  # 30 s
+    _, sts = _fly_path(R_, 1.5, n * dt, dt)
+    # the first difference starts the filter: a steady climb is known from the second step
+    assert sts[-1].climb_f == pytest.approx(1.5, rel=1e-9)
+    vres = np.array([s.v_res for s in sts])
+    # never faster than reserve_rate_m_s2 (0.1 m/s^2): 2 m/s take 20 s ...
+    assert np.max(np.abs(np.diff(vres))) <= 0.1 * dt + 1e-12
+    assert vres[int(10.0 / dt)] == pytest.approx(16.0 + 0.1 * 10.0, abs=0.1 * dt + 1e-9)
+    # ... up to what reserve_airspeed gives: (3.0 - 2.6) 10 = 4 m needs 18.3 m/s, v_max 18
+    assert reserve_airspeed(16.0, 18.0, 1.5, 4.1, 3.0, 10.0) == 18.0
+    assert vres[-1] == pytest.approx(18.0, abs=1e-9)
+    # a path whose climb changes moves the filter by dt / reserve_tau_s of the step each step
+    w1, R = _climb(0.0)
+    s = dataclasses.replace(sts[-1])
+    _, s2 = adapt((0.0, 0.0, 0.0), 16.0, R, w1, dt, R_, s, path_down_m=s.path_down_prev)
+    assert s2.climb_f == pytest.approx(1.5 + dt / 20.0 * (0.0 - 1.5), rel=1e-9)
+
+
+def test_reserve_speed_error_asks_more_thrust_and_nothing_changes_when_off():
+    sps, sts = _fly_path(R_, 1.5, 30.0)
+    sps0, sts0 = _fly_path(E, 1.5, 30.0)  # no design gust: off, as before
+    assert sts0[-1].v_res is None and sts0[-1].climb_f is None
+    # flying 16 m/s under a set-point that has risen: the speed error asks for more energy
+    assert sts[-1].v_res > 16.5
+    assert sps[-1].thrust > sps0[-1].thrust + 0.01
+    # a level path keeps the configured set-point
+    _, stl = _fly_path(R_, 0.0, 30.0)
+    assert stl[-1].v_res == 16.0
+    # a hand-back keeps what the path's climb was (the mission's), the step differences afresh
+    s = sts[-1].for_reengage(0.5)
+    assert s.climb_f == sts[-1].climb_f and s.path_down_prev is None

@@ -37,6 +37,12 @@ FAST = ["mavlink.plots=false", "mavlink.heartbeat_timeout_s=3", "mavlink.mode_ti
         "mavlink.request_streams=false", "mavlink.set_fallback=false"]  # fmt: skip
 
 
+#: the ArduPlane peers fly configs/bridge_arduplane.yaml's airspeed (ArduPlane's stock cruise):
+#: the peer's default 15 m/s is below that config's band, and a loaded machine that stretched a
+#: 1 s flight past metrics.limit_hold_s turned it into an energy FAIL (exit 5)
+AP_CRUISE_M_S = 22.0
+
+
 def free_port() -> int:
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     s.bind(("127.0.0.1", 0))
@@ -142,7 +148,13 @@ def test_lean_recording_keeps_one_row_in_five_and_no_tlog(tmp_path):
 def test_arduplane_full_lifecycle_over_pty_with_global_position(tmp_path):
     # serial link (pty), no LOCAL_POSITION_NED: GLOBAL_POSITION_INT about HOME_POSITION
     peer = MavPeer(
-        PeerOptions(flavour="ardupilot", send_local=False, send_global=True, send_wind=True),
+        PeerOptions(
+            flavour="ardupilot",
+            send_local=False,
+            send_global=True,
+            send_wind=True,
+            airspeed=AP_CRUISE_M_S,
+        ),
         pty=True,
     ).start()
     try:
@@ -153,7 +165,7 @@ def test_arduplane_full_lifecycle_over_pty_with_global_position(tmp_path):
         "TRACKING",
         NOT_JUDGED,
         True,
-    )
+    ), res.exit_reason
     assert [r.msg.param2 for r in mode_requests(peer)] == [15.0, 12.0]  # GUIDED, then LOITER
     assert peer.mode_is("LOITER")
     sp = np.genfromtxt(tmp_path / "setpoints.csv", delimiter=",", names=True)
@@ -173,8 +185,12 @@ def test_arduplane_full_lifecycle_over_pty_with_global_position(tmp_path):
     roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
     assert np.min(np.abs(sp["bank"] - roll)) < 1e-6
     ts = np.genfromtxt(tmp_path / "timeseries.csv", delimiter=",", names=True)
-    # position came from GLOBAL_POSITION_INT about home: starts near (-200, 0, -100) + 15 m/s * t
-    assert abs(ts["p_d"][0] - (-100.0)) < 0.5 and -200.0 < ts["p_n"][0] < -150.0
+    # position came from GLOBAL_POSITION_INT about home: the first row lies on the peer's own
+    # track (100 m up, heading north from (-200, 0); how far along depends on how long
+    # the engagement took, which a loaded machine stretches)
+    flown_n = [pos[0] for _, pos, _ in peer.truth]
+    assert abs(ts["p_d"][0] - (-100.0)) < 0.5 and abs(ts["p_e"][0]) < 0.5
+    assert min(flown_n) - 0.5 < ts["p_n"][0] < max(flown_n) + 0.5
 
 
 # ----------------------------------------------------------------------------- refusals
@@ -410,7 +426,13 @@ def test_cli_run_over_a_serial_port(tmp_path):
     # `mpf-mavlink run` as a user types it, on a serial port (pyserial on a pty pair): the whole
     # ArduPlane lifecycle, GUIDED then LOITER, and setpoints at the stream rate
     peer = MavPeer(
-        PeerOptions(flavour="ardupilot", send_local=False, send_global=True, send_wind=True),
+        PeerOptions(
+            flavour="ardupilot",
+            send_local=False,
+            send_global=True,
+            send_wind=True,
+            airspeed=AP_CRUISE_M_S,
+        ),
         pty=True,
     ).start()
     sets = [x for s in FAST for x in ("--set", s)]
@@ -442,7 +464,7 @@ def test_cli_run_over_a_serial_port(tmp_path):
 @pytest.mark.slow  # > 8 s of real-time flight: full suite (CI), not the quick loop
 def test_tlog_survives_sigkill(tmp_path):
     port = free_port()
-    peer = MavPeer(PeerOptions(flavour="ardupilot"), port=port).start()
+    peer = MavPeer(PeerOptions(flavour="ardupilot", airspeed=AP_CRUISE_M_S), port=port).start()
     cmd = [
         PY,
         "-m",

@@ -82,13 +82,14 @@ FRAMES = [
 def test_framer_writes_pymavlinks_bytes(cls, args):
     """The framer's bytes are pymavlink's, sequence numbers and counters included: a peer
     cannot tell the two apart."""
-    ours, ref = M.MAVLink(_Sink(), 1, 1), M.MAVLink(_Sink(), 1, 1)
-    framer = Framer(ours)
-    for seq in range(3):
-        buf = framer.pack(cls, *args)
-        assert buf == bytes(cls(*args).pack(ref)), seq
-        ref.seq = (ref.seq + 1) & 0xFF
-    assert ours.seq == 3 and ours.total_packets_sent == 3
+    for ids in ((1, 1), (2, 191)):  # the vehicle's and the target's system
+        ours, ref = M.MAVLink(_Sink(), *ids), M.MAVLink(_Sink(), *ids)
+        framer = Framer(ours)
+        for seq in range(3):
+            buf = framer.pack(cls, *args)
+            assert buf == bytes(cls(*args).pack(ref)), (ids, seq)
+            ref.seq = (ref.seq + 1) & 0xFF
+        assert ours.seq == 3 and ours.total_packets_sent == 3
 
 
 def test_crc_is_mavlinks_mcrf4xx():
@@ -149,6 +150,20 @@ def test_lockstep_awaits_the_latest_attitude_that_acts_within_the_next_frame():
     assert ls.answered and ls.answers == 1
     assert ls.on_answer(990) is None  # an answer to a frame never written: no time known
     assert ls.answer_ms == 1000  # a late answer does not move the mark back
+
+
+def test_lockstep_without_overlap_awaits_the_last_attitude_whatever_the_latency():
+    ls = Lockstep(frame_period=0.02, command_latency_s=0.02, overlap=False)
+    for k, ms in enumerate((1000, 1020, 1040)):
+        ls.written(ms, -1, 1.0 + 0.02 * k)
+        ls.choose(1.0 + 0.02 * k)
+        assert ls.await_ms == ms  # its own frame's answer, not an earlier one's
+    assert ls.overlapped == 0
+    on = Lockstep(frame_period=0.02, command_latency_s=0.02)
+    for k, ms in enumerate((1000, 1020, 1040)):
+        on.written(ms, -1, 1.0 + 0.02 * k)
+        on.choose(1.0 + 0.02 * k)
+    assert on.await_ms == 1020 and on.overlapped == 2
 
 
 def test_lockstep_unstamped_peer_and_multirate_positions():

@@ -141,8 +141,19 @@ def test_a_silent_lockstep_vehicle_is_lost_after_the_wall_bound(tmp_path):
         track_s=60.0,
     )
     assert res.exit_code == 4 and "telemetry lost" in res.exit_reason, res.exit_reason
-    vehicle_s, wall_s = _clocks(res.exit_reason)
-    assert vehicle_s == 0.0  # nothing came after the last ATTITUDE
+    if "no usable state" in res.exit_reason:
+        # a loaded bridge can read the last ATTITUDE without a control step on it (a backlog
+        # drained): its last good state is then a frame older and crosses the same wall bound
+        # first; the vehicle's clock still stood still since (at most one 20 ms frame, printed
+        # to 10 ms)
+        pattern = r"no usable state for ([\d.]+) s of vehicle time \(([\d.]+) s wall\)"
+        m = re.search(pattern, res.exit_reason)
+        assert m, res.exit_reason
+        vehicle_s, wall_s = float(m[1]), float(m[2])
+        assert vehicle_s <= 0.02 + 0.005
+    else:
+        vehicle_s, wall_s = _clocks(res.exit_reason)
+        assert vehicle_s == 0.0  # nothing came after the last ATTITUDE
     # detected at the bound (checked every <= 10 ms of the bridge's loop); the 1 s of slack
     # above is for a loaded host that leaves the bridge waiting, far below the 10 s default
     assert t_stop and 2.0 <= wall_s < 2.0 + 1.0

@@ -7,13 +7,17 @@ sil_real_time_factor: the demo as shipped (JSBSim X8, PX4 flavour, lockstep cloc
 times; the median is the figure. ``tracking`` is simulated seconds per wall second while the
 bridge commands the vehicle (OFFBOARD: every 20 ms frame waits for the bridge's answer to the
 frame before, the demo's 20 ms command latency being the lookahead that lets both peers work at
-once); ``overall`` includes start-up, the real-time-paced hand-over and the hand-back.
+once: ``lockstep_overlapped`` counts those frames; sim.vehicle.lockstep); ``overall`` includes
+start-up, the real-time-paced hand-over and the hand-back.
 ``cpu_us_per_frame_*``: CPU time of each peer per frame while
 tracking, a figure that depends less on what else the machine runs. Bar: tracking >= 30.
 
 sil_tracking: steady RMS |pt| (t >= 120 s after engagement, 360 s of tracking) in three
 atmospheres, the demo otherwise unchanged. Bars: <= 2 m without wind, <= 3 m in 5 m/s wind
 with light turbulence (the 5 m/s steady case has no bar of its own; 3 m is quoted).
+
+sil_vehicle_frame_us: the demo's vehicle alone against a scripted peer (sim/sil_peer.py) in the
+same thread: its own cost per frame, without the bridge or the lockstep wait. Goal <= 150 us.
 """
 
 from __future__ import annotations
@@ -70,6 +74,8 @@ def sil_real_time_factor(runs: int = 3) -> dict[str, Any]:
                 "cpu_us_per_frame_vehicle": m.get("cpu_us_per_frame_vehicle"),
                 "cpu_us_per_frame_bridge": m.get("cpu_us_per_frame_bridge"),
                 "lockstep_timeouts": m.get("vehicle_lockstep_timeouts"),
+                # frames that awaited an earlier frame's answer (the peers overlapped)
+                "lockstep_overlapped": m.get("vehicle_lockstep_overlapped"),
                 "steady_rms_m": m.get("steady_rms_m"),
                 "steal_pct": steal,
             }
@@ -108,3 +114,72 @@ def sil_tracking(duration_s: float = 360.0) -> dict[str, Any]:
             "real_time_factor": m.get("real_time_factor_tracking"),
         }
     return out
+
+
+def sil_vehicle_frame_us(frames: int = 3000) -> dict[str, Any]:
+    """The demo's SIL vehicle alone: wall time (us) per 20 ms lockstep frame in OFFBOARD
+    (``step_once`` + reading the answer), with a scripted peer (:mod:`sim.sil_peer`) answering
+    every ATTITUDE in the same thread, outside the timed calls. The vehicle's part of
+    ``cpu_us_per_frame_vehicle`` without the bridge's process and the lockstep wait. Quantiles
+    over the frames, and the JSBSim steps' share: on a loaded machine the 10th-50th
+    percentiles move least (a frame preempted by another process lands in the tail)."""
+    import time
+
+    import numpy as np
+
+    from mpf_mavlink.config.schema import load_config
+    from sim.sil import build_vehicle
+    from sim.sil_peer import ScriptedPeer
+
+    cfg = load_config(DEMO)
+    peer = ScriptedPeer()
+    v = build_vehicle(cfg, f"udpout:127.0.0.1:{peer.port}", "lockstep")
+    try:
+        for _ in range(60):  # > 1 s of setpoints: PX4 accepts OFFBOARD
+            v.step_once()
+            peer.pump()
+            v.poll(0.05)
+        peer.request_offboard()
+        for _ in range(5):
+            v.step_once()
+            peer.pump()
+            v.poll(0.05)
+        if v.modes.behaviour != "offboard":
+            raise RuntimeError(f"the vehicle did not enter OFFBOARD: {v.mode_name}")
+        clock = time.perf_counter
+        plant, fdm_step = v.plant, v.plant.step
+        fdm = [0.0]
+
+        def timed_step(*a: float) -> None:
+            t = clock()
+            fdm_step(*a)
+            fdm[0] += clock() - t
+
+        plant.step = timed_step
+        total, physics = np.empty(frames), np.empty(frames)
+        for i in range(frames):
+            fdm[0] = 0.0
+            c0 = clock()
+            v.step_once()
+            c1 = clock()
+            peer.pump()
+            c2 = clock()
+            v.poll(0.05)
+            c3 = clock()
+            total[i], physics[i] = c1 - c0 + c3 - c2, fdm[0]
+
+        def stats(a: Any) -> dict[str, float]:
+            p10, p50 = np.percentile(a * 1e6, [10, 50])
+            return {"p10": float(p10), "p50": float(p50), "mean": float(np.mean(a) * 1e6)}
+
+        return {
+            "frame_us": stats(total),
+            "jsbsim_us": stats(physics),
+            "rest_us": stats(total - physics),
+            "frames": frames,
+            "mode": v.mode_name,
+            "goal_us": 150.0,
+        }
+    finally:
+        v.close()
+        peer.close()

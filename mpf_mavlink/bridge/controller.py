@@ -195,6 +195,8 @@ def adapter_params(cfg: Config) -> AdapterParams:
     v = cfg.vehicle
     fields = {f.name: getattr(a, f.name) for f in dataclasses.fields(a)}
     fields["thrust_per_gamma"] = a.k_thrust(v)
+    if v.max_climb_rate_m_s is not None:  # the energy reserve's capability (core/adapter.py)
+        fields["max_climb_m_s"] = v.max_climb_rate_m_s
     return AdapterParams(
         max_bank_rad=v.max_bank_rad, airspeed_sp_m_s=v.airspeed_m_s, airspeed_min_m_s=v.v_min,
         airspeed_max_m_s=v.v_max, **fields,
@@ -424,7 +426,7 @@ class Controller:
         w1l = w1 if vl is vs else tuple(vl.R_W_I[:, 0].tolist())
         sp, self.ad_state = adapt(
             cmd.omega_w1_I, vl.airspeed, R_B_N, w1l, dt, self.ad_params, self.ad_state,
-            meas=(est.R_B_N, est.rates_frd), hold_s=hold,
+            meas=(est.R_B_N, est.rates_frd), hold_s=hold, path_down_m=diag_law.p_f[2],
         )  # fmt: skip
         if not math.isfinite(cmd.sdot):
             sp = safe_setpoint(self.ad_params)

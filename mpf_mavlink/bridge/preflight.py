@@ -11,6 +11,8 @@ import numpy as np
 
 from mpf_mavlink.config.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.config.schema import Config
+from mpf_mavlink.constants import GRAVITY_M_S2
+from mpf_mavlink.core.adapter import reserve_airspeed
 from mpf_mavlink.core.frames import euler_to_matrix
 from mpf_mavlink.core.guidance.checks import (
     CheckResult,
@@ -163,10 +165,14 @@ def climb_check(
     h0, top = home - float(p0[2]), home - float(np.min(P[:, 2]))
     k = min(1.0, density_ratio(top, h0))
     climb, sink = v.max_climb_rate_m_s, v.max_sink_rate_m_s
+    turb = None
+    if sil is not None and sil.turbulence != "none":
+        r_up, r_dn = energy_reserves(cfg, ts, P)
+        turb = (sil.turbulence, home - P[:, 2], r_up, r_dn)
     r = climb_feasibility(
         ts, W1, v.airspeed_m_s, v.v_min * (1.0 - m.airspeed_tolerance),
         v.v_max * (1.0 + m.airspeed_tolerance), None if climb is None else round(climb * k, 2),
-        None if sink is None else round(sink * k, 2), gusts=gusts,
+        None if sink is None else round(sink * k, 2), gusts=gusts, turbulence=turb,
     )  # fmt: skip
     figs = {**r.figures, "density_ratio": k, "top_asl_m": top}
     why = ""
@@ -176,6 +182,30 @@ def climb_check(
             f"level: {k:.3f} of the start's ({climb:g} / {sink:g} m/s there)"
         )
     return dataclasses.replace(r, summary=r.summary + why, figures=figs)
+
+
+def energy_reserves(cfg: Config, ts: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(climb, sink) energy reserves (m of height) per sample, as the adapter flies them: from
+    the airspeed set-point (raised by its energy reserve for the path's climb, low-passed as
+    the adapter does: core/adapter.reserve_airspeed) down to vehicle.airspeed_min_m_s, where
+    its airspeed priority gives the path up, and up to vehicle.airspeed_max_m_s."""
+    v = cfg.vehicle
+    a = cfg.extra.get("adapter")
+    v0, lo, hi = v.airspeed_m_s, v.v_min, v.v_max
+    vs = np.full(len(ts), v0)
+    if a is not None and a.reserve_gust_m_s > 0.0 and v.max_climb_rate_m_s is not None:
+        dts = np.diff(ts, prepend=ts[0])
+        climb = np.gradient(-P[:, 2], ts) if len(ts) > 1 else np.zeros(len(ts))
+        cf = float(climb[0])
+        for i in range(len(ts)):
+            cf += min(1.0, dts[i] / a.reserve_tau_s) * (float(climb[i]) - cf)
+            vs[i] = reserve_airspeed(
+                v0, hi, cf, v.max_climb_rate_m_s, a.reserve_gust_m_s, a.reserve_gust_s
+            )
+    g = GRAVITY_M_S2
+    return np.maximum(vs * vs - lo * lo, 0.0) / (2 * g), np.maximum(hi * hi - vs * vs, 0.0) / (
+        2 * g
+    )
 
 
 def density_ratio(h_m: float, h_ref_m: float) -> float:

@@ -361,6 +361,20 @@ class AdapterSection:
         ),
     )
     balance_tau_s: float = field(default=1.0, metadata=_nonneg())
+    reserve_gust_m_s: float = field(
+        default=3.0,
+        metadata=_nonneg(
+            "energy reserve: a downdraft (m/s) that the path's sustained climb must leave room "
+            "for in vehicle.max_climb_rate_m_s, or the airspeed set-point rises (up to "
+            "vehicle.airspeed_max_m_s) to pay the rest from speed; 0: off. 3 m/s for 10 s is "
+            "2.5 sigma of the 10 s mean of light turbulence at 400-600 m (MIL-F-8785C)"
+        ),
+    )
+    reserve_gust_s: float = field(default=10.0, metadata=_pos("how long that downdraft lasts"))
+    reserve_tau_s: float = field(default=20.0, metadata=_pos("low-pass of the path's climb"))
+    reserve_rate_m_s2: float = field(
+        default=0.1, metadata=_pos("how fast the reserve moves the airspeed set-point")
+    )
 
     def k_thrust(self, v: _Climb) -> float:
         """thrust_per_gamma, or its value derived from the vehicle's climb (see the field)."""

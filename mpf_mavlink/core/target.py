@@ -121,16 +121,21 @@ class PaperProfile:
     pdot_t^T = [3 sqrt((cos 0.1t + 1)^2 + 1), 0, 0],
     omega_TI^T = [0, -0.001 cos 0.03t, -sin 0.1t / (10 ((cos 0.1t + 1)^2 + 1)^1.5)],
     p_t(0) = position, R_T^I(0) = Rz(yaw). Position and attitude have no closed form: they
-    are integrated by RK4 on a 0.01 s grid (kept as it grows) and one RK4 step of the
-    remaining fraction, so state(t) is a deterministic pure function of t.
+    are integrated by RK4 on a 0.01 s grid (kept as it grows) and one step from the nearest
+    node to t (RK4; a first-order step when t is within 1e-6 s of the node, whose error,
+    ~1e-13 m, is below the RK4's own), so state(t) is a deterministic pure function of t.
     """
 
     DT = 0.01
+    # Below this distance (s) from a node one Euler step is exact to rounding in practice.
+    _NEAR_NODE_S = 1e-6
+    _CHUNK = 256  # grid nodes computed at once
 
     def __init__(self, position: ArrayLike = (0.0, 0.0, 5.0), yaw: float = math.pi / 4) -> None:
         # Grid of (position, row-major R_T^I) every DT seconds, as plain floats for speed.
-        self._grid_p: list[list[float]] = [[float(v) for v in np.asarray(position, float)]]
-        self._grid_R: list[list[float]] = [so3.rot_z(yaw).ravel().tolist()]
+        p0 = np.asarray(position, float).tolist()
+        self._grid_p: list[tuple[float, ...]] = [tuple(p0)]
+        self._grid_R: list[tuple[float, ...]] = [tuple(so3.rot_z(yaw).ravel().tolist())]
 
     @staticmethod
     def speed(t: float) -> tuple[float, float]:
@@ -140,66 +145,175 @@ class PaperProfile:
         return 3.0 * math.sqrt(g), -0.3 * (c + 1.0) * s / math.sqrt(g)
 
     @staticmethod
-    def omega(t: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """omega_TI^T (rad/s) and its time derivative (rad/s^2)."""
+    def _omega(t: float) -> tuple[float, float, float, float]:
+        """omega_TI^T = (0, wy, wz) (rad/s) and its rate (0, wy_dot, wz_dot) (rad/s^2)."""
         c, s = math.cos(0.1 * t), math.sin(0.1 * t)
         g = (c + 1.0) ** 2 + 1.0
         gdot = -0.2 * (c + 1.0) * s
         w3 = -s / (10.0 * g**1.5)
         w3dot = -(0.1 * c) / (10.0 * g**1.5) + s * 1.5 * gdot / (10.0 * g**2.5)
-        w = np.array([0.0, -0.001 * math.cos(0.03 * t), w3])
-        wd = np.array([0.0, 0.00003 * math.sin(0.03 * t), w3dot])
-        return w, wd
+        return -0.001 * math.cos(0.03 * t), w3, 0.00003 * math.sin(0.03 * t), w3dot
 
-    def _f(self, t: float, R: list[float]) -> tuple[list[float], list[float]]:
-        """(pdot, Rdot) with R a row-major list of 9 floats: pdot = R e1 v, Rdot = R hat(w)."""
+    @classmethod
+    def omega(cls, t: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """omega_TI^T (rad/s) and its time derivative (rad/s^2)."""
+        wy, wz, wy_dot, wz_dot = cls._omega(t)
+        return np.array([0.0, wy, wz]), np.array([0.0, wy_dot, wz_dot])
+
+    @staticmethod
+    def _vw(t: float) -> tuple[float, float, float]:
+        """(v, wy, wz): the speed and omega_TI^T = (0, wy, wz) the ODE needs at t."""
         c, s = math.cos(0.1 * t), math.sin(0.1 * t)
         g = (c + 1.0) ** 2 + 1.0
-        v = 3.0 * math.sqrt(g)
-        wy = -0.001 * math.cos(0.03 * t)
-        wz = -s / (10.0 * g**1.5)
-        pd = [R[0] * v, R[3] * v, R[6] * v]
-        # R hat(w) with w = (0, wy, wz): columns [R2 wz - R3 wy, -R1 wz, R1 wy].
-        Rd = []
-        for i in (0, 3, 6):
-            r0, r1, r2 = R[i], R[i + 1], R[i + 2]
-            Rd += [r1 * wz - r2 * wy, -r0 * wz, r0 * wy]
-        return pd, Rd
+        return 3.0 * math.sqrt(g), -0.001 * math.cos(0.03 * t), -s / (10.0 * g**1.5)
+
+    @staticmethod
+    def _f(
+        R: tuple[float, ...], v: float, wy: float, wz: float
+    ) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(pdot, Rdot) with R row-major (9 floats): pdot = R e1 v, Rdot = R hat(w),
+        w = (0, wy, wz), whose columns are [R2 wz - R3 wy, -R1 wz, R1 wy]."""
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
+        return (r0 * v, r3 * v, r6 * v), (
+            r1 * wz - r2 * wy, -r0 * wz, r0 * wy,
+            r4 * wz - r5 * wy, -r3 * wz, r3 * wy,
+            r7 * wz - r8 * wy, -r6 * wz, r6 * wy,
+        )  # fmt: skip
 
     def _rk4(
-        self, t: float, p: list[float], R: list[float], h: float
-    ) -> tuple[list[float], list[float]]:
-        k1p, k1R = self._f(t, R)
-        k2p, k2R = self._f(t + h / 2, [R[i] + h / 2 * k1R[i] for i in range(9)])
-        k3p, k3R = self._f(t + h / 2, [R[i] + h / 2 * k2R[i] for i in range(9)])
-        k4p, k4R = self._f(t + h, [R[i] + h * k3R[i] for i in range(9)])
-        c = h / 6
-        p2 = [p[i] + c * (k1p[i] + 2 * k2p[i] + 2 * k3p[i] + k4p[i]) for i in range(3)]
-        R2 = [R[i] + c * (k1R[i] + 2 * k2R[i] + 2 * k3R[i] + k4R[i]) for i in range(9)]
-        return p2, R2
+        self, t: float, p: tuple[float, ...], R: tuple[float, ...], h: float
+    ) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """One classical RK4 step of h (s) of (p, R) from t, written out on scalars: each row
+        r of R obeys r' = r hat(w) on its own, and p' = v R e1 takes the rows' first
+        elements at the same stages."""
+        h2, h6 = 0.5 * h, h / 6.0
+        va, ya, za = self._vw(t)
+        vb, yb, zb = self._vw(t + h2)
+        vc, yc, zc = self._vw(t + h)
+        p2: list[float] = []
+        R2: list[float] = []
+        for i in range(3):
+            r0, r1, r2 = R[3 * i], R[3 * i + 1], R[3 * i + 2]
+            a0, a1, a2 = r1 * za - r2 * ya, -r0 * za, r0 * ya  # k1
+            s0, s1, s2 = r0 + h2 * a0, r1 + h2 * a1, r2 + h2 * a2
+            b0, b1, b2 = s1 * zb - s2 * yb, -s0 * zb, s0 * yb  # k2
+            u0, u1, u2 = r0 + h2 * b0, r1 + h2 * b1, r2 + h2 * b2
+            c0, c1, c2 = u1 * zb - u2 * yb, -u0 * zb, u0 * yb  # k3
+            x0, x1, x2 = r0 + h * c0, r1 + h * c1, r2 + h * c2
+            d0, d1, d2 = x1 * zc - x2 * yc, -x0 * zc, x0 * yc  # k4
+            p2.append(p[i] + h6 * (va * r0 + 2 * vb * s0 + 2 * vb * u0 + vc * x0))
+            R2 += (
+                r0 + h6 * (a0 + 2 * b0 + 2 * c0 + d0),
+                r1 + h6 * (a1 + 2 * b1 + 2 * c1 + d1),
+                r2 + h6 * (a2 + 2 * b2 + 2 * c2 + d2),
+            )
+        return tuple(p2), tuple(R2)
+
+    def _extend(self) -> None:
+        """Extend the grid by _CHUNK RK4 steps of DT (always the same chunks, from node 0, so
+        every node has the same bits whatever the order of the queries).
+
+        The ODE is linear in (p, R) with coefficients that depend on t only, so one RK4 step
+        is (p, R) -> (p + R b, R Phi) exactly (the rows' stages R M_i, M_1 = I, M_2 = I +
+        h/2 W_a, M_3 = I + h/2 M_2 W_b, M_4 = I + h M_3 W_b, with W = hat(w) at t, t + h/2,
+        t + h): Phi and b are computed for the whole chunk at once and only the products
+        run node by node. R is re-orthonormalised every 100 nodes.
+        """
+        gp, gR = self._grid_p, self._grid_R
+        j0 = len(gp) - 1
+        n = self._CHUNK
+        h = self.DT
+        t: NDArray[np.float64] = (j0 + np.arange(n, dtype=float)) * h
+
+        def vw(tt: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+            c, s = np.cos(0.1 * tt), np.sin(0.1 * tt)
+            g = (c + 1.0) ** 2 + 1.0
+            wy, wz = -0.001 * np.cos(0.03 * tt), -s / (10.0 * g**1.5)
+            W = np.zeros((len(tt), 3, 3))  # r hat(w) = r W for a row r, w = (0, wy, wz)
+            W[:, 0, 1], W[:, 0, 2], W[:, 1, 0], W[:, 2, 0] = -wz, wy, wz, -wy
+            return 3.0 * np.sqrt(g), W
+
+        va, Wa = vw(t)
+        vb, Wb = vw(t + 0.5 * h)
+        vc, Wc = vw(t + h)
+        eye = np.eye(3)
+        M2 = eye + 0.5 * h * Wa
+        K2 = M2 @ Wb
+        M3 = eye + 0.5 * h * K2
+        K3 = M3 @ Wb
+        M4 = eye + h * K3
+        Phi = eye + (h / 6.0) * (Wa + 2.0 * K2 + 2.0 * K3 + M4 @ Wc)
+        b = (h / 6.0) * (
+            va[:, None] * eye[0] + 2.0 * vb[:, None] * (M2[:, :, 0] + M3[:, :, 0])
+            + vc[:, None] * M4[:, :, 0]
+        )  # fmt: skip
+        p0, p1, p2 = gp[-1]
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = gR[-1]
+        j = j0
+        for (f0, f1, f2, f3, f4, f5, f6, f7, f8), (b0, b1, b2) in zip(
+            Phi.reshape(n, 9).tolist(), b.tolist(), strict=True
+        ):
+            p0 += r0 * b0 + r1 * b1 + r2 * b2
+            p1 += r3 * b0 + r4 * b1 + r5 * b2
+            p2 += r6 * b0 + r7 * b1 + r8 * b2
+            R: tuple[float, ...] = (
+                r0 * f0 + r1 * f3 + r2 * f6, r0 * f1 + r1 * f4 + r2 * f7,
+                r0 * f2 + r1 * f5 + r2 * f8,
+                r3 * f0 + r4 * f3 + r5 * f6, r3 * f1 + r4 * f4 + r5 * f7,
+                r3 * f2 + r4 * f5 + r5 * f8,
+                r6 * f0 + r7 * f3 + r8 * f6, r6 * f1 + r7 * f4 + r8 * f7,
+                r6 * f2 + r7 * f5 + r8 * f8,
+            )  # fmt: skip
+            if j % 100 == 0:
+                R = tuple(so3.orthonormalize(np.reshape(R, (3, 3))).ravel().tolist())
+            r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
+            gp.append((p0, p1, p2))
+            gR.append(R)
+            j += 1
 
     def state(self, t: float) -> TargetState:
         if t < 0:
             raise ValueError("the paper's target profile starts at t = 0")
-        x = t / self.DT
-        k = int(round(x))
-        if abs(x - k) > 1e-9:  # not on the grid (up to float round-off)
-            k = int(x)
-        while len(self._grid_p) <= k:
-            j = len(self._grid_p) - 1
-            p2, R2 = self._rk4(j * self.DT, self._grid_p[j], self._grid_R[j], self.DT)
-            if j % 100 == 0:
-                R2 = so3.orthonormalize(np.array(R2).reshape(3, 3)).ravel().tolist()
-            self._grid_p.append(p2)
-            self._grid_R.append(R2)
-        h = t - k * self.DT
-        p, R = self._grid_p[k], self._grid_R[k]
-        if h > 1e-12:
+        k = int(round(t / self.DT))  # the nearest node
+        gp, gR = self._grid_p, self._grid_R
+        while len(gp) <= k:
+            self._extend()
+        h = t - k * self.DT  # |h| <= DT / 2, either sign
+        p, R = gp[k], gR[k]
+        near = abs(h) <= self._NEAR_NODE_S
+        if not near:
             p, R = self._rk4(k * self.DT, p, R, h)
-        v, vdot = self.speed(t)
-        w, wd = self.omega(t)
-        Rm = np.array(R).reshape(3, 3)
-        vel = Rm[:, 0] * v
-        # a = R (vdot e1 + omega x (v e1)) in body components.
-        acc = Rm @ np.array([vdot, w[2] * v, -w[1] * v])
-        return TargetState(t, np.array(p), vel, acc, Rm, w, wd)
+        # speed(t) and _omega(t) on one evaluation of the trigonometry.
+        c, s = math.cos(0.1 * t), math.sin(0.1 * t)
+        g = (c + 1.0) ** 2 + 1.0
+        sg = math.sqrt(g)
+        g15 = 10.0 * g * sg
+        v, vdot = 3.0 * sg, -0.3 * (c + 1.0) * s / sg
+        wy, wz = -0.001 * math.cos(0.03 * t), -s / g15
+        wy_dot = 0.00003 * math.sin(0.03 * t)
+        wz_dot = -(0.1 * c) / g15 + s * 1.5 * (-0.2 * (c + 1.0) * s) / (g15 * g)
+        p0, p1, p2 = p
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
+        if near and h != 0.0:
+            # One Euler step: p' = v R e1, each row r' = r hat(w) (w = (0, wy, wz)).
+            p0, p1, p2 = p0 + h * v * r0, p1 + h * v * r3, p2 + h * v * r6
+            r0, r1, r2 = r0 + h * (r1 * wz - r2 * wy), r1 - h * r0 * wz, r2 + h * r0 * wy
+            r3, r4, r5 = r3 + h * (r4 * wz - r5 * wy), r4 - h * r3 * wz, r5 + h * r3 * wy
+            r6, r7, r8 = r6 + h * (r7 * wz - r8 * wy), r7 - h * r6 * wz, r8 + h * r6 * wy
+        # a = R (vdot e1 + omega x (v e1)) in body components (vdot, wz v, -wy v).
+        b0, b1, b2 = vdot, wz * v, -wy * v
+        return TargetState(
+            t,
+            np.array((p0, p1, p2)),
+            np.array((r0 * v, r3 * v, r6 * v)),
+            np.array(
+                (
+                    r0 * b0 + r1 * b1 + r2 * b2,
+                    r3 * b0 + r4 * b1 + r5 * b2,
+                    r6 * b0 + r7 * b1 + r8 * b2,
+                )
+            ),
+            np.array((r0, r1, r2, r3, r4, r5, r6, r7, r8)).reshape(3, 3),
+            np.array((0.0, wy, wz)),
+            np.array((0.0, wy_dot, wz_dot)),
+        )

@@ -15,7 +15,7 @@ PX4_OFFBOARD_MAX_GAP_S = 0.5  # ... at more than 2 Hz
 
 
 def finite(*vals: float) -> bool:
-    return all(math.isfinite(v) for v in vals)
+    return all(map(math.isfinite, vals))
 
 
 def clip(x: float, lo: float, hi: float) -> float:

@@ -4,12 +4,13 @@ pdot = v_w w1 + eta(t, p)        (NED, m/s; eta: air-mass velocity)
 Rdot_W^I = R_W^I hat([0, w2, w3]) (rad/s)
 wdot = lambda_w (w_cmd - w)       (first-order autopilot of bandwidth lambda_w, rad/s)
 
-``closed_loop_rk4`` integrates this with the MPF law evaluated at every RK4 stage, so the
+:meth:`ClosedLoop.step` integrates this with the MPF law evaluated at every RK4 stage, so the
 closed loop is the paper's continuous-time system (no sample-and-hold).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -22,6 +23,7 @@ from mpf_mavlink.core.guidance.law import (
     Gains,
     MpfDiagnostics,
     VehicleState,
+    mpf_law,
 )
 from mpf_mavlink.core.paths import TabulatedPath
 from mpf_mavlink.core.target import TargetMotion
@@ -49,13 +51,18 @@ def region_wind(
     gusts: list[tuple[NDArray[np.float64], float, NDArray[np.float64]]],
 ) -> WindFn:
     """Steady wind plus gust regions (centre NED m, radius m, extra velocity NED m/s)."""
-    base = np.asarray(steady, float)
+    # Read-only, so it is handed out as it is (no copy per call, ~4 per RK4 step).
+    base = np.array(steady, float)
+    base.flags.writeable = False
+    regions = [(c.tolist(), r * r, v) for c, r, v in gusts]
 
     def f(t: float, p: NDArray[np.float64]) -> NDArray[np.float64]:
-        w = base.copy()
-        for c, r, v in gusts:
-            if float(np.sum((p - c) ** 2)) <= r * r:
-                w = w + v
+        w = base
+        if regions:
+            p0, p1, p2 = p.tolist()
+            for (c0, c1, c2), rr, v in regions:
+                if (p0 - c0) ** 2 + (p1 - c1) ** 2 + (p2 - c2) ** 2 <= rr:
+                    w = w + v
         return w
 
     return f
@@ -82,6 +89,9 @@ class ClosedLoop:
         self.law_name = law  # guidance.law: MPF or a baseline, the same command type
         self._tcache: tuple[float, object] | None = None
         self.last: Sample | None = None
+        # The last step's result, its fields and its flat state, so that the next step need
+        # not convert it back.
+        self._x_cache: tuple[KinematicState, tuple[object, ...], list[float]] | None = None
 
     def target_state(self, t: float):  # noqa: ANN201
         c = self._tcache
@@ -100,84 +110,95 @@ class ClosedLoop:
         return guidance_law(self.law_name, s, veh, st, self.path, self.gains, self.ext, diag), eta
 
     def deriv(
-        self, t: float, p: list[float], R: list[float], w: list[float], s: float, keep: bool = False
-    ) -> tuple[list[float], list[float], list[float], float, tuple[float, float]]:
-        """(pdot, Rdot, wdot, sdot, w_cmd) with R a row-major list of 9 floats.
+        self, t: float, X: list[float], keep: bool = False
+    ) -> tuple[list[float], tuple[float, float]]:
+        """(Xdot, w_cmd) of the state X = p (3), R_W^I row-major (9), w = [w2, w3] (2), s.
 
         keep: also build the diagnostics and keep them as ``self.last`` (the recorder reads
         them, so a recorded step costs no extra law evaluation)."""
-        pa = np.array(p)
-        Ra = np.array(R).reshape(3, 3)
-        (cmd, diag), eta = self.law(t, pa, Ra, s, keep)
-        if keep:
-            self.last = Sample(
-                t,
-                pa,
-                Ra,
-                np.array(w),
-                diag,
-                (cmd.w2, cmd.w3),
-                cmd.sdot,
-                self.target_state(t).position,
-                self.target_state(t).R_T_I,
-                eta,
-            )
+        pa = np.array(X[0:3])
+        Ra = np.array(X[3:12]).reshape(3, 3)
+        # What self.law does, without its call (this runs four times per step).
+        eta = self.wind(t, pa)
+        st = self.target_state(t)
+        veh = VehicleState(t, pa, Ra, self.v_w, eta)
+        if self.law_name == "mpf":
+            cmd, diag = mpf_law(X[14], veh, st, self.path, self.gains, self.ext, keep)
+        else:
+            name, s = self.law_name, X[14]
+            cmd, diag = guidance_law(name, s, veh, st, self.path, self.gains, self.ext, keep)
         wc = (cmd.w2, cmd.w3)
+        if keep:
+            assert diag is not None
+            self.last = Sample(
+                t, pa, Ra, np.array(X[12:14]), diag, wc, cmd.sdot, st.position, st.R_T_I, eta
+            )
         if self.lambda_w is None:
-            w = list(wc)
-            wdot = [0.0, 0.0]
+            w2, w3 = wc
+            w2_dot = w3_dot = 0.0
         else:
             lam = self.lambda_w
-            wdot = [lam * (wc[0] - w[0]), lam * (wc[1] - w[1])]
+            w2, w3 = X[12], X[13]
+            w2_dot, w3_dot = lam * (wc[0] - w2), lam * (wc[1] - w3)
         v = self.v_w
-        e = eta.tolist()
-        pdot = [v * R[0] + e[0], v * R[3] + e[1], v * R[6] + e[2]]
-        # R hat([0, w2, w3]): columns [R2 w3 - R3 w2, -R1 w3, R1 w2].
-        w2, w3 = w[0], w[1]
-        Rdot = []
-        for i in (0, 3, 6):
-            r0, r1, r2 = R[i], R[i + 1], R[i + 2]
-            Rdot += [r1 * w3 - r2 * w2, -r0 * w3, r0 * w2]
-        return pdot, Rdot, wdot, cmd.sdot, wc
+        e0, e1, e2 = eta.tolist()
+        _, _, _, r0, r1, r2, r3, r4, r5, r6, r7, r8 = X[0:12]
+        # pdot = v_w w1 + eta; Rdot = R hat([0, w2, w3]), whose columns are
+        # [R2 w3 - R3 w2, -R1 w3, R1 w2].
+        Xdot = [
+            v * r0 + e0, v * r3 + e1, v * r6 + e2,
+            r1 * w3 - r2 * w2, -r0 * w3, r0 * w2,
+            r4 * w3 - r5 * w2, -r3 * w3, r3 * w2,
+            r7 * w3 - r8 * w2, -r6 * w3, r6 * w2,
+            w2_dot, w3_dot, cmd.sdot,
+        ]  # fmt: skip
+        return Xdot, wc
 
     def step(self, x: KinematicState, dt: float) -> KinematicState:
         """One classical RK4 step of (p, R, w, s); R re-orthonormalised afterwards."""
-        t, s = x.t, x.s
-        p, R, w = x.p.tolist(), x.R.ravel().tolist(), x.w.tolist()
-
-        def add(a: list[float], k: list[float], h: float) -> list[float]:
-            return [a[i] + h * k[i] for i in range(len(a))]
-
-        k1 = self.deriv(t, p, R, w, s, keep=True)
-        h2 = dt / 2
-        k2 = self.deriv(
-            t + h2, add(p, k1[0], h2), add(R, k1[1], h2), add(w, k1[2], h2), s + h2 * k1[3]
-        )
-        k3 = self.deriv(
-            t + h2, add(p, k2[0], h2), add(R, k2[1], h2), add(w, k2[2], h2), s + h2 * k2[3]
-        )
-        k4 = self.deriv(
-            t + dt, add(p, k3[0], dt), add(R, k3[1], dt), add(w, k3[2], dt), s + dt * k3[3]
-        )
+        t = x.t
+        cached = self._x_cache
+        if (
+            cached is not None
+            and cached[0] is x
+            and all(a is b for a, b in zip(cached[1], (x.p, x.R, x.w), strict=True))
+            and cached[2][14] == x.s
+        ):
+            X = cached[2]
+        else:
+            X = x.p.tolist() + x.R.ravel().tolist() + x.w.tolist() + [float(x.s)]
+        h2 = 0.5 * dt
+        k1, _ = self.deriv(t, X, keep=True)
+        k2, _ = self.deriv(t + h2, [a + h2 * k for a, k in zip(X, k1, strict=True)])
+        k3, _ = self.deriv(t + h2, [a + h2 * k for a, k in zip(X, k2, strict=True)])
+        k4, wc4 = self.deriv(t + dt, [a + dt * k for a, k in zip(X, k3, strict=True)])
         c = dt / 6
-
-        def comb(
-            a: list[float], ka: list[float], kb: list[float], kc: list[float], kd: list[float]
-        ) -> list[float]:
-            return [a[i] + c * (ka[i] + 2 * kb[i] + 2 * kc[i] + kd[i]) for i in range(len(a))]
-
-        p2 = np.array(comb(p, k1[0], k2[0], k3[0], k4[0]))
-        R2 = np.array(comb(R, k1[1], k2[1], k3[1], k4[1])).reshape(3, 3)
-        w2 = np.array(comb(w, k1[2], k2[2], k3[2], k4[2]))
-        s2 = s + c * (k1[3] + 2 * k2[3] + 2 * k3[3] + k4[3])
+        X2 = [
+            a + c * (ka + 2 * kb + 2 * kc + kd)
+            for a, ka, kb, kc, kd in zip(X, k1, k2, k3, k4, strict=True)
+        ]
         if self.lambda_w is None:
-            w2 = np.array(k4[4])
-        # Gram-Schmidt keeps R on SO(3) without the cost of an SVD every step.
-        a = R2[:, 0] / np.linalg.norm(R2[:, 0])
-        b = R2[:, 1] - (R2[:, 1] @ a) * a
-        b /= np.linalg.norm(b)
-        R2 = np.column_stack([a, b, np.cross(a, b)])
-        return KinematicState(t + dt, p2, R2, w2, s2)
+            X2[12], X2[13] = wc4
+        # Gram-Schmidt on R's first two columns keeps R on SO(3) without an SVD every step.
+        _, _, _, a0, b0, _, a1, b1, _, a2, b2, _ = X2[0:12]
+        n = 1.0 / math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        a0, a1, a2 = a0 * n, a1 * n, a2 * n
+        d = b0 * a0 + b1 * a1 + b2 * a2
+        b0, b1, b2 = b0 - d * a0, b1 - d * a1, b2 - d * a2
+        n = 1.0 / math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
+        b0, b1, b2 = b0 * n, b1 * n, b2 * n
+        X2[3:12] = (
+            a0, b0, a1 * b2 - a2 * b1,
+            a1, b1, a2 * b0 - a0 * b2,
+            a2, b2, a0 * b1 - a1 * b0,
+        )  # fmt: skip
+        p, R, w = np.array(X2[0:3]), np.array(X2[3:12]).reshape(3, 3), np.array(X2[12:14])
+        # Read-only: the next step reads the flat copy, so an edit in place must fail loudly
+        # (replacing a field, or passing a new state, is seen).
+        p.flags.writeable = R.flags.writeable = w.flags.writeable = False
+        x2 = KinematicState(t + dt, p, R, w, X2[14])
+        self._x_cache = (x2, (p, R, w), X2)
+        return x2
 
 
 @dataclass

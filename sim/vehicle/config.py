@@ -62,6 +62,10 @@ class VehicleConfig:
     frame_period: float = 0.02  # one telemetry frame (s): the lockstep unit
     clock: Any = "lockstep"  # "lockstep", "realtime" or a clock object (sim.vehicle.clock)
     answer_timeout_s: float = 0.05  # lockstep: wall s to wait for the bridge's answer
+    # lockstep: await only the answer that acts in the next frame (with a command latency of a
+    # frame or more an earlier frame's, so the peer computes while the vehicle steps); False:
+    # the answer to the telemetry just written (strict alternation: the same flight, slower)
+    lockstep_overlap: bool = True
     realtime_speed: float = 1.0  # realtime clock: times real time
     # pace at real time until the bridge commands the vehicle (see SimVehicle._lockstep_peer)
     realtime_until_engaged: bool = False

@@ -10,13 +10,11 @@ CRC extra are read from pymavlink; the CRC-16/MCRF4XX is CRC-CCITT on bit-revers
 from __future__ import annotations
 
 import binascii
-import struct
 from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 _STX2 = 0xFD
-_HEADER = struct.Struct("<BBBBBBBHB")  # stx, len, incompat, compat, seq, sys, comp, id lo/hi
 _REV = bytes(int(f"{i:08b}"[::-1], 2) for i in range(256))  # bit reversal of a byte
 
 
@@ -27,12 +25,15 @@ def crc_mcrf4xx(data: bytes) -> int:
 
 
 class _Layout:
-    """One message class's wire layout: the field order and the CRC extra byte."""
+    """One message class's wire layout: the field order and the CRC extra byte; ``ids`` the
+    header's system, component and message id bytes for one sender."""
 
-    __slots__ = ("msgid", "packer", "wire_order", "arrays", "in_order", "crc_extra")
+    __slots__ = ("msgid", "packer", "wire_order", "arrays", "in_order", "crc_extra", "ids")
 
-    def __init__(self, cls: Any) -> None:
+    def __init__(self, cls: Any, sysid: int = 0, compid: int = 0) -> None:
         self.msgid = int(cls.id)
+        mid = self.msgid
+        self.ids = bytes((sysid, compid, mid & 0xFF, (mid >> 8) & 0xFF, mid >> 16))
         self.packer = cls.unpacker
         n = len(cls.orders)
         inv = [0] * n
@@ -70,32 +71,27 @@ class Framer:
 
     def _layout(self, cls: Any) -> _Layout | None:
         if cls not in self._layouts:  # text (char arrays) is pymavlink's to encode
-            self._layouts[cls] = None if "char" in cls.fieldtypes else _Layout(cls)
+            mav = self.mav
+            self._layouts[cls] = (
+                None
+                if "char" in cls.fieldtypes
+                else _Layout(cls, mav.srcSystem & 0xFF, mav.srcComponent & 0xFF)
+            )
         return self._layouts[cls]
 
     def pack(self, cls: Any, *args: Any) -> bytes:
         """One framed message from the field values in pymavlink's ``*_encode`` order."""
         mav = self.mav
-        lay = self._layout(cls)
+        lay = self._layouts.get(cls) or self._layout(cls)
         if lay is None or mav.signing.sign_outgoing:
             buf = bytes(cls(*args).pack(mav))
         else:
             payload = lay.packer.pack(*(args if lay.in_order else lay.values(args)))
             body = payload.rstrip(b"\0") or payload[:1]  # MAVLink 2 trims trailing zeros
-            mid = lay.msgid
-            head = _HEADER.pack(
-                _STX2,
-                len(body),
-                0,
-                0,
-                mav.seq,
-                mav.srcSystem,
-                mav.srcComponent,
-                mid & 0xFFFF,
-                mid >> 16,
-            )
-            crc = crc_mcrf4xx(head[1:] + body + lay.crc_extra)
-            buf = head + body + bytes((crc & 0xFF, crc >> 8))
+            # header after the start byte: length, flags 0, 0, sequence, then the ids
+            head = bytes((len(body), 0, 0, mav.seq)) + lay.ids
+            crc = crc_mcrf4xx(head + body + lay.crc_extra)
+            buf = b"\xfd" + head + body + crc.to_bytes(2, "little")
         mav.seq = (mav.seq + 1) & 0xFF  # what MAVLink.send does after packing
         mav.total_packets_sent += 1
         mav.total_bytes_sent += len(buf)

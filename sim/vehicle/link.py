@@ -4,6 +4,7 @@ hand-shake's bookkeeping of what left and what answered (:mod:`sim.vehicle.locks
 
 from __future__ import annotations
 
+import socket
 import time
 from collections import deque
 from collections.abc import Callable
@@ -68,8 +69,20 @@ class Link:
         )
         # plain UDP links are read datagram by datagram (the setpoints decoded without pymavlink)
         self._udp = type(self.conn).__name__ == "mavudp"
+        # a udpout link to one fixed address is written straight to its socket (pymavlink's
+        # write re-checks the client list and the address on every packet)
+        self._sendto: Callable[[bytes, Any], Any] | None = None
+        self._dest: Any = None
+        c = self.conn
+        if self._udp and not c.udp_server and not getattr(c, "broadcast", False):
+            host, port = c.destination_addr
+            self._sendto, self._dest = c.port.sendto, (socket.gethostbyname(host), port)
         # (due boot s, packet, ATTITUDE ms or -1, LOCAL_POSITION_NED ms or -1)
         self._out: deque[tuple[float, bytes, int, int]] = deque()
+        # without a telemetry latency packets leave at the next flush: a plain list (and the
+        # highest ATTITUDE / LOCAL_POSITION_NED stamps in it) instead of the delay queue
+        self._now: list[bytes] | None = [] if self.telemetry_latency_s <= 0.0 else None
+        self._now_att = self._now_pos = -1
         self.incoming: deque[tuple[float, Any]] = deque()  # (due boot s, message)
         self.mav = M.MAVLink(_QueueWriter(self), srcSystem=sysid, srcComponent=compid)
         self.tmav = M.MAVLink(
@@ -89,6 +102,14 @@ class Link:
         """Queue one framed packet; it leaves ``telemetry_latency_s`` of sim time from now.
         ``attitude_ms``: the time_boot_ms of an ATTITUDE packet (the bridge answers those);
         ``position_ms``: that of a LOCAL_POSITION_NED (a multi-rate bridge answers those too)."""
+        now = self._now
+        if now is not None:  # no latency: it leaves with this frame's datagram
+            now.append(buf)
+            if attitude_ms > self._now_att:
+                self._now_att = attitude_ms
+            if position_ms > self._now_pos:
+                self._now_pos = position_ms
+            return
         self._out.append(
             (self.clock.boot_s + self.telemetry_latency_s, buf, attitude_ms, position_ms)
         )
@@ -115,16 +136,37 @@ class Link:
         self.lockstep.choose(self.clock.boot_s)
 
     def _flush_due(self) -> None:
+        now = self._now
+        if now is not None:
+            if now:
+                self._now = []
+                att_ms, pos_ms = self._now_att, self._now_pos
+                self._now_att = self._now_pos = -1
+                if self._send_packets(now):
+                    self.lockstep.written(att_ms, pos_ms, self.clock.boot_s)
+            return
         q, t = self._out, self.clock.boot_s + 1e-9
         if not q or q[0][0] > t:
             return
-        wrote = False
-        chunk: list[bytes] = []
-        size = 0
+        bufs: list[bytes] = []
         att_ms = pos_ms = -1
         while q and q[0][0] <= t:
             _, buf, ms, pms = q.popleft()
             att_ms, pos_ms = max(att_ms, ms), max(pos_ms, pms)
+            bufs.append(buf)
+        if self._send_packets(bufs):
+            self.lockstep.written(att_ms, pos_ms, t - 1e-9)
+
+    def _send_packets(self, bufs: list[bytes]) -> bool:
+        """Send ``bufs`` in order, as few datagrams of at most ``_DATAGRAM_MAX`` bytes as they
+        fit in (a packet larger than that alone); True if any was written."""
+        data = b"".join(bufs)
+        if len(data) <= _DATAGRAM_MAX:
+            return self._write(data)
+        wrote = False
+        chunk: list[bytes] = []
+        size = 0
+        for buf in bufs:
             if chunk and size + len(buf) > _DATAGRAM_MAX:
                 wrote |= self._write(b"".join(chunk))
                 chunk, size = [], 0
@@ -132,10 +174,16 @@ class Link:
             size += len(buf)
         if chunk:
             wrote |= self._write(b"".join(chunk))
-        if wrote:
-            self.lockstep.written(att_ms, pos_ms, t - 1e-9)
+        return wrote
 
     def _write(self, data: bytes) -> bool:
+        send = self._sendto
+        if send is not None:
+            try:
+                send(data, self._dest)
+            except OSError:
+                pass  # as pymavlink's udp write: a peer not up yet is a datagram lost
+            return True
         try:
             self.conn.write(data)
             return True

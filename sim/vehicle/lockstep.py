@@ -8,6 +8,11 @@ the run. The ATTITUDE awaited is the latest one whose answer would act within th
 with a command latency of a frame or more, that is an earlier frame's, and the bridge computes
 while the vehicle steps (the latency is the lookahead that lets the two peers run in parallel).
 
+With ``overlap`` off the vehicle awaits the answer to the telemetry it has just written,
+whatever the latency: the peers strictly alternate. The flight is the same either way (an answer
+acts at the time its stamp says, not when it was read: tests/test_sil_lockstep.py compares the
+two bit for bit); only the wall time differs.
+
 A bridge that also answers LOCAL_POSITION_NED between ATTITUDE samples (a multi-rate loop:
 mavlink.position_instants) is awaited on those frames too, from its first answer stamped with a
 position-only frame's time on; before that (and for a bridge that never does) they are not
@@ -23,9 +28,11 @@ _REMEMBERED = 512  # frames whose stamps are remembered (10 s at 50 Hz)
 class Lockstep:
     """Stamps written, answers received, the stamp awaited (all ms of the boot clock)."""
 
-    def __init__(self, frame_period: float, command_latency_s: float) -> None:
+    def __init__(self, frame_period: float, command_latency_s: float, overlap: bool = True) -> None:
         self.frame_period = float(frame_period)
         self.command_latency_s = float(command_latency_s)
+        self.overlap = bool(overlap)
+        self.overlapped = 0  # frames that awaited an earlier frame's answer, not the last one's
         self.await_ms = -1  # time_boot_ms of the ATTITUDE awaited
         self.answer_ms = -1  # the highest stamp of the setpoints received
         self.unstamped = False  # a setpoint stamped 0 since the last ATTITUDE was written
@@ -78,9 +85,15 @@ class Lockstep:
         """At the end of the frame that ends at boot time ``t`` (s): the answer to an ATTITUDE
         written at tw acts at tw + latency, so await the latest one that acts before the end of
         the next frame."""
+        w = self._written
+        if not self.overlap:
+            self.await_ms = w[-1][0] if w else -1
+            return
         horizon = t + self.frame_period - self.command_latency_s - 1e-6
-        for m, tw in reversed(self._written):
+        for i, (m, tw) in enumerate(reversed(w)):
             if tw < horizon:
                 self.await_ms = m
+                if i:
+                    self.overlapped += 1
                 return
         self.await_ms = -1

@@ -9,6 +9,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from sim.vehicle.clock import StepClock
@@ -34,6 +35,8 @@ SPEC = {
         "gps_raw_int",
     )
 }
+_ATTITUDE, _LOCAL_POSITION = SPEC["attitude"], SPEC["local_position_ned"]
+_GLOBAL_POSITION = SPEC["global_position_int"]
 # streams after ATTITUDE within a frame (see Telemetry.frame)
 STREAM_ORDER = (
     "heartbeat",
@@ -100,9 +103,15 @@ def _e7(deg: float) -> int:
     return int(round(deg * 1e7))
 
 
+def _xyz(v: Any) -> Any:
+    """A state's 3-vector as Python floats (numpy's scalars cost more in the arithmetic and
+    packing that follow; the values are the same)."""
+    return v.tolist() if type(v) is np.ndarray else [float(x) for x in v]
+
+
 def _global_position(st: Any, ms: int, home_alt_m: float) -> tuple[int, ...]:
     """GLOBAL_POSITION_INT's fields from a plant state."""
-    vx, vy, vz = st.velocity_ned
+    vx, vy, vz = _xyz(st.velocity_ned)
     hdg = int(round(math.degrees(st.euler[2]) * 100.0)) % 36000
     alt_mm, rel_mm = int(round(st.alt_m * 1000.0)), int(round((st.alt_m - home_alt_m) * 1000.0))
     return (ms, _e7(st.lat_deg), _e7(st.lon_deg), alt_mm, rel_mm,
@@ -226,15 +235,15 @@ class Telemetry:
         st = self.st
         self.sent["attitude"] = self.sent.get("attitude", 0) + 1
         ms = self.clock.ms()
-        p, q, r = st.pqr
-        self.link.put(self.link.framer.pack(SPEC["attitude"], ms, *st.euler, p, q, r), ms)
+        p, q, r = _xyz(st.pqr)
+        self.link.put(self.link.framer.pack(_ATTITUDE, ms, *st.euler, p, q, r), ms)
 
     def local_position(self) -> None:
         st, ms = self.st, self.clock.ms()
         self.sent["local_position"] = self.sent.get("local_position", 0) + 1
-        x, y, z = st.position_ned
-        vx, vy, vz = st.velocity_ned
-        buf = self.link.framer.pack(SPEC["local_position_ned"], ms, x, y, z, vx, vy, vz)
+        x, y, z = _xyz(st.position_ned)
+        vx, vy, vz = _xyz(st.velocity_ned)
+        buf = self.link.framer.pack(_LOCAL_POSITION, ms, x, y, z, vx, vy, vz)
         self.link.put(buf, -1, ms)
 
     def send(self, name: str) -> None:
@@ -252,6 +261,8 @@ class Telemetry:
 
     def _message(self, name: str) -> bytes | None:
         st, ms, us, pack = self.st, self.clock.ms(), self.clock.us(), self.link.framer.pack
+        if name == "global_position":  # first: the one due every frame at PX4's stock rates
+            return pack(_GLOBAL_POSITION, *_global_position(st, ms, self.home_lla[2]))
         if name == "heartbeat":
             ap = M.MAV_AUTOPILOT_PX4 if self.px4 else M.MAV_AUTOPILOT_ARDUPILOTMEGA
             base, custom = self._heartbeat()
@@ -274,8 +285,6 @@ class Telemetry:
             return pack(SPEC["attitude_target"], t_ms, tm, list(q), *rates, thrust)
         if name == "system_time":
             return pack(SPEC["system_time"], self.unix0_us + us, ms)
-        if name == "global_position":
-            return pack(SPEC["global_position_int"], *_global_position(st, ms, self.home_lla[2]))
         if name == "vfr_hud":
             return pack(SPEC["vfr_hud"], *_vfr_hud(st))
         if name == "home_position":

@@ -202,6 +202,107 @@ def vertical_gusts(
     )
 
 
+def windowed_gust(sigma_w: float, L_w: float, v: float, T: float) -> tuple[float, float]:
+    """(sigma_T m/s, nu_0 1/s) of the vertical gust averaged over a window of T s, flown at v m/s
+    through MIL-F-8785C Dryden turbulence of intensity sigma_w (m/s) and scale L_w (m).
+
+    The Dryden vertical spectrum in time (one-sided, integrating to sigma_w^2):
+    Phi(w) = sigma_w^2 L / (pi v) (1 + 3 (L w / v)^2) / (1 + (L w / v)^2)^2; a T-s mean passes
+    it through |H(w)|^2 = sinc^2(w T / 2). sigma_T^2 = m0 = int Phi |H|^2 dw, and Rice's
+    up-crossing rate of the mean through zero is nu_0 = sqrt(m2 / m0) / (2 pi), m2 = int w^2
+    Phi |H|^2 dw (finite: |H|^2 Phi falls as w^-4). Both by quadrature on a log grid."""
+    if not (sigma_w > 0.0 and L_w > 0.0 and v > 0.0 and T > 0.0):
+        return 0.0, 0.0
+    tau = L_w / v
+    w = np.logspace(-4.0, 3.0, 4000) / tau
+    x2 = (tau * w) ** 2
+    phi = sigma_w * sigma_w * tau / math.pi * (1.0 + 3.0 * x2) / (1.0 + x2) ** 2
+    h2 = np.sinc(w * T / (2.0 * math.pi)) ** 2
+    m0 = float(np.trapezoid(phi * h2, w))
+    m2 = float(np.trapezoid(w * w * phi * h2, w))
+    return math.sqrt(m0), math.sqrt(m2 / m0) / (2.0 * math.pi)
+
+
+# Window lengths (s) over which the gust judgement averages the turbulence: a gust shorter than
+# ~2 s is carried by the airframe's own speed and pitch response, one longer than a minute is the
+# steady deficit's; between them a factor 1.5 apart (sigma_T changes by < 10 % from one to the next)
+GUST_WINDOWS_S = (2.0, 3.0, 4.5, 7.0, 10.0, 15.0, 23.0, 35.0, 52.0)
+# refuse when a gust beyond the reserve is more likely than not over the horizon, warn above 10 %
+GUST_REFUSE_P, GUST_WARN_P = 0.5, 0.1
+# height (m) a gust may cost beyond the reserve before it counts: less is a tracking error the
+# law takes out within seconds (the X8's steady RMS is ~0.1 m), not an energy failure
+GUST_TOLERANCE_M = 1.0
+
+
+@dataclass(frozen=True)
+class GustOdds:
+    """The likeliest way a gust exhausts the reserve (:func:`gust_odds`): probability over the
+    horizon, the window (s), where it is likeliest (s), the mean gust there (m/s) and its sigma."""
+
+    p: float
+    window_s: float
+    t_s: float
+    gust_m_s: float
+    sigma_m_s: float
+
+
+def gust_odds(
+    ts: np.ndarray,
+    need: np.ndarray,
+    reserve: np.ndarray,
+    level: str,
+    heights_asl_m: np.ndarray,
+    v_w: float,
+    windows_s: tuple[float, ...] = GUST_WINDOWS_S,
+    tolerance_m: float = GUST_TOLERANCE_M,
+) -> GustOdds:
+    """Probability that a vertical gust averaged over some window exhausts the energy reserve.
+
+    A window of T s from t_k against the capability: the steady part of the demand beyond it,
+    ``need`` (m/s: climb - max_climb for downdrafts, -climb - max_sink for updrafts), averaged
+    over the window, n_k; the reserve R_k (m, ``reserve``). A mean gust above
+    u_k = (R_k + tolerance_m) / T - n_k over that window costs more height than the reserve
+    holds, by more than ``tolerance_m``. By Rice's
+    formula the expected number of such gusts is N_T = sum_k dt nu_0 exp(-u_k^2 / (2 sigma_T^2))
+    (sigma_T, nu_0: :func:`windowed_gust` at the sample's height; the level is crossed from
+    below, counted once per crossing, only where u_k > 0: a deficit without a gust is the
+    steady check's), and the chance of at least one is 1 - exp(-N_T) (Poisson). Windows of
+    neighbouring lengths see the same gusts, so the largest over ``windows_s`` is reported
+    (a lower bound of their union). One sign of gust per call."""
+    best = GustOdds(0.0, 0.0, float(ts[0]), 0.0, 0.0)
+    if len(ts) < 2:
+        return best
+    dts = np.diff(ts, prepend=ts[0])
+    cum = np.concatenate([[0.0], np.cumsum(need * dts)])
+    # the turbulence's scale changes slowly with height: evaluate it on 10 m steps
+    hq = np.round(np.asarray(heights_asl_m, float) / 10.0) * 10.0
+    for T in windows_s:
+        j = np.minimum(np.searchsorted(ts, ts + T), len(ts) - 1)
+        span = ts[j] - ts
+        ok = span >= 0.5 * T  # the horizon's last windows are shorter than T: not this window
+        if not np.any(ok):
+            continue
+        k = np.arange(len(ts))
+        mean_n = np.where(ok, (cum[j + 1] - cum[k + 1]) / np.maximum(span, 1e-9), 0.0)
+        u = (np.asarray(reserve, float) + tolerance_m) / T - mean_n
+        sig = np.zeros(len(ts))
+        nu = np.zeros(len(ts))
+        for h in np.unique(hq):
+            s_w, L_w = vertical_gust_scale(level, float(h))
+            st, n0 = windowed_gust(s_w, L_w, v_w, T)
+            sig[hq == h], nu[hq == h] = st, n0
+        live = ok & (sig > 0.0)
+        rate = np.zeros(len(ts))
+        z = np.where(live, np.maximum(u, 0.0) / np.where(live, sig, 1.0), 0.0)
+        rate[live] = nu[live] * np.exp(-0.5 * z[live] ** 2)
+        n_exp = float(np.sum(rate * dts))
+        p = 1.0 - math.exp(-n_exp)
+        if p > best.p:
+            kk = int(np.argmax(rate))
+            best = GustOdds(p, T, float(ts[kk]), float(max(u[kk], 0.0)), float(sig[kk]))
+    return best
+
+
 @dataclass
 class _Deficits:
     """The largest height deficits (m) of :func:`climb_feasibility` beyond the climb (up) and
@@ -301,6 +402,7 @@ def climb_feasibility(
     marginal: float = 0.8,
     g: float = GRAVITY_M_S2,
     gusts: tuple[np.ndarray, np.ndarray] | None = None,
+    turbulence: tuple[str, np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> CheckResult:
     """The climb and descent the path demands (air-relative: path slope, target climb, vertical
     wind; c = -v_w wd1_z) against the aircraft's steady capability at v_w.
@@ -316,6 +418,11 @@ def climb_feasibility(
     sigma_w over the Dryden time scale L_w / V, :func:`vertical_gusts`). A downdraft adds w to the
     climb, an updraft to the sink, for T from each instant: the excess over that window beyond
     the capability is a deficit like the steady one.
+    turbulence: (level, heights above sea level (m), climb reserve (m), sink reserve (m)) per
+    sample: the odds that a gust averaged over any of :data:`GUST_WINDOWS_S` exhausts that
+    reserve (:func:`gust_odds`, downdrafts and updrafts): at least GUST_REFUSE_P over the
+    horizon is refused, GUST_WARN_P warns. The reserves are the adapter's (from the airspeed it
+    flies to the airspeed where it gives the path up), not the verdict's window.
     """
     c = -v_w * W1[:, 2]
     k_up, k_dn = int(np.argmax(c)), int(np.argmin(c))
@@ -347,11 +454,37 @@ def climb_feasibility(
     refused = dfc.refusal(res_up, res_dn, v_w, v_min, v_max)
     if refused is not None:
         return CheckResult("climb", "fail", refused + head + cap, figs)
+    odds = ""
+    if turbulence is not None:
+        level, hts, r_up, r_dn = turbulence
+        o_up = gust_odds(ts, c - max_climb_m_s, r_up, level, hts, v_w)
+        o_dn = gust_odds(ts, -c - max_sink_m_s, r_dn, level, hts, v_w)
+        figs.update(gust_p_down=o_up.p, gust_p_up=o_dn.p)
+        worst, what = (o_up, "downdraft") if o_up.p >= o_dn.p else (o_dn, "updraft")
+        r_at = float(np.interp(worst.t_s, ts, r_up if what == "downdraft" else r_dn))
+        odds = (
+            f"a {worst.window_s:g} s {what} of {worst.gust_m_s:.1f} m/s "
+            f"({worst.gust_m_s / max(worst.sigma_m_s, 1e-9):.1f} sigma of {level} turbulence's "
+            f"{worst.window_s:g} s mean, {worst.sigma_m_s:.2f} m/s) near t = {worst.t_s:.0f} s "
+            f"exhausts the {r_at:.1f} m energy reserve: {100.0 * worst.p:.0f} % likely over the "
+            f"{ts[-1] - ts[0]:.0f} s"
+        )
+        if worst.p >= GUST_REFUSE_P:
+            return CheckResult(
+                "climb", "fail",
+                f"turbulence beyond the aircraft's energy: {odds} (refused from "
+                f"{100.0 * GUST_REFUSE_P:.0f} %); " + head + cap, figs,
+            )  # fmt: skip
     figs.update(need_climb_m_s=need_up, need_sink_m_s=need_dn)
     # marginal: the steady demand above ``marginal`` x the capability, a gust's above the
     # capability itself, or half a reserve spent
+    gust_marg = (
+        turbulence is not None
+        and max(float(figs["gust_p_down"] or 0.0), float(figs["gust_p_up"] or 0.0)) >= GUST_WARN_P
+    )
     marg = (
-        up > marginal * max_climb_m_s or dn > marginal * max_sink_m_s
+        gust_marg
+        or up > marginal * max_climb_m_s or dn > marginal * max_sink_m_s
         or need_up > max_climb_m_s or need_dn > max_sink_m_s
         or worst_up > 0.5 * res_up or worst_dn > 0.5 * res_dn
     )  # fmt: skip
@@ -361,6 +494,8 @@ def climb_feasibility(
         + f" (warn above the capability, {marginal:g} x without gusts), deficits {worst_up:.1f} / "
         f"{worst_dn:.1f} m of the {res_up:.1f} / {res_dn:.1f} m reserves (warn above half)"
     )
+    if gust_marg:
+        why += f"; {odds} (warn from {100.0 * GUST_WARN_P:.0f} %)"
     return CheckResult(
         "climb", "warn" if marg else "pass", head + cap + (why if marg else ""), figs
     )

@@ -11,7 +11,8 @@ Read it beside the paper. Equation numbers are the paper's as its LaTeX source n
   and (23) print omega_{W_d D}^{W_d}, the rate of {W_d} relative to {F} is meant).
 - (15) [wdbasis] the steady-state frame {W_d} in {F}: :func:`steady_state_frame`.
 - (17)-(19) the cross-track error pt_x and y_w, z_w: :func:`cross_track_errors`.
-- (20) R_D^{W_d}, the transient frame {D} in {W_d}: :func:`transient_frame`.
+- (20) R_D^{W_d}, the transient frame {D} in {W_d}: :func:`transient_direction` (its d1)
+  and :func:`transient_frame_rate`.
 - (22) [sdot] the virtual point's progression.
 - (23) [omega] -K_R e + Pi_R Rt^T omega_DI^D, the reference for the autopilot: :func:`mpf_law`.
 
@@ -42,13 +43,9 @@ from mpf_mavlink.core.target import TargetState
 from mpf_mavlink.core.vec3 import (
     Mat3,
     Vec3,
-    add,
     cross,
     dot,
-    mat_T_vec,
-    mat_vec,
     norm,
-    sub,
 )
 
 Vec = Vec3  # the records' vector fields
@@ -211,15 +208,12 @@ def cross_track_rates(
     return y_w_dot, z_w_dot
 
 
-def transient_frame(y_w: float, z_w: float, alpha: float) -> Mat3:
-    """(20) R_D^{W_d} = (d1, d2, d3), components in {W_d}; alpha (m) the look-ahead."""
+def transient_direction(y_w: float, z_w: float, alpha: float) -> Vec3:
+    """(20) d1, the first column of R_D^{W_d} (components in {W_d}; alpha (m) the look-ahead):
+    all that (6) and (9) use. The frame's other columns, d2 = (y_w, alpha, 0) / |(alpha, y_w)|
+    and d3 = d1 x d2, enter only through its rate (:func:`transient_frame_rate`)."""
     n1 = math.sqrt(alpha * alpha + y_w * y_w + z_w * z_w)
-    n2 = math.sqrt(alpha * alpha + y_w * y_w)
-    d11, d21, d31 = alpha / n1, -y_w / n1, -z_w / n1
-    d12, d22 = y_w / n2, alpha / n2  # d32 = 0
-    # d3 = d1 x d2, written out with d32 = 0.
-    d3 = (-d31 * d22, d31 * d12, d11 * d22 - d21 * d12)
-    return (d11, d21, d31), (d12, d22, 0.0), d3
+    return alpha / n1, -y_w / n1, -z_w / n1
 
 
 def transient_frame_rate(
@@ -243,7 +237,9 @@ def progression_rate(pt_f1: float, c: Vec3, v_d: Vec3, f1: Vec3, K_p: float) -> 
     """(22) [sdot] = (K_p pt + v_w w1 + eta_hat - v_t t1 - v_d) . f1 (m/s), in {T}, where
     pt_f1 = pt . f1 and c = R_I^T (v_w w1 + eta_hat - v_t) is the vehicle's velocity relative
     to the target."""
-    return K_p * pt_f1 + dot(sub(c, v_d), f1)
+    return K_p * pt_f1 + (
+        (c[0] - v_d[0]) * f1[0] + (c[1] - v_d[1]) * f1[1] + (c[2] - v_d[2]) * f1[2]
+    )
 
 
 def feedforward_omega_DT(
@@ -272,33 +268,48 @@ def feedforward_omega_DT(
     # (5) in {T}: pt_dot = qdot - p_d_dot with qdot = c - omega_TI x q and p_d_dot = sdot
     # dp_d/ds; u = uu + v_d with d(uu)/dt = a_t - omega_TI x uu (eta_hat held) and
     # v_d = omega_TI x p_d, so u_dot = a_t + omega_dot x p_d + omega_TI x (p_d_dot - uu).
-    # Elementwise sums written out (this is the hot path).
+    # The vector algebra is written out on scalars: this is the hot path.
+    w0, w1, w2 = omega
     g0, g1, g2 = dp_ds
     pd0, pd1, pd2 = sdot * g0, sdot * g1, sdot * g2
+    x0, x1, x2 = q
     c0, c1, c2 = c
-    a0, a1, a2 = cross(omega, q)
-    pt_dot = (c0 - a0 - pd0, c1 - a1 - pd1, c2 - a2 - pd2)
-    u0, u1, u2 = uu
+    pt_dot0 = c0 - (w1 * x2 - w2 * x1) - pd0
+    pt_dot1 = c1 - (w2 * x0 - w0 * x2) - pd1
+    pt_dot2 = c2 - (w0 * x1 - w1 * x0) - pd2
+    x0, x1, x2 = p_d
+    c0, c1, c2 = omega_dot
+    g0, g1, g2 = uu
+    g0, g1, g2 = pd0 - g0, pd1 - g1, pd2 - g2
     a0, a1, a2 = a_t
-    b0, b1, b2 = cross(omega_dot, p_d)
-    r0, r1, r2 = cross(omega, (pd0 - u0, pd1 - u1, pd2 - u2))
-    u_dot = (a0 + b0 + r0, a1 + b1 + r1, a2 + b2 + r2)
+    u_dot0 = a0 + (c1 * x2 - c2 * x1) + (w1 * g2 - w2 * g1)
+    u_dot1 = a1 + (c2 * x0 - c0 * x2) + (w2 * g0 - w0 * g2)
+    u_dot2 = a2 + (c0 * x1 - c1 * x0) + (w0 * g1 - w1 * g0)
     # Their f2, f3 components (all that (15), (18), (19) use) in {F}, which turns at
     # omega_FT: d(f_k . x)/dt = f_k . x_dot - (omega_FT^F x x^F)_k.
-    _, f2, f3 = R_F_T
-    x1, x2, x3 = pt_F
-    pt_f2_dot = dot(f2, pt_dot) - (o3 * x1 - o1 * x3)
-    pt_f3_dot = dot(f3, pt_dot) - (o1 * x2 - o2 * x1)
-    x1, x2, x3 = u_F
-    wd21_dot = (dot(f2, u_dot) - (o3 * x1 - o1 * x3)) / v_w
-    wd31_dot = (dot(f3, u_dot) - (o1 * x2 - o2 * x1)) / v_w
+    _, (a0, a1, a2), (c0, c1, c2) = R_F_T  # f2, f3
+    x0, x1, x2 = pt_F
+    pt_f2_dot = a0 * pt_dot0 + a1 * pt_dot1 + a2 * pt_dot2 - (o3 * x0 - o1 * x2)
+    pt_f3_dot = c0 * pt_dot0 + c1 * pt_dot1 + c2 * pt_dot2 - (o1 * x1 - o2 * x0)
+    x0, x1, x2 = u_F
+    wd21_dot = (a0 * u_dot0 + a1 * u_dot1 + a2 * u_dot2 - (o3 * x0 - o1 * x2)) / v_w
+    wd31_dot = (c0 * u_dot0 + c1 * u_dot1 + c2 * u_dot2 - (o1 * x1 - o2 * x0)) / v_w
     omega_WdF_F = steady_state_frame_rate(R_Wd_F, wd21_dot, wd31_dot)
     y_w_dot, z_w_dot = cross_track_rates(pt_F, pt_f2_dot, pt_f3_dot, R_Wd_F, omega_WdF_F)
-    omega_DWd_Wd = transient_frame_rate(y_w, z_w, y_w_dot, z_w_dot, alpha)
-    # Summed in {F}: omega_FT^F + omega_{W_d F}^F + R_{W_d}^F omega_{D W_d}^{W_d}.
+    b0, b1, b2 = transient_frame_rate(y_w, z_w, y_w_dot, z_w_dot, alpha)
+    # Summed in {F}: omega_FT^F + omega_{W_d F}^F + R_{W_d}^F omega_{D W_d}^{W_d} (wd32 = 0),
+    # then into {T} by R_F^T.
     a0, a1, a2 = omega_WdF_F
-    b0, b1, b2 = mat_vec(R_Wd_F, omega_DWd_Wd)
-    return mat_vec(R_F_T, (o1 + a0 + b0, o2 + a1 + b1, o3 + a2 + b2))
+    (x0, x1, x2), (g0, g1, _), (c0, c1, c2) = R_Wd_F
+    o1 += a0 + (b0 * x0 + b1 * g0 + b2 * c0)
+    o2 += a1 + (b0 * x1 + b1 * g1 + b2 * c1)
+    o3 += a2 + (b0 * x2 + b2 * c2)
+    (x0, x1, x2), (a0, a1, a2), (c0, c1, c2) = R_F_T
+    return (
+        o1 * x0 + o2 * a0 + o3 * c0,
+        o1 * x1 + o2 * a1 + o3 * c1,
+        o1 * x2 + o2 * a2 + o3 * c2,
+    )
 
 
 def attitude_error(d1: Vec3, R_W_I: Mat3) -> tuple[float, float, float]:
@@ -306,7 +317,11 @@ def attitude_error(d1: Vec3, R_W_I: Mat3) -> tuple[float, float, float]:
 
     Rt = R_W^D = (R_D^I)^T R_W^I; its first row is (d1.w1, d1.w2, d1.w3).
     """
-    Rt11, Rt12, Rt13 = mat_T_vec(R_W_I, d1)
+    d0, d1_, d2 = d1
+    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = R_W_I
+    Rt11 = a0 * d0 + a1 * d1_ + a2 * d2
+    Rt12 = b0 * d0 + b1 * d1_ + b2 * d2
+    Rt13 = c0 * d0 + c1 * d1_ + c2 * d2
     return 0.5 * (1.0 - Rt11), 0.5 * Rt13, -0.5 * Rt12
 
 
@@ -369,33 +384,43 @@ def apply_extensions(
 
 
 def _diagnostics(
-    t: float,
-    s: float,
-    frames: tuple[Mat3, Mat3, Mat3, Vec3],
-    errors: tuple[Vec3, Vec3, Vec3, Vec3, Vec3, float, float, float, float, float, float],
-    rates: tuple[Vec3, float, float, float, float],
-    mode: str,
-    k1: float,
-    k2: float,
-) -> MpfDiagnostics:
+    t: float, s: float, R_I_T: Mat3, R_F_T: Mat3, wd1_F: Vec3, d1: Vec3, x_I: Vec3, p_t: Vec3,
+    p_d: Vec3, pt: Vec3, pt_F: Vec3, y_w: float, z_w: float, psi: float, e2: float, e3: float,
+    margin: float, omega_DI: Vec3, ff2: float, ff3: float, law2: float, law3: float, mode: str,
+    k1: float, k2: float,
+) -> MpfDiagnostics:  # fmt: skip
     """The record of what :func:`mpf_law` saw, its vectors in NED (see :class:`MpfDiagnostics`).
 
-    frames: R_I^T, R_F^T, R_{W_d}^F and d1 (NED); errors: p - p_t (NED), p_t, p_d, pt and pt in
-    {F} ({T} unless noted), y_w, z_w, Psi, e2, e3 and the Assumption 1 margin; rates: omega_DI
-    (NED), the feedforward and the law's command on w2, w3.
+    Given (positional, this runs at every bridge frame): the frames R_I^T, R_F^T, wd1 in {F}
+    and d1 (NED); the errors p - p_t (NED), p_t, p_d, pt and pt in {F} ({T} unless noted),
+    y_w, z_w, Psi, e2, e3 and the Assumption 1 margin; the rates omega_DI (NED), the
+    feedforward and the law's command on w2, w3; the mode and the curvatures k1, k2.
     """
-    R_I_T, R_F_T, R_Wd_F, d1 = frames
-    x_I, p_t, p_d, pt, pt_F, y_w, z_w, psi, e2, e3, margin = errors
-    omega_DI, ff2, ff3, law2, law3 = rates
-    # p_f = p_t + p_d and pt = (p - p_t) - p_d from one rotation of p_d; wd1 = R_T^I R_F^T wd1^F.
-    p_d_I = mat_T_vec(R_I_T, p_d)
-    wd1 = mat_T_vec(R_I_T, mat_vec(R_F_T, R_Wd_F[0]))
-    f1 = mat_T_vec(R_I_T, R_F_T[0])
+    # Into NED by R_T^I (written out, as in mpf_law): p_d (p_f = p_t + p_d and pt = (p - p_t)
+    # - p_d), wd1 = R_T^I R_F^T wd1^F and f1.
+    (xn, yn, zn), (xe, ye, ze), (xd, yd, zd) = R_I_T
+    f1, f2, f3 = R_F_T
+    a0, a1, a2 = p_d
+    p_d_I = (
+        xn * a0 + yn * a1 + zn * a2,
+        xe * a0 + ye * a1 + ze * a2,
+        xd * a0 + yd * a1 + zd * a2,
+    )
+    x0, x1, x2 = wd1_F
+    a0 = x0 * f1[0] + x1 * f2[0] + x2 * f3[0]
+    a1 = x0 * f1[1] + x1 * f2[1] + x2 * f3[1]
+    a2 = x0 * f1[2] + x1 * f2[2] + x2 * f3[2]
+    wd1 = (xn * a0 + yn * a1 + zn * a2, xe * a0 + ye * a1 + ze * a2, xd * a0 + yd * a1 + zd * a2)
+    a0, a1, a2 = f1
+    f1 = (xn * a0 + yn * a1 + zn * a2, xe * a0 + ye * a1 + ze * a2, xd * a0 + yd * a1 + zd * a2)
+    a0, a1, a2 = p_d_I
+    x0, x1, x2 = pt
     # tuple.__new__: the NamedTuple without its keyword-parsing constructor (hot path).
     return tuple.__new__(
         MpfDiagnostics,
-        (t, s, sub(x_I, p_d_I), norm(pt), pt_F, add(p_t, p_d_I), psi, (e2, e3), y_w, z_w, d1,
-         wd1, f1, omega_DI, (ff2, ff3), (law2, law3), margin, mode, k1, k2),
+        (t, s, (x_I[0] - a0, x_I[1] - a1, x_I[2] - a2), math.sqrt(x0 * x0 + x1 * x1 + x2 * x2),
+         pt_F, (p_t[0] + a0, p_t[1] + a1, p_t[2] + a2), psi, (e2, e3), y_w, z_w, d1, wd1, f1,
+         omega_DI, (ff2, ff3), (law2, law3), margin, mode, k1, k2),
     )  # fmt: skip
 
 
@@ -422,60 +447,107 @@ def mpf_law(
     s = float(s)
     v_w = float(vehicle.airspeed)
     K_p, K_R, alpha = gains.K_p, gains.K_R, gains.alpha
-    # ndarray.tolist() gives lists, which the vec3 helpers only index and unpack. Matrices are
-    # by columns: R_W^I's are the rows of its transpose; R_I^T = (R_T^I)^T's are R_T^I's rows.
+    # ndarray.tolist() gives lists, which are only indexed and unpacked. Matrices are by
+    # columns: R_W^I's are the rows of its transpose; R_I^T = (R_T^I)^T's are R_T^I's rows.
+    # Rotations are written out on scalars (this is the hot path; vec3 says what they are).
     R_W_I: Mat3 = vehicle.R_W_I.T.tolist()  # (w1, w2, w3) in NED
     R_I_T: Mat3 = target.R_T_I.tolist()  # NED into {T}; mat_T_vec(R_I_T, .) is R_T^I
-    eta: Vec3 = vehicle.wind.tolist() if ext.wind_compensation else _ZERO
+    (xn, yn, zn), (xe, ye, ze), (xd, yd, zd) = R_I_T  # north, east, down axes in {T}
     p_t: Vec3 = target.position.tolist()
-    v_t: Vec3 = target.velocity.tolist()
     omega_TI: Vec3 = target.omega_T.tolist()  # omega_TI^T
     w1, w2, w3 = R_W_I
 
     # Into {T}, where the path is fixed: the vehicle relative to the target, the target's
     # velocity less the wind, and the vehicle's velocity (1) relative to the target's,
     # c = R_I^T (v_w w1 + eta_hat - v_t) = v_w w1^T - uu.
-    x_I = sub(vehicle.position.tolist(), p_t)  # p - p_t in NED
-    q = mat_vec(R_I_T, x_I)
-    uu = mat_vec(R_I_T, sub(v_t, eta))
-    a0, a1, a2 = mat_vec(R_I_T, w1)  # w1 in {T}
-    c = (v_w * a0 - uu[0], v_w * a1 - uu[1], v_w * a2 - uu[2])
+    a0, a1, a2 = vehicle.position.tolist()
+    x_I = (a0 - p_t[0], a1 - p_t[1], a2 - p_t[2])  # p - p_t in NED
+    a0, a1, a2 = x_I
+    q = (xn * a0 + xe * a1 + xd * a2, yn * a0 + ye * a1 + yd * a2, zn * a0 + ze * a1 + zd * a2)
+    a0, a1, a2 = target.velocity.tolist()
+    if ext.wind_compensation:
+        b0, b1, b2 = vehicle.wind.tolist()
+        a0, a1, a2 = a0 - b0, a1 - b1, a2 - b2
+    uu = (xn * a0 + xe * a1 + xd * a2, yn * a0 + ye * a1 + yd * a2, zn * a0 + ze * a1 + zd * a2)
+    a0, a1, a2 = w1
+    c = (
+        v_w * (xn * a0 + xe * a1 + xd * a2) - uu[0],
+        v_w * (yn * a0 + ye * a1 + yd * a2) - uu[1],
+        v_w * (zn * a0 + ze * a1 + zd * a2) - uu[2],
+    )
 
     # The virtual point: p_d(s), R_F^T, dp_d/ds and the rate of {F} per unit s.
     p_d, f1, f2, f3, k1, k2, dp_ds, rate_F = path.eval_with_rate(s)
     R_F_T: Mat3 = (f1, f2, f3)
-    pt = sub(q, p_d)  # position error pt = p - p_f, in {T}
-    pt_F = mat_T_vec(R_F_T, pt)
-    v_d = cross(omega_TI, p_d)  # the path point's velocity from the target's rotation
+    a0, a1, a2 = p_d
+    x0, x1, x2 = pt = (q[0] - a0, q[1] - a1, q[2] - a2)  # position error pt = p - p_f, in {T}
+    pt_F = (  # (f1 . pt, f2 . pt, f3 . pt)
+        f1[0] * x0 + f1[1] * x1 + f1[2] * x2,
+        f2[0] * x0 + f2[1] * x1 + f2[2] * x2,
+        f3[0] * x0 + f3[1] * x1 + f3[2] * x2,
+    )
+    b0, b1, b2 = omega_TI
+    v_d = (b1 * a2 - b2 * a1, b2 * a0 - b0 * a2, b0 * a1 - b1 * a0)  # omega_TI x p_d
     sdot = progression_rate(pt_F[0], c, v_d, f1, K_p)  # (22)
 
     # The desired frames (15), (17)-(19), (20).
-    u = add(uu, v_d)  # v_t t1 + v_d - eta_hat
-    u_F = mat_T_vec(R_F_T, u)
+    x0, x1, x2 = uu[0] + v_d[0], uu[1] + v_d[1], uu[2] + v_d[2]  # u = v_t t1 + v_d - eta_hat
+    u_F = (
+        f1[0] * x0 + f1[1] * x1 + f1[2] * x2,
+        f2[0] * x0 + f2[1] * x1 + f2[2] * x2,
+        f3[0] * x0 + f3[1] * x1 + f3[2] * x2,
+    )
     R_Wd_F = steady_state_frame(u_F, v_w)
     y_w, z_w = cross_track_errors(pt_F, R_Wd_F)
-    R_D_Wd = transient_frame(y_w, z_w, alpha)
-    d1 = mat_T_vec(R_I_T, mat_vec(R_F_T, mat_vec(R_Wd_F, R_D_Wd[0])))  # in NED
-    psi, e2, e3 = attitude_error(d1, R_W_I)  # (6), (9)
+    d1_Wd = transient_direction(y_w, z_w, alpha)
+    # d1 = R_T^I R_F^T R_{W_d}^F d1^{W_d}, in NED (wd32 = 0).
+    (a0, a1, a2), (b0, b1, _), (g0, g1, g2) = R_Wd_F
+    x0, x1, x2 = d1_Wd
+    a0, a1, a2 = x0 * a0 + x1 * b0 + x2 * g0, x0 * a1 + x1 * b1 + x2 * g1, x0 * a2 + x2 * g2
+    b0 = a0 * f1[0] + a1 * f2[0] + a2 * f3[0]
+    b1 = a0 * f1[1] + a1 * f2[1] + a2 * f3[1]
+    b2 = a0 * f1[2] + a1 * f2[2] + a2 * f3[2]
+    d1_I = (xn * b0 + yn * b1 + zn * b2, xe * b0 + ye * b1 + ze * b2, xd * b0 + yd * b1 + zd * b2)
+    psi, e2, e3 = attitude_error(d1_I, R_W_I)  # (6), (9)
 
     # (10) omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d}, each term exact.
-    a_t = mat_vec(R_I_T, target.acceleration.tolist())
+    a0, a1, a2 = target.acceleration.tolist()
+    a_t = (xn * a0 + xe * a1 + xd * a2, yn * a0 + ye * a1 + yd * a2, zn * a0 + ze * a1 + zd * a2)
     flow = (q, c, uu, a_t, omega_TI, target.omega_dot_T.tolist(), p_d, pt_F, u_F)
-    omega_DT = feedforward_omega_DT(sdot, dp_ds, rate_F, R_F_T, R_Wd_F, y_w, z_w, alpha, v_w, flow)
-    omega_DI = mat_T_vec(R_I_T, add(omega_TI, omega_DT))  # in NED
+    b0, b1, b2 = feedforward_omega_DT(
+        sdot, dp_ds, rate_F, R_F_T, R_Wd_F, y_w, z_w, alpha, v_w, flow
+    )
+    a0, a1, a2 = omega_TI
+    a0, a1, a2 = a0 + b0, a1 + b1, a2 + b2
+    omega_DI = (  # in NED
+        xn * a0 + yn * a1 + zn * a2,
+        xe * a0 + ye * a1 + ze * a2,
+        xd * a0 + yd * a1 + zd * a2,
+    )
 
     # (23) [omega]: -K_R e + Pi_R Rt^T omega_DI^D, the last term being omega_DI on w2, w3.
-    ff2, ff3 = dot(omega_DI, w2), dot(omega_DI, w3)
+    a0, a1, a2 = omega_DI
+    ff2 = a0 * w2[0] + a1 * w2[1] + a2 * w2[2]
+    ff3 = a0 * w3[0] + a1 * w3[1] + a2 * w3[2]
     law2, law3 = -K_R * e2 + ff2, -K_R * e3 + ff3
-    cmd2, cmd3, mode = apply_extensions(law2, law3, ff2, ff3, psi, d1, R_W_I, K_R, ext)
+    if ext.psi_turn or ext.rate_limit is not None:
+        cmd2, cmd3, mode = apply_extensions(law2, law3, ff2, ff3, psi, d1_I, R_W_I, K_R, ext)
+    else:  # the paper's law as it is (apply_extensions would return it unchanged)
+        cmd2, cmd3, mode = law2, law3, "law"
     # The command as the angular velocity of w1 in NED: R_W^I [0, w2, w3].
-    omega_w1_I = mat_vec(R_W_I, (0.0, cmd2, cmd3))
+    omega_w1_I = (
+        cmd2 * w2[0] + cmd3 * w3[0],
+        cmd2 * w2[1] + cmd3 * w3[1],
+        cmd2 * w2[2] + cmd3 * w3[2],
+    )
     # tuple.__new__ builds the NamedTuples without their keyword-parsing constructor (~0.3 us
     # each, on the hot path).
     cmd: MpfCommand = tuple.__new__(MpfCommand, (t, cmd2, cmd3, sdot, omega_w1_I))
     if not diagnostics:
         return cmd, None
-    frames = (R_I_T, R_F_T, R_Wd_F, d1)
-    errors = (x_I, p_t, p_d, pt, pt_F, y_w, z_w, psi, e2, e3, v_w - norm(u))
-    rates = (omega_DI, ff2, ff3, law2, law3)
-    return cmd, _diagnostics(t, s, frames, errors, rates, mode, k1, k2)
+    u0, u1, u2 = u_F  # |u| = |u_F|
+    margin = v_w - math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    return cmd, _diagnostics(
+        t, s, R_I_T, R_F_T, R_Wd_F[0], d1_I, x_I, p_t, p_d, pt, pt_F, y_w, z_w, psi, e2, e3,
+        margin, omega_DI, ff2, ff3, law2, law3, mode, k1, k2,
+    )  # fmt: skip

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mpf_mavlink.core.vec3 import Vec3, add_scaled, cross, scale
+from mpf_mavlink.core.vec3 import Vec3, add_scaled, cross
 from mpf_mavlink.errors import ConfigError
 
 CurveFn = Callable[[NDArray[np.float64]], NDArray[np.float64]]
@@ -37,12 +37,8 @@ Tuple3 = Vec3
 # (p_d, f1, f2, f3, k1, k2) and, with the rate, the frame's angular velocity per metre in {F}.
 PathPoint = tuple[Vec3, Vec3, Vec3, Vec3, float, float]
 PathPointRate = tuple[Vec3, Vec3, Vec3, Vec3, float, float, Vec3, Vec3]
-_Cell = tuple[Vec3, Vec3, Vec3, Vec3, Vec3, Vec3, float, tuple[float, float, float, float]]
+_Cell = tuple[float, ...]  # 20 floats, see TabulatedPath._hermite_cells
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
-
-
-def _vec(v: list[float]) -> Vec3:
-    return (v[0], v[1], v[2])
 
 
 @dataclass(frozen=True)
@@ -233,19 +229,23 @@ class TabulatedPath:
         self._cells = self._hermite_cells()
 
     def _hermite_cells(self) -> list[_Cell]:
-        """Per cell, what evaluation needs in one tuple: the Hermite cubic in power form
-        p(w) = p_i + w a + w^2 b + w^3 c (w = (s - s_i) / ds), the node's tangent and f2, the
-        cell's closing angle and the curvatures at both nodes."""
+        """Per cell, what evaluation needs in one flat tuple of floats (unpacked at once): the
+        Hermite cubic in the arc length from the cell's start, p(x) = p_i + x (t_i + x (B +
+        x C)) (x = s - s_i; t_i is the node's tangent), the node's f2, the cell's closing angle
+        per metre and the curvatures k1, k2 at its start and their slopes (1/m^2)."""
         h = self.ds
         cells: list[_Cell] = []
         for i in range(self.n):
             pa, pb = self._Pl[i], self._Pl[i + 1]
             ta, tb = self._Tl[i], self._Tl[i + 1]
-            lin = scale(h, ta)
-            quad = _vec([3.0 * (pb[j] - pa[j]) - h * (2.0 * ta[j] + tb[j]) for j in range(3)])
-            cub = _vec([2.0 * (pa[j] - pb[j]) + h * (ta[j] + tb[j]) for j in range(3)])
-            k12 = (self._K1l[i], self._K1l[i + 1], self._K2l[i], self._K2l[i + 1])
-            cells.append((pa, lin, quad, cub, ta, self._F2l[i], self._C[i], k12))
+            # From the power form in w = x / h: b / h^2 and c / h^3.
+            B = [(3.0 * (pb[j] - pa[j]) - h * (2.0 * ta[j] + tb[j])) / (h * h) for j in range(3)]
+            C = [(2.0 * (pa[j] - pb[j]) + h * (ta[j] + tb[j])) / (h * h * h) for j in range(3)]
+            k1a, k1b, k2a, k2b = self._K1l[i], self._K1l[i + 1], self._K2l[i], self._K2l[i + 1]
+            cells.append(
+                (*pa, *ta, *B, *C, *self._F2l[i], self._C[i] / h,
+                 k1a, (k1b - k1a) / h, k2a, (k2b - k2a) / h)
+            )  # fmt: skip
         return cells
 
     # ------------------------------------------------------------------ evaluation
@@ -273,69 +273,67 @@ class TabulatedPath:
             ds = s if j == 0 else s - L
             return add_scaled(p, ds, t), t, f2, cross(t, f2), 0.0, 0.0, t, _ZERO
         h = self.ds
-        x = s / h
-        i = int(x)
+        i = int(s / h)
         if i >= self.n:
             i = self.n - 1
-        w = x - i
-        (p0, p1, p2), (a0, a1, a2), (b0, b1, b2), (c0, c1, c2), t_i, f2_i, twist, k12 = self._cells[
-            i
-        ]
-        # Written out on scalars (this runs once per law evaluation): the cell's cubic
-        # p(w) = p_i + w a + w^2 b + w^3 c by Horner, its derivatives dp = dp/dw, ddp.
+        x = s - i * h
+        (p0, p1, p2, ta0, ta1, ta2, b0, b1, b2, c0, c1, c2, v0, v1, v2,
+         twist, k1a, k1s, k2a, k2s) = self._cells[i]  # fmt: skip
+        # Written out on scalars (this runs once per law evaluation): the cell's cubic by
+        # Horner, its first derivative dp (= dp_d/ds) and its second, ddp.
         p = (
-            p0 + w * (a0 + w * (b0 + w * c0)),
-            p1 + w * (a1 + w * (b1 + w * c1)),
-            p2 + w * (a2 + w * (b2 + w * c2)),
+            p0 + x * (ta0 + x * (b0 + x * c0)),
+            p1 + x * (ta1 + x * (b1 + x * c1)),
+            p2 + x * (ta2 + x * (b2 + x * c2)),
         )
-        dp0 = a0 + w * (2.0 * b0 + 3.0 * w * c0)
-        dp1 = a1 + w * (2.0 * b1 + 3.0 * w * c1)
-        dp2 = a2 + w * (2.0 * b2 + 3.0 * w * c2)
-        ddp0, ddp1, ddp2 = 2.0 * b0 + 6.0 * w * c0, 2.0 * b1 + 6.0 * w * c1, 2.0 * b2 + 6.0 * w * c2
-        n_dp = math.sqrt(dp0 * dp0 + dp1 * dp1 + dp2 * dp2)
-        g = 1.0 / n_dp
+        b0, b1, b2 = b0 + b0, b1 + b1, b2 + b2
+        c0, c1, c2 = 3.0 * c0, 3.0 * c1, 3.0 * c2
+        dp0 = ta0 + x * (b0 + x * c0)
+        dp1 = ta1 + x * (b1 + x * c1)
+        dp2 = ta2 + x * (b2 + x * c2)
+        x2 = x + x
+        ddp0, ddp1, ddp2 = b0 + x2 * c0, b1 + x2 * c1, b2 + x2 * c2
+        g = 1.0 / math.sqrt(dp0 * dp0 + dp1 * dp1 + dp2 * dp2)
         e0, e1, e2 = dp0 * g, dp1 * g, dp2 * g  # f1
-        # r: the node's f2 carried by the minimal rotation t_i -> f1 (Rodrigues with
-        # c = t_i x f1, d = t_i . f1: v + c x v + c x (c x v) / (1 + d)).
-        ta0, ta1, ta2 = t_i
-        v0, v1, v2 = f2_i
+        # r: the node's f2 (v, orthogonal to t_i) carried by the minimal rotation t_i -> f1,
+        # I + C + C^2 / (1 + d) with C = [c]x, c = t_i x f1, d = t_i . f1; for v orthogonal
+        # to t_i it reduces to v - (v . f1) (t_i + f1) / (1 + d).
         cx = ta1 * e2 - ta2 * e1
         cy = ta2 * e0 - ta0 * e2
         cz = ta0 * e1 - ta1 * e0
         d = ta0 * e0 + ta1 * e1 + ta2 * e2
-        ux = cy * v2 - cz * v1
-        uy = cz * v0 - cx * v2
-        uz = cx * v1 - cy * v0
-        k = 1.0 / (1.0 + d) if d > -0.999999 else 0.0
-        r0 = v0 + ux + k * (cy * uz - cz * uy)
-        r1 = v1 + uy + k * (cz * ux - cx * uz)
-        r2 = v2 + uz + k * (cx * uy - cy * ux)
-        nr = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-        r0, r1, r2 = r0 * nr, r1 * nr, r2 * nr
+        if d > -0.999999:
+            k = 1.0 / (1.0 + d)
+            m = (v0 * e0 + v1 * e1 + v2 * e2) * k
+            r0, r1, r2 = v0 - m * (ta0 + e0), v1 - m * (ta1 + e1), v2 - m * (ta2 + e2)
+        else:  # f1 opposite t_i (not in a regular path's cell): v + c x v, re-normalised
+            k = 0.0
+            r0, r1, r2 = v0 + cy * v2 - cz * v1, v1 + cz * v0 - cx * v2, v2 + cx * v1 - cy * v0
+            nr = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+            r0, r1, r2 = r0 * nr, r1 * nr, r2 * nr
         q0 = e1 * r2 - e2 * r1  # f1 x r
         q1 = e2 * r0 - e0 * r2
         q2 = e0 * r1 - e1 * r0
         # Turned about f1 by this cell's share of the closing angle (exactly 0 on open and
         # planar paths, which skip the turn).
         if twist:
-            ang = w * twist
+            ang = x * twist
             ca, sa = math.cos(ang), math.sin(ang)
-            f2 = (ca * r0 + sa * q0, ca * r1 + sa * q1, ca * r2 + sa * q2)
-            f3 = (ca * q0 - sa * r0, ca * q1 - sa * r1, ca * q2 - sa * r2)
-        else:
-            f2, f3 = (r0, r1, r2), (q0, q1, q2)
-        # The frame's rate per unit w: f1' = (I - f1 f1^T) p'' / |p'| gives the curvatures
-        # f1'.f2 and f1'.f3; the minimal rotation from the fixed t_i turns r about f1 at
-        # -(c . f1') / (1 + d) = -(c . p'') / ((1 + d) |p'|); the closing share adds `twist`.
-        gh = g / h
-        kappa_1 = (ddp0 * f2[0] + ddp1 * f2[1] + ddp2 * f2[2]) * gh
-        kappa_2 = (ddp0 * f3[0] + ddp1 * f3[1] + ddp2 * f3[2]) * gh
-        tau = twist / h - k * (cx * ddp0 + cy * ddp1 + cz * ddp2) * gh
-        k1a, k1b, k2a, k2b = k12
-        k1 = (1 - w) * k1a + w * k1b
-        k2 = (1 - w) * k2a + w * k2b
-        dp_ds = (dp0 / h, dp1 / h, dp2 / h)
-        return p, (e0, e1, e2), f2, f3, k1, k2, dp_ds, (tau, -kappa_2, kappa_1)
+            r0, r1, r2, q0, q1, q2 = (
+                ca * r0 + sa * q0, ca * r1 + sa * q1, ca * r2 + sa * q2,
+                ca * q0 - sa * r0, ca * q1 - sa * r1, ca * q2 - sa * r2,
+            )  # fmt: skip
+        # f2 = r, f3 = q. The frame's rate per metre: f1' = (I - f1 f1^T) p'' / |p'| gives the
+        # curvatures f1'.f2 and f1'.f3; the minimal rotation from the fixed t_i turns r about
+        # f1 at -(c . f1') / (1 + d) = -(c . p'') / ((1 + d) |p'|); the closing share adds
+        # `twist`.
+        kappa_1 = (ddp0 * r0 + ddp1 * r1 + ddp2 * r2) * g
+        kappa_2 = (ddp0 * q0 + ddp1 * q1 + ddp2 * q2) * g
+        tau = twist - k * (cx * ddp0 + cy * ddp1 + cz * ddp2) * g
+        return (
+            p, (e0, e1, e2), (r0, r1, r2), (q0, q1, q2), k1a + x * k1s, k2a + x * k2s,
+            (dp0, dp1, dp2), (tau, -kappa_2, kappa_1),
+        )  # fmt: skip
 
     def sample(self, s: float) -> PathSample:
         """The path at arc length s (m) as a :class:`PathSample` (numpy, for callers and tests)."""
