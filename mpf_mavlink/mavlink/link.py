@@ -27,6 +27,7 @@ from typing import Any
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.mavlink.boot_clock import BootClockGate
 from mpf_mavlink.mavlink.encode import encode_companion_heartbeat
+from mpf_mavlink.mavlink.fastparse import HotDecoder
 from mpf_mavlink.mavlink.ports import _Serial, _TcpClient
 from mpf_mavlink.mavlink.pymav import DIALECT_NAME, dialect, mavutil
 from mpf_mavlink.mavlink.tlog import TlogWriter
@@ -88,23 +89,32 @@ class DatagramReader:
     truncated or corrupted packet) would be completed with the NEXT datagram's packets, and
     when its CRC then fails, that whole stretch (up to 280 bytes of good telemetry, a
     COMMAND_ACK) is thrown away. Here such a leftover is dropped (counted in ``bad_data``)
-    before the next datagram is parsed."""
+    before the next datagram is parsed.
 
-    __slots__ = ("conn", "counters")
+    A datagram made only of hot telemetry (unsigned MAVLink 2 frames with good CRCs:
+    :class:`~mpf_mavlink.mavlink.fastparse.HotDecoder`) is decoded in one pass, to the same
+    message objects; any other goes to pymavlink's parser, as does every datagram while
+    signing is on or a pymavlink callback is set."""
+
+    __slots__ = ("conn", "counters", "hot", "_pending")
 
     def __init__(self, conn: Any, counters: LinkCounters) -> None:
         self.conn = conn
         self.counters = counters
+        self.hot = HotDecoder()
+        self._pending: list[Any] = []  # the current datagram's messages, last first
 
     def recv(self) -> Any:
         """The next message of the current datagram, else of the next datagram (None: none)."""
         # mavudp's pre_message does nothing, and post_message keeps pymavlink's own per-system
         # tables (last messages, modes, loss counts) that nothing here reads: both skipped,
         # they cost a quarter of a message's receive
+        if self._pending:
+            return self._pending.pop()
         conn, mav = self.conn, self.conn.mav
-        msg = mav.parse_char(b"")
+        msg = mav.parse_char(b"") if len(mav.buf) > mav.buf_index else None
         if msg is None:
-            if mav.buf_len() > 0:
+            if len(mav.buf) > mav.buf_index:
                 self.counters.bad_data += 1
                 mav.buf, mav.buf_index = bytearray(), 0
                 mav.expected_length = dialect.HEADER_LEN_V1 + 2
@@ -113,6 +123,15 @@ class DatagramReader:
                 return None
             if conn.first_byte:
                 conn.auto_mavlink_version(data)
+            elif mav.signing.secret_key is None and mav.callback is None:
+                msgs = self.hot.decode(data)
+                if msgs is not None:
+                    mav.total_bytes_received += len(data)  # pymavlink's own tallies
+                    mav.total_packets_received += len(msgs)
+                    msgs.reverse()
+                    first = msgs.pop()
+                    self._pending = msgs
+                    return first
             msg = mav.parse_char(data)
         return msg
 
