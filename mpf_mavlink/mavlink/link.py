@@ -333,6 +333,8 @@ class Link:
                 return msg
             if more:
                 continue
+            if self.tlog is not None:  # nothing left to read: the held records go out now
+                self._flush_tlog()
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 return None
@@ -384,6 +386,15 @@ class Link:
             return
         try:
             self.tlog.write(packet, t)
+            self.tlog.flush()  # write-ahead: in the file, with all received before it, first
+        except (OSError, ValueError):
+            self.counters.io_errors += 1
+            self.counters.tlog_write_errors += 1
+
+    def _flush_tlog(self) -> None:
+        assert self.tlog is not None
+        try:
+            self.tlog.flush()
         except (OSError, ValueError):
             self.counters.io_errors += 1
             self.counters.tlog_write_errors += 1
@@ -521,7 +532,8 @@ def open_link(
     tlog = None
     if tlog_path is not None:
         try:
-            tlog = TlogWriter(tlog_path, fsync_every_s=tlog_fsync_every_s)
+            # records held until the link sends or pauses (Link.recv, Link._log_tx)
+            tlog = TlogWriter(tlog_path, fsync_every_s=tlog_fsync_every_s, hold=True)
         except MpfError:
             conn.close()
             raise
