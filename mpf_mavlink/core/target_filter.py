@@ -366,6 +366,23 @@ class TargetEstimator:
         self._prune()
         return outcome
 
+    def known_position(self, t: float, t_rx: float) -> str | None:
+        """For a position-only report (no attitude) at sender time t (s) received at t_rx (s),
+        what :meth:`add` would make of it before the report itself matters: "too_late", or
+        "duplicate" (another report of that instant already carries a position: FOLLOW_TARGET
+        and GLOBAL_POSITION_INT of one fix), with the same clock update and counts; else None,
+        and :meth:`add` takes the report (its clock update then repeats this one: a no-op).
+        Lets the caller skip building a report (geodetic conversion) that would be dropped."""
+        if not self._clock(t, t_rx):
+            return "too_late"
+        hist, j = self.hist, bisect.bisect_left(self.times, t)
+        while j < len(hist) and hist[j].t == t:
+            if hist[j].position is not None:
+                self.counts["duplicate"] += 1
+                return "duplicate"
+            j += 1
+        return None
+
     def anchor_t(self) -> float:
         return self.anchor.t if self.anchor is not None else -math.inf
 
