@@ -268,16 +268,16 @@ class Link:
             _count_bad(c, msg, self._signing_counts_itself)
             return True, None
         c.rx_packets += 1
+        sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
+        tb = getattr(msg, "time_boot_ms", None)
+        vehicle = sysid == self.vehicle_sysid and self.vehicle_sysid is not None
+        tb_s = tb * 1e-3 if vehicle and isinstance(tb, int) else None  # the vehicle's clock
         # one receive time for the record and the clock gate, quantised as the tlog stores it
         # (us): a replay of the tlog can then take exactly the gate's decisions
         vt = self.vehicle_time
-        tb_s: float | None = None
         if vt is None:
             t_rec = round(self._clock() * 1e6) * 1e-6
         else:
-            tb = getattr(msg, "time_boot_ms", None)
-            if isinstance(tb, int) and msg.get_srcSystem() == self.vehicle_sysid:
-                tb_s = tb * 1e-3
             t_rec = round(vt.stamp(tb_s) * 1e6) * 1e-6
         # the receive time a consumer sees, with or without a tlog: the record's time exactly
         msg._timestamp = t_rec
@@ -290,34 +290,31 @@ class Link:
         if mtype.startswith("UNKNOWN_"):
             c.unknown_msgid += 1
             return True, None
-        src = (msg.get_srcSystem(), msg.get_srcComponent())
-        if not self.accepts(*src):
+        if not self.accepts(sysid, compid):
             c.rejected_sysid += 1
-            c.rejected_by_source[src] += 1
+            c.rejected_by_source[(sysid, compid)] += 1
             return True, None
         if (
             mtype == "HEARTBEAT"
             and self.vehicle_autopilot is not None
-            and src[0] == self.vehicle_sysid
+            and sysid == self.vehicle_sysid
             and getattr(msg, "autopilot", None) != self.vehicle_autopilot
         ):
             c.rejected_identity += 1
             return True, None
-        if src[0] == self.vehicle_sysid and self.vehicle_sysid is not None:
-            tb = getattr(msg, "time_boot_ms", None)
-            if isinstance(tb, int):
-                why = self.clock_gate.check(mtype, tb * 1e-3, t_rec)
-                c.clock_resets = self.clock_gate.resets
-                if vt is not None and why != "time":
-                    vt.commit(t_rec)  # a sample of the vehicle's clock: time moves on
-                if why is not None:
-                    if why == "time":
-                        c.rejected_time += 1
-                    elif why == "settling":
-                        c.clock_settling += 1
-                    else:
-                        c.rejected_stale += 1
-                    return True, None
+        if tb_s is not None:
+            why = self.clock_gate.check(mtype, tb_s, t_rec)
+            c.clock_resets = self.clock_gate.resets
+            if vt is not None and why != "time":
+                vt.commit(t_rec)  # a sample of the vehicle's clock: time moves on
+            if why is not None:
+                if why == "time":
+                    c.rejected_time += 1
+                elif why == "settling":
+                    c.clock_settling += 1
+                else:
+                    c.rejected_stale += 1
+                return True, None
         c.rx_by_type[mtype] += 1
         return True, msg
 
