@@ -328,3 +328,16 @@ def test_the_link_writes_what_it_received_before_each_packet_it_sends(tmp_path):
     finally:
         tx.close()
         link.close()
+
+
+def test_a_link_fsyncing_every_record_does_not_hold_them(tmp_path):
+    # tlog_fsync_every_s 0 asks for every record on the disk at once: nothing may wait in memory
+    from mpf_mavlink.mavlink.url import free_udp_port
+
+    for every, held in ((0.0, False), (1.0, True), (None, True)):
+        url = f"udpin:127.0.0.1:{free_udp_port()}"
+        link = open_link(url, tlog_path=tmp_path / f"{every}.tlog", tlog_fsync_every_s=every)
+        try:
+            assert link.tlog is not None and link.tlog._hold is held
+        finally:
+            link.close()

@@ -529,8 +529,11 @@ def open_link(
     tlog = None
     if tlog_path is not None:
         try:
-            # records held until the link sends or pauses (Link.recv, Link._log_tx)
-            tlog = TlogWriter(tlog_path, fsync_every_s=tlog_fsync_every_s, hold=True)
+            # records held until the link sends or pauses (Link.recv, Link._log_tx), unless
+            # each record is to reach the disk at once (fsync_every_s 0)
+            tlog = TlogWriter(
+                tlog_path, fsync_every_s=tlog_fsync_every_s, hold=tlog_fsync_every_s != 0
+            )
         except MpfError:
             conn.close()
             raise
