@@ -108,8 +108,8 @@ def test_every_hot_type_is_covered_and_decodes_as_pymavlink_does() -> None:
     assert {c.cls.msgname for c in hot.types.values()} == set(HOT_TYPES)
     for name, msg in msgs.items():
         data = _pack(msg, sysid=7, compid=42)
-        fast = hot.decode(data)
-        assert fast is not None, name
+        fast, used = hot.decode(data)
+        assert len(fast) == 1 and used == len(data), name
         (slow,) = _pymavlink(data)
         assert slow.get_type() == name
         _same(fast[0], slow)
@@ -120,9 +120,9 @@ def test_several_frames_in_one_datagram_and_trimmed_payloads() -> None:
     zeros = d.MAVLink_attitude_message(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # payload trimmed to 1
     data = b"".join(_pack(m) for m in [zeros, *_hot_messages().values()])
     assert data[1] == 1  # MAVLink 2 kept a single byte of the all-zero ATTITUDE payload
-    fast = hot.decode(data)
+    fast, used = hot.decode(data)
     slow = _pymavlink(data)
-    assert fast is not None and len(fast) == len(slow) == 1 + len(HOT_TYPES)
+    assert used == len(data) and len(fast) == len(slow) == 1 + len(HOT_TYPES)
     for f, s in zip(fast, slow, strict=True):
         _same(f, s)
 
@@ -131,9 +131,16 @@ def _att() -> bytes:
     return _pack(_hot_messages()["ATTITUDE"])
 
 
-def test_bad_crc_truncated_trailing_bytes_fall_back() -> None:
+def _split(hot: HotDecoder, data: bytes) -> tuple[list[str], int]:
+    msgs, used = hot.decode(data)
+    return [m.get_type() for m in msgs], used
+
+
+def test_bad_crc_truncated_trailing_bytes_go_to_pymavlink() -> None:
+    """A doubtful frame and everything after it are left to pymavlink."""
     hot = HotDecoder()
     good = _att()
+    n = len(good)
     bad_crc = good[:-1] + bytes([good[-1] ^ 0x01])
     bad_payload = good[:12] + bytes([good[12] ^ 0x80]) + good[13:]
     for data in (
@@ -141,12 +148,13 @@ def test_bad_crc_truncated_trailing_bytes_fall_back() -> None:
         bad_payload,
         good[:-1],  # truncated frame
         good[:5],  # truncated header
-        good + b"\x00",  # a stray byte after the frame
         b"\x55" + good,  # garbage before it
-        good + good[:8],  # a second frame cut short
+        b"",
     ):
-        assert hot.decode(data) is None
-    assert hot.decode(b"") is None
+        assert _split(hot, data) == ([], 0)
+    assert _split(hot, good + b"\x00") == (["ATTITUDE"], n)  # a stray byte after the frame
+    assert _split(hot, good + good[:8]) == (["ATTITUDE"], n)  # a second frame cut short
+    assert _split(hot, good + bad_crc + good) == (["ATTITUDE"], n)
 
 
 def test_mavlink1_signed_and_other_types_fall_back() -> None:
@@ -155,7 +163,7 @@ def test_mavlink1_signed_and_other_types_fall_back() -> None:
     mav1.send(_hot_messages()["ATTITUDE"], force_mavlink1=True)
     v1 = buf1.out[-1]
     assert v1[0] == 0xFE and _pymavlink(v1)[0].get_type() == "ATTITUDE"
-    assert hot.decode(v1) is None
+    assert _split(hot, v1) == ([], 0)
     mav, buf = _mav()
     mav.signing.secret_key = bytes(range(32))
     mav.signing.link_id = 1
@@ -163,13 +171,15 @@ def test_mavlink1_signed_and_other_types_fall_back() -> None:
     mav.send(_hot_messages()["ATTITUDE"])
     signed = buf.out[-1]
     assert signed[2] & 0x01
-    assert hot.decode(signed) is None
+    assert _split(hot, signed) == ([], 0)
     text = _pack(d.MAVLink_statustext_message(6, b"hello"))
-    assert hot.decode(text) is None
-    assert hot.decode(_att() + text) is None  # one doubtful frame: the whole datagram
+    att = _att()
+    assert _split(hot, text) == ([], 0)
+    assert _split(hot, att + text + att) == (["ATTITUDE"], len(att))  # the rest: pymavlink
+    assert _split(hot, att + signed) == (["ATTITUDE"], len(att))
     # a hot message id under a frame too long for it (a newer dialect's extensions)
-    long = bytearray(_att())
-    assert hot.decode(bytes(long[:1] + bytes([long[1] + 1]) + long[2:])) is None
+    long = bytearray(att)
+    assert _split(hot, bytes(long[:1] + bytes([long[1] + 1]) + long[2:])) == ([], 0)
 
 
 def _link_pair() -> tuple[Link, socket.socket, tuple[str, int]]:
@@ -193,6 +203,9 @@ def test_the_udp_link_takes_hot_and_other_datagrams_in_order() -> None:
         sent = [_pack(m) for m in msgs]
         sent.insert(3, _pack(d.MAVLink_statustext_message(6, b"between")))
         sent.insert(5, _pack(msgs[0]) + _pack(msgs[1]))  # two hot frames in one datagram
+        text = _pack(d.MAVLink_statustext_message(6, b"mid"))
+        sent.insert(6, _pack(msgs[0]) + text + _pack(msgs[2]))  # hot, other, hot
+        sent.insert(7, _pack(msgs[1]) + _pack(msgs[0])[:-3])  # hot, then a cut frame
         for b in sent:
             tx.sendto(b, dest)
         got = _drain(link)
@@ -200,7 +213,7 @@ def test_the_udp_link_takes_hot_and_other_datagrams_in_order() -> None:
         assert [m.get_type() for m in got] == [m.get_type() for m in want]
         for g, w in zip(got, want, strict=True):
             assert g.to_dict() == w.to_dict()
-        assert link.counters.bad_data == 0
+        assert link.counters.bad_data == 1  # the cut frame
     finally:
         tx.close()
         link.close()
@@ -246,13 +259,17 @@ def test_fuzzed_datagrams_never_raise_nor_yield_non_finite_samples(seed: int) ->
             data = data[: rng.randrange(len(data))]
         elif k == 2:
             data += rng.choice(base)[: rng.randrange(1, 30)]
-        fast = hot.decode(bytes(data))
-        if fast is None:
+        fast, used = hot.decode(bytes(data))
+        assert 0 <= used <= len(data)
+        if not fast:
+            assert used == 0
             continue
         taken += 1
+        # the decoded frames, then pymavlink on the rest: what pymavlink makes of it all
         slow = _pymavlink(bytes(data))
-        assert [m.get_type() for m in fast] == [m.get_type() for m in slow]
-        for f, s in zip(fast, slow, strict=True):
+        rest = _pymavlink(bytes(data[used:]))
+        assert [m.get_type() for m in fast + rest] == [m.get_type() for m in slow]
+        for f, s in zip(fast, slow[: len(fast)], strict=True):
             _same(f, s)
             f._timestamp = 1.0
             assert _finite(decode(f))

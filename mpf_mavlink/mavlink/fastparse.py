@@ -3,14 +3,15 @@ datagrams (ATTITUDE and LOCAL_POSITION_NED every frame, then GLOBAL_POSITION_INT
 ATTITUDE_TARGET, FOLLOW_TARGET, ...), used by the UDP link before pymavlink's parser.
 
 pymavlink's byte-stream parser costs ~7 us a message (a method call per parsing stage, a header
-object, the payload copied three times). Here one datagram is checked and decoded in one pass:
-every frame must be MAVLink 2, unsigned (no incompatibility flag), of a hot type, whole within
-the datagram, no longer than the type's payload, with the right CRC (CRC_EXTRA read from the
-pymavlink dialect's message classes). Anything else, anywhere in the datagram, hands the whole
-datagram back to pymavlink unchanged (:meth:`HotDecoder.decode` returns None): MAVLink 1,
-signed frames, other types, a bad CRC, a truncated frame, garbage between frames. The messages
-made are pymavlink's own classes with the attributes pymavlink's ``MAVLink.decode`` sets
-(tests/test_fastparse.py compares them), so every consumer sees the same objects."""
+object, the payload copied three times). Here a datagram's frames are checked and decoded in one
+pass from its start: a frame must be MAVLink 2, unsigned (no incompatibility flag), of a hot
+type, whole within the datagram, no longer than the type's payload, with the right CRC
+(CRC_EXTRA read from the pymavlink dialect's message classes). The first frame that is anything
+else (MAVLink 1, signed, another type, a bad CRC, truncated, garbage) ends the pass: from there
+on the datagram goes to pymavlink (:meth:`HotDecoder.decode` says where), which then sees the
+bytes its own parser would hold after those frames. The messages made are pymavlink's own
+classes with the attributes pymavlink's ``MAVLink.decode`` sets (tests/test_fastparse.py
+compares them), so every consumer sees the same objects."""
 
 from __future__ import annotations
 
@@ -106,36 +107,37 @@ def _table() -> dict[int, _Type]:
 
 
 class HotDecoder:
-    """Decodes whole datagrams of hot, unsigned MAVLink 2 frames (see the module docstring)."""
+    """Decodes the leading hot, unsigned MAVLink 2 frames of a datagram (module docstring)."""
 
     def __init__(self) -> None:
         self.types = _table()
         self._new_header = dialect.MAVLink_header
         self._crc_unpack = struct.Struct("<H").unpack_from
 
-    def decode(self, data: bytes) -> list[Any] | None:
-        """The messages of one datagram in order, or None: pymavlink must parse it. Never
+    def decode(self, data: bytes) -> tuple[list[Any], int]:
+        """(messages, end): the datagram's leading hot frames as messages, in order, and the
+        offset where they end (``len(data)``: all of it; pymavlink parses the rest). Never
         raises."""
-        try:
-            return self._decode(data)
-        except Exception:  # noqa: BLE001 - any doubt: pymavlink decides (and counts)
-            return None
-
-    def _decode(self, data: bytes) -> list[Any] | None:
-        types, n, i = self.types, len(data), 0
         out: list[Any] = []
+        try:
+            return out, self._decode(data, out)
+        except Exception:  # noqa: BLE001 - any doubt: pymavlink decides (and counts)
+            return [], 0
+
+    def _decode(self, data: bytes, out: list[Any]) -> int:
+        types, n, i = self.types, len(data), 0
         while i < n:
             if data[i] != _STX2 or i + _HEADER_LEN > n or data[i + 2] != 0:
-                return None  # MAVLink 1, garbage, a cut header, signed or unknown flags
+                return i  # MAVLink 1, garbage, a cut header, signed or unknown flags
             mlen = data[i + 1]
             end = i + _HEADER_LEN + mlen + 2
             msgid = data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16)
             ty = types.get(msgid)
             if ty is None or end > n or mlen > ty.size:
-                return None
+                return i
             crc = self._crc_unpack(data, end - 2)[0]
             if _mcrf4xx(data[i + 1 : end - 2] + ty.crc_extra, 0xFFFF) != crc:
-                return None
+                return i
             start = i + _HEADER_LEN
             if mlen == ty.size:
                 t = ty.unpacker.unpack_from(data, start)
@@ -158,4 +160,4 @@ class HotDecoder:
                                             data[i + 5], data[i + 6])  # fmt: skip
             out.append(m)
             i = end
-        return out or None
+        return i

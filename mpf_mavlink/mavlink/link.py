@@ -91,9 +91,9 @@ class DatagramReader:
     COMMAND_ACK) is thrown away. Here such a leftover is dropped (counted in ``bad_data``)
     before the next datagram is parsed.
 
-    A datagram made only of hot telemetry (unsigned MAVLink 2 frames with good CRCs:
+    A datagram's leading hot telemetry (unsigned MAVLink 2 frames with good CRCs:
     :class:`~mpf_mavlink.mavlink.fastparse.HotDecoder`) is decoded in one pass, to the same
-    message objects; any other goes to pymavlink's parser, as does every datagram while
+    message objects; the rest goes to pymavlink's parser, as does every datagram while
     signing is on or a pymavlink callback is set."""
 
     __slots__ = ("conn", "counters", "hot", "_pending")
@@ -124,10 +124,14 @@ class DatagramReader:
             if conn.first_byte:
                 conn.auto_mavlink_version(data)
             elif mav.signing.secret_key is None and mav.callback is None:
-                msgs = self.hot.decode(data)
-                if msgs is not None:
+                msgs, used = self.hot.decode(data)
+                if msgs:
                     mav.total_bytes_received += len(data)  # pymavlink's own tallies
                     mav.total_packets_received += len(msgs)
+                    if used < len(data):
+                        # the rest, as pymavlink's parser would hold it after those frames
+                        mav.buf, mav.buf_index = bytearray(data[used:]), 0
+                        mav.expected_length = dialect.HEADER_LEN_V2 + 2
                     msgs.reverse()
                     first = msgs.pop()
                     self._pending = msgs
