@@ -17,7 +17,14 @@ from pathlib import Path
 
 import pytest
 
-from mpf_mavlink.mavlink import codec, mavutil, read_tlog
+from mpf_mavlink.mavlink import (
+    codec,
+    dialect,
+    encode_set_attitude_target_rates,
+    mavutil,
+    open_link,
+    read_tlog,
+)
 from mpf_mavlink.mavlink.tlog import TlogWriter
 
 # A real ArduPlane SITL recording kept in the repository (provenance: tests/data/README.md).
@@ -265,3 +272,72 @@ def test_writer_fsync_every_record_when_asked(tmp_path):
         for k in range(5):
             w.write(pkt, 1_700_000_000.0 + k)
         assert w.fsyncs == 5 and w._syncer is None
+
+
+def test_a_holding_writer_writes_at_flush_and_close(tmp_path):
+    from mpf_mavlink.mavlink.tlog import HOLD_MAX_BYTES
+
+    p = tmp_path / "held.tlog"
+    pkt = bytes.fromhex("fd0900000001010000000000000000000000000000")  # any bytes: not parsed
+    w = TlogWriter(p, hold=True)
+    w.write(pkt, 1.7e9)
+    w.write(pkt, 1.7e9 + 0.02)
+    assert p.stat().st_size == 0 and w.records == 2  # held
+    w.flush()
+    assert p.stat().st_size == 2 * (8 + len(pkt))
+    n = HOLD_MAX_BYTES // (8 + len(pkt)) + 1  # the cap writes them out without a flush
+    for k in range(n):
+        w.write(pkt, 1.7e9 + k)
+    assert p.stat().st_size >= HOLD_MAX_BYTES
+    w.write(pkt, 1.8e9)
+    w.close()  # the rest
+    assert p.stat().st_size == (n + 3) * (8 + len(pkt))
+
+
+def test_the_link_writes_what_it_received_before_each_packet_it_sends(tmp_path):
+    """The link holds received records and writes them with the next packet it sends (before the
+    socket) or when it has nothing left to read: a SIGKILL between a send and the next cannot
+    lose a record of anything received before a command went out."""
+    import socket
+
+    from mpf_mavlink.mavlink.url import free_udp_port
+
+    port = free_udp_port()
+    p = tmp_path / "link.tlog"
+    link = open_link(f"udpin:127.0.0.1:{port}", vehicle_sysid=None, tlog_path=p)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        peer = dialect.MAVLink(None, srcSystem=1, srcComponent=1)
+        for k in range(3):
+            tx.sendto(peer.attitude_encode(1000 + 20 * k, 0, 0, 0, 0, 0, 0).pack(peer),
+                      ("127.0.0.1", port))  # fmt: skip
+        got = []
+        t_end = time.monotonic() + 5.0
+        while len(got) < 3 and time.monotonic() < t_end:
+            m = link.recv(0.0) if got else link.recv(0.5)
+            if m is not None:
+                got.append(m)
+        assert len(got) == 3
+        # the three were read back to back; nothing made the link pause or send yet
+        held = p.stat().st_size
+        link.send(encode_set_attitude_target_rates(link.mav, 1040, 1, 1, 0.0, 0.0, 0.1, 0.5))
+        res = read_tlog(p)
+        assert res.counts == {"ATTITUDE": 3, "SET_ATTITUDE_TARGET": 1}
+        assert [m.get_type() for _, m in res][-1] == "SET_ATTITUDE_TARGET"
+        assert held < p.stat().st_size
+    finally:
+        tx.close()
+        link.close()
+
+
+def test_a_link_fsyncing_every_record_does_not_hold_them(tmp_path):
+    # tlog_fsync_every_s 0 asks for every record on the disk at once: nothing may wait in memory
+    from mpf_mavlink.mavlink.url import free_udp_port
+
+    for every, held in ((0.0, False), (1.0, True), (None, True)):
+        url = f"udpin:127.0.0.1:{free_udp_port()}"
+        link = open_link(url, tlog_path=tmp_path / f"{every}.tlog", tlog_fsync_every_s=every)
+        try:
+            assert link.tlog is not None and link.tlog._hold is held
+        finally:
+            link.close()

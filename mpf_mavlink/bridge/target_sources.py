@@ -195,6 +195,17 @@ class LiveTarget:
     def update(self, sample: Any, t_mission: float | None) -> None:
         if t_mission is None:
             return
+        if (
+            type(sample).__name__ == "GlobalPositionSample"
+            and self.est.geodetic_origin() is not None
+        ):
+            # the second report of a fix (FOLLOW_TARGET's twin) is dropped by the estimator:
+            # decided before the geodetic conversion of a report that would be dropped
+            why = self.kf.known_position(float(sample.t_boot_s), t_mission)
+            if why is not None:
+                self.samples += 1
+                self.last_outcome = why
+                return
         r = self.report(sample)
         if r is None:
             return

@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from statistics import NormalDist
 
@@ -75,6 +76,8 @@ INIT_TURN_SIGMA_RAD_S = 0.05
 N = 7  # state size
 _POS = slice(0, 3)
 _VEL = slice(3, 6)
+_EYE = np.eye(N)
+_EYE.setflags(write=False)
 
 
 @dataclass(frozen=True)
@@ -189,6 +192,51 @@ def transition(x: NDArray[np.float64], T: float) -> tuple[NDArray[np.float64], N
     return xp, F
 
 
+def transition_mean(x: list[float], T: float) -> tuple[float, ...]:
+    """The coordinated-turn mean over T (s) of x (as a list): :func:`transition`'s x',
+    the same expressions (so the same floats), without the Jacobian."""
+    n, e, d, vn, ve, vd, w = x
+    wT = w * T
+    cw, sw = math.cos(wT), math.sin(wT)
+    if abs(wT) < 1e-4:
+        s = T * (1.0 - wT * wT / 6.0)
+        c = T * (wT / 2.0 - wT**3 / 24.0)
+    else:
+        s, c = sw / w, (1.0 - cw) / w
+    return (n + s * vn - c * ve, e + c * vn + s * ve, d + T * vd,
+            cw * vn - sw * ve, sw * vn + cw * ve, vd, w)  # fmt: skip
+
+
+def position_variance(x: list[float], P: list[list[float]], T: float) -> float:
+    """trace(Fp P Fp'), Fp the position rows of :func:`transition`'s Jacobian at x over T (s):
+    the predicted position variance before the process noise, in scalars (Fp is sparse: rows
+    [1 0 0 s -c 0 F06], [0 1 0 c s 0 F16], [0 0 1 0 0 T 0])."""
+    vn, ve, w = x[3], x[4], x[6]
+    wT = w * T
+    cw, sw = math.cos(wT), math.sin(wT)
+    if abs(wT) < 1e-4:
+        s = T * (1.0 - wT * wT / 6.0)
+        c = T * (wT / 2.0 - wT**3 / 24.0)
+        ds = -w * T**3 / 3.0
+        dc = T * T / 2.0 - w * w * T**4 / 8.0
+    else:
+        s, c = sw / w, (1.0 - cw) / w
+        ds, dc = (T * cw - s) / w, (T * sw - c) / w
+    f06 = ds * vn - dc * ve
+    f16 = dc * vn + ds * ve
+    var = P[2][2] + 2.0 * T * P[2][5] + T * T * P[5][5]  # row [0 0 1 0 0 T 0]
+    P3, P4, P6 = P[3], P[4], P[6]
+    for i, a, b, f in ((0, s, -c, f06), (1, c, s, f16)):  # rows at i, 3, 4, 6
+        Pi = P[i]
+        var += (
+            (Pi[i] + a * Pi[3] + b * Pi[4] + f * Pi[6])
+            + a * (P3[i] + a * P3[3] + b * P3[4] + f * P3[6])
+            + b * (P4[i] + a * P4[3] + b * P4[4] + f * P4[6])
+            + f * (P6[i] + a * P6[3] + b * P6[4] + f * P6[6])
+        )
+    return var
+
+
 def process_noise(p: TargetFilterParams, T: float) -> NDArray[np.float64]:
     """Q over T (s): white acceleration per axis, random-walk turn rate."""
     Q = np.zeros((N, N))
@@ -224,12 +272,18 @@ class TargetEstimator:
         self.p = params
         self.gates = [0.0] + [chi2_quantile(params.gate_probability, k) for k in range(1, 8)]
         self.hist: list[Report] = []
+        self.times: list[float] = []  # hist's report times, for bisect
         self.posts: list[_Post | None] = []
         self.anchor: _Post | None = None  # the posterior before hist[0]
         self.off: float | None = None  # clock offset + smallest delay (control - sender, s)
         self.rx_last = 0.0
         self.t_last = -math.inf  # newest report time (sender clock)
         self.att: tuple[float, float] | None = None  # newest reported attitude: (t, yaw)
+        self._cache: tuple[_Post, list[float], list[list[float]]] | None = None  # _lists
+        self._sel: dict[
+            tuple[int, ...],
+            tuple[NDArray[np.float64], NDArray[np.intp], tuple[NDArray[np.intp], ...]],
+        ] = {}  # _selection
         self.counts = dict(
             fused=0, gated=0, reinit=0, out_of_order=0, duplicate=0, too_late=0,
             clock_reset=0,
@@ -257,7 +311,7 @@ class TargetEstimator:
         return True
 
     def _reset(self) -> None:
-        self.hist, self.posts, self.anchor = [], [], None
+        self.hist, self.times, self.posts, self.anchor = [], [], [], None
         self.off, self.t_last, self.att = None, -math.inf, None
 
     def shift_time_base(self, dt: float) -> None:
@@ -283,7 +337,7 @@ class TargetEstimator:
         hist = self.hist
         if r.position is not None:
             # FOLLOW_TARGET and GLOBAL_POSITION_INT of one instant carry the same fix
-            i = bisect.bisect_left([h.t for h in hist], r.t)
+            i = bisect.bisect_left(self.times, r.t)
             j = i
             while j < len(hist) and hist[j].t == r.t:
                 if hist[j].position is not None:
@@ -293,10 +347,11 @@ class TargetEstimator:
         if hist and r.t < self.anchor_t():
             self.counts["too_late"] += 1
             return "too_late"
-        k = bisect.bisect_right([h.t for h in hist], r.t)
+        k = bisect.bisect_right(self.times, r.t)
         if k < len(hist):
             self.counts["out_of_order"] += 1
         hist.insert(k, r)
+        self.times.insert(k, r.t)
         self.posts.insert(k, None)
         outcome = ""
         for i in range(k, len(hist)):  # replay from the insertion on
@@ -311,6 +366,23 @@ class TargetEstimator:
         self._prune()
         return outcome
 
+    def known_position(self, t: float, t_rx: float) -> str | None:
+        """For a position-only report (no attitude) at sender time t (s) received at t_rx (s),
+        what :meth:`add` would make of it before the report itself matters: "too_late", or
+        "duplicate" (another report of that instant already carries a position: FOLLOW_TARGET
+        and GLOBAL_POSITION_INT of one fix), with the same clock update and counts; else None,
+        and :meth:`add` takes the report (its clock update then repeats this one: a no-op).
+        Lets the caller skip building a report (geodetic conversion) that would be dropped."""
+        if not self._clock(t, t_rx):
+            return "too_late"
+        hist, j = self.hist, bisect.bisect_left(self.times, t)
+        while j < len(hist) and hist[j].t == t:
+            if hist[j].position is not None:
+                self.counts["duplicate"] += 1
+                return "duplicate"
+            j += 1
+        return None
+
     def anchor_t(self) -> float:
         return self.anchor.t if self.anchor is not None else -math.inf
 
@@ -318,6 +390,7 @@ class TargetEstimator:
         keep_from = self.t_last - self.p.history_s
         while len(self.hist) > 1 and self.hist[0].t < keep_from:
             self.hist.pop(0)
+            self.times.pop(0)
             self.anchor = self.posts.pop(0)
 
     def _init(self, r: Report, nrej: int = 0) -> _Post:
@@ -347,7 +420,7 @@ class TargetEstimator:
         return np.array((h, h, v))
 
     @staticmethod
-    def _course(x: NDArray[np.float64], held: float) -> float:
+    def _course(x: Sequence[float] | NDArray[np.float64], held: float) -> float:
         vn, ve = float(x[3]), float(x[4])
         if vn * vn + ve * ve > MIN_COURSE_SPEED_M_S**2:
             return math.atan2(ve, vn)
@@ -377,10 +450,9 @@ class TargetEstimator:
         held = r.yaw if r.yaw is not None else prev.yaw
         if not rows:
             return _Post(r.t, x, P, prev.nrej, self._course(x, held), prev.t_fix), "fused"
-        H = np.zeros((len(rows), N))
-        H[range(len(rows)), rows] = 1.0
-        nu = np.asarray(z) - x[rows]
-        S = P[np.ix_(rows, rows)] + np.diag(rv)
+        H, idx, block = self._selection(tuple(rows))
+        nu = np.asarray(z) - x[idx]
+        S = P[block] + np.diag(rv)
         d2 = float(nu @ np.linalg.solve(S, nu))
         if not math.isfinite(d2) or d2 > self.gates[len(rows)]:
             nrej = prev.nrej + 1
@@ -389,10 +461,22 @@ class TargetEstimator:
             return _Post(prev.t, prev.x, prev.P, nrej, prev.yaw, prev.t_fix), "gated"
         K = np.linalg.solve(S, H @ P).T  # P H' S^-1 (S symmetric)
         x = x + K @ nu
-        IKH = np.eye(N) - K @ H
+        IKH = _EYE - K @ H
         P = IKH @ P @ IKH.T + K @ np.diag(rv) @ K.T  # Joseph form: stays symmetric positive
         t_fix = r.t if r.position is not None else prev.t_fix
         return _Post(r.t, x, 0.5 * (P + P.T), 0, self._course(x, held), t_fix), "fused"
+
+    def _selection(
+        self, rows: tuple[int, ...]
+    ) -> tuple[NDArray[np.float64], NDArray[np.intp], tuple[NDArray[np.intp], ...]]:
+        """(H, the rows as an index array, np.ix_ of them) of a measurement of those state rows:
+        a handful of patterns, built once each."""
+        sel = self._sel.get(rows)
+        if sel is None:
+            H = np.zeros((len(rows), N))
+            H[range(len(rows)), rows] = 1.0
+            sel = self._sel[rows] = (H, np.array(rows, np.intp), np.ix_(rows, rows))
+        return sel
 
     # -- output ----------------------------------------------------------------------------
     def latest(self) -> _Post | None:
@@ -435,16 +519,18 @@ class TargetEstimator:
         if age > self.p.max_age_s:
             return f"live target stale ({age:.2f} s since its last position)"
         # every control step: the mean and only the trace of the predicted position covariance
-        # (trace(Fp P Fp') + trace(Q_pos), Fp the position rows of F), not the whole of P
+        # (trace(Fp P Fp') + trace(Q_pos), Fp the position rows of F), not the whole of P, in
+        # scalars: numpy's per-call cost is most of it at this size
         T = ts - post.t
+        xl, Pl = self._lists(post)
+        x: tuple[float, ...] | list[float]
         if T > 0.0:
-            x, F = transition(post.x, T)
-            Fp = F[:3]
+            x = transition_mean(xl, T)
             q = 2.0 * self.p.accel_noise_m_s2**2 + self.p.vertical_accel_noise_m_s2**2
-            var = float(((Fp @ post.P) * Fp).sum()) + q * T**3 / 3.0
+            var = position_variance(xl, Pl, T) + q * T**3 / 3.0
         else:
-            x = transition(post.x, T)[0] if T < 0.0 else post.x
-            var = float(np.trace(post.P[_POS, _POS]))
+            x = transition_mean(xl, T) if T < 0.0 else xl
+            var = Pl[0][0] + Pl[1][1] + Pl[2][2]
         held = post.yaw
         sig = math.sqrt(max(0.0, var)) + 0.5 * self.p.manoeuvre_accel_m_s2 * max(0.0, age) ** 2
         if sig > self.p.max_position_sigma_m:
@@ -452,16 +538,24 @@ class TargetEstimator:
                 f"live target stale (position uncertainty {sig:.2f} m > "
                 f"{self.p.max_position_sigma_m:g} m, {age:.2f} s since its last position)"
             )
-        vn, ve, w = float(x[3]), float(x[4]), float(x[6])
+        vn, ve, w = x[3], x[4], x[6]
         att = self.att
         if att is not None and ts - att[0] <= self.p.attitude_timeout_s:
             yaw = att[1] + w * (ts - att[0])  # the target's own yaw, turned on at the turn rate
         else:
             yaw = self._course(x, held)
         return TargetState(
-            t, x[_POS].copy(), x[_VEL].copy(), np.array((-w * ve, w * vn, 0.0)),
+            t, np.array(x[0:3]), np.array(x[3:6]), np.array((-w * ve, w * vn, 0.0)),
             so3.rot_z(yaw), np.array((0.0, 0.0, w)), np.zeros(3),
         )  # fmt: skip
+
+    def _lists(self, post: _Post) -> tuple[list[float], list[list[float]]]:
+        """The posterior's mean and covariance as lists (kept for the latest posterior: the
+        control steps between two reports all start from it)."""
+        c = self._cache
+        if c is None or c[0] is not post:
+            c = self._cache = (post, post.x.tolist(), post.P.tolist())
+        return c[1], c[2]
 
 
 __all__ = ["Report", "TargetEstimator", "TargetFilterParams", "chi2_quantile"]

@@ -27,6 +27,7 @@ from typing import Any
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.mavlink.boot_clock import BootClockGate
 from mpf_mavlink.mavlink.encode import encode_companion_heartbeat
+from mpf_mavlink.mavlink.fastparse import HotDecoder
 from mpf_mavlink.mavlink.ports import _Serial, _TcpClient
 from mpf_mavlink.mavlink.pymav import DIALECT_NAME, dialect, mavutil
 from mpf_mavlink.mavlink.tlog import TlogWriter
@@ -88,23 +89,32 @@ class DatagramReader:
     truncated or corrupted packet) would be completed with the NEXT datagram's packets, and
     when its CRC then fails, that whole stretch (up to 280 bytes of good telemetry, a
     COMMAND_ACK) is thrown away. Here such a leftover is dropped (counted in ``bad_data``)
-    before the next datagram is parsed."""
+    before the next datagram is parsed.
 
-    __slots__ = ("conn", "counters")
+    A datagram's leading hot telemetry (unsigned MAVLink 2 frames with good CRCs:
+    :class:`~mpf_mavlink.mavlink.fastparse.HotDecoder`) is decoded in one pass, to the same
+    message objects; the rest goes to pymavlink's parser, as does every datagram while
+    signing is on or a pymavlink callback is set."""
+
+    __slots__ = ("conn", "counters", "hot", "_pending")
 
     def __init__(self, conn: Any, counters: LinkCounters) -> None:
         self.conn = conn
         self.counters = counters
+        self.hot = HotDecoder()
+        self._pending: list[Any] = []  # the current datagram's messages, last first
 
     def recv(self) -> Any:
         """The next message of the current datagram, else of the next datagram (None: none)."""
         # mavudp's pre_message does nothing, and post_message keeps pymavlink's own per-system
         # tables (last messages, modes, loss counts) that nothing here reads: both skipped,
         # they cost a quarter of a message's receive
+        if self._pending:
+            return self._pending.pop()
         conn, mav = self.conn, self.conn.mav
-        msg = mav.parse_char(b"")
+        msg = mav.parse_char(b"") if len(mav.buf) > mav.buf_index else None
         if msg is None:
-            if mav.buf_len() > 0:
+            if len(mav.buf) > mav.buf_index:
                 self.counters.bad_data += 1
                 mav.buf, mav.buf_index = bytearray(), 0
                 mav.expected_length = dialect.HEADER_LEN_V1 + 2
@@ -113,6 +123,19 @@ class DatagramReader:
                 return None
             if conn.first_byte:
                 conn.auto_mavlink_version(data)
+            elif mav.signing.secret_key is None and mav.callback is None:
+                msgs, used = self.hot.decode(data)
+                if msgs:
+                    mav.total_bytes_received += len(data)  # pymavlink's own tallies
+                    mav.total_packets_received += len(msgs)
+                    if used < len(data):
+                        # the rest, as pymavlink's parser would hold it after those frames
+                        mav.buf, mav.buf_index = bytearray(data[used:]), 0
+                        mav.expected_length = dialect.HEADER_LEN_V2 + 2
+                    msgs.reverse()
+                    first = msgs.pop()
+                    self._pending = msgs
+                    return first
             msg = mav.parse_char(data)
         return msg
 
@@ -249,16 +272,16 @@ class Link:
             _count_bad(c, msg, self._signing_counts_itself)
             return True, None
         c.rx_packets += 1
+        sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
+        tb = getattr(msg, "time_boot_ms", None)
+        vehicle = sysid == self.vehicle_sysid and self.vehicle_sysid is not None
+        tb_s = tb * 1e-3 if vehicle and isinstance(tb, int) else None  # the vehicle's clock
         # one receive time for the record and the clock gate, quantised as the tlog stores it
         # (us): a replay of the tlog can then take exactly the gate's decisions
         vt = self.vehicle_time
-        tb_s: float | None = None
         if vt is None:
             t_rec = round(self._clock() * 1e6) * 1e-6
         else:
-            tb = getattr(msg, "time_boot_ms", None)
-            if isinstance(tb, int) and msg.get_srcSystem() == self.vehicle_sysid:
-                tb_s = tb * 1e-3
             t_rec = round(vt.stamp(tb_s) * 1e6) * 1e-6
         # the receive time a consumer sees, with or without a tlog: the record's time exactly
         msg._timestamp = t_rec
@@ -271,34 +294,31 @@ class Link:
         if mtype.startswith("UNKNOWN_"):
             c.unknown_msgid += 1
             return True, None
-        src = (msg.get_srcSystem(), msg.get_srcComponent())
-        if not self.accepts(*src):
+        if not self.accepts(sysid, compid):
             c.rejected_sysid += 1
-            c.rejected_by_source[src] += 1
+            c.rejected_by_source[(sysid, compid)] += 1
             return True, None
         if (
             mtype == "HEARTBEAT"
             and self.vehicle_autopilot is not None
-            and src[0] == self.vehicle_sysid
+            and sysid == self.vehicle_sysid
             and getattr(msg, "autopilot", None) != self.vehicle_autopilot
         ):
             c.rejected_identity += 1
             return True, None
-        if src[0] == self.vehicle_sysid and self.vehicle_sysid is not None:
-            tb = getattr(msg, "time_boot_ms", None)
-            if isinstance(tb, int):
-                why = self.clock_gate.check(mtype, tb * 1e-3, t_rec)
-                c.clock_resets = self.clock_gate.resets
-                if vt is not None and why != "time":
-                    vt.commit(t_rec)  # a sample of the vehicle's clock: time moves on
-                if why is not None:
-                    if why == "time":
-                        c.rejected_time += 1
-                    elif why == "settling":
-                        c.clock_settling += 1
-                    else:
-                        c.rejected_stale += 1
-                    return True, None
+        if tb_s is not None:
+            why = self.clock_gate.check(mtype, tb_s, t_rec)
+            c.clock_resets = self.clock_gate.resets
+            if vt is not None and why != "time":
+                vt.commit(t_rec)  # a sample of the vehicle's clock: time moves on
+            if why is not None:
+                if why == "time":
+                    c.rejected_time += 1
+                elif why == "settling":
+                    c.clock_settling += 1
+                else:
+                    c.rejected_stale += 1
+                return True, None
         c.rx_by_type[mtype] += 1
         return True, msg
 
@@ -314,6 +334,8 @@ class Link:
                 return msg
             if more:
                 continue
+            if self.tlog is not None:  # nothing left to read: the held records go out now
+                self._flush_tlog()
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 return None
@@ -365,6 +387,15 @@ class Link:
             return
         try:
             self.tlog.write(packet, t)
+            self.tlog.flush()  # write-ahead: in the file, with all received before it, first
+        except (OSError, ValueError):
+            self.counters.io_errors += 1
+            self.counters.tlog_write_errors += 1
+
+    def _flush_tlog(self) -> None:
+        assert self.tlog is not None
+        try:
+            self.tlog.flush()
         except (OSError, ValueError):
             self.counters.io_errors += 1
             self.counters.tlog_write_errors += 1
@@ -502,7 +533,11 @@ def open_link(
     tlog = None
     if tlog_path is not None:
         try:
-            tlog = TlogWriter(tlog_path, fsync_every_s=tlog_fsync_every_s)
+            # records held until the link sends or pauses (Link.recv, Link._log_tx), unless
+            # each record is to reach the disk at once (fsync_every_s 0)
+            tlog = TlogWriter(
+                tlog_path, fsync_every_s=tlog_fsync_every_s, hold=tlog_fsync_every_s != 0
+            )
         except MpfError:
             conn.close()
             raise

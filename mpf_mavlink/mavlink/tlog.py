@@ -31,6 +31,8 @@ _TS = struct.Struct(">Q")
 TS_MIN_US = 946_684_800_000_000
 TS_MAX_US = 4_102_444_800_000_000
 _SIGNED = 0x01  # MAVLINK_IFLAG_SIGNED
+#: A holding writer (TlogWriter(hold=True)) writes its records out at this many bytes at most.
+HOLD_MAX_BYTES = 16384
 
 
 class TlogWriter:
@@ -43,6 +45,13 @@ class TlogWriter:
     thread when records were written since the last one, so a control loop that logs never
     waits for the disk; None (default) leaves it to the OS.
 
+    ``hold``: records wait in memory until :meth:`flush` (or :data:`HOLD_MAX_BYTES` of them,
+    or :meth:`close`), which writes them in one ``os.write``: a link that flushes before each
+    packet it sends and whenever it has nothing left to read (:class:`~.link.Link`) writes a
+    control frame's records in one system call instead of one each, and a SIGKILL still never
+    loses a record of anything that was sent (only the records received since the link's last
+    send or pause, whose answer had not gone out).
+
     ``last_us`` / ``last_packet``: timestamp (us) and packet of the latest record, so that a
     caller can use the exact time a reader will see (``last_us * 1e-6`` s).
     """
@@ -54,8 +63,11 @@ class TlogWriter:
         append: bool = False,
         fsync_every_s: float | None = None,
         clock: Callable[[], float] = time.time,
+        hold: bool = False,
     ) -> None:
         self.path = os.fspath(path)
+        self._hold = hold
+        self._held = bytearray()
         self._clock = clock
         self._fsync_every_s = fsync_every_s
         flags = os.O_WRONLY | os.O_CREAT | (os.O_APPEND if append else os.O_TRUNC)
@@ -85,12 +97,22 @@ class TlogWriter:
             raise ValueError(f"tlog timestamp must be a finite time >= 0, got {t_unix_s!r}")
         us = int(round(t * 1e6))
         rec = _TS.pack(us) + bytes(packet)
-        n = os.write(self._fd, rec)
-        while n < len(rec):  # regular files write fully; loop only on exotic filesystems
-            n += os.write(self._fd, rec[n:])
         self.records += 1
         self.bytes += len(rec)
         self.last_us, self.last_packet = us, packet
+        if self._hold:
+            held = self._held
+            held += rec
+            if len(held) >= HOLD_MAX_BYTES:
+                self.flush()
+            return
+        self._write(rec)
+
+    def _write(self, rec: bytes | bytearray) -> None:
+        assert self._fd is not None
+        n = os.write(self._fd, rec)
+        while n < len(rec):  # regular files write fully; loop only on exotic filesystems
+            n += os.write(self._fd, rec[n:])
         if self._fsync_every_s == 0:
             os.fsync(self._fd)
             self.fsyncs += 1
@@ -114,7 +136,14 @@ class TlogWriter:
                 pass
 
     def flush(self) -> None:
-        """Nothing is buffered in user space; kept so the writer looks like a file."""
+        """Write the held records (``hold``); nothing is buffered otherwise. A failed write
+        drops them (OSError raised: the caller counts the loss) rather than retry them for
+        ever."""
+        if not self._held or self._fd is None:
+            return
+        rec = bytes(self._held)
+        self._held.clear()
+        self._write(rec)
 
     def fsync(self) -> None:
         if self._fd is not None:
@@ -128,6 +157,10 @@ class TlogWriter:
             self._syncer.join()
             self._syncer = None
         if self._fd is not None:
+            try:
+                self.flush()
+            except OSError:
+                pass
             try:
                 os.fsync(self._fd)
             except OSError:
