@@ -253,6 +253,7 @@ def vehicle_config(cfg: Config, url: str, clock: str | None = None, **over: Any)
         initial_mode=sil.initial_mode,
         wind_ned=tuple(sil.wind_ned_m_s),
         turbulence=sil.turbulence,
+        wind_turbulence_m_s=sil.wind_turbulence_m_s,
         seed=sil.seed,
         gusts=[dataclasses.asdict(g) for g in sil.gusts],
         plant_options=plant_options,

@@ -14,6 +14,7 @@ import math
 import os
 import struct
 
+import numpy as np
 import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
@@ -136,6 +137,33 @@ def test_arduplane_param_set_wind_and_stream_rates():
         assert wind[0] == pytest.approx(0.0, abs=1e-9) and wind[1] == pytest.approx(-5.0)
         assert len(g.of("ATTITUDE")) - n0 == pytest.approx(20, abs=1)  # 10 Hz x 2 s
         assert echo["SIM_WIND_SPD"].param_value == pytest.approx(5.0)
+    finally:
+        g.close()
+        v.close()
+
+
+def test_arduplane_sim_wind_turb_sets_the_firmwares_random_wind():
+    # the jsbsim plant has the firmware's random wind (sim/plant/sitl_turbulence.py): SIM_WIND_TURB
+    # switches it on in flight, on top of the steady SIM_WIND_SPD / SIM_WIND_DIR
+    pytest.importorskip("jsbsim")
+    port = free_port()
+    v = SimVehicle.build("ardupilot", f"udpin:127.0.0.1:{port}", plant="jsbsim", trim_seconds=1.0)
+    g = Gcs(port)
+    try:
+        frames(v, g, 2)
+        g.c.param_set_send("SIM_WIND_SPD", 6.0)
+        g.c.param_set_send("SIM_WIND_DIR", 180.0)  # FROM the south: the air moves north
+        g.c.param_set_send("SIM_WIND_TURB", 2.0)
+        frames(v, g, 2)
+        echo = {p.param_id: p for p in g.of("PARAM_VALUE")}
+        assert echo["SIM_WIND_TURB"].param_value == pytest.approx(2.0)
+        n0 = len(v.truth()["t"])
+        frames(v, g, 100)
+        w = v.truth()["wind_ned"][n0:] - [6.0, 0.0, 0.0]
+        # about the steady wind, zero-mean, each step's spread ~0.5 m/s per horizontal axis at
+        # 150 Hz (sitl_turbulence.expected_statistics): within a factor 2 over ~100 samples
+        assert np.all(np.abs(w.mean(axis=0)[:2]) < 0.3)
+        assert 0.25 < w[:, 0].std() < 1.0
     finally:
         g.close()
         v.close()

@@ -66,6 +66,12 @@ BAD_SIL = [
     ("aircraft.attitude_loop.bank_max_rad=2", "aircraft.attitude_loop.bank_max_rad", "(0, 1.5)"),
     ("sil.plant=xplane", "sil.plant", "one of"),
     ("sil.turbulence=strong", "sil.turbulence", "one of"),
+    ("sil.wind_turbulence_m_s=-1", "sil.wind_turbulence_m_s", ">= 0"),
+    (
+        "sil.plant=kinematic;sil.turbulence=none;sil.wind_turbulence_m_s=2",
+        "sil.wind_turbulence_m_s",
+        "steady wind only",
+    ),
     ("sil.telemetry.attitude_hz=-1", "sil.telemetry.attitude_hz", ">= 0"),
     ("sil.gusts=[{start_s: 1, direction_ned: [0, 0, 0]}]", "sil.gusts[0].direction_ned", "zero"),
     ("target.type=mavlink;mavlink.target_sysid=2", "target.type", "publishes the scripted target"),

@@ -118,7 +118,9 @@ class SilConfig:
     ``kinematic.initial_attitude_rpy_rad``, the state ``check`` uses), after ``trim_s`` of flight,
     in ``initial_mode``: ``hold`` (loiter about that point) or ``cruise`` (straight on).
     Atmosphere: steady ``wind_ned_m_s`` (air-mass velocity, blowing toward), Milspec Dryden
-    ``turbulence`` seeded with ``seed`` (jsbsim only), one-minus-cosine ``gusts``.
+    ``turbulence`` (long gusts), ArduPilot SITL's high-frequency random wind
+    ``wind_turbulence_m_s`` (its SIM_WIND_TURB), both seeded with ``seed`` (jsbsim only),
+    one-minus-cosine ``gusts``.
     wind_estimate_tau_s: the wind the vehicle reports (WIND_COV / WIND) is a first-order lag of
       the true air-mass velocity with this time constant, as an autopilot's estimator follows
       it; 0 reports the truth, gusts included.
@@ -164,6 +166,13 @@ class SilConfig:
     )
     wind_ned_m_s: Vec3 = (0.0, 0.0, 0.0)
     turbulence: Literal["none", "light", "moderate", "severe"] = "none"
+    wind_turbulence_m_s: float = field(
+        default=0.0,
+        metadata=_nonneg(
+            "ArduPilot SITL's SIM_WIND_TURB (m/s; 0: off): its random wind every physics step "
+            "(sim/plant/sitl_turbulence.py), seeded with seed (jsbsim only)"
+        ),
+    )
     seed: int = field(
         default=0, metadata=_rng(0, 2**31 - 3, "JSBSim's noise engine takes seeds below 2^31 - 2")
     )
@@ -211,8 +220,16 @@ class SilConfig:
                     f"{prof_path} is a {prof.autopilot} profile but sil.flavour is "
                     f"{self.flavour!r}",
                 )  # fmt: skip
-        if self.plant == "kinematic" and (self.turbulence != "none" or self.gusts):
-            key = "sil.turbulence" if self.turbulence != "none" else "sil.gusts"
+        if self.plant == "kinematic" and (
+            self.turbulence != "none" or self.gusts or self.wind_turbulence_m_s > 0.0
+        ):
+            key = (
+                "sil.turbulence"
+                if self.turbulence != "none"
+                else "sil.wind_turbulence_m_s"
+                if self.wind_turbulence_m_s > 0.0
+                else "sil.gusts"
+            )
             raise _fail(
                 src, key, "the kinematic plant has steady wind only (use sil.plant: jsbsim)"
             )

@@ -30,6 +30,7 @@ os.environ.setdefault("JSBSIM_DEBUG", "0")
 import jsbsim  # noqa: E402
 
 from mpf_mavlink.constants import FT_TO_M, WGS84_A_M, WGS84_F  # noqa: E402
+from sim.plant.sitl_turbulence import SitlTurbulence  # noqa: E402
 
 KTS_PER_MS = 1.0 / 0.514444
 DEFAULT_ROOT = Path(__file__).resolve().parents[1] / "jsbsim_root"
@@ -333,6 +334,8 @@ class JSBSimPlant:
         self._n_az = n("accelerations/a-pilot-z-ft_sec2")
         self._n_thrpos = n("fcs/throttle-pos-norm")
         self._run = fdm.run
+        self._steady_wind = (0.0, 0.0, 0.0)  # m/s NED, what set_wind last set
+        self.random_wind: SitlTurbulence | None = None
 
     def _bind_controls(self, model: str, controls: dict[str, tuple[str, float]]) -> None:
         """Command nodes and signs: the autopilot's convention (aileron > 0 rolls right,
@@ -407,6 +410,7 @@ class JSBSimPlant:
     def set_wind(self, wind_ned_m_s) -> None:
         """Steady air-mass velocity (m/s, NED, the direction the air moves TOWARD)."""
         wn, we, wd = (float(v) for v in wind_ned_m_s)
+        self._steady_wind = (wn, we, wd)  # the random wind (if any) is added to it every step
         self._set("atmosphere/wind-north-fps", wn / FT_TO_M)
         self._set("atmosphere/wind-east-fps", we / FT_TO_M)
         self._set("atmosphere/wind-down-fps", wd / FT_TO_M)
@@ -438,6 +442,33 @@ class JSBSimPlant:
         self._set("atmosphere/turb-type", 3)
         self._set("atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps", w20)
         self._set("atmosphere/turbulence/milspec/severity", sev)
+
+    def set_random_wind(self, turbulence_m_s: float, seed: int = 0) -> None:
+        """ArduPilot SITL's ``SIM_WIND_TURB`` (m/s; 0: off): a random air-mass velocity added to
+        the steady wind before every physics step, as the firmware's simulator does
+        (:mod:`sim.plant.sitl_turbulence`: its process at its 1200 Hz, averaged over our step).
+        ``seed``: every seed its own draw, the same seed the same flight."""
+        if turbulence_m_s <= 0.0:
+            self.random_wind = None
+            self._run = self.fdm.run
+            self.set_wind(self._steady_wind)
+            return
+        rw = self.random_wind = SitlTurbulence(turbulence_m_s, self.dt, seed)
+        nxt, run = rw.next, self.fdm.run
+        n_n = self._node("atmosphere/wind-north-fps")
+        n_e = self._node("atmosphere/wind-east-fps")
+        n_d = self._node("atmosphere/wind-down-fps")
+        k = 1.0 / FT_TO_M
+
+        def run_with_random_wind() -> bool:
+            wn, we, wd = nxt()
+            sn, se, sd = self._steady_wind
+            n_n.set_double_value((sn + wn) * k)
+            n_e.set_double_value((se + we) * k)
+            n_d.set_double_value((sd + wd) * k)
+            return bool(run())
+
+        self._run = run_with_random_wind
 
     def trigger_gust(
         self,

@@ -79,6 +79,8 @@ class VehicleConfig:
     alt0_m: float = 488.0
     wind_ned: tuple[float, float, float] = (0.0, 0.0, 0.0)  # steady air-mass velocity (m/s)
     turbulence: str = "none"  # none, light, moderate, severe (JSBSim Dryden)
+    # ArduPilot SITL's SIM_WIND_TURB (m/s): its random wind every physics step (jsbsim only)
+    wind_turbulence_m_s: float = 0.0
     seed: int = 0
     # one-minus-cosine gusts: {"start_s": s after ready, **JSBSimPlant.trigger_gust kwargs}
     gusts: list[dict[str, Any]] = field(default_factory=list)
@@ -119,6 +121,8 @@ class VehicleConfig:
             raise ValueError("target_epoch must be 'ready' or 'bridge'")
         if isinstance(self.plant, str) and self.plant not in ("jsbsim", "kinematic"):
             raise ValueError("plant must be 'jsbsim', 'kinematic' or a plant object")
+        if not self.wind_turbulence_m_s >= 0.0:  # NaN too
+            raise ValueError("wind_turbulence_m_s must be >= 0 m/s")
 
     def telemetry_rates(self) -> TelemetryRates:
         """The rates to start with: the flavour's stock rates, overridden where given."""

@@ -118,6 +118,17 @@ def _set_wind(v: Any, speed: float | None = None, from_deg: float | None = None)
     v.plant.set_wind(w)
 
 
+def _random_wind(v: Any) -> float:
+    """SIM_WIND_TURB (m/s) of the plant's random wind (0: off)."""
+    rw = getattr(v.plant, "random_wind", None)
+    return 0.0 if rw is None else float(rw.turbulence_m_s)
+
+
+def _set_random_wind(v: Any, x: float) -> None:
+    """SIM_WIND_TURB set in flight: the random wind restarts, seeded with the vehicle's seed."""
+    v.plant.set_random_wind(float(x), int(v.config.seed))
+
+
 def _set_loiter_radius(v: Any, r: float) -> None:
     v.tun.loiter_radius = float(r)
     v.modes.hold_radius = float(r)  # the hold being flown takes it too (both autopilots do)
@@ -168,6 +179,9 @@ def vehicle_params(v: Any) -> list[Param]:
         Param("SIM_WIND_SPD", R32, lambda: _wind_from(v)[0],
               lambda x: _set_wind(v, speed=x), 0.0, 50.0),
     ]  # fmt: skip
+    if hasattr(v.plant, "set_random_wind"):  # the firmware's random wind (jsbsim plant only)
+        wind.append(Param("SIM_WIND_TURB", R32, lambda: _random_wind(v),
+                          lambda x: _set_random_wind(v, x), 0.0, 50.0))  # fmt: skip
     return [
         Param("AIRSPEED_CRUISE", R32, lambda: tun.airspeed_trim, speed[0], 5.0, 100.0),
         Param("AIRSPEED_MAX", I16, lambda: tun.airspeed_max, speed[2], 5.0, 100.0),

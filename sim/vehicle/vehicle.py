@@ -137,6 +137,10 @@ def build_plant(cfg: VehicleConfig) -> tuple[Any, Any, Any]:
         plant.set_wind(wind)
     if cfg.turbulence != "none":
         plant.set_turbulence(cfg.turbulence, cfg.seed)
+    if cfg.wind_turbulence_m_s > 0.0:
+        if not hasattr(plant, "set_random_wind"):
+            raise ValueError("wind_turbulence_m_s: the plant has no random wind (use jsbsim)")
+        plant.set_random_wind(cfg.wind_turbulence_m_s, cfg.seed)
     ap = cfg.autopilot or FixedWingAutopilot()
     if isinstance(plant, KinematicMavPlant):
         ap.hold.gains.pitch_trim = 0.0  # no angle of attack in the kinematic model
