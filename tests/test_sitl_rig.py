@@ -190,3 +190,28 @@ def test_pty_relay_carries_bytes_both_ways_untouched():
     finally:
         relay.close()
         srv.close()
+
+
+def test_sil_leg_flies_the_real_flights_wind_and_turbulence(tmp_path, monkeypatch):
+    # `--sil` beside a wind flight must fly that wind (SIM_WIND_DIR is where it comes from, the
+    # SIL's wind vector where the air goes) and SIM_WIND_TURB's model, not still air
+    exe = tmp_path / "arduplane"
+    exe.write_text("#!/bin/sh\n")
+    exe.chmod(0o755)
+    out = tmp_path / "run"
+    a = common.parser().parse_args(["arduplane", "--binary", str(exe), "--wind", "6,90",
+                                    "--turbulence", "2", "--out", str(out)])  # fmt: skip
+    v = common.validate(a)
+    (out / "bridge").mkdir(parents=True)
+    n = np.linspace(0.0, 10.0, 5)
+    np.savetxt(out / "bridge" / "timeseries.csv", np.column_stack([n, n, -100.0 + 0 * n]),
+               delimiter=",", header="p_n,p_e,p_d", comments="")  # fmt: skip
+    seen: list[list[str]] = []
+    monkeypatch.setattr(common.subprocess, "run", lambda cmd, **kw: seen.append(cmd) or
+                        subprocess.CompletedProcess(cmd, 0))  # fmt: skip
+    common.sil_leg(a, v, [], {"figures": {}}, out)
+    sets = [seen[0][i + 1] for i, x in enumerate(seen[0]) if x == "--set"]
+    wind = next(s for s in sets if s.startswith("sil.wind_ned_m_s="))
+    w = [float(x) for x in wind.split("=")[1].strip("[]").split(",")]
+    assert w == pytest.approx([0.0, -6.0, 0.0], abs=1e-3)  # from the east: the air moves west
+    assert "sil.wind_turbulence_m_s=2" in sets
