@@ -418,6 +418,7 @@ class Link:
         except Exception:  # noqa: BLE001 - closing must not fail the caller's cleanup
             pass
         if self.tlog is not None:
+            self._flush_tlog()  # held records: a failed write is counted, not lost unseen
             self.tlog.close()
 
     def __enter__(self) -> Link:
