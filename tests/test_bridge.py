@@ -43,6 +43,14 @@ FAST = ["mavlink.plots=false", "mavlink.heartbeat_timeout_s=3", "mavlink.mode_ti
 AP_CRUISE_M_S = 22.0
 
 
+def arduplane_pty_peer() -> MavPeer:
+    """ArduPlane on a serial port (pty) with no LOCAL_POSITION_NED: GLOBAL_POSITION_INT about
+    HOME_POSITION, and WIND."""
+    opts = PeerOptions(flavour="ardupilot", send_local=False, send_global=True, send_wind=True,
+                       airspeed=AP_CRUISE_M_S)  # fmt: skip
+    return MavPeer(opts, pty=True).start()
+
+
 def free_port() -> int:
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     s.bind(("127.0.0.1", 0))
@@ -147,16 +155,7 @@ def test_lean_recording_keeps_one_row_in_five_and_no_tlog(tmp_path):
 
 def test_arduplane_full_lifecycle_over_pty_with_global_position(tmp_path):
     # serial link (pty), no LOCAL_POSITION_NED: GLOBAL_POSITION_INT about HOME_POSITION
-    peer = MavPeer(
-        PeerOptions(
-            flavour="ardupilot",
-            send_local=False,
-            send_global=True,
-            send_wind=True,
-            airspeed=AP_CRUISE_M_S,
-        ),
-        pty=True,
-    ).start()
+    peer = arduplane_pty_peer()
     try:
         res = fly(cfg_for("ardupilot"), f"{peer.device}:115200", tmp_path, 1.0)
     finally:
@@ -425,16 +424,7 @@ def test_sigterm_hands_back_and_reports_exit_code(tmp_path):
 def test_cli_run_over_a_serial_port(tmp_path):
     # `mpf-mavlink run` as a user types it, on a serial port (pyserial on a pty pair): the whole
     # ArduPlane lifecycle, GUIDED then LOITER, and setpoints at the stream rate
-    peer = MavPeer(
-        PeerOptions(
-            flavour="ardupilot",
-            send_local=False,
-            send_global=True,
-            send_wind=True,
-            airspeed=AP_CRUISE_M_S,
-        ),
-        pty=True,
-    ).start()
+    peer = arduplane_pty_peer()
     sets = [x for s in FAST for x in ("--set", s)]
     cmd = [
         PY,

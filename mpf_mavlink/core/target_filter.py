@@ -164,9 +164,10 @@ def chi2_quantile(p: float, k: int) -> float:
     return 0.5 * (lo + hi)
 
 
-def transition(x: NDArray[np.float64], T: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(x', F): the coordinated-turn mean over T (s) and its Jacobian."""
-    n, e, d, vn, ve, vd, w = x.tolist()
+def _turn_terms(w: float, T: float) -> tuple[float, float, float, float, float, float]:
+    """(cos wT, sin wT, s, c, ds/dw, dc/dw) of the coordinated turn over T (s) at turn rate w
+    (rad/s): s = sin(wT)/w, c = (1 - cos wT)/w. One place, so the mean, its Jacobian and the
+    position variance use the same floats."""
     wT = w * T
     cw, sw = math.cos(wT), math.sin(wT)
     if abs(wT) < 1e-4:  # series: sin(wT)/w and (1 - cos wT)/w lose digits as w -> 0
@@ -177,6 +178,13 @@ def transition(x: NDArray[np.float64], T: float) -> tuple[NDArray[np.float64], N
     else:
         s, c = sw / w, (1.0 - cw) / w
         ds, dc = (T * cw - s) / w, (T * sw - c) / w
+    return cw, sw, s, c, ds, dc
+
+
+def transition(x: NDArray[np.float64], T: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(x', F): the coordinated-turn mean over T (s) and its Jacobian."""
+    n, e, d, vn, ve, vd, w = x.tolist()
+    cw, sw, s, c, ds, dc = _turn_terms(w, T)
     xp = np.array(
         (n + s * vn - c * ve, e + c * vn + s * ve, d + T * vd,
          cw * vn - sw * ve, sw * vn + cw * ve, vd, w)
@@ -196,13 +204,7 @@ def transition_mean(x: list[float], T: float) -> tuple[float, ...]:
     """The coordinated-turn mean over T (s) of x (as a list): :func:`transition`'s x',
     the same expressions (so the same floats), without the Jacobian."""
     n, e, d, vn, ve, vd, w = x
-    wT = w * T
-    cw, sw = math.cos(wT), math.sin(wT)
-    if abs(wT) < 1e-4:
-        s = T * (1.0 - wT * wT / 6.0)
-        c = T * (wT / 2.0 - wT**3 / 24.0)
-    else:
-        s, c = sw / w, (1.0 - cw) / w
+    cw, sw, s, c, _, _ = _turn_terms(w, T)
     return (n + s * vn - c * ve, e + c * vn + s * ve, d + T * vd,
             cw * vn - sw * ve, sw * vn + cw * ve, vd, w)  # fmt: skip
 
@@ -212,16 +214,7 @@ def position_variance(x: list[float], P: list[list[float]], T: float) -> float:
     the predicted position variance before the process noise, in scalars (Fp is sparse: rows
     [1 0 0 s -c 0 F06], [0 1 0 c s 0 F16], [0 0 1 0 0 T 0])."""
     vn, ve, w = x[3], x[4], x[6]
-    wT = w * T
-    cw, sw = math.cos(wT), math.sin(wT)
-    if abs(wT) < 1e-4:
-        s = T * (1.0 - wT * wT / 6.0)
-        c = T * (wT / 2.0 - wT**3 / 24.0)
-        ds = -w * T**3 / 3.0
-        dc = T * T / 2.0 - w * w * T**4 / 8.0
-    else:
-        s, c = sw / w, (1.0 - cw) / w
-        ds, dc = (T * cw - s) / w, (T * sw - c) / w
+    _, _, s, c, ds, dc = _turn_terms(w, T)
     f06 = ds * vn - dc * ve
     f16 = dc * vn + ds * ve
     var = P[2][2] + 2.0 * T * P[2][5] + T * T * P[5][5]  # row [0 0 1 0 0 T 0]

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sim.rigs.arduplane import sil_wind_set
 from sim.rigs.bundles import sitl_dir
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -228,12 +229,7 @@ def sil_command(
     if heading is not None:
         sil_sets.append(f"sil.initial_heading_rad={heading:.4f}")
     if m.wind_m_s > 0:
-        # SIM_WIND_DIR is where the wind comes FROM; sil.wind_ned_m_s is where the air moves TO
-        to = math.radians(m.wind_dir_deg + 180.0)
-        sil_sets.append(
-            f"sil.wind_ned_m_s=[{m.wind_m_s * math.cos(to):.3f},"
-            f"{m.wind_m_s * math.sin(to):.3f},0.0]"
-        )
+        sil_sets.append(sil_wind_set(m.wind_m_s, m.wind_dir_deg))
     if profile is not None:
         sil_sets.append(f"sil.autopilot_profile={profile}")
     config = ROOT / "configs" / f"bridge_{autopilot}.yaml"

@@ -9,6 +9,7 @@ EKF and GPS let it), climb, then LOITER. Wind: SIM_WIND_SPD / SIM_WIND_DIR / SIM
 from __future__ import annotations
 
 import fcntl
+import math
 import socket
 import subprocess
 import time
@@ -18,6 +19,14 @@ from typing import IO, Any
 from mpf_mavlink.mavlink.modes import Flavour
 from sim.rigs.bundles import ROOT, RigError, die_with_parent, stop_process_group
 from sim.rigs.gcs import Gcs
+
+
+def sil_wind_set(speed_m_s: float, from_deg: float) -> str:
+    """The SIL's ``sil.wind_ned_m_s`` override for ArduPlane's SIM_WIND_SPD / SIM_WIND_DIR:
+    SIM_WIND_DIR is where the wind comes FROM, the SIL's vector where the air moves TO (m/s)."""
+    to = math.radians(from_deg + 180.0)
+    return f"sil.wind_ned_m_s=[{speed_m_s * math.cos(to):.3f},{speed_m_s * math.sin(to):.3f},0.0]"
+
 
 NAME = "arduplane"
 FLAVOUR = Flavour.ARDUPILOT

@@ -566,9 +566,7 @@ def sil_leg(
         f"aircraft.trim_airspeed_m_s={v['cfg'].vehicle.airspeed_m_s:g}",
     ]
     if a.wind is not None:
-        # SIM_WIND_DIR is where the wind comes FROM; sil.wind_ned_m_s is where the air moves TO
-        spd, to = a.wind[0], math.radians(a.wind[1] + 180.0)
-        sil_sets.append(f"sil.wind_ned_m_s=[{spd * math.cos(to):.3f},{spd * math.sin(to):.3f},0.0]")
+        sil_sets.append(arduplane.sil_wind_set(*a.wind))
     if a.turbulence:
         sil_sets.append(f"sil.wind_turbulence_m_s={a.turbulence:g}")  # SIM_WIND_TURB's model
     cmd = [
