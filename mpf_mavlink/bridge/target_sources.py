@@ -139,12 +139,18 @@ class ExtrapolatedTarget:
         return self.base.extrapolate(t)
 
 
+def _floats(a: Any) -> list[Any]:
+    """A decoded sample's array (or sequence) as a (nested) list of floats."""
+    return a.tolist() if type(a) is np.ndarray else np.asarray(a, float).tolist()
+
+
 def _turn_and_yaw(R: Any, rates: Any) -> tuple[float, float]:
-    """Turn rate (rad/s, about down: the NED z component of the body angular velocity) and
-    yaw (rad) of an attitude R_B^N with body rates (FRD, rad/s)."""
-    Ra = np.asarray(R, float)
-    w = Ra @ np.asarray(rates, float)
-    return float(w[2]), math.atan2(float(Ra[1, 0]), float(Ra[0, 0]))
+    """Turn rate (rad/s, about down: the NED z component of the body angular velocity
+    R_B^N rates) and yaw (rad) of an attitude R_B^N with body rates (FRD, rad/s). Scalars:
+    every target fix carries one."""
+    (r00, _, _), (r10, _, _), (r20, r21, r22) = _floats(R)
+    p, q, r = _floats(rates)
+    return r20 * p + r21 * q + r22 * r, math.atan2(r10, r00)
 
 
 class LiveTarget:
@@ -174,10 +180,10 @@ class LiveTarget:
             return Report(float(sample.t_boot_s), turn_rate=turn, yaw=yaw, attitude=True)
         if name not in ("FollowTargetSample", "GlobalPositionSample"):
             return None
-        pos = self.est.to_local(sample.lat_deg, sample.lon_deg, sample.alt_amsl_m)
+        pos = self.est.to_local_xyz(sample.lat_deg, sample.lon_deg, sample.alt_amsl_m)
         if pos is None:
             return None
-        vel = None if sample.vel_ned is None else np.asarray(sample.vel_ned, float)
+        vel = None if sample.vel_ned is None else _floats(sample.vel_ned)
         if name == "GlobalPositionSample":
             return Report(float(sample.t_boot_s), pos, vel, yaw=sample.heading_rad)
         turn_yaw: tuple[float | None, float | None] = (None, None)
@@ -188,17 +194,15 @@ class LiveTarget:
         cov = np.asarray(sample.position_cov, float)
         pos_var = None
         if cov.shape == (3,) and cov[0] > 0.0 and cov[1] > 0.0:
-            pos_var = np.array((cov[0] ** 2, cov[0] ** 2, cov[1] ** 2))
+            eph, epv = cov.tolist()[:2]
+            pos_var = (eph * eph, eph * eph, epv * epv)
         return Report(float(sample.t_s), pos, vel, turn_yaw[0], turn_yaw[1], pos_var,
                       attitude=turn_yaw[1] is not None)  # fmt: skip
 
     def update(self, sample: Any, t_mission: float | None) -> None:
         if t_mission is None:
             return
-        if (
-            type(sample).__name__ == "GlobalPositionSample"
-            and self.est.geodetic_origin() is not None
-        ):
+        if type(sample).__name__ == "GlobalPositionSample" and self.est.has_geodetic_origin():
             # the second report of a fix (FOLLOW_TARGET's twin) is dropped by the estimator:
             # decided before the geodetic conversion of a report that would be dropped
             why = self.kf.known_position(float(sample.t_boot_s), t_mission)

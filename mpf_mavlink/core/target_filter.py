@@ -29,6 +29,13 @@ order with the posterior after each; a report older than the newest is inserted 
 is re-run from the posterior before it (buffer and replay), so it gives the same estimate as if
 it had arrived in order. Older than the history: dropped.
 
+Computation (scalars: at 7 states numpy's per-call cost was most of a fix's cost). No term of
+F, Q, H or R couples the vertical channel ``[d, vd]`` with the horizontal one ``[n, e, vn, ve,
+w]``, so P is block diagonal and the filter runs as a 5-state and a 2-state block. A report's
+components (R diagonal) are fused one at a time (sequential scalar updates, the same posterior
+as the vector update); the gate's ``nu' S^-1 nu`` is the sum of the scalar innovations' ``nu_j^2
+/ s_j`` (the LDL' factorisation of S), computed before anything is kept.
+
 Clock: the sender's clock is not ours. ``off`` = min over reports of (receive time - report
 time) is the clock offset plus the smallest transport delay (it leaks upward by
 :data:`CLOCK_DRIFT` to follow a drifting clock); a report's time in our base is its stamp plus
@@ -74,10 +81,17 @@ INIT_VEL_SIGMA_M_S = 5.0
 INIT_TURN_SIGMA_RAD_S = 0.05
 
 N = 7  # state size
-_POS = slice(0, 3)
-_VEL = slice(3, 6)
-_EYE = np.eye(N)
-_EYE.setflags(write=False)
+#: The state's indices in the horizontal block [n, e, vn, ve, w] and in the vertical [d, vd]
+HORIZONTAL = (0, 1, 3, 4, 6)
+VERTICAL = (2, 5)
+#: state index -> (block: 0 horizontal, 1 vertical; index in the block)
+_IN_BLOCK = {0: (0, 0), 1: (0, 1), 3: (0, 2), 4: (0, 3), 6: (0, 4), 2: (1, 0), 5: (1, 1)}
+#: A block's covariance is kept as its upper triangle, row by row: the horizontal block's 15
+#: entries (p00, p01, p02, p03, p04, p11, ..., p44), the vertical's 3 (p_dd, p_dv, p_vv).
+#: _COL[i]: where column i of the horizontal block is in it.
+_COL = ((0, 1, 2, 3, 4), (1, 5, 6, 7, 8), (2, 6, 9, 10, 11), (3, 7, 10, 12, 13), (4, 8, 11, 13, 14))
+
+Vec = Sequence[float]
 
 
 @dataclass(frozen=True)
@@ -105,30 +119,56 @@ class TargetFilterParams:
 @dataclass(frozen=True)
 class Report:
     """One report of the target. ``t``: the sender's timestamp (s). position / velocity: NED (m,
-    m/s) or None; pos_var: variances (m^2, n/e/d) or None for the configured noise; turn_rate:
-    rad/s about down or None; yaw: rad or None (only used to hold the frame at low speed)."""
+    m/s; arrays or sequences of 3 floats) or None; pos_var: variances (m^2, n/e/d) or None for
+    the configured noise; turn_rate: rad/s about down or None; yaw: rad or None (only used to
+    hold the frame at low speed)."""
 
     t: float
-    position: NDArray[np.float64] | None = None
-    velocity: NDArray[np.float64] | None = None
+    position: NDArray[np.float64] | Vec | None = None
+    velocity: NDArray[np.float64] | Vec | None = None
     turn_rate: float | None = None
     yaw: float | None = None
-    pos_var: NDArray[np.float64] | None = None
+    pos_var: NDArray[np.float64] | Vec | None = None
     attitude: bool = False  # yaw is the target's measured attitude (not a heading hint)
+
+
+def _floats(v: NDArray[np.float64] | Vec) -> list[float]:
+    """A report's vector as a list of floats."""
+    if type(v) is np.ndarray:
+        return v.tolist()
+    return [float(a) for a in v]
 
 
 @dataclass(frozen=True)
 class _Post:
-    """The posterior after a report: time (sender clock), mean, covariance, gated reports in a
-    row, the yaw held for low speeds, and the time of the newest fused position (what places
-    the target: the staleness counts from it, not from attitude-only or gated reports)."""
+    """The posterior after a report: time (sender clock), mean ``[n, e, d, vn, ve, vd, w]``,
+    covariance as the upper triangles of its horizontal and vertical blocks (:data:`_COL`),
+    gated reports in a row, the yaw held for low speeds, and the time of the newest fused
+    position (what places the target: the staleness counts from it, not from attitude-only or
+    gated reports)."""
 
     t: float
-    x: NDArray[np.float64]
-    P: NDArray[np.float64]
+    x: Vec
+    Ph: Vec
+    Pv: Vec
     nrej: int
     yaw: float
     t_fix: float
+
+    @property
+    def P(self) -> NDArray[np.float64]:
+        """The full 7 x 7 covariance (the blocks in place, zeros between them)."""
+        return full_covariance(self.Ph, self.Pv)
+
+
+def full_covariance(Ph: Vec, Pv: Vec) -> NDArray[np.float64]:
+    """The 7 x 7 covariance of the state from its blocks' upper triangles (:data:`_COL`)."""
+    P = np.zeros((N, N))
+    for i, j in enumerate(HORIZONTAL):
+        P[j, HORIZONTAL] = [Ph[k] for k in _COL[i]]
+    pdd, pdv, pvv = Pv
+    P[2, 2], P[2, 5], P[5, 2], P[5, 5] = pdd, pdv, pdv, pvv
+    return P
 
 
 def chi2_sf(x: float, k: int) -> float:
@@ -181,77 +221,165 @@ def _turn_terms(w: float, T: float) -> tuple[float, float, float, float, float, 
     return cw, sw, s, c, ds, dc
 
 
-def transition(x: NDArray[np.float64], T: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(x', F): the coordinated-turn mean over T (s) and its Jacobian."""
-    n, e, d, vn, ve, vd, w = x.tolist()
-    cw, sw, s, c, ds, dc = _turn_terms(w, T)
-    xp = np.array(
-        (n + s * vn - c * ve, e + c * vn + s * ve, d + T * vd,
-         cw * vn - sw * ve, sw * vn + cw * ve, vd, w)
-    )  # fmt: skip
-    F = np.eye(N)
-    F[0, 3], F[0, 4], F[1, 3], F[1, 4] = s, -c, c, s
-    F[2, 5] = T
-    F[3, 3], F[3, 4], F[4, 3], F[4, 4] = cw, -sw, sw, cw
-    F[0, 6] = ds * vn - dc * ve
-    F[1, 6] = dc * vn + ds * ve
-    F[3, 6] = -T * (sw * vn + cw * ve)
-    F[4, 6] = T * (cw * vn - sw * ve)
-    return xp, F
-
-
-def transition_mean(x: list[float], T: float) -> tuple[float, ...]:
-    """The coordinated-turn mean over T (s) of x (as a list): :func:`transition`'s x',
-    the same expressions (so the same floats), without the Jacobian."""
+def _mean(x: Vec, T: float, cw: float, sw: float, s: float, c: float) -> tuple[float, ...]:
     n, e, d, vn, ve, vd, w = x
-    cw, sw, s, c, _, _ = _turn_terms(w, T)
     return (n + s * vn - c * ve, e + c * vn + s * ve, d + T * vd,
             cw * vn - sw * ve, sw * vn + cw * ve, vd, w)  # fmt: skip
 
 
-def position_variance(x: list[float], P: list[list[float]], T: float) -> float:
-    """trace(Fp P Fp'), Fp the position rows of :func:`transition`'s Jacobian at x over T (s):
-    the predicted position variance before the process noise, in scalars (Fp is sparse: rows
-    [1 0 0 s -c 0 F06], [0 1 0 c s 0 F16], [0 0 1 0 0 T 0])."""
+def transition_mean(x: Vec, T: float) -> tuple[float, ...]:
+    """The coordinated-turn mean over T (s) of x ``[n, e, d, vn, ve, vd, w]``."""
+    cw, sw, s, c, _, _ = _turn_terms(x[6], T)
+    return _mean(x, T, cw, sw, s, c)
+
+
+def position_variance(x: Vec, Ph: Vec, Pv: Vec, T: float) -> float:
+    """trace(Fp P Fp'), Fp the position rows of the transition's Jacobian at x over T (s):
+    the predicted position variance before the process noise, in scalars. Fp is sparse: in the
+    horizontal block [n, e, vn, ve, w] the rows [1 0 s -c F06] and [0 1 c s F16], in the
+    vertical [d, vd] the row [1 T]."""
     vn, ve, w = x[3], x[4], x[6]
     _, _, s, c, ds, dc = _turn_terms(w, T)
     f06 = ds * vn - dc * ve
     f16 = dc * vn + ds * ve
-    var = P[2][2] + 2.0 * T * P[2][5] + T * T * P[5][5]  # row [0 0 1 0 0 T 0]
-    P3, P4, P6 = P[3], P[4], P[6]
-    for i, a, b, f in ((0, s, -c, f06), (1, c, s, f16)):  # rows at i, 3, 4, 6
-        Pi = P[i]
+    p00, p01, p02, p03, p04, p11, p12, p13, p14, p22, p23, p24, p33, p34, p44 = Ph
+    pdd, pdv, pvv = Pv
+    var = pdd + 2.0 * T * pdv + T * T * pvv  # row [1 T]
+    # row [1 0 a b f]: sum over its entries k of f_k (P f')_k, then row [0 1 a b f]
+    for pi_i, pi_2, pi_3, pi_4, a, b, f in (
+        (p00, p02, p03, p04, s, -c, f06),
+        (p11, p12, p13, p14, c, s, f16),
+    ):
         var += (
-            (Pi[i] + a * Pi[3] + b * Pi[4] + f * Pi[6])
-            + a * (P3[i] + a * P3[3] + b * P3[4] + f * P3[6])
-            + b * (P4[i] + a * P4[3] + b * P4[4] + f * P4[6])
-            + f * (P6[i] + a * P6[3] + b * P6[4] + f * P6[6])
+            (pi_i + a * pi_2 + b * pi_3 + f * pi_4)
+            + a * (pi_2 + a * p22 + b * p23 + f * p24)
+            + b * (pi_3 + a * p23 + b * p33 + f * p34)
+            + f * (pi_4 + a * p24 + b * p34 + f * p44)
         )
     return var
 
 
-def process_noise(p: TargetFilterParams, T: float) -> NDArray[np.float64]:
-    """Q over T (s): white acceleration per axis, random-walk turn rate."""
-    Q = np.zeros((N, N))
-    for i, q in ((0, p.accel_noise_m_s2**2), (1, p.accel_noise_m_s2**2),
-                 (2, p.vertical_accel_noise_m_s2**2)):  # fmt: skip
-        Q[i, i] = q * T**3 / 3.0
-        Q[i, i + 3] = Q[i + 3, i] = q * T**2 / 2.0
-        Q[i + 3, i + 3] = q * T
-    Q[6, 6] = p.turn_accel_noise_rad_s2**2 * T
-    return Q
+def _predict(
+    x: Vec, Ph: Vec, Pv: Vec, T: float, q: tuple[float, float, float]
+) -> tuple[Vec, Vec, Vec]:
+    """The prior over T (s): mean, F P F' + Q per block. ``q``: the squared process noise
+    densities (horizontal acceleration, vertical acceleration, turn rate); Q per axis
+    ``q [[T^3/3, T^2/2], [T^2/2, T]]``, ``q_w T`` on w. T = 0: unchanged; T < 0 (a control time
+    before the posterior): the mean only.
 
-
-def predict(
-    p: TargetFilterParams, x: NDArray[np.float64], P: NDArray[np.float64], T: float
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    Hand-unrolled scalars (numpy's per-call cost was most of a fix): F of the horizontal block
+    ``[n, e, vn, ve, w]`` is ``[[1, 0, s, -c, a], [0, 1, c, s, b], [0, 0, cw, -sw, g],
+    [0, 0, sw, cw, h], [0, 0, 0, 0, 1]]`` (a, b, g, h: the mean's derivatives in w); ``Bkj =
+    (P F')_kj`` for the entries that F P F' = F B needs, then that product's upper triangle."""
     if T == 0.0:
-        return x, P
-    if T < 0.0:  # backwards (a control time before the posterior): the mean only
-        return transition(x, T)[0], P
-    xp, F = transition(x, T)
-    Pp = F @ P @ F.T + process_noise(p, T)
-    return xp, 0.5 * (Pp + Pp.T)
+        return x, Ph, Pv
+    vn, ve, w = x[3], x[4], x[6]
+    cw, sw, s, c, ds, dc = _turn_terms(w, T)
+    xp = _mean(x, T, cw, sw, s, c)
+    if T < 0.0:
+        return xp, Ph, Pv
+    a = ds * vn - dc * ve
+    b = dc * vn + ds * ve
+    g = -T * (sw * vn + cw * ve)
+    h = T * (cw * vn - sw * ve)
+    p00, p01, p02, p03, p04, p11, p12, p13, p14, p22, p23, p24, p33, p34, p44 = Ph
+    # B = P F': row k of P times the rows of F (column 4 of B is P's column 4)
+    B00 = p00 + s * p02 - c * p03 + a * p04
+    B01 = p01 + c * p02 + s * p03 + b * p04
+    B02 = cw * p02 - sw * p03 + g * p04
+    B03 = sw * p02 + cw * p03 + h * p04
+    B11 = p11 + c * p12 + s * p13 + b * p14
+    B12 = cw * p12 - sw * p13 + g * p14
+    B13 = sw * p12 + cw * p13 + h * p14
+    B20 = p02 + s * p22 - c * p23 + a * p24
+    B21 = p12 + c * p22 + s * p23 + b * p24
+    B22 = cw * p22 - sw * p23 + g * p24
+    B23 = sw * p22 + cw * p23 + h * p24
+    B30 = p03 + s * p23 - c * p33 + a * p34
+    B31 = p13 + c * p23 + s * p33 + b * p34
+    B32 = cw * p23 - sw * p33 + g * p34
+    B33 = sw * p23 + cw * p33 + h * p34
+    B40 = p04 + s * p24 - c * p34 + a * p44
+    B41 = p14 + c * p24 + s * p34 + b * p44
+    B42 = cw * p24 - sw * p34 + g * p44
+    B43 = sw * p24 + cw * p34 + h * p44
+    qh, qv, qw = q
+    q3, q2, q1 = qh * T**3 / 3.0, qh * T**2 / 2.0, qh * T
+    # F B + Q, upper triangle (column 4 of F B is F's rows times P's column 4: B4j)
+    Ph = (
+        B00 + s * B20 - c * B30 + a * B40 + q3,
+        B01 + s * B21 - c * B31 + a * B41,
+        B02 + s * B22 - c * B32 + a * B42 + q2,
+        B03 + s * B23 - c * B33 + a * B43,
+        B40,
+        B11 + c * B21 + s * B31 + b * B41 + q3,
+        B12 + c * B22 + s * B32 + b * B42,
+        B13 + c * B23 + s * B33 + b * B43 + q2,
+        B41,
+        cw * B22 - sw * B32 + g * B42 + q1,
+        cw * B23 - sw * B33 + g * B43,
+        B42,
+        sw * B23 + cw * B33 + h * B43 + q1,
+        B43,
+        p44 + qw * T,
+    )
+    pdd, pdv, pvv = Pv
+    dv = pdv + T * pvv  # F P F' of [[1, T], [0, 1]]
+    Pv = (pdd + T * pdv + T * dv + qv * T**3 / 3.0, dv + qv * T**2 / 2.0, pvv + qv * T)
+    return xp, Ph, Pv
+
+
+def _innovation(s: float, nu: float, g: float) -> float:
+    """nu^2 / s (g = 1 / s), nan unless s is finite and > 0 (the gate then refuses it)."""
+    return nu * nu * g if 0.0 < s < math.inf else math.nan
+
+
+def _update_horizontal(
+    xh: Vec, Ph: Vec, i: int, z: float, r: float
+) -> tuple[list[float], list[float], float]:
+    """One scalar measurement z (variance r) of the horizontal block's state i: (mean,
+    covariance, nu^2 / s). The covariance is the Schur complement ``P - k c'`` (c = P[:, i],
+    s = c_i + r, gain k = c / s), its row and column i computed as ``c r / s`` (no cancellation
+    when r << P_ii, where ``P_ii - P_ii^2 / s`` could come out negative). Hand-unrolled."""
+    c = [Ph[k] for k in _COL[i]]
+    c0, c1, c2, c3, c4 = c
+    s = c[i] + r
+    g = 1.0 / s
+    k0, k1, k2, k3, k4 = c0 * g, c1 * g, c2 * g, c3 * g, c4 * g
+    x0, x1, x2, x3, x4 = xh
+    nu = z - xh[i]
+    x = [x0 + k0 * nu, x1 + k1 * nu, x2 + k2 * nu, x3 + k3 * nu, x4 + k4 * nu]
+    p00, p01, p02, p03, p04, p11, p12, p13, p14, p22, p23, p24, p33, p34, p44 = Ph
+    P = [
+        p00 - k0 * c0, p01 - k0 * c1, p02 - k0 * c2, p03 - k0 * c3, p04 - k0 * c4,
+        p11 - k1 * c1, p12 - k1 * c2, p13 - k1 * c3, p14 - k1 * c4,
+        p22 - k2 * c2, p23 - k2 * c3, p24 - k2 * c4,
+        p33 - k3 * c3, p34 - k3 * c4,
+        p44 - k4 * c4,
+    ]  # fmt: skip
+    f = r * g
+    for k, ca in zip(_COL[i], c, strict=True):
+        P[k] = ca * f
+    return x, P, _innovation(s, nu, g)
+
+
+def _update_vertical(
+    xv: Vec, Pv: Vec, i: int, z: float, r: float
+) -> tuple[list[float], list[float], float]:
+    """:func:`_update_horizontal` for the vertical block [d, vd]."""
+    pdd, pdv, pvv = Pv
+    c0, c1 = (pdd, pdv) if i == 0 else (pdv, pvv)
+    s = (c0, c1)[i] + r
+    g = 1.0 / s
+    k0, k1 = c0 * g, c1 * g
+    nu = z - xv[i]
+    x = [xv[0] + k0 * nu, xv[1] + k1 * nu]
+    f = r * g
+    if i == 0:
+        P = [c0 * f, c1 * f, pvv - k1 * c1]
+    else:
+        P = [pdd - k0 * c0, c0 * f, c1 * f]
+    return x, P, _innovation(s, nu, g)
 
 
 class TargetEstimator:
@@ -272,11 +400,11 @@ class TargetEstimator:
         self.rx_last = 0.0
         self.t_last = -math.inf  # newest report time (sender clock)
         self.att: tuple[float, float] | None = None  # newest reported attitude: (t, yaw)
-        self._cache: tuple[_Post, list[float], list[list[float]]] | None = None  # _lists
-        self._sel: dict[
-            tuple[int, ...],
-            tuple[NDArray[np.float64], NDArray[np.intp], tuple[NDArray[np.intp], ...]],
-        ] = {}  # _selection
+        self.q = (
+            params.accel_noise_m_s2**2,
+            params.vertical_accel_noise_m_s2**2,
+            params.turn_accel_noise_rad_s2**2,
+        )  # the process noise densities squared (_predict)
         self.counts = dict(
             fused=0, gated=0, reinit=0, out_of_order=0, duplicate=0, too_late=0,
             clock_reset=0,
@@ -388,29 +516,29 @@ class TargetEstimator:
 
     def _init(self, r: Report, nrej: int = 0) -> _Post:
         assert r.position is not None
-        pv = self._pos_var(r)
-        x = np.zeros(N)
-        x[_POS] = r.position
-        P = np.zeros((N, N))
-        P[_POS, _POS] = np.diag(pv)
+        pn, pe, pd = self._pos_var(r)
+        n, e, d = _floats(r.position)
         if r.velocity is not None:
-            x[_VEL] = r.velocity
-            P[_VEL, _VEL] = np.eye(3) * self.p.velocity_noise_m_s**2
+            vn, ve, vd = _floats(r.velocity)
+            vv = self.p.velocity_noise_m_s**2
         else:
-            P[_VEL, _VEL] = np.eye(3) * INIT_VEL_SIGMA_M_S**2
+            vn = ve = vd = 0.0
+            vv = INIT_VEL_SIGMA_M_S**2
         if r.turn_rate is not None:
-            x[6] = r.turn_rate
-            P[6, 6] = self.p.turn_rate_noise_rad_s**2
+            w, ww = float(r.turn_rate), self.p.turn_rate_noise_rad_s**2
         else:
-            P[6, 6] = INIT_TURN_SIGMA_RAD_S**2
+            w, ww = 0.0, INIT_TURN_SIGMA_RAD_S**2
+        x = (n, e, d, vn, ve, vd, w)
+        Ph = (pn, 0.0, 0.0, 0.0, 0.0, pe, 0.0, 0.0, 0.0, vv, 0.0, 0.0, vv, 0.0, ww)
+        Pv = (pd, 0.0, vv)
         yaw = r.yaw if r.yaw is not None else 0.0
-        return _Post(r.t, x, P, nrej, self._course(x, yaw), r.t)
+        return _Post(r.t, x, Ph, Pv, nrej, self._course(x, yaw), r.t)
 
-    def _pos_var(self, r: Report) -> NDArray[np.float64]:
+    def _pos_var(self, r: Report) -> list[float]:
         if r.pos_var is not None:
-            return np.asarray(r.pos_var, float)
+            return _floats(r.pos_var)
         h, v = self.p.position_noise_m**2, self.p.vertical_noise_m**2
-        return np.array((h, h, v))
+        return [h, h, v]
 
     @staticmethod
     def _course(x: Sequence[float] | NDArray[np.float64], held: float) -> float:
@@ -424,52 +552,46 @@ class TargetEstimator:
             if r.position is None:
                 return None, "waiting"
             return self._init(r), "fused"
-        x, P = predict(self.p, prev.x, prev.P, r.t - prev.t)
-        rows: list[int] = []
-        z: list[float] = []
-        rv: list[float] = []
-        if r.position is not None:
-            rows += [0, 1, 2]
-            z += r.position.tolist()
-            rv += self._pos_var(r).tolist()
-        if r.velocity is not None:
-            rows += [3, 4, 5]
-            z += r.velocity.tolist()
-            rv += [self.p.velocity_noise_m_s**2] * 3
-        if r.turn_rate is not None:
-            rows.append(6)
-            z.append(float(r.turn_rate))
-            rv.append(self.p.turn_rate_noise_rad_s**2)
+        x, Ph, Pv = _predict(prev.x, prev.Ph, prev.Pv, r.t - prev.t, self.q)
         held = r.yaw if r.yaw is not None else prev.yaw
-        if not rows:
-            return _Post(r.t, x, P, prev.nrej, self._course(x, held), prev.t_fix), "fused"
-        H, idx, block = self._selection(tuple(rows))
-        nu = np.asarray(z) - x[idx]
-        S = P[block] + np.diag(rv)
-        d2 = float(nu @ np.linalg.solve(S, nu))
-        if not math.isfinite(d2) or d2 > self.gates[len(rows)]:
+        meas = self._measurements(r)
+        if not meas:
+            return _Post(r.t, x, Ph, Pv, prev.nrej, self._course(x, held), prev.t_fix), "fused"
+        # the components one at a time (module docstring); the gate's distance is their sum,
+        # and once it is past the gate the rest cannot bring it back (each term is >= 0)
+        gate = self.gates[len(meas)]
+        xh: Vec = (x[0], x[1], x[3], x[4], x[6])
+        xv: Vec = (x[2], x[5])
+        d2 = 0.0
+        for j, z, rv in meas:
+            block, i = _IN_BLOCK[j]
+            if block == 0:
+                xh, Ph, term = _update_horizontal(xh, Ph, i, z, rv)
+            else:
+                xv, Pv, term = _update_vertical(xv, Pv, i, z, rv)
+            d2 += term
+            if not d2 <= gate:  # nan, or past the gate (the terms are >= 0): gated
+                break
+        if not math.isfinite(d2) or d2 > gate:
             nrej = prev.nrej + 1
             if nrej >= self.p.reinit_after and r.position is not None:
                 return self._init(r), "reinit"
-            return _Post(prev.t, prev.x, prev.P, nrej, prev.yaw, prev.t_fix), "gated"
-        K = np.linalg.solve(S, H @ P).T  # P H' S^-1 (S symmetric)
-        x = x + K @ nu
-        IKH = _EYE - K @ H
-        P = IKH @ P @ IKH.T + K @ np.diag(rv) @ K.T  # Joseph form: stays symmetric positive
+            return _Post(prev.t, prev.x, prev.Ph, prev.Pv, nrej, prev.yaw, prev.t_fix), "gated"
+        x = (xh[0], xh[1], xv[0], xh[2], xh[3], xv[1], xh[4])
         t_fix = r.t if r.position is not None else prev.t_fix
-        return _Post(r.t, x, 0.5 * (P + P.T), 0, self._course(x, held), t_fix), "fused"
+        return _Post(r.t, x, Ph, Pv, 0, self._course(x, held), t_fix), "fused"
 
-    def _selection(
-        self, rows: tuple[int, ...]
-    ) -> tuple[NDArray[np.float64], NDArray[np.intp], tuple[NDArray[np.intp], ...]]:
-        """(H, the rows as an index array, np.ix_ of them) of a measurement of those state rows:
-        a handful of patterns, built once each."""
-        sel = self._sel.get(rows)
-        if sel is None:
-            H = np.zeros((len(rows), N))
-            H[range(len(rows)), rows] = 1.0
-            sel = self._sel[rows] = (H, np.array(rows, np.intp), np.ix_(rows, rows))
-        return sel
+    def _measurements(self, r: Report) -> list[tuple[int, float, float]]:
+        """(state index, value, variance) of each component the report measures."""
+        meas: list[tuple[int, float, float]] = []
+        if r.position is not None:
+            meas += zip((0, 1, 2), _floats(r.position), self._pos_var(r), strict=True)
+        if r.velocity is not None:
+            vv = self.p.velocity_noise_m_s**2
+            meas += ((j, z, vv) for j, z in zip((3, 4, 5), _floats(r.velocity), strict=True))
+        if r.turn_rate is not None:
+            meas.append((6, float(r.turn_rate), self.p.turn_rate_noise_rad_s**2))
+        return meas
 
     # -- output ----------------------------------------------------------------------------
     def latest(self) -> _Post | None:
@@ -479,13 +601,13 @@ class TargetEstimator:
         return self.anchor
 
     def predicted(self, t: float) -> tuple[NDArray[np.float64], NDArray[np.float64], float] | None:
-        """(mean, covariance, held yaw) at control time t (s), or None without a state."""
+        """(mean, 7 x 7 covariance, held yaw) at control time t (s), or None without a state."""
         ts = self.to_sender(t)
         post = self.latest()
         if ts is None or post is None:
             return None
-        x, P = predict(self.p, post.x, post.P, ts - post.t)
-        return x, P, post.yaw
+        x, Ph, Pv = _predict(post.x, post.Ph, post.Pv, ts - post.t, self.q)
+        return np.array(x), full_covariance(Ph, Pv), post.yaw
 
     def position_sigma(self, t: float) -> float:
         """Predicted position uncertainty (m) at control time t (s): the radial 1-sigma plus
@@ -499,7 +621,7 @@ class TargetEstimator:
 
     def _sigma(self, P: NDArray[np.float64], age: float) -> float:
         tau = max(0.0, age)
-        sig = math.sqrt(max(0.0, float(np.trace(P[_POS, _POS]))))
+        sig = math.sqrt(max(0.0, float(P[0, 0] + P[1, 1] + P[2, 2])))
         return sig + 0.5 * self.p.manoeuvre_accel_m_s2 * tau * tau
 
     def state(self, t: float) -> TargetState | str:
@@ -515,15 +637,15 @@ class TargetEstimator:
         # (trace(Fp P Fp') + trace(Q_pos), Fp the position rows of F), not the whole of P, in
         # scalars: numpy's per-call cost is most of it at this size
         T = ts - post.t
-        xl, Pl = self._lists(post)
-        x: tuple[float, ...] | list[float]
+        x = post.x
         if T > 0.0:
-            x = transition_mean(xl, T)
             q = 2.0 * self.p.accel_noise_m_s2**2 + self.p.vertical_accel_noise_m_s2**2
-            var = position_variance(xl, Pl, T) + q * T**3 / 3.0
+            var = position_variance(x, post.Ph, post.Pv, T) + q * T**3 / 3.0
+            x = transition_mean(x, T)
         else:
-            x = transition_mean(xl, T) if T < 0.0 else xl
-            var = Pl[0][0] + Pl[1][1] + Pl[2][2]
+            var = post.Ph[0] + post.Ph[5] + post.Pv[0]
+            if T < 0.0:
+                x = transition_mean(x, T)
         held = post.yaw
         sig = math.sqrt(max(0.0, var)) + 0.5 * self.p.manoeuvre_accel_m_s2 * max(0.0, age) ** 2
         if sig > self.p.max_position_sigma_m:
@@ -541,14 +663,6 @@ class TargetEstimator:
             t, np.array(x[0:3]), np.array(x[3:6]), np.array((-w * ve, w * vn, 0.0)),
             so3.rot_z(yaw), np.array((0.0, 0.0, w)), np.zeros(3),
         )  # fmt: skip
-
-    def _lists(self, post: _Post) -> tuple[list[float], list[list[float]]]:
-        """The posterior's mean and covariance as lists (kept for the latest posterior: the
-        control steps between two reports all start from it)."""
-        c = self._cache
-        if c is None or c[0] is not post:
-            c = self._cache = (post, post.x.tolist(), post.P.tolist())
-        return c[1], c[2]
 
 
 __all__ = ["Report", "TargetEstimator", "TargetFilterParams", "chi2_quantile"]
