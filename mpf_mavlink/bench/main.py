@@ -98,9 +98,10 @@ def _optional_groups() -> None:
     from mpf_mavlink.bench.calibration import calibration
 
     GROUPS["calibration"] = calibration
-    from mpf_mavlink.bench.target import target_feed
+    from mpf_mavlink.bench.target import target_feed, target_filter_us
 
     GROUPS["target_feed"] = target_feed
+    GROUPS["target_filter_us"] = target_filter_us
     from mpf_mavlink.bench.campaign import (
         campaign_demo_robustness,
         campaign_roa,
