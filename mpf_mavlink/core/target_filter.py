@@ -29,7 +29,7 @@ order with the posterior after each; a report older than the newest is inserted 
 is re-run from the posterior before it (buffer and replay), so it gives the same estimate as if
 it had arrived in order. Older than the history: dropped.
 
-Computation (scalars: at 7 states numpy's per-call cost was most of a fix's cost). No term of
+Computation, in scalars (at 7 states numpy's per-call cost would be most of a fix's). No term of
 F, Q, H or R couples the vertical channel ``[d, vd]`` with the horizontal one ``[n, e, vn, ve,
 w]``, so P is block diagonal and the filter runs as a 5-state and a 2-state block. A report's
 components (R diagonal) are fused one at a time (sequential scalar updates, the same posterior
@@ -221,6 +221,7 @@ def _turn_terms(w: float, T: float) -> tuple[float, float, float, float, float, 
 
 
 def _mean(x: Vec, T: float, cw: float, sw: float, s: float, c: float) -> tuple[float, ...]:
+    """The coordinated-turn mean over T (s) with the turn terms of :func:`_turn_terms`."""
     n, e, d, vn, ve, vd, w = x
     return (n + s * vn - c * ve, e + c * vn + s * ve, d + T * vd,
             cw * vn - sw * ve, sw * vn + cw * ve, vd, w)  # fmt: skip
@@ -273,7 +274,7 @@ def _predict(
     ``q [[T^3/3, T^2/2], [T^2/2, T]]``, ``q_w T`` on w. T = 0: unchanged; T < 0 (a control time
     before the posterior): the mean only.
 
-    Hand-unrolled scalars (numpy's per-call cost was most of a fix): F of the horizontal block
+    Hand-unrolled scalars (numpy's per-call cost would be most of a fix): F of the horizontal block
     ``[n, e, vn, ve, w]`` is ``[[1, 0, s, -c, a], [0, 1, c, s, b], [0, 0, cw, -sw, g],
     [0, 0, sw, cw, h], [0, 0, 0, 0, 1]]`` (a, b, g, h: the mean's derivatives in w); ``Bkj =
     (P F')_kj`` for the entries that F P F' = F B needs, then that product's upper triangle."""
