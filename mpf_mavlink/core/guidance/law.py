@@ -233,13 +233,13 @@ def transient_frame_rate(
     return (-climb_dot * y_w / n2, -climb_dot * alpha / n2, heading_dot)
 
 
-def progression_rate(pt_f1: float, c: Vec3, v_d: Vec3, f1: Vec3, K_p: float) -> float:
+def progression_rate(pt_f1: float, r: Vec3, f1: Vec3, K_p: float) -> float:
     """(22) [sdot] = (K_p pt + v_w w1 + eta_hat - v_t t1 - v_d) . f1 (m/s), in {T}, where
-    pt_f1 = pt . f1 and c = R_I^T (v_w w1 + eta_hat - v_t) is the vehicle's velocity relative
-    to the target."""
-    return K_p * pt_f1 + (
-        (c[0] - v_d[0]) * f1[0] + (c[1] - v_d[1]) * f1[1] + (c[2] - v_d[2]) * f1[2]
-    )
+    pt_f1 = pt . f1 and r = R_I^T (v_w w1 + eta_hat - v_t) - v_d is the vehicle's velocity
+    relative to the path point (m/s)."""
+    r0, r1, r2 = r
+    e0, e1, e2 = f1
+    return K_p * pt_f1 + (r0 * e0 + r1 * e1 + r2 * e2)
 
 
 def feedforward_omega_DT(
@@ -312,13 +312,15 @@ def feedforward_omega_DT(
     )
 
 
-def attitude_error(d1: Vec3, R_W_I: Mat3) -> tuple[float, float, float]:
-    """(6) Psi and (9) e = (e2, e3) from d1 and R_W^I (both in NED).
+def attitude_error(d1: Vec3, w1: Vec3, w2: Vec3, w3: Vec3) -> tuple[float, float, float]:
+    """(6) Psi and (9) e = (e2, e3) from d1 and the columns w1, w2, w3 of R_W^I (all in NED).
 
     Rt = R_W^D = (R_D^I)^T R_W^I; its first row is (d1.w1, d1.w2, d1.w3).
     """
     d0, d1_, d2 = d1
-    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = R_W_I
+    a0, a1, a2 = w1
+    b0, b1, b2 = w2
+    c0, c1, c2 = w3
     Rt11 = a0 * d0 + a1 * d1_ + a2 * d2
     Rt12 = b0 * d0 + b1 * d1_ + b2 * d2
     Rt13 = c0 * d0 + c1 * d1_ + c2 * d2
@@ -399,27 +401,29 @@ def _diagnostics(
     # Into NED by R_T^I (written out, as in mpf_law): p_d (p_f = p_t + p_d and pt = (p - p_t)
     # - p_d), wd1 = R_T^I R_F^T wd1^F and f1.
     (xn, yn, zn), (xe, ye, ze), (xd, yd, zd) = R_I_T
-    f1, f2, f3 = R_F_T
+    (f1x, f1y, f1z), (f2x, f2y, f2z), (f3x, f3y, f3z) = R_F_T
     a0, a1, a2 = p_d
-    p_d_I = (
-        xn * a0 + yn * a1 + zn * a2,
-        xe * a0 + ye * a1 + ze * a2,
-        xd * a0 + yd * a1 + zd * a2,
-    )
+    pdn = xn * a0 + yn * a1 + zn * a2
+    pde = xe * a0 + ye * a1 + ze * a2
+    pdd = xd * a0 + yd * a1 + zd * a2
     x0, x1, x2 = wd1_F
-    a0 = x0 * f1[0] + x1 * f2[0] + x2 * f3[0]
-    a1 = x0 * f1[1] + x1 * f2[1] + x2 * f3[1]
-    a2 = x0 * f1[2] + x1 * f2[2] + x2 * f3[2]
+    a0 = x0 * f1x + x1 * f2x + x2 * f3x
+    a1 = x0 * f1y + x1 * f2y + x2 * f3y
+    a2 = x0 * f1z + x1 * f2z + x2 * f3z
     wd1 = (xn * a0 + yn * a1 + zn * a2, xe * a0 + ye * a1 + ze * a2, xd * a0 + yd * a1 + zd * a2)
-    a0, a1, a2 = f1
-    f1 = (xn * a0 + yn * a1 + zn * a2, xe * a0 + ye * a1 + ze * a2, xd * a0 + yd * a1 + zd * a2)
-    a0, a1, a2 = p_d_I
+    f1 = (
+        xn * f1x + yn * f1y + zn * f1z,
+        xe * f1x + ye * f1y + ze * f1z,
+        xd * f1x + yd * f1y + zd * f1z,
+    )
+    a0, a1, a2 = x_I
+    b0, b1, b2 = p_t
     x0, x1, x2 = pt
     # tuple.__new__: the NamedTuple without its keyword-parsing constructor (hot path).
     return tuple.__new__(
         MpfDiagnostics,
-        (t, s, (x_I[0] - a0, x_I[1] - a1, x_I[2] - a2), math.sqrt(x0 * x0 + x1 * x1 + x2 * x2),
-         pt_F, (p_t[0] + a0, p_t[1] + a1, p_t[2] + a2), psi, (e2, e3), y_w, z_w, d1, wd1, f1,
+        (t, s, (a0 - pdn, a1 - pde, a2 - pdd), math.sqrt(x0 * x0 + x1 * x1 + x2 * x2),
+         pt_F, (b0 + pdn, b1 + pde, b2 + pdd), psi, (e2, e3), y_w, z_w, d1, wd1, f1,
          omega_DI, (ff2, ff3), (law2, law3), margin, mode, k1, k2),
     )  # fmt: skip
 
@@ -442,111 +446,116 @@ def mpf_law(
     time as the vehicle (extrapolate it first: :meth:`TargetState.extrapolate`).
     Returns the command and the diagnostics record (None when ``diagnostics`` is False, which
     saves the cost of building it inside integrators).
+
+    This is the hot path (once per bridge step, four times per step of the kinematic RK4), so
+    it is written out on scalars: rotations as sums of products (vec3 says what they are),
+    vectors unpacked into named components ({T}'s x, y, z; NED's n, e, d) rather than indexed.
     """
     t = float(vehicle.t)
     s = float(s)
     v_w = float(vehicle.airspeed)
     K_p, K_R, alpha = gains.K_p, gains.K_R, gains.alpha
-    # ndarray.tolist() gives lists, which are only indexed and unpacked. Matrices are by
-    # columns: R_W^I's are the rows of its transpose; R_I^T = (R_T^I)^T's are R_T^I's rows.
-    # Rotations are written out on scalars (this is the hot path; vec3 says what they are).
-    R_W_I: Mat3 = vehicle.R_W_I.T.tolist()  # (w1, w2, w3) in NED
-    R_I_T: Mat3 = target.R_T_I.tolist()  # NED into {T}; mat_T_vec(R_I_T, .) is R_T^I
+    # ndarray.tolist() gives lists, which are only unpacked. R_W^I's rows hold the north, east
+    # and down components of w1, w2, w3; R_T^I's rows are NED's axes in {T} (the columns of
+    # R_I^T = (R_T^I)^T, so mat_T_vec(R_I_T, .) is R_T^I).
+    (w1n, w2n, w3n), (w1e, w2e, w3e), (w1d, w2d, w3d) = vehicle.R_W_I.tolist()
+    R_I_T: Mat3 = target.R_T_I.tolist()
     (xn, yn, zn), (xe, ye, ze), (xd, yd, zd) = R_I_T  # north, east, down axes in {T}
     p_t: Vec3 = target.position.tolist()
     omega_TI: Vec3 = target.omega_T.tolist()  # omega_TI^T
-    w1, w2, w3 = R_W_I
+    ox, oy, oz = omega_TI
 
     # Into {T}, where the path is fixed: the vehicle relative to the target, the target's
     # velocity less the wind, and the vehicle's velocity (1) relative to the target's,
     # c = R_I^T (v_w w1 + eta_hat - v_t) = v_w w1^T - uu.
     a0, a1, a2 = vehicle.position.tolist()
-    x_I = (a0 - p_t[0], a1 - p_t[1], a2 - p_t[2])  # p - p_t in NED
-    a0, a1, a2 = x_I
+    b0, b1, b2 = p_t
+    x_I = a0, a1, a2 = a0 - b0, a1 - b1, a2 - b2  # p - p_t in NED
     q = (xn * a0 + xe * a1 + xd * a2, yn * a0 + ye * a1 + yd * a2, zn * a0 + ze * a1 + zd * a2)
     a0, a1, a2 = target.velocity.tolist()
     if ext.wind_compensation:
         b0, b1, b2 = vehicle.wind.tolist()
         a0, a1, a2 = a0 - b0, a1 - b1, a2 - b2
-    uu = (xn * a0 + xe * a1 + xd * a2, yn * a0 + ye * a1 + yd * a2, zn * a0 + ze * a1 + zd * a2)
-    a0, a1, a2 = w1
-    c = (
-        v_w * (xn * a0 + xe * a1 + xd * a2) - uu[0],
-        v_w * (yn * a0 + ye * a1 + yd * a2) - uu[1],
-        v_w * (zn * a0 + ze * a1 + zd * a2) - uu[2],
+    uu = u0, u1, u2 = (
+        xn * a0 + xe * a1 + xd * a2,
+        yn * a0 + ye * a1 + yd * a2,
+        zn * a0 + ze * a1 + zd * a2,
+    )
+    c = c0, c1, c2 = (
+        v_w * (xn * w1n + xe * w1e + xd * w1d) - u0,
+        v_w * (yn * w1n + ye * w1e + yd * w1d) - u1,
+        v_w * (zn * w1n + ze * w1e + zd * w1d) - u2,
     )
 
     # The virtual point: p_d(s), R_F^T, dp_d/ds and the rate of {F} per unit s.
     p_d, f1, f2, f3, k1, k2, dp_ds, rate_F = path.eval_with_rate(s)
-    R_F_T: Mat3 = (f1, f2, f3)
+    (f1x, f1y, f1z), (f2x, f2y, f2z), (f3x, f3y, f3z) = f1, f2, f3
     a0, a1, a2 = p_d
-    x0, x1, x2 = pt = (q[0] - a0, q[1] - a1, q[2] - a2)  # position error pt = p - p_f, in {T}
-    pt_F = (  # (f1 . pt, f2 . pt, f3 . pt)
-        f1[0] * x0 + f1[1] * x1 + f1[2] * x2,
-        f2[0] * x0 + f2[1] * x1 + f2[2] * x2,
-        f3[0] * x0 + f3[1] * x1 + f3[2] * x2,
+    x0, x1, x2 = q
+    x0, x1, x2 = pt = (x0 - a0, x1 - a1, x2 - a2)  # position error pt = p - p_f, in {T}
+    pt_F = pt_f1, _, _ = (  # (f1 . pt, f2 . pt, f3 . pt)
+        f1x * x0 + f1y * x1 + f1z * x2,
+        f2x * x0 + f2y * x1 + f2z * x2,
+        f3x * x0 + f3y * x1 + f3z * x2,
     )
-    b0, b1, b2 = omega_TI
-    v_d = (b1 * a2 - b2 * a1, b2 * a0 - b0 * a2, b0 * a1 - b1 * a0)  # omega_TI x p_d
-    sdot = progression_rate(pt_F[0], c, v_d, f1, K_p)  # (22)
+    b0, b1, b2 = oy * a2 - oz * a1, oz * a0 - ox * a2, ox * a1 - oy * a0  # v_d = omega_TI x p_d
+    sdot = progression_rate(pt_f1, (c0 - b0, c1 - b1, c2 - b2), f1, K_p)  # (22)
 
     # The desired frames (15), (17)-(19), (20).
-    x0, x1, x2 = uu[0] + v_d[0], uu[1] + v_d[1], uu[2] + v_d[2]  # u = v_t t1 + v_d - eta_hat
+    x0, x1, x2 = u0 + b0, u1 + b1, u2 + b2  # u = v_t t1 + v_d - eta_hat
     u_F = (
-        f1[0] * x0 + f1[1] * x1 + f1[2] * x2,
-        f2[0] * x0 + f2[1] * x1 + f2[2] * x2,
-        f3[0] * x0 + f3[1] * x1 + f3[2] * x2,
+        f1x * x0 + f1y * x1 + f1z * x2,
+        f2x * x0 + f2y * x1 + f2z * x2,
+        f3x * x0 + f3y * x1 + f3z * x2,
     )
     R_Wd_F = steady_state_frame(u_F, v_w)
     y_w, z_w = cross_track_errors(pt_F, R_Wd_F)
-    d1_Wd = transient_direction(y_w, z_w, alpha)
+    x0, x1, x2 = transient_direction(y_w, z_w, alpha)
     # d1 = R_T^I R_F^T R_{W_d}^F d1^{W_d}, in NED (wd32 = 0).
-    (a0, a1, a2), (b0, b1, _), (g0, g1, g2) = R_Wd_F
-    x0, x1, x2 = d1_Wd
-    a0, a1, a2 = x0 * a0 + x1 * b0 + x2 * g0, x0 * a1 + x1 * b1 + x2 * g1, x0 * a2 + x2 * g2
-    b0 = a0 * f1[0] + a1 * f2[0] + a2 * f3[0]
-    b1 = a0 * f1[1] + a1 * f2[1] + a2 * f3[1]
-    b2 = a0 * f1[2] + a1 * f2[2] + a2 * f3[2]
+    (a0, a1, a2), (b0, b1, _), (b2, g1, g2) = R_Wd_F
+    a0, a1, a2 = x0 * a0 + x1 * b0 + x2 * b2, x0 * a1 + x1 * b1 + x2 * g1, x0 * a2 + x2 * g2
+    b0 = a0 * f1x + a1 * f2x + a2 * f3x
+    b1 = a0 * f1y + a1 * f2y + a2 * f3y
+    b2 = a0 * f1z + a1 * f2z + a2 * f3z
     d1_I = (xn * b0 + yn * b1 + zn * b2, xe * b0 + ye * b1 + ze * b2, xd * b0 + yd * b1 + zd * b2)
-    psi, e2, e3 = attitude_error(d1_I, R_W_I)  # (6), (9)
+    w1, w2, w3 = (w1n, w1e, w1d), (w2n, w2e, w2d), (w3n, w3e, w3d)
+    psi, e2, e3 = attitude_error(d1_I, w1, w2, w3)  # (6), (9)
 
     # (10) omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d}, each term exact.
     a0, a1, a2 = target.acceleration.tolist()
     a_t = (xn * a0 + xe * a1 + xd * a2, yn * a0 + ye * a1 + yd * a2, zn * a0 + ze * a1 + zd * a2)
     flow = (q, c, uu, a_t, omega_TI, target.omega_dot_T.tolist(), p_d, pt_F, u_F)
+    R_F_T: Mat3 = (f1, f2, f3)
     b0, b1, b2 = feedforward_omega_DT(
         sdot, dp_ds, rate_F, R_F_T, R_Wd_F, y_w, z_w, alpha, v_w, flow
     )
-    a0, a1, a2 = omega_TI
-    a0, a1, a2 = a0 + b0, a1 + b1, a2 + b2
-    omega_DI = (  # in NED
+    a0, a1, a2 = ox + b0, oy + b1, oz + b2
+    omega_DI = a0, a1, a2 = (  # in NED
         xn * a0 + yn * a1 + zn * a2,
         xe * a0 + ye * a1 + ze * a2,
         xd * a0 + yd * a1 + zd * a2,
     )
 
     # (23) [omega]: -K_R e + Pi_R Rt^T omega_DI^D, the last term being omega_DI on w2, w3.
-    a0, a1, a2 = omega_DI
-    ff2 = a0 * w2[0] + a1 * w2[1] + a2 * w2[2]
-    ff3 = a0 * w3[0] + a1 * w3[1] + a2 * w3[2]
-    law2, law3 = -K_R * e2 + ff2, -K_R * e3 + ff3
+    ff2 = a0 * w2n + a1 * w2e + a2 * w2d
+    ff3 = a0 * w3n + a1 * w3e + a2 * w3d
+    m_K_R = -K_R
+    law2, law3 = m_K_R * e2 + ff2, m_K_R * e3 + ff3
     if ext.psi_turn or ext.rate_limit is not None:
-        cmd2, cmd3, mode = apply_extensions(law2, law3, ff2, ff3, psi, d1_I, R_W_I, K_R, ext)
+        cmd2, cmd3, mode = apply_extensions(law2, law3, ff2, ff3, psi, d1_I, (w1, w2, w3), K_R, ext)
     else:  # the paper's law as it is (apply_extensions would return it unchanged)
         cmd2, cmd3, mode = law2, law3, "law"
-    # The command as the angular velocity of w1 in NED: R_W^I [0, w2, w3].
-    omega_w1_I = (
-        cmd2 * w2[0] + cmd3 * w3[0],
-        cmd2 * w2[1] + cmd3 * w3[1],
-        cmd2 * w2[2] + cmd3 * w3[2],
-    )
     # tuple.__new__ builds the NamedTuples without their keyword-parsing constructor (~0.3 us
-    # each, on the hot path).
-    cmd: MpfCommand = tuple.__new__(MpfCommand, (t, cmd2, cmd3, sdot, omega_w1_I))
+    # each, on the hot path). The command's omega_w1_I is R_W^I [0, w2, w3], in NED.
+    cmd: MpfCommand = tuple.__new__(
+        MpfCommand,
+        (t, cmd2, cmd3, sdot,
+         (cmd2 * w2n + cmd3 * w3n, cmd2 * w2e + cmd3 * w3e, cmd2 * w2d + cmd3 * w3d)),
+    )  # fmt: skip
     if not diagnostics:
         return cmd, None
-    u0, u1, u2 = u_F  # |u| = |u_F|
-    margin = v_w - math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    x0, x1, x2 = u_F  # |u| = |u_F|
+    margin = v_w - math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
     return cmd, _diagnostics(
         t, s, R_I_T, R_F_T, R_Wd_F[0], d1_I, x_I, p_t, p_d, pt, pt_F, y_w, z_w, psi, e2, e3,
         margin, omega_DI, ff2, ff3, law2, law3, mode, k1, k2,

@@ -37,7 +37,7 @@ Tuple3 = Vec3
 # (p_d, f1, f2, f3, k1, k2) and, with the rate, the frame's angular velocity per metre in {F}.
 PathPoint = tuple[Vec3, Vec3, Vec3, Vec3, float, float]
 PathPointRate = tuple[Vec3, Vec3, Vec3, Vec3, float, float, Vec3, Vec3]
-_Cell = tuple[float, ...]  # 20 floats, see TabulatedPath._hermite_cells
+_Cell = tuple[float, ...]  # 27 floats, see TabulatedPath._hermite_cells
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 
@@ -230,9 +230,11 @@ class TabulatedPath:
 
     def _hermite_cells(self) -> list[_Cell]:
         """Per cell, what evaluation needs in one flat tuple of floats (unpacked at once): the
-        Hermite cubic in the arc length from the cell's start, p(x) = p_i + x (t_i + x (B +
-        x C)) (x = s - s_i; t_i is the node's tangent), the node's f2, the cell's closing angle
-        per metre and the curvatures k1, k2 at its start and their slopes (1/m^2)."""
+        cell's start s_i = i ds (m), the Hermite cubic in the arc length from there, p(x) = p_i
+        + x (t_i + x (B + x C)) (x = s - s_i; t_i is the node's tangent), 2 B and 3 C (the
+        derivatives' coefficients, formed once here rather than at every evaluation), the
+        node's f2, the cell's closing angle per metre and the curvatures k1, k2 at its start
+        and their slopes (1/m^2)."""
         h = self.ds
         cells: list[_Cell] = []
         for i in range(self.n):
@@ -243,8 +245,8 @@ class TabulatedPath:
             C = [(2.0 * (pa[j] - pb[j]) + h * (ta[j] + tb[j])) / (h * h * h) for j in range(3)]
             k1a, k1b, k2a, k2b = self._K1l[i], self._K1l[i + 1], self._K2l[i], self._K2l[i + 1]
             cells.append(
-                (*pa, *ta, *B, *C, *self._F2l[i], self._C[i] / h,
-                 k1a, (k1b - k1a) / h, k2a, (k2b - k2a) / h)
+                (i * h, *pa, *ta, *B, *C, *[b + b for b in B], *[3.0 * c for c in C],
+                 *self._F2l[i], self._C[i] / h, k1a, (k1b - k1a) / h, k2a, (k2b - k2a) / h)
             )  # fmt: skip
         return cells
 
@@ -272,13 +274,12 @@ class TabulatedPath:
             p, t, f2 = self._Pl[j], self._Tl[j], self._F2l[j]
             ds = s if j == 0 else s - L
             return add_scaled(p, ds, t), t, f2, cross(t, f2), 0.0, 0.0, t, _ZERO
-        h = self.ds
-        i = int(s / h)
+        i = int(s / self.ds)
         if i >= self.n:
             i = self.n - 1
-        x = s - i * h
-        (p0, p1, p2, ta0, ta1, ta2, b0, b1, b2, c0, c1, c2, v0, v1, v2,
-         twist, k1a, k1s, k2a, k2s) = self._cells[i]  # fmt: skip
+        (si, p0, p1, p2, ta0, ta1, ta2, b0, b1, b2, c0, c1, c2, bb0, bb1, bb2, cc0, cc1, cc2,
+         v0, v1, v2, twist, k1a, k1s, k2a, k2s) = self._cells[i]  # fmt: skip
+        x = s - si
         # Written out on scalars (this runs once per law evaluation): the cell's cubic by
         # Horner, its first derivative dp (= dp_d/ds) and its second, ddp.
         p = (
@@ -286,13 +287,11 @@ class TabulatedPath:
             p1 + x * (ta1 + x * (b1 + x * c1)),
             p2 + x * (ta2 + x * (b2 + x * c2)),
         )
-        b0, b1, b2 = b0 + b0, b1 + b1, b2 + b2
-        c0, c1, c2 = 3.0 * c0, 3.0 * c1, 3.0 * c2
-        dp0 = ta0 + x * (b0 + x * c0)
-        dp1 = ta1 + x * (b1 + x * c1)
-        dp2 = ta2 + x * (b2 + x * c2)
+        dp0 = ta0 + x * (bb0 + x * cc0)
+        dp1 = ta1 + x * (bb1 + x * cc1)
+        dp2 = ta2 + x * (bb2 + x * cc2)
         x2 = x + x
-        ddp0, ddp1, ddp2 = b0 + x2 * c0, b1 + x2 * c1, b2 + x2 * c2
+        ddp0, ddp1, ddp2 = bb0 + x2 * cc0, bb1 + x2 * cc1, bb2 + x2 * cc2
         g = 1.0 / math.sqrt(dp0 * dp0 + dp1 * dp1 + dp2 * dp2)
         e0, e1, e2 = dp0 * g, dp1 * g, dp2 * g  # f1
         # r: the node's f2 (v, orthogonal to t_i) carried by the minimal rotation t_i -> f1,
