@@ -37,6 +37,7 @@ Tuple3 = Vec3
 # (p_d, f1, f2, f3, k1, k2) and, with the rate, the frame's angular velocity per metre in {F}.
 PathPoint = tuple[Vec3, Vec3, Vec3, Vec3, float, float]
 PathPointRate = tuple[Vec3, Vec3, Vec3, Vec3, float, float, Vec3, Vec3]
+PathPointFlat = tuple[float, ...]  # PathPointRate's 20 floats in order, see eval_flat
 _Cell = tuple[float, ...]  # 27 floats, see TabulatedPath._hermite_cells
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 
@@ -265,6 +266,17 @@ class TabulatedPath:
         sdot rate_F. Both are the exact derivatives of what :meth:`eval` returns (the
         interpolant's own curvature and twist), so they agree with differencing eval.
         """
+        (p0, p1, p2, e0, e1, e2, r0, r1, r2, q0, q1, q2, k1, k2,
+         dp0, dp1, dp2, tau, m_kappa_2, kappa_1) = self.eval_flat(s)  # fmt: skip
+        return (
+            (p0, p1, p2), (e0, e1, e2), (r0, r1, r2), (q0, q1, q2), k1, k2,
+            (dp0, dp1, dp2), (tau, m_kappa_2, kappa_1),
+        )  # fmt: skip
+
+    def eval_flat(self, s: float) -> PathPointFlat:
+        """:meth:`eval_with_rate` as one flat tuple of 20 floats: p_d, f1, f2, f3 (3 each), k1,
+        k2, dp_ds and rate_F (3 each). The law evaluates the path once per call and unpacks
+        it at once: one tuple instead of seven (each costs more than a product)."""
         L = self.length
         if self.closed:
             s = s % L
@@ -273,7 +285,7 @@ class TabulatedPath:
             j = 0 if s <= 0.0 else self.n
             p, t, f2 = self._Pl[j], self._Tl[j], self._F2l[j]
             ds = s if j == 0 else s - L
-            return add_scaled(p, ds, t), t, f2, cross(t, f2), 0.0, 0.0, t, _ZERO
+            return (*add_scaled(p, ds, t), *t, *f2, *cross(t, f2), 0.0, 0.0, *t, *_ZERO)
         i = int(s / self.ds)
         if i >= self.n:
             i = self.n - 1
@@ -282,11 +294,9 @@ class TabulatedPath:
         x = s - si
         # Written out on scalars (this runs once per law evaluation): the cell's cubic by
         # Horner, its first derivative dp (= dp_d/ds) and its second, ddp.
-        p = (
-            p0 + x * (ta0 + x * (b0 + x * c0)),
-            p1 + x * (ta1 + x * (b1 + x * c1)),
-            p2 + x * (ta2 + x * (b2 + x * c2)),
-        )
+        p0 = p0 + x * (ta0 + x * (b0 + x * c0))
+        p1 = p1 + x * (ta1 + x * (b1 + x * c1))
+        p2 = p2 + x * (ta2 + x * (b2 + x * c2))
         dp0 = ta0 + x * (bb0 + x * cc0)
         dp1 = ta1 + x * (bb1 + x * cc1)
         dp2 = ta2 + x * (bb2 + x * cc2)
@@ -330,8 +340,8 @@ class TabulatedPath:
         kappa_2 = (ddp0 * q0 + ddp1 * q1 + ddp2 * q2) * g
         tau = twist - k * (cx * ddp0 + cy * ddp1 + cz * ddp2) * g
         return (
-            p, (e0, e1, e2), (r0, r1, r2), (q0, q1, q2), k1a + x * k1s, k2a + x * k2s,
-            (dp0, dp1, dp2), (tau, -kappa_2, kappa_1),
+            p0, p1, p2, e0, e1, e2, r0, r1, r2, q0, q1, q2, k1a + x * k1s, k2a + x * k2s,
+            dp0, dp1, dp2, tau, -kappa_2, kappa_1,
         )  # fmt: skip
 
     def sample(self, s: float) -> PathSample:
