@@ -314,10 +314,19 @@ def mpf_law(
     K_p, K_R, alpha = gains.K_p, gains.K_R, gains.alpha
     # ndarray.tolist() gives lists, which are only unpacked. R_W^I's rows hold the north, east
     # and down components of w1, w2, w3; R_T^I's rows are NED's axes in {T} (R_I^T's columns).
+    # The target's numbers come as floats when its producer kept them (TargetState.floats).
     (w1n, w2n, w3n), (w1e, w2e, w3e), (w1d, w2d, w3d) = vehicle.R_W_I.tolist()
-    (xn, yn, zn), (xe, ye, ze), (xd, yd, zd) = target.R_T_I.tolist()
-    tn, te, td = target.position.tolist()  # p_t (NED)
-    ox, oy, oz = target.omega_T.tolist()  # omega_TI^T
+    tf = target.floats
+    if tf is not None:
+        (xn, yn, zn, xe, ye, ze, xd, yd, zd, tn, te, td, vn, ve, vd, an, ae, ad,
+         ox, oy, oz, dx, dy, dz) = tf  # fmt: skip
+    else:
+        (xn, yn, zn), (xe, ye, ze), (xd, yd, zd) = target.R_T_I.tolist()
+        tn, te, td = target.position.tolist()  # p_t (NED)
+        vn, ve, vd = target.velocity.tolist()  # v_t (NED)
+        an, ae, ad = target.acceleration.tolist()  # pddot_t (NED)
+        ox, oy, oz = target.omega_T.tolist()  # omega_TI^T
+        dx, dy, dz = target.omega_dot_T.tolist()  # its rate
 
     # Into {T}, where the path is fixed: q = R_I^T (p - p_t), the vehicle relative to the
     # target; uu = R_I^T (v_t - eta_hat), the target's velocity less the wind; and c = R_I^T
@@ -327,7 +336,7 @@ def mpf_law(
     qx = xn * rn + xe * re + xd * rd
     qy = yn * rn + ye * re + yd * rd
     qz = zn * rn + ze * re + zd * rd
-    a0, a1, a2 = target.velocity.tolist()
+    a0, a1, a2 = vn, ve, vd
     if ext.wind_compensation:
         b0, b1, b2 = vehicle.wind.tolist()
         a0, a1, a2 = a0 - b0, a1 - b1, a2 - b2
@@ -385,16 +394,14 @@ def mpf_law(
     # dp_d/ds; u = uu + v_d with d(uu)/dt = a_t - omega_TI x uu (eta_hat held) and v_d =
     # omega_TI x p_d, so u_dot = a_t + omega_dot x p_d + omega_TI x (p_d_dot - uu), where
     # a_t = R_I^T pddot_t and omega_dot is omega_TI^T's rate.
-    a0, a1, a2 = target.acceleration.tolist()
-    dx, dy, dz = target.omega_dot_T.tolist()
     g0, g1, g2 = sdot * gx, sdot * gy, sdot * gz  # p_d_dot
     pt_dot0 = cx - (oy * qz - oz * qy) - g0
     pt_dot1 = cy - (oz * qx - ox * qz) - g1
     pt_dot2 = cz - (ox * qy - oy * qx) - g2
     g0, g1, g2 = g0 - ux, g1 - uy, g2 - uz
-    u_dot0 = (xn * a0 + xe * a1 + xd * a2) + (dy * pdz - dz * pdy) + (oy * g2 - oz * g1)
-    u_dot1 = (yn * a0 + ye * a1 + yd * a2) + (dz * pdx - dx * pdz) + (oz * g0 - ox * g2)
-    u_dot2 = (zn * a0 + ze * a1 + zd * a2) + (dx * pdy - dy * pdx) + (ox * g1 - oy * g0)
+    u_dot0 = (xn * an + xe * ae + xd * ad) + (dy * pdz - dz * pdy) + (oy * g2 - oz * g1)
+    u_dot1 = (yn * an + ye * ae + yd * ad) + (dz * pdx - dx * pdz) + (oz * g0 - ox * g2)
+    u_dot2 = (zn * an + ze * ae + zd * ad) + (dx * pdy - dy * pdx) + (ox * g1 - oy * g0)
     # Their f2, f3 components (all that (15), (18), (19) use) in {F}, which turns at
     # omega_FT: d(f_k . x)/dt = f_k . x_dot - (omega_FT^F x x^F)_k.
     pt_f2_dot = f2x * pt_dot0 + f2y * pt_dot1 + f2z * pt_dot2 - (o3 * pt1 - o1 * pt3)
