@@ -207,6 +207,7 @@ class PaperProfile:
         va, ya, za = self._vw(t)
         vb, yb, zb = self._vw(t + h2)
         vc, yc, zc = self._vw(t + h)
+        vb2 = 2.0 * vb  # float constants: CPython's int * float takes its slow generic path
         p2: list[float] = []
         R2: list[float] = []
         for i in range(3):
@@ -218,11 +219,11 @@ class PaperProfile:
             c0, c1, c2 = u1 * zb - u2 * yb, -u0 * zb, u0 * yb  # k3
             x0, x1, x2 = r0 + h * c0, r1 + h * c1, r2 + h * c2
             d0, d1, d2 = x1 * zc - x2 * yc, -x0 * zc, x0 * yc  # k4
-            p2.append(p[i] + h6 * (va * r0 + 2 * vb * s0 + 2 * vb * u0 + vc * x0))
+            p2.append(p[i] + h6 * (va * r0 + vb2 * s0 + vb2 * u0 + vc * x0))
             R2 += (
-                r0 + h6 * (a0 + 2 * b0 + 2 * c0 + d0),
-                r1 + h6 * (a1 + 2 * b1 + 2 * c1 + d1),
-                r2 + h6 * (a2 + 2 * b2 + 2 * c2 + d2),
+                r0 + h6 * (a0 + 2.0 * b0 + 2.0 * c0 + d0),
+                r1 + h6 * (a1 + 2.0 * b1 + 2.0 * c1 + d1),
+                r2 + h6 * (a2 + 2.0 * b2 + 2.0 * c2 + d2),
             )
         return tuple(p2), tuple(R2)
 
@@ -324,13 +325,6 @@ class PaperProfile:
             r0 * b0 + r1 * b1 + r2 * b2, r3 * b0 + r4 * b1 + r5 * b2, r6 * b0 + r7 * b1 + r8 * b2,
             0.0, wy, wz, 0.0, wy_dot, wz_dot,
         )  # fmt: skip
-        st = TargetState(
-            t,
-            np.array(f[9:12]),
-            np.array(f[12:15]),
-            np.array(f[15:18]),
-            np.array(f[0:9]).reshape(3, 3),
-            np.array(f[18:21]),
-            np.array(f[21:24]),
-        )
+        a = np.array(f)  # one array, its fields views of it
+        st = TargetState(t, a[9:12], a[12:15], a[15:18], a[0:9].reshape(3, 3), a[18:21], a[21:])
         return with_floats(st, f)
