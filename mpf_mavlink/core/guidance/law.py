@@ -152,10 +152,9 @@ class MpfDiagnostics(NamedTuple):
     k2: float  # path curvature along f3 (1/m)
 
 
-Vec5 = tuple[float, float, float, float, float]
-
-
+# The flat results of steady_state_frame and transient_direction (see each).
 WdFrame = tuple[float, float, float, float, float, float, float, float, float, float]
+Vec5 = tuple[float, float, float, float, float]
 
 
 def steady_state_frame(u_f2: float, u_f3: float, v_w: float) -> WdFrame:
