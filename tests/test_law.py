@@ -1,5 +1,6 @@
 """The MPF law: the paper's identities, the extensions, wind compensation."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -75,6 +76,39 @@ def test_extensions_off_is_the_paper_law_bit_for_bit():
     b, db = mpf_law(12.0, veh, tgt, path, Gains(), ext)
     assert (a.w2, a.w3, a.sdot) == (b.w2, b.w3, b.sdot)
     assert (a.w2, a.w3) == da.w_cmd_law and da.mode == "law"
+
+
+def test_the_targets_floats_are_its_arrays_and_give_the_same_law_bit_for_bit():
+    # TargetState.floats (kept by extrapolate and PaperProfile so that the law need not convert
+    # the arrays back) must be the arrays' own numbers: the law gives the same bits from either,
+    # and dataclasses.replace, which may change an array, drops them.
+    path, gains = lemniscate(50.0), Gains()
+    rng = np.random.default_rng(7)
+    live = ConstantTurn((1.0, 2.0, -3.0), 4.0, 0.3, 0.05, 0.5).state(3.0)
+    assert live.floats is None
+    for st in [PaperProfile().state(t) for t in (0.0, 12.345, 77.0)] + [
+        live.extrapolate(3.2),
+        PaperProfile().state(5.0).extrapolate(5.07),
+    ]:
+        arrays = [st.R_T_I.ravel(), st.position, st.velocity, st.acceleration]
+        arrays += [st.omega_T, st.omega_dot_T]
+        assert st.floats is not None
+        assert st.floats == tuple(np.concatenate(arrays).tolist())
+        plain = dataclasses.replace(st)
+        assert plain.floats is None and plain == st
+        for _ in range(5):
+            p = st.position + st.R_T_I @ (
+                np.array(path.eval(rng.uniform(0, 300))[0]) + rng.normal(0, 5, 3)
+            )
+            R = so3.rot_z(rng.uniform(-3, 3)) @ so3.rot_y(rng.uniform(-0.4, 0.4))
+            veh = VehicleState(st.t, p, R, 15.0, rng.normal(0, 1, 3))
+            for ext in (
+                Extensions(),
+                Extensions(rate_limit=0.3, psi_turn=True, wind_compensation=True),
+            ):
+                a = mpf_law(10.0, veh, st, path, gains, ext)
+                b = mpf_law(10.0, veh, plain, path, gains, ext)
+                assert repr(a) == repr(b)
 
 
 def test_coordinate_free_form():

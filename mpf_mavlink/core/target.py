@@ -28,6 +28,12 @@ class TargetState:
     R_T_I: NDArray[np.float64]
     omega_T: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     omega_dot_T: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    # The same numbers as floats, when whoever built the state had them at hand (extrapolate,
+    # PaperProfile.state: :func:`with_floats`): R_T^I by rows (9), then p_t, v_t, a_t,
+    # omega_T, omega_dot_T (3 each). The law reads these instead of converting the arrays
+    # back (~0.5 us of its ~10). Not an init argument, so dataclasses.replace drops it (the
+    # law then reads the arrays) and it cannot go stale.
+    floats: tuple[float, ...] | None = field(default=None, init=False, repr=False, compare=False)
 
     def extrapolate(self, t: float) -> TargetState:
         """Constant-acceleration, constant-angular-acceleration prediction to time t (s)."""
@@ -57,15 +63,26 @@ class TargetState:
             [r[0] * E[0][j] + r[1] * E[1][j] + r[2] * E[2][j] for j in range(3)]
             for r in self.R_T_I.tolist()
         ]
-        return TargetState(
+        p = (p0 + h * v0 + hh * a0, p1 + h * v1 + hh * a1, p2 + h * v2 + hh * a2)
+        v = (v0 + h * a0, v1 + h * a1, v2 + h * a2)
+        w = (w0 + h * d0, w1 + h * d1, w2 + h * d2)
+        st = TargetState(
             t,
-            np.array((p0 + h * v0 + hh * a0, p1 + h * v1 + hh * a1, p2 + h * v2 + hh * a2)),
-            np.array((v0 + h * a0, v1 + h * a1, v2 + h * a2)),
+            np.array(p),
+            np.array(v),
             self.acceleration,
             np.array(R),
-            np.array((w0 + h * d0, w1 + h * d1, w2 + h * d2)),
+            np.array(w),
             self.omega_dot_T,
         )
+        return with_floats(st, (*R[0], *R[1], *R[2], *p, *v, a0, a1, a2, *w, d0, d1, d2))
+
+
+def with_floats(st: TargetState, floats: tuple[float, ...]) -> TargetState:
+    """st with its :attr:`TargetState.floats` set (the caller's floats, equal to the arrays':
+    R_T^I by rows, p_t, v_t, a_t, omega_T, omega_dot_T)."""
+    object.__setattr__(st, "floats", floats)
+    return st
 
 
 class TargetMotion(Protocol):
@@ -190,6 +207,7 @@ class PaperProfile:
         va, ya, za = self._vw(t)
         vb, yb, zb = self._vw(t + h2)
         vc, yc, zc = self._vw(t + h)
+        vb2 = 2.0 * vb  # float constants: CPython's int * float takes its slow generic path
         p2: list[float] = []
         R2: list[float] = []
         for i in range(3):
@@ -201,11 +219,11 @@ class PaperProfile:
             c0, c1, c2 = u1 * zb - u2 * yb, -u0 * zb, u0 * yb  # k3
             x0, x1, x2 = r0 + h * c0, r1 + h * c1, r2 + h * c2
             d0, d1, d2 = x1 * zc - x2 * yc, -x0 * zc, x0 * yc  # k4
-            p2.append(p[i] + h6 * (va * r0 + 2 * vb * s0 + 2 * vb * u0 + vc * x0))
+            p2.append(p[i] + h6 * (va * r0 + vb2 * s0 + vb2 * u0 + vc * x0))
             R2 += (
-                r0 + h6 * (a0 + 2 * b0 + 2 * c0 + d0),
-                r1 + h6 * (a1 + 2 * b1 + 2 * c1 + d1),
-                r2 + h6 * (a2 + 2 * b2 + 2 * c2 + d2),
+                r0 + h6 * (a0 + 2.0 * b0 + 2.0 * c0 + d0),
+                r1 + h6 * (a1 + 2.0 * b1 + 2.0 * c1 + d1),
+                r2 + h6 * (a2 + 2.0 * b2 + 2.0 * c2 + d2),
             )
         return tuple(p2), tuple(R2)
 
@@ -302,18 +320,11 @@ class PaperProfile:
             r6, r7, r8 = r6 + h * (r7 * wz - r8 * wy), r7 - h * r6 * wz, r8 + h * r6 * wy
         # a = R (vdot e1 + omega x (v e1)) in body components (vdot, wz v, -wy v).
         b0, b1, b2 = vdot, wz * v, -wy * v
-        return TargetState(
-            t,
-            np.array((p0, p1, p2)),
-            np.array((r0 * v, r3 * v, r6 * v)),
-            np.array(
-                (
-                    r0 * b0 + r1 * b1 + r2 * b2,
-                    r3 * b0 + r4 * b1 + r5 * b2,
-                    r6 * b0 + r7 * b1 + r8 * b2,
-                )
-            ),
-            np.array((r0, r1, r2, r3, r4, r5, r6, r7, r8)).reshape(3, 3),
-            np.array((0.0, wy, wz)),
-            np.array((0.0, wy_dot, wz_dot)),
-        )
+        f = (
+            r0, r1, r2, r3, r4, r5, r6, r7, r8, p0, p1, p2, r0 * v, r3 * v, r6 * v,
+            r0 * b0 + r1 * b1 + r2 * b2, r3 * b0 + r4 * b1 + r5 * b2, r6 * b0 + r7 * b1 + r8 * b2,
+            0.0, wy, wz, 0.0, wy_dot, wz_dot,
+        )  # fmt: skip
+        a = np.array(f)  # one array, its fields views of it
+        st = TargetState(t, a[9:12], a[12:15], a[15:18], a[0:9].reshape(3, 3), a[18:21], a[21:])
+        return with_floats(st, f)

@@ -9,17 +9,23 @@ Read it beside the paper. Equation numbers are the paper's as its LaTeX source n
 - (9)  [ertilde] e = [Rt13, -Rt12] / 2.
 - (10) [ffomega] omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d} (where (11)
   and (23) print omega_{W_d D}^{W_d}, the rate of {W_d} relative to {F} is meant).
-- (15) [wdbasis] the steady-state frame {W_d} in {F}: :func:`steady_state_frame`.
-- (17)-(19) the cross-track error pt_x and y_w, z_w: :func:`cross_track_errors`.
+- (15) [wdbasis] the steady-state frame {W_d} in {F}: :func:`steady_state_frame` and
+  :func:`steady_state_frame_rate`.
+- (17)-(19) the cross-track error pt_x and y_w, z_w.
 - (20) R_D^{W_d}, the transient frame {D} in {W_d}: :func:`transient_direction` (its d1)
   and :func:`transient_frame_rate`.
 - (22) [sdot] the virtual point's progression.
-- (23) [omega] -K_R e + Pi_R Rt^T omega_DI^D, the reference for the autopilot: :func:`mpf_law`.
+- (23) [omega] -K_R e + Pi_R Rt^T omega_DI^D, the reference for the autopilot.
+
+:func:`mpf_law` evaluates them in this order, one paragraph per equation, headed by its number.
 
 Frames: {I} NED; {W} wind frame (w1 along the air-relative velocity); {T} target; {F}
 parallel-transport frame at p_d(s); {W_d} steady-state desired velocity frame; {D} transient
-desired frame. The frames are built in {T}, where the path is fixed. Vectors and matrices are
-tuples (:mod:`mpf_mavlink.core.vec3`; matrices by columns, so R_F^T = (f1, f2, f3)).
+desired frame. The frames are built in {T}, where the path is fixed. Vectors are written out
+as named components (x, y, z in {T}; n, e, d in NED; 1, 2, 3 on a frame's axes, as wd21 is
+the second component of wd1) and matrices as their columns (R_F^T = (f1, f2, f3)): this runs
+once per bridge step and four times per step of the kinematic simulator, and in CPython a
+tuple or a function call costs several products, so the law works on floats throughout.
 
 The feedforward omega_DI (10) must be the exact rate of {D} along the closed-loop flow: each
 term is differentiated analytically along the known kinematics (pdot = v_w w1 + eta_hat,
@@ -146,183 +152,79 @@ class MpfDiagnostics(NamedTuple):
     k2: float  # path curvature along f3 (1/m)
 
 
-_ZERO: Vec3 = (0.0, 0.0, 0.0)
+# The flat results of steady_state_frame and transient_direction (see each).
+WdFrame = tuple[float, float, float, float, float, float, float, float, float, float]
+Vec5 = tuple[float, float, float, float, float]
 
 
-def steady_state_frame(u_F: Vec3, v_w: float) -> Mat3:
-    """(15) [wdbasis] R_{W_d}^F = (wd1, wd2, wd3), components in {F}.
+def steady_state_frame(u_f2: float, u_f3: float, v_w: float) -> WdFrame:
+    """(15) [wdbasis] R_{W_d}^F = (wd1, wd2, wd3), components in {F}, as (wd11, wd21, wd31,
+    wd12, wd22, wd13, wd23, wd33) (wd32 = 0), then nn = wd11^2 + wd21^2 and n = sqrt(nn)
+    (cos^2 and cos of wd1's climb in {F}), which :func:`steady_state_frame_rate` reuses.
 
-    u_F: u = v_t t1 + v_d (- eta_hat with wind compensation) in {F}, the velocity the path
-    point asks of the vehicle (m/s); v_w airspeed (m/s).
+    u_f2, u_f3: u = v_t t1 + v_d (- eta_hat with wind compensation) on f2 and f3, the velocity
+    the path point asks of the vehicle (m/s); v_w airspeed (m/s).
     """
-    wd21 = u_F[1] / v_w
-    wd31 = u_F[2] / v_w
+    wd21 = u_f2 / v_w
+    wd31 = u_f3 / v_w
     radicand = 1.0 - wd21 * wd21 - wd31 * wd31
     # Assumption 1 keeps the radicand > 0; outside it the frame stays defined (the
     # diagnostics' path_speed_margin says so).
     wd11 = math.sqrt(radicand) if radicand > 1e-12 else 1e-6
-    n = math.sqrt(wd11 * wd11 + wd21 * wd21)
+    nn = wd11 * wd11 + wd21 * wd21
+    n = math.sqrt(nn)
     wd12, wd22 = -wd21 / n, wd11 / n  # wd32 = 0
     # wd3 = wd1 x wd2, written out with wd32 = 0.
-    wd13, wd23, wd33 = -wd31 * wd22, wd31 * wd12, wd11 * wd22 - wd21 * wd12
-    return (wd11, wd21, wd31), (wd12, wd22, 0.0), (wd13, wd23, wd33)
+    return (
+        wd11, wd21, wd31, wd12, wd22, -wd31 * wd22, wd31 * wd12, wd11 * wd22 - wd21 * wd12,
+        nn, n,
+    )  # fmt: skip
 
 
-def steady_state_frame_rate(R_Wd_F: Mat3, wd21_dot: float, wd31_dot: float) -> Vec3:
-    """omega_{W_d F}^F (rad/s): (15) differentiated, given the rates of wd21 and wd31 (1/s).
+def steady_state_frame_rate(
+    wd11: float, wd21: float, wd31: float, wd12: float, wd22: float, nn: float, n: float,
+    wd21_dot: float, wd31_dot: float,
+) -> Vec3:  # fmt: skip
+    """omega_{W_d F}^F (rad/s): (15) differentiated, given the rates of wd21 and wd31 (1/s),
+    the frame's wd11 ... wd22 and nn, n from :func:`steady_state_frame`.
 
     wd1 = (cos g cos x, cos g sin x, sin g) and wd2 = (-sin x, cos x, 0): heading x then climb g
     in {F}, so omega_{W_d F} = x_dot f3 - g_dot wd2.
     """
-    (wd11, wd21, wd31), (wd12, wd22, _), _ = R_Wd_F
     # wd11 = sqrt(1 - wd21^2 - wd31^2); held at its floor outside Assumption 1.
     wd11_dot = -(wd21 * wd21_dot + wd31 * wd31_dot) / wd11 if wd11 > 1e-6 else 0.0
-    nn = wd11 * wd11 + wd21 * wd21  # cos^2 g
-    n = math.sqrt(nn)
     heading_dot = (wd11 * wd21_dot - wd21 * wd11_dot) / nn
     n_dot = (wd11 * wd11_dot + wd21 * wd21_dot) / n
-    climb_dot = (n * wd31_dot - wd31 * n_dot) / (nn + wd31 * wd31)
-    return (-climb_dot * wd12, -climb_dot * wd22, heading_dot)
+    m_climb_dot = -((n * wd31_dot - wd31 * n_dot) / (nn + wd31 * wd31))
+    return m_climb_dot * wd12, m_climb_dot * wd22, heading_dot
 
 
-def cross_track_errors(pt_F: Vec3, R_Wd_F: Mat3) -> tuple[float, float]:
-    """(17)-(19): y_w = pt_x . wd2 and z_w = pt_x . wd3 (m), where pt_x = (0, pt.f2, pt.f3) in
-    {F} is the cross-track error; pt_F is pt in {F}, and wd32 = 0."""
-    _, pt_f2, pt_f3 = pt_F
-    (_, wd22, _), (_, wd23, wd33) = R_Wd_F[1], R_Wd_F[2]
-    return pt_f2 * wd22, pt_f2 * wd23 + pt_f3 * wd33
-
-
-def cross_track_rates(
-    pt_F: Vec3, pt_f2_dot: float, pt_f3_dot: float, R_Wd_F: Mat3, omega_WdF_F: Vec3
-) -> tuple[float, float]:
-    """d/dt of (18)-(19) (m/s): y_w = pt.f2 wd22 and z_w = pt.f2 wd23 + pt.f3 wd33, given the
-    rates of pt.f2, pt.f3, while {W_d} turns at omega = omega_{W_d F}^F = (o1, o2, o3):
-    d(wd_k)/dt = omega x wd_k, of which the components used here are written out."""
-    _, x2, x3 = pt_F
-    _, (wd12, wd22, _), (wd13, wd23, wd33) = R_Wd_F
-    o1, o2, o3 = omega_WdF_F
-    y_w_dot = pt_f2_dot * wd22 + x2 * o3 * wd12  # d(wd22)/dt = o3 wd12 (wd32 = 0)
-    z_w_dot = pt_f2_dot * wd23 + pt_f3_dot * wd33
-    z_w_dot += x2 * (o3 * wd13 - o1 * wd33) + x3 * (o1 * wd23 - o2 * wd13)
-    return y_w_dot, z_w_dot
-
-
-def transient_direction(y_w: float, z_w: float, alpha: float) -> Vec3:
-    """(20) d1, the first column of R_D^{W_d} (components in {W_d}; alpha (m) the look-ahead):
-    all that (6) and (9) use. The frame's other columns, d2 = (y_w, alpha, 0) / |(alpha, y_w)|
-    and d3 = d1 x d2, enter only through its rate (:func:`transient_frame_rate`)."""
-    n1 = math.sqrt(alpha * alpha + y_w * y_w + z_w * z_w)
-    return alpha / n1, -y_w / n1, -z_w / n1
+def transient_direction(y_w: float, z_w: float, alpha: float) -> Vec5:
+    """(20) d1, the first column of R_D^{W_d} (components in {W_d}; y_w, z_w the cross-track
+    errors (17)-(19), alpha the look-ahead, m): all that (6) and (9) use; then nn1 = alpha^2
+    + y_w^2 + z_w^2 and nn2 = alpha^2 + y_w^2, which :func:`transient_frame_rate` reuses.
+    The frame's other columns, d2 = (y_w, alpha, 0) / |(alpha, y_w)| and d3 = d1 x d2, enter
+    only through its rate."""
+    nn2 = alpha * alpha + y_w * y_w
+    nn1 = nn2 + z_w * z_w
+    n1 = math.sqrt(nn1)
+    return alpha / n1, -y_w / n1, -z_w / n1, nn1, nn2
 
 
 def transient_frame_rate(
-    y_w: float, z_w: float, y_w_dot: float, z_w_dot: float, alpha: float
+    y_w: float, z_w: float, y_w_dot: float, z_w_dot: float, alpha: float, nn1: float, nn2: float
 ) -> Vec3:
-    """omega_{D W_d}^{W_d} (rad/s): (20) differentiated.
+    """omega_{D W_d}^{W_d} (rad/s): (20) differentiated, given the cross-track errors (m), their
+    rates (m/s) and nn1, nn2 from :func:`transient_direction`.
 
     d1 = (alpha, -y_w, -z_w) / n1 and d2 = (y_w, alpha, 0) / n2 are heading
     x = atan2(-y_w, alpha) then climb g = atan2(-z_w, n2) in {W_d}, n2 = |(alpha, y_w)|, so
     omega_{D W_d} = x_dot wd3 - g_dot d2.
     """
-    nn2 = alpha * alpha + y_w * y_w
-    nn1 = nn2 + z_w * z_w
     n2 = math.sqrt(nn2)
     heading_dot = -alpha * y_w_dot / nn2
-    climb_dot = (z_w * y_w * y_w_dot / n2 - n2 * z_w_dot) / nn1
-    return (-climb_dot * y_w / n2, -climb_dot * alpha / n2, heading_dot)
-
-
-def progression_rate(pt_f1: float, c: Vec3, v_d: Vec3, f1: Vec3, K_p: float) -> float:
-    """(22) [sdot] = (K_p pt + v_w w1 + eta_hat - v_t t1 - v_d) . f1 (m/s), in {T}, where
-    pt_f1 = pt . f1 and c = R_I^T (v_w w1 + eta_hat - v_t) is the vehicle's velocity relative
-    to the target."""
-    return K_p * pt_f1 + (
-        (c[0] - v_d[0]) * f1[0] + (c[1] - v_d[1]) * f1[1] + (c[2] - v_d[2]) * f1[2]
-    )
-
-
-def feedforward_omega_DT(
-    sdot: float,
-    dp_ds: Vec3,
-    rate_F: Vec3,
-    R_F_T: Mat3,
-    R_Wd_F: Mat3,
-    y_w: float,
-    z_w: float,
-    alpha: float,
-    v_w: float,
-    flow: tuple[Vec3, Vec3, Vec3, Vec3, Vec3, Vec3, Vec3, Vec3, Vec3],
-) -> Vec3:
-    """omega_DT^T (rad/s): (10) less omega_TI, i.e. omega_FT + omega_{W_d F} + omega_{D W_d},
-    each the exact derivative of its frame along the closed-loop flow.
-
-    sdot (22); dp_ds, rate_F from :meth:`TabulatedPath.eval_with_rate`; R_F^T, R_{W_d}^F,
-    y_w, z_w, alpha as in (15)-(20). flow, all in {T}: q = R_I^T (p - p_t), c = R_I^T (pdot -
-    v_t) (m/s), uu = R_I^T (v_t - eta_hat), a_t = R_I^T pddot_t (m/s^2), omega_TI^T (rad/s),
-    its rate (rad/s^2), p_d, and pt and u (15) in {F}.
-    """
-    q, c, uu, a_t, omega, omega_dot, p_d, pt_F, u_F = flow
-    tau, m_kappa_2, kappa_1 = rate_F
-    o1, o2, o3 = sdot * tau, sdot * m_kappa_2, sdot * kappa_1  # omega_FT^F
-    # (5) in {T}: pt_dot = qdot - p_d_dot with qdot = c - omega_TI x q and p_d_dot = sdot
-    # dp_d/ds; u = uu + v_d with d(uu)/dt = a_t - omega_TI x uu (eta_hat held) and
-    # v_d = omega_TI x p_d, so u_dot = a_t + omega_dot x p_d + omega_TI x (p_d_dot - uu).
-    # The vector algebra is written out on scalars: this is the hot path.
-    w0, w1, w2 = omega
-    g0, g1, g2 = dp_ds
-    pd0, pd1, pd2 = sdot * g0, sdot * g1, sdot * g2
-    x0, x1, x2 = q
-    c0, c1, c2 = c
-    pt_dot0 = c0 - (w1 * x2 - w2 * x1) - pd0
-    pt_dot1 = c1 - (w2 * x0 - w0 * x2) - pd1
-    pt_dot2 = c2 - (w0 * x1 - w1 * x0) - pd2
-    x0, x1, x2 = p_d
-    c0, c1, c2 = omega_dot
-    g0, g1, g2 = uu
-    g0, g1, g2 = pd0 - g0, pd1 - g1, pd2 - g2
-    a0, a1, a2 = a_t
-    u_dot0 = a0 + (c1 * x2 - c2 * x1) + (w1 * g2 - w2 * g1)
-    u_dot1 = a1 + (c2 * x0 - c0 * x2) + (w2 * g0 - w0 * g2)
-    u_dot2 = a2 + (c0 * x1 - c1 * x0) + (w0 * g1 - w1 * g0)
-    # Their f2, f3 components (all that (15), (18), (19) use) in {F}, which turns at
-    # omega_FT: d(f_k . x)/dt = f_k . x_dot - (omega_FT^F x x^F)_k.
-    _, (a0, a1, a2), (c0, c1, c2) = R_F_T  # f2, f3
-    x0, x1, x2 = pt_F
-    pt_f2_dot = a0 * pt_dot0 + a1 * pt_dot1 + a2 * pt_dot2 - (o3 * x0 - o1 * x2)
-    pt_f3_dot = c0 * pt_dot0 + c1 * pt_dot1 + c2 * pt_dot2 - (o1 * x1 - o2 * x0)
-    x0, x1, x2 = u_F
-    wd21_dot = (a0 * u_dot0 + a1 * u_dot1 + a2 * u_dot2 - (o3 * x0 - o1 * x2)) / v_w
-    wd31_dot = (c0 * u_dot0 + c1 * u_dot1 + c2 * u_dot2 - (o1 * x1 - o2 * x0)) / v_w
-    omega_WdF_F = steady_state_frame_rate(R_Wd_F, wd21_dot, wd31_dot)
-    y_w_dot, z_w_dot = cross_track_rates(pt_F, pt_f2_dot, pt_f3_dot, R_Wd_F, omega_WdF_F)
-    b0, b1, b2 = transient_frame_rate(y_w, z_w, y_w_dot, z_w_dot, alpha)
-    # Summed in {F}: omega_FT^F + omega_{W_d F}^F + R_{W_d}^F omega_{D W_d}^{W_d} (wd32 = 0),
-    # then into {T} by R_F^T.
-    a0, a1, a2 = omega_WdF_F
-    (x0, x1, x2), (g0, g1, _), (c0, c1, c2) = R_Wd_F
-    o1 += a0 + (b0 * x0 + b1 * g0 + b2 * c0)
-    o2 += a1 + (b0 * x1 + b1 * g1 + b2 * c1)
-    o3 += a2 + (b0 * x2 + b2 * c2)
-    (x0, x1, x2), (a0, a1, a2), (c0, c1, c2) = R_F_T
-    return (
-        o1 * x0 + o2 * a0 + o3 * c0,
-        o1 * x1 + o2 * a1 + o3 * c1,
-        o1 * x2 + o2 * a2 + o3 * c2,
-    )
-
-
-def attitude_error(d1: Vec3, R_W_I: Mat3) -> tuple[float, float, float]:
-    """(6) Psi and (9) e = (e2, e3) from d1 and R_W^I (both in NED).
-
-    Rt = R_W^D = (R_D^I)^T R_W^I; its first row is (d1.w1, d1.w2, d1.w3).
-    """
-    d0, d1_, d2 = d1
-    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = R_W_I
-    Rt11 = a0 * d0 + a1 * d1_ + a2 * d2
-    Rt12 = b0 * d0 + b1 * d1_ + b2 * d2
-    Rt13 = c0 * d0 + c1 * d1_ + c2 * d2
-    return 0.5 * (1.0 - Rt11), 0.5 * Rt13, -0.5 * Rt12
+    m_climb_dot = -((z_w * y_w * y_w_dot / n2 - n2 * z_w_dot) / nn1)
+    return m_climb_dot * y_w / n2, m_climb_dot * alpha / n2, heading_dot
 
 
 def psi_turn_direction(R_W_I: Mat3, d1: Vec3) -> tuple[float, float]:
@@ -383,47 +285,6 @@ def apply_extensions(
     return cmd2, cmd3, mode
 
 
-def _diagnostics(
-    t: float, s: float, R_I_T: Mat3, R_F_T: Mat3, wd1_F: Vec3, d1: Vec3, x_I: Vec3, p_t: Vec3,
-    p_d: Vec3, pt: Vec3, pt_F: Vec3, y_w: float, z_w: float, psi: float, e2: float, e3: float,
-    margin: float, omega_DI: Vec3, ff2: float, ff3: float, law2: float, law3: float, mode: str,
-    k1: float, k2: float,
-) -> MpfDiagnostics:  # fmt: skip
-    """The record of what :func:`mpf_law` saw, its vectors in NED (see :class:`MpfDiagnostics`).
-
-    Given (positional, this runs at every bridge frame): the frames R_I^T, R_F^T, wd1 in {F}
-    and d1 (NED); the errors p - p_t (NED), p_t, p_d, pt and pt in {F} ({T} unless noted),
-    y_w, z_w, Psi, e2, e3 and the Assumption 1 margin; the rates omega_DI (NED), the
-    feedforward and the law's command on w2, w3; the mode and the curvatures k1, k2.
-    """
-    # Into NED by R_T^I (written out, as in mpf_law): p_d (p_f = p_t + p_d and pt = (p - p_t)
-    # - p_d), wd1 = R_T^I R_F^T wd1^F and f1.
-    (xn, yn, zn), (xe, ye, ze), (xd, yd, zd) = R_I_T
-    f1, f2, f3 = R_F_T
-    a0, a1, a2 = p_d
-    p_d_I = (
-        xn * a0 + yn * a1 + zn * a2,
-        xe * a0 + ye * a1 + ze * a2,
-        xd * a0 + yd * a1 + zd * a2,
-    )
-    x0, x1, x2 = wd1_F
-    a0 = x0 * f1[0] + x1 * f2[0] + x2 * f3[0]
-    a1 = x0 * f1[1] + x1 * f2[1] + x2 * f3[1]
-    a2 = x0 * f1[2] + x1 * f2[2] + x2 * f3[2]
-    wd1 = (xn * a0 + yn * a1 + zn * a2, xe * a0 + ye * a1 + ze * a2, xd * a0 + yd * a1 + zd * a2)
-    a0, a1, a2 = f1
-    f1 = (xn * a0 + yn * a1 + zn * a2, xe * a0 + ye * a1 + ze * a2, xd * a0 + yd * a1 + zd * a2)
-    a0, a1, a2 = p_d_I
-    x0, x1, x2 = pt
-    # tuple.__new__: the NamedTuple without its keyword-parsing constructor (hot path).
-    return tuple.__new__(
-        MpfDiagnostics,
-        (t, s, (x_I[0] - a0, x_I[1] - a1, x_I[2] - a2), math.sqrt(x0 * x0 + x1 * x1 + x2 * x2),
-         pt_F, (p_t[0] + a0, p_t[1] + a1, p_t[2] + a2), psi, (e2, e3), y_w, z_w, d1, wd1, f1,
-         omega_DI, (ff2, ff3), (law2, law3), margin, mode, k1, k2),
-    )  # fmt: skip
-
-
 _NO_EXTENSIONS = Extensions()
 
 
@@ -442,112 +303,169 @@ def mpf_law(
     time as the vehicle (extrapolate it first: :meth:`TargetState.extrapolate`).
     Returns the command and the diagnostics record (None when ``diagnostics`` is False, which
     saves the cost of building it inside integrators).
+
+    One paragraph per equation of the paper, in the order the law needs them, written out on
+    floats (the module docstring says why and how the components are named).
     """
     t = float(vehicle.t)
     s = float(s)
     v_w = float(vehicle.airspeed)
     K_p, K_R, alpha = gains.K_p, gains.K_R, gains.alpha
-    # ndarray.tolist() gives lists, which are only indexed and unpacked. Matrices are by
-    # columns: R_W^I's are the rows of its transpose; R_I^T = (R_T^I)^T's are R_T^I's rows.
-    # Rotations are written out on scalars (this is the hot path; vec3 says what they are).
-    R_W_I: Mat3 = vehicle.R_W_I.T.tolist()  # (w1, w2, w3) in NED
-    R_I_T: Mat3 = target.R_T_I.tolist()  # NED into {T}; mat_T_vec(R_I_T, .) is R_T^I
-    (xn, yn, zn), (xe, ye, ze), (xd, yd, zd) = R_I_T  # north, east, down axes in {T}
-    p_t: Vec3 = target.position.tolist()
-    omega_TI: Vec3 = target.omega_T.tolist()  # omega_TI^T
-    w1, w2, w3 = R_W_I
+    # ndarray.tolist() gives lists, which are only unpacked. R_W^I's rows hold the north, east
+    # and down components of w1, w2, w3; R_T^I's rows are NED's axes in {T} (R_I^T's columns).
+    # The target's numbers come as floats when its producer kept them (TargetState.floats).
+    (w1n, w2n, w3n), (w1e, w2e, w3e), (w1d, w2d, w3d) = vehicle.R_W_I.tolist()
+    tf = target.floats
+    if tf is not None:
+        (xn, yn, zn, xe, ye, ze, xd, yd, zd, tn, te, td, vn, ve, vd, an, ae, ad,
+         ox, oy, oz, dx, dy, dz) = tf  # fmt: skip
+    else:
+        (xn, yn, zn), (xe, ye, ze), (xd, yd, zd) = target.R_T_I.tolist()
+        tn, te, td = target.position.tolist()  # p_t (NED)
+        vn, ve, vd = target.velocity.tolist()  # v_t (NED)
+        an, ae, ad = target.acceleration.tolist()  # pddot_t (NED)
+        ox, oy, oz = target.omega_T.tolist()  # omega_TI^T
+        dx, dy, dz = target.omega_dot_T.tolist()  # its rate
 
-    # Into {T}, where the path is fixed: the vehicle relative to the target, the target's
-    # velocity less the wind, and the vehicle's velocity (1) relative to the target's,
-    # c = R_I^T (v_w w1 + eta_hat - v_t) = v_w w1^T - uu.
+    # Into {T}, where the path is fixed: q = R_I^T (p - p_t), the vehicle relative to the
+    # target; uu = R_I^T (v_t - eta_hat), the target's velocity less the wind; and c = R_I^T
+    # (v_w w1 + eta_hat - v_t) = v_w w1^T - uu, the vehicle's velocity (1) relative to it.
     a0, a1, a2 = vehicle.position.tolist()
-    x_I = (a0 - p_t[0], a1 - p_t[1], a2 - p_t[2])  # p - p_t in NED
-    a0, a1, a2 = x_I
-    q = (xn * a0 + xe * a1 + xd * a2, yn * a0 + ye * a1 + yd * a2, zn * a0 + ze * a1 + zd * a2)
-    a0, a1, a2 = target.velocity.tolist()
+    rn, re, rd = a0 - tn, a1 - te, a2 - td  # p - p_t (NED)
+    qx = xn * rn + xe * re + xd * rd
+    qy = yn * rn + ye * re + yd * rd
+    qz = zn * rn + ze * re + zd * rd
+    a0, a1, a2 = vn, ve, vd
     if ext.wind_compensation:
         b0, b1, b2 = vehicle.wind.tolist()
         a0, a1, a2 = a0 - b0, a1 - b1, a2 - b2
-    uu = (xn * a0 + xe * a1 + xd * a2, yn * a0 + ye * a1 + yd * a2, zn * a0 + ze * a1 + zd * a2)
-    a0, a1, a2 = w1
-    c = (
-        v_w * (xn * a0 + xe * a1 + xd * a2) - uu[0],
-        v_w * (yn * a0 + ye * a1 + yd * a2) - uu[1],
-        v_w * (zn * a0 + ze * a1 + zd * a2) - uu[2],
-    )
+    ux = xn * a0 + xe * a1 + xd * a2
+    uy = yn * a0 + ye * a1 + yd * a2
+    uz = zn * a0 + ze * a1 + zd * a2
+    cx = v_w * (xn * w1n + xe * w1e + xd * w1d) - ux
+    cy = v_w * (yn * w1n + ye * w1e + yd * w1d) - uy
+    cz = v_w * (zn * w1n + ze * w1e + zd * w1d) - uz
 
-    # The virtual point: p_d(s), R_F^T, dp_d/ds and the rate of {F} per unit s.
-    p_d, f1, f2, f3, k1, k2, dp_ds, rate_F = path.eval_with_rate(s)
-    R_F_T: Mat3 = (f1, f2, f3)
-    a0, a1, a2 = p_d
-    x0, x1, x2 = pt = (q[0] - a0, q[1] - a1, q[2] - a2)  # position error pt = p - p_f, in {T}
-    pt_F = (  # (f1 . pt, f2 . pt, f3 . pt)
-        f1[0] * x0 + f1[1] * x1 + f1[2] * x2,
-        f2[0] * x0 + f2[1] * x1 + f2[2] * x2,
-        f3[0] * x0 + f3[1] * x1 + f3[2] * x2,
-    )
-    b0, b1, b2 = omega_TI
-    v_d = (b1 * a2 - b2 * a1, b2 * a0 - b0 * a2, b0 * a1 - b1 * a0)  # omega_TI x p_d
-    sdot = progression_rate(pt_F[0], c, v_d, f1, K_p)  # (22)
+    # The virtual point: p_d(s), R_F^T = (f1, f2, f3), the curvatures k1, k2, dp_d/ds and the
+    # rate of {F} per unit s, (tau, -kappa_2, kappa_1) (TabulatedPath.eval_with_rate).
+    (pdx, pdy, pdz, f1x, f1y, f1z, f2x, f2y, f2z, f3x, f3y, f3z, k1, k2,
+     gx, gy, gz, tau, m_kappa_2, kappa_1) = path.eval_flat(s)  # fmt: skip
+    ex, ey, ez = qx - pdx, qy - pdy, qz - pdz  # the position error pt = p - p_f, in {T}
+    pt1 = f1x * ex + f1y * ey + f1z * ez  # pt in {F}: along-track, along f2, along f3
+    pt2 = f2x * ex + f2y * ey + f2z * ez
+    pt3 = f3x * ex + f3y * ey + f3z * ez
+    vdx, vdy, vdz = oy * pdz - oz * pdy, oz * pdx - ox * pdz, ox * pdy - oy * pdx  # omega_TI x p_d
 
-    # The desired frames (15), (17)-(19), (20).
-    x0, x1, x2 = uu[0] + v_d[0], uu[1] + v_d[1], uu[2] + v_d[2]  # u = v_t t1 + v_d - eta_hat
-    u_F = (
-        f1[0] * x0 + f1[1] * x1 + f1[2] * x2,
-        f2[0] * x0 + f2[1] * x1 + f2[2] * x2,
-        f3[0] * x0 + f3[1] * x1 + f3[2] * x2,
-    )
-    R_Wd_F = steady_state_frame(u_F, v_w)
-    y_w, z_w = cross_track_errors(pt_F, R_Wd_F)
-    d1_Wd = transient_direction(y_w, z_w, alpha)
-    # d1 = R_T^I R_F^T R_{W_d}^F d1^{W_d}, in NED (wd32 = 0).
-    (a0, a1, a2), (b0, b1, _), (g0, g1, g2) = R_Wd_F
-    x0, x1, x2 = d1_Wd
-    a0, a1, a2 = x0 * a0 + x1 * b0 + x2 * g0, x0 * a1 + x1 * b1 + x2 * g1, x0 * a2 + x2 * g2
-    b0 = a0 * f1[0] + a1 * f2[0] + a2 * f3[0]
-    b1 = a0 * f1[1] + a1 * f2[1] + a2 * f3[1]
-    b2 = a0 * f1[2] + a1 * f2[2] + a2 * f3[2]
-    d1_I = (xn * b0 + yn * b1 + zn * b2, xe * b0 + ye * b1 + ze * b2, xd * b0 + yd * b1 + zd * b2)
-    psi, e2, e3 = attitude_error(d1_I, R_W_I)  # (6), (9)
+    # (22) [sdot] = (K_p pt + v_w w1 + eta_hat - v_t t1 - v_d) . f1 (m/s), in {T}.
+    sdot = K_p * pt1 + ((cx - vdx) * f1x + (cy - vdy) * f1y + (cz - vdz) * f1z)
 
-    # (10) omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d}, each term exact.
-    a0, a1, a2 = target.acceleration.tolist()
-    a_t = (xn * a0 + xe * a1 + xd * a2, yn * a0 + ye * a1 + yd * a2, zn * a0 + ze * a1 + zd * a2)
-    flow = (q, c, uu, a_t, omega_TI, target.omega_dot_T.tolist(), p_d, pt_F, u_F)
-    b0, b1, b2 = feedforward_omega_DT(
-        sdot, dp_ds, rate_F, R_F_T, R_Wd_F, y_w, z_w, alpha, v_w, flow
-    )
-    a0, a1, a2 = omega_TI
-    a0, a1, a2 = a0 + b0, a1 + b1, a2 + b2
-    omega_DI = (  # in NED
-        xn * a0 + yn * a1 + zn * a2,
-        xe * a0 + ye * a1 + ze * a2,
-        xd * a0 + yd * a1 + zd * a2,
-    )
+    # (15) {W_d} from u = v_t t1 + v_d - eta_hat, in {F} (u_F1 only enters its rate).
+    a0, a1, a2 = ux + vdx, uy + vdy, uz + vdz
+    uF1 = f1x * a0 + f1y * a1 + f1z * a2
+    uF2 = f2x * a0 + f2y * a1 + f2z * a2
+    uF3 = f3x * a0 + f3y * a1 + f3z * a2
+    wd11, wd21, wd31, wd12, wd22, wd13, wd23, wd33, nn, n = steady_state_frame(uF2, uF3, v_w)
+    # (17)-(19): y_w = pt_x . wd2, z_w = pt_x . wd3 (m), pt_x = (0, pt.f2, pt.f3) in {F}.
+    y_w = pt2 * wd22
+    z_w = pt2 * wd23 + pt3 * wd33
+    # (20) d1 in {W_d}, then in NED: d1 = R_T^I R_F^T R_{W_d}^F d1^{W_d} (wd32 = 0).
+    x0, x1, x2, nn1, nn2 = transient_direction(y_w, z_w, alpha)
+    a0 = x0 * wd11 + x1 * wd12 + x2 * wd13
+    a1 = x0 * wd21 + x1 * wd22 + x2 * wd23
+    a2 = x0 * wd31 + x2 * wd33
+    b0 = a0 * f1x + a1 * f2x + a2 * f3x
+    b1 = a0 * f1y + a1 * f2y + a2 * f3y
+    b2 = a0 * f1z + a1 * f2z + a2 * f3z
+    d1n = xn * b0 + yn * b1 + zn * b2
+    d1e = xe * b0 + ye * b1 + ze * b2
+    d1d = xd * b0 + yd * b1 + zd * b2
+
+    # (6) Psi = (1 - Rt11) / 2 and (9) e = (Rt13, -Rt12) / 2, where Rt = R_W^D = (R_D^I)^T R_W^I
+    # has the first row (d1.w1, d1.w2, d1.w3).
+    psi = 0.5 * (1.0 - (w1n * d1n + w1e * d1e + w1d * d1d))
+    e2 = 0.5 * (w3n * d1n + w3e * d1e + w3d * d1d)
+    e3 = -0.5 * (w2n * d1n + w2e * d1e + w2d * d1d)
+
+    # (10) omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d}, each the exact rate
+    # of its frame along the closed-loop flow. omega_FT^F = sdot (tau, -kappa_2, kappa_1).
+    o1, o2, o3 = sdot * tau, sdot * m_kappa_2, sdot * kappa_1
+    # (5) in {T}: pt_dot = qdot - p_d_dot with qdot = c - omega_TI x q and p_d_dot = sdot
+    # dp_d/ds; u = uu + v_d with d(uu)/dt = a_t - omega_TI x uu (eta_hat held) and v_d =
+    # omega_TI x p_d, so u_dot = a_t + omega_dot x p_d + omega_TI x (p_d_dot - uu), where
+    # a_t = R_I^T pddot_t and omega_dot is omega_TI^T's rate.
+    g0, g1, g2 = sdot * gx, sdot * gy, sdot * gz  # p_d_dot
+    pt_dot0 = cx - (oy * qz - oz * qy) - g0
+    pt_dot1 = cy - (oz * qx - ox * qz) - g1
+    pt_dot2 = cz - (ox * qy - oy * qx) - g2
+    g0, g1, g2 = g0 - ux, g1 - uy, g2 - uz
+    u_dot0 = (xn * an + xe * ae + xd * ad) + (dy * pdz - dz * pdy) + (oy * g2 - oz * g1)
+    u_dot1 = (yn * an + ye * ae + yd * ad) + (dz * pdx - dx * pdz) + (oz * g0 - ox * g2)
+    u_dot2 = (zn * an + ze * ae + zd * ad) + (dx * pdy - dy * pdx) + (ox * g1 - oy * g0)
+    # Their f2, f3 components (all that (15), (18), (19) use) in {F}, which turns at
+    # omega_FT: d(f_k . x)/dt = f_k . x_dot - (omega_FT^F x x^F)_k.
+    pt_f2_dot = f2x * pt_dot0 + f2y * pt_dot1 + f2z * pt_dot2 - (o3 * pt1 - o1 * pt3)
+    pt_f3_dot = f3x * pt_dot0 + f3y * pt_dot1 + f3z * pt_dot2 - (o1 * pt2 - o2 * pt1)
+    wd21_dot = (f2x * u_dot0 + f2y * u_dot1 + f2z * u_dot2 - (o3 * uF1 - o1 * uF3)) / v_w
+    wd31_dot = (f3x * u_dot0 + f3y * u_dot1 + f3z * u_dot2 - (o1 * uF2 - o2 * uF1)) / v_w
+    a0, a1, a2 = steady_state_frame_rate(
+        wd11, wd21, wd31, wd12, wd22, nn, n, wd21_dot, wd31_dot
+    )  # omega_{W_d F}^F
+    # d/dt of (18)-(19) while {W_d} turns at omega_{W_d F}^F = a: d(wd_k)/dt = a x wd_k, of
+    # which the components used here are written out (d(wd22)/dt = a2 wd12 as wd32 = 0).
+    y_w_dot = pt_f2_dot * wd22 + pt2 * a2 * wd12
+    z_w_dot = pt_f2_dot * wd23 + pt_f3_dot * wd33
+    z_w_dot += pt2 * (a2 * wd13 - a0 * wd33) + pt3 * (a0 * wd23 - a1 * wd13)
+    b0, b1, b2 = transient_frame_rate(y_w, z_w, y_w_dot, z_w_dot, alpha, nn1, nn2)
+    # Summed in {F}: omega_FT^F + omega_{W_d F}^F + R_{W_d}^F omega_{D W_d}^{W_d} (wd32 = 0),
+    # into {T} by R_F^T plus omega_TI^T, then into NED by R_T^I.
+    o1 += a0 + (b0 * wd11 + b1 * wd12 + b2 * wd13)
+    o2 += a1 + (b0 * wd21 + b1 * wd22 + b2 * wd23)
+    o3 += a2 + (b0 * wd31 + b2 * wd33)
+    a0 = ox + (o1 * f1x + o2 * f2x + o3 * f3x)
+    a1 = oy + (o1 * f1y + o2 * f2y + o3 * f3y)
+    a2 = oz + (o1 * f1z + o2 * f2z + o3 * f3z)
+    on = xn * a0 + yn * a1 + zn * a2  # omega_DI (NED)
+    oe = xe * a0 + ye * a1 + ze * a2
+    od = xd * a0 + yd * a1 + zd * a2
 
     # (23) [omega]: -K_R e + Pi_R Rt^T omega_DI^D, the last term being omega_DI on w2, w3.
-    a0, a1, a2 = omega_DI
-    ff2 = a0 * w2[0] + a1 * w2[1] + a2 * w2[2]
-    ff3 = a0 * w3[0] + a1 * w3[1] + a2 * w3[2]
-    law2, law3 = -K_R * e2 + ff2, -K_R * e3 + ff3
+    ff2 = on * w2n + oe * w2e + od * w2d
+    ff3 = on * w3n + oe * w3e + od * w3d
+    m_K_R = -K_R
+    law2, law3 = m_K_R * e2 + ff2, m_K_R * e3 + ff3
     if ext.psi_turn or ext.rate_limit is not None:
-        cmd2, cmd3, mode = apply_extensions(law2, law3, ff2, ff3, psi, d1_I, R_W_I, K_R, ext)
+        R_W_I = (w1n, w1e, w1d), (w2n, w2e, w2d), (w3n, w3e, w3d)
+        cmd2, cmd3, mode = apply_extensions(
+            law2, law3, ff2, ff3, psi, (d1n, d1e, d1d), R_W_I, K_R, ext
+        )
     else:  # the paper's law as it is (apply_extensions would return it unchanged)
         cmd2, cmd3, mode = law2, law3, "law"
-    # The command as the angular velocity of w1 in NED: R_W^I [0, w2, w3].
-    omega_w1_I = (
-        cmd2 * w2[0] + cmd3 * w3[0],
-        cmd2 * w2[1] + cmd3 * w3[1],
-        cmd2 * w2[2] + cmd3 * w3[2],
-    )
     # tuple.__new__ builds the NamedTuples without their keyword-parsing constructor (~0.3 us
-    # each, on the hot path).
-    cmd: MpfCommand = tuple.__new__(MpfCommand, (t, cmd2, cmd3, sdot, omega_w1_I))
+    # each). The command's omega_w1_I is R_W^I [0, w2, w3], in NED.
+    cmd: MpfCommand = tuple.__new__(
+        MpfCommand,
+        (t, cmd2, cmd3, sdot,
+         (cmd2 * w2n + cmd3 * w3n, cmd2 * w2e + cmd3 * w3e, cmd2 * w2d + cmd3 * w3d)),
+    )  # fmt: skip
     if not diagnostics:
         return cmd, None
-    u0, u1, u2 = u_F  # |u| = |u_F|
-    margin = v_w - math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-    return cmd, _diagnostics(
-        t, s, R_I_T, R_F_T, R_Wd_F[0], d1_I, x_I, p_t, p_d, pt, pt_F, y_w, z_w, psi, e2, e3,
-        margin, omega_DI, ff2, ff3, law2, law3, mode, k1, k2,
+
+    # The record, its vectors into NED by R_T^I: p_d (p_f = p_t + p_d and pt = (p - p_t) -
+    # p_d), wd1 = R_T^I R_F^T wd1^F and f1; the Assumption 1 margin v_w - |u| (|u| = |u_F|).
+    pdn = xn * pdx + yn * pdy + zn * pdz
+    pde = xe * pdx + ye * pdy + ze * pdz
+    pdd = xd * pdx + yd * pdy + zd * pdz
+    a0 = wd11 * f1x + wd21 * f2x + wd31 * f3x
+    a1 = wd11 * f1y + wd21 * f2y + wd31 * f3y
+    a2 = wd11 * f1z + wd21 * f2z + wd31 * f3z
+    return cmd, tuple.__new__(
+        MpfDiagnostics,
+        (t, s, (rn - pdn, re - pde, rd - pdd), math.sqrt(ex * ex + ey * ey + ez * ez),
+         (pt1, pt2, pt3), (tn + pdn, te + pde, td + pdd), psi, (e2, e3), y_w, z_w,
+         (d1n, d1e, d1d),
+         (xn * a0 + yn * a1 + zn * a2, xe * a0 + ye * a1 + ze * a2, xd * a0 + yd * a1 + zd * a2),
+         (xn * f1x + yn * f1y + zn * f1z, xe * f1x + ye * f1y + ze * f1z,
+          xd * f1x + yd * f1y + zd * f1z),
+         (on, oe, od), (ff2, ff3), (law2, law3),
+         v_w - math.sqrt(uF1 * uF1 + uF2 * uF2 + uF3 * uF3), mode, k1, k2),
     )  # fmt: skip

@@ -37,7 +37,8 @@ Tuple3 = Vec3
 # (p_d, f1, f2, f3, k1, k2) and, with the rate, the frame's angular velocity per metre in {F}.
 PathPoint = tuple[Vec3, Vec3, Vec3, Vec3, float, float]
 PathPointRate = tuple[Vec3, Vec3, Vec3, Vec3, float, float, Vec3, Vec3]
-_Cell = tuple[float, ...]  # 20 floats, see TabulatedPath._hermite_cells
+PathPointFlat = tuple[float, ...]  # PathPointRate's 20 floats in order, see eval_flat
+_Cell = tuple[float, ...]  # 27 floats, see TabulatedPath._hermite_cells
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 
@@ -230,9 +231,11 @@ class TabulatedPath:
 
     def _hermite_cells(self) -> list[_Cell]:
         """Per cell, what evaluation needs in one flat tuple of floats (unpacked at once): the
-        Hermite cubic in the arc length from the cell's start, p(x) = p_i + x (t_i + x (B +
-        x C)) (x = s - s_i; t_i is the node's tangent), the node's f2, the cell's closing angle
-        per metre and the curvatures k1, k2 at its start and their slopes (1/m^2)."""
+        cell's start s_i = i ds (m), the Hermite cubic in the arc length from there, p(x) = p_i
+        + x (t_i + x (B + x C)) (x = s - s_i; t_i is the node's tangent), 2 B and 3 C (the
+        derivatives' coefficients, formed once here rather than at every evaluation), the
+        node's f2, the cell's closing angle per metre and the curvatures k1, k2 at its start
+        and their slopes (1/m^2)."""
         h = self.ds
         cells: list[_Cell] = []
         for i in range(self.n):
@@ -243,8 +246,8 @@ class TabulatedPath:
             C = [(2.0 * (pa[j] - pb[j]) + h * (ta[j] + tb[j])) / (h * h * h) for j in range(3)]
             k1a, k1b, k2a, k2b = self._K1l[i], self._K1l[i + 1], self._K2l[i], self._K2l[i + 1]
             cells.append(
-                (*pa, *ta, *B, *C, *self._F2l[i], self._C[i] / h,
-                 k1a, (k1b - k1a) / h, k2a, (k2b - k2a) / h)
+                (i * h, *pa, *ta, *B, *C, *[b + b for b in B], *[3.0 * c for c in C],
+                 *self._F2l[i], self._C[i] / h, k1a, (k1b - k1a) / h, k2a, (k2b - k2a) / h)
             )  # fmt: skip
         return cells
 
@@ -263,6 +266,17 @@ class TabulatedPath:
         sdot rate_F. Both are the exact derivatives of what :meth:`eval` returns (the
         interpolant's own curvature and twist), so they agree with differencing eval.
         """
+        (p0, p1, p2, e0, e1, e2, r0, r1, r2, q0, q1, q2, k1, k2,
+         dp0, dp1, dp2, tau, m_kappa_2, kappa_1) = self.eval_flat(s)  # fmt: skip
+        return (
+            (p0, p1, p2), (e0, e1, e2), (r0, r1, r2), (q0, q1, q2), k1, k2,
+            (dp0, dp1, dp2), (tau, m_kappa_2, kappa_1),
+        )  # fmt: skip
+
+    def eval_flat(self, s: float) -> PathPointFlat:
+        """:meth:`eval_with_rate` as one flat tuple of 20 floats: p_d, f1, f2, f3 (3 each), k1,
+        k2, dp_ds and rate_F (3 each). The law evaluates the path once per call and unpacks
+        it at once: one tuple instead of seven (each costs more than a product)."""
         L = self.length
         if self.closed:
             s = s % L
@@ -271,28 +285,23 @@ class TabulatedPath:
             j = 0 if s <= 0.0 else self.n
             p, t, f2 = self._Pl[j], self._Tl[j], self._F2l[j]
             ds = s if j == 0 else s - L
-            return add_scaled(p, ds, t), t, f2, cross(t, f2), 0.0, 0.0, t, _ZERO
-        h = self.ds
-        i = int(s / h)
+            return (*add_scaled(p, ds, t), *t, *f2, *cross(t, f2), 0.0, 0.0, *t, *_ZERO)
+        i = int(s / self.ds)
         if i >= self.n:
             i = self.n - 1
-        x = s - i * h
-        (p0, p1, p2, ta0, ta1, ta2, b0, b1, b2, c0, c1, c2, v0, v1, v2,
-         twist, k1a, k1s, k2a, k2s) = self._cells[i]  # fmt: skip
+        (si, p0, p1, p2, ta0, ta1, ta2, b0, b1, b2, c0, c1, c2, bb0, bb1, bb2, cc0, cc1, cc2,
+         v0, v1, v2, twist, k1a, k1s, k2a, k2s) = self._cells[i]  # fmt: skip
+        x = s - si
         # Written out on scalars (this runs once per law evaluation): the cell's cubic by
         # Horner, its first derivative dp (= dp_d/ds) and its second, ddp.
-        p = (
-            p0 + x * (ta0 + x * (b0 + x * c0)),
-            p1 + x * (ta1 + x * (b1 + x * c1)),
-            p2 + x * (ta2 + x * (b2 + x * c2)),
-        )
-        b0, b1, b2 = b0 + b0, b1 + b1, b2 + b2
-        c0, c1, c2 = 3.0 * c0, 3.0 * c1, 3.0 * c2
-        dp0 = ta0 + x * (b0 + x * c0)
-        dp1 = ta1 + x * (b1 + x * c1)
-        dp2 = ta2 + x * (b2 + x * c2)
+        p0 = p0 + x * (ta0 + x * (b0 + x * c0))
+        p1 = p1 + x * (ta1 + x * (b1 + x * c1))
+        p2 = p2 + x * (ta2 + x * (b2 + x * c2))
+        dp0 = ta0 + x * (bb0 + x * cc0)
+        dp1 = ta1 + x * (bb1 + x * cc1)
+        dp2 = ta2 + x * (bb2 + x * cc2)
         x2 = x + x
-        ddp0, ddp1, ddp2 = b0 + x2 * c0, b1 + x2 * c1, b2 + x2 * c2
+        ddp0, ddp1, ddp2 = bb0 + x2 * cc0, bb1 + x2 * cc1, bb2 + x2 * cc2
         g = 1.0 / math.sqrt(dp0 * dp0 + dp1 * dp1 + dp2 * dp2)
         e0, e1, e2 = dp0 * g, dp1 * g, dp2 * g  # f1
         # r: the node's f2 (v, orthogonal to t_i) carried by the minimal rotation t_i -> f1,
@@ -331,8 +340,8 @@ class TabulatedPath:
         kappa_2 = (ddp0 * q0 + ddp1 * q1 + ddp2 * q2) * g
         tau = twist - k * (cx * ddp0 + cy * ddp1 + cz * ddp2) * g
         return (
-            p, (e0, e1, e2), (r0, r1, r2), (q0, q1, q2), k1a + x * k1s, k2a + x * k2s,
-            (dp0, dp1, dp2), (tau, -kappa_2, kappa_1),
+            p0, p1, p2, e0, e1, e2, r0, r1, r2, q0, q1, q2, k1a + x * k1s, k2a + x * k2s,
+            dp0, dp1, dp2, tau, -kappa_2, kappa_1,
         )  # fmt: skip
 
     def sample(self, s: float) -> PathSample:
