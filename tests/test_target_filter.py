@@ -346,3 +346,20 @@ def test_reported_attitude_sets_the_frame_while_fresh_then_the_course():
     assert not isinstance(st, str)
     course = math.atan2(st.velocity[1], st.velocity[0])
     assert math.atan2(st.R_T_I[1, 0], st.R_T_I[0, 0]) == pytest.approx(course, abs=1e-9)
+
+
+def test_state_floats_equal_its_arrays():
+    """state() hands the law its numbers twice, as arrays and as floats (TargetState.floats,
+    R_T^I by rows, then p, v, a, omega, omega_dot): they must be the same doubles, exactly,
+    behind, at and ahead of the latest fix."""
+    kf = TargetEstimator(params(accel_noise_m_s2=0.005, turn_accel_noise_rad_s2=1e-5))
+    feed(kf, reports(BOAT, 60.0, seed=3))
+    for t in (10.0, 60.0 + LATENCY, 61.7):
+        st = kf.state(t)
+        assert not isinstance(st, str)
+        assert st.floats is not None
+        arrays = np.concatenate(
+            [st.R_T_I.ravel(), st.position, st.velocity, st.acceleration, st.omega_T,
+             st.omega_dot_T]
+        )  # fmt: skip
+        assert list(st.floats) == arrays.tolist()

@@ -68,7 +68,7 @@ from statistics import NormalDist
 import numpy as np
 from numpy.typing import NDArray
 
-from mpf_mavlink.core.target import TargetState
+from mpf_mavlink.core.target import TargetState, with_floats
 
 #: Upward leak of the clock-offset minimum (s per s): follows a sender clock drifting by up to
 #: 100 ppm (crystal clocks: 20-50 ppm) while a single fast report does not fix it for ever.
@@ -674,9 +674,13 @@ class TargetEstimator:
         cy, sy = math.cos(yaw), math.sin(yaw)
         # one array, its parts as views (a third cheaper than seven arrays): position,
         # velocity, acceleration w [-ve, vn, 0], omega [0, 0, w], omega_dot 0, R = rot_z(yaw)
-        a = np.array((n, e, d, vn, ve, vd, -w * ve, w * vn, 0.0, 0.0, 0.0, w, 0.0, 0.0, 0.0,
+        an, ae = -w * ve, w * vn
+        a = np.array((n, e, d, vn, ve, vd, an, ae, 0.0, 0.0, 0.0, w, 0.0, 0.0, 0.0,
                       cy, -sy, 0.0, sy, cy, 0.0, 0.0, 0.0, 1.0))  # fmt: skip
-        return TargetState(t, a[0:3], a[3:6], a[6:9], a[15:24].reshape(3, 3), a[9:12], a[12:15])
+        st = TargetState(t, a[0:3], a[3:6], a[6:9], a[15:24].reshape(3, 3), a[9:12], a[12:15])
+        # the same numbers as floats, so the law need not read them back out of the arrays
+        return with_floats(st, (cy, -sy, 0.0, sy, cy, 0.0, 0.0, 0.0, 1.0, n, e, d, vn, ve, vd,
+                                an, ae, 0.0, 0.0, 0.0, w, 0.0, 0.0, 0.0))  # fmt: skip
 
 
 __all__ = ["Report", "TargetEstimator", "TargetFilterParams", "chi2_quantile"]
