@@ -164,6 +164,9 @@ class FakeLink:
     def recv(self, timeout_s: float = 0.0) -> Any:
         return self.vehicle.next_message(self.vehicle.clock.t + timeout_s)
 
+    def buffered(self) -> bool:
+        return False  # one message at a time, as a stream link
+
     def clock(self) -> float:
         return self.vehicle.clock.t
 

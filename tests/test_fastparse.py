@@ -293,3 +293,28 @@ def test_the_stdlib_crc_fallback_matches_pymavlinks_crc() -> None:
     for n in (0, 1, 9, 40, 280):
         data = bytes(rng.randrange(256) for _ in range(n))
         assert _mcrf4xx_hqx(data, 0xFFFF) == x25crc_slow(data).crc
+
+
+def test_the_bridge_takes_a_datagrams_messages_before_its_duties() -> None:
+    """VehicleLink.spin runs its duties (watchdog, re-sends) once per wake-up, after every
+    message of the datagram read: not between a LOCAL_POSITION_NED and the ATTITUDE after it."""
+    from types import SimpleNamespace
+
+    from mpf_mavlink.bridge.link_io import VehicleLink
+
+    link, tx, dest = _link_pair()
+    try:
+        vl = VehicleLink(SimpleNamespace(vehicle_sysid=1, target_sysid=None, lockstep=False))
+        vl.link = link
+        seen: list[str] = []
+        vl.on_vehicle = lambda s, rx: seen.append(type(s).__name__)
+        vl.on_tick = lambda: seen.append("tick")
+        msgs = _hot_messages()
+        tx.sendto(_pack(msgs["LOCAL_POSITION_NED"]) + _pack(msgs["ATTITUDE"]), dest)
+        assert vl.spin(1.0, until=lambda: "AttitudeSample" in seen)
+        i = seen.index("LocalPositionSample")
+        assert seen[i : i + 2] == ["LocalPositionSample", "AttitudeSample"]
+        assert not link.buffered()
+    finally:
+        tx.close()
+        link.close()

@@ -282,7 +282,8 @@ class Link:
         self.allowed_sysids = self.allowed_sysids | {int(sysid)}
 
     def accepts(self, sysid: int, compid: int) -> bool:
-        if sysid == self.source_system and compid == self.source_component:
+        mav = self.conn.mav
+        if sysid == mav.srcSystem and compid == mav.srcComponent:
             return False  # our own packets echoed by a router
         if self.vehicle_sysid is None:
             return True
@@ -394,6 +395,15 @@ class Link:
                 return None
             _wait_readable(self.conn, min(remaining, 0.05))
 
+    def buffered(self) -> bool:
+        """Whether messages of the datagram read last are still to come from :meth:`recv`
+        (UDP; a stream link says False): a caller can take them before its periodic duties."""
+        udp = self._udp
+        if udp is None:
+            return False
+        mav = self.conn.mav  # pymavlink holds what follows a frame it parsed
+        return bool(udp._pending) or len(mav.buf) > mav.buf_index
+
     def recv_all(self, timeout_s: float = 0.0) -> list[Any]:
         """Every accepted message available now (waiting up to timeout_s for the first)."""
         out = []
@@ -429,6 +439,42 @@ class Link:
         self.counters.tx_packets += 1
         self.counters.tx_by_type[msg.get_type()] += 1
 
+    def send_many(self, msgs: list[Any]) -> None:
+        """Several messages in one write (on UDP one datagram, as PX4 bundles its telemetry)
+        and one tlog write: a burst that wakes the peer once, not once per packet. Packed,
+        logged and counted as :meth:`send` does; with signing on they go one by one."""
+        if self._closed:
+            raise MpfError(f"link {self.url} is closed")
+        mav = self.conn.mav
+        bufs: list[bytes] = []
+        for i, msg in enumerate(msgs):
+            buf = None if self.signing_enabled else pack_v2(mav, msg)
+            if buf is None:  # pymavlink must pack this one: it and the rest one by one
+                self._send_bufs(mav, bufs, msgs[:i])
+                for m in msgs[i:]:
+                    self.send(m)
+                return
+            sent(mav, buf)  # the next packet's sequence number
+            bufs.append(buf)
+        self._send_bufs(mav, bufs, msgs)
+
+    def _send_bufs(self, mav: Any, bufs: list[bytes], msgs: list[Any]) -> None:
+        """Log then write packed ``bufs`` (of ``msgs``) in one go."""
+        if not bufs:
+            return
+        for buf in bufs:
+            self._log_tx(buf, flush=False)
+        if self.tlog is not None:  # write-ahead, as send
+            self._flush_tlog()
+        try:
+            self._write(b"".join(bufs))
+        except OSError:
+            self.counters.io_errors += 1
+            return
+        self.counters.tx_packets += len(bufs)
+        for msg in msgs:
+            self.counters.tx_by_type[msg.get_type()] += 1
+
     def _send_pymavlink(self, mav: Any, msg: Any) -> bool:
         """pymavlink packs (seq, signing) and hands the bytes to ``mav.file.write``: they are
         logged there, before the socket (write-ahead, as :meth:`send`). False: not written."""
@@ -461,7 +507,9 @@ class Link:
                 return
         conn.write(buf)
 
-    def _log_tx(self, packet: bytes | bytearray) -> None:
+    def _log_tx(self, packet: bytes | bytearray, flush: bool = True) -> None:
+        """Log one packet about to be written; ``flush``: the held records go in the file
+        first (write-ahead)."""
         vt = self.vehicle_time
         t = self._clock() if vt is None else vt.now()
         # the record time of the latest packet sent (s): what a tlog reader computes from its
@@ -471,7 +519,8 @@ class Link:
             return
         try:
             self.tlog.write(packet, t)
-            self.tlog.flush()  # write-ahead: in the file, with all received before it, first
+            if flush:  # write-ahead: in the file, with all received before it, first
+                self.tlog.flush()
         except (OSError, ValueError):
             self.counters.io_errors += 1
             self.counters.tlog_write_errors += 1
