@@ -400,6 +400,36 @@ def test_recv_after_close_and_send_after_close():
         link.send_heartbeat()
 
 
+def test_a_burst_goes_in_one_datagram_logged_as_single_sends(tmp_path):
+    """Link.send_many: one datagram holding the packets pymavlink would send one by one (same
+    bytes, consecutive sequence numbers), each its own tlog record, counted per packet."""
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.settimeout(2.0)
+    link = open_link(f"udpout:127.0.0.1:{rx.getsockname()[1]}", tlog_path=tmp_path / "b.tlog")
+    want: list[bytes] = []
+
+    class _Out:
+        def write(self, b: bytes) -> None:
+            want.append(bytes(b))
+
+    ref = mavlink.MAVLink(_Out(), srcSystem=link.source_system, srcComponent=link.source_component)
+    try:
+        names = [b"MPF_pt", b"MPF_psi", b"MPF_sdot"]
+        link.send_many([link.mav.named_value_float_encode(7, n, 1.5) for n in names])
+        data = rx.recv(65536)
+        for n in names:
+            ref.send(ref.named_value_float_encode(7, n, 1.5))
+        assert data == b"".join(want)
+        assert link.counters.tx_packets == 3
+        assert link.counters.tx_by_type["NAMED_VALUE_FLOAT"] == 3
+    finally:
+        link.close()
+        rx.close()
+    got = read_tlog(tmp_path / "b.tlog")
+    assert [bytes(m.get_msgbuf()) for _, m in got.messages] == want
+
+
 def test_struct_of_tlog_record_written_by_link(tmp_path):
     """Record = 8-byte big-endian us since the epoch + the exact packet bytes we sent."""
     port = free_udp_port()

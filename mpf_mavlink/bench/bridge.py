@@ -1,5 +1,6 @@
 """Benchmarks of the bridge side: latency (a telemetry datagram in -> the SET_ATTITUDE_TARGET
-datagram out) and the wall time of a replay of the real tlog.
+datagram out), the CPU of its link path per frame (:func:`bridge_link_us`) and the wall time of
+a replay of the real tlog.
 
 A minimal PX4-like peer (this process) talks to the real bridge (run_bridge in a forked
 process, so that the two never wait for each other's GIL) over UDP loopback. Each control cycle it
@@ -12,6 +13,7 @@ hops, pymavlink parsing and packing, the tlog writes, the estimator, the law and
 
 from __future__ import annotations
 
+import contextlib
 import math
 import multiprocessing
 import socket
@@ -164,6 +166,113 @@ def bridge_latency_ms(n_samples: int = 300, rate_hz: float = 50.0) -> dict[str, 
         "p99": float(np.percentile(a, 99)),
         "n": int(a.size),
         "max": float(a.max()),
+    }
+
+
+def _demo_frames(n: int, t0_ms: int) -> list[tuple[bytes, bytes, int]]:
+    """``n`` 20 ms frames of the demo's telemetry as the SIL vehicle sends it: per frame a
+    datagram of LOCAL_POSITION_NED + ATTITUDE; every 5th frame also one of GLOBAL_POSITION_INT,
+    VFR_HUD, ATTITUDE_TARGET and the target's FOLLOW_TARGET + GLOBAL_POSITION_INT (system 2);
+    SYS_STATUS at 5 Hz, HEARTBEAT and WIND_COV at 2 Hz. (pair, slow or b"", time_boot_ms)."""
+    from mpf_mavlink.mavlink import dialect as mavlink
+
+    out: list[bytes] = []
+
+    class _W:
+        def write(self, b: bytes) -> None:
+            out.append(bytes(b))
+
+    veh = mavlink.MAVLink(_W(), srcSystem=1, srcComponent=1)
+    tgt = mavlink.MAVLink(_W(), srcSystem=2, srcComponent=1)
+    frames = []
+    for k in range(n):
+        tb = t0_ms + 20 * k
+        out.clear()
+        veh.local_position_ned_send(tb, 1.0 + 0.3 * k, 2.0, -100.0, 15.0, 0.1, 0.0)
+        veh.attitude_send(tb, 0.1, 0.02, 1.0, 0.01, 0.02, 0.03)
+        pair = b"".join(out)
+        out.clear()
+        if k % 5 == 0:
+            veh.global_position_int_send(tb, 411850000, -87600000, 100000, 100000, 1500, 10, 0,
+                                         9000)  # fmt: skip
+            veh.vfr_hud_send(16.0, 15.0, 90, 50, 100.0, 0.1)
+            veh.attitude_target_send(tb, 128, [1, 0, 0, 0], 0.1, 0.2, 0.3, 0.5)
+            tgt.follow_target_send(tb, 7, 411850000, -87600000, 0.0, [3.0, 0.1, 0.0], [0, 0, 0],
+                                   [1, 0, 0, 0], [0, 0, 0], [0, 0, 0], 0)  # fmt: skip
+            tgt.global_position_int_send(tb, 411850000, -87600000, 0, 0, 300, 10, 0, 9000)
+        if k % 10 == 0:
+            veh.sys_status_send(0, 0, 0, 500, 12000, -1, 80, 0, 0, 0, 0, 0, 0)
+        if k % 25 == 0:
+            veh.heartbeat_send(1, 12, 129, 6 << 16, 4)
+            veh.wind_cov_send(tb * 1000, 0.0, 4.0, 0.0, 0, 0, 0, 0, 0, 0)
+        frames.append((pair, b"".join(out), tb))
+    return frames
+
+
+def bridge_link_us(frames: int = 800, rounds: int = 15) -> dict[str, float | int]:
+    """CPU time (us) per 20 ms frame of the bridge's link path alone: the demo's telemetry
+    (:func:`_demo_frames`, 3.2 messages a frame) received on a UDP loopback link with a tlog,
+    decoded and dispatched (VehicleLink), and one SET_ATTITUDE_TARGET sent per ATTITUDE; no
+    estimator, no law. The sender's own cost (measured alone) is subtracted; best of
+    ``rounds`` (a CPU-time figure: less sensitive to a busy machine than the SIL's)."""
+    from types import SimpleNamespace
+
+    from mpf_mavlink.bridge.link_io import VehicleLink
+    from mpf_mavlink.mavlink import Flavour, encode_set_attitude_target_rates, open_link
+
+    port = free_udp_port()
+    with tempfile.TemporaryDirectory(prefix="mpf-bench-link-") as d:
+        link = open_link(f"udpin:127.0.0.1:{port}", tlog_path=Path(d) / "t.tlog",
+                         vehicle_time=True, allowed_sysids=[2])  # fmt: skip
+        vl = VehicleLink(SimpleNamespace(vehicle_sysid=1, target_sysid=2, lockstep=True), True)
+        vl.link, vl.flavour = link, Flavour.PX4
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        tx.bind(("127.0.0.1", 0))
+        tx.setblocking(False)
+        att = [0]
+
+        def on_vehicle(sample: object, rx: float | None) -> None:
+            if type(sample).__name__ == "AttitudeSample":
+                att[0] += 1
+                vl.send(encode_set_attitude_target_rates(link.mav, tb_now[0], 1, 1, 0.1, 0.2,
+                                                         0.3, 0.5))  # fmt: skip
+
+        tb_now = [0]
+        vl.on_vehicle = on_vehicle
+        dest, sink = ("127.0.0.1", port), ("127.0.0.1", free_udp_port())
+        best = best_send = math.inf
+        t_ms = 100_000
+        try:
+            for r in range(rounds + 1):
+                batch = _demo_frames(frames, t_ms)
+                t_ms += 20 * frames
+                t0 = time.process_time()
+                for pair, slow, _ in batch:  # the sender alone, to a port nobody reads
+                    if slow:
+                        tx.sendto(slow, sink)
+                    tx.sendto(pair, sink)
+                best_send = min(best_send, time.process_time() - t0)
+                t0 = time.process_time()
+                for i, (pair, slow, tb) in enumerate(batch):
+                    tb_now[0] = tb
+                    for data in (slow, pair) if slow else (pair,):
+                        tx.sendto(data, dest)
+                        while (msg := link.recv(0.0)) is not None:
+                            vl.dispatch(msg)
+                    if i % 64 == 63:  # the setpoints that came back
+                        with contextlib.suppress(BlockingIOError):
+                            while True:
+                                tx.recv(65536)
+                if r:  # the first round warms up (the link's clock gate settles)
+                    best = min(best, time.process_time() - t0)
+        finally:
+            tx.close()
+            link.close()
+    return {
+        "us_per_frame": (best - best_send) / frames * 1e6,
+        "sender_us_per_frame": best_send / frames * 1e6,
+        "setpoints": att[0],
+        "rx_packets": link.counters.rx_packets,
     }
 
 

@@ -85,9 +85,15 @@ GROUPS = {
 
 def _optional_groups() -> None:
     try:
-        from mpf_mavlink.bench.bridge import bridge_latency_ms, estimator_us, replay_s
+        from mpf_mavlink.bench.bridge import (
+            bridge_latency_ms,
+            bridge_link_us,
+            estimator_us,
+            replay_s,
+        )
 
         GROUPS["bridge_latency_ms"] = bridge_latency_ms
+        GROUPS["bridge_link_us"] = bridge_link_us
         GROUPS["estimator_us"] = estimator_us
         GROUPS["replay_s"] = replay_s
     except ImportError:

@@ -56,8 +56,9 @@ class VehicleLink:
     """One vehicle over one MAVLink link (``link``: :class:`~mpf_mavlink.mavlink.link.Link`,
     opened by the bridge). Hooks the bridge wires: ``on_heartbeat(sample, rx)`` for the
     autopilot's HEARTBEATs, ``on_vehicle(sample, rx)`` for its other decoded samples,
-    ``on_target(sample, rx)`` for the live target's, ``on_tick()`` after every receive or wait,
-    ``due(now)`` the monotonic time by which ``on_tick`` must run next."""
+    ``on_target(sample, rx)`` for the live target's, ``on_tick()`` after every wait and
+    after every datagram's messages (a stream link: every message), ``due(now)`` the
+    monotonic time by which ``on_tick`` must run next."""
 
     def __init__(self, m: Any, live_target: bool = False) -> None:
         self.m = m
@@ -184,6 +185,8 @@ class VehicleLink:
             msg = link.recv(wait)
             if msg is not None:
                 self.dispatch(msg)
+                if link.buffered():
+                    continue  # the rest of the datagram first: the duties run once per wake-up
             self.on_tick()
 
     # -- timeouts ----------------------------------------------------------------------------

@@ -53,13 +53,14 @@ class OperatorDisplay:
             return
         self._next_t = t + self.period_s
         mav, ms, d = link.mav, int(step.time_boot_ms), step.diag
-        for name, value in (
+        values = (
             (b"MPF_pt", d.pt_norm),
             (b"MPF_psi", d.psi),
             (b"MPF_sdot", step.cmd.sdot),
             (b"MPF_state", float(state)),
-        ):
-            link.send(mav.named_value_float_encode(ms, name, float(value)))
+        )
+        # in one datagram: the peer wakes up once for the four
+        link.send_many([mav.named_value_float_encode(ms, n, float(v)) for n, v in values])
         self.values_sent += 1
 
     def text(self, link: Any, text: str, severity: int = dialect.MAV_SEVERITY_INFO) -> None:

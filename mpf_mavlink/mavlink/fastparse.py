@@ -1,21 +1,26 @@
-"""A decoder for the few message types that make up nearly all of a vehicle's telemetry
-datagrams (ATTITUDE and LOCAL_POSITION_NED every frame, then GLOBAL_POSITION_INT, VFR_HUD,
-ATTITUDE_TARGET, FOLLOW_TARGET, ...), used by the UDP link before pymavlink's parser.
+"""A decoder of the frames that make up nearly all of a vehicle's telemetry datagrams (ATTITUDE
+and LOCAL_POSITION_NED every frame, then GLOBAL_POSITION_INT, VFR_HUD, ATTITUDE_TARGET,
+FOLLOW_TARGET, ...: every message type without text fields), used by the UDP link before
+pymavlink's parser.
 
 pymavlink's byte-stream parser costs ~7 us a message (a method call per parsing stage, a header
 object, the payload copied three times). Here a datagram's frames are checked and decoded in one
-pass from its start: a frame must be MAVLink 2, unsigned (no incompatibility flag), of a hot
-type, whole within the datagram, no longer than the type's payload, with the right CRC
+pass from its start: a frame must be MAVLink 2, unsigned (no incompatibility flag), of a type
+without text (pymavlink post-processes text: STATUSTEXT, PARAM_VALUE, NAMED_VALUE_FLOAT... stay
+with it), whole within the datagram, no longer than the type's payload, with the right CRC
 (CRC_EXTRA read from the pymavlink dialect's message classes). The first frame that is anything
-else (MAVLink 1, signed, another type, a bad CRC, truncated, garbage) ends the pass: from there
+else (MAVLink 1, signed, text, unknown, a bad CRC, truncated, garbage) ends the pass: from there
 on the datagram goes to pymavlink (:meth:`HotDecoder.decode` says where), which then sees the
-bytes its own parser would hold after those frames. The messages made are pymavlink's own
-classes with the attributes pymavlink's ``MAVLink.decode`` sets (tests/test_fastparse.py
-compares them), so every consumer sees the same objects."""
+bytes its own parser would hold after those frames. The messages made are instances of
+pymavlink's own classes with the fields, ids, bytes and methods pymavlink's ``MAVLink.decode``
+gives them (tests/test_fastparse.py compares them for every type), so every consumer sees the
+same messages; only what nothing reads per message (the header object, the payload copy, the
+CRC) is made when first asked for."""
 
 from __future__ import annotations
 
 import binascii
+import functools
 import struct
 from collections.abc import Callable
 from typing import Any
@@ -43,7 +48,7 @@ def _crc_function() -> Callable[[bytes, int], int]:
 _mcrf4xx = _crc_function()
 
 
-#: Types decoded here; every other type goes through pymavlink.
+#: The telemetry a vehicle streams (decoded here with every other type without text).
 HOT_TYPES = (
     "ATTITUDE",
     "LOCAL_POSITION_NED",
@@ -63,10 +68,43 @@ _STX2 = 0xFD
 _HEADER_LEN = 10  # stx, len, incompat, compat, seq, sys, comp, msgid (3 bytes)
 
 
-class _Type:
-    """One message class: its payload layout, CRC extra and how pymavlink orders its fields."""
+class _Wire:
+    """What a pymavlink message holds besides its fields, for a message made from one frame:
+    the ids and sequence read from the frame's bytes (``_msgbuf``), and the header object, the
+    payload copy and the CRC pymavlink's decoder sets made only if something asks for them
+    (nothing in the bridge does: that saves a third of a message's decoding)."""
 
-    __slots__ = ("cls", "size", "unpacker", "crc_extra", "names", "order", "arrays", "base")
+    _msgbuf: bytes
+
+    def get_srcSystem(self) -> int:  # noqa: N802 - pymavlink's names
+        return self._msgbuf[5]
+
+    def get_srcComponent(self) -> int:  # noqa: N802
+        return self._msgbuf[6]
+
+    def get_seq(self) -> int:
+        return self._msgbuf[4]
+
+    @functools.cached_property
+    def _header(self) -> Any:
+        b = self._msgbuf
+        return dialect.MAVLink_header(b[7] | b[8] << 8 | b[9] << 16, b[2], b[3], b[1], b[4],
+                                      b[5], b[6])  # fmt: skip
+
+    @functools.cached_property
+    def _payload(self) -> bytearray:
+        return bytearray(self._msgbuf[6:-2])  # what pymavlink stores (its v1 offset, kept as is)
+
+    @functools.cached_property
+    def _crc(self) -> int:
+        return int.from_bytes(self._msgbuf[-2:], "little")
+
+
+class _Type:
+    """One message class: its payload layout, CRC extra and how pymavlink orders its fields;
+    ``hot`` is the class of the messages made here (the pymavlink class with :class:`_Wire`)."""
+
+    __slots__ = ("cls", "hot", "size", "unpacker", "crc_extra", "names", "order", "arrays")
 
     def __init__(self, cls: Any) -> None:
         self.cls = cls
@@ -77,13 +115,17 @@ class _Type:
         lengths = list(cls.lengths)
         # pymavlink's MAVLink.decode: field i (declared order) is t[order[i]] when the message
         # has no arrays, else the slice of the struct's values at the field's wire offset
-        self.order = tuple(cls.orders)
+        order = tuple(cls.orders)
+        self.order: tuple[int, ...] | None = None if order == tuple(range(len(order))) else order
         self.arrays: tuple[tuple[int, int], ...] | None = None
         if sum(lengths) != len(lengths):
-            self.arrays = tuple((sum(lengths[:o]), lengths[o]) for o in cls.orders)
-        # what the generated constructor sets besides the fields (ids, names, instance info)
+            self.arrays = tuple((sum(lengths[:o]), lengths[o]) for o in order)
+        # what the generated constructor sets besides the fields and the wire (the type's name,
+        # field names, instance info) is the same for every message: class attributes here
         proto = cls(*[[0] * n if n > 1 else 0 for n in self._declared_lengths(cls)])
-        self.base = {k: v for k, v in vars(proto).items() if k not in self.names}
+        wire = ("_header", "_payload", "_msgbuf", "_crc")
+        same = {k: v for k, v in vars(proto).items() if k not in self.names and k not in wire}
+        self.hot: Any = type(cls.__name__, (_Wire, cls), {**same, "__module__": __name__})
 
     @staticmethod
     def _declared_lengths(cls: Any) -> list[int]:
@@ -98,12 +140,11 @@ def _has_text(cls: Any) -> bool:
     return "s" in fmt or "c" in fmt
 
 
+@functools.cache
 def _table() -> dict[int, _Type]:
-    out: dict[int, _Type] = {}
-    for cls in dialect.mavlink_map.values():
-        if cls.msgname in HOT_TYPES and not _has_text(cls):
-            out[int(cls.id)] = _Type(cls)
-    return out
+    """Message id -> layout, for every type of the dialect without text (once per process:
+    ~25 ms for its ~260 types)."""
+    return {int(cls.id): _Type(cls) for cls in dialect.mavlink_map.values() if not _has_text(cls)}
 
 
 class HotDecoder:
@@ -111,7 +152,6 @@ class HotDecoder:
 
     def __init__(self) -> None:
         self.types = _table()
-        self._new_header = dialect.MAVLink_header
         self._crc_unpack = struct.Struct("<H").unpack_from
 
     def decode(self, data: bytes) -> tuple[list[Any], int]:
@@ -126,17 +166,16 @@ class HotDecoder:
 
     def _decode(self, data: bytes, out: list[Any]) -> int:
         types, n, i = self.types, len(data), 0
+        crc_of, crc_at, append = _mcrf4xx, self._crc_unpack, out.append
         while i < n:
             if data[i] != _STX2 or i + _HEADER_LEN > n or data[i + 2] != 0:
                 return i  # MAVLink 1, garbage, a cut header, signed or unknown flags
             mlen = data[i + 1]
             end = i + _HEADER_LEN + mlen + 2
-            msgid = data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16)
-            ty = types.get(msgid)
+            ty = types.get(data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16))
             if ty is None or end > n or mlen > ty.size:
                 return i
-            crc = self._crc_unpack(data, end - 2)[0]
-            if _mcrf4xx(data[i + 1 : end - 2] + ty.crc_extra, 0xFFFF) != crc:
+            if crc_of(data[i + 1 : end - 2] + ty.crc_extra, 0xFFFF) != crc_at(data, end - 2)[0]:
                 return i
             start = i + _HEADER_LEN
             if mlen == ty.size:
@@ -144,20 +183,14 @@ class HotDecoder:
             else:  # MAVLink 2 trims trailing zero bytes of the payload
                 t = ty.unpacker.unpack(data[start : end - 2] + bytes(ty.size - mlen))
             if ty.arrays is None:
-                fields: list[Any] = [t[k] for k in ty.order]
+                fields: Any = t if ty.order is None else [t[k] for k in ty.order]
             else:
                 fields = [t[a] if k == 1 else list(t[a : a + k]) for a, k in ty.arrays]
-            m = ty.cls.__new__(ty.cls)
+            hot = ty.hot
+            m = hot.__new__(hot)
             d = m.__dict__
-            d.update(ty.base)
             d.update(zip(ty.names, fields, strict=True))
-            buf = bytearray(data[i:end])
-            d["_signed"] = False
-            d["_msgbuf"] = buf
-            d["_payload"] = buf[6:-2]  # what pymavlink stores (its v1 offset, kept as is)
-            d["_crc"] = crc
-            d["_header"] = self._new_header(msgid, 0, data[i + 3], mlen, data[i + 4],
-                                            data[i + 5], data[i + 6])  # fmt: skip
-            out.append(m)
+            d["_msgbuf"] = data[i:end]
+            append(m)
             i = end
         return i

@@ -27,11 +27,14 @@ from typing import Any
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.mavlink.boot_clock import BootClockGate
 from mpf_mavlink.mavlink.encode import encode_companion_heartbeat
+from mpf_mavlink.mavlink.fastpack import pack_v2, sent
 from mpf_mavlink.mavlink.fastparse import HotDecoder
 from mpf_mavlink.mavlink.ports import _Serial, _TcpClient
 from mpf_mavlink.mavlink.pymav import DIALECT_NAME, dialect, mavutil
 from mpf_mavlink.mavlink.tlog import TlogWriter
 from mpf_mavlink.mavlink.url import MAV_COMP_ID_ONBOARD_COMPUTER, parse_url
+
+UDP_MAX_PACKET_LEN = 65535  # pymavlink's mavutil.UDP_MAX_PACKET_LEN
 
 
 # ---------------------------------------------------------------------------------------------
@@ -82,7 +85,7 @@ class LinkCounters:
 
 
 class DatagramReader:
-    """Reads a pymavlink UDP connection datagram by datagram (:meth:`recv`).
+    """Reads a pymavlink UDP connection datagram by datagram (:meth:`read`, then :meth:`recv`).
 
     MAVLink over UDP never splits a frame across datagrams, but pymavlink parses a UDP link
     as one byte stream: a frame whose length byte points past the end of its datagram (a
@@ -94,50 +97,84 @@ class DatagramReader:
     A datagram's leading hot telemetry (unsigned MAVLink 2 frames with good CRCs:
     :class:`~mpf_mavlink.mavlink.fastparse.HotDecoder`) is decoded in one pass, to the same
     message objects; the rest goes to pymavlink's parser, as does every datagram while
-    signing is on or a pymavlink callback is set."""
+    signing is on or a pymavlink callback is set.
 
-    __slots__ = ("conn", "counters", "hot", "_pending")
+    The socket is read here, not through ``mavudp.recv`` (whose bookkeeping of the sender's
+    address is kept): a datagram is read once ``poll`` says one is waiting, so a control
+    frame costs one wait and one read instead of a read that fails (an exception), a wait and
+    a read."""
+
+    __slots__ = ("conn", "counters", "hot", "_pending", "_port", "_poll")
 
     def __init__(self, conn: Any, counters: LinkCounters) -> None:
         self.conn = conn
         self.counters = counters
         self.hot = HotDecoder()
         self._pending: list[Any] = []  # the current datagram's messages, last first
+        self._port = conn.port
+        self._poll = select.poll()
+        self._poll.register(conn.port.fileno(), select.POLLIN)
 
     def recv(self) -> Any:
-        """The next message of the current datagram, else of the next datagram (None: none)."""
+        """The next message of the datagram read last (None: it has none left)."""
         # mavudp's pre_message does nothing, and post_message keeps pymavlink's own per-system
         # tables (last messages, modes, loss counts) that nothing here reads: both skipped,
         # they cost a quarter of a message's receive
         if self._pending:
             return self._pending.pop()
-        conn, mav = self.conn, self.conn.mav
-        msg = mav.parse_char(b"") if len(mav.buf) > mav.buf_index else None
-        if msg is None:
-            if len(mav.buf) > mav.buf_index:
+        mav = self.conn.mav
+        if len(mav.buf) > mav.buf_index:
+            msg = mav.parse_char(b"")
+            if msg is not None:
+                return msg
+            if len(mav.buf) > mav.buf_index:  # a frame cut short by its datagram's end
                 self.counters.bad_data += 1
                 mav.buf, mav.buf_index = bytearray(), 0
                 mav.expected_length = dialect.HEADER_LEN_V1 + 2
-            data = conn.recv()
-            if not data:
-                return None
-            if conn.first_byte:
-                conn.auto_mavlink_version(data)
-            elif mav.signing.secret_key is None and mav.callback is None:
-                msgs, used = self.hot.decode(data)
-                if msgs:
-                    mav.total_bytes_received += len(data)  # pymavlink's own tallies
-                    mav.total_packets_received += len(msgs)
-                    if used < len(data):
-                        # the rest, as pymavlink's parser would hold it after those frames
-                        mav.buf, mav.buf_index = bytearray(data[used:]), 0
-                        mav.expected_length = dialect.HEADER_LEN_V2 + 2
-                    msgs.reverse()
-                    first = msgs.pop()
-                    self._pending = msgs
-                    return first
+        return None
+
+    def read(self, timeout_s: float) -> bool:
+        """Read the next datagram, waiting up to ``timeout_s`` (s) for one; False: none came.
+        Its messages then come from :meth:`recv`. Raises OSError (a dead socket)."""
+        if not self._poll.poll(timeout_s * 1e3 if timeout_s > 0.0 else 0):
+            return False
+        try:
+            data, addr = self._port.recvfrom(UDP_MAX_PACKET_LEN)
+        except (BlockingIOError, ConnectionRefusedError):  # as mavudp.recv: no data
+            return False
+        conn = self.conn
+        if conn.udp_server:  # as mavudp.recv: replies go to every address heard from
+            conn.clients.add(addr)
+            conn.clients_last_alive[addr] = time.time()
+        elif conn.broadcast:
+            conn.last_address = addr
+        if not data:
+            return True
+        mav = conn.mav
+        if conn.first_byte:
+            conn.auto_mavlink_version(data)
+        elif mav.signing.secret_key is None and mav.callback is None:
+            msgs, used = self.hot.decode(data)
+            if msgs:
+                mav.total_bytes_received += len(data)  # pymavlink's own tallies
+                mav.total_packets_received += len(msgs)
+                if used < len(data):
+                    # the rest, as pymavlink's parser would hold it after those frames
+                    mav.buf, mav.buf_index = bytearray(data[used:]), 0
+                    mav.expected_length = dialect.HEADER_LEN_V2 + 2
+                msgs.reverse()
+                self._pending = msgs
+                return True
+        try:
             msg = mav.parse_char(data)
-        return msg
+        except Exception:  # noqa: BLE001 - a pymavlink parse bug must not take the loop down
+            self.counters.bad_data += 1
+            mav.buf, mav.buf_index = bytearray(), 0
+            mav.expected_length = dialect.HEADER_LEN_V1 + 2
+            return True
+        if msg is not None:
+            self._pending = [msg]
+        return True
 
 
 def _count_bad(c: LinkCounters, msg: Any, signing_counts_itself: bool) -> None:
@@ -245,7 +282,8 @@ class Link:
         self.allowed_sysids = self.allowed_sysids | {int(sysid)}
 
     def accepts(self, sysid: int, compid: int) -> bool:
-        if sysid == self.source_system and compid == self.source_component:
+        mav = self.conn.mav
+        if sysid == mav.srcSystem and compid == mav.srcComponent:
             return False  # our own packets echoed by a router
         if self.vehicle_sysid is None:
             return True
@@ -327,7 +365,8 @@ class Link:
         malformed input: bad frames, spoofed ids and rejected signatures are counted instead."""
         if self._closed:
             return None
-        deadline = time.monotonic() + max(0.0, float(timeout_s))
+        deadline: float | None = None
+        udp = self._udp
         while True:
             more, msg = self._read_one()
             if msg is not None:
@@ -336,10 +375,34 @@ class Link:
                 continue
             if self.tlog is not None:  # nothing left to read: the held records go out now
                 self._flush_tlog()
-            remaining = deadline - time.monotonic()
+            now = time.monotonic()
+            if deadline is None:
+                deadline = now + max(0.0, float(timeout_s))
+            remaining = deadline - now
+            if udp is not None:
+                try:
+                    if udp.read(min(remaining, 0.05)):
+                        continue
+                except OSError:
+                    self.counters.io_errors += 1
+                    if remaining > 0:
+                        time.sleep(min(remaining, 0.05))  # a dead socket: no busy loop
+                        continue
+                if remaining <= 0:
+                    return None
+                continue
             if remaining <= 0:
                 return None
             _wait_readable(self.conn, min(remaining, 0.05))
+
+    def buffered(self) -> bool:
+        """Whether messages of the datagram read last are still to come from :meth:`recv`
+        (UDP; a stream link says False): a caller can take them before its periodic duties."""
+        udp = self._udp
+        if udp is None:
+            return False
+        mav = self.conn.mav  # pymavlink holds what follows a frame it parsed
+        return bool(udp._pending) or len(mav.buf) > mav.buf_index
 
     def recv_all(self, timeout_s: float = 0.0) -> list[Any]:
         """Every accepted message available now (waiting up to timeout_s for the first)."""
@@ -358,10 +421,63 @@ class Link:
         mav = self.conn.mav
         if self.signing_enabled:
             _advance_signing_timestamp(mav)
-        # pymavlink packs (seq, signing) and hands the bytes to mav.file.write: logging them
-        # there, before the socket, means a process killed between the two (SIGKILL) never
-        # leaves a packet the vehicle received out of the tlog (write-ahead; a packet the socket
-        # then refuses stays in the tlog, counted in io_errors)
+        # logged before it is written: a process killed between the two (SIGKILL) never leaves
+        # a packet the vehicle received out of the tlog (write-ahead; a packet the socket then
+        # refuses stays in the tlog, counted in io_errors)
+        buf = pack_v2(mav, msg)
+        if buf is None:  # signed (or a send callback): pymavlink packs and writes
+            if not self._send_pymavlink(mav, msg):
+                return
+        else:
+            self._log_tx(buf)
+            try:
+                self._write(buf)
+            except OSError:
+                self.counters.io_errors += 1
+                return
+            sent(mav, buf)
+        self.counters.tx_packets += 1
+        self.counters.tx_by_type[msg.get_type()] += 1
+
+    def send_many(self, msgs: list[Any]) -> None:
+        """Several messages in one write (on UDP one datagram, as PX4 bundles its telemetry)
+        and one tlog write: a burst that wakes the peer once, not once per packet. Packed,
+        logged and counted as :meth:`send` does; with signing on they go one by one."""
+        if self._closed:
+            raise MpfError(f"link {self.url} is closed")
+        mav = self.conn.mav
+        bufs: list[bytes] = []
+        for i, msg in enumerate(msgs):
+            buf = None if self.signing_enabled else pack_v2(mav, msg)
+            if buf is None:  # pymavlink must pack this one: it and the rest one by one
+                self._send_bufs(mav, bufs, msgs[:i])
+                for m in msgs[i:]:
+                    self.send(m)
+                return
+            sent(mav, buf)  # the next packet's sequence number
+            bufs.append(buf)
+        self._send_bufs(mav, bufs, msgs)
+
+    def _send_bufs(self, mav: Any, bufs: list[bytes], msgs: list[Any]) -> None:
+        """Log then write packed ``bufs`` (of ``msgs``) in one go."""
+        if not bufs:
+            return
+        for buf in bufs:
+            self._log_tx(buf, flush=False)
+        if self.tlog is not None:  # write-ahead, as send
+            self._flush_tlog()
+        try:
+            self._write(b"".join(bufs))
+        except OSError:
+            self.counters.io_errors += 1
+            return
+        self.counters.tx_packets += len(bufs)
+        for msg in msgs:
+            self.counters.tx_by_type[msg.get_type()] += 1
+
+    def _send_pymavlink(self, mav: Any, msg: Any) -> bool:
+        """pymavlink packs (seq, signing) and hands the bytes to ``mav.file.write``: they are
+        logged there, before the socket (write-ahead, as :meth:`send`). False: not written."""
         file = mav.file
         tx = self._tx_file
         if tx is None or tx._file is not file:
@@ -371,13 +487,29 @@ class Link:
             mav.send(msg)
         except OSError:
             self.counters.io_errors += 1
-            return
+            return False
         finally:
             mav.file = file
-        self.counters.tx_packets += 1
-        self.counters.tx_by_type[msg.get_type()] += 1
+        return True
 
-    def _log_tx(self, packet: bytes | bytearray) -> None:
+    def _write(self, buf: bytes) -> None:
+        """Write one packet as pymavlink's connection would (a UDP server: to every client it
+        heard from; a refused datagram is dropped, as mavudp does)."""
+        conn = self.conn
+        if self._udp is not None and conn.udp_server:
+            clients = conn.clients
+            if len(clients) == 1:
+                for addr in clients:
+                    try:
+                        conn.port.sendto(buf, addr)
+                    except OSError:
+                        pass
+                return
+        conn.write(buf)
+
+    def _log_tx(self, packet: bytes | bytearray, flush: bool = True) -> None:
+        """Log one packet about to be written; ``flush``: the held records go in the file
+        first (write-ahead)."""
         vt = self.vehicle_time
         t = self._clock() if vt is None else vt.now()
         # the record time of the latest packet sent (s): what a tlog reader computes from its
@@ -387,7 +519,8 @@ class Link:
             return
         try:
             self.tlog.write(packet, t)
-            self.tlog.flush()  # write-ahead: in the file, with all received before it, first
+            if flush:  # write-ahead: in the file, with all received before it, first
+                self.tlog.flush()
         except (OSError, ValueError):
             self.counters.io_errors += 1
             self.counters.tlog_write_errors += 1

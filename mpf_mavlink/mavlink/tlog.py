@@ -95,18 +95,18 @@ class TlogWriter:
         t = self._clock() if t_unix_s is None else float(t_unix_s)
         if not math.isfinite(t) or t < 0:
             raise ValueError(f"tlog timestamp must be a finite time >= 0, got {t_unix_s!r}")
-        us = int(round(t * 1e6))
-        rec = _TS.pack(us) + bytes(packet)
+        us = round(t * 1e6)
         self.records += 1
-        self.bytes += len(rec)
+        self.bytes += 8 + len(packet)
         self.last_us, self.last_packet = us, packet
         if self._hold:
             held = self._held
-            held += rec
+            held += _TS.pack(us)
+            held += packet
             if len(held) >= HOLD_MAX_BYTES:
                 self.flush()
             return
-        self._write(rec)
+        self._write(_TS.pack(us) + bytes(packet))
 
     def _write(self, rec: bytes | bytearray) -> None:
         assert self._fd is not None
@@ -141,8 +141,7 @@ class TlogWriter:
         ever."""
         if not self._held or self._fd is None:
             return
-        rec = bytes(self._held)
-        self._held.clear()
+        rec, self._held = self._held, bytearray()
         self._write(rec)
 
     def fsync(self) -> None:
