@@ -45,7 +45,7 @@ from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.adapter import AdapterParams, AdapterState, Setpoint, adapt, safe_setpoint
 from mpf_mavlink.core.guidance.baselines import guidance_law
 from mpf_mavlink.core.guidance.law import MpfCommand, MpfDiagnostics, VehicleState
-from mpf_mavlink.core.guidance.predict import look_ahead, predict_segments, prediction_horizon
+from mpf_mavlink.core.guidance.predict import look_ahead, predict_rows, prediction_horizon
 from mpf_mavlink.core.target import TargetState
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.runs.rundir import row_from
@@ -402,7 +402,9 @@ class Controller:
                 return None
             self._advance(dt)
         # The law acts on the state when its setpoint acts (guidance/predict.py)
-        vl, R_B_N, s_law, tgt_law, tau = self._predicted(est, tgt)
+        w10, w11, w12 = vs.R_W_I[:, 0].tolist()
+        w1 = (w10, w11, w12)  # measured: the logs' achieved rate
+        vl, R_B_N, w1l, s_law, tgt_law, tau = self._predicted(est, tgt, w1)
         hold = self.period_s if self.m.delay_compensation else 0.0  # for the adapter's roll loop
         self.tau_s = tau
         gains = self.gains
@@ -421,9 +423,6 @@ class Controller:
             # the predicted evaluation's, which is what was sent.
             diag = self._diag_at_sample(self.s, vs, tgt, gains, diag_law.mode)
         self.law_evals += 1
-        w10, w11, w12 = vs.R_W_I[:, 0].tolist()
-        w1 = (w10, w11, w12)  # measured: the logs' achieved rate
-        w1l = w1 if vl is vs else tuple(vl.R_W_I[:, 0].tolist())
         sp, self.ad_state = adapt(
             cmd.omega_w1_I, vl.airspeed, R_B_N, w1l, dt, self.ad_params, self.ad_state,
             meas=(est.R_B_N, est.rates_frd), hold_s=hold, path_down_m=diag_law.p_f[2],
@@ -450,24 +449,25 @@ class Controller:
             self.period_s = dt if T == 0.0 else T + 0.1 * (dt - T)
 
     def _predicted(
-        self, est: Estimate, tgt: TargetState
-    ) -> tuple[VehicleState, Any, float, TargetState, float]:
-        """(vehicle state, R_B_N, s, target, horizon tau s) the law acts on: predicted tau
-        ahead with delay compensation (the rates in flight, the target there, s moved on by
-        sdot), else those of the sample."""
+        self, est: Estimate, tgt: TargetState, w1: tuple[float, float, float]
+    ) -> tuple[VehicleState, Any, tuple[float, float, float], float, TargetState, float]:
+        """(vehicle state, R_B_N, w1 (NED), s, target, horizon tau s) the law acts on:
+        predicted tau ahead with delay compensation (the rates in flight, the target there, s
+        moved on by sdot), else those of the sample (``w1``: the sample's)."""
         vs = est.vehicle
         if not self.m.delay_compensation:
-            return vs, est.R_B_N, self.s, tgt, 0.0
+            return vs, est.R_B_N, w1, self.s, tgt, 0.0
         tau = prediction_horizon(self.delay_s)
         if not tau > 0.0:
-            return vs, est.R_B_N, self.s, tgt, tau
+            return vs, est.R_B_N, w1, self.s, tgt, tau
         t = vs.t
         att = self.est.att
-        rates = att.rates_frd if att is not None else (0.0, 0.0, 0.0)
+        rates = np.asarray(att.rates_frd, float).tolist() if att is not None else (0.0, 0.0, 0.0)
         segs = self.delay.segments(t, tau, rates, self.ad_state.q_bias)
-        vl, R_B_N = predict_segments(vs, est.R_B_N, segs)
+        vl, R_B_N, w1l = predict_rows(vs, est.R_B_N, segs)
         tp = self.target.state(t + tau)
-        return vl, R_B_N, self.s + self.sdot_prev * tau, tgt if isinstance(tp, str) else tp, tau
+        s_law = self.s + self.sdot_prev * tau
+        return vl, R_B_N, w1l, s_law, tgt if isinstance(tp, str) else tp, tau
 
     def _diag_at_sample(
         self, s: float, vs: VehicleState, tgt: TargetState, gains: Any, mode: str
