@@ -404,7 +404,8 @@ class Controller:
         # The law acts on the state when its setpoint acts (guidance/predict.py)
         w10, w11, w12 = vs.R_W_I[:, 0].tolist()
         w1 = (w10, w11, w12)  # measured: the logs' achieved rate
-        vl, R_B_N, w1l, s_law, tgt_law, tau = self._predicted(est, tgt, w1)
+        R_m = est.R_B_N.tolist()  # by rows: the prediction and the adapter index it as scalars
+        vl, R_B_N, w1l, s_law, tgt_law, tau = self._predicted(est, tgt, w1, R_m)
         hold = self.period_s if self.m.delay_compensation else 0.0  # for the adapter's roll loop
         self.tau_s = tau
         gains = self.gains
@@ -425,7 +426,7 @@ class Controller:
         self.law_evals += 1
         sp, self.ad_state = adapt(
             cmd.omega_w1_I, vl.airspeed, R_B_N, w1l, dt, self.ad_params, self.ad_state,
-            meas=(est.R_B_N, est.rates_frd), hold_s=hold, path_down_m=diag_law.p_f[2],
+            meas=(R_m, est.rates_frd.tolist()), hold_s=hold, path_down_m=diag_law.p_f[2],
         )  # fmt: skip
         if not math.isfinite(cmd.sdot):
             sp = safe_setpoint(self.ad_params)
@@ -449,22 +450,22 @@ class Controller:
             self.period_s = dt if T == 0.0 else T + 0.1 * (dt - T)
 
     def _predicted(
-        self, est: Estimate, tgt: TargetState, w1: tuple[float, float, float]
+        self, est: Estimate, tgt: TargetState, w1: tuple[float, float, float], R_m: Any
     ) -> tuple[VehicleState, Any, tuple[float, float, float], float, TargetState, float]:
-        """(vehicle state, R_B_N, w1 (NED), s, target, horizon tau s) the law acts on:
-        predicted tau ahead with delay compensation (the rates in flight, the target there, s
-        moved on by sdot), else those of the sample (``w1``: the sample's)."""
+        """(vehicle state, R_B_N by rows, w1 (NED), s, target, horizon tau s) the law acts
+        on: predicted tau ahead with delay compensation (the rates in flight, the target there,
+        s moved on by sdot), else those of the sample (``w1``, ``R_m``: the sample's)."""
         vs = est.vehicle
         if not self.m.delay_compensation:
-            return vs, est.R_B_N, w1, self.s, tgt, 0.0
-        tau = prediction_horizon(self.delay_s)
+            return vs, R_m, w1, self.s, tgt, 0.0
+        tau = prediction_horizon(self.delay.delay_s)
         if not tau > 0.0:
-            return vs, est.R_B_N, w1, self.s, tgt, tau
+            return vs, R_m, w1, self.s, tgt, tau
         t = vs.t
         att = self.est.att
         rates = np.asarray(att.rates_frd, float).tolist() if att is not None else (0.0, 0.0, 0.0)
         segs = self.delay.segments(t, tau, rates, self.ad_state.q_bias)
-        vl, R_B_N, w1l = predict_rows(vs, est.R_B_N, segs)
+        vl, R_B_N, w1l = predict_rows(vs, R_m, segs)
         tp = self.target.state(t + tau)
         s_law = self.s + self.sdot_prev * tau
         return vl, R_B_N, w1l, s_law, tgt if isinstance(tp, str) else tp, tau

@@ -148,7 +148,7 @@ def predict_rows(
     first column of R_W^I) as a tuple: what the adapter takes. Scalar arithmetic on tuples:
     this runs at every control step, where numpy's per-call cost on 3-vectors and 3x3
     matrices (~1 us a call) was most of the prediction's."""
-    R: Mat3 = np.asarray(R_B_N, float).tolist()
+    R: Mat3 = R_B_N.tolist() if isinstance(R_B_N, np.ndarray) else R_B_N
     R_W: Mat3 = np.asarray(vs.R_W_I, float).tolist()
     p0, p1, p2 = np.asarray(vs.position, float).tolist()
     e0, e1, e2 = np.asarray(vs.wind, float).tolist()
