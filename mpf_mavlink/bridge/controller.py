@@ -142,17 +142,14 @@ class Step:
         wp = self.w1_prev
         if wp is not None and self.dt > 0.0:
             # logging only: the law never sees this difference of telemetry
-            R = vs.R_W_I
+            (_, r01, r02), (_, r11, r12), (_, r21, r22) = vs.R_W_I.tolist()
             w = self.w1
             d0, d1, d2 = (
                 (w[0] - wp[0]) / self.dt,
                 (w[1] - wp[1]) / self.dt,
                 (w[2] - wp[2]) / self.dt,
             )
-            w_act = (
-                -(d0 * float(R[0, 2]) + d1 * float(R[1, 2]) + d2 * float(R[2, 2])),
-                d0 * float(R[0, 1]) + d1 * float(R[1, 1]) + d2 * float(R[2, 1]),
-            )
+            w_act = (-(d0 * r02 + d1 * r12 + d2 * r22), d0 * r01 + d1 * r11 + d2 * r21)
         tg = self.target
         c = self.cmd
         return row_from(
