@@ -88,6 +88,10 @@ def parse_marker(text: str) -> tuple[str, float | None] | None:
     return None
 
 
+#: The index of ``mode`` in :class:`MpfDiagnostics`
+_MODE = MpfDiagnostics._fields.index("mode")
+
+
 class Step:
     """One control step: what the law saw and the setpoint it produced.
 
@@ -401,8 +405,9 @@ class Controller:
         # The law acts on the state when its setpoint acts (guidance/predict.py)
         w10, w11, w12 = vs.R_W_I[:, 0].tolist()
         w1 = (w10, w11, w12)  # measured: the logs' achieved rate
-        R_m = est.R_B_N.tolist()  # by rows: the prediction and the adapter index it as scalars
-        vl, R_B_N, w1l, s_law, tgt_law, tau = self._predicted(est, tgt, w1, R_m)
+        # the measured attitude by rows and rates: the prediction and the adapter use scalars
+        R_m, rates_m = est.R_B_N.tolist(), est.rates_frd.tolist()
+        vl, R_B_N, w1l, s_law, tgt_law, tau = self._predicted(est, tgt, w1, R_m, rates_m)
         hold = self.period_s if self.m.delay_compensation else 0.0  # for the adapter's roll loop
         self.tau_s = tau
         gains = self.gains
@@ -423,7 +428,7 @@ class Controller:
         self.law_evals += 1
         sp, self.ad_state = adapt(
             cmd.omega_w1_I, vl.airspeed, R_B_N, w1l, dt, self.ad_params, self.ad_state,
-            meas=(R_m, est.rates_frd.tolist()), hold_s=hold, path_down_m=diag_law.p_f[2],
+            meas=(R_m, rates_m), hold_s=hold, path_down_m=diag_law.p_f[2],
         )  # fmt: skip
         if not math.isfinite(cmd.sdot):
             sp = safe_setpoint(self.ad_params)
@@ -447,11 +452,17 @@ class Controller:
             self.period_s = dt if T == 0.0 else T + 0.1 * (dt - T)
 
     def _predicted(
-        self, est: Estimate, tgt: TargetState, w1: tuple[float, float, float], R_m: Any
+        self,
+        est: Estimate,
+        tgt: TargetState,
+        w1: tuple[float, float, float],
+        R_m: Any,
+        rates_m: Any,
     ) -> tuple[VehicleState, Any, tuple[float, float, float], float, TargetState, float]:
         """(vehicle state, R_B_N by rows, w1 (NED), s, target, horizon tau s) the law acts
         on: predicted tau ahead with delay compensation (the rates in flight, the target there,
-        s moved on by sdot), else those of the sample (``w1``, ``R_m``: the sample's)."""
+        s moved on by sdot), else those of the sample (``w1``, ``R_m``, ``rates_m``: the
+        sample's, its body rates rad/s)."""
         vs = est.vehicle
         if not self.m.delay_compensation:
             return vs, R_m, w1, self.s, tgt, 0.0
@@ -459,9 +470,7 @@ class Controller:
         if not tau > 0.0:
             return vs, R_m, w1, self.s, tgt, tau
         t = vs.t
-        att = self.est.att
-        rates = np.asarray(att.rates_frd, float).tolist() if att is not None else (0.0, 0.0, 0.0)
-        segs = self.delay.segments(t, tau, rates, self.ad_state.q_bias)
+        segs = self.delay.segments(t, tau, rates_m, self.ad_state.q_bias)
         vl, R_B_N, w1l = predict_rows(vs, R_m, segs)
         tp = self.target.state(t + tau)
         s_law = self.s + self.sdot_prev * tau
@@ -476,7 +485,10 @@ class Controller:
         def diag() -> MpfDiagnostics:
             _, dm = guidance_law(law, s, vs, tgt, path, gains, ext, True)
             assert dm is not None
-            return dm._replace(mode=mode)
+            # dm._replace(mode=mode) without its keyword machinery (~1 us a recorded row)
+            fields = list(dm)
+            fields[_MODE] = mode
+            return tuple.__new__(MpfDiagnostics, fields)
 
         return diag
 
