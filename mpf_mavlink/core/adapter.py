@@ -520,9 +520,8 @@ def _thrust(
     ))  # fmt: skip
     if params.energy_control:
         # the flight-path angle the law aims at one tau_pitch ahead (pitch limits included)
-        gamma_c = gamma + gamd_law * params.tau_pitch_s
-        gamma_c = _clip(gamma_c, params.min_pitch_rad - trim, params.max_pitch_rad - trim)
         gamma_law = gamma + gamd_law * params.tau_pitch_s
+        gamma_c = _clip(gamma_law, params.min_pitch_rad - trim, params.max_pitch_rad - trim)
         return energy_thrust(params, en, v, v_sp, gamma, gamma_c, ff, dt, g, gamma_law)
     thrust, integ = _airspeed_pi(params, state.integ, v_sp - v, ff, dt)
     return thrust, en._replace(integ=integ)
