@@ -23,7 +23,8 @@ def limits_row(t: float, estimate: Any, thrust: float) -> tuple[float, ...]:
     NED, ``vehicle.airspeed``) and the thrust sent: t, roll, pitch, airspeed, altitude, thrust."""
     import math
 
-    r20, r21, r22 = np.asarray(estimate.R_B_N[2], float).tolist()
+    R = estimate.R_B_N
+    r20, r21, r22 = R[2].tolist() if type(R) is np.ndarray else (float(x) for x in R[2])
     roll = math.atan2(r21, r22)
     pitch = math.asin(max(-1.0, min(1.0, -r20)))
     v = estimate.vehicle
