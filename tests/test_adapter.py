@@ -478,7 +478,7 @@ def test_reserve_raises_the_set_point_for_a_sustained_climb_at_its_rate_limit():
     assert vres[-1] == pytest.approx(18.0, abs=1e-9)
     # a path whose climb changes moves the filter by dt / reserve_tau_s of the step each step
     w1, R = _climb(0.0)
-    s = dataclasses.replace(sts[-1])
+    s = sts[-1]
     _, s2 = adapt((0.0, 0.0, 0.0), 16.0, R, w1, dt, R_, s, path_down_m=s.path_down_prev)
     assert s2.climb_f == pytest.approx(1.5 + dt / 20.0 * (0.0 - 1.5), rel=1e-9)
 

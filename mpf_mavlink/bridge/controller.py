@@ -45,7 +45,7 @@ from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.adapter import AdapterParams, AdapterState, Setpoint, adapt, safe_setpoint
 from mpf_mavlink.core.guidance.baselines import guidance_law
 from mpf_mavlink.core.guidance.law import MpfCommand, MpfDiagnostics, VehicleState
-from mpf_mavlink.core.guidance.predict import look_ahead, predict_segments, prediction_horizon
+from mpf_mavlink.core.guidance.predict import look_ahead, predict_rows, prediction_horizon
 from mpf_mavlink.core.target import TargetState
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.runs.rundir import row_from
@@ -86,6 +86,10 @@ def parse_marker(text: str) -> tuple[str, float | None] | None:
     if text == HALT_TEXT:
         return ("halt", None)
     return None
+
+
+#: The index of ``mode`` in :class:`MpfDiagnostics`
+_MODE = MpfDiagnostics._fields.index("mode")
 
 
 class Step:
@@ -142,17 +146,14 @@ class Step:
         wp = self.w1_prev
         if wp is not None and self.dt > 0.0:
             # logging only: the law never sees this difference of telemetry
-            R = vs.R_W_I
+            (_, r01, r02), (_, r11, r12), (_, r21, r22) = vs.R_W_I.tolist()
             w = self.w1
             d0, d1, d2 = (
                 (w[0] - wp[0]) / self.dt,
                 (w[1] - wp[1]) / self.dt,
                 (w[2] - wp[2]) / self.dt,
             )
-            w_act = (
-                -(d0 * float(R[0, 2]) + d1 * float(R[1, 2]) + d2 * float(R[2, 2])),
-                d0 * float(R[0, 1]) + d1 * float(R[1, 1]) + d2 * float(R[2, 1]),
-            )
+            w_act = (-(d0 * r02 + d1 * r12 + d2 * r22), d0 * r01 + d1 * r11 + d2 * r21)
         tg = self.target
         c = self.cmd
         return row_from(
@@ -402,7 +403,11 @@ class Controller:
                 return None
             self._advance(dt)
         # The law acts on the state when its setpoint acts (guidance/predict.py)
-        vl, R_B_N, s_law, tgt_law, tau = self._predicted(est, tgt)
+        w10, w11, w12 = vs.R_W_I[:, 0].tolist()
+        w1 = (w10, w11, w12)  # measured: the logs' achieved rate
+        # the measured attitude by rows and rates: the prediction and the adapter use scalars
+        R_m, rates_m = est.R_B_N.tolist(), est.rates_frd.tolist()
+        vl, R_B_N, w1l, s_law, tgt_law, tau = self._predicted(est, tgt, w1, R_m, rates_m)
         hold = self.period_s if self.m.delay_compensation else 0.0  # for the adapter's roll loop
         self.tau_s = tau
         gains = self.gains
@@ -421,12 +426,9 @@ class Controller:
             # the predicted evaluation's, which is what was sent.
             diag = self._diag_at_sample(self.s, vs, tgt, gains, diag_law.mode)
         self.law_evals += 1
-        w10, w11, w12 = vs.R_W_I[:, 0].tolist()
-        w1 = (w10, w11, w12)  # measured: the logs' achieved rate
-        w1l = w1 if vl is vs else tuple(vl.R_W_I[:, 0].tolist())
         sp, self.ad_state = adapt(
             cmd.omega_w1_I, vl.airspeed, R_B_N, w1l, dt, self.ad_params, self.ad_state,
-            meas=(est.R_B_N, est.rates_frd), hold_s=hold, path_down_m=diag_law.p_f[2],
+            meas=(R_m, rates_m), hold_s=hold, path_down_m=diag_law.p_f[2],
         )  # fmt: skip
         if not math.isfinite(cmd.sdot):
             sp = safe_setpoint(self.ad_params)
@@ -450,24 +452,29 @@ class Controller:
             self.period_s = dt if T == 0.0 else T + 0.1 * (dt - T)
 
     def _predicted(
-        self, est: Estimate, tgt: TargetState
-    ) -> tuple[VehicleState, Any, float, TargetState, float]:
-        """(vehicle state, R_B_N, s, target, horizon tau s) the law acts on: predicted tau
-        ahead with delay compensation (the rates in flight, the target there, s moved on by
-        sdot), else those of the sample."""
+        self,
+        est: Estimate,
+        tgt: TargetState,
+        w1: tuple[float, float, float],
+        R_m: Any,
+        rates_m: Any,
+    ) -> tuple[VehicleState, Any, tuple[float, float, float], float, TargetState, float]:
+        """(vehicle state, R_B_N by rows, w1 (NED), s, target, horizon tau s) the law acts
+        on: predicted tau ahead with delay compensation (the rates in flight, the target there,
+        s moved on by sdot), else those of the sample (``w1``, ``R_m``, ``rates_m``: the
+        sample's, its body rates rad/s)."""
         vs = est.vehicle
         if not self.m.delay_compensation:
-            return vs, est.R_B_N, self.s, tgt, 0.0
-        tau = prediction_horizon(self.delay_s)
+            return vs, R_m, w1, self.s, tgt, 0.0
+        tau = prediction_horizon(self.delay.delay_s)
         if not tau > 0.0:
-            return vs, est.R_B_N, self.s, tgt, tau
+            return vs, R_m, w1, self.s, tgt, tau
         t = vs.t
-        att = self.est.att
-        rates = att.rates_frd if att is not None else (0.0, 0.0, 0.0)
-        segs = self.delay.segments(t, tau, rates, self.ad_state.q_bias)
-        vl, R_B_N = predict_segments(vs, est.R_B_N, segs)
+        segs = self.delay.segments(t, tau, rates_m, self.ad_state.q_bias)
+        vl, R_B_N, w1l = predict_rows(vs, R_m, segs)
         tp = self.target.state(t + tau)
-        return vl, R_B_N, self.s + self.sdot_prev * tau, tgt if isinstance(tp, str) else tp, tau
+        s_law = self.s + self.sdot_prev * tau
+        return vl, R_B_N, w1l, s_law, tgt if isinstance(tp, str) else tp, tau
 
     def _diag_at_sample(
         self, s: float, vs: VehicleState, tgt: TargetState, gains: Any, mode: str
@@ -478,7 +485,10 @@ class Controller:
         def diag() -> MpfDiagnostics:
             _, dm = guidance_law(law, s, vs, tgt, path, gains, ext, True)
             assert dm is not None
-            return dm._replace(mode=mode)
+            # dm._replace(mode=mode) without its keyword machinery (~1 us a recorded row)
+            fields = list(dm)
+            fields[_MODE] = mode
+            return tuple.__new__(MpfDiagnostics, fields)
 
         return diag
 

@@ -7,7 +7,6 @@ sees are the link's, with or without a tlog)."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +17,7 @@ from mpf_mavlink.bridge.controller import Controller, Step, write_setpoints
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.runs.rundir import RunTable, compute_metrics
 from mpf_mavlink.runs.verdict import assess
-from mpf_mavlink.runs.write import write_limits, write_run
+from mpf_mavlink.runs.write import limits_row, write_limits, write_run
 
 #: Lean recording keeps one tracking row in this many (50 Hz ATTITUDE: 10 Hz rows).
 LEAN_ROW_EVERY = 5
@@ -40,7 +39,8 @@ class Recorder:
         self._skip = 0
         self.table = RunTable()
         self.sp_rows: list[tuple[float, ...]] = []
-        self.judge_rows: list[tuple[float, float, float, float]] = []  # alt, airspeed, roll, pitch
+        # the verdict's series, limits_row's: t, roll, pitch, airspeed, altitude, thrust
+        self.judge_rows: list[tuple[float, ...]] = []
 
     def record(self, st: Step) -> None:
         """One tracking step's rows (every ``every``-th step)."""
@@ -50,17 +50,7 @@ class Recorder:
         self._skip = self.every - 1
         self.table.append(st.row())
         self.sp_rows.append(tuple(st.setpoint_row()))
-        e = st.estimate
-        R2 = e.R_B_N[2]
-        r20, r21, r22 = float(R2[0]), float(R2[1]), float(R2[2])
-        self.judge_rows.append(
-            (
-                -float(e.vehicle.position[2]),
-                float(e.vehicle.airspeed),
-                math.atan2(r21, r22),
-                math.asin(max(-1.0, min(1.0, -r20))),
-            )
-        )
+        self.judge_rows.append(limits_row(st.t, st.estimate, st.setpoint.thrust))
 
     # -- the end of the run ------------------------------------------------------------------------
     def finish(self, res: BridgeResult, ctl: Controller, counters: dict[str, Any]) -> None:
@@ -105,12 +95,12 @@ class Recorder:
         if not len(cols["t"]):
             return None
         metrics["final_pt_m"] = float(cols["pt_norm"][-1])
-        J = np.array(self.judge_rows, float).reshape(-1, 4)
+        J = np.array(self.judge_rows, float).reshape(-1, 6)
         thr_sent = np.array([r[8] for r in self.sp_rows], float)
         t_rel = cols["t"] - cols["t"][0]
         thr = thr_sent if len(thr_sent) == len(t_rel) else None
         vd = assess(
-            self.cfg, t_rel, cols["pt_norm"], J[:, 0], J[:, 1], J[:, 2], J[:, 3], thr,
+            self.cfg, t_rel, cols["pt_norm"], J[:, 4], J[:, 3], J[:, 1], J[:, 2], thr,
             source="telemetry",
         )  # fmt: skip
         res.verdict = vd.line()
@@ -118,7 +108,7 @@ class Recorder:
         if res.exit_code == EXIT_OK:
             res.exit_code = vd.exit_code(EXIT_OK)
         thr_col = thr if thr is not None else np.full(len(t_rel), np.nan)
-        return np.column_stack([t_rel, J[:, 2], J[:, 3], J[:, 1], J[:, 0], thr_col])
+        return np.column_stack([t_rel, J[:, 1], J[:, 2], J[:, 3], J[:, 4], thr_col])
 
     def _write(
         self,

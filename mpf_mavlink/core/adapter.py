@@ -150,11 +150,11 @@ class AdapterParams:
     reserve_rate_m_s2: float = 0.1
 
 
-@dataclass(frozen=True)
-class AdapterState:
+class AdapterState(NamedTuple):
     """Memory of the adapter: the airspeed integrator (thrust units), the learned pitch offset
     trim_hat (rad, None until the first measurement) and turn gain (achieved heading rate per
-    coordinated-turn rate, 1 = ideal)."""
+    coordinated-turn rate, 1 = ideal). A NamedTuple (immutable like a frozen dataclass): a new
+    one is built at every control step, ~0.3 us against ~2.3 us for the dataclass."""
 
     integ: float = 0.0
     trim_hat: float | None = None
@@ -199,9 +199,8 @@ class AdapterState:
         )  # fmt: skip
 
 
-@dataclass(frozen=True)
-class Setpoint:
-    """What is sent, for either flavour.
+class Setpoint(NamedTuple):
+    """What is sent, for either flavour (a NamedTuple: built at every control step).
 
     body_rates_frd: (p, q, r) rad/s (PX4 type_mask 128; carried for logs with ArduPlane);
     q_wxyz: attitude quaternion (w, x, y, z), roll = bank, yaw = 0 (ArduPlane GUIDED);
@@ -216,6 +215,10 @@ class Setpoint:
     pitch_rad: float
     load_factor: float
     safe: bool = False
+
+
+#: The state of a first step (no memory yet)
+_FRESH = AdapterState()
 
 
 def _clip(x: float, lo: float, hi: float) -> float:
@@ -283,7 +286,7 @@ def adapt(
     w1: Vec,
     dt: float,
     params: AdapterParams,
-    state: AdapterState = AdapterState(),
+    state: AdapterState = _FRESH,
     g: float = GRAVITY_M_S2,
     meas: tuple[Any, Any] | None = None,
     hold_s: float = 0.0,
@@ -355,10 +358,14 @@ def adapt(
         and isf(qw) and isf(qx) and isf(qy) and isf(qz)
     ):  # fmt: skip
         return safe_setpoint(params, roll), state
-    return Setpoint((p, q, r), quat, thrust, bank, pitch_sp, n), AdapterState(
-        en.integ, trim_hat, k_turn, bank, None if clipped else chid, q_bias,
-        q if q_free else None, en.v_prev, en.v_sp_prev, en.vdot_f, en.gam_f, en.balance,
-        en.gam_m_f, en.thrust_engaged, *res,
+    integ, v_prev, v_sp_prev, vdot_f, gam_f, balance, gam_m_f, thrust_engaged = en
+    # tuple.__new__: the NamedTuples without their keyword-parsing constructors (every step)
+    return tuple.__new__(Setpoint, ((p, q, r), quat, thrust, bank, pitch_sp, n, False)), (
+        tuple.__new__(AdapterState, (
+            integ, trim_hat, k_turn, bank, None if clipped else chid, q_bias,
+            q if q_free else None, v_prev, v_sp_prev, vdot_f, gam_f, balance, gam_m_f,
+            thrust_engaged, *res,
+        ))
     )  # fmt: skip
 
 
@@ -507,21 +514,14 @@ def _thrust(
     """Thrust (0..1) and the energy controller's memory: :func:`energy_thrust` when
     ``energy_control`` is on, else the airspeed PI; ``n`` the load factor (feed-forward)."""
     ff = params.load_factor_ff * (n - 1.0)
-    en = EnergyState(
-        state.integ,
-        state.v_prev,
-        state.v_sp_prev,
-        state.vdot_f,
-        state.gam_f,
-        bal,
-        state.gam_m_f,
-        state.thrust_engaged,
-    )
+    en = tuple.__new__(EnergyState, (
+        state.integ, state.v_prev, state.v_sp_prev, state.vdot_f, state.gam_f, bal,
+        state.gam_m_f, state.thrust_engaged,
+    ))  # fmt: skip
     if params.energy_control:
         # the flight-path angle the law aims at one tau_pitch ahead (pitch limits included)
-        gamma_c = gamma + gamd_law * params.tau_pitch_s
-        gamma_c = _clip(gamma_c, params.min_pitch_rad - trim, params.max_pitch_rad - trim)
         gamma_law = gamma + gamd_law * params.tau_pitch_s
+        gamma_c = _clip(gamma_law, params.min_pitch_rad - trim, params.max_pitch_rad - trim)
         return energy_thrust(params, en, v, v_sp, gamma, gamma_c, ff, dt, g, gamma_law)
     thrust, integ = _airspeed_pi(params, state.integ, v_sp - v, ff, dt)
     return thrust, en._replace(integ=integ)
@@ -633,7 +633,7 @@ def energy_thrust(
     thrust = _clip(raw, p.thrust_min, p.thrust_max)
     law = gamma_c if gamma_law is None else gamma_law
     bal = _priority_balance(p, bal, raw - thrust, v, gamma_c, law, dt)
-    return thrust, EnergyState(integ, v, v_sp, vdot_f, gam_f, bal, gam_m_f, t_eng)
+    return thrust, tuple.__new__(EnergyState, (integ, v, v_sp, vdot_f, gam_f, bal, gam_m_f, t_eng))
 
 
 def _priority_balance(

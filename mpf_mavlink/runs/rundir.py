@@ -54,6 +54,15 @@ class RunTable:
         return {c: A[:, i] for i, c in enumerate(COLUMNS)}
 
 
+def _floats(x: Any) -> Any:
+    """x (an array, nested or not) as Python floats in lists."""
+    return (
+        x.tolist()
+        if type(x) is np.ndarray and x.dtype == np.float64
+        else np.asarray(x, float).tolist()
+    )
+
+
 def row_from(
     diag: Any,
     p: Any,
@@ -66,9 +75,10 @@ def row_from(
 ) -> list[float]:
     """One CSV row from the law's diagnostics and the vehicle/target state (NED)."""
     # scalar arithmetic: called at every control step, where numpy's per-call cost dominates
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = np.asarray(target_R, float).tolist()
-    p0, p1, p2 = np.asarray(p, float).tolist()
-    q0, q1, q2 = np.asarray(target_p, float).tolist()
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = _floats(target_R)
+    p0, p1, p2 = _floats(p)
+    q0, q1, q2 = _floats(target_p)
+    e0, e1, e2 = _floats(wind)
     d0, d1, d2 = p0 - q0, p1 - q1, p2 - q2
     rel = (r00 * d0 + r10 * d1 + r20 * d2, r01 * d0 + r11 * d1 + r21 * d2,
            r02 * d0 + r12 * d1 + r22 * d2)  # fmt: skip
@@ -83,7 +93,7 @@ def row_from(
         *diag.pt, diag.pt_norm, diag.psi, diag.e[0], diag.e[1], diag.y_w, diag.z_w,
         w_cmd[0], w_cmd[1], float(w_act[0]), float(w_act[1]), diag.path_speed_margin,
         1.0 if "sat" in diag.mode else 0.0, 1.0 if "psi_turn" in diag.mode else 0.0,
-        float(wind[0]), float(wind[1]), float(wind[2]),
+        e0, e1, e2,
         t_roll, t_pitch, t_yaw,
     ]  # fmt: skip
 

@@ -23,9 +23,10 @@ def limits_row(t: float, estimate: Any, thrust: float) -> tuple[float, ...]:
     NED, ``vehicle.airspeed``) and the thrust sent: t, roll, pitch, airspeed, altitude, thrust."""
     import math
 
-    R2 = estimate.R_B_N[2]
-    roll = math.atan2(float(R2[1]), float(R2[2]))
-    pitch = math.asin(max(-1.0, min(1.0, -float(R2[0]))))
+    R = estimate.R_B_N
+    r20, r21, r22 = R[2].tolist() if type(R) is np.ndarray else (float(x) for x in R[2])
+    roll = math.atan2(r21, r22)
+    pitch = math.asin(max(-1.0, min(1.0, -r20)))
     v = estimate.vehicle
     return (t, roll, pitch, float(v.airspeed), -float(v.position[2]), float(thrust))
 

@@ -35,26 +35,58 @@ from numpy.typing import NDArray
 
 from mpf_mavlink.core.guidance.law import VehicleState
 
+Vec3 = tuple[float, float, float]
+Mat3 = tuple[Vec3, Vec3, Vec3]  # by rows
+
 #: Longest prediction (s). A delay beyond this is not a link to compensate but a fault
 #: (the bridge's telemetry timeout handles it); the prediction error grows as tau^2.
 MAX_PREDICTION_S = 0.25
 
 
-def _exp(x: float, y: float, z: float) -> NDArray[np.float64]:
-    """Rotation matrix exp(hat([x, y, z])) (Rodrigues)."""
+def _exp(x: float, y: float, z: float) -> Mat3:
+    """Rotation matrix exp(hat([x, y, z])) (Rodrigues), by rows."""
     th2 = x * x + y * y + z * z
     th = math.sqrt(th2)
     if th < 1e-9:
         c1, c2 = 1.0, 0.5
     else:
         c1, c2 = math.sin(th) / th, (1.0 - math.cos(th)) / th2
-    return np.array(
-        (
-            (1.0 + c2 * (x * x - th2), -c1 * z + c2 * x * y, c1 * y + c2 * x * z),
-            (c1 * z + c2 * x * y, 1.0 + c2 * (y * y - th2), -c1 * x + c2 * y * z),
-            (-c1 * y + c2 * x * z, c1 * x + c2 * y * z, 1.0 + c2 * (z * z - th2)),
-        )
+    return (
+        (1.0 + c2 * (x * x - th2), -c1 * z + c2 * x * y, c1 * y + c2 * x * z),
+        (c1 * z + c2 * x * y, 1.0 + c2 * (y * y - th2), -c1 * x + c2 * y * z),
+        (-c1 * y + c2 * x * z, c1 * x + c2 * y * z, 1.0 + c2 * (z * z - th2)),
     )
+
+
+def _turn(x: float, y: float, z: float, a: float, b: float, c: float) -> Vec3:
+    """exp(hat(k)) u for k = [x, y, z], u = [a, b, c] (Rodrigues on the vector:
+    u + sin|k|/|k| k x u + (1 - cos|k|)/|k|^2 k x (k x u))."""
+    th2 = x * x + y * y + z * z
+    th = math.sqrt(th2)
+    if th < 1e-9:
+        c1, c2 = 1.0, 0.5
+    else:
+        c1, c2 = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+    k_u = x * a + y * b + z * c  # k x (k x u) = k (k . u) - |k|^2 u
+    return (
+        a + c1 * (y * c - z * b) + c2 * (x * k_u - th2 * a),
+        b + c1 * (z * a - x * c) + c2 * (y * k_u - th2 * b),
+        c + c1 * (x * b - y * a) + c2 * (z * k_u - th2 * c),
+    )
+
+
+def _mul(A: Mat3, B: Mat3) -> Mat3:
+    """A B, 3x3 by rows."""
+    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = A
+    (b00, b01, b02), (b10, b11, b12), (b20, b21, b22) = B
+    return (
+        (a00 * b00 + a01 * b10 + a02 * b20, a00 * b01 + a01 * b11 + a02 * b21,
+         a00 * b02 + a01 * b12 + a02 * b22),
+        (a10 * b00 + a11 * b10 + a12 * b20, a10 * b01 + a11 * b11 + a12 * b21,
+         a10 * b02 + a11 * b12 + a12 * b22),
+        (a20 * b00 + a21 * b10 + a22 * b20, a20 * b01 + a21 * b11 + a22 * b21,
+         a20 * b02 + a21 * b12 + a22 * b22),
+    )  # fmt: skip
 
 
 #: Phase (rad) the guidance loop may lose, at its crossover, to what prediction cannot remove:
@@ -105,24 +137,45 @@ def predict_segments(
     """As :func:`predict`, over consecutive segments (duration s, body rates rad/s): the body
     rates the autopilot's rate loop is known to fly next (setpoints already sent and not yet
     acting), then the latest. Each segment turns the body (and w1 with it) at its rates."""
-    R = np.asarray(R_B_N, float)
-    R_W = np.asarray(vs.R_W_I, float)
-    pos = np.asarray(vs.position, float)
+    vp, R, _ = predict_rows(vs, R_B_N, segments)
+    return vp, np.array(R)
+
+
+def predict_rows(
+    vs: VehicleState, R_B_N: Any, segments: list[tuple[float, Any]]
+) -> tuple[VehicleState, Mat3, Vec3]:
+    """:func:`predict_segments` with R_B^N as a tuple of rows, and the predicted w1 (NED, the
+    first column of R_W^I) as a tuple: what the adapter takes. Scalar arithmetic on tuples:
+    this runs at every control step, where numpy's per-call cost on 3-vectors and 3x3
+    matrices (~1 us a call) was most of the prediction's."""
+    R: Mat3 = R_B_N.tolist() if isinstance(R_B_N, np.ndarray) else R_B_N
+    R_W: Mat3 = np.asarray(vs.R_W_I, float).tolist()
+    p0, p1, p2 = np.asarray(vs.position, float).tolist()
+    e0, e1, e2 = np.asarray(vs.wind, float).tolist()
+    v = float(vs.airspeed)
     tau = 0.0
     for dur, rates in segments:
         if not dur > 0.0:
             continue
-        wi = R @ np.asarray(rates, float)  # the body's angular velocity in NED
-        x, y, z = (float(v) * dur for v in wi)
-        half = _exp(0.5 * x, 0.5 * y, 0.5 * z)
-        pos = pos + dur * (vs.airspeed * (half @ R_W[:, 0]) + vs.wind)
+        r0, r1, r2 = rates
+        # the body's angular velocity in NED, times the duration: the rotation vector
+        (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = R
+        x = (a00 * r0 + a01 * r1 + a02 * r2) * dur
+        y = (a10 * r0 + a11 * r1 + a12 * r2) * dur
+        z = (a20 * r0 + a21 * r1 + a22 * r2) * dur
+        # the position advances with w1 turned half-way (the midpoint rule), plus the wind
+        h0, h1, h2 = _turn(0.5 * x, 0.5 * y, 0.5 * z, R_W[0][0], R_W[1][0], R_W[2][0])
+        p0 = p0 + dur * (v * h0 + e0)
+        p1 = p1 + dur * (v * h1 + e1)
+        p2 = p2 + dur * (v * h2 + e2)
         dR = _exp(x, y, z)
-        R_W = dR @ R_W
-        R = dR @ R
+        R_W = _mul(dR, R_W)
+        R = _mul(dR, R)
         tau += dur
+    w1_I = (R_W[0][0], R_W[1][0], R_W[2][0])
     if tau == 0.0:
-        return vs, R
-    return VehicleState(vs.t + tau, pos, R_W, vs.airspeed, vs.wind), R
+        return vs, R, w1_I
+    return VehicleState(vs.t + tau, np.array((p0, p1, p2)), np.array(R_W), v, vs.wind), R, w1_I
 
 
 __all__ = [
@@ -130,6 +183,7 @@ __all__ = [
     "MAX_PREDICTION_S",
     "look_ahead",
     "predict",
+    "predict_rows",
     "predict_segments",
     "prediction_horizon",
 ]
