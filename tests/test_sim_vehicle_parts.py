@@ -21,6 +21,7 @@ from sim.autopilot.setpoints import PX4_OFFBOARD_MIN_STREAM_S, Setpoints  # noqa
 from sim.vehicle.clock import StepClock  # noqa: E402
 from sim.vehicle.config import TelemetryRates, VehicleConfig, stock_rates  # noqa: E402
 from sim.vehicle.framing import Framer, crc_mcrf4xx, decode_set_attitude_target  # noqa: E402
+from sim.vehicle.link import _ignored  # noqa: E402
 from sim.vehicle.lockstep import Lockstep  # noqa: E402
 from sim.vehicle.truth import TruthRecorder  # noqa: E402
 
@@ -131,6 +132,32 @@ def test_setpoint_decoder_leaves_the_rest_to_pymavlink():
     assert decode_set_attitude_target(other) is None
     assert decode_set_attitude_target(sat + other) is None
     assert decode_set_attitude_target(sat[:20]) is None
+
+
+def test_datagrams_of_dropped_messages_are_counted_unparsed_and_the_rest_parsed():
+    """What the vehicle drops on arrival (NAMED_VALUE_FLOAT, a HEARTBEAT) is counted frame by
+    frame from the headers; a datagram with one wanted message in it, a MAVLink 1 frame, a
+    fragment or trailing bytes go to pymavlink whole (0)."""
+    mav = M.MAVLink(_Sink(), 255, 190)
+    nvf = bytes(M.MAVLink_named_value_float_message(5, b"MPF_pt", 1.5).pack(mav))
+    hb = bytes(M.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(mav))
+    cmd = bytes(
+        M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 1, 6, 0, 0, 0, 0, 0).pack(
+            mav
+        )
+    )
+    wanted = frozenset((M.MAVLINK_MSG_ID_COMMAND_LONG, M.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET))
+    assert _ignored(nvf, wanted) == 1
+    assert _ignored(nvf + hb + nvf, wanted) == 3
+    assert _ignored(nvf + cmd, wanted) == 0
+    assert _ignored(cmd, wanted) == 0
+    assert _ignored(nvf[:-1], wanted) == 0  # a fragment: pymavlink keeps its bytes
+    assert _ignored(nvf + b"\x00", wanted) == 0
+    assert _ignored(b"\xfe" + nvf[1:], wanted) == 0  # not MAVLink 2: pymavlink's to read
+    signed = bytearray(nvf)
+    signed[2] = 1  # MAVLINK_IFLAG_SIGNED: 13 bytes of signature follow, missing here
+    assert _ignored(bytes(signed), wanted) == 0
+    assert _ignored(bytes(signed) + bytes(13), wanted) == 1
 
 
 # ------------------------------------------------------------------------------ lockstep
