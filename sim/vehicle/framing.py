@@ -18,10 +18,16 @@ _STX2 = 0xFD
 _REV = bytes(int(f"{i:08b}"[::-1], 2) for i in range(256))  # bit reversal of a byte
 
 
-def crc_mcrf4xx(data: bytes) -> int:
+def _crc_mcrf4xx_hqx(data: bytes) -> int:
     """MAVLink's CRC-16/MCRF4XX (reflected CCITT, init 0xFFFF) of ``data``."""
     c = binascii.crc_hqx(data.translate(_REV), 0xFFFF)
     return (_REV[c & 0xFF] << 8) | _REV[c >> 8]
+
+
+try:  # pymavlink's own CRC when its wheel brought fastcrc (one C call: 0.35 us, not 1.0)
+    from fastcrc.crc16 import mcrf4xx as crc_mcrf4xx
+except ImportError:  # pragma: no cover - exercised only without fastcrc
+    crc_mcrf4xx = _crc_mcrf4xx_hqx
 
 
 class _Layout:
