@@ -357,3 +357,36 @@ def test_truth_rows_and_the_target_on_its_clock():
     off = TruthRecorder(enabled=False)
     off.record(0.0, 12.0, st, 7)
     assert off.truth(None, 0.0)["t"].shape == (0,)
+
+
+# ------------------------------------------------------------------------------ target stream
+@pytest.mark.parametrize("turn", [0.01, 0.0])
+def test_target_positions_computed_ahead_are_the_bytes_computed_on_time(monkeypatch, turn):
+    """The target's fixes are computed in bursts ahead of their due times (a pure function of
+    the target's time): the packets are byte for byte those computed when due, across an
+    epoch change (the times ahead then miss and are computed when they come)."""
+    import sim.vehicle.target_stream as TS
+    from mpf_mavlink.core.target import ConstantTurn
+    from sim.plant.jsbsim_plant import LocalNED
+    from sim.vehicle.framing import Framer
+
+    def fly(ahead: int) -> list[bytes]:
+        monkeypatch.setattr(TS, "_AHEAD", ahead)
+        out: list[bytes] = []
+        clock = StepClock(0.01, 1234)
+        link = SimpleNamespace(
+            target_framer=Framer(M.MAVLink(_Sink(), 2, 1)), put=out.append, tmav=None
+        )
+        motion = ConstantTurn((10.0, -5.0, 0.0), 3.0, 0.3, turn, 0.1)
+        ts = TS.TargetStream(motion, clock, link, LocalNED(41.185, -8.76, 0.0), 0.0, 10.0,
+                             True, True, None)  # fmt: skip
+        for i in range(700):  # 14 s of 20 ms frames
+            clock.k += 2
+            if i == 300:
+                ts.epoch_boot_s = clock.boot_s - 0.37  # as take_epoch does
+            ts.frame()
+        return out
+
+    got, want = fly(50), fly(1)
+    assert len(want) == 14 * 10 * 2 + 14  # FOLLOW_TARGET + GLOBAL_POSITION_INT, HEARTBEAT
+    assert got == want
