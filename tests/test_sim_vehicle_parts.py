@@ -247,6 +247,25 @@ def test_px4_offboard_setpoints_and_their_stream_rule():
     assert kind == "att" and roll == pytest.approx(0.2) and pitch == pytest.approx(0.0)
 
 
+def test_px4_all_rates_setpoint_takes_every_rule():
+    """type_mask 128 (every rate and the thrust, what the bridge streams) has a path of its
+    own: the thrust clipped to 0..1, the echo raw, a NaN in any used field dropped and not
+    counted as signal, the stream rule kept."""
+    sp = Setpoints()
+    sp.take_px4(_sat(128, rates=(0.1, -0.2, 0.3), thrust=1.7), t=20.0, ms=20000,
+                require_thrust=True)  # fmt: skip
+    assert sp.sp == ("rates", (0.1, -0.2, 0.3), 1.0)
+    assert sp.echo == (20000, 128, (1.0, 0.0, 0.0, 0.0), (0.1, -0.2, 0.3), 1.7)
+    assert sp.stream_start == 20.0 and sp.sp_last == 20.0
+    for i, bad in enumerate(((math.nan, 0.0, 0.0), (0.0, math.inf, 0.0), (0.0, 0.0, -math.inf))):
+        sp.take_px4(_sat(128, rates=bad), t=20.1 + i, ms=0, require_thrust=False)
+    sp.take_px4(_sat(128, thrust=math.nan), t=24.0, ms=0, require_thrust=False)
+    assert sp.dropped["nonfinite"] == 4 and sp.sp_last == 20.0
+    sp.take_px4(_sat(128, thrust=-0.5), t=25.0, ms=0, require_thrust=False)
+    assert sp.sp == ("rates", (0.1, 0.2, 0.3), 0.0)
+    assert sp.stream_start == 25.0  # after a gap over 0.5 s: a new stream
+
+
 def test_ardupilot_guided_forced_axes():
     """ArduPlane's inverted mask: type_mask 134 (0b10000110) forces roll alone."""
     sp = Setpoints()
