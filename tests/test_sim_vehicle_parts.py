@@ -21,6 +21,7 @@ from sim.autopilot.setpoints import PX4_OFFBOARD_MIN_STREAM_S, Setpoints  # noqa
 from sim.vehicle.clock import StepClock  # noqa: E402
 from sim.vehicle.config import TelemetryRates, VehicleConfig, stock_rates  # noqa: E402
 from sim.vehicle.framing import Framer, crc_mcrf4xx, decode_set_attitude_target  # noqa: E402
+from sim.vehicle.link import _ignored  # noqa: E402
 from sim.vehicle.lockstep import Lockstep  # noqa: E402
 from sim.vehicle.truth import TruthRecorder  # noqa: E402
 
@@ -93,13 +94,17 @@ def test_framer_writes_pymavlinks_bytes(cls, args):
 
 
 def test_crc_is_mavlinks_mcrf4xx():
-    """The C-speed CRC agrees with pymavlink's x25crc on arbitrary bytes."""
+    """The C-speed CRCs (fastcrc's, and binascii's on reversed bytes without it) agree with
+    pymavlink's x25crc on arbitrary bytes."""
     from pymavlink.dialects.v20.ardupilotmega import x25crc
+
+    from sim.vehicle.framing import _crc_mcrf4xx_hqx
 
     rng = np.random.default_rng(0)
     for n in (0, 1, 7, 40, 255):
         data = bytes(rng.integers(0, 256, n, dtype=np.uint8))
         assert crc_mcrf4xx(data) == x25crc(data).crc
+        assert _crc_mcrf4xx_hqx(data) == x25crc(data).crc
 
 
 def test_setpoint_decoder_reads_what_pymavlink_reads():
@@ -131,6 +136,32 @@ def test_setpoint_decoder_leaves_the_rest_to_pymavlink():
     assert decode_set_attitude_target(other) is None
     assert decode_set_attitude_target(sat + other) is None
     assert decode_set_attitude_target(sat[:20]) is None
+
+
+def test_datagrams_of_dropped_messages_are_counted_unparsed_and_the_rest_parsed():
+    """What the vehicle drops on arrival (NAMED_VALUE_FLOAT, a HEARTBEAT) is counted frame by
+    frame from the headers; a datagram with one wanted message in it, a MAVLink 1 frame, a
+    fragment or trailing bytes go to pymavlink whole (0)."""
+    mav = M.MAVLink(_Sink(), 255, 190)
+    nvf = bytes(M.MAVLink_named_value_float_message(5, b"MPF_pt", 1.5).pack(mav))
+    hb = bytes(M.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(mav))
+    cmd = bytes(
+        M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 1, 6, 0, 0, 0, 0, 0).pack(
+            mav
+        )
+    )
+    wanted = frozenset((M.MAVLINK_MSG_ID_COMMAND_LONG, M.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET))
+    assert _ignored(nvf, wanted) == 1
+    assert _ignored(nvf + hb + nvf, wanted) == 3
+    assert _ignored(nvf + cmd, wanted) == 0
+    assert _ignored(cmd, wanted) == 0
+    assert _ignored(nvf[:-1], wanted) == 0  # a fragment: pymavlink keeps its bytes
+    assert _ignored(nvf + b"\x00", wanted) == 0
+    assert _ignored(b"\xfe" + nvf[1:], wanted) == 0  # not MAVLink 2: pymavlink's to read
+    signed = bytearray(nvf)
+    signed[2] = 1  # MAVLINK_IFLAG_SIGNED: 13 bytes of signature follow, missing here
+    assert _ignored(bytes(signed), wanted) == 0
+    assert _ignored(bytes(signed) + bytes(13), wanted) == 1
 
 
 # ------------------------------------------------------------------------------ lockstep
@@ -214,6 +245,25 @@ def test_px4_offboard_setpoints_and_their_stream_rule():
     sp.take_px4(_sat(0, q=(math.cos(0.1), math.sin(0.1), 0.0, 0.0)), 13.0, 0, False)
     kind, (roll, pitch), _ = sp.sp
     assert kind == "att" and roll == pytest.approx(0.2) and pitch == pytest.approx(0.0)
+
+
+def test_px4_all_rates_setpoint_takes_every_rule():
+    """type_mask 128 (every rate and the thrust, what the bridge streams) has a path of its
+    own: the thrust clipped to 0..1, the echo raw, a NaN in any used field dropped and not
+    counted as signal, the stream rule kept."""
+    sp = Setpoints()
+    sp.take_px4(_sat(128, rates=(0.1, -0.2, 0.3), thrust=1.7), t=20.0, ms=20000,
+                require_thrust=True)  # fmt: skip
+    assert sp.sp == ("rates", (0.1, -0.2, 0.3), 1.0)
+    assert sp.echo == (20000, 128, (1.0, 0.0, 0.0, 0.0), (0.1, -0.2, 0.3), 1.7)
+    assert sp.stream_start == 20.0 and sp.sp_last == 20.0
+    for i, bad in enumerate(((math.nan, 0.0, 0.0), (0.0, math.inf, 0.0), (0.0, 0.0, -math.inf))):
+        sp.take_px4(_sat(128, rates=bad), t=20.1 + i, ms=0, require_thrust=False)
+    sp.take_px4(_sat(128, thrust=math.nan), t=24.0, ms=0, require_thrust=False)
+    assert sp.dropped["nonfinite"] == 4 and sp.sp_last == 20.0
+    sp.take_px4(_sat(128, thrust=-0.5), t=25.0, ms=0, require_thrust=False)
+    assert sp.sp == ("rates", (0.1, 0.2, 0.3), 0.0)
+    assert sp.stream_start == 25.0  # after a gap over 0.5 s: a new stream
 
 
 def test_ardupilot_guided_forced_axes():
@@ -326,3 +376,36 @@ def test_truth_rows_and_the_target_on_its_clock():
     off = TruthRecorder(enabled=False)
     off.record(0.0, 12.0, st, 7)
     assert off.truth(None, 0.0)["t"].shape == (0,)
+
+
+# ------------------------------------------------------------------------------ target stream
+@pytest.mark.parametrize("turn", [0.01, 0.0])
+def test_target_positions_computed_ahead_are_the_bytes_computed_on_time(monkeypatch, turn):
+    """The target's fixes are computed in bursts ahead of their due times (a pure function of
+    the target's time): the packets are byte for byte those computed when due, across an
+    epoch change (the times ahead then miss and are computed when they come)."""
+    import sim.vehicle.target_stream as TS
+    from mpf_mavlink.core.target import ConstantTurn
+    from sim.plant.jsbsim_plant import LocalNED
+    from sim.vehicle.framing import Framer
+
+    def fly(ahead: int) -> list[bytes]:
+        monkeypatch.setattr(TS, "_AHEAD", ahead)
+        out: list[bytes] = []
+        clock = StepClock(0.01, 1234)
+        link = SimpleNamespace(
+            target_framer=Framer(M.MAVLink(_Sink(), 2, 1)), put=out.append, tmav=None
+        )
+        motion = ConstantTurn((10.0, -5.0, 0.0), 3.0, 0.3, turn, 0.1)
+        ts = TS.TargetStream(motion, clock, link, LocalNED(41.185, -8.76, 0.0), 0.0, 10.0,
+                             True, True, None)  # fmt: skip
+        for i in range(700):  # 14 s of 20 ms frames
+            clock.k += 2
+            if i == 300:
+                ts.epoch_boot_s = clock.boot_s - 0.37  # as take_epoch does
+            ts.frame()
+        return out
+
+    got, want = fly(50), fly(1)
+    assert len(want) == 14 * 10 * 2 + 14  # FOLLOW_TARGET + GLOBAL_POSITION_INT, HEARTBEAT
+    assert got == want

@@ -6,6 +6,7 @@ or non-finite input is dropped and counted, never applied."""
 from __future__ import annotations
 
 import math
+from math import isfinite
 from typing import Any
 
 from mpf_mavlink.core.frames import matrix_to_euler, quat_wxyz_to_matrix
@@ -66,6 +67,19 @@ class Setpoints:
         rate on that axis), else the quaternion's roll and pitch; "throttle ignore" (64) gives
         zero thrust. ``t``, ``ms``: boot time now (s, ms)."""
         tm = msg.type_mask
+        if tm == 128:
+            # every body rate and the thrust (what a companion streams, once per lockstep frame
+            # in the SIL): the rules below without the lists they build for the general mask
+            p, q, r, thr = msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate, msg.thrust
+            if not (isfinite(thr) and isfinite(p) and isfinite(q) and isfinite(r)):
+                self.dropped["nonfinite"] += 1
+                return
+            self.sp = ("rates", (float(p), float(q), float(r)), clip(float(thr), 0.0, 1.0))
+            self.echo = (ms, tm, tuple(msg.q), (p, q, r), float(thr))
+            if self.sp_last is None or t - self.sp_last > PX4_OFFBOARD_MAX_GAP_S:
+                self.stream_start = t
+            self.sp_last = t
+            return
         att_ignore, thr_ignore = bool(tm & 128), bool(tm & 64)
         rates = (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate)
         used = [] if thr_ignore else [msg.thrust]

@@ -188,27 +188,47 @@ def rotation_body_to_ned(phi: float, theta: float, psi: float) -> np.ndarray:
     ).reshape(3, 3)
 
 
+# the snapshot's 3-vectors: field -> the tuple of floats that stands in for it until it is read
+VECTOR_FLOATS = {
+    "position_ned": "_p",
+    "velocity_ned": "_v",
+    "pqr": "_w",
+    "wind_ned": "_wind",
+    "specific_force_body": "_f_body",
+}
+
+
 class _Snapshot(PlantState):
     """A :class:`PlantState` built without the frozen dataclass's per-field
     ``object.__setattr__`` (a third of a snapshot's cost, once per lockstep frame), whose
-    rotation matrix and accelerometer array are made when first read: the vehicle's frame
-    reads neither, tests and estimators do."""
+    rotation matrix and arrays are made when first read: the vehicle's frame reads the floats
+    (:func:`vector_floats`), tests, estimators and the autopilot's hold the arrays."""
 
     def __getattr__(self, name: str) -> Any:
         d = self.__dict__
         if name == "R_B_N":
             value: Any = rotation_body_to_ned(*d["_euler"])
-        elif name == "specific_force_body":
-            value = np.array(d["_f_body"])
+        elif name in VECTOR_FLOATS and VECTOR_FLOATS[name] in d:
+            value = np.array(d[VECTOR_FLOATS[name]])
         else:
             raise AttributeError(name)
         d[name] = value
         return value
 
 
+def vector_floats(st: Any, name: str) -> Any:
+    """State ``st``'s 3-vector field ``name`` as three Python floats (a tuple or list): a plant
+    snapshot's own floats without making its array, any other state's array converted."""
+    v = st.__dict__.get(VECTOR_FLOATS[name])
+    if v is not None:
+        return v
+    v = getattr(st, name)
+    return v.tolist() if type(v) is np.ndarray else [float(x) for x in v]
+
+
 def make_state(**fields: object) -> PlantState:
-    """A snapshot from its fields; ``_euler`` (roll, pitch, yaw rad) and ``_f_body`` (m/s^2)
-    stand in for ``R_B_N`` and ``specific_force_body`` until those are read."""
+    """A snapshot from its fields; ``_euler`` (roll, pitch, yaw rad) stands in for ``R_B_N``
+    and the tuples of :data:`VECTOR_FLOATS` for the arrays until those are read."""
     st = object.__new__(_Snapshot)
     st.__dict__.update(fields)
     return st
@@ -553,32 +573,26 @@ class JSBSimPlant:
         psi = self._n_psi.get_double_value()
         return make_state(
             t=self._n_t.get_double_value(),
-            position_ned=np.array(self.origin.ned(lat, lon, alt)),
-            velocity_ned=np.array(
-                (
-                    self._n_vn.get_double_value() * FT_TO_M,
-                    self._n_ve.get_double_value() * FT_TO_M,
-                    self._n_vd.get_double_value() * FT_TO_M,
-                )
+            _p=self.origin.ned(lat, lon, alt),
+            _v=(
+                self._n_vn.get_double_value() * FT_TO_M,
+                self._n_ve.get_double_value() * FT_TO_M,
+                self._n_vd.get_double_value() * FT_TO_M,
             ),
             _euler=(phi, th, psi),
             euler=(phi, th, psi if psi <= math.pi else psi - 2.0 * math.pi),
-            pqr=np.array(
-                (
-                    self._n_p.get_double_value(),
-                    self._n_q.get_double_value(),
-                    self._n_r.get_double_value(),
-                )
+            _w=(
+                self._n_p.get_double_value(),
+                self._n_q.get_double_value(),
+                self._n_r.get_double_value(),
             ),
             airspeed=self._n_vt.get_double_value() * FT_TO_M,
             alpha=self._n_alpha.get_double_value(),
             beta=self._n_beta.get_double_value(),
-            wind_ned=np.array(
-                (
-                    self._n_wn.get_double_value() * FT_TO_M,
-                    self._n_we.get_double_value() * FT_TO_M,
-                    self._n_wd.get_double_value() * FT_TO_M,
-                )
+            _wind=(
+                self._n_wn.get_double_value() * FT_TO_M,
+                self._n_we.get_double_value() * FT_TO_M,
+                self._n_wd.get_double_value() * FT_TO_M,
             ),
             lat_deg=lat,
             lon_deg=lon,

@@ -10,6 +10,7 @@ CRC extra are read from pymavlink; the CRC-16/MCRF4XX is CRC-CCITT on bit-revers
 from __future__ import annotations
 
 import binascii
+from collections.abc import Callable
 from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as M
@@ -18,10 +19,22 @@ _STX2 = 0xFD
 _REV = bytes(int(f"{i:08b}"[::-1], 2) for i in range(256))  # bit reversal of a byte
 
 
-def crc_mcrf4xx(data: bytes) -> int:
+def _crc_mcrf4xx_hqx(data: bytes) -> int:
     """MAVLink's CRC-16/MCRF4XX (reflected CCITT, init 0xFFFF) of ``data``."""
     c = binascii.crc_hqx(data.translate(_REV), 0xFFFF)
     return (_REV[c & 0xFF] << 8) | _REV[c >> 8]
+
+
+def _crc_function() -> Callable[[bytes], int]:
+    try:  # pymavlink's own CRC when its wheel brought fastcrc (one C call: 0.35 us, not 1.0)
+        from fastcrc.crc16 import mcrf4xx
+
+        return mcrf4xx
+    except ImportError:  # pragma: no cover - exercised only without fastcrc
+        return _crc_mcrf4xx_hqx
+
+
+crc_mcrf4xx = _crc_function()
 
 
 class _Layout:

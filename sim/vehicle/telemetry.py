@@ -9,9 +9,9 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from sim.plant.jsbsim_plant import vector_floats
 from sim.vehicle.clock import StepClock
 from sim.vehicle.config import TelemetryRates, stock_rates
 from sim.vehicle.link import Link
@@ -103,15 +103,9 @@ def _e7(deg: float) -> int:
     return int(round(deg * 1e7))
 
 
-def _xyz(v: Any) -> Any:
-    """A state's 3-vector as Python floats (numpy's scalars cost more in the arithmetic and
-    packing that follow; the values are the same)."""
-    return v.tolist() if type(v) is np.ndarray else [float(x) for x in v]
-
-
 def _global_position(st: Any, ms: int, home_alt_m: float) -> tuple[int, ...]:
     """GLOBAL_POSITION_INT's fields from a plant state."""
-    vx, vy, vz = _xyz(st.velocity_ned)
+    vx, vy, vz = vector_floats(st, "velocity_ned")
     hdg = int(round(math.degrees(st.euler[2]) * 100.0)) % 36000
     alt_mm, rel_mm = int(round(st.alt_m * 1000.0)), int(round((st.alt_m - home_alt_m) * 1000.0))
     return (ms, _e7(st.lat_deg), _e7(st.lon_deg), alt_mm, rel_mm,
@@ -121,7 +115,7 @@ def _global_position(st: Any, ms: int, home_alt_m: float) -> tuple[int, ...]:
 def _vfr_hud(st: Any) -> tuple[float, ...]:
     """VFR_HUD's fields: both autopilots report an equivalent airspeed (ArduPilot EAS, PX4
     calibrated)."""
-    v = st.velocity_ned
+    v = vector_floats(st, "velocity_ned")
     hdg = int(round(math.degrees(st.euler[2]))) % 360
     eas = st.airspeed * eas_factor(float(st.alt_m))
     return (eas, math.hypot(v[0], v[1]), hdg, int(round(100 * st.throttle)), st.alt_m,
@@ -131,7 +125,7 @@ def _vfr_hud(st: Any) -> tuple[float, ...]:
 def _gps_raw(st: Any, us: int) -> tuple[float, ...]:
     """GPS_RAW_INT's fields: a healthy 3D fix (HDOP 0.8, VDOP 1.2, 14 satellites, 0.5 m / 0.8 m
     accuracy)."""
-    vn, ve = float(st.velocity_ned[0]), float(st.velocity_ned[1])
+    vn, ve, _ = vector_floats(st, "velocity_ned")
     cog = int(round(math.degrees(math.atan2(ve, vn)) * 100.0)) % 36000
     return (us, M.GPS_FIX_TYPE_3D_FIX, _e7(st.lat_deg), _e7(st.lon_deg),
             int(round(st.alt_m * 1000.0)), 80, 120, int(round(math.hypot(vn, ve) * 100.0)), cog,
@@ -221,7 +215,7 @@ class Telemetry:
         .step_once` for why the pair leaves in a datagram of its own)."""
         r, nxt, t = self.rates, self.next, self.clock.boot_s + 1e-9
         if self.wind.tau_s > 0.0:
-            self.wind.update(self.st.wind_ned, t)
+            self.wind.update(vector_floats(self.st, "wind_ned"), t)
         for name in STREAM_ORDER:
             n = nxt.get(name)
             if n is not None and t < n:
@@ -235,14 +229,14 @@ class Telemetry:
         st = self.st
         self.sent["attitude"] = self.sent.get("attitude", 0) + 1
         ms = self.clock.ms()
-        p, q, r = _xyz(st.pqr)
+        p, q, r = vector_floats(st, "pqr")
         self.link.put(self.link.framer.pack(_ATTITUDE, ms, *st.euler, p, q, r), ms)
 
     def local_position(self) -> None:
         st, ms = self.st, self.clock.ms()
         self.sent["local_position"] = self.sent.get("local_position", 0) + 1
-        x, y, z = _xyz(st.position_ned)
-        vx, vy, vz = _xyz(st.velocity_ned)
+        x, y, z = vector_floats(st, "position_ned")
+        vx, vy, vz = vector_floats(st, "velocity_ned")
         buf = self.link.framer.pack(_LOCAL_POSITION, ms, x, y, z, vx, vy, vz)
         self.link.put(buf, -1, ms)
 
@@ -269,7 +263,7 @@ class Telemetry:
             return pack(SPEC["heartbeat"], M.MAV_TYPE_FIXED_WING, ap, base, custom,
                         M.MAV_STATE_ACTIVE, 3)  # fmt: skip
         if name == "wind":
-            w = self.wind.value if self.wind.value is not None else st.wind_ned
+            w = self.wind.value if self.wind.value is not None else vector_floats(st, "wind_ned")
             wn, we, wd = (float(x) for x in w)
             if self.px4:
                 return pack(SPEC["wind_cov"], us, wn, we, 0.0, 0.0, 0.0, st.alt_m, 0.0, 0.0)

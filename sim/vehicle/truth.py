@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from sim.plant.jsbsim_plant import vector_floats
+
 _COLS = 17
 
 
@@ -24,7 +26,8 @@ class TruthRecorder:
     def record(self, t: float, boot_s: float, st: Any, custom_mode: int) -> None:
         if not self.enabled:
             return
-        p, v, w = st.position_ned, st.velocity_ned, st.wind_ned
+        p, v = vector_floats(st, "position_ned"), vector_floats(st, "velocity_ned")
+        w = vector_floats(st, "wind_ned")
         row = (
             t,
             boot_s,
