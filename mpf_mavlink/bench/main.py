@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 
-def controller_step_us(n: int = 3000) -> dict[str, float]:
+def controller_step_us(n: int = 3000, passes: int = 7) -> dict[str, Any]:
     import dataclasses
 
     from mpf_mavlink.config.schema import load_config
@@ -33,23 +33,28 @@ def controller_step_us(n: int = 3000) -> dict[str, float]:
     for i in range(n):
         x = loop.step(x, 0.02) if i % 3 == 0 else x
         states.append((x.s, VehicleState(x.t, x.p, x.R, loop.v_w), loop.target_state(x.t)))
-    times = np.empty(n)
     path, gains, ext = loop.path, loop.gains, loop.ext  # the harness's lookups, not the law's
+    plain = [(s, veh, dataclasses.replace(tgt)) for s, veh, tgt in states]  # without its floats
     clock = time.perf_counter
-    for i, (s, veh, tgt) in enumerate(states):
-        t0 = clock()
-        mpf_law(s, veh, tgt, path, gains, ext)
-        times[i] = clock() - t0
-    arrays = np.empty(n)
-    for i, (s, veh, tgt) in enumerate(states):
-        tgt = dataclasses.replace(tgt)  # the same state without its floats
-        t0 = clock()
-        mpf_law(s, veh, tgt, path, gains, ext)
-        arrays[i] = clock() - t0
+    # The n calls take ~30 ms: one pass is at the mercy of the virtual machine's clock speed in
+    # that instant (medians of single passes spread 9-18 us on one quiet 2-core host), so the
+    # calls are timed in several passes spread over ~0.5 s and the figure is the median of all.
+    times = np.empty((passes, n))
+    arrays = np.empty((passes, n))
+    for k in range(passes):
+        for i, (s, veh, tgt) in enumerate(states):
+            t0 = clock()
+            mpf_law(s, veh, tgt, path, gains, ext)
+            times[k, i] = clock() - t0
+        for i, (s, veh, tgt) in enumerate(plain):
+            t0 = clock()
+            mpf_law(s, veh, tgt, path, gains, ext)
+            arrays[k, i] = clock() - t0
     return {
         "median": float(np.median(times) * 1e6),
         "p99": float(np.percentile(times, 99) * 1e6),
         "median_target_arrays": float(np.median(arrays) * 1e6),
+        "pass_medians": [round(float(np.median(p)) * 1e6, 2) for p in times],
     }
 
 
