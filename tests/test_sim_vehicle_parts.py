@@ -98,13 +98,13 @@ def test_crc_is_mavlinks_mcrf4xx():
     pymavlink's x25crc on arbitrary bytes."""
     from pymavlink.dialects.v20.ardupilotmega import x25crc
 
-    from sim.vehicle.framing import _crc_mcrf4xx_hqx
+    from mpf_mavlink.mavlink.fastparse import _mcrf4xx_hqx
 
     rng = np.random.default_rng(0)
     for n in (0, 1, 7, 40, 255):
         data = bytes(rng.integers(0, 256, n, dtype=np.uint8))
-        assert crc_mcrf4xx(data) == x25crc(data).crc
-        assert _crc_mcrf4xx_hqx(data) == x25crc(data).crc
+        assert crc_mcrf4xx(data, 0xFFFF) == x25crc(data).crc
+        assert _mcrf4xx_hqx(data, 0xFFFF) == x25crc(data).crc
 
 
 def test_setpoint_decoder_reads_what_pymavlink_reads():

@@ -15,7 +15,7 @@ import struct
 from collections.abc import Callable
 from typing import Any
 
-from mpf_mavlink.mavlink.fastparse import _mcrf4xx
+from mpf_mavlink.mavlink.fastparse import crc_mcrf4xx
 from mpf_mavlink.mavlink.pymav import dialect
 
 _HEADER = struct.Struct("<BBBBBBBHB").pack  # stx, len, incompat, compat, seq, sys, comp, id
@@ -79,7 +79,7 @@ def pack_v2(mav: Any, msg: Any) -> bytes | None:
         _HEADER(0xFD, len(payload), 0, 0, mav.seq, mav.srcSystem, mav.srcComponent, lay.lo, lay.hi)
         + payload
     )
-    buf = body + _CRC(_mcrf4xx(body[1:] + lay.tail, 0xFFFF))
+    buf = body + _CRC(crc_mcrf4xx(body[1:] + lay.tail, 0xFFFF))
     msg._msgbuf = buf  # what pymavlink leaves on a sent message (get_msgbuf)
     return buf
 

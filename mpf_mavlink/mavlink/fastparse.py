@@ -45,7 +45,8 @@ def _crc_function() -> Callable[[bytes, int], int]:
         return _mcrf4xx_hqx
 
 
-_mcrf4xx = _crc_function()
+# MAVLink's CRC-16/MCRF4XX (data, initial 0xFFFF); also the SIL vehicle's framing's
+crc_mcrf4xx = _crc_function()
 
 
 #: The telemetry a vehicle streams (decoded here with every other type without text).
@@ -166,7 +167,7 @@ class HotDecoder:
 
     def _decode(self, data: bytes, out: list[Any]) -> int:
         types, n, i = self.types, len(data), 0
-        crc_of, crc_at, append = _mcrf4xx, self._crc_unpack, out.append
+        crc_of, crc_at, append = crc_mcrf4xx, self._crc_unpack, out.append
         while i < n:
             if data[i] != _STX2 or i + _HEADER_LEN > n or data[i + 2] != 0:
                 return i  # MAVLink 1, garbage, a cut header, signed or unknown flags

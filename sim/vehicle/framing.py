@@ -4,37 +4,19 @@ lockstep frame are most of the vehicle's CPU when framed by pymavlink (an object
 CRC byte loop and a header object per message).
 
 The bytes are pymavlink's own (the tests compare them): the message classes' wire layout and
-CRC extra are read from pymavlink; the CRC-16/MCRF4XX is CRC-CCITT on bit-reversed bytes
-(``binascii.crc_hqx`` in C). Signed links and messages with text fields go through pymavlink."""
+CRC extra are read from pymavlink; the CRC-16/MCRF4XX is the bridge's fast decoder's
+(mpf_mavlink.mavlink.fastparse: fastcrc, or binascii on bit-reversed bytes). Signed links and
+messages with text fields go through pymavlink."""
 
 from __future__ import annotations
 
-import binascii
-from collections.abc import Callable
 from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from mpf_mavlink.mavlink.fastparse import crc_mcrf4xx
+
 _STX2 = 0xFD
-_REV = bytes(int(f"{i:08b}"[::-1], 2) for i in range(256))  # bit reversal of a byte
-
-
-def _crc_mcrf4xx_hqx(data: bytes) -> int:
-    """MAVLink's CRC-16/MCRF4XX (reflected CCITT, init 0xFFFF) of ``data``."""
-    c = binascii.crc_hqx(data.translate(_REV), 0xFFFF)
-    return (_REV[c & 0xFF] << 8) | _REV[c >> 8]
-
-
-def _crc_function() -> Callable[[bytes], int]:
-    try:  # pymavlink's own CRC when its wheel brought fastcrc (one C call: 0.35 us, not 1.0)
-        from fastcrc.crc16 import mcrf4xx
-
-        return mcrf4xx
-    except ImportError:  # pragma: no cover - exercised only without fastcrc
-        return _crc_mcrf4xx_hqx
-
-
-crc_mcrf4xx = _crc_function()
 
 
 class _Layout:
@@ -103,7 +85,7 @@ class Framer:
             body = payload.rstrip(b"\0") or payload[:1]  # MAVLink 2 trims trailing zeros
             # header after the start byte: length, flags 0, 0, sequence, then the ids
             head = bytes((len(body), 0, 0, mav.seq)) + lay.ids
-            crc = crc_mcrf4xx(head + body + lay.crc_extra)
+            crc = crc_mcrf4xx(head + body + lay.crc_extra, 0xFFFF)
             buf = b"\xfd" + head + body + crc.to_bytes(2, "little")
         mav.seq = (mav.seq + 1) & 0xFF  # what MAVLink.send does after packing
         mav.total_packets_sent += 1
@@ -174,7 +156,7 @@ def decode_set_attitude_target(data: bytes) -> SetAttitudeTarget | None:
     if data[7] != 82 or data[8] != 0 or data[9] != 0:  # MAVLINK_MSG_ID_SET_ATTITUDE_TARGET
         return None
     body = data[10:-2]
-    crc = crc_mcrf4xx(data[1:-2] + _SAT_CRC_EXTRA)
+    crc = crc_mcrf4xx(data[1:-2] + _SAT_CRC_EXTRA, 0xFFFF)
     if data[-2] != crc & 0xFF or data[-1] != crc >> 8 or len(body) > _SAT_LEN:
         return None
     fields = _SAT.unpacker.unpack(body + bytes(_SAT_LEN - len(body)))

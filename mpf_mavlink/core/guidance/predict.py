@@ -43,14 +43,18 @@ Mat3 = tuple[Vec3, Vec3, Vec3]  # by rows
 MAX_PREDICTION_S = 0.25
 
 
-def _exp(x: float, y: float, z: float) -> Mat3:
-    """Rotation matrix exp(hat([x, y, z])) (Rodrigues), by rows."""
+def _rodrigues(x: float, y: float, z: float) -> tuple[float, float, float]:
+    """|k|^2, sin|k|/|k| and (1 - cos|k|)/|k|^2 for k = [x, y, z] (their limits near 0)."""
     th2 = x * x + y * y + z * z
     th = math.sqrt(th2)
     if th < 1e-9:
-        c1, c2 = 1.0, 0.5
-    else:
-        c1, c2 = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+        return th2, 1.0, 0.5
+    return th2, math.sin(th) / th, (1.0 - math.cos(th)) / th2
+
+
+def _exp(x: float, y: float, z: float) -> Mat3:
+    """Rotation matrix exp(hat([x, y, z])) (Rodrigues), by rows."""
+    th2, c1, c2 = _rodrigues(x, y, z)
     return (
         (1.0 + c2 * (x * x - th2), -c1 * z + c2 * x * y, c1 * y + c2 * x * z),
         (c1 * z + c2 * x * y, 1.0 + c2 * (y * y - th2), -c1 * x + c2 * y * z),
@@ -61,12 +65,7 @@ def _exp(x: float, y: float, z: float) -> Mat3:
 def _turn(x: float, y: float, z: float, a: float, b: float, c: float) -> Vec3:
     """exp(hat(k)) u for k = [x, y, z], u = [a, b, c] (Rodrigues on the vector:
     u + sin|k|/|k| k x u + (1 - cos|k|)/|k|^2 k x (k x u))."""
-    th2 = x * x + y * y + z * z
-    th = math.sqrt(th2)
-    if th < 1e-9:
-        c1, c2 = 1.0, 0.5
-    else:
-        c1, c2 = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+    th2, c1, c2 = _rodrigues(x, y, z)
     k_u = x * a + y * b + z * c  # k x (k x u) = k (k . u) - |k|^2 u
     return (
         a + c1 * (y * c - z * b) + c2 * (x * k_u - th2 * a),
