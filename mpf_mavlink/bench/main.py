@@ -36,9 +36,9 @@ def controller_step_us(n: int = 3000, passes: int = 7) -> dict[str, Any]:
     path, gains, ext = loop.path, loop.gains, loop.ext  # the harness's lookups, not the law's
     plain = [(s, veh, dataclasses.replace(tgt)) for s, veh, tgt in states]  # without its floats
     clock = time.perf_counter
-    # The n calls take ~30 ms: one pass is at the mercy of the virtual machine's clock speed in
-    # that instant (medians of single passes spread 9-18 us on one quiet 2-core host), so the
-    # calls are timed in several passes spread over ~0.5 s and the figure is the median of all.
+    # The n calls take ~30 ms: one pass is at the mercy of a shared host's clock speed in that
+    # instant (single-pass medians of the same code can differ ~2x), so the calls are timed in
+    # several passes spread over ~0.5 s and the figure is the median of all.
     times = np.empty((passes, n))
     arrays = np.empty((passes, n))
     for k in range(passes):
