@@ -11,7 +11,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from mpf_mavlink.mavlink import Flavour, decode, dialect
+from mpf_mavlink.mavlink import CommandAckSample, Flavour, HeartbeatSample, decode, dialect
 
 #: How often the bridge asks PX4 for TIMESYNC (s): the 16 answers kept (controller.py) span
 #: 8 s, over which a line follows the clocks' drift.
@@ -125,33 +125,37 @@ class VehicleLink:
         return None if t is None else round(t * 1e6) * 1e-6
 
     def dispatch(self, msg: Any) -> None:
-        """One received message: bookkeeping here, decoded samples to the hooks."""
+        """One received message: bookkeeping here, decoded samples to the hooks. (A few per
+        control frame: the type is read once, the receive time quantised inline as
+        :meth:`rx_time` does.)"""
         src = msg.get_srcSystem()
         own = src == self.sysid
+        mtype = msg.get_type()
         if own:
             if self.arrivals is not None:
-                q = self.arrivals.setdefault(msg.get_type(), deque(maxlen=400))
+                q = self.arrivals.setdefault(mtype, deque(maxlen=400))
                 q.append(time.monotonic())
-            if msg.get_type() == "PARAM_VALUE":
+            if mtype == "PARAM_VALUE":
                 self._param(msg)
                 return
         elif src != self.target_sysid:
             return
-        rx = self.rx_time(msg)
+        t = getattr(msg, "_timestamp", None)
+        rx = None if t is None else round(t * 1e6) * 1e-6
         msg._timestamp = rx  # decoders copy it into the samples (VFR_HUD, WIND, HEARTBEAT)
-        sample = decode(msg)
+        sample = decode(msg, mtype)
         if sample is None:
             return
         if not own:
             self.on_target(sample, rx)
             return
-        name = type(sample).__name__
-        if name == "HeartbeatSample":
+        cls = type(sample)
+        if cls is HeartbeatSample:
             if sample.autopilot != dialect.MAV_AUTOPILOT_INVALID:  # not a GCS on our system id
                 self.hb = sample
                 self.on_heartbeat(sample, rx)
             return
-        if name == "CommandAckSample":
+        if cls is CommandAckSample:
             self.acks.append(sample)
             return
         t_boot = getattr(sample, "t_boot_s", None)
@@ -174,7 +178,7 @@ class VehicleLink:
     def spin(self, timeout_s: float, until: Callable[[], bool] | None = None) -> bool:
         """Pump messages and duties until ``until()`` (True) or the timeout (False)."""
         t_end = time.monotonic() + timeout_s
-        link, due = self.link, self.due
+        link, due, dispatch = self.link, self.due, self.dispatch
         while True:
             if until is not None and until():
                 return True
@@ -183,10 +187,15 @@ class VehicleLink:
                 return False
             wait = min(t_end - now, MAX_WAIT_S, max(0.0, due(now) - now))
             msg = link.recv(wait)
-            if msg is not None:
-                self.dispatch(msg)
-                if link.buffered():
-                    continue  # the rest of the datagram first: the duties run once per wake-up
+            while msg is not None:
+                dispatch(msg)
+                # the rest of the datagram first (it is here: no wait to work out), the duties
+                # once per wake-up
+                if not link.buffered():
+                    break
+                if until is not None and until():
+                    return True
+                msg = link.recv(0.0)
             self.on_tick()
 
     # -- timeouts ----------------------------------------------------------------------------

@@ -125,21 +125,26 @@ class BootClockGate:
         consistent (PX4 v1.16 in body-rate OFFBOARD keeps the stamp of the last attitude
         set-point from before OFFBOARD for the whole flight), a time ahead of "now" is not, and
         it never moves the clock."""
+        # every vehicle sample passes here: max(0.0, x) and max(hi, off) are written as the
+        # conditionals they are (same values, NaN included), without the calls
         off = t_boot_s - t_rx
         if mtype in SETPOINT_STAMPED:
             if self.off is None:
                 return "settling"
-            hi = self.hi - self.drift_s_per_s * max(0.0, t_rx - self.hi_t)
+            since = t_rx - self.hi_t
+            hi = self.hi - self.drift_s_per_s * (since if since > 0.0 else 0.0)
             return None if off - hi <= self.fwd_tol_s and t_boot_s >= 0.0 else "time"
-        if self.off is None:
+        last_off = self.off
+        if last_off is None:
             return self._settle(mtype, t_boot_s, off, t_rx)
-        hi = self.hi - self.drift_s_per_s * max(0.0, t_rx - self.hi_t)
-        if off - hi <= self.fwd_tol_s and off - self.off >= -self.back_tol_s:
+        since = t_rx - self.hi_t
+        hi = self.hi - self.drift_s_per_s * (since if since > 0.0 else 0.0)
+        if off - hi <= self.fwd_tol_s and off - last_off >= -self.back_tol_s:
             last = self._last.get(mtype)
             if last is not None and t_boot_s <= last:
                 return "stale"
             self.off, self._cand = off, None
-            self.hi, self.hi_t = max(hi, off), t_rx
+            self.hi, self.hi_t = off if off > hi else hi, t_rx
             self._last[mtype] = t_boot_s
             return None
         c = self._cand

@@ -543,13 +543,14 @@ _DECODERS: dict[str, Callable[[Any], Any]] = {
 DECODED_TYPES = frozenset(_DECODERS)
 
 
-def decode(msg: Any) -> Any:
-    """Dispatch on ``msg.get_type()``; None for unhandled types or rejected content.
+def decode(msg: Any, mtype: str | None = None) -> Any:
+    """Dispatch on ``msg.get_type()`` (``mtype``: what it returns, when the caller has read
+    it); None for unhandled types or rejected content.
 
     Never raises.
     """
     try:
-        fn = _DECODERS.get(msg.get_type())
+        fn = _DECODERS.get(msg.get_type() if mtype is None else mtype)
         return fn(msg) if fn is not None else None
     except Exception:  # noqa: BLE001 - a decoder bug must not take the loop down
         return None

@@ -37,6 +37,15 @@ from mpf_mavlink.mavlink.wire_limits import (
 # Encoders (raise ValueError rather than send a non-finite or out-of-range value)
 # ---------------------------------------------------------------------------------------------
 def _check_ids(time_boot_ms: int, target_sys: int, target_comp: int) -> int:
+    if (  # plain ints in range (every setpoint): the same answer without the conversions
+        type(time_boot_ms) is int
+        and type(target_sys) is int
+        and type(target_comp) is int
+        and time_boot_ms >= 0
+        and 0 <= target_sys <= 255
+        and 0 <= target_comp <= 255
+    ):
+        return time_boot_ms & 0xFFFFFFFF
     if not (0 <= int(target_sys) <= 255 and 0 <= int(target_comp) <= 255):
         raise ValueError(f"target ids out of range: {target_sys}/{target_comp}")
     if not isinstance(time_boot_ms, (int, np.integer)) or time_boot_ms < 0:

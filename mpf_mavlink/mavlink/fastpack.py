@@ -26,10 +26,9 @@ _V2 = float(dialect.WIRE_PROTOCOL_VERSION) == 2.0
 class _Layout:
     """How one message class packs: its struct, its CRC extra and its values in wire order."""
 
-    __slots__ = ("pack", "tail", "lo", "hi", "values")
+    __slots__ = ("tail", "lo", "hi", "payload")
 
     def __init__(self, cls: Any) -> None:
-        self.pack = cls.unpacker.pack
         self.tail = bytes((int(cls.crc_extra),))
         mid = int(cls.id)
         self.lo, self.hi = mid & 0xFFFF, mid >> 16
@@ -49,10 +48,11 @@ class _Layout:
             else:
                 items.append(f"m.{name}")
         # one compiled expression per class, as pymavlink's generator writes its pack methods
-        # (a generic loop over the fields costs more than the packing itself); its text is
-        # made of the dialect's identifiers only
-        source = f"lambda m: ({', '.join(items)},)"
-        self.values: Callable[[Any], tuple[Any, ...]] = eval(source, {})  # noqa: S307
+        # (a generic loop over the fields costs more than the packing itself): the untrimmed
+        # payload; its text is made of the dialect's identifiers only
+        source = f"lambda m: pack({', '.join(items)})"
+        scope = {"pack": cls.unpacker.pack}
+        self.payload: Callable[[Any], bytes] = eval(source, scope)  # noqa: S307
 
 
 _LAYOUTS: dict[type, _Layout] = {}
@@ -72,7 +72,7 @@ def pack_v2(mav: Any, msg: Any) -> bytes | None:
             return None
         lay = _LAYOUTS[cls] = _Layout(cls)
     try:
-        payload = lay.pack(*lay.values(msg)).rstrip(b"\x00") or b"\x00"
+        payload = lay.payload(msg).rstrip(b"\x00") or b"\x00"
     except Exception:  # noqa: BLE001 - pymavlink packs it, or raises its own error
         return None
     body = (

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import binascii
 import functools
-import struct
 from collections.abc import Callable
 from typing import Any
 
@@ -103,30 +102,72 @@ class _Wire:
 
 class _Type:
     """One message class: its payload layout, CRC extra and how pymavlink orders its fields;
-    ``hot`` is the class of the messages made here (the pymavlink class with :class:`_Wire`)."""
+    ``hot`` is the class of the messages made here (the pymavlink class with :class:`_Wire`),
+    ``make(data, i, end)`` the message of the frame ``data[i:end]`` (CRC checked by the
+    caller)."""
 
-    __slots__ = ("cls", "hot", "size", "unpacker", "crc_extra", "names", "order", "arrays")
+    __slots__ = ("cls", "hot", "size", "full", "unpacker", "crc_extra", "names", "make")
 
     def __init__(self, cls: Any) -> None:
         self.cls = cls
         self.unpacker = cls.unpacker
         self.size = int(cls.unpacker.size)
+        self.full = self.size + _HEADER_LEN + 2  # the frame of an untrimmed payload (bytes)
         self.crc_extra = bytes((int(cls.crc_extra),))
         self.names = tuple(cls.fieldnames)
-        lengths = list(cls.lengths)
-        # pymavlink's MAVLink.decode: field i (declared order) is t[order[i]] when the message
-        # has no arrays, else the slice of the struct's values at the field's wire offset
-        order = tuple(cls.orders)
-        self.order: tuple[int, ...] | None = None if order == tuple(range(len(order))) else order
-        self.arrays: tuple[tuple[int, int], ...] | None = None
-        if sum(lengths) != len(lengths):
-            self.arrays = tuple((sum(lengths[:o]), lengths[o]) for o in order)
         # what the generated constructor sets besides the fields and the wire (the type's name,
         # field names, instance info) is the same for every message: class attributes here
         proto = cls(*[[0] * n if n > 1 else 0 for n in self._declared_lengths(cls)])
         wire = ("_header", "_payload", "_msgbuf", "_crc")
         same = {k: v for k, v in vars(proto).items() if k not in self.names and k not in wire}
         self.hot: Any = type(cls.__name__, (_Wire, cls), {**same, "__module__": __name__})
+        # compiled when the first frame of the type comes (a few types of the ~260 ever do)
+        self.make: Callable[[bytes, int, int], Any] = self._first
+
+    def _first(self, data: bytes, i: int, end: int) -> Any:
+        self.make = self._maker(self.cls)
+        return self.make(data, i, end)
+
+    def _maker(self, cls: Any) -> Callable[[bytes, int, int], Any]:
+        """One compiled constructor per type (as pymavlink's generator writes one decoder per
+        type): the instance's ``__dict__`` made in one dict display costs half of filling it
+        field by field. Field i (declared order) is what pymavlink's ``MAVLink.decode`` makes
+        of the struct's values ``t``: ``t[order[i]]`` when the message has no arrays, else the
+        value (or the list of values) at the field's wire offset. The text is made of the
+        dialect's field names (identifiers) only."""
+        lengths = list(cls.lengths)
+        order = list(cls.orders)
+        items = []
+        for name, o in zip(self.names, order, strict=True):
+            if not name.isidentifier():  # pragma: no cover - generated names always are
+                raise ValueError(f"odd field name {name!r}")
+            if sum(lengths) == len(lengths):
+                value = f"t[{o}]"
+            else:
+                a, k = sum(lengths[:o]), lengths[o]
+                value = f"t[{a}]" if k == 1 else f"[{', '.join(f't[{a + j}]' for j in range(k))}]"
+            items.append(f"{name!r}: {value}")
+        items.append("'_msgbuf': data[i:end]")
+        full, head = self.full, _HEADER_LEN
+        source = (
+            "def make(data, i, end):\n"
+            f"    if end - i == {full}:\n"
+            f"        t = unpack_from(data, i + {head})\n"
+            "    else:  # MAVLink 2 trims trailing zero bytes of the payload\n"
+            f"        t = unpack(data[i + {head} : end - 2] + bytes({full} - end + i))\n"
+            "    o = new(hot)\n"
+            f"    o.__dict__ = {{{', '.join(items)}}}\n"
+            "    return o\n"
+        )
+        scope: dict[str, Any] = {
+            "unpack_from": cls.unpacker.unpack_from,
+            "unpack": cls.unpacker.unpack,
+            "new": object.__new__,
+            "hot": self.hot,
+        }
+        exec(source, scope)  # noqa: S102
+        make: Callable[[bytes, int, int], Any] = scope["make"]
+        return make
 
     @staticmethod
     def _declared_lengths(cls: Any) -> list[int]:
@@ -153,7 +194,6 @@ class HotDecoder:
 
     def __init__(self) -> None:
         self.types = _table()
-        self._crc_unpack = struct.Struct("<H").unpack_from
 
     def decode(self, data: bytes) -> tuple[list[Any], int]:
         """(messages, end): the datagram's leading hot frames as messages, in order, and the
@@ -167,31 +207,19 @@ class HotDecoder:
 
     def _decode(self, data: bytes, out: list[Any]) -> int:
         types, n, i = self.types, len(data), 0
-        crc_of, crc_at, append = crc_mcrf4xx, self._crc_unpack, out.append
+        crc_of, append = crc_mcrf4xx, out.append
         while i < n:
             if data[i] != _STX2 or i + _HEADER_LEN > n or data[i + 2] != 0:
                 return i  # MAVLink 1, garbage, a cut header, signed or unknown flags
-            mlen = data[i + 1]
-            end = i + _HEADER_LEN + mlen + 2
+            end = i + _HEADER_LEN + 2 + data[i + 1]
             ty = types.get(data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16))
-            if ty is None or end > n or mlen > ty.size:
+            if ty is None or end > n or end - i > ty.full:
                 return i
-            if crc_of(data[i + 1 : end - 2] + ty.crc_extra, 0xFFFF) != crc_at(data, end - 2)[0]:
+            # the CRC of the frame (STX excluded) and then of the type's CRC_EXTRA
+            if crc_of(ty.crc_extra, crc_of(data[i + 1 : end - 2], 0xFFFF)) != (
+                data[end - 2] | (data[end - 1] << 8)
+            ):
                 return i
-            start = i + _HEADER_LEN
-            if mlen == ty.size:
-                t = ty.unpacker.unpack_from(data, start)
-            else:  # MAVLink 2 trims trailing zero bytes of the payload
-                t = ty.unpacker.unpack(data[start : end - 2] + bytes(ty.size - mlen))
-            if ty.arrays is None:
-                fields: Any = t if ty.order is None else [t[k] for k in ty.order]
-            else:
-                fields = [t[a] if k == 1 else list(t[a : a + k]) for a, k in ty.arrays]
-            hot = ty.hot
-            m = hot.__new__(hot)
-            d = m.__dict__
-            d.update(zip(ty.names, fields, strict=True))
-            d["_msgbuf"] = data[i:end]
-            append(m)
+            append(ty.make(data, i, end))
             i = end
         return i

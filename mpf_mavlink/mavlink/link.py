@@ -144,8 +144,11 @@ class DatagramReader:
             return False
         conn = self.conn
         if conn.udp_server:  # as mavudp.recv: replies go to every address heard from
-            conn.clients.add(addr)
-            conn.clients_last_alive[addr] = time.time()
+            # the time an address was last heard is read only to expire it (mavudp.write
+            # with a timeout): without one, a known sender costs no clock read
+            if conn.timeout > 0 or addr not in conn.clients:
+                conn.clients.add(addr)
+                conn.clients_last_alive[addr] = time.time()
         elif conn.broadcast:
             conn.last_address = addr
         if not data:
@@ -293,9 +296,14 @@ class Link:
 
     # -- receive ----------------------------------------------------------------------------
     def _read_one(self) -> tuple[bool, Any]:
-        """(more, msg): msg is an accepted message or None; more=False when no data is left."""
+        """(more, msg): msg is an accepted message or None; more=False when no data is left.
+
+        Every message received passes here (a few a control frame): the checks are written
+        out inline, with the link's fields read once, rather than as calls
+        (:meth:`accepts`)."""
+        udp = self._udp
         try:
-            msg = self._udp.recv() if self._udp is not None else self.conn.recv_msg()
+            msg = udp.recv() if udp is not None else self.conn.recv_msg()
         except OSError:
             self.counters.io_errors += 1
             return False, None
@@ -311,42 +319,55 @@ class Link:
             return True, None
         c.rx_packets += 1
         sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
-        tb = getattr(msg, "time_boot_ms", None)
-        vehicle = sysid == self.vehicle_sysid and self.vehicle_sysid is not None
-        tb_s = tb * 1e-3 if vehicle and isinstance(tb, int) else None  # the vehicle's clock
+        vsys = self.vehicle_sysid
+        vehicle = sysid == vsys and vsys is not None
+        tb_s = None
+        if vehicle:
+            tb = getattr(msg, "time_boot_ms", None)
+            if isinstance(tb, int):
+                tb_s = tb * 1e-3  # the vehicle's clock
         # one receive time for the record and the clock gate, quantised as the tlog stores it
         # (us): a replay of the tlog can then take exactly the gate's decisions
         vt = self.vehicle_time
-        if vt is None:
-            t_rec = round(self._clock() * 1e6) * 1e-6
-        else:
-            t_rec = round(vt.stamp(tb_s) * 1e6) * 1e-6
+        t_rec = round((self._clock() if vt is None else vt.stamp(tb_s)) * 1e6) * 1e-6
         # the receive time a consumer sees, with or without a tlog: the record's time exactly
         msg._timestamp = t_rec
-        if self.tlog is not None:
+        tlog = self.tlog
+        if tlog is not None:
             try:
-                self.tlog.write(msg.get_msgbuf(), t_rec)
+                tlog.write(msg.get_msgbuf(), t_rec)
             except (OSError, ValueError):
                 c.io_errors += 1
                 c.tlog_write_errors += 1
         if mtype.startswith("UNKNOWN_"):
             c.unknown_msgid += 1
             return True, None
-        if not self.accepts(sysid, compid):
+        # what accepts() says: not our own packets echoed by a router; the vehicle's
+        # (component); the other systems allowed
+        if vehicle:
+            mav = self.conn.mav
+            vcomp = self.vehicle_compid
+            ok = (vcomp is None or compid == vcomp) and not (
+                sysid == mav.srcSystem and compid == mav.srcComponent
+            )
+        else:
+            ok = self.accepts(sysid, compid)
+        if not ok:
             c.rejected_sysid += 1
             c.rejected_by_source[(sysid, compid)] += 1
             return True, None
         if (
-            mtype == "HEARTBEAT"
+            vehicle
+            and mtype == "HEARTBEAT"
             and self.vehicle_autopilot is not None
-            and sysid == self.vehicle_sysid
             and getattr(msg, "autopilot", None) != self.vehicle_autopilot
         ):
             c.rejected_identity += 1
             return True, None
         if tb_s is not None:
-            why = self.clock_gate.check(mtype, tb_s, t_rec)
-            c.clock_resets = self.clock_gate.resets
+            gate = self.clock_gate
+            why = gate.check(mtype, tb_s, t_rec)
+            c.clock_resets = gate.resets
             if vt is not None and why != "time":
                 vt.commit(t_rec)  # a sample of the vehicle's clock: time moves on
             if why is not None:

@@ -27,6 +27,7 @@ from mpf_mavlink.mavlink.pymav import dialect as _d
 STX_V1 = 0xFE
 STX_V2 = 0xFD
 _TS = struct.Struct(">Q")
+_TS_PACK = _TS.pack
 # plausible record timestamps: 2000-01-01 .. 2100-01-01 (us since the Unix epoch)
 TS_MIN_US = 946_684_800_000_000
 TS_MAX_US = 4_102_444_800_000_000
@@ -93,7 +94,7 @@ class TlogWriter:
         if self._fd is None:
             raise MpfError(f"tlog {self.path} is closed")
         t = self._clock() if t_unix_s is None else float(t_unix_s)
-        if not math.isfinite(t) or t < 0:
+        if not 0.0 <= t < math.inf:  # NaN fails the comparison too
             raise ValueError(f"tlog timestamp must be a finite time >= 0, got {t_unix_s!r}")
         us = round(t * 1e6)
         self.records += 1
@@ -101,12 +102,12 @@ class TlogWriter:
         self.last_us, self.last_packet = us, packet
         if self._hold:
             held = self._held
-            held += _TS.pack(us)
+            held += _TS_PACK(us)
             held += packet
             if len(held) >= HOLD_MAX_BYTES:
                 self.flush()
             return
-        self._write(_TS.pack(us) + bytes(packet))
+        self._write(_TS_PACK(us) + bytes(packet))
 
     def _write(self, rec: bytes | bytearray) -> None:
         assert self._fd is not None
