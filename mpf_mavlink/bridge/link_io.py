@@ -208,10 +208,15 @@ class VehicleLink:
         simulation is starved, bounded by ``wall_s`` (default ``lockstep_wall_timeout_s``) of
         wall time for a vehicle that sends nothing at all."""
         wall = time.monotonic() - since_mono
-        if not self.m.lockstep:
+        m = self.m
+        if not m.lockstep:
             return timeout_s - wall
-        bound = wall_s or self.m.lockstep_wall_timeout_s
-        return min(timeout_s - self.vehicle_since(since_vt), bound - wall)
+        # twice per control frame (the watchdog): vehicle_since and min() written out
+        vt, since = self.vehicle_t, 0.0
+        if vt is not None and since_vt is not None and vt - since_vt > 0.0:
+            since = vt - since_vt
+        left, wall_left = timeout_s - since, (wall_s or m.lockstep_wall_timeout_s) - wall
+        return wall_left if wall_left < left else left
 
     def vehicle_since(self, since_vt: float | None) -> float:
         """Vehicle seconds since ``since_vt``; 0 before any time stamp or after a reboot (its
