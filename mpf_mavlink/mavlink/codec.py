@@ -100,6 +100,9 @@ __all__ = [
 _PACK3 = struct.Struct("3d").pack
 _PACK9 = struct.Struct("9d").pack
 _frombuffer = np.frombuffer
+# the 3x3 straight from the bytes (np.ndarray(shape, dtype, buffer)): one call instead of
+# frombuffer, then a reshape, with the dtype an object rather than ``float`` to look up
+_ndarray, _F64, _SHAPE33 = np.ndarray, np.dtype(np.float64), (3, 3)
 
 
 def _ro(a: Iterable[float]) -> np.ndarray:
@@ -251,9 +254,7 @@ def _ro3(a: float, b: float, c: float) -> np.ndarray:
 
 def _ro33(*rows: float) -> np.ndarray:
     """The 3x3 matrix of nine values in row order, read-only."""
-    arr = _frombuffer(_PACK9(*rows))
-    arr.shape = (3, 3)
-    return arr
+    return _ndarray(_SHAPE33, _F64, _PACK9(*rows))
 
 
 _attitude = _frozen_maker(AttitudeSample)
