@@ -467,3 +467,37 @@ def test_waiting_for_the_heartbeat_announces_us_to_a_listening_vehicle():
     srv.close()
     assert len(got) == 2
     assert all(m.autopilot == mavlink.MAV_AUTOPILOT_INVALID for m in got)  # a companion's
+
+
+def test_a_udpin_link_answers_every_sender_and_keeps_their_times_only_with_a_timeout():
+    """pymavlink's udpin bookkeeping, as the link's datagram reader keeps it: every address
+    heard from is a client (a second sender is learnt from its first datagram); the time each
+    was last heard is what mavudp.write expires clients by, so it follows every datagram when
+    the connection has a timeout and is set once per address without one."""
+    port = free_udp_port()
+    link = open_link(f"udpin:127.0.0.1:{port}", vehicle_sysid=1)
+    a, b = vehicle_peer(port), vehicle_peer(port, sysid=2)
+    try:
+        conn = link.conn
+        assert conn.timeout <= 0
+        px4_heartbeat(a)
+        assert link.recv(1.0) is not None
+        (addr_a,) = conn.clients
+        first = conn.clients_last_alive[addr_a]
+        time.sleep(0.01)
+        px4_heartbeat(a)
+        assert link.recv(1.0) is not None
+        assert conn.clients_last_alive[addr_a] == first  # no timeout: never read, not kept
+        link.allow_sysid(2)
+        px4_heartbeat(b)
+        assert link.recv(1.0) is not None
+        assert len(conn.clients) == 2 and addr_a in conn.clients
+        conn.timeout = 5.0
+        time.sleep(0.01)
+        px4_heartbeat(a)
+        assert link.recv(1.0) is not None
+        assert conn.clients_last_alive[addr_a] > first  # with a timeout: every datagram
+    finally:
+        a.close()
+        b.close()
+        link.close()
