@@ -8,8 +8,9 @@ import pytest
 
 from mpf_mavlink.core import so3
 from mpf_mavlink.core.guidance import Extensions, Gains, VehicleState, mpf_law
+from mpf_mavlink.core.guidance.law import MpfErrors, mpf_errors
 from mpf_mavlink.core.paths import circle, helix, lemniscate
-from mpf_mavlink.core.target import ConstantTurn, PaperProfile
+from mpf_mavlink.core.target import ConstantTurn, PaperProfile, Stationary
 from sim.plant.kinematic import ClosedLoop, KinematicState, initial_state
 from tests._law_reference import reference_mpf_law
 from tests.test_law_equivalence import _rate_bound
@@ -85,8 +86,9 @@ def test_the_targets_floats_are_its_arrays_and_give_the_same_law_bit_for_bit():
     path, gains = lemniscate(50.0), Gains()
     rng = np.random.default_rng(7)
     live = ConstantTurn((1.0, 2.0, -3.0), 4.0, 0.3, 0.05, 0.5).state(3.0)
-    assert live.floats is None
     for st in [PaperProfile().state(t) for t in (0.0, 12.345, 77.0)] + [
+        live,
+        Stationary((5.0, -2.0, 1.0), 0.7).state(2.0),
         live.extrapolate(3.2),
         PaperProfile().state(5.0).extrapolate(5.07),
     ]:
@@ -109,6 +111,32 @@ def test_the_targets_floats_are_its_arrays_and_give_the_same_law_bit_for_bit():
                 a = mpf_law(10.0, veh, st, path, gains, ext)
                 b = mpf_law(10.0, veh, plain, path, gains, ext)
                 assert repr(a) == repr(b)
+
+
+def test_mpf_errors_are_the_laws_diagnostics_bit_for_bit():
+    # mpf_errors (the bridge's rows at the sample instant under delay compensation) stops the
+    # law after (9): every field it gives must be the full evaluation's float, exactly, or a
+    # replayed run directory would not match the one the bridge wrote.
+    path, gains = lemniscate(50.0), Gains(2.0, 3.0, 5.0)
+    rng = np.random.default_rng(11)
+    for k in range(40):
+        st = (PaperProfile().state(3.0 * k) if k % 2 else ConstantTurn(
+            (1.0, 2.0, -3.0), 4.0, 0.3, 0.05, 0.5).state(3.0 * k))  # fmt: skip
+        p = st.position + st.R_T_I @ (
+            np.array(path.eval(rng.uniform(0, 300))[0]) + rng.normal(0, 8, 3)
+        )
+        R = so3.rot_z(rng.uniform(-3, 3)) @ so3.rot_y(rng.uniform(-0.4, 0.4))
+        veh = VehicleState(st.t, p, R, 15.0, rng.normal(0, 1, 3))
+        for ext in (
+            Extensions(),
+            Extensions(rate_limit=0.3, psi_turn=True, wind_compensation=True),
+        ):
+            s = rng.uniform(0, 300)
+            _, d = mpf_law(s, veh, st, path, gains, ext)
+            e = mpf_errors(s, veh, st, path, gains, ext, mode="flown")
+            assert e.mode == "flown"
+            for name in MpfErrors._fields[:-1]:
+                assert repr(getattr(e, name)) == repr(getattr(d, name)), name
 
 
 def test_coordinate_free_form():

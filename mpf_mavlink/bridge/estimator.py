@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mpf_mavlink.core.frames import wind_frame_from_velocity
-from mpf_mavlink.core.guidance.law import VehicleState
+from mpf_mavlink.core.guidance.law import VehicleState, vehicle_state
 from mpf_mavlink.core.so3 import exp as so3_exp
 
 
@@ -266,6 +266,9 @@ class Estimate:
     wind_source: str  # "WIND" | "WIND_COV" | "estimated"
 
 
+_new = object.__new__
+
+
 class _Fused(NamedTuple):
     """What :meth:`Estimator.estimate` and the wind low-pass both derive from the samples."""
 
@@ -470,7 +473,7 @@ class Estimator:
         elif self.vfr is not None:
             lag = self.att_rx - self.vfr_rx  # type: ignore[operator]
             return None, f"airspeed stale ({lag:.2f} s behind the attitude)"
-        return _Fused(t, px, py, pz, vg, psrc, R, R.tolist(), airspeed)
+        return tuple.__new__(_Fused, (t, px, py, pz, vg, psrc, R, R.tolist(), airspeed))
 
     def _fused_now(self, at_position: bool = False) -> _Fused | tuple[None, str]:
         """:meth:`_fuse` of the samples stored now, computed once per new sample."""
@@ -517,17 +520,7 @@ class Estimator:
         f = self._fused_now(at_position)
         if not isinstance(f, _Fused):
             return f
-        t, px, py, pz, vg, psrc, R, R_rows, airspeed = (
-            f.t,
-            f.px,
-            f.py,
-            f.pz,
-            f.vg,
-            f.psrc,
-            f.R,
-            f.R_rows,
-            f.airspeed,
-        )
+        t, px, py, pz, vg, psrc, R, R_rows, airspeed = f
         # Scalar arithmetic throughout (a numpy call on a 3-vector costs more than the
         # arithmetic): the same operations, in the same order, as the array form.
         gx, gy, gz = vg.tolist()
@@ -572,5 +565,11 @@ class Estimator:
         )  # fmt: skip
         if not math.isfinite(check + t - self.t0 + v_w):
             return None, "non-finite estimate (rejected)"
-        vs = VehicleState(t - self.t0, np.array((px, py, pz)), np.array(W), v_w, wind)
-        return Estimate(vs, t, R, rates, vg, psrc, asrc, wsrc), ""
+        vs = vehicle_state(t - self.t0, np.array((px, py, pz)), np.array(W), v_w, wind)
+        # Estimate(...) without the frozen dataclass's __init__ (as vehicle_state: ~1 us)
+        e = _new(Estimate)
+        d = e.__dict__
+        d["vehicle"], d["t_boot_s"], d["R_B_N"], d["rates_frd"] = vs, t, R, rates
+        d["ground_velocity"], d["position_source"], d["airspeed_source"] = vg, psrc, asrc
+        d["wind_source"] = wsrc
+        return e, ""

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal, NamedTuple
+from typing import Any, Literal, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -107,6 +107,26 @@ class VehicleState:
     wind: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
 
 
+def vehicle_state(
+    t: float,
+    position: NDArray[np.float64],
+    R_W_I: NDArray[np.float64],
+    airspeed: float,
+    wind: NDArray[np.float64],
+) -> VehicleState:
+    """``VehicleState(t, position, R_W_I, airspeed, wind)`` without the frozen dataclass's
+    ``__init__``, which sets each field through ``object.__setattr__`` (~0.5 us of ~0.8; the
+    bridge builds two a control step: the estimate and the prediction). Every field is given,
+    of its declared type: nothing is converted or checked."""
+    vs = _new(VehicleState)
+    d = vs.__dict__
+    d["t"], d["position"], d["R_W_I"], d["airspeed"], d["wind"] = t, position, R_W_I, airspeed, wind
+    return vs
+
+
+_new = object.__new__
+
+
 class MpfCommand(NamedTuple):
     """The law's output at time t (s).
 
@@ -150,6 +170,24 @@ class MpfDiagnostics(NamedTuple):
     mode: str  # "law" or "psi_turn", with "+sat" when the rate limit acted
     k1: float  # path curvature along f2 (1/m)
     k2: float  # path curvature along f3 (1/m)
+
+
+class MpfErrors(NamedTuple):
+    """The fields of :class:`MpfDiagnostics` a run's rows record (the same names, units and
+    floats), from :func:`mpf_errors`: the errors and frames of an instant without the law's
+    rates."""
+
+    t: float
+    s: float
+    pt: Vec
+    pt_norm: float
+    p_f: Vec
+    psi: float
+    e: tuple[float, float]
+    y_w: float
+    z_w: float
+    path_speed_margin: float
+    mode: str  # as the caller gave it (mpf_errors)
 
 
 # The flat results of steady_state_frame and transient_direction (see each).
@@ -296,13 +334,15 @@ def mpf_law(
     gains: Gains,
     ext: Extensions = _NO_EXTENSIONS,
     diagnostics: bool = True,
+    errors_mode: str | None = None,
 ) -> tuple[MpfCommand, MpfDiagnostics | None]:
     """Evaluate the MPF law (22) [sdot], (23) [omega] at the vehicle's time.
 
     s is the virtual point's arc length (m, unwrapped); the target state must be for the same
     time as the vehicle (extrapolate it first: :meth:`TargetState.extrapolate`).
     Returns the command and the diagnostics record (None when ``diagnostics`` is False, which
-    saves the cost of building it inside integrators).
+    saves the cost of building it inside integrators). ``errors_mode``: :func:`mpf_errors`'s
+    (it then returns None and an :class:`MpfErrors` recorded with that mode).
 
     One paragraph per equation of the paper, in the order the law needs them, written out on
     floats (the module docstring says why and how the components are named).
@@ -385,6 +425,17 @@ def mpf_law(
     psi = 0.5 * (1.0 - (w1n * d1n + w1e * d1e + w1d * d1d))
     e2 = 0.5 * (w3n * d1n + w3e * d1e + w3d * d1d)
     e3 = -0.5 * (w2n * d1n + w2e * d1e + w2d * d1d)
+    if errors_mode is not None:  # mpf_errors: the record below without the rates
+        pdn = xn * pdx + yn * pdy + zn * pdz
+        pde = xe * pdx + ye * pdy + ze * pdz
+        pdd = xd * pdx + yd * pdy + zd * pdz
+        errors = tuple.__new__(
+            MpfErrors,
+            (t, s, (rn - pdn, re - pde, rd - pdd), math.sqrt(ex * ex + ey * ey + ez * ez),
+             (tn + pdn, te + pde, td + pdd), psi, (e2, e3), y_w, z_w,
+             v_w - math.sqrt(uF1 * uF1 + uF2 * uF2 + uF3 * uF3), errors_mode),
+        )  # fmt: skip
+        return cast(Any, (None, errors))
 
     # (10) omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d}, each the exact rate
     # of its frame along the closed-loop flow. omega_FT^F = sdot (tau, -kappa_2, kappa_1).
@@ -469,3 +520,20 @@ def mpf_law(
          (on, oe, od), (ff2, ff3), (law2, law3),
          v_w - math.sqrt(uF1 * uF1 + uF2 * uF2 + uF3 * uF3), mode, k1, k2),
     )  # fmt: skip
+
+
+def mpf_errors(
+    s: float,
+    vehicle: VehicleState,
+    target: TargetState,
+    path: TabulatedPath,
+    gains: Gains,
+    ext: Extensions = _NO_EXTENSIONS,
+    mode: str = "law",
+) -> MpfErrors:
+    """The errors and frames of :func:`mpf_law` at (s, vehicle, target), without its rates
+    (10)-(23): the record of an instant that is logged but not flown (the bridge's sample
+    instant when the command comes from a predicted state), at half the law's cost. The same
+    code as the law's up to (9), so the same floats as its :class:`MpfDiagnostics`; ``mode``
+    is recorded as given (the mode of the evaluation that was flown)."""
+    return cast(MpfErrors, mpf_law(s, vehicle, target, path, gains, ext, True, mode)[1])

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mpf_mavlink.core.guidance.law import VehicleState
+from mpf_mavlink.core.guidance.law import VehicleState, vehicle_state
 
 Vec3 = tuple[float, float, float]
 Mat3 = tuple[Vec3, Vec3, Vec3]  # by rows
@@ -174,7 +174,7 @@ def predict_rows(
     w1_I = (R_W[0][0], R_W[1][0], R_W[2][0])
     if tau == 0.0:
         return vs, R, w1_I
-    return VehicleState(vs.t + tau, np.array((p0, p1, p2)), np.array(R_W), v, vs.wind), R, w1_I
+    return vehicle_state(vs.t + tau, np.array((p0, p1, p2)), np.array(R_W), v, vs.wind), R, w1_I
 
 
 __all__ = [
