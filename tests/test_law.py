@@ -8,7 +8,8 @@ import pytest
 
 from mpf_mavlink.core import so3
 from mpf_mavlink.core.guidance import Extensions, Gains, VehicleState, mpf_law
-from mpf_mavlink.core.guidance.law import MpfErrors, mpf_errors
+from mpf_mavlink.core.guidance.law import MpfErrors, mpf_errors, vehicle_state_of_floats
+from mpf_mavlink.core.guidance.predict import predict_rows
 from mpf_mavlink.core.paths import circle, helix, lemniscate
 from mpf_mavlink.core.target import ConstantTurn, PaperProfile, Stationary
 from sim.plant.kinematic import ClosedLoop, KinematicState, initial_state
@@ -111,6 +112,40 @@ def test_the_targets_floats_are_its_arrays_and_give_the_same_law_bit_for_bit():
                 a = mpf_law(10.0, veh, st, path, gains, ext)
                 b = mpf_law(10.0, veh, plain, path, gains, ext)
                 assert repr(a) == repr(b)
+
+
+def test_a_vehicle_state_of_floats_gives_the_same_law_and_prediction_bit_for_bit():
+    # The bridge's states carry their numbers as floats (vehicle_state_of_floats), the arrays
+    # built only if read: the law and the delay compensation's prediction must give the same
+    # bits from either form, and the arrays must be those floats.
+    path, gains = lemniscate(50.0), Gains(2.0, 3.0, 5.0)
+    rng = np.random.default_rng(5)
+    for k in range(20):
+        st = PaperProfile().state(4.0 * k)
+        p = st.position + rng.normal(0, 30, 3)
+        R = so3.rot_z(rng.uniform(-3, 3)) @ so3.rot_y(rng.uniform(-0.4, 0.4))
+        wind = rng.normal(0, 2, 3)
+        arrays = VehicleState(st.t, p, R, 15.0, wind)
+        floats = vehicle_state_of_floats(
+            st.t, tuple(R.ravel().tolist() + p.tolist() + wind.tolist()), 15.0
+        )
+        assert "position" not in vars(floats)
+        for ext in (
+            Extensions(),
+            Extensions(rate_limit=0.3, psi_turn=True, wind_compensation=True),
+        ):
+            assert repr(mpf_law(7.0, arrays, st, path, gains, ext)) == repr(
+                mpf_law(7.0, floats, st, path, gains, ext)
+            )
+        segs = [(0.013, (0.1, -0.2, 0.3)), (0.02, (0.05, 0.0, -0.1))]
+        a, Ra, wa = predict_rows(arrays, R, segs)
+        b, Rb, wb = predict_rows(floats, R, segs)
+        assert (Ra, wa, a.t, a.airspeed) == (Rb, wb, b.t, b.airspeed)
+        for name in ("position", "R_W_I", "wind"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+        assert not floats.R_W_I.flags.writeable and np.array_equal(floats.R_W_I, R)
+        again = dataclasses.replace(floats)  # through __init__, with the arrays
+        assert again.floats is None and np.array_equal(again.position, p)
 
 
 def test_mpf_errors_are_the_laws_diagnostics_bit_for_bit():

@@ -187,7 +187,11 @@ class Step:
         wp = self.w1_prev
         if wp is not None and self.dt > 0.0:
             # logging only: the law never sees this difference of telemetry
-            (_, r01, r02), (_, r11, r12), (_, r21, r22) = vs.R_W_I.tolist()
+            vf = vs.floats
+            if vf is not None:
+                _, r01, r02, _, r11, r12, _, r21, r22 = vf[0:9]
+            else:
+                (_, r01, r02), (_, r11, r12), (_, r21, r22) = vs.R_W_I.tolist()
             w = self.w1
             d0, d1, d2 = (
                 (w[0] - wp[0]) / self.dt,
@@ -207,7 +211,9 @@ class Step:
         d: MpfDiagnostics | MpfErrors | None = self._diag
         if d is None:
             d = self.diag if self._errors_of is None else self._errors_of()
-        return row_from(d, vs.position, (c.w2, c.w3), w_act, c.sdot, tp, tR, vs.wind)
+        vf = vs.floats
+        p, wind = (vf[9:12], vf[12:15]) if vf is not None else (vs.position, vs.wind)
+        return row_from(d, p, (c.w2, c.w3), w_act, c.sdot, tp, tR, wind)
 
     def setpoint_row(self) -> list[float]:
         """The row of setpoints.csv (:data:`SETPOINT_COLUMNS`)."""
@@ -458,8 +464,9 @@ class Controller:
         if callable(tgt):
             tgt = _Once(tgt)
         # The law acts on the state when its setpoint acts (guidance/predict.py)
-        w10, w11, w12 = vs.R_W_I[:, 0].tolist()
-        w1 = (w10, w11, w12)  # measured: the logs' achieved rate
+        vf = vs.floats  # R_W^I by rows, ... (VehicleState.floats: the estimator's states)
+        w1 = (vf[0], vf[3], vf[6]) if vf is not None else tuple(vs.R_W_I[:, 0].tolist())
+        # w1: measured, for the logs' achieved rate
         # the measured attitude by rows and rates: the prediction and the adapter use scalars
         R_m, rates_m = est.R_B_N.tolist(), est.rates_frd.tolist()
         vl, R_B_N, w1l, s_law, tgt_law, tau = self._predicted(est, tgt, w1, R_m, rates_m)

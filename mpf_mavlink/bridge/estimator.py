@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mpf_mavlink.core.frames import wind_frame_from_velocity
-from mpf_mavlink.core.guidance.law import VehicleState, vehicle_state
+from mpf_mavlink.core.guidance.law import VehicleState, vehicle_state_of_floats
 from mpf_mavlink.core.so3 import exp as so3_exp
 
 
@@ -533,12 +533,12 @@ class Estimator:
             or self.att_rx is None
             or abs(self.att_rx - self.wind_rx) <= p.wind_stale_s
         ):
-            wind, wsrc = np.asarray(w.wind_ned, float), w.source
-            ex, ey, ez = wind.tolist()
+            wsrc = w.source
+            ex, ey, ez = np.asarray(w.wind_ned, float).tolist()
         else:
             lp = self._wind_lp
             ex, ey, ez = (0.0, 0.0, 0.0) if lp is None else lp
-            wind, wsrc = np.array((ex, ey, ez)), "estimated"
+            wsrc = "estimated"
         v_air = (gx - ex, gy - ey, gz - ez)
         n_air = math.sqrt(v_air[0] ** 2 + v_air[1] ** 2 + v_air[2] ** 2)
         if n_air < p.min_air_speed:
@@ -565,8 +565,10 @@ class Estimator:
         )  # fmt: skip
         if not math.isfinite(check + t - self.t0 + v_w):
             return None, "non-finite estimate (rejected)"
-        vs = vehicle_state(t - self.t0, np.array((px, py, pz)), np.array(W), v_w, wind)
-        # Estimate(...) without the frozen dataclass's __init__ (as vehicle_state: ~1 us)
+        # the state as floats (the law and the prediction read them; numpy is slow to wake up
+        # in a loop that sleeps between frames), its arrays built if read
+        vs = vehicle_state_of_floats(t - self.t0, w0 + w1 + w2 + (px, py, pz, ex, ey, ez), v_w)
+        # Estimate(...) without the frozen dataclass's __init__ (an object.__setattr__ a field)
         e = _new(Estimate)
         d = e.__dict__
         d["vehicle"], d["t_boot_s"], d["R_B_N"], d["rates_frd"] = vs, t, R, rates

@@ -28,7 +28,9 @@ def limits_row(t: float, estimate: Any, thrust: float) -> tuple[float, ...]:
     roll = math.atan2(r21, r22)
     pitch = math.asin(max(-1.0, min(1.0, -r20)))
     v = estimate.vehicle
-    return (t, roll, pitch, float(v.airspeed), -float(v.position[2]), float(thrust))
+    f = getattr(v, "floats", None)  # VehicleState.floats: p_d is its 12th
+    return (t, roll, pitch, float(v.airspeed), -float(v.position[2] if f is None else f[11]),
+            float(thrust))  # fmt: skip
 
 
 def write_limits(out: Path, rows: NDArray[np.float64]) -> Path:

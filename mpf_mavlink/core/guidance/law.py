@@ -38,8 +38,9 @@ its parent's third axis and -gamma_dot about its own second axis. No I/O, no clo
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass, field
-from typing import Any, Literal, NamedTuple, cast
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -105,22 +106,39 @@ class VehicleState:
     R_W_I: NDArray[np.float64]
     airspeed: float
     wind: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    # The same numbers as floats in a state made by :func:`vehicle_state_of_floats`: R_W^I by
+    # rows (9), then p and eta_hat (3 each). The law reads these; the arrays are built when
+    # first read. Not an init argument, so dataclasses.replace drops it (cannot go stale).
+    floats: tuple[float, ...] | None = field(default=None, init=False, repr=False, compare=False)
+
+    if not TYPE_CHECKING:  # (mypy keeps checking the attributes' names)
+
+        def __getattr__(self, name: str) -> NDArray[np.float64]:
+            """Called only for an attribute the instance does not hold: the arrays of a state
+            made by :func:`vehicle_state_of_floats`, built from its floats when first read."""
+            d = self.__dict__
+            f = d.get("floats")
+            if f is None or name not in _VEHICLE_ARRAYS or "position" in d:
+                raise AttributeError(name)
+            a = _frombuffer(_PACK15(*f))  # one read-only array, the fields views of it
+            d["R_W_I"], d["position"], d["wind"] = a[0:9].reshape(3, 3), a[9:12], a[12:15]
+            return d[name]
 
 
-def vehicle_state(
-    t: float,
-    position: NDArray[np.float64],
-    R_W_I: NDArray[np.float64],
-    airspeed: float,
-    wind: NDArray[np.float64],
-) -> VehicleState:
-    """``VehicleState(t, position, R_W_I, airspeed, wind)`` without the frozen dataclass's
-    ``__init__``, which sets each field through ``object.__setattr__`` (~0.5 us of ~0.8; the
-    bridge builds two a control step: the estimate and the prediction). Every field is given,
-    of its declared type: nothing is converted or checked."""
+_VEHICLE_ARRAYS = frozenset(("position", "R_W_I", "wind"))
+_PACK15 = struct.Struct("15d").pack
+_frombuffer = np.frombuffer
+
+
+def vehicle_state_of_floats(t: float, floats: tuple[float, ...], airspeed: float) -> VehicleState:
+    """The :class:`VehicleState` at time t (s) with airspeed v_w (m/s) of 15 floats in the
+    order of :attr:`VehicleState.floats` (R_W^I by rows, p, eta_hat), whose arrays are built
+    when first read (read-only): the law and the prediction read the floats. Made without the
+    frozen dataclass's ``__init__`` (an ``object.__setattr__`` a field); with the numpy calls
+    it saves, ~3 us of the bridge's every control step, more with cold caches."""
     vs = _new(VehicleState)
     d = vs.__dict__
-    d["t"], d["position"], d["R_W_I"], d["airspeed"], d["wind"] = t, position, R_W_I, airspeed, wind
+    d["t"], d["airspeed"], d["floats"] = t, airspeed, floats
     return vs
 
 
@@ -354,7 +372,14 @@ def mpf_law(
     # ndarray.tolist() gives lists, which are only unpacked. R_W^I's rows hold the north, east
     # and down components of w1, w2, w3; R_T^I's rows are NED's axes in {T} (R_I^T's columns).
     # The target's numbers come as floats when its producer kept them (TargetState.floats).
-    (w1n, w2n, w3n), (w1e, w2e, w3e), (w1d, w2d, w3d) = vehicle.R_W_I.tolist()
+    # The vehicle's too (VehicleState.floats).
+    vf = vehicle.floats
+    if vf is not None:
+        w1n, w2n, w3n, w1e, w2e, w3e, w1d, w2d, w3d, pn, pe, pd, hn, he, hd = vf
+    else:
+        (w1n, w2n, w3n), (w1e, w2e, w3e), (w1d, w2d, w3d) = vehicle.R_W_I.tolist()
+        pn, pe, pd = vehicle.position.tolist()
+        hn, he, hd = vehicle.wind.tolist() if ext.wind_compensation else (0.0, 0.0, 0.0)
     tf = target.floats
     if tf is not None:
         (xn, yn, zn, xe, ye, ze, xd, yd, zd, tn, te, td, vn, ve, vd, an, ae, ad,
@@ -370,15 +395,13 @@ def mpf_law(
     # Into {T}, where the path is fixed: q = R_I^T (p - p_t), the vehicle relative to the
     # target; uu = R_I^T (v_t - eta_hat), the target's velocity less the wind; and c = R_I^T
     # (v_w w1 + eta_hat - v_t) = v_w w1^T - uu, the vehicle's velocity (1) relative to it.
-    a0, a1, a2 = vehicle.position.tolist()
-    rn, re, rd = a0 - tn, a1 - te, a2 - td  # p - p_t (NED)
+    rn, re, rd = pn - tn, pe - te, pd - td  # p - p_t (NED)
     qx = xn * rn + xe * re + xd * rd
     qy = yn * rn + ye * re + yd * rd
     qz = zn * rn + ze * re + zd * rd
     a0, a1, a2 = vn, ve, vd
     if ext.wind_compensation:
-        b0, b1, b2 = vehicle.wind.tolist()
-        a0, a1, a2 = a0 - b0, a1 - b1, a2 - b2
+        a0, a1, a2 = a0 - hn, a1 - he, a2 - hd
     ux = xn * a0 + xe * a1 + xd * a2
     uy = yn * a0 + ye * a1 + yd * a2
     uz = zn * a0 + ze * a1 + zd * a2
