@@ -8,8 +8,10 @@ import pytest
 
 from mpf_mavlink.core import so3
 from mpf_mavlink.core.guidance import Extensions, Gains, VehicleState, mpf_law
+from mpf_mavlink.core.guidance.law import MpfErrors, mpf_errors, vehicle_state_of_floats
+from mpf_mavlink.core.guidance.predict import predict_rows
 from mpf_mavlink.core.paths import circle, helix, lemniscate
-from mpf_mavlink.core.target import ConstantTurn, PaperProfile
+from mpf_mavlink.core.target import ConstantTurn, PaperProfile, Stationary
 from sim.plant.kinematic import ClosedLoop, KinematicState, initial_state
 from tests._law_reference import reference_mpf_law
 from tests.test_law_equivalence import _rate_bound
@@ -85,8 +87,9 @@ def test_the_targets_floats_are_its_arrays_and_give_the_same_law_bit_for_bit():
     path, gains = lemniscate(50.0), Gains()
     rng = np.random.default_rng(7)
     live = ConstantTurn((1.0, 2.0, -3.0), 4.0, 0.3, 0.05, 0.5).state(3.0)
-    assert live.floats is None
     for st in [PaperProfile().state(t) for t in (0.0, 12.345, 77.0)] + [
+        live,
+        Stationary((5.0, -2.0, 1.0), 0.7).state(2.0),
         live.extrapolate(3.2),
         PaperProfile().state(5.0).extrapolate(5.07),
     ]:
@@ -109,6 +112,66 @@ def test_the_targets_floats_are_its_arrays_and_give_the_same_law_bit_for_bit():
                 a = mpf_law(10.0, veh, st, path, gains, ext)
                 b = mpf_law(10.0, veh, plain, path, gains, ext)
                 assert repr(a) == repr(b)
+
+
+def test_a_vehicle_state_of_floats_gives_the_same_law_and_prediction_bit_for_bit():
+    # The bridge's states carry their numbers as floats (vehicle_state_of_floats), the arrays
+    # built only if read: the law and the delay compensation's prediction must give the same
+    # bits from either form, and the arrays must be those floats.
+    path, gains = lemniscate(50.0), Gains(2.0, 3.0, 5.0)
+    rng = np.random.default_rng(5)
+    for k in range(20):
+        st = PaperProfile().state(4.0 * k)
+        p = st.position + rng.normal(0, 30, 3)
+        R = so3.rot_z(rng.uniform(-3, 3)) @ so3.rot_y(rng.uniform(-0.4, 0.4))
+        wind = rng.normal(0, 2, 3)
+        arrays = VehicleState(st.t, p, R, 15.0, wind)
+        floats = vehicle_state_of_floats(
+            st.t, tuple(R.ravel().tolist() + p.tolist() + wind.tolist()), 15.0
+        )
+        assert "position" not in vars(floats)
+        for ext in (
+            Extensions(),
+            Extensions(rate_limit=0.3, psi_turn=True, wind_compensation=True),
+        ):
+            assert repr(mpf_law(7.0, arrays, st, path, gains, ext)) == repr(
+                mpf_law(7.0, floats, st, path, gains, ext)
+            )
+        segs = [(0.013, (0.1, -0.2, 0.3)), (0.02, (0.05, 0.0, -0.1))]
+        a, Ra, wa = predict_rows(arrays, R, segs)
+        b, Rb, wb = predict_rows(floats, R, segs)
+        assert (Ra, wa, a.t, a.airspeed) == (Rb, wb, b.t, b.airspeed)
+        for name in ("position", "R_W_I", "wind"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+        assert not floats.R_W_I.flags.writeable and np.array_equal(floats.R_W_I, R)
+        again = dataclasses.replace(floats)  # through __init__, with the arrays
+        assert again.floats is None and np.array_equal(again.position, p)
+
+
+def test_mpf_errors_are_the_laws_diagnostics_bit_for_bit():
+    # mpf_errors (the bridge's rows at the sample instant under delay compensation) stops the
+    # law after (9): every field it gives must be the full evaluation's float, exactly, or a
+    # replayed run directory would not match the one the bridge wrote.
+    path, gains = lemniscate(50.0), Gains(2.0, 3.0, 5.0)
+    rng = np.random.default_rng(11)
+    for k in range(40):
+        st = (PaperProfile().state(3.0 * k) if k % 2 else ConstantTurn(
+            (1.0, 2.0, -3.0), 4.0, 0.3, 0.05, 0.5).state(3.0 * k))  # fmt: skip
+        p = st.position + st.R_T_I @ (
+            np.array(path.eval(rng.uniform(0, 300))[0]) + rng.normal(0, 8, 3)
+        )
+        R = so3.rot_z(rng.uniform(-3, 3)) @ so3.rot_y(rng.uniform(-0.4, 0.4))
+        veh = VehicleState(st.t, p, R, 15.0, rng.normal(0, 1, 3))
+        for ext in (
+            Extensions(),
+            Extensions(rate_limit=0.3, psi_turn=True, wind_compensation=True),
+        ):
+            s = rng.uniform(0, 300)
+            _, d = mpf_law(s, veh, st, path, gains, ext)
+            e = mpf_errors(s, veh, st, path, gains, ext, mode="flown")
+            assert e.mode == "flown"
+            for name in MpfErrors._fields[:-1]:
+                assert repr(getattr(e, name)) == repr(getattr(d, name)), name
 
 
 def test_coordinate_free_form():

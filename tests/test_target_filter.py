@@ -7,6 +7,7 @@ the geometry (each test says how), not from one run's output.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -363,3 +364,27 @@ def test_state_floats_equal_its_arrays():
              st.omega_dot_T]
         )  # fmt: skip
         assert list(st.floats) == arrays.tolist()
+
+
+def test_a_state_of_floats_reads_as_arrays_built_once():
+    """state() gives its arrays only when read (the law reads the floats): read-only views of
+    one array of the floats, built once, and the state copies, pickles and compares as one
+    built with its arrays."""
+    import copy
+    import pickle
+
+    kf = TargetEstimator(params())
+    feed(kf, reports(BOAT, 20.0, seed=5))
+    st = kf.state(20.0)
+    assert not isinstance(st, str)
+    assert "position" not in vars(st)  # nothing built yet
+    R = st.R_T_I
+    assert R is st.R_T_I and st.position.base is R.base  # built once, views of one array
+    assert not st.velocity.flags.writeable
+    with pytest.raises(AttributeError):
+        st.no_such_field  # noqa: B018
+    eager = dataclasses.replace(st)  # through __init__, with the arrays
+    for other in (copy.copy(kf.state(20.0)), pickle.loads(pickle.dumps(kf.state(20.0))), eager):
+        for name in ("position", "velocity", "acceleration", "R_T_I", "omega_T", "omega_dot_T"):
+            assert np.array_equal(getattr(other, name), getattr(st, name)), name
+    assert repr(eager) == repr(st)

@@ -44,7 +44,14 @@ from mpf_mavlink.config.scenario import build_extensions, build_gains, build_pat
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.adapter import AdapterParams, AdapterState, Setpoint, adapt, safe_setpoint
 from mpf_mavlink.core.guidance.baselines import guidance_law
-from mpf_mavlink.core.guidance.law import MpfCommand, MpfDiagnostics, VehicleState
+from mpf_mavlink.core.guidance.law import (
+    Gains,
+    MpfCommand,
+    MpfDiagnostics,
+    MpfErrors,
+    VehicleState,
+    mpf_errors,
+)
 from mpf_mavlink.core.guidance.predict import look_ahead, predict_rows, prediction_horizon
 from mpf_mavlink.core.target import TargetState
 from mpf_mavlink.errors import MpfError
@@ -92,20 +99,39 @@ def parse_marker(text: str) -> tuple[str, float | None] | None:
 _MODE = MpfDiagnostics._fields.index("mode")
 
 
+class _Once:
+    """A value made by ``make()`` the first time it is asked for, then kept."""
+
+    __slots__ = ("_make", "_value")
+
+    def __init__(self, make: Callable[[], Any]) -> None:
+        self._make: Callable[[], Any] | None = make
+        self._value: Any = None
+
+    def __call__(self) -> Any:
+        if self._make is not None:
+            self._value, self._make = self._make(), None
+        return self._value
+
+
 class Step:
     """One control step: what the law saw and the setpoint it produced.
 
     t: mission time (s); t_boot_s: the ATTITUDE sample's autopilot time (s);
     time_boot_ms: what the setpoint carries; dt: time since the previous step (s, 0 first);
     w1_prev: w1 (NED) of the previous step, for the achieved-rate column of the logs.
-    ``diag``: the law's diagnostics at the sample's own instant. With delay compensation the
-    command comes from the predicted state, and the diagnostics the logs need are a second
-    evaluation of the (pure) law, made only when a record or the display asks for them.
+    ``target``, ``diag``: the target and the law's diagnostics at the sample's own instant.
+    With delay compensation the command comes from the predicted state, and what the logs
+    need of the sample's instant (the target's state there, a second evaluation of the pure
+    law) is made only when a record or the display asks for it, after the setpoint went out:
+    given as functions. ``errors``: the function that gives the rows' part of ``diag``
+    (:func:`~mpf_mavlink.core.guidance.law.mpf_errors`, half the law's cost) when the full
+    record has not been asked for; None: ``diag``.
     """
 
     __slots__ = (
-        "t", "t_boot_s", "time_boot_ms", "dt", "estimate", "target", "cmd", "setpoint",
-        "w1", "w1_prev", "_diag", "_diag_of",
+        "t", "t_boot_s", "time_boot_ms", "dt", "estimate", "cmd", "setpoint",
+        "w1", "w1_prev", "_target", "_target_of", "_diag", "_diag_of", "_errors_of",
     )  # fmt: skip
 
     def __init__(
@@ -115,22 +141,37 @@ class Step:
         time_boot_ms: int,
         dt: float,
         estimate: Estimate,
-        target: TargetState,
+        target: TargetState | Callable[[], TargetState],
         cmd: MpfCommand,
         diag: MpfDiagnostics | Callable[[], MpfDiagnostics],
         setpoint: Setpoint,
         w1: tuple[float, float, float],
         w1_prev: tuple[float, float, float] | None,
+        errors: Callable[[], MpfErrors] | None = None,
     ) -> None:
         self.t, self.t_boot_s, self.time_boot_ms, self.dt = t, t_boot_s, time_boot_ms, dt
-        self.estimate, self.target, self.cmd, self.setpoint = estimate, target, cmd, setpoint
+        self.estimate, self.cmd, self.setpoint = estimate, cmd, setpoint
         self.w1, self.w1_prev = w1, w1_prev
+        self._target: TargetState | None = None
+        self._target_of: Callable[[], TargetState] | None = None
+        if callable(target):
+            self._target_of = target
+        else:
+            self._target = target
         self._diag: MpfDiagnostics | None = None
         self._diag_of: Callable[[], MpfDiagnostics] | None = None
         if callable(diag):
             self._diag_of = diag
         else:
             self._diag = diag
+        self._errors_of = errors
+
+    @property
+    def target(self) -> TargetState:
+        if self._target is None:
+            assert self._target_of is not None
+            self._target, self._target_of = self._target_of(), None
+        return self._target
 
     @property
     def diag(self) -> MpfDiagnostics:
@@ -146,7 +187,11 @@ class Step:
         wp = self.w1_prev
         if wp is not None and self.dt > 0.0:
             # logging only: the law never sees this difference of telemetry
-            (_, r01, r02), (_, r11, r12), (_, r21, r22) = vs.R_W_I.tolist()
+            vf = vs.floats
+            if vf is not None:
+                _, r01, r02, _, r11, r12, _, r21, r22 = vf[0:9]
+            else:
+                (_, r01, r02), (_, r11, r12), (_, r21, r22) = vs.R_W_I.tolist()
             w = self.w1
             d0, d1, d2 = (
                 (w[0] - wp[0]) / self.dt,
@@ -155,10 +200,20 @@ class Step:
             )
             w_act = (-(d0 * r02 + d1 * r12 + d2 * r22), d0 * r01 + d1 * r11 + d2 * r21)
         tg = self.target
+        f = tg.floats
+        tp: Any
+        tR: Any
+        if f is not None:  # its own floats: a live target's arrays need not be built for this
+            tp, tR = f[9:12], (f[0:3], f[3:6], f[6:9])
+        else:
+            tp, tR = tg.position, tg.R_T_I
         c = self.cmd
-        return row_from(
-            self.diag, vs.position, (c.w2, c.w3), w_act, c.sdot, tg.position, tg.R_T_I, vs.wind
-        )
+        d: MpfDiagnostics | MpfErrors | None = self._diag
+        if d is None:
+            d = self.diag if self._errors_of is None else self._errors_of()
+        vf = vs.floats
+        p, wind = (vf[9:12], vf[12:15]) if vf is not None else (vs.position, vs.wind)
+        return row_from(d, p, (c.w2, c.w3), w_act, c.sdot, tp, tR, wind)
 
     def setpoint_row(self) -> list[float]:
         """The row of setpoints.csv (:data:`SETPOINT_COLUMNS`)."""
@@ -382,14 +437,18 @@ class Controller:
     def step(self) -> Step | None:
         """One control step at the latest control instant (ATTITUDE, or a position instant:
         :meth:`feed_vehicle`); None (``why_not`` set) when the state or the target is not
-        usable, or when the sample is not newer than the previous step."""
+        usable, or when the sample is not newer than the previous step.
+
+        What only the logs need (the target at the sample's instant when the command comes
+        from a prediction, the law's diagnostics there) is left in the :class:`Step` as
+        functions, made when a record or the display asks: after the setpoint went out."""
         est, why = self.est.estimate(self.instants.at_position)
         if est is None:
             self.why_not = why
             return None
         vs = est.vehicle
         t = vs.t
-        tgt = self.target.state(t)
+        tgt = self.target.state_later(t)  # whether the target is there now; its state later
         if isinstance(tgt, str):
             self.why_not = tgt
             return None
@@ -402,29 +461,27 @@ class Controller:
                 )
                 return None
             self._advance(dt)
+        if callable(tgt):
+            tgt = _Once(tgt)
         # The law acts on the state when its setpoint acts (guidance/predict.py)
-        w10, w11, w12 = vs.R_W_I[:, 0].tolist()
-        w1 = (w10, w11, w12)  # measured: the logs' achieved rate
+        vf = vs.floats  # R_W^I by rows, ... (VehicleState.floats: the estimator's states)
+        w1 = (vf[0], vf[3], vf[6]) if vf is not None else tuple(vs.R_W_I[:, 0].tolist())
+        # w1: measured, for the logs' achieved rate
         # the measured attitude by rows and rates: the prediction and the adapter use scalars
         R_m, rates_m = est.R_B_N.tolist(), est.rates_frd.tolist()
         vl, R_B_N, w1l, s_law, tgt_law, tau = self._predicted(est, tgt, w1, R_m, rates_m)
-        hold = self.period_s if self.m.delay_compensation else 0.0  # for the adapter's roll loop
+        delay_comp = self.m.delay_compensation
+        hold = self.period_s if delay_comp else 0.0  # for the adapter's roll loop
         self.tau_s = tau
         gains = self.gains
-        if self.m.delay_compensation:
+        if delay_comp:
             a = look_ahead(gains.alpha, gains.K_R, vs.airspeed, self.delay_s, self.period_s)
             if a > gains.alpha:
-                gains = dataclasses.replace(gains, alpha=a)
+                gains = Gains(gains.K_p, gains.K_R, a)
         self.alpha_m = gains.alpha
         law = self.cfg_law
         cmd, diag_law = guidance_law(law, s_law, vl, tgt_law, self.path, gains, self.ext, True)
         assert diag_law is not None
-        diag: MpfDiagnostics | Callable[[], MpfDiagnostics] = diag_law
-        if tau > 0.0:
-            # The logs describe the sample's own instant (errors, frames, the relative position:
-            # replay and the SIL truth align on them); the command and its saturation flag are
-            # the predicted evaluation's, which is what was sent.
-            diag = self._diag_at_sample(self.s, vs, tgt, gains, diag_law.mode)
         self.law_evals += 1
         sp, self.ad_state = adapt(
             cmd.omega_w1_I, vl.airspeed, R_B_N, w1l, dt, self.ad_params, self.ad_state,
@@ -440,7 +497,13 @@ class Controller:
         w1_prev, self.w1_prev = self.w1_prev, w1
         tb_ms = int(round(est.t_boot_s * 1000.0))
         self.why_not = ""  # a step was made: nothing is missing now
-        return Step(t, est.t_boot_s, tb_ms, dt, est, tgt, cmd, diag, sp, w1, w1_prev)
+        if not tau > 0.0:
+            return Step(t, est.t_boot_s, tb_ms, dt, est, tgt_law, cmd, diag_law, sp, w1, w1_prev)
+        # The logs describe the sample's own instant (errors, frames, the relative position:
+        # replay and the SIL truth align on them); the command and its saturation flag are
+        # the predicted evaluation's, which is what was sent.
+        diag, errors = self._at_sample(self.s, vs, tgt, gains, diag_law.mode)
+        return Step(t, est.t_boot_s, tb_ms, dt, est, tgt, cmd, diag, sp, w1, w1_prev, errors)
 
     def _advance(self, dt: float) -> None:
         """s over the dt (s) since the previous step, and the step period (how long a setpoint
@@ -454,7 +517,7 @@ class Controller:
     def _predicted(
         self,
         est: Estimate,
-        tgt: TargetState,
+        tgt: TargetState | Callable[[], TargetState],
         w1: tuple[float, float, float],
         R_m: Any,
         rates_m: Any,
@@ -462,35 +525,49 @@ class Controller:
         """(vehicle state, R_B_N by rows, w1 (NED), s, target, horizon tau s) the law acts
         on: predicted tau ahead with delay compensation (the rates in flight, the target there,
         s moved on by sdot), else those of the sample (``w1``, ``R_m``, ``rates_m``: the
-        sample's, its body rates rad/s)."""
+        sample's, its body rates rad/s; ``tgt`` the target there, or the function that gives
+        it)."""
         vs = est.vehicle
-        if not self.m.delay_compensation:
-            return vs, R_m, w1, self.s, tgt, 0.0
-        tau = prediction_horizon(self.delay.delay_s)
+        tau = prediction_horizon(self.delay.delay_s) if self.m.delay_compensation else 0.0
         if not tau > 0.0:
-            return vs, R_m, w1, self.s, tgt, tau
+            return vs, R_m, w1, self.s, tgt() if callable(tgt) else tgt, tau
         t = vs.t
         segs = self.delay.segments(t, tau, rates_m, self.ad_state.q_bias)
         vl, R_B_N, w1l = predict_rows(vs, R_m, segs)
         tp = self.target.state(t + tau)
+        if isinstance(tp, str):  # placed now but not then: the sample's
+            tp = tgt() if callable(tgt) else tgt
         s_law = self.s + self.sdot_prev * tau
-        return vl, R_B_N, w1l, s_law, tgt if isinstance(tp, str) else tp, tau
+        return vl, R_B_N, w1l, s_law, tp, tau
 
-    def _diag_at_sample(
-        self, s: float, vs: VehicleState, tgt: TargetState, gains: Any, mode: str
-    ) -> Callable[[], MpfDiagnostics]:
-        """The diagnostics of the law at the sample's own instant, when asked for."""
+    def _at_sample(
+        self,
+        s: float,
+        vs: VehicleState,
+        tgt: TargetState | Callable[[], TargetState],
+        gains: Any,
+        mode: str,
+    ) -> tuple[Callable[[], MpfDiagnostics], Callable[[], MpfErrors] | None]:
+        """The diagnostics of the law at the sample's own instant, and their rows' part
+        (:func:`mpf_errors`; None for a baseline law), each when asked for; ``mode`` the
+        flown evaluation's."""
         law, path, ext = self.cfg_law, self.path, self.ext
 
         def diag() -> MpfDiagnostics:
-            _, dm = guidance_law(law, s, vs, tgt, path, gains, ext, True)
+            _, dm = guidance_law(law, s, vs, tgt() if callable(tgt) else tgt, path, gains, ext)
             assert dm is not None
             # dm._replace(mode=mode) without its keyword machinery (~1 us a recorded row)
             fields = list(dm)
             fields[_MODE] = mode
             return tuple.__new__(MpfDiagnostics, fields)
 
-        return diag
+        if law != "mpf":
+            return diag, None
+
+        def errors() -> MpfErrors:
+            return mpf_errors(s, vs, tgt() if callable(tgt) else tgt, path, gains, ext, mode)
+
+        return diag, errors
 
     def roll(self) -> float:
         """Roll (rad) of the latest ATTITUDE, 0 without one (for the wings-level setpoint)."""

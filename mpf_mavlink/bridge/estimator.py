@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mpf_mavlink.core.frames import wind_frame_from_velocity
-from mpf_mavlink.core.guidance.law import VehicleState
+from mpf_mavlink.core.guidance.law import VehicleState, vehicle_state_of_floats
 from mpf_mavlink.core.so3 import exp as so3_exp
 
 
@@ -266,6 +266,9 @@ class Estimate:
     wind_source: str  # "WIND" | "WIND_COV" | "estimated"
 
 
+_new = object.__new__
+
+
 class _Fused(NamedTuple):
     """What :meth:`Estimator.estimate` and the wind low-pass both derive from the samples."""
 
@@ -470,7 +473,7 @@ class Estimator:
         elif self.vfr is not None:
             lag = self.att_rx - self.vfr_rx  # type: ignore[operator]
             return None, f"airspeed stale ({lag:.2f} s behind the attitude)"
-        return _Fused(t, px, py, pz, vg, psrc, R, R.tolist(), airspeed)
+        return tuple.__new__(_Fused, (t, px, py, pz, vg, psrc, R, R.tolist(), airspeed))
 
     def _fused_now(self, at_position: bool = False) -> _Fused | tuple[None, str]:
         """:meth:`_fuse` of the samples stored now, computed once per new sample."""
@@ -517,17 +520,7 @@ class Estimator:
         f = self._fused_now(at_position)
         if not isinstance(f, _Fused):
             return f
-        t, px, py, pz, vg, psrc, R, R_rows, airspeed = (
-            f.t,
-            f.px,
-            f.py,
-            f.pz,
-            f.vg,
-            f.psrc,
-            f.R,
-            f.R_rows,
-            f.airspeed,
-        )
+        t, px, py, pz, vg, psrc, R, R_rows, airspeed = f
         # Scalar arithmetic throughout (a numpy call on a 3-vector costs more than the
         # arithmetic): the same operations, in the same order, as the array form.
         gx, gy, gz = vg.tolist()
@@ -540,12 +533,12 @@ class Estimator:
             or self.att_rx is None
             or abs(self.att_rx - self.wind_rx) <= p.wind_stale_s
         ):
-            wind, wsrc = np.asarray(w.wind_ned, float), w.source
-            ex, ey, ez = wind.tolist()
+            wsrc = w.source
+            ex, ey, ez = np.asarray(w.wind_ned, float).tolist()
         else:
             lp = self._wind_lp
             ex, ey, ez = (0.0, 0.0, 0.0) if lp is None else lp
-            wind, wsrc = np.array((ex, ey, ez)), "estimated"
+            wsrc = "estimated"
         v_air = (gx - ex, gy - ey, gz - ez)
         n_air = math.sqrt(v_air[0] ** 2 + v_air[1] ** 2 + v_air[2] ** 2)
         if n_air < p.min_air_speed:
@@ -572,5 +565,13 @@ class Estimator:
         )  # fmt: skip
         if not math.isfinite(check + t - self.t0 + v_w):
             return None, "non-finite estimate (rejected)"
-        vs = VehicleState(t - self.t0, np.array((px, py, pz)), np.array(W), v_w, wind)
-        return Estimate(vs, t, R, rates, vg, psrc, asrc, wsrc), ""
+        # the state as floats (the law and the prediction read them; numpy is slow to wake up
+        # in a loop that sleeps between frames), its arrays built if read
+        vs = vehicle_state_of_floats(t - self.t0, w0 + w1 + w2 + (px, py, pz, ex, ey, ez), v_w)
+        # Estimate(...) without the frozen dataclass's __init__ (an object.__setattr__ a field)
+        e = _new(Estimate)
+        d = e.__dict__
+        d["vehicle"], d["t_boot_s"], d["R_B_N"], d["rates_frd"] = vs, t, R, rates
+        d["ground_velocity"], d["position_source"], d["airspeed_source"] = vg, psrc, asrc
+        d["wind_source"] = wsrc
+        return e, ""

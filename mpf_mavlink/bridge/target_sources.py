@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -36,6 +37,10 @@ class ScriptedTarget:
         return None
 
     def state(self, t: float) -> TargetState | str:
+        return self.motion.state(t)
+
+    def state_later(self, t: float) -> TargetState | Callable[[], TargetState] | str:
+        """:meth:`state` (see :meth:`LiveTarget.state_later`)."""
         return self.motion.state(t)
 
 
@@ -138,6 +143,10 @@ class ExtrapolatedTarget:
             return f"live target stale ({age:.2f} s old)"
         return self.base.extrapolate(t)
 
+    def state_later(self, t: float) -> TargetState | Callable[[], TargetState] | str:
+        """:meth:`state` (see :meth:`LiveTarget.state_later`)."""
+        return self.state(t)
+
 
 def _floats(a: Any) -> list[Any]:
     """A decoded sample's array (or sequence) as a (nested) list of floats."""
@@ -222,6 +231,17 @@ class LiveTarget:
 
     def state(self, t: float) -> TargetState | str:
         return self.kf.state(t)
+
+    def state_later(self, t: float) -> TargetState | Callable[[], TargetState] | str:
+        """Whether the target can be placed at t (s) decided now (a reason when it cannot), the
+        state itself built by the function returned, when asked: the bridge's logs want the
+        target at the sample's instant, the command the one predicted (controller.py), and
+        what only the logs need is made after the setpoint went out."""
+        kf = self.kf
+        placed = kf.place(t)
+        if isinstance(placed, str):
+            return placed
+        return lambda: kf.build(t, placed)
 
 
 # ----------------------------------------------------------------------------- one step

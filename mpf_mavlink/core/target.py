@@ -8,8 +8,9 @@ rad/s, rad/s^2). Motions are pure functions of t.
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -29,11 +30,26 @@ class TargetState:
     omega_T: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     omega_dot_T: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     # The same numbers as floats, when whoever built the state had them at hand (extrapolate,
-    # PaperProfile.state: :func:`with_floats`): R_T^I by rows (9), then p_t, v_t, a_t,
-    # omega_T, omega_dot_T (3 each). The law reads these instead of converting the arrays
-    # back (~0.5 us of its ~10). Not an init argument, so dataclasses.replace drops it (the
-    # law then reads the arrays) and it cannot go stale.
+    # PaperProfile.state: :func:`with_floats`; :func:`target_state_of_floats`): R_T^I by rows
+    # (9), then p_t, v_t, a_t, omega_T, omega_dot_T (3 each). The law reads these instead of
+    # converting the arrays back (~0.5 us of its ~10). Not an init argument, so
+    # dataclasses.replace drops it (the law then reads the arrays) and it cannot go stale.
     floats: tuple[float, ...] | None = field(default=None, init=False, repr=False, compare=False)
+
+    if not TYPE_CHECKING:  # (mypy keeps checking the attributes' names)
+
+        def __getattr__(self, name: str) -> NDArray[np.float64]:
+            """Called only for an attribute the instance does not hold: the arrays of a state
+            made by :func:`target_state_of_floats`, built from its floats when first read."""
+            d = self.__dict__
+            f = d.get("floats")
+            if f is None or name not in _ARRAY_FIELDS or "position" in d:
+                raise AttributeError(name)
+            a = _frombuffer(_PACK24(*f))  # one read-only array, the fields views of it
+            d["R_T_I"] = a[0:9].reshape(3, 3)
+            d["position"], d["velocity"], d["acceleration"] = a[9:12], a[12:15], a[15:18]
+            d["omega_T"], d["omega_dot_T"] = a[18:21], a[21:24]
+            return d[name]  # type: ignore[no-any-return]
 
     def extrapolate(self, t: float) -> TargetState:
         """Constant-acceleration, constant-angular-acceleration prediction to time t (s)."""
@@ -66,16 +82,29 @@ class TargetState:
         p = (p0 + h * v0 + hh * a0, p1 + h * v1 + hh * a1, p2 + h * v2 + hh * a2)
         v = (v0 + h * a0, v1 + h * a1, v2 + h * a2)
         w = (w0 + h * d0, w1 + h * d1, w2 + h * d2)
-        st = TargetState(
-            t,
-            np.array(p),
-            np.array(v),
-            self.acceleration,
-            np.array(R),
-            np.array(w),
-            self.omega_dot_T,
-        )
-        return with_floats(st, (*R[0], *R[1], *R[2], *p, *v, a0, a1, a2, *w, d0, d1, d2))
+        return target_state_of_floats(t, (*R[0], *R[1], *R[2], *p, *v, a0, a1, a2, *w, d0, d1, d2))
+
+
+_ARRAY_FIELDS = frozenset(
+    ("position", "velocity", "acceleration", "R_T_I", "omega_T", "omega_dot_T")
+)
+_PACK24 = struct.Struct("24d").pack
+_frombuffer = np.frombuffer
+
+
+def target_state_of_floats(t: float, floats: tuple[float, ...]) -> TargetState:
+    """The :class:`TargetState` at time t (s) of 24 floats in the order of
+    :attr:`TargetState.floats` (R_T^I by rows, p_t, v_t, a_t, omega_T, omega_dot_T), whose
+    arrays are built when first read: the law reads the floats, and most states the bridge
+    makes (the target predicted to when its setpoint acts, every control step) are never read
+    as arrays (~2 us a state). Its arrays are read-only."""
+    st = _new(TargetState)
+    d = st.__dict__
+    d["t"], d["floats"] = t, floats
+    return st
+
+
+_new = object.__new__
 
 
 def with_floats(st: TargetState, floats: tuple[float, ...]) -> TargetState:
@@ -99,8 +128,12 @@ class Stationary:
     yaw: float = 0.0
 
     def state(self, t: float) -> TargetState:
-        z = np.zeros(3)
-        return TargetState(t, np.array(self.position, float), z, z.copy(), so3.rot_z(self.yaw))
+        # as floats (the law reads them; the arrays are built if read): rot_z(yaw) by rows
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        n, e, d = (float(x) for x in self.position)
+        return target_state_of_floats(
+            t, (c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0, n, e, d) + (0.0,) * 12
+        )
 
 
 @dataclass(frozen=True)
@@ -126,10 +159,16 @@ class ConstantTurn:
             de = V / w * (math.cos(psi0) - math.cos(psi))
         else:
             dn, de = V * t * math.cos(psi0), V * t * math.sin(psi0)
-        pos = p0 + np.array([dn, de, -self.climb_rate * t])
-        vel = np.array([V * math.cos(psi), V * math.sin(psi), -self.climb_rate])
-        acc = np.array([-V * w * math.sin(psi), V * w * math.cos(psi), 0.0])
-        return TargetState(t, pos, vel, acc, so3.rot_z(psi), np.array([0.0, 0.0, w]), np.zeros(3))
+        pos = (p0 + np.array([dn, de, -self.climb_rate * t])).tolist()
+        c, s = math.cos(psi), math.sin(psi)
+        # as floats (the law reads them; the arrays are built if read): R = rot_z(psi) by rows,
+        # p, v, a, omega, omega_dot
+        return target_state_of_floats(t, (
+            c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0, *pos,
+            V * math.cos(psi), V * math.sin(psi), -self.climb_rate,
+            -V * w * math.sin(psi), V * w * math.cos(psi), 0.0,
+            0.0, 0.0, w, 0.0, 0.0, 0.0,
+        ))  # fmt: skip
 
 
 class PaperProfile:

@@ -68,7 +68,7 @@ from statistics import NormalDist
 import numpy as np
 from numpy.typing import NDArray
 
-from mpf_mavlink.core.target import TargetState, with_floats
+from mpf_mavlink.core.target import TargetState, target_state_of_floats
 
 #: Upward leak of the clock-offset minimum (s per s): follows a sender clock drifting by up to
 #: 100 ppm (crystal clocks: 20-50 ppm) while a single fast report does not fix it for ever.
@@ -634,7 +634,15 @@ class TargetEstimator:
         return sig + 0.5 * self.p.manoeuvre_accel_m_s2 * tau * tau
 
     def state(self, t: float) -> TargetState | str:
-        """The target at control time t (s), or why it cannot be placed.
+        """The target at control time t (s), or why it cannot be placed."""
+        placed = self.place(t)
+        return placed if isinstance(placed, str) else self.build(t, placed)
+
+    def place(self, t: float) -> tuple[float, ...] | str:
+        """Where :meth:`state` puts the target at control time t (s): the predicted mean
+        ``(n, e, d, vn, ve, vd, w)`` and the frame's yaw, or why it cannot be placed;
+        :meth:`build` makes the state of it. Apart so that the bridge decides now whether the
+        target can be placed and builds the state its logs need after the setpoint went out.
 
         Every control step (twice: the sample's instant and the predicted one), so in scalars:
         the mean and only the trace of the predicted position covariance (trace(Fp P Fp') +
@@ -665,22 +673,24 @@ class TargetEstimator:
                 f"live target stale (position uncertainty {sig:.2f} m > "
                 f"{p.max_position_sigma_m:g} m, {age:.2f} s since its last position)"
             )
-        n, e, d, vn, ve, vd, w = x
         att = self.att
         if att is not None and ts - att[0] <= p.attitude_timeout_s:
-            yaw = att[1] + w * (ts - att[0])  # the target's own yaw, turned on at the turn rate
+            yaw = att[1] + x[6] * (ts - att[0])  # the target's own yaw, turned at the turn rate
         else:
             yaw = self._course(x, post.yaw)
+        return (*x, yaw)
+
+    @staticmethod
+    def build(t: float, placed: tuple[float, ...]) -> TargetState:
+        """The state at control time t (s) of what :meth:`place` gave for t: position,
+        velocity, acceleration w [-ve, vn, 0], omega [0, 0, w], omega_dot 0, R = rot_z(yaw),
+        its arrays built when first read (the law reads its floats)."""
+        n, e, d, vn, ve, vd, w, yaw = placed
         cy, sy = math.cos(yaw), math.sin(yaw)
-        # one array, its parts as views (a third cheaper than seven arrays): position,
-        # velocity, acceleration w [-ve, vn, 0], omega [0, 0, w], omega_dot 0, R = rot_z(yaw)
-        an, ae = -w * ve, w * vn
-        a = np.array((n, e, d, vn, ve, vd, an, ae, 0.0, 0.0, 0.0, w, 0.0, 0.0, 0.0,
-                      cy, -sy, 0.0, sy, cy, 0.0, 0.0, 0.0, 1.0))  # fmt: skip
-        st = TargetState(t, a[0:3], a[3:6], a[6:9], a[15:24].reshape(3, 3), a[9:12], a[12:15])
-        # the same numbers as floats, so the law need not read them back out of the arrays
-        return with_floats(st, (cy, -sy, 0.0, sy, cy, 0.0, 0.0, 0.0, 1.0, n, e, d, vn, ve, vd,
-                                an, ae, 0.0, 0.0, 0.0, w, 0.0, 0.0, 0.0))  # fmt: skip
+        return target_state_of_floats(
+            t, (cy, -sy, 0.0, sy, cy, 0.0, 0.0, 0.0, 1.0, n, e, d, vn, ve, vd,
+                -w * ve, w * vn, 0.0, 0.0, 0.0, w, 0.0, 0.0, 0.0),
+        )  # fmt: skip
 
 
 __all__ = ["Report", "TargetEstimator", "TargetFilterParams", "chi2_quantile"]

@@ -55,7 +55,10 @@ class RunTable:
 
 
 def _floats(x: Any) -> Any:
-    """x (an array, nested or not) as Python floats in lists."""
+    """x (an array, nested or not) as Python floats in lists; a tuple (of floats, or of tuples
+    of floats) as it is."""
+    if type(x) is tuple:
+        return x
     return (
         x.tolist()
         if type(x) is np.ndarray and x.dtype == np.float64

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -21,14 +22,14 @@ LIMITS_COLUMNS = "t,roll,pitch,airspeed,altitude,thrust"
 def limits_row(t: float, estimate: Any, thrust: float) -> tuple[float, ...]:
     """One row of ``limits.csv`` from the bridge's estimate (``R_B_N``, ``vehicle.position``
     NED, ``vehicle.airspeed``) and the thrust sent: t, roll, pitch, airspeed, altitude, thrust."""
-    import math
-
     R = estimate.R_B_N
     r20, r21, r22 = R[2].tolist() if type(R) is np.ndarray else (float(x) for x in R[2])
     roll = math.atan2(r21, r22)
     pitch = math.asin(max(-1.0, min(1.0, -r20)))
     v = estimate.vehicle
-    return (t, roll, pitch, float(v.airspeed), -float(v.position[2]), float(thrust))
+    f = getattr(v, "floats", None)  # VehicleState.floats: p_d is its 12th
+    return (t, roll, pitch, float(v.airspeed), -float(v.position[2] if f is None else f[11]),
+            float(thrust))  # fmt: skip
 
 
 def write_limits(out: Path, rows: NDArray[np.float64]) -> Path:

@@ -38,8 +38,9 @@ its parent's third axis and -gamma_dot about its own second axis. No I/O, no clo
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass, field
-from typing import Literal, NamedTuple
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -105,6 +106,43 @@ class VehicleState:
     R_W_I: NDArray[np.float64]
     airspeed: float
     wind: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    # The same numbers as floats in a state made by :func:`vehicle_state_of_floats`: R_W^I by
+    # rows (9), then p and eta_hat (3 each). The law reads these; the arrays are built when
+    # first read. Not an init argument, so dataclasses.replace drops it (cannot go stale).
+    floats: tuple[float, ...] | None = field(default=None, init=False, repr=False, compare=False)
+
+    if not TYPE_CHECKING:  # (mypy keeps checking the attributes' names)
+
+        def __getattr__(self, name: str) -> NDArray[np.float64]:
+            """Called only for an attribute the instance does not hold: the arrays of a state
+            made by :func:`vehicle_state_of_floats`, built from its floats when first read."""
+            d = self.__dict__
+            f = d.get("floats")
+            if f is None or name not in _VEHICLE_ARRAYS or "position" in d:
+                raise AttributeError(name)
+            a = _frombuffer(_PACK15(*f))  # one read-only array, the fields views of it
+            d["R_W_I"], d["position"], d["wind"] = a[0:9].reshape(3, 3), a[9:12], a[12:15]
+            return d[name]
+
+
+_VEHICLE_ARRAYS = frozenset(("position", "R_W_I", "wind"))
+_PACK15 = struct.Struct("15d").pack
+_frombuffer = np.frombuffer
+
+
+def vehicle_state_of_floats(t: float, floats: tuple[float, ...], airspeed: float) -> VehicleState:
+    """The :class:`VehicleState` at time t (s) with airspeed v_w (m/s) of 15 floats in the
+    order of :attr:`VehicleState.floats` (R_W^I by rows, p, eta_hat), whose arrays are built
+    when first read (read-only): the law and the prediction read the floats. Made without the
+    frozen dataclass's ``__init__`` (an ``object.__setattr__`` a field); with the numpy calls
+    it saves, ~3 us of the bridge's every control step, more with cold caches."""
+    vs = _new(VehicleState)
+    d = vs.__dict__
+    d["t"], d["airspeed"], d["floats"] = t, airspeed, floats
+    return vs
+
+
+_new = object.__new__
 
 
 class MpfCommand(NamedTuple):
@@ -150,6 +188,24 @@ class MpfDiagnostics(NamedTuple):
     mode: str  # "law" or "psi_turn", with "+sat" when the rate limit acted
     k1: float  # path curvature along f2 (1/m)
     k2: float  # path curvature along f3 (1/m)
+
+
+class MpfErrors(NamedTuple):
+    """The fields of :class:`MpfDiagnostics` a run's rows record (the same names, units and
+    floats), from :func:`mpf_errors`: the errors and frames of an instant without the law's
+    rates."""
+
+    t: float
+    s: float
+    pt: Vec
+    pt_norm: float
+    p_f: Vec
+    psi: float
+    e: tuple[float, float]
+    y_w: float
+    z_w: float
+    path_speed_margin: float
+    mode: str  # as the caller gave it (mpf_errors)
 
 
 # The flat results of steady_state_frame and transient_direction (see each).
@@ -296,13 +352,15 @@ def mpf_law(
     gains: Gains,
     ext: Extensions = _NO_EXTENSIONS,
     diagnostics: bool = True,
+    errors_mode: str | None = None,
 ) -> tuple[MpfCommand, MpfDiagnostics | None]:
     """Evaluate the MPF law (22) [sdot], (23) [omega] at the vehicle's time.
 
     s is the virtual point's arc length (m, unwrapped); the target state must be for the same
     time as the vehicle (extrapolate it first: :meth:`TargetState.extrapolate`).
     Returns the command and the diagnostics record (None when ``diagnostics`` is False, which
-    saves the cost of building it inside integrators).
+    saves the cost of building it inside integrators). ``errors_mode``: :func:`mpf_errors`'s
+    (it then returns None and an :class:`MpfErrors` recorded with that mode).
 
     One paragraph per equation of the paper, in the order the law needs them, written out on
     floats (the module docstring says why and how the components are named).
@@ -314,7 +372,14 @@ def mpf_law(
     # ndarray.tolist() gives lists, which are only unpacked. R_W^I's rows hold the north, east
     # and down components of w1, w2, w3; R_T^I's rows are NED's axes in {T} (R_I^T's columns).
     # The target's numbers come as floats when its producer kept them (TargetState.floats).
-    (w1n, w2n, w3n), (w1e, w2e, w3e), (w1d, w2d, w3d) = vehicle.R_W_I.tolist()
+    # The vehicle's too (VehicleState.floats).
+    vf = vehicle.floats
+    if vf is not None:
+        w1n, w2n, w3n, w1e, w2e, w3e, w1d, w2d, w3d, pn, pe, pd, hn, he, hd = vf
+    else:
+        (w1n, w2n, w3n), (w1e, w2e, w3e), (w1d, w2d, w3d) = vehicle.R_W_I.tolist()
+        pn, pe, pd = vehicle.position.tolist()
+        hn, he, hd = vehicle.wind.tolist() if ext.wind_compensation else (0.0, 0.0, 0.0)
     tf = target.floats
     if tf is not None:
         (xn, yn, zn, xe, ye, ze, xd, yd, zd, tn, te, td, vn, ve, vd, an, ae, ad,
@@ -330,15 +395,13 @@ def mpf_law(
     # Into {T}, where the path is fixed: q = R_I^T (p - p_t), the vehicle relative to the
     # target; uu = R_I^T (v_t - eta_hat), the target's velocity less the wind; and c = R_I^T
     # (v_w w1 + eta_hat - v_t) = v_w w1^T - uu, the vehicle's velocity (1) relative to it.
-    a0, a1, a2 = vehicle.position.tolist()
-    rn, re, rd = a0 - tn, a1 - te, a2 - td  # p - p_t (NED)
+    rn, re, rd = pn - tn, pe - te, pd - td  # p - p_t (NED)
     qx = xn * rn + xe * re + xd * rd
     qy = yn * rn + ye * re + yd * rd
     qz = zn * rn + ze * re + zd * rd
     a0, a1, a2 = vn, ve, vd
     if ext.wind_compensation:
-        b0, b1, b2 = vehicle.wind.tolist()
-        a0, a1, a2 = a0 - b0, a1 - b1, a2 - b2
+        a0, a1, a2 = a0 - hn, a1 - he, a2 - hd
     ux = xn * a0 + xe * a1 + xd * a2
     uy = yn * a0 + ye * a1 + yd * a2
     uz = zn * a0 + ze * a1 + zd * a2
@@ -385,6 +448,17 @@ def mpf_law(
     psi = 0.5 * (1.0 - (w1n * d1n + w1e * d1e + w1d * d1d))
     e2 = 0.5 * (w3n * d1n + w3e * d1e + w3d * d1d)
     e3 = -0.5 * (w2n * d1n + w2e * d1e + w2d * d1d)
+    if errors_mode is not None:  # mpf_errors: the record below without the rates
+        pdn = xn * pdx + yn * pdy + zn * pdz
+        pde = xe * pdx + ye * pdy + ze * pdz
+        pdd = xd * pdx + yd * pdy + zd * pdz
+        errors = tuple.__new__(
+            MpfErrors,
+            (t, s, (rn - pdn, re - pde, rd - pdd), math.sqrt(ex * ex + ey * ey + ez * ez),
+             (tn + pdn, te + pde, td + pdd), psi, (e2, e3), y_w, z_w,
+             v_w - math.sqrt(uF1 * uF1 + uF2 * uF2 + uF3 * uF3), errors_mode),
+        )  # fmt: skip
+        return cast(Any, (None, errors))
 
     # (10) omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d}, each the exact rate
     # of its frame along the closed-loop flow. omega_FT^F = sdot (tau, -kappa_2, kappa_1).
@@ -469,3 +543,20 @@ def mpf_law(
          (on, oe, od), (ff2, ff3), (law2, law3),
          v_w - math.sqrt(uF1 * uF1 + uF2 * uF2 + uF3 * uF3), mode, k1, k2),
     )  # fmt: skip
+
+
+def mpf_errors(
+    s: float,
+    vehicle: VehicleState,
+    target: TargetState,
+    path: TabulatedPath,
+    gains: Gains,
+    ext: Extensions = _NO_EXTENSIONS,
+    mode: str = "law",
+) -> MpfErrors:
+    """The errors and frames of :func:`mpf_law` at (s, vehicle, target), without its rates
+    (10)-(23): the record of an instant that is logged but not flown (the bridge's sample
+    instant when the command comes from a predicted state), at half the law's cost. The same
+    code as the law's up to (9), so the same floats as its :class:`MpfDiagnostics`; ``mode``
+    is recorded as given (the mode of the evaluation that was flown)."""
+    return cast(MpfErrors, mpf_law(s, vehicle, target, path, gains, ext, True, mode)[1])

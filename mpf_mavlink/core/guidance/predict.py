@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mpf_mavlink.core.guidance.law import VehicleState
+from mpf_mavlink.core.guidance.law import VehicleState, vehicle_state_of_floats
 
 Vec3 = tuple[float, float, float]
 Mat3 = tuple[Vec3, Vec3, Vec3]  # by rows
@@ -148,9 +148,15 @@ def predict_rows(
     this runs at every control step, where numpy's per-call cost on 3-vectors and 3x3
     matrices (~1 us a call) was most of the prediction's."""
     R: Mat3 = R_B_N.tolist() if isinstance(R_B_N, np.ndarray) else R_B_N
-    R_W: Mat3 = np.asarray(vs.R_W_I, float).tolist()
-    p0, p1, p2 = np.asarray(vs.position, float).tolist()
-    e0, e1, e2 = np.asarray(vs.wind, float).tolist()
+    vf = vs.floats
+    R_W: Any  # rows (tuples or lists)
+    if vf is not None:  # the bridge's states (VehicleState.floats): no numpy
+        R_W = vf[0:3], vf[3:6], vf[6:9]
+        p0, p1, p2, e0, e1, e2 = vf[9:15]
+    else:
+        R_W = np.asarray(vs.R_W_I, float).tolist()
+        p0, p1, p2 = np.asarray(vs.position, float).tolist()
+        e0, e1, e2 = np.asarray(vs.wind, float).tolist()
     v = float(vs.airspeed)
     tau = 0.0
     for dur, rates in segments:
@@ -174,7 +180,8 @@ def predict_rows(
     w1_I = (R_W[0][0], R_W[1][0], R_W[2][0])
     if tau == 0.0:
         return vs, R, w1_I
-    return VehicleState(vs.t + tau, np.array((p0, p1, p2)), np.array(R_W), v, vs.wind), R, w1_I
+    vp = vehicle_state_of_floats(vs.t + tau, (*R_W[0], *R_W[1], *R_W[2], p0, p1, p2, e0, e1, e2), v)
+    return vp, R, w1_I
 
 
 __all__ = [
