@@ -144,23 +144,40 @@ class StepClock:
     """The vehicle's own time: physics steps of ``dt`` since boot (the trim flight included).
 
     ``boot_s`` is what MAVLink's time_boot_ms carries; ``t`` counts from when the vehicle was
-    ready (``mark_ready``), the time of the truth record and the scripted target."""
+    ready (``mark_ready``), the time of the truth record and the scripted target.
+
+    ``boot_s`` and ``t`` are plain attributes, kept by :meth:`advance` (and the ``k`` setter):
+    every piece of the vehicle reads them, a dozen times a frame, and a property is a Python
+    call each time."""
+
+    __slots__ = ("dt", "_k", "k0", "boot_s", "t", "_ms")
 
     def __init__(self, dt: float, k: int = 0):
         self.dt = float(dt)
+        self.k0 = int(k)  # physics steps since boot when the vehicle was ready
         self.k = int(k)  # physics steps since boot
-        self.k0 = self.k  # ... when the vehicle was ready
+
+    @property
+    def k(self) -> int:
+        return self._k
+
+    @k.setter
+    def k(self, k: int) -> None:
+        self._k = k
+        self.boot_s = k * self.dt
+        self.t = (k - self.k0) * self.dt
+        self._ms = -1  # ms() of this k, not computed yet
+
+    def advance(self) -> None:
+        """One physics step on."""
+        k = self._k = self._k + 1
+        self.boot_s = k * self.dt
+        self.t = (k - self.k0) * self.dt
+        self._ms = -1
 
     def mark_ready(self) -> None:
-        self.k0 = self.k
-
-    @property
-    def boot_s(self) -> float:
-        return self.k * self.dt
-
-    @property
-    def t(self) -> float:
-        return (self.k - self.k0) * self.dt
+        self.k0 = self._k
+        self.t = 0.0
 
     @property
     def ready_boot_s(self) -> float:
@@ -168,7 +185,10 @@ class StepClock:
         return self.k0 * self.dt
 
     def ms(self) -> int:
-        return int(round(self.k * self.dt * 1000.0))
+        ms = self._ms
+        if ms < 0:
+            ms = self._ms = int(round(self.boot_s * 1000.0))
+        return ms
 
     def us(self) -> int:
-        return int(round(self.k * self.dt * 1e6))
+        return int(round(self._k * self.dt * 1e6))
