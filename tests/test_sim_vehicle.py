@@ -570,6 +570,39 @@ def test_lockstep_counts_only_the_answer_to_the_last_attitude():
         g.close()
 
 
+def test_a_mode_request_releases_the_lockstep_frames_until_it_is_applied():
+    """The hand-back: the bridge asks for Hold instead of answering. The frame that reads the
+    request ends at once, and so does every frame until it is applied (a command latency of
+    two frames here); then the frames await their answers again."""
+    port = free_port()
+    v = SimVehicle.build("px4", f"udpin:127.0.0.1:{port}", plant="kinematic", clock="lockstep",
+                         command_latency_s=0.04)  # fmt: skip
+    g = Gcs(port)
+    try:
+        for _ in range(20):
+            v.step_once()
+            if any(m.get_type() == "ATTITUDE" for m in g.read()):
+                break
+        for _ in range(3):  # the awaited ATTITUDE is two frames old: written by now
+            v.step_once()
+        g.read()
+        assert not v.poll(0.0)  # awaits an answer
+        g.set_mode(4, 3)  # PX4 AUTO.LOITER
+        assert v.poll(0.5), "the mode request did not end the wait"
+        assert v.lockstep.modes_pending == 1
+        v.step_once()  # not due yet: still released
+        assert v.poll(0.0) and ack_for(g, M.MAV_CMD_DO_SET_MODE) is None
+        for _ in range(3):
+            v.step_once()
+        g.read()
+        assert ack_for(g, M.MAV_CMD_DO_SET_MODE).result == M.MAV_RESULT_ACCEPTED  # applied
+        assert v.lockstep.modes_pending == 0
+        assert not v.poll(0.0)  # awaits its answer again
+    finally:
+        v.close()
+        g.close()
+
+
 def test_lockstep_awaits_position_frames_once_the_bridge_answers_them():
     """ATTITUDE 10 Hz, LOCAL_POSITION_NED 50 Hz: the four frames between two ATTITUDE samples
     carry a position only. A bridge that answers ATTITUDE only is not held up by them; once a

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from types import SimpleNamespace
 
 import numpy as np
@@ -18,11 +19,11 @@ from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 from mpf_mavlink.mavlink.modes import px4_custom_mode  # noqa: E402
 from sim.autopilot.modes import GUIDED, LOITER, OFFBOARD, Modes, Tunables  # noqa: E402
 from sim.autopilot.setpoints import PX4_OFFBOARD_MIN_STREAM_S, Setpoints  # noqa: E402
-from sim.vehicle.clock import StepClock  # noqa: E402
+from sim.vehicle.clock import LockstepClock, StepClock  # noqa: E402
 from sim.vehicle.config import TelemetryRates, VehicleConfig, stock_rates  # noqa: E402
 from sim.vehicle.framing import Framer, crc_mcrf4xx, decode_set_attitude_target  # noqa: E402
 from sim.vehicle.link import _ignored  # noqa: E402
-from sim.vehicle.lockstep import Lockstep  # noqa: E402
+from sim.vehicle.lockstep import Lockstep, is_mode_request  # noqa: E402
 from sim.vehicle.truth import TruthRecorder  # noqa: E402
 
 
@@ -213,6 +214,61 @@ def test_lockstep_unstamped_peer_and_multirate_positions():
     ls.written(-1, 1030, 1.03)
     ls.choose(1.03)
     assert ls.await_ms == 1030
+
+
+def test_a_mode_request_ends_the_waits_until_it_is_applied():
+    """The hand-back: the bridge asks for the hold mode instead of answering; the frames until
+    the request is applied do not wait for answers that will not come."""
+    mav = M.MAVLink(None, 255, 190)
+    do_set_mode = mav.command_long_encode(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 1, 4, 3, 0, 0, 0, 0)
+    set_mode = mav.set_mode_encode(0, 1, 12)  # target 0: any system, as the dispatcher takes it
+    other = mav.command_long_encode(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, 33, 0, 0, 0, 0, 0, 0)
+    elsewhere = mav.command_long_encode(7, 1, M.MAV_CMD_DO_SET_MODE, 0, 1, 4, 3, 0, 0, 0, 0)
+    assert is_mode_request(do_set_mode, "COMMAND_LONG", 1)
+    assert is_mode_request(set_mode, "SET_MODE", 1)
+    assert not is_mode_request(other, "COMMAND_LONG", 1)  # not a mode change: still waits
+    assert not is_mode_request(elsewhere, "COMMAND_LONG", 1)  # another vehicle's
+    ls = Lockstep(frame_period=0.02, command_latency_s=0.02)
+    for k, ms in enumerate((1000, 1020)):
+        ls.written(ms, -1, 1.0 + 0.02 * k)
+        ls.choose(1.0 + 0.02 * k)
+    assert not ls.answered
+    ls.on_mode_request()
+    ls.on_mode_request()
+    assert ls.answered
+    ls.mode_request_applied()
+    assert ls.answered  # one of the two still pending
+    ls.mode_request_applied()
+    assert not ls.answered  # both applied: the frame awaits its answer again
+    ls.mode_request_applied()  # one dispatched without being read here (a test, a replay)
+    assert ls.modes_pending == 0 and not ls.answered
+
+
+def test_lockstep_clock_waits_long_for_an_answering_peer_and_short_after_a_timeout():
+    """The first frame and every frame after an answered one wait up to answered_timeout_s;
+    a frame after a timeout waits answer_timeout_s: the poll is asked for that long."""
+    clock = LockstepClock(answer_timeout_s=0.01, answered_timeout_s=0.2)
+    asked: list[float] = []
+    answers = iter([False, False, True, False])  # the first poll of each frame
+
+    def poll(timeout: float) -> bool:
+        if timeout > 0.0:
+            asked.append(timeout)
+            if next(answers):
+                return True
+        time.sleep(timeout)  # the whole wait passes unanswered
+        return False
+
+    for k in range(4):
+        clock.wait(1.0 + 0.02 * k, poll, lambda: True)
+    # the bounds are the timeouts themselves: poll is asked for what is left of each
+    assert 0.1 < asked[0] <= 0.2  # first frame: the peer is taken to be answering
+    assert asked[1] <= 0.01  # after a timeout
+    assert asked[2] <= 0.01  # still after a timeout (it answers this one)
+    assert 0.1 < asked[3] <= 0.2  # after an answered frame
+    assert clock.timeouts == 3 and clock.answered_frames == 1
+    assert LockstepClock(answer_timeout_s=0.0).answered_timeout_s == 0.0  # free-running stays
+    assert LockstepClock(answer_timeout_s=30.0).answered_timeout_s == 30.0  # never shorter
 
 
 # ------------------------------------------------------------------------------ setpoints

@@ -151,15 +151,16 @@ def sil_vehicle_frame_us(frames: int = 3000) -> dict[str, Any]:
         if v.modes.behaviour != "offboard":
             raise RuntimeError(f"the vehicle did not enter OFFBOARD: {v.mode_name}")
         clock = time.perf_counter
-        plant, fdm_step = v.plant, v.plant.step
+        plant, fdm_run = v.plant, v.plant._run
         fdm = [0.0]
 
-        def timed_step(*a: float) -> None:
+        def timed_run() -> bool:
             t = clock()
-            fdm_step(*a)
+            ok = fdm_run()
             fdm[0] += clock() - t
+            return bool(ok)
 
-        plant.step = timed_step
+        plant._run = timed_run  # what every physics step calls (JSBSim's FGFDMExec.run)
 
         def fly(idle_s: float) -> tuple[Any, Any]:
             total, physics = np.empty(frames), np.empty(frames)

@@ -13,6 +13,7 @@ from typing import Any
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from sim.autopilot.commands import Commands, Outbox
+from sim.autopilot.inner_loop import body_rates
 from sim.autopilot.modes import CRUISE, GUIDED, LOITER, OFFBOARD, Modes, Time, Tunables
 from sim.autopilot.setpoints import Setpoints, clip
 
@@ -143,7 +144,7 @@ class AutopilotEmulation:
         kind, vals, thrust = sp.sp
         dt, ap = self.ap_dt, self.ap
         if kind == "rates":
-            a, e, r = ap.rates_to_surfaces(dt, vals, tuple(st.pqr), st.airspeed)
+            a, e, r = ap.rates_to_surfaces(dt, vals, body_rates(st.pqr), st.airspeed)
         else:
             roll_sp, pitch_sp = vals
             if self.shaper is not None:

@@ -34,6 +34,14 @@ def _wrap_pi(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def body_rates(pqr) -> tuple[float, float, float]:
+    """(p, q, r) of a state's ``pqr`` (an array or a sequence) as Python floats: a numpy scalar
+    that reaches a rate loop's integrator stays in it, and every later step's arithmetic would
+    be numpy's, many times slower than on floats (the same values)."""
+    p, q, r = pqr
+    return float(p), float(q), float(r)
+
+
 # --------------------------------------------------------------------------- gains
 @dataclass
 class RateLoopGains:
@@ -163,12 +171,16 @@ class RateController:
         self._saturated = 0
 
     def update(self, dt: float, rate_sp: float, rate: float, airspeed: float) -> float:
-        """One step: returns u in [-1, 1]."""
-        s = self.airspeed_trim / max(airspeed, self.airspeed_min)
+        """One step: returns u in [-1, 1]. (Three of these run every physics step of the SIL:
+        the floor and the clamp are written out, ``max`` and :func:`_clip` as they evaluate.)"""
+        v_min = self.airspeed_min
+        s = self.airspeed_trim / (v_min if v_min > airspeed else airspeed)
         e = rate_sp - rate
         # integrate unless that drives the saturated output further into saturation
         if self.i > 0.0 and dt > 0.0 and not (self._saturated * e > 0.0):
-            self.integrator = _clip(self.integrator + self.i * e * dt, -self.imax, self.imax)
+            x, hi = self.integrator + self.i * e * dt, self.imax
+            lo = -hi
+            self.integrator = lo if x < lo else hi if x > hi else x
         u = self.trim + s * s * (self.p * e + self.integrator) + s * self.ff * rate_sp
         if u > 1.0:
             u, self._saturated = 1.0, 1
@@ -386,7 +398,7 @@ class FixedWingAutopilot:
         """Roll/pitch setpoints (rad) -> surfaces, using a PlantState-like ``st``."""
         roll, pitch, _ = st.euler
         rates = self.attitude.update(dt, roll_sp, pitch_sp, roll, pitch, st.airspeed)
-        return self.rates_to_surfaces(dt, rates, tuple(st.pqr), st.airspeed)
+        return self.rates_to_surfaces(dt, rates, body_rates(st.pqr), st.airspeed)
 
     def hold_step(
         self,

@@ -353,6 +353,20 @@ class JSBSimPlant:
         self._n_ay = n("accelerations/a-pilot-y-ft_sec2")
         self._n_az = n("accelerations/a-pilot-z-ft_sec2")
         self._n_thrpos = n("fcs/throttle-pos-norm")
+        # what state() reads, in its order: the nodes' bound getters
+        self._state_getters = tuple(
+            x.get_double_value
+            for x in (
+                self._n_lat, self._n_lon, self._n_alt, self._n_phi, self._n_theta, self._n_psi,
+                self._n_t, self._n_vn, self._n_ve, self._n_vd, self._n_p, self._n_q, self._n_r,
+                self._n_vt, self._n_alpha, self._n_beta, self._n_wn, self._n_we, self._n_wd,
+                self._n_ax, self._n_ay, self._n_az, self._n_thrpos,
+            )
+        )  # fmt: skip
+        # the rate loops' inputs, read after every step: the nodes' bound getters
+        self._get_pqr_vt = tuple(
+            x.get_double_value for x in (self._n_p, self._n_q, self._n_r, self._n_vt)
+        )
         self._run = fdm.run
         self._steady_wind = (0.0, 0.0, 0.0)  # m/s NED, what set_wind last set
         self.random_wind: SitlTurbulence | None = None
@@ -376,6 +390,9 @@ class JSBSimPlant:
         self._n_ele, self._s_ele = n(ctl["elevator"][0]), float(ctl["elevator"][1])
         self._n_rud, self._s_rud = n(ctl["rudder"][0]), float(ctl["rudder"][1])
         self._n_thr, self._s_thr = n(ctl["throttle"][0]), float(ctl["throttle"][1])
+        self._set_cmd = tuple(
+            x.set_double_value for x in (self._n_ail, self._n_ele, self._n_rud, self._n_thr)
+        )
 
     def _spin_up(self, thr_prop: str, thr_sign: float, throttle: float) -> None:
         """Start the engines and spin the propeller up. FGPropeller divides the shaft power by
@@ -527,6 +544,21 @@ class JSBSimPlant:
         self._n_thr.set_double_value(throttle * self._s_thr)
         self._run()
 
+    def step_rates(
+        self, aileron: float, elevator: float, rudder: float, throttle: float
+    ) -> tuple[float, float, float, float]:
+        """:meth:`step`, then :meth:`rates_airspeed`: what the vehicle does every physics step,
+        in one call with the nodes' bound accessors (a lockstep frame is short enough that the
+        calls around the two JSBSim steps cost as much as the steps)."""
+        set_a, set_e, set_r, set_t = self._set_cmd
+        set_a(aileron * self._s_ail)
+        set_e(elevator * self._s_ele)
+        set_r(rudder * self._s_rud)
+        set_t(throttle * self._s_thr)
+        self._run()
+        get_p, get_q, get_r, get_vt = self._get_pqr_vt
+        return get_p(), get_q(), get_r(), get_vt() * FT_TO_M
+
     def run(self, n: int, aileron: float, elevator: float, rudder: float, throttle: float) -> None:
         """Hold the commands for ``n`` steps."""
         self._n_ail.set_double_value(aileron * self._s_ail)
@@ -564,46 +596,31 @@ class JSBSimPlant:
         return self._n_t.get_double_value()
 
     def state(self) -> PlantState:
-        """Snapshot of the truth state (SI units, NED/FRD, rad)."""
-        lat = self._n_lat.get_double_value()
-        lon = self._n_lon.get_double_value()
-        alt = self._n_alt.get_double_value() * FT_TO_M
-        phi = self._n_phi.get_double_value()
-        th = self._n_theta.get_double_value()
-        psi = self._n_psi.get_double_value()
-        return make_state(
-            t=self._n_t.get_double_value(),
+        """Snapshot of the truth state (SI units, NED/FRD, rad). (Once per lockstep frame: the
+        nodes' bound getters, a third cheaper than looking the method up on each node.)"""
+        (g_lat, g_lon, g_alt, g_phi, g_th, g_psi, g_t, g_vn, g_ve, g_vd, g_p, g_q, g_r, g_vt,
+         g_alpha, g_beta, g_wn, g_we, g_wd, g_ax, g_ay, g_az,
+         g_thr) = self._state_getters  # fmt: skip
+        lat, lon, alt, phi, th, psi = g_lat(), g_lon(), g_alt() * FT_TO_M, g_phi(), g_th(), g_psi()
+        st = object.__new__(_Snapshot)
+        st.__dict__.update(
+            t=g_t(),
             _p=self.origin.ned(lat, lon, alt),
-            _v=(
-                self._n_vn.get_double_value() * FT_TO_M,
-                self._n_ve.get_double_value() * FT_TO_M,
-                self._n_vd.get_double_value() * FT_TO_M,
-            ),
+            _v=(g_vn() * FT_TO_M, g_ve() * FT_TO_M, g_vd() * FT_TO_M),
             _euler=(phi, th, psi),
             euler=(phi, th, psi if psi <= math.pi else psi - 2.0 * math.pi),
-            _w=(
-                self._n_p.get_double_value(),
-                self._n_q.get_double_value(),
-                self._n_r.get_double_value(),
-            ),
-            airspeed=self._n_vt.get_double_value() * FT_TO_M,
-            alpha=self._n_alpha.get_double_value(),
-            beta=self._n_beta.get_double_value(),
-            _wind=(
-                self._n_wn.get_double_value() * FT_TO_M,
-                self._n_we.get_double_value() * FT_TO_M,
-                self._n_wd.get_double_value() * FT_TO_M,
-            ),
+            _w=(g_p(), g_q(), g_r()),
+            airspeed=g_vt() * FT_TO_M,
+            alpha=g_alpha(),
+            beta=g_beta(),
+            _wind=(g_wn() * FT_TO_M, g_we() * FT_TO_M, g_wd() * FT_TO_M),
             lat_deg=lat,
             lon_deg=lon,
             alt_m=alt,
-            _f_body=(
-                self._n_ax.get_double_value() * FT_TO_M,
-                self._n_ay.get_double_value() * FT_TO_M,
-                self._n_az.get_double_value() * FT_TO_M,
-            ),
-            throttle=self._n_thrpos.get_double_value(),
+            _f_body=(g_ax() * FT_TO_M, g_ay() * FT_TO_M, g_az() * FT_TO_M),
+            throttle=g_thr(),
         )
+        return st
 
     @classmethod
     def from_config(cls, cfg: PlantConfig) -> JSBSimPlant:

@@ -15,9 +15,14 @@ Two clocks:
   advance anyway. A bridge that answers every frame drives the simulation as fast as both sides
   can compute (faster than real time); a dead or silent bridge still sees simulated time pass
   (at ``frame_period / answer_timeout_s`` of real time, e.g. 20 ms / 50 ms = 0.4x), so its
-  offboard-loss timeout is met in sim time. With nobody connected at all the clock paces at
-  real time (a vehicle alone in the world behaves like a real one). ``answer_timeout_s = 0``
-  gives a free-running simulation (never waits).
+  offboard-loss timeout is met in sim time. While the bridge answers, a frame waits up to
+  ``answered_timeout_s`` (1 s) instead: a bridge that is only slow for once (descheduled on a
+  loaded machine) is waited for rather than left a frame behind, which would make the flight
+  depend on the machine's load; the first frame it leaves unanswered brings the short timeout
+  back. A mode change it asks for ends the waits until it is applied (the hand-back:
+  :mod:`sim.vehicle.lockstep`). With nobody connected at all the clock paces at real time (a
+  vehicle alone in the world behaves like a real one). ``answer_timeout_s = 0`` gives a
+  free-running simulation (never waits).
 * :class:`RealtimeClock` - paced to the wall clock (``speed`` x real time), polling the link
   while it waits. If the computation falls more than ``max_lag_s`` behind, the pacing is
   re-anchored instead of bursting to catch up.
@@ -85,14 +90,20 @@ class LockstepClock:
 
     mode = "lockstep"
 
-    def __init__(self, answer_timeout_s: float = 0.05):
+    def __init__(self, answer_timeout_s: float = 0.05, answered_timeout_s: float = 1.0):
         if answer_timeout_s < 0:
             raise ValueError("answer_timeout_s must be >= 0")
         self.answer_timeout_s = float(answer_timeout_s)
+        # after an answered frame (and for a peer's first): never shorter than the plain one,
+        # and 0 (free-running) stays 0
+        self.answered_timeout_s = (
+            max(float(answered_timeout_s), self.answer_timeout_s) if self.answer_timeout_s else 0.0
+        )
+        self._answering = True  # the last frame ended on its answer
         self._rt = RealtimeClock()  # used while nobody is connected
         self.frames = 0
         self.answered_frames = 0  # frames that ended with an answer (not the timeout)
-        self.timeouts = 0  # frames a connected peer left unanswered for answer_timeout_s
+        self.timeouts = 0  # frames a connected peer left unanswered for their timeout
 
     def start(self, sim_t: float) -> None:
         self._rt.start(sim_t)
@@ -101,16 +112,20 @@ class LockstepClock:
         self.frames += 1
         if not has_peer():
             self._rt.wait(sim_t, poll, has_peer)
+            self._answering = True  # a peer that comes (or engages) gets the long wait first
             return
         self._rt.start(sim_t)  # keep the realtime anchor fresh for a later disconnect
-        deadline = time.monotonic() + self.answer_timeout_s
+        timeout = self.answered_timeout_s if self._answering else self.answer_timeout_s
+        deadline = time.monotonic() + timeout
         while True:
             remaining = deadline - time.monotonic()
             if poll(max(0.0, remaining)):
                 self.answered_frames += 1
+                self._answering = True
                 return
             if remaining <= 0.0:
                 self.timeouts += 1
+                self._answering = False
                 return
 
 
@@ -129,23 +144,40 @@ class StepClock:
     """The vehicle's own time: physics steps of ``dt`` since boot (the trim flight included).
 
     ``boot_s`` is what MAVLink's time_boot_ms carries; ``t`` counts from when the vehicle was
-    ready (``mark_ready``), the time of the truth record and the scripted target."""
+    ready (``mark_ready``), the time of the truth record and the scripted target.
+
+    ``boot_s`` and ``t`` are plain attributes, kept by :meth:`advance` (and the ``k`` setter):
+    every piece of the vehicle reads them, a dozen times a frame, and a property is a Python
+    call each time."""
+
+    __slots__ = ("dt", "_k", "k0", "boot_s", "t", "_ms")
 
     def __init__(self, dt: float, k: int = 0):
         self.dt = float(dt)
+        self.k0 = int(k)  # physics steps since boot when the vehicle was ready
         self.k = int(k)  # physics steps since boot
-        self.k0 = self.k  # ... when the vehicle was ready
+
+    @property
+    def k(self) -> int:
+        return self._k
+
+    @k.setter
+    def k(self, k: int) -> None:
+        self._k = k
+        self.boot_s = k * self.dt
+        self.t = (k - self.k0) * self.dt
+        self._ms = -1  # ms() of this k, not computed yet
+
+    def advance(self) -> None:
+        """One physics step on."""
+        k = self._k = self._k + 1
+        self.boot_s = k * self.dt
+        self.t = (k - self.k0) * self.dt
+        self._ms = -1
 
     def mark_ready(self) -> None:
-        self.k0 = self.k
-
-    @property
-    def boot_s(self) -> float:
-        return self.k * self.dt
-
-    @property
-    def t(self) -> float:
-        return (self.k - self.k0) * self.dt
+        self.k0 = self._k
+        self.t = 0.0
 
     @property
     def ready_boot_s(self) -> float:
@@ -153,7 +185,10 @@ class StepClock:
         return self.k0 * self.dt
 
     def ms(self) -> int:
-        return int(round(self.k * self.dt * 1000.0))
+        ms = self._ms
+        if ms < 0:
+            ms = self._ms = int(round(self.boot_s * 1000.0))
+        return ms
 
     def us(self) -> int:
-        return int(round(self.k * self.dt * 1e6))
+        return int(round(self._k * self.dt * 1e6))

@@ -61,7 +61,8 @@ class VehicleConfig:
     physics_rate_hz: float = 120.0  # physics steps at least this often
     frame_period: float = 0.02  # one telemetry frame (s): the lockstep unit
     clock: Any = "lockstep"  # "lockstep", "realtime" or a clock object (sim.vehicle.clock)
-    answer_timeout_s: float = 0.05  # lockstep: wall s to wait for the bridge's answer
+    # lockstep: wall s to wait for the bridge's answer (1 s after a frame it answered: clock.py)
+    answer_timeout_s: float = 0.05
     # lockstep: await only the answer that acts in the next frame (with a command latency of a
     # frame or more an earlier frame's, so the peer computes while the vehicle steps); False:
     # the answer to the telemetry just written (strict alternation: the same flight, slower)

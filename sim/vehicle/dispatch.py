@@ -33,6 +33,8 @@ class Dispatcher:
             else:
                 self.autopilot.set_attitude_target(msg, self.clock.ms())
         elif mt in ("COMMAND_LONG", "COMMAND_INT") and msg.target_system in me:
+            if msg.command == M.MAV_CMD_DO_SET_MODE:
+                self.link.lockstep.mode_request_applied()  # the lockstep waits again
             try:
                 if msg.command in STREAM_COMMANDS:
                     self.telemetry.command(msg)
@@ -41,6 +43,7 @@ class Dispatcher:
             except (ValueError, OverflowError):  # a NaN / huge where an integer belongs
                 self.link.ack(msg.command, M.MAV_RESULT_DENIED, msg)
         elif mt == "SET_MODE" and msg.target_system in me:
+            self.link.lockstep.mode_request_applied()
             self.autopilot.commands.set_mode(msg)
         elif mt == "REQUEST_DATA_STREAM" and msg.target_system in me:
             self.telemetry.request_data_stream(msg)

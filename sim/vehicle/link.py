@@ -16,7 +16,7 @@ from pymavlink.dialects.v20 import ardupilotmega as M
 
 from sim.vehicle.clock import StepClock
 from sim.vehicle.framing import Framer, decode_set_attitude_target
-from sim.vehicle.lockstep import Lockstep
+from sim.vehicle.lockstep import Lockstep, is_mode_request
 
 _DATAGRAM_MAX = 1400  # a UDP datagram carries several packets (as PX4 does), up to this size
 _READS_MAX = 10000  # datagrams read per poll at most (a flood cannot hold the frame forever)
@@ -346,6 +346,8 @@ class Link:
             return
         elif mt not in self.accept:
             return
+        elif is_mode_request(msg, mt, self.sysid):
+            self.lockstep.on_mode_request()
         q = self.incoming
         i = len(q)
         while i > 0 and q[i - 1][0] > due:  # kept in order of due time

@@ -16,13 +16,33 @@ two bit for bit); only the wall time differs.
 A bridge that also answers LOCAL_POSITION_NED between ATTITUDE samples (a multi-rate loop:
 mavlink.position_instants) is awaited on those frames too, from its first answer stamped with a
 position-only frame's time on; before that (and for a bridge that never does) they are not
-awaited, so a peer answering ATTITUDE only is not held up by them."""
+awaited, so a peer answering ATTITUDE only is not held up by them.
+
+A mode change the peer has asked for (SET_MODE, MAV_CMD_DO_SET_MODE) ends the waits until it
+is applied: a bridge that hands back asks for the hold mode instead of answering, and waiting for
+an answer that will not come would only cost wall time (the command acts at the time it was
+read plus the command latency, however long the vehicle waited)."""
 
 from __future__ import annotations
 
 from collections import deque
+from typing import Any
 
 _REMEMBERED = 512  # frames whose stamps are remembered (10 s at 50 Hz)
+
+
+_DO_SET_MODE = 176  # MAV_CMD_DO_SET_MODE
+
+
+def is_mode_request(msg: Any, mtype: str, sysid: int) -> bool:
+    """Whether ``msg`` (of type ``mtype``) asks vehicle ``sysid`` for a mode change."""
+    if mtype == "SET_MODE":
+        return msg.target_system in (0, sysid)
+    return (
+        mtype in ("COMMAND_LONG", "COMMAND_INT")
+        and msg.command == _DO_SET_MODE
+        and msg.target_system in (0, sysid)
+    )
 
 
 class Lockstep:
@@ -41,10 +61,20 @@ class Lockstep:
         self._pos_t: dict[int, float] = {}  # position-only frames: ms -> boot s written
         self.answers_positions = False
         self.answers = 0  # SET_ATTITUDE_TARGET messages received
+        self.modes_pending = 0  # mode changes read and not yet applied
 
     @property
     def answered(self) -> bool:
-        return self.answer_ms >= self.await_ms or self.unstamped
+        return self.answer_ms >= self.await_ms or self.unstamped or self.modes_pending > 0
+
+    def on_mode_request(self) -> None:
+        """A mode change for the vehicle was read (it is applied when due)."""
+        self.modes_pending += 1
+
+    def mode_request_applied(self) -> None:
+        """A mode change read before was applied (or one never read here: nothing pending)."""
+        if self.modes_pending > 0:
+            self.modes_pending -= 1
 
     def on_answer(self, stamp_ms: int) -> float | None:
         """A SET_ATTITUDE_TARGET stamped ``stamp_ms`` arrived: the boot time (s) its telemetry

@@ -103,13 +103,21 @@ def _e7(deg: float) -> int:
     return int(round(deg * 1e7))
 
 
+# x + _RINT - _RINT is x rounded to an integer half to even (IEEE's rounding of the sum, whose
+# unit in the last place is 1) for |x| < 2**51: round(x) without its method look-up, for the
+# integer fields of the message sent every frame
+_RINT = 1.5 * 2.0**52
+
+
 def _global_position(st: Any, ms: int, home_alt_m: float) -> tuple[int, ...]:
     """GLOBAL_POSITION_INT's fields from a plant state."""
     vx, vy, vz = vector_floats(st, "velocity_ned")
-    hdg = int(round(math.degrees(st.euler[2]) * 100.0)) % 36000
-    alt_mm, rel_mm = int(round(st.alt_m * 1000.0)), int(round((st.alt_m - home_alt_m) * 1000.0))
-    return (ms, _e7(st.lat_deg), _e7(st.lon_deg), alt_mm, rel_mm,
-            int(round(vx * 100)), int(round(vy * 100)), int(round(vz * 100)), hdg)  # fmt: skip
+    r = _RINT
+    alt = st.alt_m
+    hdg = int(math.degrees(st.euler[2]) * 100.0 + r - r) % 36000
+    return (ms, int(st.lat_deg * 1e7 + r - r), int(st.lon_deg * 1e7 + r - r),
+            int(alt * 1000.0 + r - r), int((alt - home_alt_m) * 1000.0 + r - r),
+            int(vx * 100 + r - r), int(vy * 100 + r - r), int(vz * 100 + r - r), hdg)  # fmt: skip
 
 
 def _vfr_hud(st: Any) -> tuple[float, ...]:
@@ -187,7 +195,19 @@ class Telemetry:
         self.frame_period = frame_period
         self._heartbeat, self._echo = heartbeat, echo
         self.next: dict[str, float] = {}  # boot s each stream is next due
-        self.sent: dict[str, int] = {}  # messages produced per stream
+        self.sent = dict.fromkeys(("attitude", *STREAM_ORDER), 0)  # messages produced per stream
+        # the builders of the streams' messages (bytes, or None: nothing to send)
+        self._build: dict[str, Callable[[], bytes | None]] = {
+            "global_position": self._global_position,
+            "heartbeat": self._heartbeat_msg,
+            "wind": self._wind,
+            "attitude_target": self._attitude_target,
+            "system_time": self._system_time,
+            "vfr_hud": self._vfr_hud,
+            "home_position": self._home_position,
+            "sys_status": self._sys_status,
+            "gps_raw": self._gps_raw,
+        }
         self.st: Any = None  # the state reported (set each frame by the vehicle)
         self.wind = WindEstimate()  # the wind reported
         self.unix0_us = int(time.time() * 1e6)
@@ -227,14 +247,15 @@ class Telemetry:
     def attitude(self) -> None:
         """ATTITUDE (roll, pitch, yaw, p, q, r) of the state reported, stamped for lockstep."""
         st = self.st
-        self.sent["attitude"] = self.sent.get("attitude", 0) + 1
+        self.sent["attitude"] += 1
         ms = self.clock.ms()
+        roll, pitch, yaw = st.euler
         p, q, r = vector_floats(st, "pqr")
-        self.link.put(self.link.framer.pack(_ATTITUDE, ms, *st.euler, p, q, r), ms)
+        self.link.put(self.link.framer.pack(_ATTITUDE, ms, roll, pitch, yaw, p, q, r), ms)
 
     def local_position(self) -> None:
         st, ms = self.st, self.clock.ms()
-        self.sent["local_position"] = self.sent.get("local_position", 0) + 1
+        self.sent["local_position"] += 1
         x, y, z = vector_floats(st, "position_ned")
         vx, vy, vz = vector_floats(st, "velocity_ned")
         buf = self.link.framer.pack(_LOCAL_POSITION, ms, x, y, z, vx, vy, vz)
@@ -248,48 +269,58 @@ class Telemetry:
         if name == "local_position":
             self.local_position()
             return
-        self.sent[name] = self.sent.get(name, 0) + 1
-        buf = self._message(name)
+        self.sent[name] += 1
+        buf = self._build[name]()
         if buf is not None:
             self.link.put(buf)
 
-    def _message(self, name: str) -> bytes | None:
-        st, ms, us, pack = self.st, self.clock.ms(), self.clock.us(), self.link.framer.pack
-        if name == "global_position":  # first: the one due every frame at PX4's stock rates
-            return pack(_GLOBAL_POSITION, *_global_position(st, ms, self.home_lla[2]))
-        if name == "heartbeat":
-            ap = M.MAV_AUTOPILOT_PX4 if self.px4 else M.MAV_AUTOPILOT_ARDUPILOTMEGA
-            base, custom = self._heartbeat()
-            return pack(SPEC["heartbeat"], M.MAV_TYPE_FIXED_WING, ap, base, custom,
-                        M.MAV_STATE_ACTIVE, 3)  # fmt: skip
-        if name == "wind":
-            w = self.wind.value if self.wind.value is not None else vector_floats(st, "wind_ned")
-            wn, we, wd = (float(x) for x in w)
-            if self.px4:
-                return pack(SPEC["wind_cov"], us, wn, we, 0.0, 0.0, 0.0, st.alt_m, 0.0, 0.0)
-            direction = math.degrees(math.atan2(-we, -wn)) % 360.0
-            return pack(SPEC["wind"], direction, math.sqrt(wn * wn + we * we + wd * wd), wd)
-        if name == "attitude_target":
-            # PX4's ATTITUDE_TARGET: the setpoint in use, stamped when it was received (a
-            # companion measures its loop delay from it); nothing before the first setpoint
-            echo = self._echo()
-            if not self.px4 or echo is None:
-                return None
-            t_ms, tm, q, rates, thrust = echo
-            return pack(SPEC["attitude_target"], t_ms, tm, list(q), *rates, thrust)
-        if name == "system_time":
-            return pack(SPEC["system_time"], self.unix0_us + us, ms)
-        if name == "vfr_hud":
-            return pack(SPEC["vfr_hud"], *_vfr_hud(st))
-        if name == "home_position":
-            lat, lon, alt = self.home_lla
-            return pack(SPEC["home_position"], _e7(lat), _e7(lon), int(round(alt * 1000)),
-                        0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, us)  # fmt: skip
-        if name == "sys_status":
-            return pack(SPEC["sys_status"], *_SYS_STATUS)
-        if name == "gps_raw":
-            return pack(SPEC["gps_raw_int"], *_gps_raw(st, us))
-        return None
+    def _global_position(self) -> bytes:
+        fields = _global_position(self.st, self.clock.ms(), self.home_lla[2])
+        return self.link.framer.pack(_GLOBAL_POSITION, *fields)
+
+    def _heartbeat_msg(self) -> bytes:
+        ap = M.MAV_AUTOPILOT_PX4 if self.px4 else M.MAV_AUTOPILOT_ARDUPILOTMEGA
+        base, custom = self._heartbeat()
+        return self.link.framer.pack(SPEC["heartbeat"], M.MAV_TYPE_FIXED_WING, ap, base, custom,
+                                     M.MAV_STATE_ACTIVE, 3)  # fmt: skip
+
+    def _wind(self) -> bytes:
+        st, pack = self.st, self.link.framer.pack
+        w = self.wind.value if self.wind.value is not None else vector_floats(st, "wind_ned")
+        wn, we, wd = (float(x) for x in w)
+        if self.px4:
+            return pack(SPEC["wind_cov"], self.clock.us(), wn, we, 0.0, 0.0, 0.0, st.alt_m, 0.0,
+                        0.0)  # fmt: skip
+        direction = math.degrees(math.atan2(-we, -wn)) % 360.0
+        return pack(SPEC["wind"], direction, math.sqrt(wn * wn + we * we + wd * wd), wd)
+
+    def _attitude_target(self) -> bytes | None:
+        # PX4's ATTITUDE_TARGET: the setpoint in use, stamped when it was received (a companion
+        # measures its loop delay from it); nothing before the first setpoint
+        echo = self._echo()
+        if not self.px4 or echo is None:
+            return None
+        t_ms, tm, q, rates, thrust = echo
+        return self.link.framer.pack(SPEC["attitude_target"], t_ms, tm, list(q), *rates, thrust)
+
+    def _system_time(self) -> bytes:
+        us = self.clock.us()
+        return self.link.framer.pack(SPEC["system_time"], self.unix0_us + us, self.clock.ms())
+
+    def _vfr_hud(self) -> bytes:
+        return self.link.framer.pack(SPEC["vfr_hud"], *_vfr_hud(self.st))
+
+    def _home_position(self) -> bytes:
+        lat, lon, alt = self.home_lla
+        return self.link.framer.pack(SPEC["home_position"], _e7(lat), _e7(lon),
+                                     int(round(alt * 1000)), 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0],
+                                     0.0, 0.0, 0.0, self.clock.us())  # fmt: skip
+
+    def _sys_status(self) -> bytes:
+        return self.link.framer.pack(SPEC["sys_status"], *_SYS_STATUS)
+
+    def _gps_raw(self) -> bytes:
+        return self.link.framer.pack(SPEC["gps_raw_int"], *_gps_raw(self.st, self.clock.us()))
 
     # ------------------------------------------------------------------ requests
     def command(self, msg: Any) -> None:

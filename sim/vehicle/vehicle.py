@@ -77,7 +77,7 @@ os.environ.setdefault("JSBSIM_DEBUG", "0")
 
 
 from sim.autopilot.emulation import AutopilotEmulation  # noqa: E402
-from sim.autopilot.inner_loop import FixedWingAutopilot, fly_to_trim  # noqa: E402
+from sim.autopilot.inner_loop import FixedWingAutopilot, body_rates, fly_to_trim  # noqa: E402
 from sim.autopilot.modes import Tunables  # noqa: E402
 from sim.plant.kinematic_plant import KinematicMavPlant  # noqa: E402
 from sim.vehicle.clock import StepClock, make_clock  # noqa: E402
@@ -233,9 +233,11 @@ class SimVehicle:
         self.telemetry.st = self._st
         rates_fn = getattr(self.plant, "rates_airspeed", None)
         self._rates_fn = rates_fn or (
-            lambda: (*self.plant.state().pqr, self.plant.state().airspeed)
+            lambda: (*body_rates(self.plant.state().pqr), float(self.plant.state().airspeed))
         )
         self._rates = self._rates_fn()  # (p, q, r) rad/s, airspeed m/s: what the rate loops read
+        # one physics step, then the rates and airspeed after it (one call for the plant's two)
+        self._step_rates = getattr(self.plant, "step_rates", None) or self._plant_step_rates
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self.wall_time_running = 0.0  # wall seconds spent in run()
@@ -329,6 +331,13 @@ class SimVehicle:
             handle(q.popleft()[1])
 
     # ------------------------------------------------------------------ stepping
+    def _plant_step_rates(
+        self, aileron: float, elevator: float, rudder: float, throttle: float
+    ) -> tuple[float, float, float, float]:
+        """A plant without ``step_rates``: ``step`` then the rates and airspeed."""
+        self.plant.step(aileron, elevator, rudder, throttle)
+        return self._rates_fn()
+
     def step_once(self) -> float:
         """One frame: read pending input (no waiting), apply due commands, ``n_sub`` physics
         steps, due telemetry, truth. Returns the sim time ``t``.
@@ -345,26 +354,30 @@ class SimVehicle:
         if not link.drained:
             link.poll(0.0)
         link.drained = False
-        self._apply_due()
-        plant, ape, clock, dt = self.plant, self.autopilot, self.time, self.dt
+        incoming = link.incoming
+        if incoming:
+            self._apply_due()
+        ape, clock, dt = self.autopilot, self.time, self.dt
+        step, offboard_rates = self._step_rates, ape.offboard_rates
         rates, fresh = self._rates, True  # fresh: self._st is the state now
-        last, incoming = self.n_sub - 1, self.link.incoming
+        last = self.n_sub - 1
         for i in range(self.n_sub):
-            fast = ape.offboard_rates(clock.k * dt)
+            fast = offboard_rates(clock.boot_s)
             if fast is not None:
                 # PX4 offboard body rates: the rate loops read only p, q, r and the airspeed,
                 # so the full state (geodetic conversion, matrices) is not needed here
                 a, e, r = ape.ap.rates_to_surfaces(dt, fast[0], rates, rates[3])
-                plant.step(a, e, r, fast[1])
+                rates = step(a, e, r, fast[1])
             else:
-                plant.step(*ape.control(self._st if fresh else self.observe()))
-            clock.k += 1
-            rates, fresh = self._rates_fn(), False
+                rates = step(*ape.control(self._st if fresh else self.observe()))
+            clock.advance()
+            fresh = False
             # what falls due at the frame's end acts from the next frame's start (the same
             # physics), whether it was read before this frame or during the lockstep wait
             if incoming and i < last:
                 self._apply_due()
         self._rates = rates
+        plant = self.plant
         self.observe()
         tel = self.telemetry
         if tel.due("attitude", tel.rates.attitude):
