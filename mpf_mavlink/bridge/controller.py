@@ -32,7 +32,7 @@ import dataclasses
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -100,13 +100,22 @@ _MODE = MpfDiagnostics._fields.index("mode")
 
 
 class _Once:
-    """A value made by ``make()`` the first time it is asked for, then kept."""
+    """A value, or the function ``make()`` that makes it the first time it is asked for
+    (then kept)."""
 
     __slots__ = ("_make", "_value")
 
-    def __init__(self, make: Callable[[], Any]) -> None:
-        self._make: Callable[[], Any] | None = make
+    def __init__(self, value_or_make: Any) -> None:
+        self._make: Callable[[], Any] | None = None
         self._value: Any = None
+        if callable(value_or_make):
+            self._make = value_or_make
+        else:
+            self._value = value_or_make
+
+    @property
+    def made(self) -> bool:
+        return self._make is None
 
     def __call__(self) -> Any:
         if self._make is not None:
@@ -131,7 +140,7 @@ class Step:
 
     __slots__ = (
         "t", "t_boot_s", "time_boot_ms", "dt", "estimate", "cmd", "setpoint",
-        "w1", "w1_prev", "_target", "_target_of", "_diag", "_diag_of", "_errors_of",
+        "w1", "w1_prev", "_target", "_diag", "_errors_of",
     )  # fmt: skip
 
     def __init__(
@@ -152,33 +161,17 @@ class Step:
         self.t, self.t_boot_s, self.time_boot_ms, self.dt = t, t_boot_s, time_boot_ms, dt
         self.estimate, self.cmd, self.setpoint = estimate, cmd, setpoint
         self.w1, self.w1_prev = w1, w1_prev
-        self._target: TargetState | None = None
-        self._target_of: Callable[[], TargetState] | None = None
-        if callable(target):
-            self._target_of = target
-        else:
-            self._target = target
-        self._diag: MpfDiagnostics | None = None
-        self._diag_of: Callable[[], MpfDiagnostics] | None = None
-        if callable(diag):
-            self._diag_of = diag
-        else:
-            self._diag = diag
+        self._target = target if isinstance(target, _Once) else _Once(target)
+        self._diag = _Once(diag)
         self._errors_of = errors
 
     @property
     def target(self) -> TargetState:
-        if self._target is None:
-            assert self._target_of is not None
-            self._target, self._target_of = self._target_of(), None
-        return self._target
+        return cast(TargetState, self._target())
 
     @property
     def diag(self) -> MpfDiagnostics:
-        if self._diag is None:
-            assert self._diag_of is not None
-            self._diag, self._diag_of = self._diag_of(), None
-        return self._diag
+        return cast(MpfDiagnostics, self._diag())
 
     def row(self) -> list[float]:
         """The run directory's timeseries row (:data:`mpf_mavlink.runs.rundir.COLUMNS`)."""
@@ -208,9 +201,9 @@ class Step:
         else:
             tp, tR = tg.position, tg.R_T_I
         c = self.cmd
-        d: MpfDiagnostics | MpfErrors | None = self._diag
-        if d is None:
-            d = self.diag if self._errors_of is None else self._errors_of()
+        # the full record when it was made (or asked for) anyway, else the rows' part of it
+        ef = self._errors_of
+        d: MpfDiagnostics | MpfErrors = self.diag if ef is None or self._diag.made else ef()
         vf = vs.floats
         p, wind = (vf[9:12], vf[12:15]) if vf is not None else (vs.position, vs.wind)
         return row_from(d, p, (c.w2, c.w3), w_act, c.sdot, tp, tR, wind)

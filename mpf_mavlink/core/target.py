@@ -8,7 +8,6 @@ rad/s, rad/s^2). Motions are pure functions of t.
 from __future__ import annotations
 
 import math
-import struct
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol
 
@@ -16,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mpf_mavlink.core import so3
+from mpf_mavlink.core.float_arrays import FloatArrays
 
 
 @dataclass(frozen=True)
@@ -41,15 +41,7 @@ class TargetState:
         def __getattr__(self, name: str) -> NDArray[np.float64]:
             """Called only for an attribute the instance does not hold: the arrays of a state
             made by :func:`target_state_of_floats`, built from its floats when first read."""
-            d = self.__dict__
-            f = d.get("floats")
-            if f is None or name not in _ARRAY_FIELDS or "position" in d:
-                raise AttributeError(name)
-            a = _frombuffer(_PACK24(*f))  # one read-only array, the fields views of it
-            d["R_T_I"] = a[0:9].reshape(3, 3)
-            d["position"], d["velocity"], d["acceleration"] = a[9:12], a[12:15], a[15:18]
-            d["omega_T"], d["omega_dot_T"] = a[18:21], a[21:24]
-            return d[name]  # type: ignore[no-any-return]
+            return _ARRAYS.fill(self.__dict__, name)
 
     def extrapolate(self, t: float) -> TargetState:
         """Constant-acceleration, constant-angular-acceleration prediction to time t (s)."""
@@ -85,11 +77,10 @@ class TargetState:
         return target_state_of_floats(t, (*R[0], *R[1], *R[2], *p, *v, a0, a1, a2, *w, d0, d1, d2))
 
 
-_ARRAY_FIELDS = frozenset(
-    ("position", "velocity", "acceleration", "R_T_I", "omega_T", "omega_dot_T")
-)
-_PACK24 = struct.Struct("24d").pack
-_frombuffer = np.frombuffer
+_ARRAYS = FloatArrays(
+    (("R_T_I", 0, 9), ("position", 9, 12), ("velocity", 12, 15), ("acceleration", 15, 18),
+     ("omega_T", 18, 21), ("omega_dot_T", 21, 24))
+)  # fmt: skip
 
 
 def target_state_of_floats(t: float, floats: tuple[float, ...]) -> TargetState:

@@ -38,13 +38,13 @@ its parent's third axis and -gamma_dot about its own second axis. No I/O, no clo
 from __future__ import annotations
 
 import math
-import struct
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
+from mpf_mavlink.core.float_arrays import FloatArrays
 from mpf_mavlink.core.paths import TabulatedPath
 from mpf_mavlink.core.target import TargetState
 from mpf_mavlink.core.vec3 import (
@@ -116,18 +116,10 @@ class VehicleState:
         def __getattr__(self, name: str) -> NDArray[np.float64]:
             """Called only for an attribute the instance does not hold: the arrays of a state
             made by :func:`vehicle_state_of_floats`, built from its floats when first read."""
-            d = self.__dict__
-            f = d.get("floats")
-            if f is None or name not in _VEHICLE_ARRAYS or "position" in d:
-                raise AttributeError(name)
-            a = _frombuffer(_PACK15(*f))  # one read-only array, the fields views of it
-            d["R_W_I"], d["position"], d["wind"] = a[0:9].reshape(3, 3), a[9:12], a[12:15]
-            return d[name]
+            return _ARRAYS.fill(self.__dict__, name)
 
 
-_VEHICLE_ARRAYS = frozenset(("position", "R_W_I", "wind"))
-_PACK15 = struct.Struct("15d").pack
-_frombuffer = np.frombuffer
+_ARRAYS = FloatArrays((("R_W_I", 0, 9), ("position", 9, 12), ("wind", 12, 15)))
 
 
 def vehicle_state_of_floats(t: float, floats: tuple[float, ...], airspeed: float) -> VehicleState:
