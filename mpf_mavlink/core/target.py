@@ -32,7 +32,7 @@ class TargetState:
     # The same numbers as floats, when whoever built the state had them at hand (extrapolate,
     # PaperProfile.state: :func:`with_floats`; :func:`target_state_of_floats`): R_T^I by rows
     # (9), then p_t, v_t, a_t, omega_T, omega_dot_T (3 each). The law reads these instead of
-    # converting the arrays back (~0.5 us of its ~10). Not an init argument, so
+    # converting the arrays back. Not an init argument, so
     # dataclasses.replace drops it (the law then reads the arrays) and it cannot go stale.
     floats: tuple[float, ...] | None = field(default=None, init=False, repr=False, compare=False)
 
@@ -88,7 +88,7 @@ def target_state_of_floats(t: float, floats: tuple[float, ...]) -> TargetState:
     :attr:`TargetState.floats` (R_T^I by rows, p_t, v_t, a_t, omega_T, omega_dot_T), whose
     arrays are built when first read: the law reads the floats, and most states the bridge
     makes (the target predicted to when its setpoint acts, every control step) are never read
-    as arrays (~2 us a state). Its arrays are read-only."""
+    as arrays. Its arrays are read-only."""
     st = _new(TargetState)
     d = st.__dict__
     d["t"], d["floats"] = t, floats

@@ -121,7 +121,7 @@ class TargetStream:
         """:meth:`_fields` of now, computed with those of the next ``_AHEAD`` due times (a pure
         function of the target's time): one burst every few seconds of sim time instead of one
         evaluation every 10th of a second, each of which ran on caches the rest of the frame
-        and the peer had made cold (~90 us a call in the SIL, 19 warm). The times ahead are
+        and the peer had made cold (several times its warm cost). The times ahead are
         what :meth:`_due` will give if the frames keep their length; any other time is computed
         when it comes."""
         t = self.t

@@ -126,8 +126,8 @@ def vehicle_state_of_floats(t: float, floats: tuple[float, ...], airspeed: float
     """The :class:`VehicleState` at time t (s) with airspeed v_w (m/s) of 15 floats in the
     order of :attr:`VehicleState.floats` (R_W^I by rows, p, eta_hat), whose arrays are built
     when first read (read-only): the law and the prediction read the floats. Made without the
-    frozen dataclass's ``__init__`` (an ``object.__setattr__`` a field); with the numpy calls
-    it saves, ~3 us of the bridge's every control step, more with cold caches."""
+    frozen dataclass's ``__init__`` (an ``object.__setattr__`` a field) and without numpy
+    calls: it is made at every control step."""
     vs = _new(VehicleState)
     d = vs.__dict__
     d["t"], d["airspeed"], d["floats"] = t, airspeed, floats
