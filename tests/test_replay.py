@@ -645,3 +645,22 @@ def test_noisy_late_out_of_order_target_replays_bit_identically(tmp_path):
     te = rp.metrics["replay"]["target_estimator"]
     # every fix twice (one a duplicate), some of them late: the filter saw all three cases
     assert te["fused"] >= 5 and te["duplicate"] >= 5 and te["out_of_order"] >= 1, te
+
+
+def test_replay_points_to_the_runs_own_config_when_the_markers_disagree(tmp_path: Path) -> None:
+    # a SIL run's bridge flies with the SIL's overrides, so its tlog replayed with the YAML the
+    # run started from disagrees at the s0 marker; the run directory holds the config it flew
+    from mpf_mavlink.cli.replay import _config_hint
+
+    tlog, own = tmp_path / "mavlink.tlog", tmp_path / "config.yaml"
+    tlog.write_bytes(b"")
+    other = tmp_path / "other.yaml"
+    disagree = [
+        "the bridge took s0 = 1.0 m, this config gives 2.0 m: the tlog and the code/config disagree"
+    ]
+    assert _config_hint(tlog, other, disagree) is None  # no config beside the tlog
+    own.write_text("name: x\n")
+    hint = _config_hint(tlog, other, disagree)
+    assert hint is not None and str(own) in hint
+    assert _config_hint(tlog, own, disagree) is None  # already replayed with it
+    assert _config_hint(tlog, other, []) is None  # nothing disagreed

@@ -51,8 +51,26 @@ def cmd_replay(args: argparse.Namespace) -> int:
         log=printer(args.quiet),
     )
     print(res.summary(), flush=True)
+    hint = _config_hint(Path(args.tlog), Path(args.config), res.notes)
+    if hint:
+        print(hint, flush=True)
     c = res.check
     return 1 if (c.markers and not c.identical and c.sent) else 0
+
+
+def _config_hint(tlog: Path, config: Path, notes: list[str]) -> str | None:
+    """A pointer to the run's own config when the replay disagrees with the bridge's markers and
+    the tlog sits in a run directory (mpf-mavlink run / sim write config.yaml beside it): a SIL
+    run's bridge flies the scenario with the SIL's overrides, not the YAML it was started with."""
+    if not any("disagree" in n for n in notes):
+        return None
+    own = tlog.parent / "config.yaml"
+    try:
+        if not own.is_file() or own.resolve() == config.resolve():
+            return None
+    except OSError:
+        return None
+    return f"hint              the run's own config is {own}: replay with --config {own}"
 
 
 def add_replay_parser(subparsers: Any) -> argparse.ArgumentParser:
