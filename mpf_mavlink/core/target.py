@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -35,13 +35,6 @@ class TargetState:
     # converting the arrays back. Not an init argument, so
     # dataclasses.replace drops it (the law then reads the arrays) and it cannot go stale.
     floats: tuple[float, ...] | None = field(default=None, init=False, repr=False, compare=False)
-
-    if not TYPE_CHECKING:  # (mypy keeps checking the attributes' names)
-
-        def __getattr__(self, name: str) -> NDArray[np.float64]:
-            """Called only for an attribute the instance does not hold: the arrays of a state
-            made by :func:`target_state_of_floats`, built from its floats when first read."""
-            return _ARRAYS.fill(self.__dict__, name)
 
     def extrapolate(self, t: float) -> TargetState:
         """Constant-acceleration, constant-angular-acceleration prediction to time t (s)."""
@@ -81,6 +74,7 @@ _ARRAYS = FloatArrays(
     (("R_T_I", 0, 9), ("position", 9, 12), ("velocity", 12, 15), ("acceleration", 15, 18),
      ("omega_T", 18, 21), ("omega_dot_T", 21, 24))
 )  # fmt: skip
+_ARRAYS.install(TargetState)
 
 
 def target_state_of_floats(t: float, floats: tuple[float, ...]) -> TargetState:

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal, NamedTuple, cast
+from typing import Any, Literal, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -111,15 +111,9 @@ class VehicleState:
     # first read. Not an init argument, so dataclasses.replace drops it (cannot go stale).
     floats: tuple[float, ...] | None = field(default=None, init=False, repr=False, compare=False)
 
-    if not TYPE_CHECKING:  # (mypy keeps checking the attributes' names)
-
-        def __getattr__(self, name: str) -> NDArray[np.float64]:
-            """Called only for an attribute the instance does not hold: the arrays of a state
-            made by :func:`vehicle_state_of_floats`, built from its floats when first read."""
-            return _ARRAYS.fill(self.__dict__, name)
-
 
 _ARRAYS = FloatArrays((("R_W_I", 0, 9), ("position", 9, 12), ("wind", 12, 15)))
+_ARRAYS.install(VehicleState)
 
 
 def vehicle_state_of_floats(t: float, floats: tuple[float, ...], airspeed: float) -> VehicleState:
