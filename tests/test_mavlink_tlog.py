@@ -423,14 +423,36 @@ def test_a_mapped_writer_writes_the_same_file_across_its_stretches(tmp_path):
         assert w.mapped
         for k, (pkt, t) in enumerate(recs[:half]):
             w.write(pkt, t)
-            if k % 3 == 0:
-                w.ahead()  # as a link does at its pauses
+            # as a link does at its pauses: often, and after bursts of several pages
+            every = 3 if k < half // 2 else 400  # 400 records: 17.6 kB, over four pages
+            if k % every == 0:
+                w.ahead()
+            if k == half // 3:
+                w.fsync()  # the pages written back: ahead() makes them writable again
         assert got.stat().st_size > 44 * half  # mapped ahead of its records
     with TlogWriter(got, mapped=True, append=True) as w:
         for pkt, t in recs[half:]:
             w.write(pkt, t)
     assert got.read_bytes() == ref.read_bytes()
     assert read_tlog(got).zero_tail_bytes == 0
+
+
+def test_a_mapped_writer_prepares_pages_beyond_its_records_only(tmp_path):
+    # ahead() after a burst of several pages written without one (a parameter download read
+    # back to back): the page it makes writable is past the records' end, never one of them
+    recs = _records(400)  # 36-byte records: 14.4 kB, the byte at 4096 is a pitch byte (0x4C)
+    ref, got = tmp_path / "ref.tlog", tmp_path / "burst.tlog"
+    with TlogWriter(ref) as w:
+        for pkt, t in recs:
+            w.write(pkt, t)
+    with TlogWriter(got, mapped=True) as w:
+        w.write(*recs[0])
+        w.ahead()
+        for pkt, t in recs[1:]:
+            w.write(pkt, t)
+        w.ahead()
+    assert ref.read_bytes()[4096] != 0
+    assert got.read_bytes() == ref.read_bytes()
 
 
 def test_a_mapped_writer_without_room_writes_instead(tmp_path, monkeypatch):

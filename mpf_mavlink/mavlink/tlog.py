@@ -103,7 +103,8 @@ class TlogWriter:
         self._map: mmap.mmap | None = None
         self._base = 0  # file offset of the map's first byte
         self._pos = os.lseek(self._fd, 0, os.SEEK_END)  # file offset of the records' end
-        self._touched = 0  # map offset of the first page not written to yet
+        self._touched = 0  # map offset from which the pages were not written to yet
+        self._synced = False  # an fsync wrote the pages back since ahead() last ran
         if mapped:
             self._remap()
         self.records = 0
@@ -162,18 +163,23 @@ class TlogWriter:
         return self._map is not None
 
     def ahead(self) -> None:
-        """A mapped writer: make the next page writable now (its page fault: ~1 every 4 kB
-        of records) and map the next stretch of the file when the records near the end of
-        this one, so that neither happens inside :meth:`write`. Otherwise nothing."""
+        """A mapped writer: make the page after the records' end writable now (its page fault:
+        ~1 every 4 kB of records, and again after an fsync cleaned the pages) and map the next
+        stretch of the file when the records near the end of this one, so that neither happens
+        inside :meth:`write`. Otherwise nothing."""
         m = self._map
         if m is None:
             return
         off = self._pos - self._base
-        if off + _PAGE < self._touched:
+        if self._synced:  # written back: the pages from the records' end on fault again
+            self._synced = False
+            self._touched = off
+        t = max(self._touched, off)  # never below the records' end: those bytes are records
+        if t > off + _PAGE:
             return
-        if self._touched < MAP_BYTES:
-            m[self._touched] = 0  # beyond the records: a zero where a zero was
-            self._touched += _PAGE
+        if t < MAP_BYTES:
+            m[t] = 0  # beyond the records: a zero where a zero was
+            self._touched = t - t % _PAGE + _PAGE
         elif off + 2 * _PAGE > MAP_BYTES:
             self._remap()
 
@@ -197,8 +203,7 @@ class TlogWriter:
                 pass
             return
         self._base = base
-        # the pages before the one the records end in were written already
-        self._touched = -(-(self._pos - base) // _PAGE) * _PAGE
+        self._touched = self._pos - base  # map offset from which pages were not written to
 
     def _write(self, rec: bytes | bytearray) -> None:
         assert self._fd is not None
@@ -225,6 +230,7 @@ class TlogWriter:
             try:
                 os.fsync(fd)
                 self.fsyncs += 1
+                self._synced = True
             except OSError:  # a full or vanished disk: the records are still in the page cache
                 pass
 
@@ -241,6 +247,7 @@ class TlogWriter:
         if self._fd is not None:
             os.fsync(self._fd)
             self.fsyncs += 1
+            self._synced = True
 
     def close(self) -> None:
         # stop the syncer before the fd goes: it must never fsync a closed (or reused) fd
