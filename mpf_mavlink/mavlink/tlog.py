@@ -193,9 +193,9 @@ class TlogWriter:
             old.close()
         base = self._pos - self._pos % mmap.ALLOCATIONGRANULARITY
         try:
-            os.posix_fallocate(self._fd, base, MAP_BYTES)
+            os.posix_fallocate(self._fd, base, MAP_BYTES)  # not on macOS: AttributeError
             self._map = mmap.mmap(self._fd, MAP_BYTES, offset=base)
-        except (OSError, ValueError):
+        except (OSError, ValueError, AttributeError):
             try:
                 os.ftruncate(self._fd, self._pos)
                 os.lseek(self._fd, self._pos, os.SEEK_SET)
