@@ -25,7 +25,7 @@ from mpf_mavlink.mavlink import (
     open_link,
     read_tlog,
 )
-from mpf_mavlink.mavlink.tlog import TlogWriter
+from mpf_mavlink.mavlink.tlog import MAP_BYTES, TlogWriter
 
 # A real ArduPlane SITL recording kept in the repository (provenance: tests/data/README.md).
 SHARED_TLOG = Path(__file__).resolve().parent / "data" / "arduplane-quadplane-sitl-vtol.tlog"
@@ -203,30 +203,88 @@ def test_tlog_survives_sigkill_of_the_writing_link(tmp_path):
     proc = subprocess.Popen([sys.executable, str(script), str(p), "udpout:127.0.0.1:9"], env=env)
     try:
         t_end = time.monotonic() + 10.0
-        while time.monotonic() < t_end and (not p.exists() or p.stat().st_size < 50_000):
+        # the link's writer maps the file ahead of its records: their count says how far it is
+        while time.monotonic() < t_end and (not p.exists() or read_tlog(p).records < 1000):
             time.sleep(0.02)
-        assert p.exists() and p.stat().st_size >= 50_000, "writer did not start"
+        assert p.exists() and read_tlog(p).records >= 1000, "writer did not start"
         os.kill(proc.pid, signal.SIGKILL)  # mid-stream, no chance to flush or close
     finally:
         proc.wait(timeout=5)
     assert proc.returncode == -signal.SIGKILL
     size = p.stat().st_size
     res = read_tlog(p)
-    # every record goes out in one write(), but Linux may still cut a write at a page boundary
-    # when SIGKILL arrives mid-copy: at most the tail of the LAST record is missing, never a
-    # record in the middle (nothing skipped) and never more than one record's bytes
-    # (8-byte stamp + a MAVLink 2 SET_ATTITUDE_TARGET of at most 12 + 39 bytes)
-    assert res.skipped_bytes == 0 and res.truncated_tail_bytes < 8 + 12 + 39
+    # every record is copied into the file's map in one piece, but a SIGKILL can land inside
+    # that copy: at most the LAST record is cut off (one that never went out: a record is
+    # whole before its packet is written), never a record in the middle (no corrupt stretch)
+    # and never more than one record's bytes (8-byte stamp + a MAVLink 2 SET_ATTITUDE_TARGET
+    # of at most 12 + 39 bytes); then the zeros of the mapped stretch, at most MAP_BYTES
+    assert res.skipped_regions == 0 and res.truncated_tail_bytes < 8 + 12 + 39
+    assert res.skipped_bytes == res.truncated_tail_bytes
+    assert 0 < res.zero_tail_bytes <= MAP_BYTES
     assert res.counts == {"SET_ATTITUDE_TARGET": res.records}
     assert all(m.type_mask == 128 for _, m in res)
     # SET_ATTITUDE_TARGET v2, unsigned, trailing zeros trimmed: records have the sizes we decode
-    assert sum(8 + len(m.get_msgbuf()) for _, m in res) + res.truncated_tail_bytes == size
+    assert (
+        sum(8 + len(m.get_msgbuf()) for _, m in res)
+        + res.truncated_tail_bytes
+        + res.zero_tail_bytes
+        == size
+    )
+    assert _pymavlink_messages(p) == res.records  # pymavlink's own reader agrees
+
+
+def _pymavlink_messages(p: Path) -> int:
+    """The messages pymavlink's tlog reader finds in p (a crash's zero tail: one BAD_DATA)."""
     ref = mavutil.mavlink_connection(str(p))
     n = 0
-    while ref.recv_msg() is not None:
-        n += 1
+    while (m := ref.recv_msg()) is not None:
+        n += m.get_type() != "BAD_DATA"
     ref.close()
-    assert n == res.records  # pymavlink's own reader agrees
+    return n
+
+
+SEND_THEN_DIE = textwrap.dedent(
+    """
+    import os, signal, socket, sys
+    from mpf_mavlink.mavlink import dialect, open_link
+    from mpf_mavlink.mavlink.encode import encode_set_attitude_target_rates
+    link = open_link(sys.argv[2], tlog_path=sys.argv[1], vehicle_sysid=None)
+    peer = dialect.MAVLink(None, srcSystem=1, srcComponent=1)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    for k in range(int(sys.argv[3])):
+        # a telemetry datagram in, its setpoint out (the bridge's frame), then the next
+        tx.sendto(peer.attitude_encode(1000 + 20 * k, 0, 0, 0, 0, 0, 0).pack(peer),
+                  ("127.0.0.1", link.conn.port.getsockname()[1]))
+        while link.recv(1.0) is None:
+            pass
+        link.send(encode_set_attitude_target_rates(link.mav, 1000 + 20 * k, 1, 1, 0, 0, 0, 0.5))
+    os.kill(os.getpid(), signal.SIGKILL)  # right after the last sendto: no close, no flush
+    """
+)
+
+
+@pytest.mark.parametrize("frames", [1, 700])  # 700: past the first mapped stretch (64 kB)
+def test_a_setpoint_sent_right_before_a_sigkill_is_in_the_tlog(tmp_path, frames):
+    """The tlog's guarantee: a packet the link sent (and everything received before it) is in
+    the file even if the process is killed the instant its sendto returns."""
+    from mpf_mavlink.mavlink.url import free_udp_port
+
+    p = tmp_path / "died.tlog"
+    script = tmp_path / "die.py"
+    script.write_text(SEND_THEN_DIE)
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    url = f"udpin:127.0.0.1:{free_udp_port()}"
+    proc = subprocess.run([sys.executable, str(script), str(p), url, str(frames)], env=env,
+                          timeout=60)  # fmt: skip
+    assert proc.returncode == -signal.SIGKILL
+    res = read_tlog(p)
+    assert res.counts == {"ATTITUDE": frames, "SET_ATTITUDE_TARGET": frames}
+    assert res.skipped_regions == 0 and res.truncated_tail_bytes == 0
+    assert 0 < res.zero_tail_bytes <= MAP_BYTES  # the unused end of the mapped stretch
+    types = [m.get_type() for _, m in res]
+    assert types == ["ATTITUDE", "SET_ATTITUDE_TARGET"] * frames  # in the order they happened
+    assert res.messages[-1][1].time_boot_ms == 1000 + 20 * (frames - 1)
+    assert _pymavlink_messages(p) == 2 * frames
 
 
 def test_writer_fsyncs_in_the_background_not_in_write(tmp_path, monkeypatch):
@@ -318,13 +376,15 @@ def test_the_link_writes_what_it_received_before_each_packet_it_sends(tmp_path):
             if m is not None:
                 got.append(m)
         assert len(got) == 3
-        # the three were read back to back; nothing made the link pause or send yet
-        held = p.stat().st_size
+        # the three were read back to back; nothing made the link pause or send yet: the
+        # mapped tlog has them already (a holding one, where the file cannot be mapped, would
+        # write them with the next packet sent)
+        assert link.tlog is not None and link.tlog.mapped
+        assert read_tlog(p).counts == {"ATTITUDE": 3}
         link.send(encode_set_attitude_target_rates(link.mav, 1040, 1, 1, 0.0, 0.0, 0.1, 0.5))
         res = read_tlog(p)
         assert res.counts == {"ATTITUDE": 3, "SET_ATTITUDE_TARGET": 1}
         assert [m.get_type() for _, m in res][-1] == "SET_ATTITUDE_TARGET"
-        assert held < p.stat().st_size
     finally:
         tx.close()
         link.close()
@@ -334,10 +394,106 @@ def test_a_link_fsyncing_every_record_does_not_hold_them(tmp_path):
     # tlog_fsync_every_s 0 asks for every record on the disk at once: nothing may wait in memory
     from mpf_mavlink.mavlink.url import free_udp_port
 
-    for every, held in ((0.0, False), (1.0, True), (None, True)):
+    for every, mapped in ((0.0, False), (1.0, True), (None, True)):
         url = f"udpin:127.0.0.1:{free_udp_port()}"
         link = open_link(url, tlog_path=tmp_path / f"{every}.tlog", tlog_fsync_every_s=every)
         try:
-            assert link.tlog is not None and link.tlog._hold is held
+            assert link.tlog is not None and link.tlog.mapped is mapped
+            assert link.tlog._hold is not (every == 0.0)  # the fallback where it cannot map
         finally:
             link.close()
+
+
+def _records(n: int, t0: float = 1.7e9) -> list[tuple[bytes, float]]:
+    mav = dialect.MAVLink(None, srcSystem=1, srcComponent=1)
+    return [(mav.attitude_encode(k, 0.1, 0.2, 0.3, 0, 0, 0).pack(mav), t0 + 0.02 * k)
+            for k in range(n)]  # fmt: skip
+
+
+def test_a_mapped_writer_writes_the_same_file_across_its_stretches(tmp_path):
+    # > 3 mapped stretches of records, some of them appended to an existing file: the file
+    # closed is byte for byte what one write() per record makes, nothing after it
+    recs = _records(3 * MAP_BYTES // 44 + 100)
+    ref, got = tmp_path / "ref.tlog", tmp_path / "mapped.tlog"
+    with TlogWriter(ref) as w:
+        for pkt, t in recs:
+            w.write(pkt, t)
+    half = len(recs) // 2
+    with TlogWriter(got, mapped=True) as w:
+        assert w.mapped
+        for k, (pkt, t) in enumerate(recs[:half]):
+            w.write(pkt, t)
+            # as a link does at its pauses: often, and after bursts of several pages
+            every = 3 if k < half // 2 else 400  # 400 records: 17.6 kB, over four pages
+            if k % every == 0:
+                w.ahead()
+            if k == half // 3:
+                w.fsync()  # the pages written back: ahead() makes them writable again
+        assert got.stat().st_size > 44 * half  # mapped ahead of its records
+    with TlogWriter(got, mapped=True, append=True) as w:
+        for pkt, t in recs[half:]:
+            w.write(pkt, t)
+    assert got.read_bytes() == ref.read_bytes()
+    assert read_tlog(got).zero_tail_bytes == 0
+
+
+def test_a_mapped_writer_prepares_pages_beyond_its_records_only(tmp_path):
+    # ahead() after a burst of several pages written without one (a parameter download read
+    # back to back): the page it makes writable is past the records' end, never one of them
+    recs = _records(400)  # 36-byte records: 14.4 kB, the byte at 4096 is a pitch byte (0x4C)
+    ref, got = tmp_path / "ref.tlog", tmp_path / "burst.tlog"
+    with TlogWriter(ref) as w:
+        for pkt, t in recs:
+            w.write(pkt, t)
+    with TlogWriter(got, mapped=True) as w:
+        w.write(*recs[0])
+        w.ahead()
+        for pkt, t in recs[1:]:
+            w.write(pkt, t)
+        w.ahead()
+    assert ref.read_bytes()[4096] != 0
+    assert got.read_bytes() == ref.read_bytes()
+
+
+def test_a_mapped_writer_without_room_writes_instead(tmp_path, monkeypatch):
+    # a full disk (no blocks to reserve for the next stretch) must never reach the map, where
+    # it would be a SIGBUS: the writer goes on with write() from where its records end
+    import errno
+
+    recs = _records(2 * MAP_BYTES // 44)
+    p = tmp_path / "full.tlog"
+    w = TlogWriter(p, mapped=True)
+    for pkt, t in recs[: len(recs) // 4]:
+        w.write(pkt, t)
+    assert w.mapped
+
+    def no_room(fd: int, off: int, n: int) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "posix_fallocate", no_room)
+    for pkt, t in recs[len(recs) // 4 :]:
+        w.write(pkt, t)
+    assert not w.mapped
+    w.close()
+    res = read_tlog(p)
+    assert res.records == len(recs) and res.skipped_bytes == 0 and res.zero_tail_bytes == 0
+    assert p.stat().st_size == sum(8 + len(pkt) for pkt, _ in recs)
+
+
+def test_the_reader_takes_zeros_after_the_last_record_as_a_crash_tail(tmp_path):
+    recs = _records(50)
+    body = b"".join(struct.pack(">Q", round(t * 1e6)) + pkt for pkt, t in recs)
+    p = tmp_path / "z.tlog"
+    for tail, cut in ((4096, 0), (7, 0), (4096, 20)):
+        data = body[: len(body) - cut] + bytes(tail)
+        p.write_bytes(data)
+        res = read_tlog(p)
+        if cut:  # a record cut off by the crash, then zeros: a cut-off tail, not corruption
+            assert res.records == 49 and res.skipped_regions == 0
+            assert res.truncated_tail_bytes == len(body) - cut - (len(body) - 8 - len(recs[-1][0]))
+            assert res.zero_tail_bytes == tail
+        elif tail >= 8:
+            assert (res.records, res.skipped_regions, res.zero_tail_bytes) == (50, 0, tail)
+        else:  # fewer zeros than a time stamp: not a writer's tail, a cut-off record
+            assert res.records == 50 and res.truncated_tail_bytes == tail
+        assert _pymavlink_messages(p) == res.records

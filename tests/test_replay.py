@@ -432,6 +432,17 @@ def test_truncated_and_corrupted_copies_of_a_bridge_tlog(tmp_path, px4_run):
     rp = replay(tmp_path / "cut.tlog", cfg)
     assert rp.truncated_tail_bytes == 5 and rp.records == k
     assert rp.check.identical and 0 < rp.check.compared < full.compared
+    # a bridge killed there: its mapped tlog (tlog.MAP_BYTES) ends in zeros after the records
+    (tmp_path / "killed.tlog").write_bytes(data[: offs[k][0]] + bytes(40_000))
+    rp = replay(tmp_path / "killed.tlog", cfg)
+    assert (rp.records, rp.skipped_regions, rp.skipped_bytes, rp.zero_tail_bytes) == (
+        k,
+        0,
+        0,
+        40_000,
+    )
+    assert rp.check.identical and 0 < rp.check.compared < full.compared
+    assert "then 40000 zero bytes: the writer was killed" in rp.summary()
     # our own HEARTBEATs corrupted: skipped, counted, nothing else changes
     hbs = records_of(data, "HEARTBEAT", (1, 191))[:2]
     bad = bytearray(data)

@@ -394,8 +394,10 @@ class Link:
                 return msg
             if more:
                 continue
-            if self.tlog is not None:  # nothing left to read: the held records go out now
-                self._flush_tlog()
+            tlog = self.tlog
+            if tlog is not None:  # nothing left to read: the held records go out now, and a
+                self._flush_tlog()  # mapped tlog's next page is made ready (off any path)
+                tlog.ahead()
             now = time.monotonic()
             if deadline is None:
                 deadline = now + max(0.0, float(timeout_s))
@@ -688,10 +690,15 @@ def open_link(
     tlog = None
     if tlog_path is not None:
         try:
-            # records held until the link sends or pauses (Link.recv, Link._log_tx), unless
-            # each record is to reach the disk at once (fsync_every_s 0)
+            # records copied into a map of the file (in the page cache at once, as a write
+            # would put them, for a copy's cost); where it cannot be mapped, held until the
+            # link sends or pauses (Link.recv, Link._log_tx); with fsync_every_s 0, neither:
+            # each record written and on the disk at once
             tlog = TlogWriter(
-                tlog_path, fsync_every_s=tlog_fsync_every_s, hold=tlog_fsync_every_s != 0
+                tlog_path,
+                fsync_every_s=tlog_fsync_every_s,
+                hold=tlog_fsync_every_s != 0,
+                mapped=True,
             )
         except MpfError:
             conn.close()

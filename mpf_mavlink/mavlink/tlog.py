@@ -10,6 +10,7 @@ from the packet headers themselves.
 from __future__ import annotations
 
 import math
+import mmap
 import os
 import struct
 import threading
@@ -32,8 +33,13 @@ _TS_PACK = _TS.pack
 TS_MIN_US = 946_684_800_000_000
 TS_MAX_US = 4_102_444_800_000_000
 _SIGNED = 0x01  # MAVLINK_IFLAG_SIGNED
+_MAX_RECORD = 8 + 10 + 255 + 2 + 13  # time stamp + the longest MAVLink 2 packet (bytes)
 #: A holding writer (TlogWriter(hold=True)) writes its records out at this many bytes at most.
 HOLD_MAX_BYTES = 16384
+#: A mapped writer (TlogWriter(mapped=True)) maps the file this many bytes at a time: the most
+#: of zeros a crash can leave after its last record (pymavlink's reader and ours skip them).
+MAP_BYTES = 65536
+_PAGE = mmap.PAGESIZE
 
 
 class TlogWriter:
@@ -53,6 +59,20 @@ class TlogWriter:
     loses a record of anything that was sent (only the records received since the link's last
     send or pause, whose answer had not gone out).
 
+    ``mapped``: records are copied into a shared memory map of the file (:data:`MAP_BYTES` at a
+    time, its disk blocks reserved first with ``posix_fallocate``) instead of written: a record
+    is in the kernel's page cache once :meth:`write` returns, as with ``os.write``, for the
+    cost of a copy (a control frame's records no longer wait for a system call before the
+    setpoint they answer goes out). A SIGKILL keeps every record written; the file then ends
+    in up to :data:`MAP_BYTES` of zeros, which :func:`iter_tlog` counts as
+    ``zero_tail_bytes`` and pymavlink's reader passes as one BAD_DATA. :meth:`close`
+    truncates the file to its records. :meth:`ahead` (called after a packet went out) touches
+    the next page and maps the next stretch, so that the page faults and the mapping happen
+    off the path between a telemetry datagram and its setpoint. With ``fsync_every_s`` 0, or
+    where the file cannot be mapped or its blocks reserved (a full disk), records are
+    written as without it (``mapped`` reads False then): a full disk never reaches the map,
+    where it would be a SIGBUS instead of an error.
+
     ``last_us`` / ``last_packet``: timestamp (us) and packet of the latest record, so that a
     caller can use the exact time a reader will see (``last_us * 1e-6`` s).
     """
@@ -65,17 +85,28 @@ class TlogWriter:
         fsync_every_s: float | None = None,
         clock: Callable[[], float] = time.time,
         hold: bool = False,
+        mapped: bool = False,
     ) -> None:
         self.path = os.fspath(path)
         self._hold = hold
         self._held = bytearray()
         self._clock = clock
         self._fsync_every_s = fsync_every_s
-        flags = os.O_WRONLY | os.O_CREAT | (os.O_APPEND if append else os.O_TRUNC)
+        mapped = mapped and fsync_every_s != 0
+        # a mapping needs the file open for reading too; it writes at offsets, not appends
+        flags = (os.O_RDWR if mapped else os.O_WRONLY) | os.O_CREAT
+        flags |= os.O_TRUNC if not append else 0 if mapped else os.O_APPEND
         try:
             self._fd: int | None = os.open(self.path, flags, 0o644)
         except OSError as e:
             raise MpfError(f"cannot open tlog {self.path} for writing: {e.strerror}") from None
+        self._map: mmap.mmap | None = None
+        self._base = 0  # file offset of the map's first byte
+        self._pos = os.lseek(self._fd, 0, os.SEEK_END)  # file offset of the records' end
+        self._touched = 0  # map offset from which the pages were not written to yet
+        self._synced = False  # an fsync wrote the pages back since ahead() last ran
+        if mapped:
+            self._remap()
         self.records = 0
         self.bytes = 0
         self.fsyncs = 0
@@ -100,6 +131,23 @@ class TlogWriter:
         self.records += 1
         self.bytes += 8 + len(packet)
         self.last_us, self.last_packet = us, packet
+        m = self._map
+        if m is not None:
+            off = self._pos - self._base
+            end = off + 8 + len(packet)
+            if end > MAP_BYTES:
+                self._remap()
+                m = self._map
+                if m is None:  # no longer mapped (no room): written
+                    self._write(_TS_PACK(us) + bytes(packet))
+                    return
+                off = self._pos - self._base
+                end = off + 8 + len(packet)
+            # one copy: a process killed in it leaves at most this record cut off
+            m[off:end] = _TS_PACK(us) + packet
+            self._pos += end - off
+            self._dirty = True
+            return
         if self._hold:
             held = self._held
             held += _TS_PACK(us)
@@ -109,11 +157,60 @@ class TlogWriter:
             return
         self._write(_TS_PACK(us) + bytes(packet))
 
+    @property
+    def mapped(self) -> bool:
+        """Whether records go into a memory map of the file (``mapped``) now."""
+        return self._map is not None
+
+    def ahead(self) -> None:
+        """A mapped writer: make the page after the records' end writable now (its page fault:
+        ~1 every 4 kB of records, and again after an fsync cleaned the pages) and map the next
+        stretch of the file when the records near the end of this one, so that neither happens
+        inside :meth:`write`. Otherwise nothing."""
+        m = self._map
+        if m is None:
+            return
+        off = self._pos - self._base
+        if self._synced:  # written back: the pages from the records' end on fault again
+            self._synced = False
+            self._touched = off
+        t = max(self._touched, off)  # never below the records' end: those bytes are records
+        if t > off + _PAGE:
+            return
+        if t < MAP_BYTES:
+            m[t] = 0  # beyond the records: a zero where a zero was
+            self._touched = t - t % _PAGE + _PAGE
+        elif off + 2 * _PAGE > MAP_BYTES:
+            self._remap()
+
+    def _remap(self) -> None:
+        """Map MAP_BYTES of the file from the page holding the records' end, its blocks
+        reserved first. Falls back to writing (the map dropped, the file cut to its records)
+        when that fails: the disk is full, or the file cannot be mapped."""
+        assert self._fd is not None
+        old, self._map = self._map, None
+        if old is not None:
+            old.close()
+        base = self._pos - self._pos % mmap.ALLOCATIONGRANULARITY
+        try:
+            os.posix_fallocate(self._fd, base, MAP_BYTES)  # not on macOS: AttributeError
+            self._map = mmap.mmap(self._fd, MAP_BYTES, offset=base)
+        except (OSError, ValueError, AttributeError):
+            try:
+                os.ftruncate(self._fd, self._pos)
+                os.lseek(self._fd, self._pos, os.SEEK_SET)
+            except OSError:
+                pass
+            return
+        self._base = base
+        self._touched = self._pos - base  # map offset from which pages were not written to
+
     def _write(self, rec: bytes | bytearray) -> None:
         assert self._fd is not None
         n = os.write(self._fd, rec)
         while n < len(rec):  # regular files write fully; loop only on exotic filesystems
             n += os.write(self._fd, rec[n:])
+        self._pos += len(rec)
         if self._fsync_every_s == 0:
             os.fsync(self._fd)
             self.fsyncs += 1
@@ -133,6 +230,7 @@ class TlogWriter:
             try:
                 os.fsync(fd)
                 self.fsyncs += 1
+                self._synced = True
             except OSError:  # a full or vanished disk: the records are still in the page cache
                 pass
 
@@ -149,6 +247,7 @@ class TlogWriter:
         if self._fd is not None:
             os.fsync(self._fd)
             self.fsyncs += 1
+            self._synced = True
 
     def close(self) -> None:
         # stop the syncer before the fd goes: it must never fsync a closed (or reused) fd
@@ -161,6 +260,13 @@ class TlogWriter:
                 self.flush()
             except OSError:
                 pass
+            if self._map is not None:  # the file ends where its records do
+                self._map.close()
+                self._map = None
+                try:
+                    os.ftruncate(self._fd, self._pos)
+                except OSError:
+                    pass
             try:
                 os.fsync(self._fd)
             except OSError:
@@ -185,6 +291,8 @@ class TlogStats:
     skipped_bytes: int = 0  # bytes inside those stretches, the truncated tail included
     truncated_tail_bytes: int = 0  # bytes at the end too short to hold the record they start
     unknown_msgids: int = 0  # records whose message id this dialect does not know (no CRC check)
+    # zeros after the last record: the unused end of a mapped writer's file after a crash
+    zero_tail_bytes: int = 0
     counts: Counter[str] = field(default_factory=Counter)  # message type -> good records
     t_first_s: float | None = None
     t_last_s: float | None = None
@@ -203,6 +311,7 @@ class TlogReadResult:
     t_first_s: float | None
     t_last_s: float | None
     elapsed_s: float  # wall time the read took
+    zero_tail_bytes: int = 0  # zeros after the last record (a mapped writer's, after a crash)
 
     def __iter__(self) -> Iterator[tuple[float, Any]]:
         return iter(self.messages)
@@ -307,15 +416,31 @@ def iter_tlog(
     mmap = _d.mavlink_map
     counts = st.counts
     n = len(data)
+    # where the file's trailing zeros begin: a record never starts there (its time stamp is
+    # not 0), so a record boundary at or past it is the end of a crashed mapped writer's records
+    zeros = len(data.rstrip(b"\0"))
+    if n - zeros < 8:  # fewer than a time stamp's: the end of a record (a CRC byte), or cut
+        zeros = n
     i = 0
 
     def skip_to(j: int) -> None:
+        if j >= n and n - zeros and zeros - i <= _MAX_RECORD:
+            # the record a crashed mapped writer was copying when it died, then its zeros: a
+            # cut-off tail (never sent: a record is whole before its packet leaves), not a
+            # corrupt stretch
+            st.truncated_tail_bytes += zeros - i
+            st.skipped_bytes += zeros - i
+            st.zero_tail_bytes += n - zeros
+            return
         st.skipped_regions += 1
         st.skipped_bytes += j - i
         if j >= n:  # nothing decodable after i: a cut-off or garbled end of file
             st.truncated_tail_bytes += n - i
 
     while i < n:
+        if i >= zeros:
+            st.zero_tail_bytes += n - i
+            break
         hdr = _valid_header(data, i, n)
         end = i + 8 + hdr[1] if hdr is not None else n + 1
         if hdr is None or end > n:
@@ -376,4 +501,5 @@ def read_tlog(
         t_first_s=st.t_first_s,
         t_last_s=st.t_last_s,
         elapsed_s=time.perf_counter() - t0,
+        zero_tail_bytes=st.zero_tail_bytes,
     )

@@ -464,7 +464,8 @@ def _replay_figures(
     return {
         "tlog": path, "config": cfg.source, "window_s": list(window), "records": stats.records,
         "skipped_regions": stats.skipped_regions, "skipped_bytes": stats.skipped_bytes,
-        "truncated_tail_bytes": stats.truncated_tail_bytes, "counts": dict(stats.counts),
+        "truncated_tail_bytes": stats.truncated_tail_bytes,
+        "zero_tail_bytes": stats.zero_tail_bytes, "counts": dict(stats.counts),
         "modes": [list(x) for x in rp.modes], "attitude_gaps": [list(g) for g in gaps],
         "origin": rp.origin, "t0_boot_s": rp.ctl.t0, "s0_m": rp.s0, "steps": rp.steps,
         "skipped_steps": dict(rp.skip_reasons), "link_rejected": dict(rp.link.rejected),
@@ -552,6 +553,7 @@ def replay(
         skipped_regions=stats.skipped_regions,
         skipped_bytes=stats.skipped_bytes,
         truncated_tail_bytes=stats.truncated_tail_bytes,
+        zero_tail_bytes=stats.zero_tail_bytes,
         unknown_msgids=stats.unknown_msgids,
         t_first_s=stats.t_first_s,
         duration_s=duration,

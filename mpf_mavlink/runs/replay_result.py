@@ -115,6 +115,7 @@ class ReplayResult:
     skipped_regions: int
     skipped_bytes: int
     truncated_tail_bytes: int
+    zero_tail_bytes: int  # zeros after the last record: its writer died (a mapped tlog)
     unknown_msgids: int
     t_first_s: float | None  # s since the epoch
     duration_s: float
@@ -148,6 +149,11 @@ class ReplayResult:
         lines.append(
             f"records           {self.records} good; {skip}; {self.unknown_msgids} unknown ids"
         )
+        if self.zero_tail_bytes:
+            lines.append(
+                f"                  then {self.zero_tail_bytes} zero bytes: the writer was killed "
+                "before it closed the file (every record it wrote is above)"
+            )
         lines.append(
             f"duration          {self.duration_s:.2f} s; window {self.window[0]:.2f} .. "
             f"{self.window[1]:.2f} s"
