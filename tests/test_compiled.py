@@ -73,8 +73,10 @@ def test_compiled_and_pure_give_the_same_floats_bit_for_bit() -> None:
     comp = _probe({"MPF_PURE_PYTHON": "0"})
     assert pure["compiled"] == []
     assert comp["compiled"] == list(MODULES), "the build exists but was not loaded"
-    for part in ("law", "controller", "paper"):
-        assert len(pure[part]) > 100, part  # the probe exercised something
+    # the probe exercised something: floats of 160 law states, of the tlog's steps, and the
+    # paper scenario's steady RMS with a digest of each of its columns
+    for part, least in (("law", 10000), ("controller", 10000), ("paper", 20)):
+        assert len(pure[part]) >= least, part
         assert comp[part] == pure[part], f"{part}: {_first_difference(comp[part], pure[part])}"
 
 
