@@ -76,6 +76,35 @@ def read_manifest(ext_dir: Path = EXT_DIR) -> dict[str, Any] | None:
     return data if isinstance(data, dict) else None
 
 
+class CompiledLoader(importlib.machinery.ExtensionFileLoader):
+    """Loads a build; one that cannot be loaded (a broken file, a missing symbol) warns once and
+    the module runs from its .py instead: a build never turns into an import error."""
+
+    def __init__(self, fullname: str, path: str, py: Path) -> None:
+        super().__init__(fullname, path)
+        self.py = py
+        self.fallback: importlib.machinery.SourceFileLoader | None = None
+
+    def create_module(self, spec: importlib.machinery.ModuleSpec) -> ModuleType:
+        try:
+            return super().create_module(spec)
+        except ImportError as exc:
+            warnings.warn(
+                f"mpf_mavlink: the compiled {spec.name} does not load ({exc}); using the .py",
+                StaleCompiledWarning,
+                stacklevel=2,
+            )
+            self.fallback = importlib.machinery.SourceFileLoader(spec.name, str(self.py))
+            return ModuleType(spec.name)  # a plain module, which exec_module fills from the .py
+
+    def exec_module(self, module: ModuleType) -> None:
+        if self.fallback is None:
+            super().exec_module(module)
+            return
+        module.__file__ = str(self.py)
+        self.fallback.exec_module(module)
+
+
 class CompiledFinder:
     """A meta path finder for the modules of a build's manifest (see the module docstring)."""
 
@@ -102,7 +131,7 @@ class CompiledFinder:
                 stacklevel=2,
             )
             return None
-        loader = importlib.machinery.ExtensionFileLoader(fullname, str(so))
+        loader = CompiledLoader(fullname, str(so), source_files(fullname)[0])
         return importlib.machinery.ModuleSpec(fullname, loader, origin=str(so))
 
 

@@ -11,6 +11,7 @@ _venv.sh builds one otherwise) there is nothing compiled to compare and those te
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import subprocess
@@ -139,6 +140,31 @@ def test_an_edited_source_falls_back_to_the_py_with_one_warning(tmp_path: Path) 
     assert law_file.endswith("law.py")
     assert base_file.endswith(EXT_SUFFIX) and base_file.startswith(str(ext))
     assert r.stderr.count("StaleCompiledWarning") == 1, r.stderr
+
+
+@needs_build
+def test_a_build_that_does_not_load_falls_back_to_the_py(tmp_path: Path) -> None:
+    """A current manifest but a broken file (truncated, foreign): the .py runs, said once."""
+    ext = tmp_path / "ext"
+    shutil.copytree(EXT_DIR, ext, ignore=shutil.ignore_patterns(".build"))
+    (ext / f"{LAW}{EXT_SUFFIX}").write_bytes(b"\x7fELF broken")
+    code = (
+        "import mpf_mavlink.core.guidance.law as law;"
+        "print(law.__file__); print(law.steady_state_frame(1.0, 0.5, 16.0)[0])"
+    )
+    r = subprocess.run(
+        [sys.executable, "-W", "default", "-c", code],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env={**os.environ, "MPF_COMPILED_DIR": str(ext), "MPF_PURE_PYTHON": "0"},
+        timeout=120,
+    )
+    assert r.returncode == 0, r.stderr
+    law_file, wd11 = r.stdout.split()
+    assert law_file.endswith("law.py")
+    assert float(wd11) == math.sqrt(1.0 - (1.0 / 16.0) ** 2 - (0.5 / 16.0) ** 2)  # (15)
+    assert r.stderr.count("does not load") == 1, r.stderr
 
 
 def test_pure_python_when_asked() -> None:
