@@ -34,6 +34,7 @@ MODULES: tuple[str, ...] = (
     "mpf_mavlink.core.paths.base",
     "mpf_mavlink.core.guidance.predict",
     "mpf_mavlink.core.adapter",
+    "mpf_mavlink.core.target_filter",
 )
 
 PACKAGE_DIR = Path(__file__).resolve().parent

@@ -1,8 +1,8 @@
 """Prints, as JSON, every float the hot paths give on a fixed set of inputs (float.hex, exact):
 the law with its diagnostics and errors record on the scenarios of test_law_equivalence, the
-path evaluation, the prediction, the bridge's controller over the real ArduPlane tlog and the
-paper scenario. tests/test_compiled.py runs it compiled and with MPF_PURE_PYTHON=1 and
-requires the same output. ``--quick`` leaves out the 300 s paper scenario."""
+path evaluation, the prediction, the bridge's controller over the real ArduPlane tlog, the live
+target's filter and the paper scenario. tests/test_compiled.py runs it compiled and with
+MPF_PURE_PYTHON=1 and requires the same output. ``--quick`` leaves out the 300 s paper scenario."""
 
 from __future__ import annotations
 
@@ -70,6 +70,45 @@ def controller() -> list[str]:
     return out
 
 
+def target_filter() -> list[str]:
+    """The live target's filter on the radio feed of test_target_filter_equivalence (5 Hz
+    fixes with noise, lost and late reports, attitude-only turn rates): what became of each
+    report, the posterior, and the target placed at the control time."""
+    import math
+
+    from mpf_mavlink.core.target import PaperProfile
+    from mpf_mavlink.core.target_filter import Report, TargetEstimator, TargetFilterParams
+
+    rng = np.random.default_rng(2)
+    m = PaperProfile()
+    stream: list[tuple[float, dict[str, Any]]] = []
+    for k in range(1500):
+        t = 0.2 * k
+        ts = m.state(t)
+        w = float((ts.R_T_I @ ts.omega_T)[2])
+        stream.append((t + 0.15, dict(t=t + 0.1 - 50.0, turn_rate=w + rng.normal(0, 0.01),
+                                      yaw=0.3, attitude=True)))  # fmt: skip
+        if rng.random() < 0.1:
+            continue
+        late = 0.4 if rng.random() < 0.05 else 0.0
+        stream.append((t + 0.05 + late, dict(
+            t=t - 50.0, position=(ts.position + rng.normal(0, 2, 3)).tolist(),
+            velocity=(ts.velocity + rng.normal(0, 0.3, 3)).tolist(),
+        )))  # fmt: skip
+    stream.sort(key=lambda e: e[0])
+    est = TargetEstimator(TargetFilterParams(latency_s=0.05))
+    out: list[str] = []
+    for rx, d in stream:
+        out.append(est.add(Report(**d), rx))
+        post = est.latest()
+        if post is not None:
+            out += _hex((post.t, post.x, post.Ph, post.Pv, post.yaw))
+        placed = est.place(rx + 0.02)
+        out += [placed] if isinstance(placed, str) else _hex(placed)
+        out += _hex(est.position_sigma(rx + 0.02)) if math.isfinite(rx) else []
+    return out
+
+
 def paper() -> list[str]:
     from mpf_mavlink.config.schema import load_config
     from sim.runner import run_kinematic
@@ -83,6 +122,7 @@ def paper() -> list[str]:
 def main() -> None:
     out: dict[str, Any] = {"compiled": compiled_modules(), "law": law()}
     out["controller"] = controller()
+    out["target_filter"] = target_filter()
     if "--quick" not in sys.argv:
         out["paper"] = paper()
     print(json.dumps(out))
