@@ -4,7 +4,8 @@ controller_step_us: median and p99 of one MPF law evaluation on the paper scenar
 along a real closed-loop trajectory, with the diagnostics record (the bridge's Controller.step
 asks for it: it records it and reads its mode and p_f); median_target_arrays: the same with the
 target state read from its arrays, as for a producer that does not keep its floats
-(TargetState.floats; the paper profile and extrapolate keep them). paper_wall_time_s: the 300 s
+(TargetState.floats; the paper profile and extrapolate keep them). controller_path: the
+bridge's whole control path per step (mpf_mavlink.bench.control_path). paper_wall_time_s: the 300 s
 Section V scenario, kinematic plant, lambda_w = 10. Further figures (bridge, SIL, replay)
 appear as those parts exist; ``--only NAME`` runs one group.
 """
@@ -81,8 +82,17 @@ def fdm_steps_per_s() -> dict[str, Any]:
     return {"steps_per_s": benchmark(seconds=300.0)}
 
 
+def controller_path_us() -> dict[str, Any]:
+    """The bridge's control path (estimator, target, prediction, law, adapter) per step, over
+    the calls of a replay of a 120 s SIL demo tlog: mpf_mavlink.bench.control_path."""
+    from mpf_mavlink.bench.control_path import controller_path_us as run
+
+    return run()
+
+
 GROUPS = {
     "controller_step_us": controller_step_us,
+    "controller_path": controller_path_us,
     "paper_scenario": paper_wall_time_s,
     "fdm_steps_per_s": fdm_steps_per_s,
 }
@@ -151,7 +161,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--only", choices=sorted(GROUPS), action="append", help="run only these groups")
     args = p.parse_args(argv)
-    out: dict[str, Any] = {}
+    from mpf_mavlink._compiled import status
+
+    # which hot paths ran compiled: figures of a compiled and of a pure tree differ ~2x
+    out: dict[str, Any] = {"compiled": status()}
     for name, fn in GROUPS.items():
         if args.only and name not in args.only:
             continue

@@ -144,12 +144,23 @@ class _OneLineErrors(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+class _Version(argparse.Action):
+    """--version: the version and whether the hot paths run compiled (mpf_mavlink._compiled),
+    worked out only when asked (it imports them)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, *_: Any) -> None:
+        from mpf_mavlink._compiled import status
+
+        print(f"{parser.prog} {__version__} ({status()})")
+        parser.exit(0)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _OneLineErrors(
         prog="mpf-mavlink",
         description="3D moving-path-following guidance for fixed-wing vehicles over MAVLink.",
     )
-    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    p.add_argument("--version", action=_Version, nargs=0, help="show the version and exit")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     c = sub.add_parser(

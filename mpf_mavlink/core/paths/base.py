@@ -185,6 +185,66 @@ def _closing_angles(Tl: list[Tuple3], F2l: list[Tuple3]) -> list[float]:
     return corr
 
 
+def _cell_point(cell: _Cell, s: float) -> PathPointFlat:
+    """:meth:`TabulatedPath.eval_flat` at arc length s (m) inside the cell ``cell`` (see
+    :meth:`TabulatedPath._hermite_cells`). A function of floats, not a method: its .pxd gives
+    every name a C double type when the module is compiled (mpf_mavlink._compiled)."""
+    (si, p0, p1, p2, ta0, ta1, ta2, b0, b1, b2, c0, c1, c2, bb0, bb1, bb2, cc0, cc1, cc2,
+     v0, v1, v2, twist, k1a, k1s, k2a, k2s) = cell  # fmt: skip
+    x = s - si
+    # Written out on scalars (this runs once per law evaluation): the cell's cubic by
+    # Horner, its first derivative dp (= dp_d/ds) and its second, ddp.
+    p0 = p0 + x * (ta0 + x * (b0 + x * c0))
+    p1 = p1 + x * (ta1 + x * (b1 + x * c1))
+    p2 = p2 + x * (ta2 + x * (b2 + x * c2))
+    dp0 = ta0 + x * (bb0 + x * cc0)
+    dp1 = ta1 + x * (bb1 + x * cc1)
+    dp2 = ta2 + x * (bb2 + x * cc2)
+    x2 = x + x
+    ddp0, ddp1, ddp2 = bb0 + x2 * cc0, bb1 + x2 * cc1, bb2 + x2 * cc2
+    g = 1.0 / math.sqrt(dp0 * dp0 + dp1 * dp1 + dp2 * dp2)
+    e0, e1, e2 = dp0 * g, dp1 * g, dp2 * g  # f1
+    # r: the node's f2 (v, orthogonal to t_i) carried by the minimal rotation t_i -> f1,
+    # I + C + C^2 / (1 + d) with C = [c]x, c = t_i x f1, d = t_i . f1; for v orthogonal
+    # to t_i it reduces to v - (v . f1) (t_i + f1) / (1 + d).
+    cx = ta1 * e2 - ta2 * e1
+    cy = ta2 * e0 - ta0 * e2
+    cz = ta0 * e1 - ta1 * e0
+    d = ta0 * e0 + ta1 * e1 + ta2 * e2
+    if d > -0.999999:
+        k = 1.0 / (1.0 + d)
+        m = (v0 * e0 + v1 * e1 + v2 * e2) * k
+        r0, r1, r2 = v0 - m * (ta0 + e0), v1 - m * (ta1 + e1), v2 - m * (ta2 + e2)
+    else:  # f1 opposite t_i (not in a regular path's cell): v + c x v, re-normalised
+        k = 0.0
+        r0, r1, r2 = v0 + cy * v2 - cz * v1, v1 + cz * v0 - cx * v2, v2 + cx * v1 - cy * v0
+        nr = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        r0, r1, r2 = r0 * nr, r1 * nr, r2 * nr
+    q0 = e1 * r2 - e2 * r1  # f1 x r
+    q1 = e2 * r0 - e0 * r2
+    q2 = e0 * r1 - e1 * r0
+    # Turned about f1 by this cell's share of the closing angle (exactly 0 on open and
+    # planar paths, which skip the turn).
+    if twist:
+        ang = x * twist
+        ca, sa = math.cos(ang), math.sin(ang)
+        r0, r1, r2, q0, q1, q2 = (
+            ca * r0 + sa * q0, ca * r1 + sa * q1, ca * r2 + sa * q2,
+            ca * q0 - sa * r0, ca * q1 - sa * r1, ca * q2 - sa * r2,
+        )  # fmt: skip
+    # f2 = r, f3 = q. The frame's rate per metre: f1' = (I - f1 f1^T) p'' / |p'| gives the
+    # curvatures f1'.f2 and f1'.f3; the minimal rotation from the fixed t_i turns r about
+    # f1 at -(c . f1') / (1 + d) = -(c . p'') / ((1 + d) |p'|); the closing share adds
+    # `twist`.
+    kappa_1 = (ddp0 * r0 + ddp1 * r1 + ddp2 * r2) * g
+    kappa_2 = (ddp0 * q0 + ddp1 * q1 + ddp2 * q2) * g
+    tau = twist - k * (cx * ddp0 + cy * ddp1 + cz * ddp2) * g
+    return (
+        p0, p1, p2, e0, e1, e2, r0, r1, r2, q0, q1, q2, k1a + x * k1s, k2a + x * k2s,
+        dp0, dp1, dp2, tau, -kappa_2, kappa_1,
+    )  # fmt: skip
+
+
 class TabulatedPath:
     """A regular curve re-parameterised by arc length, with a continuous transported frame."""
 
@@ -289,60 +349,7 @@ class TabulatedPath:
         i = int(s / self.ds)
         if i >= self.n:
             i = self.n - 1
-        (si, p0, p1, p2, ta0, ta1, ta2, b0, b1, b2, c0, c1, c2, bb0, bb1, bb2, cc0, cc1, cc2,
-         v0, v1, v2, twist, k1a, k1s, k2a, k2s) = self._cells[i]  # fmt: skip
-        x = s - si
-        # Written out on scalars (this runs once per law evaluation): the cell's cubic by
-        # Horner, its first derivative dp (= dp_d/ds) and its second, ddp.
-        p0 = p0 + x * (ta0 + x * (b0 + x * c0))
-        p1 = p1 + x * (ta1 + x * (b1 + x * c1))
-        p2 = p2 + x * (ta2 + x * (b2 + x * c2))
-        dp0 = ta0 + x * (bb0 + x * cc0)
-        dp1 = ta1 + x * (bb1 + x * cc1)
-        dp2 = ta2 + x * (bb2 + x * cc2)
-        x2 = x + x
-        ddp0, ddp1, ddp2 = bb0 + x2 * cc0, bb1 + x2 * cc1, bb2 + x2 * cc2
-        g = 1.0 / math.sqrt(dp0 * dp0 + dp1 * dp1 + dp2 * dp2)
-        e0, e1, e2 = dp0 * g, dp1 * g, dp2 * g  # f1
-        # r: the node's f2 (v, orthogonal to t_i) carried by the minimal rotation t_i -> f1,
-        # I + C + C^2 / (1 + d) with C = [c]x, c = t_i x f1, d = t_i . f1; for v orthogonal
-        # to t_i it reduces to v - (v . f1) (t_i + f1) / (1 + d).
-        cx = ta1 * e2 - ta2 * e1
-        cy = ta2 * e0 - ta0 * e2
-        cz = ta0 * e1 - ta1 * e0
-        d = ta0 * e0 + ta1 * e1 + ta2 * e2
-        if d > -0.999999:
-            k = 1.0 / (1.0 + d)
-            m = (v0 * e0 + v1 * e1 + v2 * e2) * k
-            r0, r1, r2 = v0 - m * (ta0 + e0), v1 - m * (ta1 + e1), v2 - m * (ta2 + e2)
-        else:  # f1 opposite t_i (not in a regular path's cell): v + c x v, re-normalised
-            k = 0.0
-            r0, r1, r2 = v0 + cy * v2 - cz * v1, v1 + cz * v0 - cx * v2, v2 + cx * v1 - cy * v0
-            nr = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-            r0, r1, r2 = r0 * nr, r1 * nr, r2 * nr
-        q0 = e1 * r2 - e2 * r1  # f1 x r
-        q1 = e2 * r0 - e0 * r2
-        q2 = e0 * r1 - e1 * r0
-        # Turned about f1 by this cell's share of the closing angle (exactly 0 on open and
-        # planar paths, which skip the turn).
-        if twist:
-            ang = x * twist
-            ca, sa = math.cos(ang), math.sin(ang)
-            r0, r1, r2, q0, q1, q2 = (
-                ca * r0 + sa * q0, ca * r1 + sa * q1, ca * r2 + sa * q2,
-                ca * q0 - sa * r0, ca * q1 - sa * r1, ca * q2 - sa * r2,
-            )  # fmt: skip
-        # f2 = r, f3 = q. The frame's rate per metre: f1' = (I - f1 f1^T) p'' / |p'| gives the
-        # curvatures f1'.f2 and f1'.f3; the minimal rotation from the fixed t_i turns r about
-        # f1 at -(c . f1') / (1 + d) = -(c . p'') / ((1 + d) |p'|); the closing share adds
-        # `twist`.
-        kappa_1 = (ddp0 * r0 + ddp1 * r1 + ddp2 * r2) * g
-        kappa_2 = (ddp0 * q0 + ddp1 * q1 + ddp2 * q2) * g
-        tau = twist - k * (cx * ddp0 + cy * ddp1 + cz * ddp2) * g
-        return (
-            p0, p1, p2, e0, e1, e2, r0, r1, r2, q0, q1, q2, k1a + x * k1s, k2a + x * k2s,
-            dp0, dp1, dp2, tau, -kappa_2, kappa_1,
-        )  # fmt: skip
+        return _cell_point(self._cells[i], s)
 
     def sample(self, s: float) -> PathSample:
         """The path at arc length s (m) as a :class:`PathSample` (numpy, for callers and tests)."""

@@ -1,0 +1,132 @@
+"""Prints, as JSON, every float the hot paths give on a fixed set of inputs (float.hex, exact):
+the law with its diagnostics and errors record on the scenarios of test_law_equivalence, the
+path evaluation, the prediction, the bridge's controller over the real ArduPlane tlog, the live
+target's filter and the paper scenario. tests/test_compiled.py runs it compiled and with
+MPF_PURE_PYTHON=1 and requires the same output. ``--quick`` leaves out the 300 s paper scenario."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from mpf_mavlink._compiled import compiled_modules  # noqa: E402
+from mpf_mavlink.core.guidance import VehicleState, mpf_law  # noqa: E402
+from mpf_mavlink.core.guidance.law import mpf_errors  # noqa: E402
+from mpf_mavlink.core.guidance.predict import predict_rows  # noqa: E402
+from tests.test_law_equivalence import _scenarios, _states  # noqa: E402
+
+
+def _hex(x: Any) -> list[str]:
+    """Every float in x (nested tuples/lists/NamedTuples, strings kept) as float.hex."""
+    if isinstance(x, float | int | np.floating) and not isinstance(x, bool):
+        return [float(x).hex()]
+    if isinstance(x, str | bool) or x is None:
+        return [repr(x)]
+    if isinstance(x, np.ndarray):
+        return [hashlib.sha256(np.ascontiguousarray(x, dtype=float).tobytes()).hexdigest()]
+    out: list[str] = []
+    for v in x:
+        out += _hex(v)
+    return out
+
+
+def law() -> list[str]:
+    out: list[str] = []
+    rng = np.random.default_rng(28)
+    for _, path, motion, gains, ext, v_w, wind in _scenarios():
+        for s, t, p, R, eta, tgt, _, _ in _states(path, motion, 40, rng, wind):
+            veh = VehicleState(t, p, R, v_w, eta)
+            cmd, diag = mpf_law(s, veh, tgt, path, gains, ext)
+            out += _hex(cmd) + _hex(diag)
+            out += _hex(mpf_law(s, veh, tgt, path, gains, ext, diagnostics=False))
+            out += _hex(mpf_errors(s, veh, tgt, path, gains, ext, "probe"))
+            out += _hex(path.eval_flat(s))
+            rates = tuple(rng.normal(0.0, 0.5, 3))
+            segments = [(0.02, rates), (0.0, rates), (0.05, tuple(rng.normal(0.0, 0.5, 3)))]
+            vp, Rb, w1 = predict_rows(veh, R, segments)
+            out += _hex((vp.t, vp.floats, Rb, w1))
+    return out
+
+
+def controller() -> list[str]:
+    from mpf_mavlink.bench.control_path import issue, record_calls
+    from mpf_mavlink.bridge.controller import Controller
+
+    cfg, calls = record_calls(
+        ROOT / "tests" / "data" / "arduplane-quadplane-sitl-vtol.tlog",
+        ROOT / "configs" / "replay_arduplane_sitl.yaml",
+    )
+    out: list[str] = []
+    for st in issue(Controller(cfg), calls):
+        out += ["None"] if st is None else _hex(tuple(st.setpoint)) + _hex(st.row())
+    return out
+
+
+def target_filter() -> list[str]:
+    """The live target's filter on the radio feed of test_target_filter_equivalence (5 Hz
+    fixes with noise, lost and late reports, attitude-only turn rates): what became of each
+    report, the posterior, and the target placed at the control time."""
+    import math
+
+    from mpf_mavlink.core.target import PaperProfile
+    from mpf_mavlink.core.target_filter import Report, TargetEstimator, TargetFilterParams
+
+    rng = np.random.default_rng(2)
+    m = PaperProfile()
+    stream: list[tuple[float, dict[str, Any]]] = []
+    for k in range(1500):
+        t = 0.2 * k
+        ts = m.state(t)
+        w = float((ts.R_T_I @ ts.omega_T)[2])
+        stream.append((t + 0.15, dict(t=t + 0.1 - 50.0, turn_rate=w + rng.normal(0, 0.01),
+                                      yaw=0.3, attitude=True)))  # fmt: skip
+        if rng.random() < 0.1:
+            continue
+        late = 0.4 if rng.random() < 0.05 else 0.0
+        stream.append((t + 0.05 + late, dict(
+            t=t - 50.0, position=(ts.position + rng.normal(0, 2, 3)).tolist(),
+            velocity=(ts.velocity + rng.normal(0, 0.3, 3)).tolist(),
+        )))  # fmt: skip
+    stream.sort(key=lambda e: e[0])
+    est = TargetEstimator(TargetFilterParams(latency_s=0.05))
+    out: list[str] = []
+    for rx, d in stream:
+        out.append(est.add(Report(**d), rx))
+        post = est.latest()
+        if post is not None:
+            out += _hex((post.t, post.x, post.Ph, post.Pv, post.yaw))
+        placed = est.place(rx + 0.02)
+        out += [placed] if isinstance(placed, str) else _hex(placed)
+        out += _hex(est.position_sigma(rx + 0.02)) if math.isfinite(rx) else []
+    return out
+
+
+def paper() -> list[str]:
+    from mpf_mavlink.config.schema import load_config
+    from sim.runner import run_kinematic
+
+    res = run_kinematic(load_config(ROOT / "configs" / "paper_lemniscate.yaml"), progress=False)
+    return _hex(res.metrics["steady_rms_m"]) + [
+        f"{k}:{_hex(np.asarray(v, dtype=float))[0]}" for k, v in sorted(res.cols.items())
+    ]
+
+
+def main() -> None:
+    out: dict[str, Any] = {"compiled": compiled_modules(), "law": law()}
+    out["controller"] = controller()
+    out["target_filter"] = target_filter()
+    if "--quick" not in sys.argv:
+        out["paper"] = paper()
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    main()
