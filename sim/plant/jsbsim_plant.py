@@ -198,22 +198,49 @@ VECTOR_FLOATS = {
 }
 
 
+class _Lazy:
+    """A snapshot's field made from its floats when first read, then an ordinary attribute of
+    the instance (a descriptor without ``__set__`` yields to the instance's ``__dict__``)."""
+
+    __slots__ = ("name", "make")
+
+    def __init__(self, make: Any) -> None:
+        self.make = make
+        self.name = ""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj: Any, objtype: Any = None) -> Any:
+        if obj is None:
+            return self
+        d = obj.__dict__
+        try:
+            value = self.make(d)
+        except KeyError:  # a snapshot without the floats of this field
+            raise AttributeError(self.name) from None
+        d[self.name] = value
+        return value
+
+
+def _vector(key: str) -> _Lazy:
+    return _Lazy(lambda d: np.array(d[key]))
+
+
 class _Snapshot(PlantState):
     """A :class:`PlantState` built without the frozen dataclass's per-field
     ``object.__setattr__`` (a third of a snapshot's cost, once per lockstep frame), whose
     rotation matrix and arrays are made when first read: the vehicle's frame reads the floats
-    (:func:`vector_floats`), tests, estimators and the autopilot's hold the arrays."""
+    (:func:`vector_floats`), tests, estimators and the autopilot's hold the arrays. (Descriptors
+    rather than ``__getattr__``: a class with ``__getattr__`` makes every attribute read of its
+    instances a slow generic lookup, and the frame reads a snapshot's fields some twenty times.)"""
 
-    def __getattr__(self, name: str) -> Any:
-        d = self.__dict__
-        if name == "R_B_N":
-            value: Any = rotation_body_to_ned(*d["_euler"])
-        elif name in VECTOR_FLOATS and VECTOR_FLOATS[name] in d:
-            value = np.array(d[VECTOR_FLOATS[name]])
-        else:
-            raise AttributeError(name)
-        d[name] = value
-        return value
+    R_B_N = _Lazy(lambda d: rotation_body_to_ned(*d["_euler"]))
+    position_ned = _vector(VECTOR_FLOATS["position_ned"])
+    velocity_ned = _vector(VECTOR_FLOATS["velocity_ned"])
+    pqr = _vector(VECTOR_FLOATS["pqr"])
+    wind_ned = _vector(VECTOR_FLOATS["wind_ned"])
+    specific_force_body = _vector(VECTOR_FLOATS["specific_force_body"])
 
 
 def vector_floats(st: Any, name: str) -> Any:
