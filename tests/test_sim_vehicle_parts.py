@@ -511,3 +511,30 @@ def test_target_fields_from_floats_equal_those_from_arrays():
 
     assert turn.state(1.0).floats is not None and ArraysOnly().state(1.0).floats is None
     assert fields(turn) == fields(ArraysOnly())
+
+
+def test_constant_turn_state_on_floats_is_the_float64_formula():
+    """ConstantTurn.state computes on Python floats what ``position + [dn, de, -climb t]``
+    gives in float64 arrays, to the bit, and gives Python floats whatever type t has."""
+    from mpf_mavlink.core.target import ConstantTurn
+
+    rng = np.random.default_rng(11)
+    for k in range(300):
+        pos = tuple(rng.uniform(-500.0, 500.0, 3).tolist())
+        V, psi0 = float(rng.uniform(0.0, 20.0)), float(rng.uniform(-3.0, 3.0))
+        w = (0.0, 1e-10, 0.01, float(rng.uniform(-0.2, 0.2)))[k % 4]
+        climb = float(rng.uniform(-2.0, 2.0))
+        t_any = (float(rng.uniform(0.0, 900.0)), np.float64(rng.uniform(0.0, 900.0)), 7)[k % 3]
+        st = ConstantTurn(pos, V, psi0, w, climb).state(t_any)
+        t = float(t_any)
+        psi = psi0 + w * t
+        if abs(w) > 1e-9:
+            dn = V / w * (math.sin(psi) - math.sin(psi0))
+            de = V / w * (math.cos(psi0) - math.cos(psi))
+        else:
+            dn, de = V * t * math.cos(psi0), V * t * math.sin(psi0)
+        want = (np.array(pos, float) + np.array([dn, de, -climb * t])).tolist()
+        assert st.floats is not None
+        assert list(st.floats[9:12]) == want
+        assert all(type(x) is float for x in st.floats[9:18])
+        assert st.position.tolist() == want and st.t == t_any
