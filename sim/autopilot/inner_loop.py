@@ -382,31 +382,10 @@ class FixedWingAutopilot:
         pqr: tuple[float, float, float],
         airspeed: float,
     ) -> tuple[float, float, float]:
-        """Body-rate setpoints (rad/s) -> (aileron, elevator, rudder) normalized commands.
-        (Twice a lockstep frame: :meth:`RateController.update` of the three axes written out
-        here, the same arithmetic in the same order, without three calls.)"""
-        out = []
-        for c, sp, w in ((self.roll, rates_sp[0], pqr[0]), (self.pitch, rates_sp[1], pqr[1]),
-                         (self.yaw, rates_sp[2], pqr[2])):  # fmt: skip
-            v_min = c.airspeed_min
-            s = c.airspeed_trim / (v_min if v_min > airspeed else airspeed)
-            err = sp - w
-            ki = c.i
-            if ki > 0.0 and dt > 0.0 and not (c._saturated * err > 0.0):
-                x, hi = c.integrator + ki * err * dt, c.imax
-                lo = -hi
-                c.integrator = lo if x < lo else hi if x > hi else x
-            u = c.trim + s * s * (c.p * err + c.integrator) + s * c.ff * sp
-            if u > 1.0:
-                u, c._saturated = 1.0, 1
-            elif u < -1.0:
-                u, c._saturated = -1.0, -1
-            else:
-                c._saturated = 0
-            c.output = u
-            out.append(u)
-        a, e, r = out
-        e = -e
+        """Body-rate setpoints (rad/s) -> (aileron, elevator, rudder) normalized commands."""
+        a = self.roll.update(dt, rates_sp[0], pqr[0], airspeed)
+        e = -self.pitch.update(dt, rates_sp[1], pqr[1], airspeed)
+        r = self.yaw.update(dt, rates_sp[2], pqr[2], airspeed)
         if self.gains.rudder_mix:
             # about the trims: the mix answers the aileron the rate loop adds, not the trim's
             mix = self.gains.rudder_mix * (a - self.gains.trim_aileron)
