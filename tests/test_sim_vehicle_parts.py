@@ -465,3 +465,76 @@ def test_target_positions_computed_ahead_are_the_bytes_computed_on_time(monkeypa
     got, want = fly(50), fly(1)
     assert len(want) == 14 * 10 * 2 + 14  # FOLLOW_TARGET + GLOBAL_POSITION_INT, HEARTBEAT
     assert got == want
+
+
+def test_target_quaternion_of_rows_is_the_frames_quaternion_bit_for_bit():
+    """The target stream's quaternion of a matrix given by rows (floats) is
+    :func:`matrix_to_quat_wxyz` of that matrix to the bit, in all four of Shepperd's branches
+    (rotations by ~pi about each axis reach the three non-trace ones)."""
+    from mpf_mavlink.core import so3
+    from mpf_mavlink.core.frames import matrix_to_quat_wxyz
+    from sim.vehicle.target_stream import quat_of_rows
+
+    rng = np.random.default_rng(5)
+    branches = set()
+    for i in range(4000):
+        axis = rng.normal(size=3) if i % 2 else np.eye(3)[i // 2 % 3] + 0.05 * rng.normal(size=3)
+        angle = rng.uniform(-math.pi, math.pi) if i % 4 < 2 else math.pi - rng.uniform(0, 0.3)
+        R = so3.exp(angle * axis / np.linalg.norm(axis))
+        got, want = quat_of_rows(R.ravel().tolist()), matrix_to_quat_wxyz(R)
+        assert [float(x) for x in got] == [float(x) for x in want]
+        tr = R[0, 0] + R[1, 1] + R[2, 2]
+        branches.add(-1 if tr > 0 else int(np.argmax(np.diag(R))))
+    assert branches == {-1, 0, 1, 2}
+
+
+def test_target_fields_from_floats_equal_those_from_arrays():
+    """A motion whose states carry floats and one whose states carry only arrays (the same
+    numbers) give the target stream the same fields, to the bit."""
+    import sim.vehicle.target_stream as TS
+    from mpf_mavlink.core.target import ConstantTurn, TargetState
+    from sim.plant.jsbsim_plant import LocalNED
+
+    turn = ConstantTurn((10.0, -5.0, 0.0), 3.0, 0.3, 0.01, 0.1)
+
+    class ArraysOnly:
+        def state(self, t: float) -> TargetState:
+            s = turn.state(t)
+            return TargetState(t, np.array(s.position), np.array(s.velocity),
+                               np.array(s.acceleration), np.array(s.R_T_I), np.array(s.omega_T),
+                               np.array(s.omega_dot_T))  # fmt: skip
+
+    def fields(motion: object) -> list[tuple[object, ...]]:
+        ts = TS.TargetStream(motion, StepClock(0.01, 0), SimpleNamespace(), LocalNED(41.185,
+                             -8.76, 0.0), 0.0, 10.0, True, True, None)  # fmt: skip
+        return [ts._fields(0.1 * k + 0.013) for k in range(200)]
+
+    assert turn.state(1.0).floats is not None and ArraysOnly().state(1.0).floats is None
+    assert fields(turn) == fields(ArraysOnly())
+
+
+def test_constant_turn_state_on_floats_is_the_float64_formula():
+    """ConstantTurn.state computes on Python floats what ``position + [dn, de, -climb t]``
+    gives in float64 arrays, to the bit, and gives Python floats whatever type t has."""
+    from mpf_mavlink.core.target import ConstantTurn
+
+    rng = np.random.default_rng(11)
+    for k in range(300):
+        pos = tuple(rng.uniform(-500.0, 500.0, 3).tolist())
+        V, psi0 = float(rng.uniform(0.0, 20.0)), float(rng.uniform(-3.0, 3.0))
+        w = (0.0, 1e-10, 0.01, float(rng.uniform(-0.2, 0.2)))[k % 4]
+        climb = float(rng.uniform(-2.0, 2.0))
+        t_any = (float(rng.uniform(0.0, 900.0)), np.float64(rng.uniform(0.0, 900.0)), 7)[k % 3]
+        st = ConstantTurn(pos, V, psi0, w, climb).state(t_any)
+        t = float(t_any)
+        psi = psi0 + w * t
+        if abs(w) > 1e-9:
+            dn = V / w * (math.sin(psi) - math.sin(psi0))
+            de = V / w * (math.cos(psi0) - math.cos(psi))
+        else:
+            dn, de = V * t * math.cos(psi0), V * t * math.sin(psi0)
+        want = (np.array(pos, float) + np.array([dn, de, -climb * t])).tolist()
+        assert st.floats is not None
+        assert list(st.floats[9:12]) == want
+        assert all(type(x) is float for x in st.floats[9:18])
+        assert st.position.tolist() == want and st.t == t_any

@@ -136,22 +136,27 @@ class ConstantTurn:
     climb_rate: float = 0.0
 
     def state(self, t: float) -> TargetState:
+        """The state at t (s), on Python floats only (the SIL's target stream evaluates it for
+        every fix; numpy's per-call cost was most of it): the same IEEE operations as
+        ``position + [dn, de, -climb_rate t]`` in float64, so the same bits."""
         V, w, psi0 = self.speed, self.turn_rate, self.heading
-        psi = psi0 + w * t
-        p0 = np.array(self.position, float)
+        tf = float(t)  # (a numpy scalar t would make every number below one)
+        psi = psi0 + w * tf
         if abs(w) > 1e-9:
             dn = V / w * (math.sin(psi) - math.sin(psi0))
             de = V / w * (math.cos(psi0) - math.cos(psi))
         else:
-            dn, de = V * t * math.cos(psi0), V * t * math.sin(psi0)
-        pos = (p0 + np.array([dn, de, -self.climb_rate * t])).tolist()
+            dn, de = V * tf * math.cos(psi0), V * tf * math.sin(psi0)
+        n0, e0, d0 = self.position
+        dd = -self.climb_rate * tf
         c, s = math.cos(psi), math.sin(psi)
         # as floats (the law reads them; the arrays are built if read): R = rot_z(psi) by rows,
         # p, v, a, omega, omega_dot
         return target_state_of_floats(t, (
-            c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0, *pos,
-            V * math.cos(psi), V * math.sin(psi), -self.climb_rate,
-            -V * w * math.sin(psi), V * w * math.cos(psi), 0.0,
+            c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0,
+            float(n0) + dn, float(e0) + de, float(d0) + dd,
+            V * c, V * s, -self.climb_rate,
+            -V * w * s, V * w * c, 0.0,
             0.0, 0.0, w, 0.0, 0.0, 0.0,
         ))  # fmt: skip
 

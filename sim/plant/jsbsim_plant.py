@@ -45,6 +45,7 @@ DEFAULT_CONTROLS: dict[str, tuple[str, float]] = {
 
 # WGS-84
 WGS84_E2 = WGS84_F * (2.0 - WGS84_F)  # first eccentricity squared
+_ONE_MINUS_E2 = 1.0 - WGS84_E2
 
 # Milspec Dryden settings (spec): windspeed at 20 ft AGL (ft/s), severity index.
 TURBULENCE_LEVELS: dict[str, tuple[float, int]] = {
@@ -93,8 +94,16 @@ class LocalNED:
         self._rd = (-cl * co, -cl * so, -sl)
 
     def ned(self, lat_deg: float, lon_deg: float, alt_m: float) -> tuple[float, float, float]:
-        x, y, z = _geodetic_to_ecef(math.radians(lat_deg), math.radians(lon_deg), alt_m)
-        dx, dy, dz = x - self._o[0], y - self._o[1], z - self._o[2]
+        """(north, east, down) m of a geodetic point (once per lockstep frame: the ECEF of
+        :func:`_geodetic_to_ecef` written out, the same operations)."""
+        la, lo = math.radians(lat_deg), math.radians(lon_deg)
+        s = math.sin(la)
+        n = WGS84_A_M / math.sqrt(1.0 - WGS84_E2 * s * s)
+        nhc = (n + alt_m) * math.cos(la)
+        o = self._o
+        dx = nhc * math.cos(lo) - o[0]
+        dy = nhc * math.sin(lo) - o[1]
+        dz = (n * _ONE_MINUS_E2 + alt_m) * s - o[2]
         rn, re, rd = self._rn, self._re, self._rd
         return (
             rn[0] * dx + rn[1] * dy + rn[2] * dz,
@@ -198,22 +207,49 @@ VECTOR_FLOATS = {
 }
 
 
+class _Lazy:
+    """A snapshot's field made from its floats when first read, then an ordinary attribute of
+    the instance (a descriptor without ``__set__`` yields to the instance's ``__dict__``)."""
+
+    __slots__ = ("name", "make")
+
+    def __init__(self, make: Any) -> None:
+        self.make = make
+        self.name = ""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj: Any, objtype: Any = None) -> Any:
+        if obj is None:
+            return self
+        d = obj.__dict__
+        try:
+            value = self.make(d)
+        except KeyError:  # a snapshot without the floats of this field
+            raise AttributeError(self.name) from None
+        d[self.name] = value
+        return value
+
+
+def _vector(key: str) -> _Lazy:
+    return _Lazy(lambda d: np.array(d[key]))
+
+
 class _Snapshot(PlantState):
     """A :class:`PlantState` built without the frozen dataclass's per-field
     ``object.__setattr__`` (a third of a snapshot's cost, once per lockstep frame), whose
     rotation matrix and arrays are made when first read: the vehicle's frame reads the floats
-    (:func:`vector_floats`), tests, estimators and the autopilot's hold the arrays."""
+    (:func:`vector_floats`), tests, estimators and the autopilot's hold the arrays. (Descriptors
+    rather than ``__getattr__``: a class with ``__getattr__`` makes every attribute read of its
+    instances a slow generic lookup, and the frame reads a snapshot's fields some twenty times.)"""
 
-    def __getattr__(self, name: str) -> Any:
-        d = self.__dict__
-        if name == "R_B_N":
-            value: Any = rotation_body_to_ned(*d["_euler"])
-        elif name in VECTOR_FLOATS and VECTOR_FLOATS[name] in d:
-            value = np.array(d[VECTOR_FLOATS[name]])
-        else:
-            raise AttributeError(name)
-        d[name] = value
-        return value
+    R_B_N = _Lazy(lambda d: rotation_body_to_ned(*d["_euler"]))
+    position_ned = _vector(VECTOR_FLOATS["position_ned"])
+    velocity_ned = _vector(VECTOR_FLOATS["velocity_ned"])
+    pqr = _vector(VECTOR_FLOATS["pqr"])
+    wind_ned = _vector(VECTOR_FLOATS["wind_ned"])
+    specific_force_body = _vector(VECTOR_FLOATS["specific_force_body"])
 
 
 def vector_floats(st: Any, name: str) -> Any:
@@ -393,6 +429,7 @@ class JSBSimPlant:
         self._set_cmd = tuple(
             x.set_double_value for x in (self._n_ail, self._n_ele, self._n_rud, self._n_thr)
         )
+        self._unit_signs = (self._s_ail, self._s_ele, self._s_rud, self._s_thr) == (1.0,) * 4
 
     def _spin_up(self, thr_prop: str, thr_sign: float, throttle: float) -> None:
         """Start the engines and spin the propeller up. FGPropeller divides the shaft power by
@@ -551,10 +588,16 @@ class JSBSimPlant:
         in one call with the nodes' bound accessors (a lockstep frame is short enough that the
         calls around the two JSBSim steps cost as much as the steps)."""
         set_a, set_e, set_r, set_t = self._set_cmd
-        set_a(aileron * self._s_ail)
-        set_e(elevator * self._s_ele)
-        set_r(rudder * self._s_rud)
-        set_t(throttle * self._s_thr)
+        if self._unit_signs:  # (x * 1.0 is x)
+            set_a(aileron)
+            set_e(elevator)
+            set_r(rudder)
+            set_t(throttle)
+        else:
+            set_a(aileron * self._s_ail)
+            set_e(elevator * self._s_ele)
+            set_r(rudder * self._s_rud)
+            set_t(throttle * self._s_thr)
         self._run()
         get_p, get_q, get_r, get_vt = self._get_pqr_vt
         return get_p(), get_q(), get_r(), get_vt() * FT_TO_M

@@ -100,6 +100,9 @@ class Link:
         if self._udp and not c.udp_server and not getattr(c, "broadcast", False):
             host, port = c.destination_addr
             self._sendto, self._dest = c.port.sendto, (socket.gethostbyname(host), port)
+        # a link that neither listens for UDP clients nor accepts TCP ones (udpout, serial...)
+        # always has its peer
+        self._fixed_peer = not getattr(c, "udp_server", False) and not hasattr(c, "listen")
         # the lockstep wait polls the UDP socket with one prepared poll object (mavfile.select
         # builds three lists and a select call each time)
         self._poller: Any = None
@@ -171,7 +174,17 @@ class Link:
                 self._now = []
                 att_ms, pos_ms = self._now_att, self._now_pos
                 self._now_att = self._now_pos = -1
-                if self._send_packets(now):
+                data, send = b"".join(now), self._sendto
+                if send is not None and len(data) <= _DATAGRAM_MAX:
+                    # every frame: one datagram to the one peer (_send_packets, _write)
+                    try:
+                        send(data, self._dest)
+                    except OSError:
+                        pass  # as pymavlink's udp write: a peer not up yet is a datagram lost
+                    wrote = True
+                else:
+                    wrote = self._send_packets(now)
+                if wrote:
                     self.lockstep.written(att_ms, pos_ms, self.clock.boot_s)
             return
         q, t = self._out, self.clock.boot_s + 1e-9
@@ -221,6 +234,8 @@ class Link:
 
     # ------------------------------------------------------------------ input
     def has_peer(self) -> bool:
+        if self._fixed_peer:  # (every lockstep wait: no attribute probes that raise)
+            return True
         c = self.conn
         if getattr(c, "udp_server", False):  # pymavlink >= 2.4.4x keeps a set of clients
             return bool(getattr(c, "clients", None)) or getattr(c, "last_address", None) is not None

@@ -92,8 +92,13 @@ class Lockstep:
     def written(self, att_ms: int, pos_ms: int, t: float) -> None:
         """A frame left at boot time ``t`` (s) with ATTITUDE stamped ``att_ms`` and
         LOCAL_POSITION_NED ``pos_ms`` (-1: none)."""
-        if att_ms >= 0:
-            self._attitude(att_ms, t)
+        if att_ms >= 0:  # (every frame: _attitude written out)
+            w = self._written
+            if len(w) == w.maxlen:
+                self._att_t.pop(w[0][0], None)
+            w.append((att_ms, t))
+            self._att_t[att_ms] = t
+            self.unstamped = False
         if pos_ms > att_ms:  # a position newer than any ATTITUDE in the frame
             if self.answers_positions:
                 self._attitude(pos_ms, t)
@@ -120,6 +125,18 @@ class Lockstep:
             self.await_ms = w[-1][0] if w else -1
             return
         horizon = t + self.frame_period - self.command_latency_s - 1e-6
+        # every frame: the last two frames written decide (the loop below does the same)
+        if w:
+            m, tw = w[-1]
+            if tw < horizon:
+                self.await_ms = m
+                return
+            if len(w) > 1:
+                m, tw = w[-2]
+                if tw < horizon:
+                    self.await_ms = m
+                    self.overlapped += 1
+                    return
         for i, (m, tw) in enumerate(reversed(w)):
             if tw < horizon:
                 self.await_ms = m

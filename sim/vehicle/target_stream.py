@@ -12,7 +12,6 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from mpf_mavlink.bridge.controller import parse_marker
-from mpf_mavlink.core.frames import matrix_to_quat_wxyz
 from sim.plant.kinematic_plant import ned_to_geodetic_fast
 from sim.vehicle.clock import StepClock
 from sim.vehicle.link import Link
@@ -23,6 +22,30 @@ _AHEAD = 50  # position fixes computed at once (5 s at 10 Hz)
 
 def _floats(v: Any) -> list[float]:
     return v.tolist() if type(v) is np.ndarray else [float(x) for x in v]
+
+
+def quat_of_rows(R: Any) -> tuple[float, float, float, float]:
+    """:func:`mpf_mavlink.core.frames.matrix_to_quat_wxyz` of the rotation matrix whose rows are
+    ``R[0:9]`` (floats), with the same operations in the same order (the same bits), without
+    numpy's per-element indexing (a target fix's second largest cost)."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = R[0:9]
+    tr = r00 + r11 + r22
+    if tr > 0:
+        S = math.sqrt(tr + 1.0) * 2
+        w, x, y, z = 0.25 * S, (r21 - r12) / S, (r02 - r20) / S, (r10 - r01) / S
+    elif r00 > r11 and r00 > r22:
+        S = math.sqrt(1.0 + r00 - r11 - r22) * 2
+        w, x, y, z = (r21 - r12) / S, 0.25 * S, (r01 + r10) / S, (r02 + r20) / S
+    elif r11 > r22:
+        S = math.sqrt(1.0 + r11 - r00 - r22) * 2
+        w, x, y, z = (r02 - r20) / S, (r01 + r10) / S, 0.25 * S, (r12 + r21) / S
+    else:
+        S = math.sqrt(1.0 + r22 - r00 - r11) * 2
+        w, x, y, z = (r10 - r01) / S, (r02 + r20) / S, (r12 + r21) / S, 0.25 * S
+    if w < 0:
+        w, x, y, z = -w, -x, -y, -z
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    return (w / n, x / n, y / n, z / n)
 
 
 class TargetStream:
@@ -105,14 +128,19 @@ class TargetStream:
     def _fields(self, t: float) -> tuple[Any, ...]:
         """The position messages' fields (all but the stamp) at target time ``t`` (s): lat, lon
         (1e-7 deg), altitude (m), velocity, acceleration, attitude quaternion, body rates,
-        GLOBAL_POSITION_INT's altitudes (mm), velocity (cm/s) and heading (cdeg)."""
+        GLOBAL_POSITION_INT's altitudes (mm), velocity (cm/s) and heading (cdeg). Read from the
+        state's floats (no numpy array is built: the motions give their states as floats)."""
         ts = self.motion.state(t)
-        n, e, d = _floats(ts.position)
+        f = ts.floats
+        if f is None:
+            f = (*ts.R_T_I.ravel().tolist(), *_floats(ts.position), *_floats(ts.velocity),
+                 *_floats(ts.acceleration), *_floats(ts.omega_T))  # fmt: skip
+        n, e, d = f[9], f[10], f[11]
         lat, lon, alt = ned_to_geodetic_fast(self.origin, n, e, d)
-        vel, acc, rates = _floats(ts.velocity), _floats(ts.acceleration), _floats(ts.omega_T)
-        yaw = math.atan2(ts.R_T_I[1, 0], ts.R_T_I[0, 0])
+        vel, acc, rates = list(f[12:15]), list(f[15:18]), list(f[18:21])
+        yaw = math.atan2(f[3], f[0])
         return (int(round(lat * 1e7)), int(round(lon * 1e7)), alt, vel, acc,
-                list(matrix_to_quat_wxyz(ts.R_T_I)), rates, int(round(alt * 1000)),
+                list(quat_of_rows(f)), rates, int(round(alt * 1000)),
                 int(round((alt - self.home_alt_m) * 1000)), int(round(vel[0] * 100)),
                 int(round(vel[1] * 100)), int(round(vel[2] * 100)),
                 int(round(math.degrees(yaw) * 100)) % 36000)  # fmt: skip

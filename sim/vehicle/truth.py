@@ -21,32 +21,19 @@ class TruthRecorder:
         self.enabled = enabled
         self._rows: list[tuple[float, ...]] = []
         self._tgt_rows: list[tuple[float, ...]] = []  # target position, velocity of the rows
-        self._lock = threading.Lock()  # truth() may be read while the vehicle runs
+        self._lock = threading.Lock()  # the target's rows: truth() may run beside the vehicle
 
     def record(self, t: float, boot_s: float, st: Any, custom_mode: int) -> None:
+        """One row (every frame: a plant snapshot's floats read from its ``__dict__``, and no
+        lock: a list's append is atomic, and :meth:`truth` reads a copy of the list)."""
         if not self.enabled:
             return
-        p, v = vector_floats(st, "position_ned"), vector_floats(st, "velocity_ned")
-        w = vector_floats(st, "wind_ned")
-        row = (
-            t,
-            boot_s,
-            p[0],
-            p[1],
-            p[2],
-            v[0],
-            v[1],
-            v[2],
-            *st.euler,
-            st.airspeed,
-            w[0],
-            w[1],
-            w[2],
-            st.throttle,
-            custom_mode,
-        )
-        with self._lock:
-            self._rows.append(row)
+        d = getattr(st, "__dict__", {})
+        p, v, w = d.get("_p"), d.get("_v"), d.get("_wind")
+        if p is None or v is None or w is None:  # not a plant snapshot: its arrays
+            p, v, w = (vector_floats(st, n) for n in ("position_ned", "velocity_ned", "wind_ned"))
+        self._rows.append((t, boot_s, *p, *v, *st.euler, st.airspeed, *w, st.throttle,
+                           custom_mode))  # fmt: skip
 
     def forget_target(self) -> None:
         """The target's epoch changed: its rows are recomputed on the new clock."""
@@ -59,7 +46,7 @@ class TruthRecorder:
         throttle (N), mode (N, custom_mode), target_t (N: the target's clock, s) and
         target_position / target_velocity (N,3) of ``target`` (motion.state(t)) if any."""
         with self._lock:
-            A = np.array(self._rows, dtype=float).reshape(-1, _COLS)
+            A = np.array(self._rows[:], dtype=float).reshape(-1, _COLS)
             tgt = self._tgt_rows
             if target is not None:
                 for tb in A[len(tgt) :, 1]:
