@@ -147,8 +147,11 @@ def install() -> CompiledFinder | None:
     manifest = read_manifest()
     if manifest is None:
         return None
-    mods = manifest.get("modules", {})
-    digests = {str(k): str(v["sha256"]) for k, v in mods.items() if k in MODULES}
+    try:
+        mods = manifest.get("modules", {})
+        digests = {str(k): str(v["sha256"]) for k, v in mods.items() if k in MODULES}
+    except (AttributeError, KeyError, TypeError):  # a manifest not of our build: pure Python
+        return None
     finder = CompiledFinder(EXT_DIR, digests)
     sys.meta_path.insert(0, finder)
     return finder

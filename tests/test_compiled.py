@@ -181,3 +181,15 @@ def test_pure_python_when_asked() -> None:
     )
     assert r.returncode == 0, r.stderr
     assert "pure Python" in r.stdout and "MPF_PURE_PYTHON" in r.stdout
+
+
+def test_a_manifest_not_of_our_build_means_pure_python(monkeypatch: pytest.MonkeyPatch) -> None:
+    # install() runs at every import of mpf_mavlink: a damaged manifest must not break it
+    monkeypatch.setattr(
+        sys, "meta_path", [f for f in sys.meta_path if not isinstance(f, CompiledFinder)]
+    )
+    monkeypatch.delenv("MPF_PURE_PYTHON", raising=False)
+    for bad in ({"modules": {LAW: 1}}, {"modules": {LAW: {}}}, {"modules": [LAW]}):
+        monkeypatch.setattr(_compiled, "read_manifest", lambda bad=bad: bad)
+        assert _compiled.install() is None
+    assert not any(isinstance(f, CompiledFinder) for f in sys.meta_path)
