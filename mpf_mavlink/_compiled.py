@@ -35,6 +35,7 @@ MODULES: tuple[str, ...] = (
     "mpf_mavlink.core.guidance.predict",
     "mpf_mavlink.core.adapter",
     "mpf_mavlink.core.target_filter",
+    "mpf_mavlink.bridge.estimator",
 )
 
 PACKAGE_DIR = Path(__file__).resolve().parent

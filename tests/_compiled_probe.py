@@ -109,6 +109,53 @@ def target_filter() -> list[str]:
     return out
 
 
+def estimator() -> list[str]:
+    """The estimator alone over the vehicle samples of the real ArduPlane tlog, each fed as
+    recorded and then as three spoiled copies (a NaN rate, a rotation off orthonormal by
+    1e-5, a ground speed beyond the bound): what update() took, every estimate at the
+    attitude and at the position instant, and the wind low-pass."""
+    import dataclasses
+
+    from mpf_mavlink.bench.control_path import record_calls
+    from mpf_mavlink.bridge.estimator import Estimator, EstimatorParams
+
+    _, calls = record_calls(
+        ROOT / "tests" / "data" / "arduplane-quadplane-sitl-vtol.tlog",
+        ROOT / "configs" / "replay_arduplane_sitl.yaml",
+    )
+    est = Estimator(EstimatorParams(airspeed_from_wind=False))
+    out: list[str] = []
+
+    def spoiled(s: Any) -> list[Any]:
+        name = type(s).__name__
+        if name == "AttitudeSample":
+            return [
+                dataclasses.replace(s, rates_frd=np.array([np.nan, 0.0, 0.0])),
+                dataclasses.replace(s, R_B_N=np.asarray(s.R_B_N) * (1.0 + 1e-5)),
+            ]
+        if name in ("LocalPositionSample", "GlobalPositionSample"):
+            return [dataclasses.replace(s, vel_ned=np.asarray(s.vel_ned) * 0 + 250.0)]
+        return []
+
+    for key, args in calls:
+        if key != "feed_vehicle":
+            continue
+        sample, rx = args
+        for bad in spoiled(sample):
+            out.append(str(est.update(bad, rx)))
+        out.append(str(est.update(sample, rx)))
+        out += _hex(est._wind_lp) if est._wind_lp is not None else ["None"]
+        for at_position in (False, True):
+            e, why = est.estimate(at_position)
+            if e is None:
+                out.append(why)
+                continue
+            out += _hex((e.vehicle.t, e.vehicle.floats, e.vehicle.airspeed, e.R_B_N))
+            out += _hex((e.rates_frd, e.ground_velocity))
+            out += [e.position_source, e.airspeed_source, e.wind_source]
+    return out
+
+
 def paper() -> list[str]:
     from mpf_mavlink.config.schema import load_config
     from sim.runner import run_kinematic
@@ -123,6 +170,7 @@ def main() -> None:
     out: dict[str, Any] = {"compiled": compiled_modules(), "law": law()}
     out["controller"] = controller()
     out["target_filter"] = target_filter()
+    out["estimator"] = estimator()
     if "--quick" not in sys.argv:
         out["paper"] = paper()
     print(json.dumps(out))
