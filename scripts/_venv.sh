@@ -36,7 +36,8 @@ elif [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ] || [ "$ROOT/re
 fi
 # The optional compiled hot paths (mpf_mavlink/_compiled.py): rebuilt whenever a compiled module's
 # .py or .pxd, Cython or the flags changed; a quick no-op otherwise. Without Cython or a C
-# compiler it says so and everything runs as pure Python. MPF_PURE_PYTHON=1 skips the build.
+# compiler it says so. Built so that tests/test_compiled.py checks them against pure Python;
+# used only with MPF_COMPILED=1 (mpf_mavlink/_compiled.py says why). MPF_PURE_PYTHON=1 skips it.
 if [ "${MPF_PURE_PYTHON:-0}" = 0 ]; then
   nice -n 19 "$VENV/bin/python" -m mpf_mavlink._build --if-stale >&2
 fi

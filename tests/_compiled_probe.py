@@ -1,8 +1,9 @@
 """Prints, as JSON, every float the hot paths give on a fixed set of inputs (float.hex, exact):
 the law with its diagnostics and errors record on the scenarios of test_law_equivalence, the
 path evaluation, the prediction, the bridge's controller over the real ArduPlane tlog, the live
-target's filter and the paper scenario. tests/test_compiled.py runs it compiled and with
-MPF_PURE_PYTHON=1 and requires the same output. ``--quick`` leaves out the 300 s paper scenario."""
+target's filter and the paper scenario. tests/test_compiled.py runs it compiled (MPF_COMPILED=1)
+and with MPF_PURE_PYTHON=1 and requires the same output. ``--quick`` leaves out the 300 s paper
+scenario."""
 
 from __future__ import annotations
 

@@ -72,7 +72,7 @@ def test_compiled_and_pure_give_the_same_floats_bit_for_bit() -> None:
     estimator alone over that tlog's samples (and spoiled copies it must refuse), the live
     target's filter on a radio feed and the 300 s paper scenario."""
     pure = _probe({"MPF_PURE_PYTHON": "1"})
-    comp = _probe({"MPF_PURE_PYTHON": "0"})
+    comp = _probe({"MPF_PURE_PYTHON": "0", "MPF_COMPILED": "1"})
     assert pure["compiled"] == []
     assert comp["compiled"] == list(MODULES), "the build exists but was not loaded"
     # the probe exercised something: floats of 160 law states, of the tlog's steps, and the
@@ -136,7 +136,12 @@ def test_an_edited_source_falls_back_to_the_py_with_one_warning(tmp_path: Path) 
         capture_output=True,
         text=True,
         cwd=ROOT,
-        env={**os.environ, "MPF_COMPILED_DIR": str(ext), "MPF_PURE_PYTHON": "0"},
+        env={
+            **os.environ,
+            "MPF_COMPILED_DIR": str(ext),
+            "MPF_PURE_PYTHON": "0",
+            "MPF_COMPILED": "1",
+        },
         timeout=120,
     )
     assert r.returncode == 0, r.stderr
@@ -161,7 +166,12 @@ def test_a_build_that_does_not_load_falls_back_to_the_py(tmp_path: Path) -> None
         capture_output=True,
         text=True,
         cwd=ROOT,
-        env={**os.environ, "MPF_COMPILED_DIR": str(ext), "MPF_PURE_PYTHON": "0"},
+        env={
+            **os.environ,
+            "MPF_COMPILED_DIR": str(ext),
+            "MPF_PURE_PYTHON": "0",
+            "MPF_COMPILED": "1",
+        },
         timeout=120,
     )
     assert r.returncode == 0, r.stderr
@@ -191,7 +201,28 @@ def test_a_manifest_not_of_our_build_means_pure_python(monkeypatch: pytest.Monke
         sys, "meta_path", [f for f in sys.meta_path if not isinstance(f, CompiledFinder)]
     )
     monkeypatch.delenv("MPF_PURE_PYTHON", raising=False)
+    monkeypatch.setenv("MPF_COMPILED", "1")
     for bad in ({"modules": {LAW: 1}}, {"modules": {LAW: {}}}, {"modules": [LAW]}):
         monkeypatch.setattr(_compiled, "read_manifest", lambda bad=bad: bad)
         assert _compiled.install() is None
     assert not any(isinstance(f, CompiledFinder) for f in sys.meta_path)
+
+
+def test_the_build_is_used_only_when_asked() -> None:
+    """Without MPF_COMPILED=1 every module runs from its .py, and --version says how to ask."""
+    env = {k: v for k, v in os.environ.items() if k not in ("MPF_COMPILED", "MPF_PURE_PYTHON")}
+    code = "import mpf_mavlink.core.guidance.law as law, sys; print(law.__file__)"
+    r = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env, timeout=120
+    )
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().endswith("law.py")
+    r = subprocess.run(
+        [sys.executable, "-m", "mpf_mavlink.cli.main", "--version"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=env,
+        timeout=120,
+    )
+    assert r.returncode == 0 and "MPF_COMPILED=1" in r.stdout, r.stdout + r.stderr
