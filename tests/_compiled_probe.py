@@ -23,6 +23,7 @@ from mpf_mavlink.core.guidance import VehicleState, mpf_law  # noqa: E402
 from mpf_mavlink.core.guidance.law import mpf_errors  # noqa: E402
 from mpf_mavlink.core.guidance.predict import predict_rows  # noqa: E402
 from tests.test_law_equivalence import _scenarios, _states  # noqa: E402
+from tests.test_target_filter_equivalence import radio_feed  # noqa: E402
 
 
 def _hex(x: Any) -> list[str]:
@@ -77,26 +78,9 @@ def target_filter() -> list[str]:
     report, the posterior, and the target placed at the control time."""
     import math
 
-    from mpf_mavlink.core.target import PaperProfile
     from mpf_mavlink.core.target_filter import Report, TargetEstimator, TargetFilterParams
 
-    rng = np.random.default_rng(2)
-    m = PaperProfile()
-    stream: list[tuple[float, dict[str, Any]]] = []
-    for k in range(1500):
-        t = 0.2 * k
-        ts = m.state(t)
-        w = float((ts.R_T_I @ ts.omega_T)[2])
-        stream.append((t + 0.15, dict(t=t + 0.1 - 50.0, turn_rate=w + rng.normal(0, 0.01),
-                                      yaw=0.3, attitude=True)))  # fmt: skip
-        if rng.random() < 0.1:
-            continue
-        late = 0.4 if rng.random() < 0.05 else 0.0
-        stream.append((t + 0.05 + late, dict(
-            t=t - 50.0, position=(ts.position + rng.normal(0, 2, 3)).tolist(),
-            velocity=(ts.velocity + rng.normal(0, 0.3, 3)).tolist(),
-        )))  # fmt: skip
-    stream.sort(key=lambda e: e[0])
+    stream = radio_feed()
     est = TargetEstimator(TargetFilterParams(latency_s=0.05))
     out: list[str] = []
     for rx, d in stream:

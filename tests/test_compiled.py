@@ -117,6 +117,19 @@ def test_the_digest_covers_the_pxd(tmp_path: Path, monkeypatch: pytest.MonkeyPat
     assert len({before, with_pxd, source_digest(LAW)}) == 3
 
 
+def _with_build(ext: Path, code: str) -> subprocess.CompletedProcess[str]:
+    """``code`` in a fresh interpreter that asks for the compiled modules of build ``ext``."""
+    env = {**os.environ, "MPF_COMPILED_DIR": str(ext), "MPF_PURE_PYTHON": "0", "MPF_COMPILED": "1"}
+    return subprocess.run(
+        [sys.executable, "-W", "default", "-c", code],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=env,
+        timeout=120,
+    )
+
+
 @needs_build
 def test_an_edited_source_falls_back_to_the_py_with_one_warning(tmp_path: Path) -> None:
     """End to end in a fresh interpreter: a copy of the build whose manifest records another
@@ -131,19 +144,7 @@ def test_an_edited_source_falls_back_to_the_py_with_one_warning(tmp_path: Path) 
         "import mpf_mavlink.core.guidance.law as law, mpf_mavlink.core.paths.base as b;"
         "print(law.__file__); print(b.__file__)"
     )
-    r = subprocess.run(
-        [sys.executable, "-W", "default", "-c", code],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        env={
-            **os.environ,
-            "MPF_COMPILED_DIR": str(ext),
-            "MPF_PURE_PYTHON": "0",
-            "MPF_COMPILED": "1",
-        },
-        timeout=120,
-    )
+    r = _with_build(ext, code)
     assert r.returncode == 0, r.stderr
     law_file, base_file = r.stdout.split()
     assert law_file.endswith("law.py")
@@ -161,19 +162,7 @@ def test_a_build_that_does_not_load_falls_back_to_the_py(tmp_path: Path) -> None
         "import mpf_mavlink.core.guidance.law as law;"
         "print(law.__file__); print(law.steady_state_frame(1.0, 0.5, 16.0)[0])"
     )
-    r = subprocess.run(
-        [sys.executable, "-W", "default", "-c", code],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        env={
-            **os.environ,
-            "MPF_COMPILED_DIR": str(ext),
-            "MPF_PURE_PYTHON": "0",
-            "MPF_COMPILED": "1",
-        },
-        timeout=120,
-    )
+    r = _with_build(ext, code)
     assert r.returncode == 0, r.stderr
     law_file, wd11 = r.stdout.split()
     assert law_file.endswith("law.py")

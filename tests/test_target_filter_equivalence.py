@@ -123,13 +123,13 @@ def test_demo_feed_agrees_with_the_numpy_filter():
     assert counts["fused"] == 6000
 
 
-def test_radio_feed_with_late_reports_and_attitudes_agrees_with_the_numpy_filter():
-    """The paper's manoeuvring target through a radio: 5 Hz fixes (2 m, 0.3 m/s noise), 10 %
-    lost, 5 % of them 0.4 s late (re-ordered: the filter re-runs from the posterior before),
-    ATTITUDE-only turn-rate reports between them, the default tuning."""
+def radio_feed() -> list[tuple[float, dict[str, Any]]]:
+    """The paper's manoeuvring target through a radio, as (receive time s, report fields) in
+    receive order: 5 Hz fixes (2 m, 0.3 m/s noise), 10 % lost, 5 % of them 0.4 s late, and
+    ATTITUDE-only turn-rate reports between them (also tests/_compiled_probe.py's feed)."""
     rng = np.random.default_rng(2)
     m = PaperProfile()
-    stream = []
+    stream: list[tuple[float, dict[str, Any]]] = []
     for k in range(1500):
         t = 0.2 * k
         ts = m.state(t)
@@ -144,7 +144,14 @@ def test_radio_feed_with_late_reports_and_attitudes_agrees_with_the_numpy_filter
             velocity=(ts.velocity + rng.normal(0, 0.3, 3)).tolist(),
         )))  # fmt: skip
     stream.sort(key=lambda e: e[0])
-    counts = _compare(stream, latency_s=0.05)
+    return stream
+
+
+def test_radio_feed_with_late_reports_and_attitudes_agrees_with_the_numpy_filter():
+    """The paper's manoeuvring target through a radio: 5 Hz fixes (2 m, 0.3 m/s noise), 10 %
+    lost, 5 % of them 0.4 s late (re-ordered: the filter re-runs from the posterior before),
+    ATTITUDE-only turn-rate reports between them, the default tuning."""
+    counts = _compare(radio_feed(), latency_s=0.05)
     assert counts["out_of_order"] > 20 and counts["fused"] > 2500
 
 
