@@ -245,6 +245,7 @@ def vehicle_config(cfg: Config, url: str, clock: str | None = None, **over: Any)
         command_latency_s=sil.command_latency_s,
         wind_estimate_tau_s=sil.wind_estimate_tau_s,
         answer_timeout_s=sil.answer_timeout_s,
+        lockstep_spin_s=sil.lockstep_spin_s,
         realtime_speed=sil.realtime_speed,
         com_of_loss_t=sil.offboard_loss_timeout_s,
         guided_timeout=sil.guided_timeout_s,
@@ -342,8 +343,11 @@ def _vehicle_run(
     )
 
     def watch() -> None:
-        while not stop.wait(0.2):
+        spin = getattr(v.clock, "spin_cpu_s", None) is not None
+        while not stop.wait(0.05):
             status[0] = v.t
+            if spin:
+                status[1] = v.clock.spin_cpu_s
             if os.getppid() != parent:  # orphaned (parent killed): do not run forever
                 break
         v._stop.set()
@@ -459,7 +463,7 @@ def run_sil(
     pb, pv, rx, stop, status, q = _start_peers(
         cfg, bcfg, port, bridge_dir, duration, clock, force, vehicle or {}
     )
-    bar = _Progress(duration, progress, log, (pv.pid, pb.pid))
+    bar = _Progress(duration, progress, log, (pv.pid, pb.pid), lambda: status[1])
     bres: Any = None
     berr: str | None = None
     interrupted = False
@@ -525,7 +529,7 @@ def _start_peers(
     ctx = _context()
     rx, tx = ctx.Pipe(duplex=False)
     stop = ctx.Event()
-    status = ctx.RawArray("d", 1)
+    status = ctx.RawArray("d", 2)  # the vehicle's sim time (s), its CPU time spent spinning (s)
     q = ctx.Queue()
     pb = ctx.Process(
         target=_bridge_main,
@@ -587,10 +591,15 @@ def _cpu_per_frame(bar: Any, frame_period_s: float) -> dict[str, float]:
     if None in bar.cpu0 + bar.cpu1 or bar.t_end is None or bar.t_track is None:
         return {}
     frames = max(1.0, (bar.t_end - bar.t_track) / frame_period_s)
-    return {
+    out = {
         f"cpu_us_per_frame_{who}": (bar.cpu1[i] - bar.cpu0[i]) / frames * 1e6
         for i, who in enumerate(("vehicle", "bridge"))
     }
+    # the vehicle's lockstep spin (sil.lockstep_spin_s) is waiting: its work is the rest
+    spin = (bar.spin1 - bar.spin0) / frames * 1e6
+    out["cpu_us_per_frame_vehicle_spin"] = spin
+    out["cpu_us_per_frame_vehicle_work"] = out["cpu_us_per_frame_vehicle"] - spin
+    return out
 
 
 def _measure(

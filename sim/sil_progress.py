@@ -28,9 +28,19 @@ class _Progress:
     """Progress for long runs: a bar over the tracking seconds, the bridge's events above it.
     Also samples the peers' CPU time over the tracking phase (a load-independent cost figure)."""
 
-    def __init__(self, duration: float, enabled: bool, log: Any, pids: tuple[int, int] = (0, 0)):
+    def __init__(
+        self,
+        duration: float,
+        enabled: bool,
+        log: Any,
+        pids: tuple[int, int] = (0, 0),
+        spin_s: Any = None,
+    ):
         self.duration, self.enabled, self.log = duration, enabled, log
         self.pids = pids
+        # the vehicle's CPU time spent spinning in its lockstep wait so far (s), sampled with cpu
+        self.spin_s = spin_s if spin_s is not None else (lambda: 0.0)
+        self.spin0 = self.spin1 = 0.0
         self.cpu0: list[float | None] = [None, None]
         self.cpu1: list[float | None] = [None, None]
         self.t_end: float | None = None
@@ -53,6 +63,7 @@ class _Progress:
         if text.startswith("[TRACKING]"):
             self.t_track, self.wall_track = t, time.perf_counter()
             self.cpu0 = [_cpu_s(p) for p in self.pids]
+            self.spin0 = float(self.spin_s())
             self.next_line = 0.1
             if self.enabled and sys.stderr.isatty():
                 from tqdm import tqdm
@@ -68,6 +79,7 @@ class _Progress:
         elif text.startswith("[HANDBACK]") or text.startswith("[DONE]"):
             if self.t_end is None and self.t_track is not None:
                 self.cpu1 = [_cpu_s(p) for p in self.pids]
+                self.spin1 = float(self.spin_s())
                 self.t_end = t
             self.update(t)
         if self.enabled and not _STATE_MARK.match(text):  # states are shown by the bar

@@ -24,7 +24,9 @@ from sim.vehicle.vehicle import SimVehicle
 FRAME_S = 0.02
 
 
-def _fly(overlap: bool, latency_s: float, seconds: float) -> tuple[dict[str, Any], SimVehicle]:
+def _fly(
+    overlap: bool, latency_s: float, seconds: float, spin_s: float = 0.0
+) -> tuple[dict[str, Any], SimVehicle]:
     ctx = multiprocessing.get_context("fork")
     rx, tx = ctx.Pipe(duplex=False)
     stop = ctx.Event()
@@ -45,6 +47,7 @@ def _fly(overlap: bool, latency_s: float, seconds: float) -> tuple[dict[str, Any
             answer_timeout_s=30.0,
             command_latency_s=latency_s,
             lockstep_overlap=overlap,
+            lockstep_spin_s=spin_s,
             trim_seconds=3.0,
             wind_ned=(0.0, 4.0, 0.0),
             turbulence="light",
@@ -91,3 +94,22 @@ def test_the_overlapped_lockstep_flies_the_serial_flight_bit_for_bit(latency_s):
         a, b = serial[key], overlapped[key]
         assert a.shape == b.shape, key
         assert np.array_equal(a, b), f"{key} differs between the serial and overlapped lockstep"
+
+
+def test_the_spinning_wait_flies_the_sleeping_flight_bit_for_bit():
+    """sil.lockstep_spin_s changes how the vehicle waits for the answer, never which answer
+    ends which frame: the truth equals the serial, sleeping lockstep's bit for bit. The spin
+    (10 ms) outlasts the peer's 1 ms sleep before each answer, so the answers do come while it
+    spins."""
+    seconds = 4.0
+    serial, _ = _fly(False, FRAME_S, seconds)
+    spun, v = _fly(True, FRAME_S, seconds, spin_s=0.01)
+    frames = int(round((1.2 + seconds) / FRAME_S))
+    assert v.clock.timeouts == 0
+    # nearly every frame's answer came while spinning (a preempted one may end in the sleep)
+    assert v.clock.spun >= 0.8 * frames and v.clock.spin_cpu_s > 0.0
+    assert serial.keys() == spun.keys()
+    for key in serial:
+        a, b = serial[key], spun[key]
+        assert a.shape == b.shape, key
+        assert np.array_equal(a, b), f"{key} differs between the sleeping and spinning wait"

@@ -271,6 +271,44 @@ def test_lockstep_clock_waits_long_for_an_answering_peer_and_short_after_a_timeo
     assert LockstepClock(answer_timeout_s=30.0).answered_timeout_s == 30.0  # never shorter
 
 
+def test_lockstep_spin_ends_the_wait_on_the_answer_and_rests_after_a_run_of_misses():
+    """The spin polls without a timeout until the answer (no sleeping poll is asked for then);
+    SPIN_MISSES_MAX spins in a row that end without it make the next SPIN_REST_FRAMES frames
+    sleep at once; a frame after a timeout never spins (the peer is not answering)."""
+    clock = LockstepClock(answer_timeout_s=0.01, answered_timeout_s=0.2, spin_s=0.002)
+    sleeping: list[float] = []
+    spins = [0]
+    answer_after = [3]  # polls without a timeout before the answer comes (None: never)
+
+    def poll(timeout: float) -> bool:
+        if timeout > 0.0:
+            sleeping.append(timeout)
+            return True  # the sleeping wait always gets its answer here
+        spins[0] += 1
+        n = answer_after[0]
+        if n is not None and spins[0] >= n:
+            spins[0] = 0
+            return True
+        return False
+
+    clock.wait(1.0, poll, lambda: True)
+    assert sleeping == [] and clock.spun == 1 and clock.answered_frames == 1
+    answer_after[0] = None  # from now on the answer comes only to the sleeping wait
+    for k in range(LockstepClock.SPIN_MISSES_MAX):
+        clock.wait(1.02 + 0.02 * k, poll, lambda: True)
+    assert len(sleeping) == LockstepClock.SPIN_MISSES_MAX and clock.spun == 1
+    spins[0] = 0
+    for k in range(LockstepClock.SPIN_REST_FRAMES):  # resting: not one poll without a timeout
+        clock.wait(2.0 + 0.02 * k, poll, lambda: True)
+    assert spins[0] == 0
+    assert len(sleeping) == LockstepClock.SPIN_MISSES_MAX + LockstepClock.SPIN_REST_FRAMES
+    clock.wait(9.0, poll, lambda: True)  # rested: it spins again
+    assert spins[0] > 0
+    assert clock.spin_cpu_s >= 0.0 and clock.timeouts == 0
+    with pytest.raises(ValueError, match="spin_s"):
+        LockstepClock(spin_s=-1.0)
+
+
 # ------------------------------------------------------------------------------ setpoints
 def _sat(mask: int, q=(1.0, 0.0, 0.0, 0.0), rates=(0.1, 0.2, 0.3), thrust: float = 0.6):
     return SimpleNamespace(

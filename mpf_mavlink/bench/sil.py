@@ -76,6 +76,9 @@ def sil_real_time_factor(runs: int = 3) -> dict[str, Any]:
                 "overall": m.get("real_time_factor_overall"),
                 "wall_s": m.get("wall_time_s"),
                 "cpu_us_per_frame_vehicle": m.get("cpu_us_per_frame_vehicle"),
+                # of which the lockstep wait's spin (sil.lockstep_spin_s), and the rest: its work
+                "cpu_us_per_frame_vehicle_spin": m.get("cpu_us_per_frame_vehicle_spin"),
+                "cpu_us_per_frame_vehicle_work": m.get("cpu_us_per_frame_vehicle_work"),
                 "cpu_us_per_frame_bridge": m.get("cpu_us_per_frame_bridge"),
                 "lockstep_timeouts": m.get("vehicle_lockstep_timeouts"),
                 # frames that awaited an earlier frame's answer (the peers overlapped)

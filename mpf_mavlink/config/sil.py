@@ -109,8 +109,10 @@ class SilConfig:
     clock: ``lockstep`` (the vehicle advances once the bridge has answered the last telemetry,
       waiting at most ``answer_timeout_s`` of wall time, 1 s after a frame the bridge answered;
       a mode change the bridge asked for ends the waits until it is applied; real time until
-      the bridge has taken control) or ``realtime`` (paced to ``realtime_speed`` x the wall
-      clock).
+      the bridge has taken control; ``lockstep_spin_s``: how long the vehicle polls for the
+      answer before it sleeps, which spares the bridge's send a wake-up of the vehicle: only the
+      wait changes, never the flight; sim/vehicle/clock.py) or ``realtime`` (paced to
+      ``realtime_speed`` x the wall clock).
     target_live: the bridge takes the moving target from the vehicle's MAVLink stream (the
       target is its own system ``target_system``: FOLLOW_TARGET + GLOBAL_POSITION_INT at
       ``target_rate_hz``) instead of its own copy of the scripted motion; ``target_feed``: a
@@ -133,6 +135,12 @@ class SilConfig:
     flavour: Literal["px4", "ardupilot"] = "px4"
     clock: Literal["lockstep", "realtime"] = "lockstep"
     answer_timeout_s: float = field(default=0.05, metadata=_pos())
+    lockstep_spin_s: float = field(
+        default=0.0005,
+        metadata=_rng(
+            0.0, 0.01, "wall s the lockstep vehicle polls for the answer before it sleeps"
+        ),
+    )
     realtime_speed: float = field(default=1.0, metadata=_pos())
     port: int | None = field(default=None, metadata=_rng(1024, 65535, "null: a free one"))
     frame_period_s: float = field(default=0.02, metadata=_open(0.0, 0.5))

@@ -63,6 +63,8 @@ class VehicleConfig:
     clock: Any = "lockstep"  # "lockstep", "realtime" or a clock object (sim.vehicle.clock)
     # lockstep: wall s to wait for the bridge's answer (1 s after a frame it answered: clock.py)
     answer_timeout_s: float = 0.05
+    # lockstep: wall s to poll for the answer before sleeping (0: sleep at once; clock.py)
+    lockstep_spin_s: float = 0.0
     # lockstep: await only the answer that acts in the next frame (with a command latency of a
     # frame or more an earlier frame's, so the peer computes while the vehicle steps); False:
     # the answer to the telemetry just written (strict alternation: the same flight, slower)

@@ -191,7 +191,7 @@ class SimVehicle:
                              for g in cfg.gusts)  # fmt: skip
         self.time = StepClock(self.dt, int(round(self.plant.t / self.dt)))
         self.clock = make_clock(cfg.clock, answer_timeout_s=cfg.answer_timeout_s,
-                                speed=cfg.realtime_speed)  # fmt: skip
+                                spin_s=cfg.lockstep_spin_s, speed=cfg.realtime_speed)  # fmt: skip
         self.lockstep = Lockstep(self.frame_period, cfg.command_latency_s, cfg.lockstep_overlap)
         self.link = Link(cfg.url, self.sysid, self.compid,
                          (int(cfg.target_system), int(cfg.target_component)), self.time,
