@@ -7,18 +7,8 @@
 #   --python-version 3.11 --python-platform linux -o requirements.lock
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-# The interpreter: $PYTHON if set; else the distribution's /usr/bin/python3.11 when it can make a
-# venv (Debian's and Ubuntu's are built with profile-guided and link-time optimisation and link
-# libpython into the executable: the SIL and the bridge run 5-10 % faster on it than on a default
-# pyenv build, a shared libpython without PGO); else python3.11 on the PATH; else python3.
-if [ -n "${PYTHON:-}" ]; then
-  PY="$PYTHON"
-elif [ -x /usr/bin/python3.11 ] && /usr/bin/python3.11 -c "import ensurepip, venv" 2>/dev/null; then
-  PY=/usr/bin/python3.11
-else
-  PY=python3.11
-  command -v "$PY" >/dev/null 2>&1 || PY=python3
-fi
+PY="${PYTHON:-python3.11}"
+command -v "$PY" >/dev/null 2>&1 || PY=python3
 if [ "${MPF_LATEST:-0}" = 1 ]; then
   VENV="$ROOT/.venv-latest"
 else
