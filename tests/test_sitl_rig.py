@@ -215,3 +215,66 @@ def test_sil_leg_flies_the_real_flights_wind_and_turbulence(tmp_path, monkeypatc
     w = [float(x) for x in wind.split("=")[1].strip("[]").split(",")]
     assert w == pytest.approx([0.0, -6.0, 0.0], abs=1e-3)  # from the east: the air moves west
     assert "sil.wind_turbulence_m_s=2" in sets
+
+
+@pytest.mark.parametrize("with_filter", [True, False])
+def test_a_bundle_member_outside_the_cache_is_refused_with_or_without_tarfiles_filter(
+    tmp_path, monkeypatch, with_filter
+):
+    """Unpacking a bundle never writes outside the cache: tarfile's "tar" filter where the
+    interpreter has it, our own check where it has not (Python before 3.11.4); a sound
+    archive unpacks the same either way."""
+    import io
+    import tarfile
+
+    from sim.rigs import bundles
+
+    if with_filter and not hasattr(tarfile, "tar_filter"):
+        pytest.skip("this interpreter's tarfile has no filters (Python before 3.11.4)")
+    if not with_filter:
+        monkeypatch.delattr(tarfile, "tar_filter", raising=False)
+
+    def archive(name: str, members: dict[str, bytes], link: tuple[str, str] | None = None):
+        p = tmp_path / name
+        with tarfile.open(p, "w:gz") as tf:
+            for n, data in members.items():
+                info = tarfile.TarInfo(n)
+                info.size = len(data)
+                tf.addfile(info, io.BytesIO(data))
+            if link is not None:
+                info = tarfile.TarInfo(link[0])
+                info.type, info.linkname = tarfile.SYMTYPE, link[1]
+                tf.addfile(info)
+        return p
+
+    good = archive("good.tar.gz", {"b/RUN.txt": b"run", "b/bin/px4": b"\x7fELF"})
+    out = tmp_path / "good"
+    out.mkdir()
+    with tarfile.open(good) as tf:
+        bundles._extract(tf, out, good)
+    assert (out / "b" / "bin" / "px4").read_bytes() == b"\x7fELF"
+    outside = tmp_path / "evil"  # where "../../evil" from tmp_path/<case>/ would land
+    absolute = tmp_path / "abs-evil"
+    for name, members, link in (
+        ("up.tar.gz", {"b/../../evil": b"x"}, None),
+        ("abs.tar.gz", {str(absolute): b"x"}, None),
+        ("sym.tar.gz", {"b/RUN.txt": b"run"}, ("b/escape", "../../..")),
+    ):
+        bad = archive(name, members, link)
+        dest = tmp_path / name.split(".")[0] / "x"
+        dest.mkdir(parents=True)
+        refused: BaseException | None = None
+        try:
+            with tarfile.open(bad) as tf:
+                bundles._extract(tf, dest, bad)
+        except (RigError, tarfile.TarError) as e:
+            refused = e
+        # ours refuses all three, naming the member; the "tar" filter refuses the name that
+        # leaves, takes the absolute one as relative to the destination and lets a symbolic
+        # link point anywhere (its "data" filter would not: the bundles need none of that)
+        if not with_filter:
+            assert isinstance(refused, RigError) and "member" in str(refused), name
+            assert not any(dest.rglob("*")), name
+        elif name == "up.tar.gz":
+            assert isinstance(refused, tarfile.TarError), name
+    assert not outside.exists() and not absolute.exists()

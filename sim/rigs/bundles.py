@@ -75,6 +75,25 @@ def check_bundle(autopilot: str, spec: str | None) -> Path:
     raise RigError(f"--bundle {spec}: no such file or directory")
 
 
+def _extract(tf: tarfile.TarFile, dest: Path, bundle: Path) -> None:
+    """Every member of ``tf`` under ``dest``, none outside it: tarfile's "tar" filter where the
+    interpreter has it (Python 3.11.4 and later), else the same refusal checked here (an
+    absolute name, a ``..`` component, a link that leaves the archive, a device)."""
+    if hasattr(tarfile, "tar_filter"):
+        tf.extractall(dest, filter="tar")
+        return
+    root = dest.resolve()
+    for m in tf.getmembers():
+        target = (root / m.name).resolve()
+        bad = m.name.startswith("/") or not target.is_relative_to(root) or m.isdev()
+        if m.issym() or m.islnk():
+            base = target.parent if m.issym() else root
+            bad = bad or not (base / m.linkname).resolve().is_relative_to(root)
+        if bad:
+            raise RigError(f"--bundle {bundle}: member {m.name!r} would land outside the cache")
+    tf.extractall(dest)  # noqa: S202 - every member checked above
+
+
 def unpack(autopilot: str, bundle: Path) -> Path:
     """The bundle's directory: ``bundle`` itself, or its tarball unpacked into the cache (once;
     into a temporary directory renamed into place, so an interrupted unpack leaves no half)."""
@@ -88,7 +107,7 @@ def unpack(autopilot: str, bundle: Path) -> Path:
     tmp = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=CACHE))
     try:
         with tarfile.open(bundle) as tf:
-            tf.extractall(tmp, filter="tar")
+            _extract(tf, tmp, bundle)
         inner = tmp / name if (tmp / name).is_dir() else tmp
         if not (inner / ENTRY[autopilot]).is_file():
             raise RigError(f"--bundle {bundle}: not a {autopilot} bundle (no {ENTRY[autopilot]})")
