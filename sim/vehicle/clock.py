@@ -112,6 +112,9 @@ class LockstepClock:
         if not spin_s >= 0.0:
             raise ValueError("spin_s must be >= 0")
         self.spin_s = float(spin_s)
+        # whether anything waits to be read (the vehicle's link sets it): the spin reads only
+        # then; None: it reads every time
+        self.ready: Callable[[], bool] | None = None
         self.spin_cpu_s = 0.0  # CPU time spent spinning (s): waiting, not work
         self.spun = 0  # frames whose answer came while spinning
         self._misses = 0  # spins in a row that ended without the answer
@@ -161,8 +164,9 @@ class LockstepClock:
         cpu0 = time.thread_time()
         end = time.monotonic() + self.spin_s
         answered = False
+        ready = self.ready
         while True:
-            if poll(0.0):
+            if (ready is None or ready()) and poll(0.0):
                 answered = True
                 break
             if time.monotonic() >= end:

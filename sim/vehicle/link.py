@@ -243,6 +243,13 @@ class Link:
             return getattr(c, "port", None) is not None
         return True
 
+    def readable(self) -> bool:
+        """Whether a datagram is waiting (UDP; other links: True, read to find out). The
+        lockstep clock's spin asks this before it reads: a poll that finds nothing is cheaper
+        than a read that fails, and leaves the socket to the peer's send."""
+        p = self._poller
+        return p is None or bool(p.poll(0))
+
     def poll(self, timeout: float = 0.0) -> bool:
         """Read incoming MAVLink (waiting up to ``timeout`` wall s for the first byte).
         Returns True when the answer the lockstep awaits has arrived."""

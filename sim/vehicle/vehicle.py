@@ -80,7 +80,7 @@ from sim.autopilot.emulation import AutopilotEmulation  # noqa: E402
 from sim.autopilot.inner_loop import FixedWingAutopilot, body_rates, fly_to_trim  # noqa: E402
 from sim.autopilot.modes import Tunables  # noqa: E402
 from sim.plant.kinematic_plant import KinematicMavPlant  # noqa: E402
-from sim.vehicle.clock import StepClock, make_clock  # noqa: E402
+from sim.vehicle.clock import LockstepClock, StepClock, make_clock  # noqa: E402
 from sim.vehicle.config import VehicleConfig  # noqa: E402
 from sim.vehicle.dispatch import Dispatcher  # noqa: E402
 from sim.vehicle.gcs_services import GcsServices  # noqa: E402
@@ -198,6 +198,8 @@ class SimVehicle:
                          self.lockstep, telemetry_latency_s=cfg.telemetry_latency_s,
                          command_latency_s=cfg.command_latency_s,
                          lockstep_clock=self.clock.mode == "lockstep", accept=_QUEUED)  # fmt: skip
+        if isinstance(self.clock, LockstepClock):
+            self.clock.ready = self.link.readable
         self.tun = tunables(cfg)
         self.autopilot = AutopilotEmulation(self.px4, inner, self.dt, self.tun, self.time,
                                             self.link, self.plant.state, self.home_lla)  # fmt: skip
