@@ -10,7 +10,9 @@ frame before, the demo's 20 ms command latency being the lookahead that lets bot
 once: ``lockstep_overlapped`` counts those frames; sim.vehicle.lockstep); ``overall`` includes
 start-up, the real-time-paced hand-over and the hand-back.
 ``cpu_us_per_frame_*``: CPU time of each peer per frame while
-tracking, a figure that depends less on what else the machine runs. Bar: tracking >= 30.
+tracking, a figure that depends less on what else the machine runs; the vehicle's splits into
+``_spin`` (polling for the answer before it sleeps: ``sil.lockstep_spin_s``, waiting) and
+``_work`` (the rest). Bar: tracking >= 30.
 
 sil_tracking: steady RMS |pt| (t >= 120 s after engagement, 360 s of tracking) in three
 atmospheres, the demo otherwise unchanged. Bars: <= 2 m without wind, <= 3 m in 5 m/s wind
