@@ -25,12 +25,12 @@ Two clocks:
   free-running simulation (never waits). ``spin_s``: before it sleeps, the wait polls the socket
   for up to that much wall time (yielding the core to anything else runnable between polls):
   a peer's answer that lands in a sleeping process costs the peer's send a wake-up of this one
-  (on a virtual machine an inter-processor interrupt, 20-30 us), paid on the simulation's
-  critical path, the bridge's frame. A wait that outlasts the spin (a loaded machine, a slow
-  peer) sleeps as before, and after a run of them the spin rests for a while, so a machine with
-  more simulations than cores does not burn its cores polling. Only the wait changes: the same
-  answer ends the same frame (the flight is the same). ``spin_cpu_s`` is the CPU time spent
-  spinning, which is waiting, not the vehicle's work.
+  (on a virtual machine an inter-processor interrupt), paid on the simulation's critical path,
+  the bridge's frame; a process that slept also finds its caches cold. A wait that outlasts the
+  spin (a loaded machine, a slow peer) sleeps as before, and after a run of them the spin rests
+  for a while, so a machine with more simulations than cores does not burn its cores polling.
+  Only the wait changes: the same answer ends the same frame (the flight is the same).
+  ``spin_cpu_s`` is the CPU time spent spinning, which is waiting, not the vehicle's work.
 * :class:`RealtimeClock` - paced to the wall clock (``speed`` x real time), polling the link
   while it waits. If the computation falls more than ``max_lag_s`` behind, the pacing is
   re-anchored instead of bursting to catch up.
