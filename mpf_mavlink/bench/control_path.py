@@ -126,7 +126,7 @@ def _freeze() -> None:
     """What the bridge does before it flies (bridge/live.py): everything allocated so far goes
     to the collector's permanent generation. Here that is the recorded calls (~30 objects a
     step), which the collector would otherwise traverse in every full collection during the
-    timed passes: without this the figure was 1.6-1.8x the control path's own cost."""
+    timed passes, a cost the bridge's own loop does not pay."""
     import gc
 
     gc.collect()

@@ -77,7 +77,7 @@ def check_bundle(autopilot: str, spec: str | None) -> Path:
 
 def _extract(tf: tarfile.TarFile, dest: Path, bundle: Path) -> None:
     """Every member of ``tf`` under ``dest``, none outside it: tarfile's "tar" filter where the
-    interpreter has it (Python 3.11.4 and later), else the same refusal checked here (an
+    interpreter has it (Python 3.11.4 and later), else a stricter refusal checked here (an
     absolute name, a ``..`` component, a link that leaves the archive, a device)."""
     if hasattr(tarfile, "tar_filter"):
         tf.extractall(dest, filter="tar")
