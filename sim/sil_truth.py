@@ -10,11 +10,11 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.bridge.estimator import wind_frame
+from mpf_mavlink.bridge.estimator import wind_frame_rows
 from mpf_mavlink.config.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.guidance.baselines import guidance_law
-from mpf_mavlink.core.guidance.law import VehicleState
+from mpf_mavlink.core.guidance.law import vehicle_state_of_floats
 from mpf_mavlink.runs.compare import distance_to_polyline
 from mpf_mavlink.runs.rundir import RunTable, row_from
 
@@ -50,38 +50,47 @@ def truth_table(
     tm = tb - t0  # bridge mission time of each truth frame
     sel = np.nonzero((tm >= bt[0] - 1e-6) & (tm <= bt[-1] + 1e-6))[0]
     s_at = np.interp(tm[sel], bt, bs)
-    P, V, W = truth["position_ned"], truth["velocity_ned"], truth["wind_ned"]
-    tv = truth["t"]
-    tt = truth.get("target_t", tv)  # the target's clock (see SimVehicle target_epoch)
+    # Python floats row by row (the law's own scalar path): numpy's per-call cost on 3-vectors
+    # would be most of the work over a 30,000-row flight
+    P, V, W = (truth[k].tolist() for k in ("position_ned", "velocity_ned", "wind_ned"))
+    tt = truth.get("target_t", truth["t"]).tolist()  # the target's clock (SimVehicle target_epoch)
+    tml, s_atl = tm.tolist(), s_at.tolist()
+    law = cfg.guidance.law
     table = RunTable()
-    w1_prev: np.ndarray | None = None
+    w1_prev: tuple[float, float, float] | None = None
     t_prev = 0.0
     t_engage = float(bt[0])
-    rel_all = np.empty((len(sel), 3))
-    for j, k in enumerate(sel):
-        va = V[k] - W[k]
-        R_W = wind_frame(float(va[0]), float(va[1]), float(va[2]))
-        t = float(tm[k]) - t_engage
-        veh = VehicleState(t, P[k], R_W, float(np.linalg.norm(va)), W[k])
-        tgt = target.state(float(tt[k]))
-        cmd, diag = guidance_law(cfg.guidance.law, float(s_at[j]), veh, tgt, path, gains, ext)
-        w1 = R_W[:, 0]
+    for j, k in enumerate(sel.tolist()):
+        p, w = tuple(P[k]), tuple(W[k])
+        v = V[k]
+        va0, va1, va2 = v[0] - w[0], v[1] - w[1], v[2] - w[2]
+        (a, e, b), (c, f, g), (h, i, q) = wind_frame_rows(va0, va1, va2)
+        t = tml[k] - t_engage
+        veh = vehicle_state_of_floats(
+            t, (a, e, b, c, f, g, h, i, q, *p, *w), math.sqrt(va0 * va0 + va1 * va1 + va2 * va2)
+        )
+        tgt = target.state(tt[k])
+        cmd, diag = guidance_law(law, s_atl[j], veh, tgt, path, gains, ext)
+        w1 = (a, c, h)  # the columns of R_W^I: w1, w2 = (e, f, i), w3 = (b, g, q)
         w_act = (0.0, 0.0)
         if w1_prev is not None and t > t_prev:
-            w1d = (w1 - w1_prev) / (t - t_prev)
-            w_act = (-float(w1d @ R_W[:, 2]), float(w1d @ R_W[:, 1]))
+            dt = t - t_prev
+            d0, d1, d2 = ((w1[0] - w1_prev[0]) / dt, (w1[1] - w1_prev[1]) / dt,
+                          (w1[2] - w1_prev[2]) / dt)  # fmt: skip
+            w_act = (-(d0 * b + d1 * g + d2 * q), d0 * e + d1 * f + d2 * i)
         w1_prev, t_prev = w1, t
-        table.append(
-            row_from(diag, P[k], (cmd.w2, cmd.w3), w_act, cmd.sdot, tgt.position, tgt.R_T_I, W[k])
-        )
-        rel_all[j] = tgt.R_T_I.T @ (P[k] - tgt.position)
+        tf = tgt.floats
+        tp: Any = tf[9:12] if tf is not None else tgt.position
+        tR: Any = (tf[0:3], tf[3:6], tf[6:9]) if tf is not None else tgt.R_T_I
+        table.append(row_from(diag, p, (cmd.w2, cmd.w3), w_act, cmd.sdot, tp, tR, w))
     cols = table.arrays()
+    rel_all = np.column_stack([cols["rel_x"], cols["rel_y"], cols["rel_z"]])
     cross = distance_to_polyline(path.positions(), rel_all, bool(getattr(path, "closed", False)))
     info = {
         "alignment_t0_s": t0,
         "alignment_residual_m": resid,
         "cross_track_m": cross,
-        "t_vehicle": tv[sel],
+        "t_vehicle": truth["t"][sel],
         "rows": sel,
     }
     return cols, info

@@ -17,6 +17,8 @@ import struct
 import numpy as np
 import pytest
 
+from mpf_mavlink.bridge.px4_fallback import PX4_FALLBACK_PARAMS
+
 os.environ.setdefault("MAVLINK20", "1")
 pytest.importorskip("pymavlink")
 
@@ -71,6 +73,9 @@ def test_param_fetch_all_streams_every_parameter_once_with_index_and_count(vg):
     names = {p.param_id for p in pv}
     if v.px4:
         assert {"COM_OF_LOSS_T", "COM_OBL_RC_ACT", "NAV_LOITER_RAD", "FW_AIRSPD_TRIM"} <= names
+        # every parameter the bridge reads before engaging (real PX4 has them all: a missing
+        # one costs the bridge its re-asks, ~1.2 s of a real-time-paced hand-over)
+        assert set(PX4_FALLBACK_PARAMS) <= names
     else:  # names as ArduPlane 4.7's own PARAM_REQUEST_LIST spells them
         assert {"WP_LOITER_RAD", "AIRSPEED_CRUISE", "MAV1_EXTRA1", "SIM_WIND_SPD"} <= names
     # pymavlink's own parameter store has the full set

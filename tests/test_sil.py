@@ -366,6 +366,7 @@ def test_full_sil_mission_converges(tmp_path, capsys):
     tlog = out / "bridge" / "mavlink.tlog"
     assert f"tlog:          {tlog}" in text and f"run directory: {out}" in text
     assert "steady RMS |pt|" in text
+    assert "trajectory_3d" in text.split("plots:")[1].splitlines()[0]  # the figures drawn
     for f in ("timeseries.csv", "truth.csv", "metrics.json", "errors.png", "trajectory_3d.png"):
         assert (out / f).is_file(), f
     counts: dict[str, int] = {}
@@ -524,3 +525,14 @@ def test_scripted_target_runs_on_the_bridge_clock(tmp_path):
     for c in ("tgt_n", "tgt_e"):
         b = np.interp(t, bc["t"], bc[c])
         assert np.max(np.abs(b - r.cols[c])) < 0.01, c
+
+
+def test_the_summary_names_only_the_plots_drawn(tmp_path):
+    # --no-plots (what campaigns fly) draws none, and the summary must not point at figures
+    # that are not there
+    from mpf_mavlink.cli.sim import _plots_line
+
+    assert _plots_line(tmp_path) == "plots:         none (--no-plots)"
+    for name in ("errors", "limits"):
+        (tmp_path / f"{name}.png").write_bytes(b"")
+    assert _plots_line(tmp_path) == f"plots:         {tmp_path}/*.png  (errors, limits)"

@@ -7,7 +7,7 @@ cimport cython
 
 @cython.locals(n=double, a=double, b=double, c=double, h=double, e=double, f=double,
                g=double)
-cpdef tuple _wind_frame_rows(double vx, double vy, double vz)
+cpdef tuple wind_frame_rows(double vx, double vy, double vz)
 
 @cython.locals(x=double, y=double, z=double)
 cpdef bint _vec3_ok(a, double bound)

@@ -55,7 +55,7 @@ def eas_to_tas(alt_amsl_m: float) -> float:
     return (1.0 - 2.25577e-5 * h) ** -2.127940
 
 
-def _wind_frame_rows(vx: float, vy: float, vz: float) -> tuple[tuple[float, float, float], ...]:
+def wind_frame_rows(vx: float, vy: float, vz: float) -> tuple[tuple[float, float, float], ...]:
     """The rows of :func:`wind_frame` as tuples (no numpy: the estimator's hot path)."""
     n = math.sqrt(vx * vx + vy * vy + vz * vz)
     if n < 1e-6:
@@ -72,7 +72,7 @@ def _wind_frame_rows(vx: float, vy: float, vz: float) -> tuple[tuple[float, floa
 def wind_frame(vx: float, vy: float, vz: float) -> NDArray[np.float64]:
     """Scalar twin of :func:`frames.wind_frame_from_velocity` (roll_ref = 0), ~10x faster:
     w1 = v/|v|, w2 = down x w1 normalised (horizontal, to the right), w3 = w1 x w2."""
-    return np.array(_wind_frame_rows(vx, vy, vz))
+    return np.array(wind_frame_rows(vx, vy, vz))
 
 
 class LocalFrame:
@@ -542,9 +542,9 @@ class Estimator:
         v_air = (gx - ex, gy - ey, gz - ez)
         n_air = math.sqrt(v_air[0] ** 2 + v_air[1] ** 2 + v_air[2] ** 2)
         if n_air < p.min_air_speed:
-            W = _wind_frame_rows(xb0, xb1, xb2)
+            W = wind_frame_rows(xb0, xb1, xb2)
         else:
-            W = _wind_frame_rows(*v_air)
+            W = wind_frame_rows(*v_air)
         if p.airspeed_from_wind and wsrc != "estimated" and n_air >= p.min_air_speed:
             # the autopilot's own wind: v_air = v_ground - wind is what the law's kinematics
             # p_dot = v_w w1 + eta assume, whatever its EAS-to-TAS factor (ArduPlane SITL:

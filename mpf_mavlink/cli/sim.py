@@ -148,6 +148,14 @@ def add_vehicle_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentPar
 
 
 # ----------------------------------------------------------------------------- sim (SIL)
+def _plots_line(out: Path) -> str:
+    """The summary's plots line: the figures this run drew (none with --no-plots)."""
+    names = sorted(p.stem for p in out.glob("*.png"))
+    if not names:
+        return "plots:         none (--no-plots)"
+    return f"plots:         {out}/*.png  ({', '.join(names)})"
+
+
 def sil_summary(res: Any) -> str:
     """The table printed at the end of a SIL ``sim``: figures, then where everything is."""
     m = res.metrics
@@ -181,9 +189,10 @@ def sil_summary(res: Any) -> str:
         f"bridge: {m.get('bridge_exit_reason')} (exit {m.get('bridge_exit_code')}); {hb}",
         f"run directory: {res.out_dir}  (timeseries.csv and truth.csv from the plant, "
         "metrics.json)",
-        f"plots:         {res.out_dir}/*.png  (limits, errors, sdot_rates, planar, "
-        "trajectory_3d, target_relative)",
-        f"tlog:          {res.tlog}  (both directions; MAVProxy, QGC or mavlogdump.py read it)",
+        _plots_line(Path(res.out_dir)),
+        f"tlog:          {res.tlog}  (both directions; MAVProxy, QGC or mavlogdump.py read it)"
+        if Path(res.tlog).is_file()
+        else "tlog:          none (mavlink.recording: lean writes none)",
         f"bridge's view: {res.bridge_dir}  (what the law saw: timeseries.csv, setpoints.csv, "
         "metrics.json)",
     ]

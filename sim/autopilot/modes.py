@@ -88,6 +88,11 @@ class Tunables:
     airspeed_min: float = 10.0
     airspeed_max: float = 20.0
     obl_rc_act: int = 0  # PX4 COM_OBL_RC_ACT: 0 = position (Hold), what the SIL flies
+    # PX4's RC-loss parameters, at PX4 v1.16 SITL's values: stored and served, nothing else (the
+    # SIL has no RC to lose)
+    rcl_except: int = 0  # COM_RCL_EXCEPT
+    nav_rcl_act: int = 2  # NAV_RCL_ACT: Return
+    rc_in_mode: int = 1  # COM_RC_IN_MODE: SITL's rcS sets 1 (MAVLink only)
     px4_require_thrust: bool = False
 
 

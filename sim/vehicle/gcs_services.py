@@ -7,8 +7,10 @@ setters, and sends through the vehicle's MAVLink encoder (the outgoing delay que
 Parameters (names and MAV_PARAM_TYPE of the real firmware; checked against ArduPlane 4.7-dev
 SITL's own PARAM_REQUEST_LIST, PX4 from its parameter reference):
 
-* PX4: COM_OF_LOSS_T, COM_OBL_RC_ACT, NAV_LOITER_RAD, FW_AIRSPD_TRIM / _MIN / _MAX, MAV_SYS_ID.
-  Integers are sent byte-wise (the int32's bytes in param_value), as PX4 does.
+* PX4: COM_OF_LOSS_T, COM_OBL_RC_ACT, NAV_LOITER_RAD, FW_AIRSPD_TRIM / _MIN / _MAX, MAV_SYS_ID,
+  and the RC-loss trio the bridge reads to describe its fallback (COM_RCL_EXCEPT, NAV_RCL_ACT,
+  COM_RC_IN_MODE: PX4 v1.16 SITL's values, served and settable, nothing flies by them since the
+  SIL has no RC). Integers are sent byte-wise (the int32's bytes in param_value), as PX4 does.
 * ArduPlane: GUIDED_TIMEOUT (ArduPlane's forced-attitude timeout; 4.7-dev hard-codes the 3 s),
   WP_LOITER_RAD, AIRSPEED_CRUISE / _MIN / _MAX, MAV1_EXT_STAT / _POSITION / _EXTRA1..3 (the
   stream rates of the link, Hz), SIM_WIND_SPD / SIM_WIND_DIR (the plant's steady wind, m/s and
@@ -166,12 +168,18 @@ def vehicle_params(v: Any) -> list[Param]:
                   lambda x: setattr(v.tun, "obl_rc_act", int(x)), 0, 7),
             Param("COM_OF_LOSS_T", R32, lambda: tun.com_of_loss_t,
                   lambda x: setattr(v.tun, "com_of_loss_t", float(x)), 0.0, 60.0),
+            Param("COM_RCL_EXCEPT", I32, lambda: tun.rcl_except,
+                  lambda x: setattr(v.tun, "rcl_except", int(x)), 0, 7),
+            Param("COM_RC_IN_MODE", I32, lambda: tun.rc_in_mode,
+                  lambda x: setattr(v.tun, "rc_in_mode", int(x)), 0, 4),
             Param("FW_AIRSPD_MAX", R32, lambda: tun.airspeed_max, speed[2], 0.5, 40.0),
             Param("FW_AIRSPD_MIN", R32, lambda: tun.airspeed_min, speed[1], 0.5, 40.0),
             Param("FW_AIRSPD_TRIM", R32, lambda: tun.airspeed_trim, speed[0], 0.5, 40.0),
             Param("MAV_SYS_ID", I32, lambda: float(v.sysid), None),
             Param("NAV_LOITER_RAD", R32, lambda: tun.loiter_radius,
                   lambda x: _set_loiter_radius(v, x), 25.0, 1000.0),
+            Param("NAV_RCL_ACT", I32, lambda: tun.nav_rcl_act,
+                  lambda x: setattr(v.tun, "nav_rcl_act", int(x)), 1, 6),
         ]  # fmt: skip
     wind = [
         Param("SIM_WIND_DIR", R32, lambda: _wind_from(v)[1],

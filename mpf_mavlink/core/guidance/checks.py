@@ -13,7 +13,8 @@ from mpf_mavlink.constants import FT_TO_M, GRAVITY_M_S2
 from mpf_mavlink.core.adapter import bank_and_load_factor
 from mpf_mavlink.core.guidance.law import Gains
 from mpf_mavlink.core.paths import TabulatedPath
-from mpf_mavlink.core.target import TargetMotion
+from mpf_mavlink.core.target import TargetMotion, TargetState
+from mpf_mavlink.core.vec3 import cross, dot
 
 
 @dataclass(frozen=True)
@@ -137,25 +138,49 @@ def demanded_directions(
     """(t (s), wd1 (n, 3)): the air-relative direction flying the moving path exactly demands
     at airspeed v_w over the horizon (see :func:`feasibility`); with_positions: also the path
     point flown (NED m, (n, 3))."""
-    eta = np.asarray(wind_ned, float)
+    e0, e1, e2 = (float(x) for x in wind_ned)
     ts = _times(horizon_s, dt_s)
+    tl = ts.tolist()
     s = s0
-    W1 = np.empty((len(ts), 3))
-    P = np.empty((len(ts), 3))
-    for k, t in enumerate(ts):
-        st = target.state(float(t))
-        pd, f1, f2, f3, _, _ = path.eval(s)
-        R = st.R_T_I
-        P[k] = st.position + R @ pd
-        f1I, f2I, f3I = R @ f1, R @ f2, R @ f3
-        u = st.velocity + np.cross(R @ st.omega_T, R @ pd) - eta
-        a21, a31 = float(u @ f2I) / v_w, float(u @ f3I) / v_w
+    # A sequential integration (s follows sdot), so a loop, in scalar arithmetic: on 3-vectors
+    # numpy's per-call cost would be most of the work (vec3's module docstring).
+    W1: list[tuple[float, float, float]] = []
+    P: list[tuple[float, float, float]] = []
+    for k, t in enumerate(tl):
+        f = _target_floats(target.state(t))
+        R, (p0, p1, p2), (v0, v1, v2) = f[:9], f[9:12], f[12:15]
+        pd, f1, f2, f3 = path.eval(s)[:4]
+        pdI, f1I, f2I, f3I = _rows_vec(R, pd), _rows_vec(R, f1), _rows_vec(R, f2), _rows_vec(R, f3)
+        P.append((p0 + pdI[0], p1 + pdI[1], p2 + pdI[2]))
+        c = cross(_rows_vec(R, f[18:21]), pdI)
+        u = (v0 + c[0] - e0, v1 + c[1] - e1, v2 + c[2] - e2)
+        a21, a31 = dot(u, f2I) / v_w, dot(u, f3I) / v_w
         a11 = math.sqrt(max(1e-12, 1.0 - a21 * a21 - a31 * a31))
-        W1[k] = a11 * f1I + a21 * f2I + a31 * f3I
-        sdot = v_w * a11 - float(u @ f1I)
-        if k + 1 < len(ts):
-            s += sdot * (ts[k + 1] - t)
-    return (ts, W1, P) if with_positions else (ts, W1)
+        W1.append((a11 * f1I[0] + a21 * f2I[0] + a31 * f3I[0],
+                   a11 * f1I[1] + a21 * f2I[1] + a31 * f3I[1],
+                   a11 * f1I[2] + a21 * f2I[2] + a31 * f3I[2]))  # fmt: skip
+        sdot = v_w * a11 - dot(u, f1I)
+        if k + 1 < len(tl):
+            s += sdot * (tl[k + 1] - t)
+    W1a, Pa = np.array(W1).reshape(-1, 3), np.array(P).reshape(-1, 3)
+    return (ts, W1a, Pa) if with_positions else (ts, W1a)
+
+
+def _rows_vec(R: tuple[float, ...], x: tuple[float, ...]) -> tuple[float, float, float]:
+    """R x for R given by rows as 9 floats."""
+    x0, x1, x2 = x
+    return (R[0] * x0 + R[1] * x1 + R[2] * x2,
+            R[3] * x0 + R[4] * x1 + R[5] * x2,
+            R[6] * x0 + R[7] * x1 + R[8] * x2)  # fmt: skip
+
+
+def _target_floats(st: TargetState) -> tuple[float, ...]:
+    """The state's floats (:attr:`TargetState.floats`: R_T^I by rows, p, v, a, omega_T,
+    omega_dot_T), from its arrays when it was built from arrays."""
+    if st.floats is not None:
+        return st.floats
+    arrays = (st.R_T_I, st.position, st.velocity, st.acceleration, st.omega_T, st.omega_dot_T)
+    return tuple(x for a in arrays for x in np.asarray(a, float).ravel().tolist())
 
 
 # MIL-F-8785C Fig. 7: sigma (ft/s) of medium/high-altitude turbulence at 500, 1750, 3750 and
