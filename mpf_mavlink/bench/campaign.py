@@ -5,7 +5,12 @@
 - ``campaign_roa``: the whole ROA campaign (1,024 kinematic flights; bar: <= 10 min on 2
   cores) with its convergence figures;
 - ``campaign_demo_robustness``: configs/campaign_demo_robustness.yaml, 40 SIL flights of 600 s
-  on 2 workers (bar: <= 12 min).
+  on 2 workers (bar: <= 12 min);
+- ``campaign_sil_flight``: one SIL flight of the demo (600 s) as a campaign's worker flies it
+  (``mpf-mavlink sim -q --no-plots`` in a subprocess: start-up, the pre-flight gate, the
+  real-time-paced hand-over and hand-back, the tracking, the truth's metrics and the records),
+  three times: its wall and CPU seconds, what a campaign pays per flight beyond the tracking's
+  real-time factor (``rtf_flight``: simulated seconds per wall second of the whole flight).
 
 The machine's load average is printed with each: on a shared machine the figures are pessimistic.
 """
@@ -65,3 +70,24 @@ def campaign_roa() -> dict[str, Any]:
 
 def campaign_demo_robustness() -> dict[str, Any]:
     return _fly(DEMO, 2)
+
+
+def campaign_sil_flight(runs: int = 3) -> dict[str, Any]:
+    import statistics
+
+    from mpf_mavlink.campaign.flight import fly
+
+    rows: list[dict[str, Any]] = []
+    for _ in range(runs):
+        r = fly("configs/default.yaml", [], "jsbsim", ["real_time_factor_tracking"], 600.0)
+        rows.append({k: r.get(k) for k in ("status", "error", "wall_s", "cpu_s", "sim_time_s",
+                                           "real_time_factor_tracking")})  # fmt: skip
+    ok = [r for r in rows if r["status"] == "ok" and r["wall_s"]]
+    wall = statistics.median(float(r["wall_s"]) for r in ok) if ok else None
+    sim = statistics.median(float(r["sim_time_s"] or 0.0) for r in ok) if ok else None
+    return {
+        "wall_s": wall,
+        "cpu_s": statistics.median(float(r["cpu_s"]) for r in ok) if ok else None,
+        "rtf_flight": sim / wall if wall and sim else None,
+        "runs": rows,
+    }

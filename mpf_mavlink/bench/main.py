@@ -141,6 +141,7 @@ def _optional_groups() -> None:
     from mpf_mavlink.bench.campaign import (
         campaign_demo_robustness,
         campaign_roa,
+        campaign_sil_flight,
         campaign_throughput,
     )
     from mpf_mavlink.bench.framing import mavlink_framing_us
@@ -149,6 +150,7 @@ def _optional_groups() -> None:
     GROUPS["campaign_throughput"] = campaign_throughput
     GROUPS["campaign_roa"] = campaign_roa
     GROUPS["campaign_demo_robustness"] = campaign_demo_robustness
+    GROUPS["campaign_sil_flight"] = campaign_sil_flight
 
 
 def main(argv: list[str] | None = None) -> int:
