@@ -92,7 +92,7 @@ class Tunables:
     # SIL has no RC to lose)
     rcl_except: int = 0  # COM_RCL_EXCEPT
     nav_rcl_act: int = 2  # NAV_RCL_ACT: Return
-    rc_in_mode: int = 1  # COM_RC_IN_MODE: SITL's rcS sets 1 (MAVLink only)
+    rc_in_mode: int = 1  # COM_RC_IN_MODE: SITL's rcS sets 1 (joystick only)
     px4_require_thrust: bool = False
 
 
