@@ -116,3 +116,32 @@ def test_climb_check_counts_the_turbulence_downdrafts():
     w, T = vertical_gusts("light", np.full(len(ts), 100.0), 16.0)
     assert w[0] == pytest.approx(2 * 0.762, rel=0.01) and T[0] == pytest.approx(100 / 16.0)
     assert climb_feasibility(ts, W1, 16.0, 14.0, 18.0, 4.1, 1.5, gusts=(w, T)).status == "pass"
+
+
+def test_demanded_directions_read_a_target_built_from_arrays_as_one_that_kept_its_floats():
+    # The integration reads the target's floats; a motion whose states carry arrays only (no
+    # TargetState.floats) goes through the arrays' values, which are the same numbers: the
+    # results must be identical, not merely close.
+    import dataclasses
+
+    import numpy as np
+
+    from mpf_mavlink.core.guidance.checks import demanded_directions
+
+    path = lemniscate(150.0)
+    boat = ConstantTurn(position=(10.0, -5.0, -120.0), speed=6.0, heading=0.4, turn_rate=0.02,
+                        climb_rate=0.5)  # fmt: skip
+
+    class ArraysOnly:
+        def state(self, t: float):  # type: ignore[no-untyped-def]
+            return dataclasses.replace(boat.state(t))  # replace drops the floats
+
+    assert ArraysOnly().state(3.0).floats is None and boat.state(3.0).floats is not None
+    a = demanded_directions(path, boat, 16.0, 60.0, 5.0, (1.0, -2.0, 0.0), with_positions=True)
+    b = demanded_directions(
+        path, ArraysOnly(), 16.0, 60.0, 5.0, (1.0, -2.0, 0.0), with_positions=True
+    )
+    for x, y in zip(a, b, strict=True):
+        assert np.array_equal(x, y)
+    # unit demanded directions (the a11 clamp only bites beyond Assumption 1)
+    assert np.allclose(np.linalg.norm(a[1], axis=1), 1.0, atol=1e-12)
