@@ -15,6 +15,7 @@ from mpf_mavlink.config.scenario import build_extensions, build_gains, build_pat
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.guidance.baselines import guidance_law
 from mpf_mavlink.core.guidance.law import vehicle_state_of_floats
+from mpf_mavlink.core.target import state_floats
 from mpf_mavlink.runs.compare import distance_to_polyline
 from mpf_mavlink.runs.rundir import RunTable, row_from
 
@@ -79,10 +80,9 @@ def truth_table(
                           (w1[2] - w1_prev[2]) / dt)  # fmt: skip
             w_act = (-(d0 * b + d1 * g + d2 * q), d0 * e + d1 * f + d2 * i)
         w1_prev, t_prev = w1, t
-        tf = tgt.floats
-        tp: Any = tf[9:12] if tf is not None else tgt.position
-        tR: Any = (tf[0:3], tf[3:6], tf[6:9]) if tf is not None else tgt.R_T_I
-        table.append(row_from(diag, p, (cmd.w2, cmd.w3), w_act, cmd.sdot, tp, tR, w))
+        tf = state_floats(tgt)
+        tR = (tf[0:3], tf[3:6], tf[6:9])
+        table.append(row_from(diag, p, (cmd.w2, cmd.w3), w_act, cmd.sdot, tf[9:12], tR, w))
     cols = table.arrays()
     rel_all = np.column_stack([cols["rel_x"], cols["rel_y"], cols["rel_z"]])
     cross = distance_to_polyline(path.positions(), rel_all, bool(getattr(path, "closed", False)))

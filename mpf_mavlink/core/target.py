@@ -99,6 +99,15 @@ def with_floats(st: TargetState, floats: tuple[float, ...]) -> TargetState:
     return st
 
 
+def state_floats(st: TargetState) -> tuple[float, ...]:
+    """The 24 floats of :attr:`TargetState.floats` (R_T^I by rows, p_t, v_t, a_t, omega_T,
+    omega_dot_T): its own when it kept them, else its arrays' values."""
+    if st.floats is not None:
+        return st.floats
+    arrays = (st.R_T_I, st.position, st.velocity, st.acceleration, st.omega_T, st.omega_dot_T)
+    return tuple(x for a in arrays for x in np.asarray(a, float).ravel().tolist())
+
+
 class TargetMotion(Protocol):
     """Anything that gives the target's state at time t (s)."""
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -13,8 +13,8 @@ from mpf_mavlink.constants import FT_TO_M, GRAVITY_M_S2
 from mpf_mavlink.core.adapter import bank_and_load_factor
 from mpf_mavlink.core.guidance.law import Gains
 from mpf_mavlink.core.paths import TabulatedPath
-from mpf_mavlink.core.target import TargetMotion, TargetState
-from mpf_mavlink.core.vec3 import cross, dot
+from mpf_mavlink.core.target import TargetMotion, state_floats
+from mpf_mavlink.core.vec3 import Mat3, Vec3, cross, dot, mat_T_vec
 
 
 @dataclass(frozen=True)
@@ -147,12 +147,14 @@ def demanded_directions(
     W1: list[tuple[float, float, float]] = []
     P: list[tuple[float, float, float]] = []
     for k, t in enumerate(tl):
-        f = _target_floats(target.state(t))
-        R, (p0, p1, p2), (v0, v1, v2) = f[:9], f[9:12], f[12:15]
+        f = state_floats(target.state(t))
+        # R_T^I's rows as the columns of mat_T_vec's matrix: mat_T_vec(rows, x) = R_T^I x
+        R = cast(Mat3, (f[0:3], f[3:6], f[6:9]))
+        (p0, p1, p2), (v0, v1, v2) = f[9:12], f[12:15]
         pd, f1, f2, f3 = path.eval(s)[:4]
-        pdI, f1I, f2I, f3I = _rows_vec(R, pd), _rows_vec(R, f1), _rows_vec(R, f2), _rows_vec(R, f3)
+        pdI, f1I, f2I, f3I = mat_T_vec(R, pd), mat_T_vec(R, f1), mat_T_vec(R, f2), mat_T_vec(R, f3)
         P.append((p0 + pdI[0], p1 + pdI[1], p2 + pdI[2]))
-        c = cross(_rows_vec(R, f[18:21]), pdI)
+        c = cross(mat_T_vec(R, cast(Vec3, f[18:21])), pdI)
         u = (v0 + c[0] - e0, v1 + c[1] - e1, v2 + c[2] - e2)
         a21, a31 = dot(u, f2I) / v_w, dot(u, f3I) / v_w
         a11 = math.sqrt(max(1e-12, 1.0 - a21 * a21 - a31 * a31))
@@ -164,23 +166,6 @@ def demanded_directions(
             s += sdot * (tl[k + 1] - t)
     W1a, Pa = np.array(W1).reshape(-1, 3), np.array(P).reshape(-1, 3)
     return (ts, W1a, Pa) if with_positions else (ts, W1a)
-
-
-def _rows_vec(R: tuple[float, ...], x: tuple[float, ...]) -> tuple[float, float, float]:
-    """R x for R given by rows as 9 floats."""
-    x0, x1, x2 = x
-    return (R[0] * x0 + R[1] * x1 + R[2] * x2,
-            R[3] * x0 + R[4] * x1 + R[5] * x2,
-            R[6] * x0 + R[7] * x1 + R[8] * x2)  # fmt: skip
-
-
-def _target_floats(st: TargetState) -> tuple[float, ...]:
-    """The state's floats (:attr:`TargetState.floats`: R_T^I by rows, p, v, a, omega_T,
-    omega_dot_T), from its arrays when it was built from arrays."""
-    if st.floats is not None:
-        return st.floats
-    arrays = (st.R_T_I, st.position, st.velocity, st.acceleration, st.omega_T, st.omega_dot_T)
-    return tuple(x for a in arrays for x in np.asarray(a, float).ravel().tolist())
 
 
 # MIL-F-8785C Fig. 7: sigma (ft/s) of medium/high-altitude turbulence at 500, 1750, 3750 and
