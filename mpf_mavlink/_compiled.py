@@ -10,10 +10,13 @@ the same folder, so an edited .py would silently lose to a stale build. Instead
 :class:`CompiledFinder` (first on ``sys.meta_path``, installed by ``mpf_mavlink/__init__``)
 loads a build only when the module's sources hash to what the manifest recorded; otherwise it
 warns once and lets the ordinary importer load the .py.
-A build is used only when asked, MPF_COMPILED=1 (MPF_PURE_PYTHON=1 overrides it): the compiled
-modules halve the law's cost and speed the kinematic simulations up by a third when their code
-stays in the caches, but in the live bridge, which sleeps between frames, they measured slower
-than the interpreter (bench bridge_latency_ms and sil_real_time_factor, same tree, alternating).
+Which processes use a build: the simulations (``mpf-mavlink sim``, ``campaign``, ``compare``:
+:func:`prefer_for_simulation`) unless MPF_COMPILED=0, everything else only when asked with
+MPF_COMPILED=1; MPF_PURE_PYTHON=1 overrides both. A simulation keeps the CPU busy, and there the
+compiled modules run the controller's path in ~0.6 of the interpreter's time and the SIL's
+lockstep loop faster (bench sil_real_time_factor); the live bridge sleeps between frames,
+starting each with cold caches, where they measured no faster than the interpreter (bench
+bridge_latency_ms), so a live flight runs the .py files unless asked.
 The compiled and the pure modules compute the same IEEE double operations in the same order
 (no fused multiply-add, ``-ffp-contract=off``), so their results agree bit for bit.
 """
@@ -145,6 +148,16 @@ def _asked() -> bool:
     return os.environ.get("MPF_COMPILED", "") == "1"
 
 
+def prefer_for_simulation() -> CompiledFinder | None:
+    """A simulation's default (module docstring): the build, unless MPF_COMPILED is set (0
+    keeps pure Python) or MPF_PURE_PYTHON is. Sets MPF_COMPILED=1 in the environment, so the
+    processes the simulation starts (a campaign's workers and their SIL flights) load the same.
+    Call it before the hot modules are imported: one imported already stays as it is."""
+    if "MPF_COMPILED" not in os.environ:
+        os.environ["MPF_COMPILED"] = "1"
+    return install()
+
+
 def install() -> CompiledFinder | None:
     """Put a :class:`CompiledFinder` first on ``sys.meta_path`` when a build exists,
     MPF_COMPILED=1 asks for it and MPF_PURE_PYTHON is not set; None otherwise (everything then
@@ -189,7 +202,10 @@ def status() -> str:
         return "compiled hot paths: off (MPF_PURE_PYTHON), pure Python"
     if not _asked():
         built = "built" if read_manifest() is not None else "none built"
-        return f"compiled hot paths: {built}, not used (MPF_COMPILED=1 uses them), pure Python"
+        return (
+            f"compiled hot paths: {built}, not used (MPF_COMPILED=1 uses them; the "
+            "simulations do unless MPF_COMPILED=0), pure Python"
+        )
     if read_manifest() is None:
         return "compiled hot paths: none built (python -m mpf_mavlink._build), pure Python"
     return "compiled hot paths: stale or for another Python, pure Python"

@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from mpf_mavlink._compiled import status as compiled_status
 from mpf_mavlink.config.scenario import build_path, build_target
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.mavlink.url import free_udp_port
@@ -507,6 +508,8 @@ def run_sil(
     res = _measure(cfg, truth, vinfo, bres, bridge_dir, wall)
     res.metrics.update(_cpu_per_frame(bar, sil.frame_period_s))
     res.metrics["clock"] = clock or sil.clock
+    # which build flew (the cost figures above depend on it; mpf_mavlink._compiled)
+    res.metrics["hot_paths"] = compiled_status()
     res.out_dir = out
     _write(out, res, truth, plots)
     if interrupted:

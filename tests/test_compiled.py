@@ -197,8 +197,9 @@ def test_a_manifest_not_of_our_build_means_pure_python(monkeypatch: pytest.Monke
     assert not any(isinstance(f, CompiledFinder) for f in sys.meta_path)
 
 
-def test_the_build_is_used_only_when_asked() -> None:
-    """Without MPF_COMPILED=1 every module runs from its .py, and --version says how to ask."""
+def test_outside_the_simulations_the_build_is_used_only_when_asked() -> None:
+    """Without MPF_COMPILED=1 every module runs from its .py (the live bridge's default), and
+    --version says how to ask."""
     env = {k: v for k, v in os.environ.items() if k not in ("MPF_COMPILED", "MPF_PURE_PYTHON")}
     code = "import mpf_mavlink.core.guidance.law as law, sys; print(law.__file__)"
     r = subprocess.run(
@@ -215,3 +216,35 @@ def test_the_build_is_used_only_when_asked() -> None:
         timeout=120,
     )
     assert r.returncode == 0 and "MPF_COMPILED=1" in r.stdout, r.stdout + r.stderr
+
+
+def _sim_then_law_file(env: dict[str, str], out: Path) -> tuple[str, str]:
+    """A short kinematic ``mpf-mavlink sim`` in a fresh interpreter; (where the law it flew was
+    loaded from, MPF_COMPILED as the processes it starts see it)."""
+    code = (
+        "import os, sys; from mpf_mavlink.cli.main import main;"
+        "rc = main(['sim', 'configs/paper_lemniscate.yaml', '-q', '--no-plots', '--out', "
+        f"{str(out)!r}, '--set', 'sim.duration_s=2']);"
+        "import mpf_mavlink.core.guidance.law as law;"
+        "print(law.__file__, os.environ.get('MPF_COMPILED', '-'))"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300
+    )
+    assert r.returncode == 0, r.stderr[-2000:]
+    law_file, asked = r.stdout.split()[-2:]
+    return law_file, asked
+
+
+@needs_build
+def test_the_simulations_fly_the_build_unless_told_not_to(tmp_path: Path) -> None:
+    """``mpf-mavlink sim`` (and campaign, compare: prefer_for_simulation) loads the build when
+    nothing is set, and passes the choice on to the processes it starts; MPF_COMPILED=0 and
+    MPF_PURE_PYTHON=1 keep it pure."""
+    env = {k: v for k, v in os.environ.items() if k not in ("MPF_COMPILED", "MPF_PURE_PYTHON")}
+    law_file, asked = _sim_then_law_file(env, tmp_path / "a")
+    assert law_file.endswith(EXT_SUFFIX) and asked == "1", (law_file, asked)
+    law_file, asked = _sim_then_law_file({**env, "MPF_COMPILED": "0"}, tmp_path / "b")
+    assert law_file.endswith("law.py") and asked == "0", (law_file, asked)
+    law_file, _ = _sim_then_law_file({**env, "MPF_PURE_PYTHON": "1"}, tmp_path / "c")
+    assert law_file.endswith("law.py"), law_file

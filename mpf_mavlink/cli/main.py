@@ -102,6 +102,9 @@ def _gate(cfg: Config, force: bool) -> None:
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
+    from mpf_mavlink._compiled import prefer_for_simulation
+
+    prefer_for_simulation()  # before the hot modules load
     from mpf_mavlink.runs.rundir import prepare_out_dir
     from mpf_mavlink.runs.write import write_run
 
@@ -116,6 +119,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from sim.runner import run_kinematic
 
     res = run_kinematic(cfg, progress=not args.quiet)
+    from mpf_mavlink._compiled import status
+
+    res.metrics["hot_paths"] = status()  # which build flew (mpf_mavlink._compiled)
     from mpf_mavlink.runs.verdict import assess
 
     # the paper's kinematic plant has no attitude, airspeed or thrust to judge: tracking only
