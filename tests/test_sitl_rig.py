@@ -198,8 +198,13 @@ def test_sil_leg_flies_the_real_flights_wind_and_turbulence(tmp_path, monkeypatc
     exe = tmp_path / "arduplane"
     exe.write_text("#!/bin/sh\n")
     exe.chmod(0o755)
+    # a checkout of its own (its plane.parm only): no SITL bundle needed, a bare clone runs it
+    parm = tmp_path / "ardupilot" / "Tools" / "autotest" / "models" / "plane.parm"
+    parm.parent.mkdir(parents=True)
+    parm.write_text("")
     out = tmp_path / "run"
-    a = common.parser().parse_args(["arduplane", "--binary", str(exe), "--wind", "6,90",
+    a = common.parser().parse_args(["arduplane", "--binary", str(exe), "--bundle",
+                                    str(tmp_path / "ardupilot"), "--wind", "6,90",
                                     "--turbulence", "2", "--out", str(out)])  # fmt: skip
     v = common.validate(a)
     (out / "bridge").mkdir(parents=True)
