@@ -15,8 +15,8 @@ Which processes use a build: the simulations (``mpf-mavlink sim``, ``campaign``,
 MPF_COMPILED=1; MPF_PURE_PYTHON=1 overrides both. A simulation keeps the CPU busy, and there the
 compiled modules run the controller's path in ~0.6 of the interpreter's time and the SIL's
 lockstep loop faster (bench sil_real_time_factor); the live bridge sleeps between frames,
-starting each with cold caches, where they measured no faster than the interpreter (bench
-bridge_latency_ms), so a live flight runs the .py files unless asked.
+and there they measured no faster than the interpreter (bench bridge_latency_ms), so a live
+flight runs the .py files unless asked.
 The compiled and the pure modules compute the same IEEE double operations in the same order
 (no fused multiply-add, ``-ffp-contract=off``), so their results agree bit for bit.
 """
