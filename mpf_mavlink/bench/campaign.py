@@ -39,7 +39,7 @@ def _fly(path: str, workers: int, samples: int | None = None) -> dict[str, Any]:
     # the workers load what `mpf-mavlink campaign` gives them (_compiled.prefer_for_simulation:
     # the compiled hot paths when built, unless MPF_COMPILED is set), this process unchanged
     had = os.environ.get("MPF_COMPILED")
-    os.environ["MPF_COMPILED"] = "1" if had is None else had
+    os.environ.setdefault("MPF_COMPILED", "1")
     try:
         with tempfile.TemporaryDirectory(prefix="mpf-bench-campaign-") as d:
             # a copy of the campaign file with the sample count used (the fingerprint reads it)
@@ -62,7 +62,7 @@ def _fly(path: str, workers: int, samples: int | None = None) -> dict[str, Any]:
         "success_rate": s["success_rate"], "converged_rate": s["converged_rate"],
         "status": s["status"], "percentiles": s["percentiles"],
         "load_avg_1min_before": load0, "load_avg_1min_after": os.getloadavg()[0],
-        "mpf_compiled": "1" if had is None else had,
+        "mpf_compiled": had or "1",
     }  # fmt: skip
 
 

@@ -119,9 +119,6 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from sim.runner import run_kinematic
 
     res = run_kinematic(cfg, progress=not args.quiet)
-    from mpf_mavlink._compiled import status
-
-    res.metrics["hot_paths"] = status()  # which build flew (mpf_mavlink._compiled)
     from mpf_mavlink.runs.verdict import assess
 
     # the paper's kinematic plant has no attitude, airspeed or thrust to judge: tracking only
