@@ -62,10 +62,15 @@ def source_files(name: str) -> tuple[Path, Path]:
     return base.with_suffix(".py"), base.with_suffix(".pxd")
 
 
+#: The .pxd the modules' own .pxd files cimport (C math with Python's results and errors).
+SHARED_PXD = (PACKAGE_DIR / "_cmath.pxd",)
+
+
 def source_digest(name: str) -> str:
-    """sha256 of the module's .py, then its .pxd (empty when absent): what a build is of."""
+    """sha256 of the module's .py, its .pxd (empty when absent) and the shared .pxd files:
+    what a build is of."""
     h = hashlib.sha256()
-    for f in source_files(name):
+    for f in (*source_files(name), *SHARED_PXD):
         h.update(f.read_bytes() if f.is_file() else b"")
         h.update(b"\0")
     return h.hexdigest()

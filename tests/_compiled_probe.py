@@ -151,11 +151,48 @@ def paper() -> list[str]:
     ]
 
 
+def domain() -> list[str]:
+    """Math at and past its domain through the compiled modules' C math (mpf_mavlink/_cmath.pxd):
+    each call's floats, or the exception Python's math module raises (type and message)."""
+    from mpf_mavlink.core import adapter, target_filter
+    from mpf_mavlink.core.guidance import predict
+
+    inf, nan = float("inf"), float("nan")
+    calls: list[tuple[Any, tuple[Any, ...]]] = [
+        (adapter._euler_to_quat_wxyz, (inf, 0.1, 0.0)),  # cos/sin of inf: ValueError
+        (adapter._euler_to_quat_wxyz, (nan, 0.1, -0.2)),  # nan: no error, nan out
+        (adapter._euler_to_quat_wxyz, (0.3, -0.2, 1e300)),
+        (adapter.bank_and_load_factor, ((0.6, 0.8, 0.0), (inf, 1.0, 0.0))),
+        (adapter.bank_and_load_factor, ((0.6, 0.8, 0.0), (nan, 1.0, 0.0))),
+        (adapter.heading_and_path_angle_rates, ((0.0, 0.0, 1.0), (0.1, 0.2, 0.3))),
+        (adapter.roll_rate_gain, (0.5, 1e-320)),
+        (adapter.roll_rate_gain, (-0.5, 800.0)),  # expm1 overflows: OverflowError
+        (adapter.roll_rate_gain, (0.5, inf)),
+        (adapter.reserve_airspeed, (18.0, 25.0, 2.0, 4.0, 3.0, 10.0)),
+        (adapter.reserve_airspeed, (18.0, 25.0, inf, 4.0, 3.0, 10.0)),
+        (adapter.reserve_airspeed, (-18.0, 25.0, 1e308, -1e-300, 3.0, 10.0)),
+        (target_filter._turn_terms, (inf, 0.1)),
+        (target_filter._turn_terms, (0.2, nan)),
+        (target_filter._turn_terms, (1e-9, 0.1)),
+        (predict._rodrigues, (inf, 0.0, 0.0)),
+        (predict._rodrigues, (nan, 0.0, 0.0)),
+        (predict._rodrigues, (1e200, 1e200, 0.0)),
+    ]
+    out: list[str] = []
+    for fn, args in calls:
+        try:
+            out += _hex(fn(*args))
+        except Exception as e:  # noqa: BLE001 - the exception is the result compared
+            out.append(f"{type(e).__name__}: {e}")
+    return out
+
+
 def main() -> None:
     out: dict[str, Any] = {"compiled": compiled_modules(), "law": law()}
     out["controller"] = controller()
     out["target_filter"] = target_filter()
     out["estimator"] = estimator()
+    out["domain"] = domain()
     if "--quick" not in sys.argv:
         out["paper"] = paper()
     print(json.dumps(out))

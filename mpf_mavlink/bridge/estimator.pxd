@@ -4,6 +4,8 @@
 # a Python object per product. Numbers that may arrive as anything (float(x) of a field) stay
 # Python objects, so a bad sample fails the same way compiled and pure.
 cimport cython
+# math.* as C calls that give Python's doubles and raise where it raises (_cmath.pxd)
+cimport mpf_mavlink._cmath as math
 
 @cython.locals(n=double, a=double, b=double, c=double, h=double, e=double, f=double,
                g=double)

@@ -3,6 +3,8 @@
 # stay Python objects; the rest are C doubles, and the helpers called at every step take and
 # return them without a Python object between them.
 cimport cython
+# math.* as C calls that give Python's doubles and raise where it raises (_cmath.pxd)
+cimport mpf_mavlink._cmath as math
 
 @cython.locals(fx=double, fy=double, fz=double, d=double, k=double, nx=double, ny=double,
                nz=double, nn=double, rx=double, ry=double, rz=double, bank=double, load=double)

@@ -312,7 +312,6 @@ def adapt(
     (:func:`energy_thrust`). ``path_down_m`` (m, NED down): where the law's path point is now;
     its rate, low-passed over reserve_tau_s, is the sustained climb the reserve is sized for.
     """
-    isf = math.isfinite
     roll, pitch, ok = _roll_pitch_if_finite(omega_w1_I, airspeed, R_B_N, w1, dt)
     if not ok:
         return safe_setpoint(params, roll), state
@@ -328,8 +327,10 @@ def adapt(
     gamma = math.asin(_clip(-w1[2], -1.0, 1.0))
     chid, gamd_law = heading_and_path_angle_rates(w1, omega_w1_I)
     res = _reserve_step(params, state, path_down_m, dt, g)
-    v_sp = params.airspeed_sp_m_s if airspeed_sp is None or not isf(airspeed_sp) else airspeed_sp
-    if (airspeed_sp is None or not isf(airspeed_sp)) and res[2] is not None:
+    v_sp = params.airspeed_sp_m_s
+    if airspeed_sp is not None and math.isfinite(airspeed_sp):
+        v_sp = airspeed_sp
+    elif res[2] is not None:
         v_sp = res[2]
     # The priority's offset (previous step's, low-passed) lowers (raises) the flight-path
     # demand while thrust is at its ceiling (floor): the law's gamma_dot plus the rate that
@@ -354,8 +355,9 @@ def adapt(
     thrust, en = _thrust(params, state, v, v_sp, gamma, gamd_law, trim, n, bal, dt, g)
     qw, qx, qy, qz = quat = _euler_to_quat_wxyz(bank, pitch_sp, 0.0)
     if not (
-        isf(p) and isf(q) and isf(r) and isf(thrust) and isf(bank) and isf(pitch_sp)
-        and isf(qw) and isf(qx) and isf(qy) and isf(qz)
+        math.isfinite(p) and math.isfinite(q) and math.isfinite(r) and math.isfinite(thrust)
+        and math.isfinite(bank) and math.isfinite(pitch_sp) and math.isfinite(qw)
+        and math.isfinite(qx) and math.isfinite(qy) and math.isfinite(qz)
     ):  # fmt: skip
         return safe_setpoint(params, roll), state
     integ, v_prev, v_sp_prev, vdot_f, gam_f, balance, gam_m_f, thrust_engaged = en
@@ -431,7 +433,6 @@ def _roll_pitch_if_finite(
 ) -> tuple[float, float, bool]:
     """(roll, pitch, ok) of the attitude R_B_N (rad); ok: every input of :func:`adapt` is
     there, finite, and the airspeed positive (roll 0 when it could not be read)."""
-    isf = math.isfinite
     try:
         # only row 2 is used (a numpy matrix or nested lists)
         R2 = R_B_N[2].tolist() if hasattr(R_B_N, "tolist") else R_B_N[2]  # type: ignore[union-attr]
@@ -439,8 +440,10 @@ def _roll_pitch_if_finite(
         pitch = math.asin(_clip(-R2[0], -1.0, 1.0))
         ox, oy, oz = omega_w1_I
         ok = (
-            isf(ox) and isf(oy) and isf(oz) and isf(airspeed) and isf(w1[0]) and isf(w1[1])
-            and isf(w1[2]) and isf(dt) and isf(roll) and isf(pitch) and airspeed > 0.0
+            math.isfinite(ox) and math.isfinite(oy) and math.isfinite(oz)
+            and math.isfinite(airspeed) and math.isfinite(w1[0]) and math.isfinite(w1[1])
+            and math.isfinite(w1[2]) and math.isfinite(dt) and math.isfinite(roll)
+            and math.isfinite(pitch) and airspeed > 0.0
         )  # fmt: skip
     except (TypeError, ValueError, IndexError):
         return 0.0, 0.0, False

@@ -3,6 +3,8 @@
 # updates are hand-unrolled scalars: typed as C doubles they run without a Python object per
 # product.
 cimport cython
+# math.* as C calls that give Python's doubles and raise where it raises (_cmath.pxd)
+cimport mpf_mavlink._cmath as math
 
 @cython.locals(wT=double, cw=double, sw=double, s=double, c=double, ds=double, dc=double)
 cpdef (double, double, double, double, double, double) _turn_terms(double w, double T)

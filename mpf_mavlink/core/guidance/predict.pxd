@@ -2,6 +2,8 @@
 # the source and runs unchanged as Python. The prediction is scalar kinematics: typed as C
 # doubles, it runs without a Python object per product.
 cimport cython
+# math.* as C calls that give Python's doubles and raise where it raises (_cmath.pxd)
+cimport mpf_mavlink._cmath as math
 
 @cython.locals(th2=double, th=double)
 cpdef (double, double, double) _rodrigues(double x, double y, double z)
