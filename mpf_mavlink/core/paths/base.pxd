@@ -2,9 +2,8 @@
 # source and runs unchanged as Python. The evaluation of a cell is all floats: typed as C
 # doubles it runs without a Python object per product.
 cimport cython
-# math.sqrt/sin/cos/atan2/ceil as the C library's: the same IEEE results for the finite
-# arguments they get here (the Python ones raise only on infinities and negative roots).
-from libc cimport math
+# math.* as C calls that give Python's doubles and raise where it raises (_cmath.pxd)
+cimport mpf_mavlink._cmath as math
 
 @cython.locals(
     si=double, p0=double, p1=double, p2=double, ta0=double, ta1=double, ta2=double,
