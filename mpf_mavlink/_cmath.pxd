@@ -13,22 +13,21 @@ cdef extern from "<math.h>":
     const double pi "M_PI"
 
 
-cdef inline double _domain() except -1.0:
-    raise ValueError("math domain error")
-
-
-cdef inline double _range() except -1.0:
-    raise OverflowError("math range error")
+cdef inline double _checked(double r, double x, bint can_overflow) except? -1.0:
+    """r = f(x) as Python's math module returns it (CPython's math_1): a NaN from a non-NaN x
+    is a domain error, an infinity from a finite x a range error where f can overflow, else a
+    domain error."""
+    if _m.isnan(r) and not _m.isnan(x):
+        raise ValueError("math domain error")
+    if _m.isinf(r) and _m.isfinite(x):
+        if can_overflow:
+            raise OverflowError("math range error")
+        raise ValueError("math domain error")
+    return r
 
 
 cdef inline bint isfinite(double x) noexcept:
     return _m.isfinite(x)
-
-
-cdef inline double sqrt(double x) except? -1.0:
-    if x < 0.0:
-        return _domain()
-    return _m.sqrt(x)
 
 
 cdef inline double atan2(double y, double x) noexcept:
@@ -39,42 +38,32 @@ cdef inline double atan(double x) noexcept:
     return _m.atan(x)
 
 
+cdef inline double sqrt(double x) except? -1.0:
+    return _checked(_m.sqrt(x), x, False)
+
+
 cdef inline double sin(double x) except? -1.0:
-    if _m.isinf(x):
-        return _domain()
-    return _m.sin(x)
+    return _checked(_m.sin(x), x, False)
 
 
 cdef inline double cos(double x) except? -1.0:
-    if _m.isinf(x):
-        return _domain()
-    return _m.cos(x)
+    return _checked(_m.cos(x), x, False)
 
 
 cdef inline double tan(double x) except? -1.0:
-    if _m.isinf(x):
-        return _domain()
-    return _m.tan(x)
+    return _checked(_m.tan(x), x, False)
 
 
 cdef inline double asin(double x) except? -1.0:
-    if x < -1.0 or x > 1.0:
-        return _domain()
-    return _m.asin(x)
+    return _checked(_m.asin(x), x, False)
 
 
 cdef inline double exp(double x) except? -1.0:
-    cdef double r = _m.exp(x)
-    if _m.isinf(r) and _m.isfinite(x):
-        return _range()
-    return r
+    return _checked(_m.exp(x), x, True)
 
 
 cdef inline double expm1(double x) except? -1.0:
-    cdef double r = _m.expm1(x)
-    if _m.isinf(r) and _m.isfinite(x):
-        return _range()
-    return r
+    return _checked(_m.expm1(x), x, True)
 
 
 cdef inline double radians(double x) noexcept:
