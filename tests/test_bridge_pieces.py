@@ -357,3 +357,27 @@ def test_young_objects_are_collected_after_a_setpoint_before_the_collector_would
     live._collect_young()
     assert gc.get_count()[0] < 10
     del keep
+
+
+def test_only_state_samples_move_the_vehicle_clock() -> None:
+    """ATTITUDE_TARGET is stamped when the autopilot took the setpoint (frames old; PX4 v1.16
+    freezes it) and WIND_COV's time_usec may be another clock: neither is the vehicle's now.
+    The vehicle clock once followed them back, and a lockstep telemetry timeout then fired a
+    frame late (CI, stop 38: lost at 0.54 s instead of 0.50-0.52 s)."""
+    m = load_config(str(ROOT / "configs" / "default.yaml")).section("mavlink")
+    vl = VehicleLink(m)
+    tx = d.MAVLink(None, srcSystem=m.vehicle_sysid, srcComponent=1)
+    rx = d.MAVLink(None)
+
+    def feed(msg: object) -> None:
+        vl.dispatch(rx.parse_char(bytes(msg.pack(tx))))  # type: ignore[attr-defined]
+
+    feed(tx.attitude_encode(17_300, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+    assert vl.vehicle_t == 17.3
+    feed(tx.local_position_ned_encode(17_820, 0.0, 0.0, -50.0, 16.0, 0.0, 0.0))
+    assert vl.vehicle_t == 17.82
+    feed(tx.attitude_target_encode(17_320, 0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0.5))
+    feed(tx.wind_cov_encode(1_700_000_000_000_000, 1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+    assert vl.vehicle_t == 17.82
+    # the 0.5 s telemetry timeout against an ATTITUDE at 17.30: over at 17.82, not held off
+    assert vl.vehicle_since(17.3) > m.telemetry_timeout_s

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import Any
 
 from mpf_mavlink.mavlink import CommandAckSample, Flavour, HeartbeatSample, decode, dialect
+from mpf_mavlink.mavlink.codec import AttitudeSample, GlobalPositionSample, LocalPositionSample
 
 #: How often the bridge asks PX4 for TIMESYNC (s): the 16 answers kept (controller.py) span
 #: 8 s, over which a line follows the clocks' drift.
@@ -22,6 +23,13 @@ HEARTBEAT_PERIOD_S = 1.0
 MAX_WAIT_S = 0.01
 
 _INT_PARAM_TYPES = frozenset({1, 2, 3, 4, 5, 6})  # MAV_PARAM_TYPE_(U)INT8/16/32
+
+#: The samples whose time stamp is the vehicle's "now" (the instant of the state they carry),
+#: which alone move the vehicle's clock as the bridge sees it: ATTITUDE_TARGET's stamp is when
+#: the autopilot took our setpoint (frames old, frozen on PX4 v1.16) and WIND_COV's time_usec
+#: may be another clock, so either would move the clock back (or far ahead) and hold off a
+#: lockstep timeout by a frame or more.
+_CLOCK_SAMPLES = frozenset({AttitudeSample, LocalPositionSample, GlobalPositionSample})
 
 
 def param_value(msg: Any, bytewise: bool) -> float | None:
@@ -73,7 +81,7 @@ class VehicleLink:
         self.param_types: dict[str, int] = {}  # name -> MAV_PARAM_TYPE
         # arrival times (monotonic s) per message type while the stream rates are measured
         self.arrivals: dict[str, deque[float]] | None = None
-        # the vehicle's clock (s since its boot): the newest time stamp it sent
+        # the vehicle's clock (s since its boot): the stamp of its latest state sample
         self.vehicle_t: float | None = None
         self.last_hb_tx_mono = -math.inf
         self.last_ts_tx_mono = -math.inf  # the latest TIMESYNC request (PX4's loop delay)
@@ -158,9 +166,8 @@ class VehicleLink:
         if cls is CommandAckSample:
             self.acks.append(sample)
             return
-        t_boot = getattr(sample, "t_boot_s", None)
-        if t_boot is not None:
-            self.vehicle_t = t_boot
+        if cls in _CLOCK_SAMPLES:
+            self.vehicle_t = sample.t_boot_s
         self.on_vehicle(sample, rx)
 
     def _param(self, msg: Any) -> None:
