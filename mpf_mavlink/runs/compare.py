@@ -30,8 +30,9 @@ def distance_to_polyline(
     Fast on long tables (a SIL truth of 30,000 rows against a path of thousands of nodes): the
     segments that meet at a point's k nearest nodes (k-d tree) settle it when its k-th nearest
     node is farther than the distance found plus half the longest segment (a closer segment
-    would have an end point within that distance, so among those nodes); the other points are
-    measured against every segment."""
+    would have an end point within that distance, so among those nodes); the points left
+    unsettled (far from a densely sampled path, e.g. before convergence) are asked again with
+    eight times as many nodes, up to all of them (every segment)."""
     from scipy.spatial import cKDTree
 
     nodes, q = np.asarray(nodes, float), np.asarray(q, float).reshape(-1, 3)
@@ -43,21 +44,30 @@ def distance_to_polyline(
         return best if len(A) else np.linalg.norm(q - nodes[0], axis=1)
     d = B - A
     L2 = np.maximum(np.sum(d * d, axis=1), 1e-12)
-    k = min(8, len(nodes))
-    dist, idx = cKDTree(nodes).query(q, k=k)
-    dist, idx = np.reshape(dist, (len(q), k)), np.reshape(idx, (len(q), k))
-    seg = np.concatenate([idx - 1, idx], axis=1)  # the segments ending and starting at a node
-    seg = seg % len(A) if closed else np.clip(seg, 0, len(A) - 1)
-    Aq, dq = A[seg], d[seg]
-    u = np.clip(np.sum((q[:, None, :] - Aq) * dq, axis=2) / L2[seg], 0.0, 1.0)
-    best = np.min(np.linalg.norm(q[:, None, :] - (Aq + u[:, :, None] * dq), axis=2), axis=1)
-    if k < len(nodes):
-        rest = np.flatnonzero(dist[:, -1] <= best + 0.5 * math.sqrt(float(np.max(L2))))
-        for i in range(0, len(rest), 256):  # chunks keep the (chunk, segments) arrays small
-            r = rest[i : i + 256]
-            qq = q[r, None, :]
-            u = np.clip(np.sum((qq - A) * d, axis=2) / L2, 0.0, 1.0)
-            best[r] = np.min(np.linalg.norm(qq - (A + u[:, :, None] * d), axis=2), axis=1)
+    half = 0.5 * math.sqrt(float(np.max(L2)))
+    tree, n = cKDTree(nodes), len(nodes)
+    kth = np.empty(len(q))  # the k-th nearest node's distance of the latest ask
+    todo, k = np.arange(len(q)), min(8, n)
+    while True:
+        # chunks keep the (points, 2 k segments, 3) arrays to a few MB
+        step = max(1, 65536 // k)
+        for i in range(0, len(todo), step):
+            r = todo[i : i + step]
+            qq = q[r]
+            dist, idx = tree.query(qq, k=k)
+            dist, idx = np.reshape(dist, (len(r), k)), np.reshape(idx, (len(r), k))
+            seg = np.concatenate([idx - 1, idx], axis=1)  # the segments ending/starting there
+            seg = seg % len(A) if closed else np.clip(seg, 0, len(A) - 1)
+            Aq, dq = A[seg], d[seg]
+            u = np.clip(np.sum((qq[:, None, :] - Aq) * dq, axis=2) / L2[seg], 0.0, 1.0)
+            best[r] = np.min(np.linalg.norm(qq[:, None, :] - (Aq + u[:, :, None] * dq), axis=2), 1)
+            kth[r] = dist[:, -1]
+        if k >= n:
+            break
+        todo = todo[kth[todo] <= best[todo] + half]
+        if not len(todo):
+            break
+        k = min(8 * k, n)
     return np.asarray(best, dtype=np.float64)
 
 
