@@ -310,3 +310,25 @@ def test_a_sil_flight_whose_bridge_lost_telemetry_is_flown_once_more(monkeypatch
     monkeypatch.setattr(flight, "_sil_once", scripted([other]))
     row = flight.fly("default.yaml", [], "sil", ["steady_rms_m"], timeout_s=100.0)
     assert row["error"] == "exit 1: bad config" and len(calls) == 1
+
+
+def test_sil_flights_not_kept_fly_the_lean_recording_kept_ones_the_full(monkeypatch, tmp_path):
+    """A campaign flight whose run directory is thrown away pays for no tlog and one row in
+    five (mavlink.recording: lean, the same setpoints); a sample's own sets still win, and the
+    worst flights flown again into a kept directory get the full recording and plots."""
+    from mpf_mavlink.campaign import flight
+
+    cmds: list[list[str]] = []
+
+    def run(cmd, **kw):
+        cmds.append(list(cmd))
+        return subprocess.CompletedProcess(cmd, 0, "", "")
+
+    monkeypatch.setattr(flight.subprocess, "run", run)
+    flight._sil_once("default.yaml", ["sil.seed=3", "mavlink.recording=full"], 10.0, False, None)
+    flight._sil_once("default.yaml", ["sil.seed=3"], 10.0, False, str(tmp_path / "kept"))
+    thrown, kept = cmds
+    assert "--no-plots" in thrown and "--no-plots" not in kept
+    sets = [thrown[i + 1] for i, a in enumerate(thrown) if a == "--set"]
+    assert sets == ["mavlink.recording=lean", "sil.seed=3", "mavlink.recording=full"]
+    assert not any("recording" in a for a in kept)
