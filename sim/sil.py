@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from mpf_mavlink._compiled import status as compiled_status
+from mpf_mavlink.bridge.recording import LEAN_ROW_EVERY
 from mpf_mavlink.config.scenario import build_path, build_target
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.mavlink.url import free_udp_port
@@ -511,7 +512,8 @@ def run_sil(
     # which build flew (the cost figures above depend on it; mpf_mavlink._compiled)
     res.metrics["hot_paths"] = compiled_status()
     res.out_dir = out
-    _write(out, res, truth, plots)
+    lean = cfg.section("mavlink").recording == "lean"
+    _write(out, res, truth, plots, LEAN_ROW_EVERY if lean else 1)
     if interrupted:
         raise KeyboardInterrupt
     return res
@@ -713,7 +715,23 @@ def _write_bridge_config(bridge_dir: Path, bcfg: Config) -> None:
     (bridge_dir / "config.yaml").write_text(head + body)
 
 
-def _write(out: Path, res: SilResult, truth: dict[str, np.ndarray], plots: bool) -> None:
+def _lean_rows(n: int, every: int) -> np.ndarray:
+    """Indices of the rows kept of ``n``: one in ``every`` and the last (the final state)."""
+    keep = np.arange(0, n, every)
+    return keep if n == 0 or keep[-1] == n - 1 else np.append(keep, n - 1)
+
+
+def _write(
+    out: Path, res: SilResult, truth: dict[str, np.ndarray], plots: bool, every: int = 1
+) -> None:
+    """The run directory's tables (``every``: one row in that many, the lean recording's; the
+    figures in metrics.json are the whole run's either way)."""
+    if every > 1:
+        truth = {k: v[_lean_rows(len(v), every)] for k, v in truth.items()}
+        sel = _lean_rows(len(res.cols["t"]), every)
+        res = dataclasses.replace(
+            res, cols={k: v[sel] for k, v in res.cols.items()}, t_vehicle=res.t_vehicle[sel]
+        )
     tv = res.t_vehicle
     if len(tv) and len(res.cols["t"]) and "euler" in truth:
         # the truth the verdict judged, from the start (t < 0: before engagement) for the plots

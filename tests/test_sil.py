@@ -536,3 +536,35 @@ def test_the_summary_names_only_the_plots_drawn(tmp_path):
     for name in ("errors", "limits"):
         (tmp_path / f"{name}.png").write_bytes(b"")
     assert _plots_line(tmp_path) == f"plots:         {tmp_path}/*.png  (errors, limits)"
+
+
+def test_a_lean_sil_run_writes_one_row_in_five_and_judges_on_every_frame(tmp_path):
+    # mavlink.recording=lean (what campaigns fly): the tables in the run directory keep one row
+    # in five and the last (the final state); the figures come from the table of every frame
+    cfg = load_config(
+        DEMO,
+        [
+            "sil.plant=kinematic",
+            "sil.turbulence=none",
+            "sim.duration_s=20",
+            "mavlink.recording=lean",
+        ],
+    )
+    r = run_sil(cfg, tmp_path / "run", progress=False, plots=False, log=lambda s: None)
+    import json
+
+    from mpf_mavlink.runs.rundir import read_run
+
+    n = len(r.cols["t"])
+    assert n >= 0.9 * 20.0 / 0.02  # a table of the 50 Hz frames
+    keep = list(range(0, n, 5)) + ([n - 1] if (n - 1) % 5 else [])
+    written, _, _ = read_run(tmp_path / "run")
+    for c in ("t", "pt_norm", "rel_x"):  # written with 9 significant digits
+        np.testing.assert_array_equal(written[c], [float(f"{x:.9g}") for x in r.cols[c][keep]])
+    truth_rows = len((tmp_path / "run" / "truth.csv").read_text().splitlines()) - 1
+    m = len(r.truth["t"])
+    assert truth_rows == len(range(0, m, 5)) + (1 if (m - 1) % 5 else 0)
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert metrics["sim_time_s"] == float(r.cols["t"][-1])
+    assert metrics["first_within_s"] is not None
+    assert metrics["first_within_s"] == r.metrics["first_within_s"]

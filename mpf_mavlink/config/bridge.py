@@ -161,7 +161,8 @@ class MavlinkConfig:
     recording: Literal["full", "lean"] = field(
         default="full",
         metadata=_doc(
-            "lean (campaigns): no tlog, no plots, one tracking row in five; every setpoint is "
+            "lean (campaigns): no tlog, no plots, one tracking row in five (a SIL's truth tables "
+            "too; its figures still use every frame); every setpoint is "
             "still sent, so the flight is the same"
         ),
     )
