@@ -481,6 +481,10 @@ def run_sil(
                 f"vehicle ready ({sil.plant}, {sil.flavour}, {clock or sil.clock} clock) in "
                 f"{ready[1]['mode']}"
             )
+            # what the figures after the flight need (~0.3 s), loaded now while the hand-over
+            # paces at real time and this process only waits
+            import scipy.spatial  # noqa: F401
+
             bres, berr = _await_bridge(q, pb, bar, status)
         except KeyboardInterrupt:
             interrupted = True

@@ -134,18 +134,27 @@ def start_altitude(cfg: Config) -> CheckResult:
 
 
 def climb_check(
-    cfg: Config, path: Any, target: Any, horizon: float, s0: float, steady: Any
+    cfg: Config,
+    path: Any,
+    target: Any,
+    horizon: float,
+    s0: float,
+    steady: Any,
+    demanded: tuple[Any, Any, Any] | None = None,
 ) -> CheckResult:
     """:func:`climb_feasibility` of the config: the vehicle's climb/sink capability (given where
     the aircraft starts, scaled by the air density at the highest point the path reaches over
     the horizon: :func:`density_ratio`), the verdict's airspeed window as the energy reserve,
     and in the SIL the vertical gusts of its turbulence (2 sigma_w over L_w / V at the altitude
     above sea level the path reaches, as JSBSim keys them: home_alt_m + height). Heights above
-    sea level start from sil.home_alt_m (SIL), mavlink.origin_alt_m or 0."""
+    sea level start from sil.home_alt_m (SIL), mavlink.origin_alt_m or 0. ``demanded``: what
+    :func:`demanded_directions` gives for them with positions, when the caller has it."""
     v, m = cfg.vehicle, cfg.metrics
-    ts, W1, P = demanded_directions(
-        path, target, v.airspeed_m_s, horizon, s0, steady, with_positions=True
-    )
+    if demanded is None:
+        demanded = demanded_directions(
+            path, target, v.airspeed_m_s, horizon, s0, steady, with_positions=True
+        )
+    ts, W1, P = demanded
     gusts = None
     sil = cfg.extra.get("sil")
     sil = sil if sil is not None and sil.link != "none" else None
@@ -275,17 +284,22 @@ def run_checks(cfg: Config, scripted_target: bool = True) -> list[CheckResult]:
             )
         )
 
+        # the directions flying the path demands at the cruise airspeed: both the turn and the
+        # climb checks read them (an integration over the horizon, computed once)
+        v0 = cfg.vehicle.airspeed_m_s
+        at_v0 = demanded_directions(path, target, v0, horizon, s0, steady, with_positions=True)
+
         def feasible_at(v: float) -> CheckResult:
             # the bank the aircraft may fly (ours or the autopilot's own limit, the smaller) at
             # the turn per bank it really flies (vehicle.turn_gain)
             return feasibility(
                 path, target, v, horizon, bank_limit_rad(cfg),
                 cfg.vehicle.max_turn_rate_rad_s, s0, steady, bank_margin_rad=ch.bank_margin_rad,
-                turn_gain=cfg.vehicle.turn_gain,
+                turn_gain=cfg.vehicle.turn_gain, demanded=at_v0[:2] if v == v0 else None,
             )  # fmt: skip
 
-        results.append(feasible_at(cfg.vehicle.airspeed_m_s))
-        results.append(climb_check(cfg, path, target, horizon, s0, steady))
+        results.append(feasible_at(v0))
+        results.append(climb_check(cfg, path, target, horizon, s0, steady, at_v0))
         if gust > 0.0:
             results.append(gust_feasibility(feasible_at, cfg.vehicle.airspeed_m_s, gust))
         hold = airspeed_hold(cfg)

@@ -523,6 +523,7 @@ def feasibility(
     dt_s: float = 0.05,
     bank_margin_rad: float = 0.0,
     turn_gain: float = 1.0,
+    demanded: tuple[Any, Any] | None = None,
 ) -> CheckResult:
     """Peak turn rate and bank that flying the moving path exactly demands at airspeed v_w.
 
@@ -535,9 +536,12 @@ def feasibility(
     ``turn_gain`` is the turn the aircraft really flies per bank, as a fraction of the
     coordinated turn (the adapter's learned turn gain): it needs tan(bank) / turn_gain to turn
     as the path asks (an airframe that turns 25 % less needs 37.6 deg where the textbook says
-    29.8), and its turn-rate limit is turn_gain g tan(limit) / v_w.
+    29.8), and its turn-rate limit is turn_gain g tan(limit) / v_w. ``demanded``: the (t, wd1)
+    of :func:`demanded_directions` for these arguments, when the caller has them already.
     """
-    ts, W1 = demanded_directions(path, target, v_w, horizon_s, s0, wind_ned, dt_s)
+    if demanded is None:
+        demanded = demanded_directions(path, target, v_w, horizon_s, s0, wind_ned, dt_s)
+    ts, W1 = demanded
     dW = np.gradient(W1, ts, axis=0)
     rate = np.linalg.norm(dW, axis=1)
     banks = np.array(
