@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from mpf_mavlink._compiled import status as compiled_status
-from mpf_mavlink.bridge.recording import LEAN_ROW_EVERY
+from mpf_mavlink.bridge.recording import LEAN_ROW_EVERY, is_lean
 from mpf_mavlink.config.scenario import build_path, build_target
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.mavlink.url import free_udp_port
@@ -516,8 +516,7 @@ def run_sil(
     # which build flew (the cost figures above depend on it; mpf_mavlink._compiled)
     res.metrics["hot_paths"] = compiled_status()
     res.out_dir = out
-    lean = cfg.section("mavlink").recording == "lean"
-    _write(out, res, truth, plots, LEAN_ROW_EVERY if lean else 1)
+    _write(out, res, truth, plots, LEAN_ROW_EVERY if is_lean(cfg.section("mavlink")) else 1)
     if interrupted:
         raise KeyboardInterrupt
     return res

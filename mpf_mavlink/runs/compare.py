@@ -60,7 +60,8 @@ def distance_to_polyline(
             seg = seg % len(A) if closed else np.clip(seg, 0, len(A) - 1)
             Aq, dq = A[seg], d[seg]
             u = np.clip(np.sum((qq[:, None, :] - Aq) * dq, axis=2) / L2[seg], 0.0, 1.0)
-            best[r] = np.min(np.linalg.norm(qq[:, None, :] - (Aq + u[:, :, None] * dq), axis=2), 1)
+            gap = np.linalg.norm(qq[:, None, :] - (Aq + u[:, :, None] * dq), axis=2)
+            best[r] = np.min(gap, axis=1)
             kth[r] = dist[:, -1]
         if k >= n:
             break
