@@ -291,9 +291,8 @@ def test_lockstep_spin_ends_the_wait_on_the_answer_and_rests_after_a_run_of_miss
             return True
         return False
 
-    # a spin long enough that a descheduled test process (CI's loaded host: 2 ms of wall time
-    # once ran out before the third poll) cannot end it before the answer; then the short one,
-    # whose spins below miss whatever the host does (the answer never comes to them)
+    # a spin long enough that a descheduled test process cannot end it before the answer; then
+    # the short one, whose spins below miss whatever the host does (the answer never comes)
     clock.spin_s = 60.0
     clock.wait(1.0, poll, lambda: True)
     assert sleeping == [] and clock.spun == 1 and clock.answered_frames == 1

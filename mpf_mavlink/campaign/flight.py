@@ -7,8 +7,8 @@
   the SIL, and its own temporary run directory), killed at the timeout: a hang or a crash of
   the flight is a row with its error, never a lost worker. Flights whose run directory is not
   kept fly with ``mavlink.recording: lean``; the truth's figures then take the virtual point's
-  ``s`` interpolated between the bridge's 10 Hz rows instead of read at every 50 Hz frame (on
-  the demo the steady RMS moves by 2e-5 m; the worst flights kept are flown again in full).
+  ``s`` interpolated between the bridge's 10 Hz rows instead of read at every 50 Hz frame
+  (docs/campaigns.md); the worst flights kept are flown again in full.
 
 Every flight returns a flat row: the sample, the metrics kept, ``status`` (``ok``, ``failed``:
 the flight's verdict failed it, ``refused``: the pre-flight gate did, ``error``, ``timeout``),
