@@ -59,7 +59,7 @@ def law() -> list[str]:
 
 
 def controller() -> list[str]:
-    from mpf_mavlink.bench.control_path import issue, record_calls
+    from bench.control_path import issue, record_calls
     from mpf_mavlink.bridge.controller import Controller
 
     cfg, calls = record_calls(
@@ -101,7 +101,7 @@ def estimator() -> list[str]:
     attitude and at the position instant, and the wind low-pass."""
     import dataclasses
 
-    from mpf_mavlink.bench.control_path import record_calls
+    from bench.control_path import record_calls
     from mpf_mavlink.bridge.estimator import Estimator, EstimatorParams
 
     _, calls = record_calls(

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from mpf_mavlink.bench.bridge import _demo_frames, bridge_link_us
+from bench.bridge import _demo_frames, bridge_link_us
 from mpf_mavlink.mavlink import dialect as d
 
 

@@ -655,7 +655,7 @@ def test_run_help_explains_every_option():
 
 @pytest.mark.slow
 def test_bridge_latency():
-    from mpf_mavlink.bench.bridge import bridge_latency_ms
+    from bench.bridge import bridge_latency_ms
 
     r = bridge_latency_ms(200)
     print(r)

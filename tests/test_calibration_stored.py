@@ -78,7 +78,7 @@ def test_compare_row_judges_the_band_and_the_means():
 
 
 def test_calibration_and_profiled_robustness_are_bench_groups():
-    from mpf_mavlink.bench import main as bench
+    from bench import main as bench
 
     bench._optional_groups()
     for g in ("calibration", "sil_robustness_px4", "sil_robustness_arduplane"):
@@ -86,7 +86,7 @@ def test_calibration_and_profiled_robustness_are_bench_groups():
 
 
 def test_robustness_profile_flies_the_profile_without_sihs_thrust(tmp_path):
-    from mpf_mavlink.bench.robustness import profile_rows, profile_sets
+    from bench.robustness import profile_rows, profile_sets
 
     sets = dict(s.split("=", 1) for s in profile_sets("px4", tmp_path))
     assert sets["sil.flavour"] == "px4"
@@ -117,7 +117,7 @@ def test_robustness_profile_flies_the_profile_without_sihs_thrust(tmp_path):
 )
 def test_robustness_refuses_bad_input_in_one_line_before_flying(args, msg):
     r = subprocess.run(
-        [sys.executable, "-m", "mpf_mavlink.bench.robustness", *args],
+        [sys.executable, "-m", "bench.robustness", *args],
         cwd=ROOT, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert r.returncode == 2

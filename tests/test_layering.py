@@ -3,7 +3,10 @@
 - ``core`` (so3, frames, paths, target, target estimator, guidance law and checks, adapter) is
   the pure guidance core: it may use ``errors`` and ``constants``, never the configuration
   (``config.scenario`` builds the core's objects from it, one layer up), the MAVLink boundary,
-  the live bridge, run output, the CLI, the benchmarks or ``sim``;
+  the live bridge, run output, the CLI or ``sim``;
+- the benchmarks (top-level ``bench/``, run by scripts/bench) are tooling, not product: nothing
+  that ships (``mpf_mavlink``, ``sim``: pyproject's packages) imports them, and they are no
+  package the wheel holds;
 - ``mavlink`` is the only package that imports pymavlink, and it knows nothing of guidance;
 - no two modules import each other, directly or round a longer circle.
 """
@@ -73,10 +76,36 @@ def test_the_layout_is_there():
         "runs",
         "config",
         "cli",
-        "bench",
     ):
         assert f"mpf_mavlink.{p}" in GRAPH, p
     assert len([m for m in GRAPH if _in(m, "core")]) >= 10
+
+
+def _top_level_imports(path: Path) -> set[str]:
+    """The first component of every absolute import in ``path`` (those inside functions too)."""
+    out: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            out |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            out.add(node.module.split(".")[0])
+    return out
+
+
+def test_what_ships_never_imports_the_benchmarks_and_the_wheel_leaves_them_out():
+    assert (ROOT / "bench" / "main.py").is_file()
+    assert not (PKG / "bench").exists()
+    for path in [*PKG.rglob("*.py"), *(ROOT / "sim").rglob("*.py")]:
+        assert "bench" not in _top_level_imports(path), path.relative_to(ROOT)
+    # setuptools' own discovery with pyproject's include list: what the wheel packages
+    import tomllib
+
+    from setuptools import find_packages
+
+    find = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    shipped = find_packages(str(ROOT), include=find["packages"]["find"]["include"])
+    assert "mpf_mavlink" in shipped and "sim" in shipped
+    assert not [p for p in shipped if p.split(".")[0] in ("bench", "tests", "scripts")], shipped
 
 
 def test_core_is_pure_of_io_layers():

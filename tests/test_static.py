@@ -1,5 +1,5 @@
 """The code is typed and formatted as the project says: mypy (configured in pyproject.toml) and
-ruff report nothing on the package and the simulator."""
+ruff report nothing on the package, the simulator and the benchmarks."""
 
 from __future__ import annotations
 
@@ -20,12 +20,12 @@ def test_mypy_is_clean():
 
 def test_ruff_is_clean():
     r = subprocess.run(
-        [sys.executable, "-m", "ruff", "check", "mpf_mavlink", "sim", "tests"],
+        [sys.executable, "-m", "ruff", "check", "mpf_mavlink", "sim", "bench", "tests"],
         cwd=ROOT, capture_output=True, text=True,
     )  # fmt: skip
     assert r.returncode == 0, r.stdout[-3000:]
     r = subprocess.run(
-        [sys.executable, "-m", "ruff", "format", "--check", "mpf_mavlink", "sim", "tests"],
+        [sys.executable, "-m", "ruff", "format", "--check", "mpf_mavlink", "sim", "bench", "tests"],
         cwd=ROOT, capture_output=True, text=True,
     )  # fmt: skip
     assert r.returncode == 0, r.stdout[-3000:]

@@ -1,4 +1,4 @@
-"""Bench group ``calibration`` (``python -m mpf_mavlink.bench --only calibration``): how far our
+"""Bench group ``calibration`` (``python -m bench --only calibration``): how far our
 SIL, with the shipped autopilot profiles, is from the real firmware on the calibration matrix.
 
 The real side is stored in the repository (sim/calibration/flights/<autopilot>.json: each real

@@ -4,7 +4,7 @@ A replay of the tlog records the calls the bridge made on its :class:`Controller
 sequence as live and replay, with the decoded samples); the bench then issues that sequence to
 fresh controllers and times it, without the link, the decoding or the files. The figure is
 wall time per control step (``us_per_step``) and, for ``valgrind --tool=callgrind`` (load
-independent), ``python -m mpf_mavlink.bench.control_path TLOG CONFIG --passes N`` runs N passes
+independent), ``python -m bench.control_path TLOG CONFIG --passes N`` runs N passes
 (each on a new controller) and nothing else: (I(3) - I(1)) / (2 x steps) is the instructions
 per step.
 Without a tlog the bench flies the SIL demo for 120 s first (~10 s) and uses its recording.
@@ -140,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from mpf_mavlink.bridge.controller import Controller
 
-    p = argparse.ArgumentParser(prog="python -m mpf_mavlink.bench.control_path")
+    p = argparse.ArgumentParser(prog="python -m bench.control_path")
     p.add_argument("tlog", nargs="?")
     p.add_argument("config", nargs="?")
     p.add_argument("--save", type=Path)

@@ -5,7 +5,7 @@ along a real closed-loop trajectory, with the diagnostics record (the bridge's C
 asks for it: it records it and reads its mode and p_f); median_target_arrays: the same with the
 target state read from its arrays, as for a producer that does not keep its floats
 (TargetState.floats; the paper profile and extrapolate keep them). controller_path: the
-bridge's whole control path per step (mpf_mavlink.bench.control_path). paper_wall_time_s: the 300 s
+bridge's whole control path per step (bench.control_path). paper_wall_time_s: the 300 s
 Section V scenario, kinematic plant, lambda_w = 10. Further figures (bridge, SIL, replay)
 appear as those parts exist; ``--only NAME`` runs one group.
 """
@@ -84,8 +84,8 @@ def fdm_steps_per_s() -> dict[str, Any]:
 
 def controller_path_us() -> dict[str, Any]:
     """The bridge's control path (estimator, target, prediction, law, adapter) per step, over
-    the calls of a replay of a 120 s SIL demo tlog: mpf_mavlink.bench.control_path."""
-    from mpf_mavlink.bench.control_path import controller_path_us as run
+    the calls of a replay of a 120 s SIL demo tlog: bench.control_path."""
+    from bench.control_path import controller_path_us as run
 
     return run()
 
@@ -100,7 +100,7 @@ GROUPS = {
 
 def _optional_groups() -> None:
     try:
-        from mpf_mavlink.bench.bridge import (
+        from bench.bridge import (
             bridge_latency_ms,
             bridge_link_us,
             estimator_us,
@@ -113,14 +113,14 @@ def _optional_groups() -> None:
         GROUPS["replay_s"] = replay_s
     except ImportError:
         pass
-    from mpf_mavlink.bench.sil import sil_real_time_factor, sil_tracking
+    from bench.sil import sil_real_time_factor, sil_tracking
 
     GROUPS["sil_real_time_factor"] = sil_real_time_factor
     GROUPS["sil_tracking"] = sil_tracking
-    from mpf_mavlink.bench.sil import sil_vehicle_frame_us
+    from bench.sil import sil_vehicle_frame_us
 
     GROUPS["sil_vehicle_frame_us"] = sil_vehicle_frame_us
-    from mpf_mavlink.bench.robustness import (
+    from bench.robustness import (
         sil_airframes,
         sil_robustness,
         sil_robustness_arduplane,
@@ -131,20 +131,20 @@ def _optional_groups() -> None:
     GROUPS["sil_airframes"] = sil_airframes
     GROUPS["sil_robustness_px4"] = sil_robustness_px4
     GROUPS["sil_robustness_arduplane"] = sil_robustness_arduplane
-    from mpf_mavlink.bench.calibration import calibration
+    from bench.calibration import calibration
 
     GROUPS["calibration"] = calibration
-    from mpf_mavlink.bench.target import target_feed, target_filter_us
+    from bench.target import target_feed, target_filter_us
 
     GROUPS["target_feed"] = target_feed
     GROUPS["target_filter_us"] = target_filter_us
-    from mpf_mavlink.bench.campaign import (
+    from bench.campaign import (
         campaign_demo_robustness,
         campaign_roa,
         campaign_sil_flight,
         campaign_throughput,
     )
-    from mpf_mavlink.bench.framing import mavlink_framing_us
+    from bench.framing import mavlink_framing_us
 
     GROUPS["mavlink_framing_us"] = mavlink_framing_us
     GROUPS["campaign_throughput"] = campaign_throughput
@@ -155,7 +155,7 @@ def _optional_groups() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     _optional_groups()
-    from mpf_mavlink.bench.compare import guidance_compare
+    from bench.compare import guidance_compare
 
     GROUPS["guidance_compare"] = guidance_compare
     p = argparse.ArgumentParser(

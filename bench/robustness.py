@@ -16,7 +16,7 @@ autopilot): what the firmware adds to the same mission. The profile's ``thrust``
 airframe the firmware was identified on (PX4 SIH's airplane), not the X8 these rows fly, so it
 is left out unless ``--profile-thrust``.
 
-Run alone: ``python -m mpf_mavlink.bench.robustness [--rows demo,calm] [--duration S]
+Run alone: ``python -m bench.robustness [--rows demo,calm] [--duration S]
 [--profile px4]``.
 """
 
@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 DEMO = "configs/default.yaml"
 PROFILES = {
     "px4": "configs/autopilots/px4-1.16-sih.yaml",
@@ -347,7 +347,7 @@ def format_row(name: str, r: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m mpf_mavlink.bench.robustness")
+    p = argparse.ArgumentParser(prog="python -m bench.robustness")
     p.add_argument("--rows", help="comma-separated row names (default: all)")
     p.add_argument("--duration", type=float, help="sim.duration_s of every row (default: config)")
     p.add_argument("--json", type=Path, help="also write the table as JSON here")

@@ -330,7 +330,7 @@ def bridge_link_us(frames: int = 800, rounds: int = 15) -> dict[str, float | int
 
 
 SHARED_TLOG = (
-    Path(__file__).resolve().parents[2] / "tests" / "data" / "arduplane-quadplane-sitl-vtol.tlog"
+    Path(__file__).resolve().parents[1] / "tests" / "data" / "arduplane-quadplane-sitl-vtol.tlog"
 )
 
 
@@ -345,7 +345,7 @@ def replay_s(runs: int = 3) -> dict[str, float | int | str]:
     if not SHARED_TLOG.is_file():
         return {"s": math.nan, "no_plots_s": math.nan, "note": f"{SHARED_TLOG} not found"}
     cfg = load_config(
-        Path(__file__).resolve().parents[2] / "configs" / "replay_arduplane_sitl.yaml"
+        Path(__file__).resolve().parents[1] / "configs" / "replay_arduplane_sitl.yaml"
     )
     full, bare = [], []
     steps = 0
@@ -372,7 +372,7 @@ def estimator_us(runs: int = 20) -> dict[str, float | int | str]:
     if not SHARED_TLOG.is_file():
         return {"per_attitude_us": math.nan, "note": f"{SHARED_TLOG} not found"}
     cfg = load_config(
-        Path(__file__).resolve().parents[2] / "configs" / "replay_arduplane_sitl.yaml"
+        Path(__file__).resolve().parents[1] / "configs" / "replay_arduplane_sitl.yaml"
     )
     m = cfg.section("mavlink")
     samples = []
