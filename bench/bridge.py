@@ -339,8 +339,8 @@ def replay_s(runs: int = 3) -> dict[str, float | int | str]:
     23,894 records) with configs/replay_arduplane_sitl.yaml: ``s`` with the run directory and
     its plots (what a user waits for), ``no_plots_s`` without the PNGs. Best of ``runs``
     (the machine is shared: the best run is the one least disturbed)."""
+    from mpf_mavlink.bridge.replay import replay
     from mpf_mavlink.config.schema import load_config
-    from mpf_mavlink.runs.replay import replay
 
     if not SHARED_TLOG.is_file():
         return {"s": math.nan, "no_plots_s": math.nan, "note": f"{SHARED_TLOG} not found"}

@@ -30,8 +30,8 @@ _METHODS = ("feed_vehicle", "feed_target", "ready", "set_origin", "init_s", "ste
 
 def record_calls(tlog: str | Path, config: str | Path) -> tuple[Any, Calls]:
     """(config, calls): the controller calls of a replay of ``tlog`` with ``config``."""
+    from mpf_mavlink.bridge.replay import _has_markers, _read_window, _Replayer
     from mpf_mavlink.config.schema import load_config
-    from mpf_mavlink.runs.replay import _has_markers, _read_window, _Replayer
 
     cfg = load_config(Path(config), ["mavlink.plots=false"])
     m = cfg.section("mavlink")

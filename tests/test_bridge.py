@@ -309,7 +309,7 @@ def test_telemetry_loss_stops_commands_within_half_a_second(tmp_path):
 
 @pytest.mark.slow  # > 8 s of real-time flight: full suite (CI), not the quick loop
 def test_reengages_once_telemetry_is_back_and_replays_identically(tmp_path):
-    from mpf_mavlink.runs.replay import TOLERANCE, replay
+    from mpf_mavlink.bridge.replay import TOLERANCE, replay
 
     port = free_port()
     peer = MavPeer(PeerOptions(flavour="px4"), port=port).start()

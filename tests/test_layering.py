@@ -8,6 +8,9 @@
   that ships (``mpf_mavlink``, ``sim``: pyproject's packages) imports them, and they are no
   package the wheel holds;
 - ``mavlink`` is the only package that imports pymavlink, and it knows nothing of guidance;
+- ``runs`` (run directories, plots, verdicts, the replay's result) sits below the live bridge:
+  the bridge writes runs, runs never imports the bridge (the replay, which drives the bridge's
+  controller, is ``bridge.replay``);
 - no two modules import each other, directly or round a longer circle.
 """
 
@@ -122,6 +125,14 @@ def test_only_the_mavlink_package_touches_pymavlink_and_it_knows_no_guidance():
             assert _in(mod, "mavlink"), f"{mod} imports pymavlink"
         if _in(mod, "mavlink"):
             bad = {d for d in deps - {"pymavlink"} if not _in(d, "mavlink", "errors")}
+            assert not bad, f"{mod} imports {sorted(bad)}"
+
+
+def test_runs_never_imports_the_bridge():
+    assert "mpf_mavlink.bridge.replay" in GRAPH and "mpf_mavlink.runs.replay_result" in GRAPH
+    for mod, deps in GRAPH.items():
+        if _in(mod, "runs"):
+            bad = {d for d in deps if _in(d, "bridge", "cli")}
             assert not bad, f"{mod} imports {sorted(bad)}"
 
 

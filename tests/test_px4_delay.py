@@ -226,7 +226,7 @@ def test_bridge_against_a_px4_like_peer_measures_by_timesync_and_sets_a_hold(tmp
     assert [c.msg.command for c in peer.commands if c.msg.command == 192] == [192]
     # the delays come from the tlog (TIMESYNC answers, the setpoints' record times): a replay
     # recomputes every command bit for bit
-    from mpf_mavlink.runs.replay import replay
+    from mpf_mavlink.bridge.replay import replay
 
     cfg = cfg_for("px4", "mavlink.set_fallback=true")
     c = replay(tmp_path / "mavlink.tlog", cfg, plots=False).check

@@ -25,13 +25,13 @@ from mav_peer import MavPeer, PeerOptions  # noqa: E402
 
 from mpf_mavlink.bridge.controller import origin_texts, parse_marker  # noqa: E402
 from mpf_mavlink.bridge.live import BridgeOptions, BridgeResult, run_bridge  # noqa: E402
+from mpf_mavlink.bridge.replay import TOLERANCE, replay  # noqa: E402
 from mpf_mavlink.cli.main import main  # noqa: E402
 from mpf_mavlink.config import bridge as bridge_config  # noqa: E402,F401
 from mpf_mavlink.config.schema import Config, load_config  # noqa: E402
 from mpf_mavlink.core.frames import geodetic_to_ned, ned_to_geodetic  # noqa: E402
 from mpf_mavlink.mavlink import dialect as mavlink  # noqa: E402
 from mpf_mavlink.mavlink import read_tlog  # noqa: E402
-from mpf_mavlink.runs.replay import TOLERANCE, replay  # noqa: E402
 
 # a lifecycle flight of seconds has no steady window: it ends NOT JUDGED (exit 6), not PASS
 from mpf_mavlink.runs.verdict import EXIT_NOT_JUDGED as NOT_JUDGED  # noqa: E402

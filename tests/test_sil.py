@@ -381,7 +381,7 @@ def test_full_sil_mission_converges(tmp_path, capsys):
     )
     # the bridge's own configuration is kept, and with it the replay recomputes every command
     # the bridge sent, bit for bit (the live target, the delay measured from the echoes)
-    from mpf_mavlink.runs.replay import replay
+    from mpf_mavlink.bridge.replay import replay
 
     rp = replay(tlog, load_config(str(out / "bridge" / "config.yaml")))
     assert rp.check.identical and rp.check.max_diff == 0.0

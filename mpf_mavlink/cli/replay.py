@@ -1,6 +1,6 @@
 """``mpf-mavlink replay LOG.tlog --config CONFIG``: re-run the guidance on recorded telemetry.
 
-Thin: parse, load the config, call :func:`mpf_mavlink.runs.replay.replay`, print the summary.
+Thin: parse, load the config, call :func:`mpf_mavlink.bridge.replay.replay`, print the summary.
 Known failures (missing or unreadable file, not a tlog, bad window, bad config) are MpfError:
 one line, exit 2. Exit 1 when the tlog was recorded by this bridge and a replayed command
 differs from what it sent (the summary says which first).
@@ -36,8 +36,8 @@ configuration.
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
+    from mpf_mavlink.bridge.replay import replay
     from mpf_mavlink.config.schema import load_config
-    from mpf_mavlink.runs.replay import replay
 
     cfg = load_config(args.config, args.overrides)
     out = args.out or default_out("replay", cfg.name)

@@ -3,7 +3,8 @@ SET_ATTITUDE_TARGET records (:class:`CommandCheck`, floats compared after float3
 the wire, tolerance :data:`TOLERANCE`) and the summary of a replay (:class:`ReplayResult`).
 
 The replay itself (the link filter, the control steps, the comparison in file order) is in
-:mod:`mpf_mavlink.runs.replay`, which re-exports these names.
+:mod:`mpf_mavlink.bridge.replay` (it drives the bridge's controller; runs/ never imports the
+bridge), which re-exports these names.
 """
 
 from __future__ import annotations
