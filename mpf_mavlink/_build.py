@@ -60,12 +60,12 @@ def build(annotate: Path | None = None, jobs: int = 2) -> dict[str, Any]:
     """Compile every module into EXT_DIR and write the manifest; returns it. The generated C
     and the objects stay in EXT_DIR/.build, so that a rebuild after an edit re-generates and
     re-compiles only the modules whose .py or .pxd changed."""
-    import Cython
     from Cython.Build import cythonize
+    from Cython.Shadow import __version__ as cython_version  # what Cython.__version__ is
     from setuptools import Distribution, Extension
     from setuptools.command.build_ext import build_ext
 
-    want = _wanted(Cython.__version__)
+    want = _wanted(cython_version)
     root = PACKAGE_DIR.parent
     work = EXT_DIR / ".build"
     exts = [
@@ -115,11 +115,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--annotate", type=Path, help="write Cython's HTML annotations here")
     args = p.parse_args(argv)
     try:
-        import Cython
+        from Cython.Shadow import __version__ as cython_version
     except ImportError:
         print("[build] compiled hot paths: skipped (no Cython): pure Python", file=sys.stderr)
         return 0
-    if args.if_stale and args.annotate is None and up_to_date(_wanted(Cython.__version__)):
+    if args.if_stale and args.annotate is None and up_to_date(_wanted(cython_version)):
         return 0
     t0 = time.perf_counter()
     try:

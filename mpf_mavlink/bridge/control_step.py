@@ -113,8 +113,9 @@ class ControlLoop:
         if self.first_send_mono is None:
             return False
         span = self.last_send_mono - self.first_send_mono  # first to last setpoint sent
-        return span >= self.m.prestream_s and (self.prestream_sends - 1) / span >= (
-            self.m.min_setpoint_rate_hz
+        return bool(
+            span >= self.m.prestream_s
+            and (self.prestream_sends - 1) / span >= self.m.min_setpoint_rate_hz
         )
 
     def hold_wings_level(self) -> None:

@@ -52,7 +52,7 @@ def eas_to_tas(alt_amsl_m: float) -> float:
     calibrated/indicated, the same at UAV speeds); the law's v_w is the speed along w1, a true
     airspeed: at 600 m AMSL they differ by 3 %."""
     h = min(max(alt_amsl_m, -500.0), 11000.0) if math.isfinite(alt_amsl_m) else 0.0
-    return (1.0 - 2.25577e-5 * h) ** -2.127940
+    return float((1.0 - 2.25577e-5 * h) ** -2.127940)
 
 
 def wind_frame_rows(vx: float, vy: float, vz: float) -> tuple[tuple[float, float, float], ...]:
@@ -129,7 +129,7 @@ _MIN_ALT_M, _MAX_ALT_M = -1000.0, 50000.0
 _ROTATION_TOL = 1e-6
 
 
-def _arr_list(a: object, shape: tuple[int, ...]) -> list | None:
+def _arr_list(a: object, shape: tuple[int, ...]) -> list[Any] | None:
     """``a`` as a (nested) list of floats if it has that shape, else None."""
     if type(a) is np.ndarray and a.dtype.char == "d":  # the decoders' arrays: no conversion
         return a.tolist() if a.shape == shape else None
@@ -146,7 +146,7 @@ def _vec3_ok(a: object, bound: float) -> bool:
     if v is None:
         return False
     x, y, z = v
-    return -bound <= x <= bound and -bound <= y <= bound and -bound <= z <= bound
+    return bool(-bound <= x <= bound and -bound <= y <= bound and -bound <= z <= bound)
 
 
 def _arr_ok(a: object, shape: tuple[int, ...], bound: float) -> bool:
@@ -207,7 +207,7 @@ def _rotation_ok(a: object) -> bool:
     ):
         return False
     det = x0 * (y1 * z2 - y2 * z1) - x1 * (y0 * z2 - y2 * z0) + x2 * (y0 * z1 - y1 * z0)
-    return det > 0.0
+    return bool(det > 0.0)
 
 
 def _plausible(name: str, s: object) -> bool:

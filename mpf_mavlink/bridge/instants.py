@@ -68,4 +68,4 @@ class ControlInstants:
             return False
         half = 0.5 * self.pos_period_s
         last = a.t_boot_s if self.t_prev_boot is None else max(a.t_boot_s, self.t_prev_boot)
-        return tp - last >= half and tp - a.t_boot_s < T - half
+        return bool(tp - last >= half and tp - a.t_boot_s < T - half)

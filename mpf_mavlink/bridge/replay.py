@@ -64,7 +64,8 @@ from mpf_mavlink.mavlink import (
     iter_tlog,
     mode_name,
 )
-from mpf_mavlink.mavlink.link import AUTOPILOTS, MAV_COMP_ID_AUTOPILOT1, BootClockGate
+from mpf_mavlink.mavlink.boot_clock import BootClockGate
+from mpf_mavlink.mavlink.link import AUTOPILOTS, MAV_COMP_ID_AUTOPILOT1
 from mpf_mavlink.mavlink.tlog import TlogStats
 from mpf_mavlink.runs.replay_result import (
     _INT_FIELDS,

@@ -79,7 +79,7 @@ class Session:
             main, sub = px4_mode_from_name(name)
             got = px4_decode_custom_mode(hb.custom_mode)
             return got[0] == main and (main != 4 or got[1] == sub)
-        return hb.custom_mode == arduplane_mode_from_name(name)
+        return bool(hb.custom_mode == arduplane_mode_from_name(name))
 
     def request_mode(self, name: str, confirm: Callable[[], bool]) -> tuple[bool, str]:
         """DO_SET_MODE with retries; confirmed by an accepted ACK and ``confirm()`` (heartbeat)."""

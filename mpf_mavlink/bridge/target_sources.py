@@ -16,7 +16,7 @@ import numpy as np
 
 from mpf_mavlink.bridge.estimator import Estimator
 from mpf_mavlink.core import so3
-from mpf_mavlink.core.target import TargetState
+from mpf_mavlink.core.target import TargetMotion, TargetState
 from mpf_mavlink.core.target_filter import Report, TargetEstimator, TargetFilterParams
 
 
@@ -25,7 +25,7 @@ class ScriptedTarget:
 
     live = False
 
-    def __init__(self, motion: Any) -> None:
+    def __init__(self, motion: TargetMotion) -> None:
         self.motion = motion
 
     def update(
@@ -150,7 +150,8 @@ class ExtrapolatedTarget:
 
 def _floats(a: Any) -> list[Any]:
     """A decoded sample's array (or sequence) as a (nested) list of floats."""
-    return a.tolist() if type(a) is np.ndarray else np.asarray(a, float).tolist()
+    out: list[Any] = a.tolist() if type(a) is np.ndarray else np.asarray(a, float).tolist()
+    return out
 
 
 def _turn_and_yaw(R: Any, rates: Any) -> tuple[float, float]:

@@ -48,7 +48,8 @@ class FloatArrays:
         a = np.frombuffer(self._pack(*f))  # one read-only array, the fields views of it
         for field_name, i, j in self.fields:
             d[field_name] = a[i:j].reshape(3, 3) if j - i == 9 else a[i:j]
-        return d[name]
+        got: NDArray[np.float64] = d[name]
+        return got
 
 
 class _ArrayField:

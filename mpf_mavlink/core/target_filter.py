@@ -134,7 +134,8 @@ class Report:
 def _floats(v: NDArray[np.float64] | Vec) -> list[float]:
     """A report's vector as a list of floats."""
     if type(v) is np.ndarray:
-        return v.tolist()
+        out: list[float] = v.tolist()
+        return out
     return [float(a) for a in v]
 
 

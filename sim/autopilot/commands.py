@@ -97,15 +97,15 @@ class Commands:
         about (x, y, z), counter-clockwise when param4 is non-zero; the forced attitude stays."""
         lat, lon = msg.x * 1e-7, msg.y * 1e-7
         if not (abs(lat) <= 90.0 and abs(lon) <= 180.0) or (msg.x == 0 and msg.y == 0):
-            return M.MAV_RESULT_DENIED
+            return int(M.MAV_RESULT_DENIED)
         alt = float(msg.z)
         if msg.frame in _RELATIVE:
             alt += self.home_lla[2]
         elif msg.frame not in _GLOBAL:
-            return M.MAV_RESULT_DENIED
+            return int(M.MAV_RESULT_DENIED)
         modes = self.modes
         if not (int(msg.param2) & 1) and modes.behaviour != GUIDED:
-            return M.MAV_RESULT_FAILED
+            return int(M.MAV_RESULT_FAILED)
         if modes.behaviour != GUIDED:
             modes.set_ardupilot(ARDUPLANE_MODES["GUIDED"])
         n, e, d = (float(v) for v in geodetic_to_ned(lat, lon, alt, *self.home_lla))
@@ -113,7 +113,7 @@ class Commands:
         r = float(msg.param3) if ok else self.tun.loiter_radius
         ccw = math.isfinite(msg.param4) and msg.param4 != 0.0
         self.setpoints.guided_loiter = ((n, e), -d, r, -1 if ccw else 1)
-        return M.MAV_RESULT_ACCEPTED
+        return int(M.MAV_RESULT_ACCEPTED)
 
     def _position(self, msg: Any) -> tuple[float, float, float] | None:
         """(lat deg, lon deg, altitude AMSL m) of a COMMAND_INT (x, y 1e7, z; a global frame)
@@ -142,26 +142,26 @@ class Commands:
         navigator) at its altitude; without either it is accepted and changes nothing."""
         pos = self._position(msg)
         if pos is None:
-            return M.MAV_RESULT_DENIED
+            return int(M.MAV_RESULT_DENIED)
         modes = self.modes
         if not (int(msg.param2) & 1) and modes.custom_mode != PX4_HOLD:
-            return M.MAV_RESULT_ACCEPTED
+            return int(M.MAV_RESULT_ACCEPTED)
         if modes.custom_mode != PX4_HOLD:
             modes.set_px4(PX4_AUTO, PX4_LOITER)
         n, e, d = (float(x) for x in geodetic_to_ned(*pos, *self.home_lla))
         modes.center, modes.alt_sp = (n, e), -d
         if math.isfinite(msg.param3) and msg.param3 > 0:
             modes.hold_radius = float(msg.param3)
-        return M.MAV_RESULT_ACCEPTED
+        return int(M.MAV_RESULT_ACCEPTED)
 
     def _takeoff(self, msg: Any) -> int:
         """MAV_CMD_NAV_TAKEOFF in the air. PX4 accepts it and enters AUTO.TAKEOFF (here: a loiter
         climbing to param7, AMSL, where it is). ArduPlane answers FAILED (4.7 SITL does so from
         the ground; its TAKEOFF is a mode, not this command)."""
         if not self.px4:
-            return M.MAV_RESULT_FAILED
+            return int(M.MAV_RESULT_FAILED)
         alt = float(msg.param7) if msg.get_type() == "COMMAND_LONG" else float(msg.z)
         self.modes.set_px4(PX4_AUTO, 2)  # AUTO.TAKEOFF
         if math.isfinite(alt):
             self.modes.alt_sp = alt - self.home_lla[2]
-        return M.MAV_RESULT_ACCEPTED
+        return int(M.MAV_RESULT_ACCEPTED)

@@ -22,6 +22,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # the plants' state; importing the plant at run time would load JSBSim
+    from sim.plant.jsbsim_plant import PlantState
 
 G = 9.80665
 
@@ -34,7 +38,7 @@ def _wrap_pi(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def body_rates(pqr) -> tuple[float, float, float]:
+def body_rates(pqr: Any) -> tuple[float, float, float]:
     """(p, q, r) of a state's ``pqr`` (an array or a sequence) as Python floats: a numpy scalar
     that reaches a rate loop's integrator stays in it, and every later step's arithmetic would
     be numpy's, many times slower than on floats (the same values)."""
@@ -393,7 +397,7 @@ class FixedWingAutopilot:
         return a, e, r
 
     def attitude_to_surfaces(
-        self, dt: float, roll_sp: float, pitch_sp: float, st
+        self, dt: float, roll_sp: float, pitch_sp: float, st: PlantState
     ) -> tuple[float, float, float]:
         """Roll/pitch setpoints (rad) -> surfaces, using a PlantState-like ``st``."""
         roll, pitch, _ = st.euler
@@ -403,7 +407,7 @@ class FixedWingAutopilot:
     def hold_step(
         self,
         dt: float,
-        st,
+        st: PlantState,
         airspeed_sp: float,
         altitude_sp: float,
         roll_sp: float = 0.0,
@@ -424,7 +428,7 @@ class FixedWingAutopilot:
     def loiter_step(
         self,
         dt: float,
-        st,
+        st: PlantState,
         center_ne: tuple[float, float],
         airspeed_sp: float,
         altitude_sp: float,
@@ -453,7 +457,7 @@ class TrimResult:
 
 
 def fly_to_trim(
-    plant,
+    plant: Any,  # JSBSimPlant or KinematicPlant (no common interface yet)
     controllers: FixedWingAutopilot,
     airspeed: float,
     altitude: float,

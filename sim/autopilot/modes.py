@@ -177,7 +177,7 @@ class Modes:
             b |= M.MAV_MODE_FLAG_GUIDED_ENABLED
         if self.behaviour == LOITER:
             b |= M.MAV_MODE_FLAG_AUTO_ENABLED
-        return b
+        return int(b)
 
     def request(
         self, p1: float, p2: float, p3: float, offboard_ready: Callable[[], bool]

@@ -119,7 +119,7 @@ def fit_first_order(t: np.ndarray, y: np.ndarray, du: float, gain: float | None 
 
 
 def _trimmed(
-    model: str, root: str | os.PathLike | None, airspeed_m_s: float, altitude_m: float
+    model: str, root: str | os.PathLike[str] | None, airspeed_m_s: float, altitude_m: float
 ) -> Any:
     """sim.plant.airframe_trim.trimmed_fdm at the identification's step, the load error named."""
     try:
@@ -134,7 +134,7 @@ def _has(fdm: Any, prop: str) -> bool:
 
 def identify(
     model: str,
-    root_dir: str | os.PathLike | None,
+    root_dir: str | os.PathLike[str] | None,
     airspeed_m_s: float,
     altitude_m: float,
     controls: dict[str, tuple[str, float]] | None = None,

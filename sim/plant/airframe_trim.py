@@ -43,7 +43,7 @@ class FdmTrim:
 
 def trimmed_fdm(
     model: str,
-    root_dir: str | os.PathLike | None,
+    root_dir: str | os.PathLike[str] | None,
     airspeed_m_s: float,
     altitude_m: float,
     dt: float | None = None,
@@ -89,7 +89,7 @@ def trimmed_fdm(
 
 def fdm_trim(
     model: str,
-    root_dir: str | os.PathLike | None,
+    root_dir: str | os.PathLike[str] | None,
     airspeed_m_s: float,
     altitude_m: float = 800.0,
 ) -> FdmTrim:
@@ -136,7 +136,7 @@ class CruiseEnvelope:
 
 def cruise_envelope(
     model: str,
-    root_dir: str | os.PathLike | None,
+    root_dir: str | os.PathLike[str] | None,
     speeds_m_s: tuple[float, ...] = (25.0, 30.0, 35.0, 40.0, 45.0, 50.0, 55.0, 60.0),
     altitude_m: float = 800.0,
 ) -> CruiseEnvelope:

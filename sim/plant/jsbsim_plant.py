@@ -135,7 +135,8 @@ class PlantState:
     @property
     def velocity_air_ned(self) -> np.ndarray:
         """Air-relative velocity in NED (m/s) = ground velocity - wind."""
-        return self.velocity_ned - self.wind_ned
+        v: np.ndarray = self.velocity_ned - self.wind_ned
+        return v
 
     @property
     def altitude_rel(self) -> float:
@@ -312,7 +313,7 @@ class JSBSimPlant:
 
     def __init__(
         self,
-        root_dir: str | os.PathLike | None = None,
+        root_dir: str | os.PathLike[str] | None = None,
         model: str = "x8",
         dt: float = 1.0 / 120.0,
         lat0_deg: float = 47.397742,
@@ -474,14 +475,14 @@ class JSBSimPlant:
 
     def get(self, name: str) -> float:
         """Any JSBSim property (cached node)."""
-        return self._node(name).get_double_value()
+        return float(self._node(name).get_double_value())
 
     def set(self, name: str, value: float) -> None:
         """Set any JSBSim property (cached node)."""
         self._set(name, value)
 
     # ------------------------------------------------------------------ environment
-    def set_wind(self, wind_ned_m_s) -> None:
+    def set_wind(self, wind_ned_m_s: Any) -> None:
         """Steady air-mass velocity (m/s, NED, the direction the air moves TOWARD)."""
         wn, we, wd = (float(v) for v in wind_ned_m_s)
         self._steady_wind = (wn, we, wd)  # the random wind (if any) is added to it every step
@@ -546,7 +547,7 @@ class JSBSimPlant:
 
     def trigger_gust(
         self,
-        direction_ned=(0.0, 1.0, 0.0),
+        direction_ned: Any = (0.0, 1.0, 0.0),
         magnitude_m_s: float = 5.0,
         rise_s: float = 1.0,
         hold_s: float = 2.0,
@@ -636,7 +637,7 @@ class JSBSimPlant:
 
     @property
     def t(self) -> float:
-        return self._n_t.get_double_value()
+        return float(self._n_t.get_double_value())
 
     def state(self) -> PlantState:
         """Snapshot of the truth state (SI units, NED/FRD, rad). (Once per lockstep frame: the

@@ -21,12 +21,13 @@ from mpf_mavlink.core.guidance.baselines import guidance_law
 from mpf_mavlink.core.guidance.law import (
     Extensions,
     Gains,
+    MpfCommand,
     MpfDiagnostics,
     VehicleState,
     mpf_law,
 )
 from mpf_mavlink.core.paths import TabulatedPath
-from mpf_mavlink.core.target import TargetMotion
+from mpf_mavlink.core.target import TargetMotion, TargetState
 
 WindFn = Callable[[float, NDArray[np.float64]], NDArray[np.float64]]
 
@@ -87,13 +88,13 @@ class ClosedLoop:
         self.lambda_w = lambda_w  # None: perfect rate tracking (w = w_cmd)
         self.wind = wind
         self.law_name = law  # guidance.law: MPF or a baseline, the same command type
-        self._tcache: tuple[float, object] | None = None
+        self._tcache: tuple[float, TargetState] | None = None
         self.last: Sample | None = None
         # The last step's result, its fields and its flat state, so that the next step need
         # not convert it back.
         self._x_cache: tuple[KinematicState, tuple[object, ...], list[float]] | None = None
 
-    def target_state(self, t: float):  # noqa: ANN201
+    def target_state(self, t: float) -> TargetState:
         c = self._tcache
         if c is not None and c[0] == t:
             return c[1]
@@ -101,9 +102,9 @@ class ClosedLoop:
         self._tcache = (t, st)
         return st
 
-    def law(  # noqa: ANN201
+    def law(
         self, t: float, p: NDArray[np.float64], R: NDArray[np.float64], s: float, diag: bool
-    ):
+    ) -> tuple[tuple[MpfCommand, MpfDiagnostics | None], NDArray[np.float64]]:
         eta = self.wind(t, p)
         veh = VehicleState(t, p, R, self.v_w, eta)
         st = self.target_state(t)

@@ -26,6 +26,7 @@ Geodetic output uses the exact WGS-84 inverse of :class:`sim.plant.jsbsim_plant.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -64,7 +65,7 @@ class KinematicMavPlant:
         lat0_deg: float = 47.397742,
         lon0_deg: float = 8.545594,
         alt0_m: float = 488.0,
-        position_ned=(0.0, 0.0, -100.0),
+        position_ned: Any = (0.0, 0.0, -100.0),
         heading: float = 0.0,
         airspeed: float = 16.0,
         throttle: float = 0.3,
@@ -72,8 +73,8 @@ class KinematicMavPlant:
         roll_tau: float = 0.15,
         pitch_gain: float = 1.0 / 0.55,
         pitch_tau: float = 0.1,
-        **_ignored,
-    ):
+        **_ignored: Any,
+    ) -> None:
         self.dt = float(dt)
         self.origin = LocalNED(lat0_deg, lon0_deg, alt0_m)
         self.V = float(airspeed)
@@ -92,7 +93,7 @@ class KinematicMavPlant:
         return self._k * self.dt
 
     # environment (steady wind only)
-    def set_wind(self, wind_ned_m_s) -> None:
+    def set_wind(self, wind_ned_m_s: Any) -> None:
         w = [float(v) for v in wind_ned_m_s]
         self._wind = (w[0], w[1], w[2])
 
@@ -100,7 +101,7 @@ class KinematicMavPlant:
         if kind != "none":
             raise NotImplementedError("the kinematic plant has steady wind only")
 
-    def trigger_gust(self, *a, **kw) -> None:
+    def trigger_gust(self, *a: Any, **kw: Any) -> None:
         raise NotImplementedError("the kinematic plant has steady wind only")
 
     def _v_air(self) -> tuple[float, float, float]:

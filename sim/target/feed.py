@@ -147,7 +147,9 @@ class TargetFeed:
             mav.seq = (mav.seq + 1) & 0xFF  # pack() does not advance it (send() would)
 
 
-def feed_from_options(motion: Any, mav: Any, to_geodetic: Any, origin: Any, o: dict) -> TargetFeed:
+def feed_from_options(
+    motion: Any, mav: Any, to_geodetic: Any, origin: Any, o: dict[str, Any]
+) -> TargetFeed:
     """A :class:`TargetFeed` from the ``sil.target_feed`` section as a plain dict."""
     o = dict(o)
     outages = [(float(w["start_s"]), float(w["duration_s"])) for w in o.pop("outages", [])]

@@ -308,8 +308,8 @@ class GcsServices:
              | M.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
              | M.MAV_PROTOCOL_CAPABILITY_MAVLINK2)  # fmt: skip
         if self.v.px4:
-            return c | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
-        return c | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+            return int(c | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)
+        return int(c | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST)
 
     def send_autopilot_version(self) -> None:
         """AUTOPILOT_VERSION: the firmware the flavour stands for (PX4 v1.16.0 official,

@@ -96,7 +96,7 @@ STREAM_COMMANDS = frozenset(
 def eas_factor(alt_amsl_m: float) -> float:
     """EAS / TAS = sqrt(rho / rho0) in the ISA troposphere (what VFR_HUD.airspeed reports)."""
     h = min(max(alt_amsl_m, -500.0), 11000.0)
-    return (1.0 - 2.25577e-5 * h) ** 2.127940
+    return float((1.0 - 2.25577e-5 * h) ** 2.127940)
 
 
 def _e7(deg: float) -> int:
