@@ -1,13 +1,16 @@
 """The package's layers, read from the source (every import, including those inside functions):
 
 - ``core`` (so3, frames, paths, target, target estimator, guidance law and checks, adapter) is
-  the pure guidance core: it may use ``errors`` and ``constants``, never the configuration
+  the pure guidance core: it may use ``errors``, ``constants`` and ``quaternion``, never the
+  configuration
   (``config.scenario`` builds the core's objects from it, one layer up), the MAVLink boundary,
   the live bridge, run output, the CLI or ``sim``;
 - the benchmarks (top-level ``bench/``, run by scripts/bench) are tooling, not product: nothing
   that ships (``mpf_mavlink``, ``sim``: pyproject's packages) imports them, and they are no
   package the wheel holds;
 - ``mavlink`` is the only package that imports pymavlink, and it knows nothing of guidance;
+- ``quaternion`` (the one quaternion <-> matrix conversion of each kind) and ``constants`` are
+  leaves that import nothing of ours, so that the core and the MAVLink boundary share them;
 - ``runs`` (run directories, plots, verdicts, the replay's result) sits below the live bridge:
   the bridge writes runs, runs never imports the bridge (the replay, which drives the bridge's
   controller, is ``bridge.replay``);
@@ -115,7 +118,7 @@ def test_core_is_pure_of_io_layers():
     for mod, deps in GRAPH.items():
         if _in(mod, "core"):
             # constants: the one home of physical constants, a leaf with no imports of its own
-            bad = {d for d in deps if not (_in(d, "core", "errors", "constants"))}
+            bad = {d for d in deps if not (_in(d, "core", "errors", "constants", "quaternion"))}
             assert not bad, f"{mod} imports {sorted(bad)}"
 
 
@@ -124,8 +127,13 @@ def test_only_the_mavlink_package_touches_pymavlink_and_it_knows_no_guidance():
         if "pymavlink" in deps:
             assert _in(mod, "mavlink"), f"{mod} imports pymavlink"
         if _in(mod, "mavlink"):
-            bad = {d for d in deps - {"pymavlink"} if not _in(d, "mavlink", "errors")}
+            bad = {d for d in deps - {"pymavlink"} if not _in(d, "mavlink", "errors", "quaternion")}
             assert not bad, f"{mod} imports {sorted(bad)}"
+
+
+def test_the_leaves_import_nothing_of_ours():
+    for leaf in ("mpf_mavlink.quaternion", "mpf_mavlink.constants"):
+        assert leaf in GRAPH and not GRAPH[leaf], (leaf, GRAPH.get(leaf))
 
 
 def test_runs_never_imports_the_bridge():

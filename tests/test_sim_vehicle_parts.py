@@ -509,13 +509,15 @@ def test_target_positions_computed_ahead_are_the_bytes_computed_on_time(monkeypa
     assert got == want
 
 
-def test_target_quaternion_of_rows_is_the_frames_quaternion_bit_for_bit():
-    """The target stream's quaternion of a matrix given by rows (floats) is
-    :func:`matrix_to_quat_wxyz` of that matrix to the bit, in all four of Shepperd's branches
-    (rotations by ~pi about each axis reach the three non-trace ones)."""
+def test_the_target_quaternion_of_rows_is_the_rotation_in_all_four_branches():
+    """The one matrix -> quaternion conversion (:func:`mpf_mavlink.quaternion.quat_of_rows`,
+    which the target stream sends and :func:`matrix_to_quat_wxyz` returns) gives, in all four
+    of Shepperd's branches (rotations by ~pi about each axis reach the three non-trace ones), a
+    unit quaternion with w >= 0 whose matrix is the rotation: a few roundings per element, so
+    1e-14 (50 eps) bounds the error of the round trip."""
     from mpf_mavlink.core import so3
-    from mpf_mavlink.core.frames import matrix_to_quat_wxyz
-    from sim.vehicle.target_stream import quat_of_rows
+    from mpf_mavlink.core.frames import matrix_to_quat_wxyz, quat_wxyz_to_matrix
+    from mpf_mavlink.quaternion import quat_of_rows
 
     rng = np.random.default_rng(5)
     branches = set()
@@ -523,8 +525,10 @@ def test_target_quaternion_of_rows_is_the_frames_quaternion_bit_for_bit():
         axis = rng.normal(size=3) if i % 2 else np.eye(3)[i // 2 % 3] + 0.05 * rng.normal(size=3)
         angle = rng.uniform(-math.pi, math.pi) if i % 4 < 2 else math.pi - rng.uniform(0, 0.3)
         R = so3.exp(angle * axis / np.linalg.norm(axis))
-        got, want = quat_of_rows(R.ravel().tolist()), matrix_to_quat_wxyz(R)
-        assert [float(x) for x in got] == [float(x) for x in want]
+        q = quat_of_rows(R.ravel().tolist())
+        assert q == matrix_to_quat_wxyz(R)
+        assert q[0] >= 0.0 and abs(math.fsum(c * c for c in q) - 1.0) < 1e-14
+        assert np.max(np.abs(quat_wxyz_to_matrix(q) - R)) < 1e-14
         tr = R[0, 0] + R[1, 1] + R[2, 2]
         branches.add(-1 if tr > 0 else int(np.argmax(np.diag(R))))
     assert branches == {-1, 0, 1, 2}

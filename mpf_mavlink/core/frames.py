@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mpf_mavlink.core.so3 import Mat3, Vec3, rot_x, rot_y, rot_z
+from mpf_mavlink.quaternion import quat_of_rows, rows_of_unit_quat
 
 
 def quat_wxyz_to_matrix(q: ArrayLike) -> Mat3:
@@ -21,56 +22,14 @@ def quat_wxyz_to_matrix(q: ArrayLike) -> Mat3:
     n = math.sqrt(w * w + x * x + y * y + z * z)
     if not math.isfinite(n) or n < 1e-9:
         raise ValueError(f"quaternion {(w, x, y, z)} has no direction")
-    w, x, y, z = w / n, x / n, y / n, z / n
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    r = rows_of_unit_quat(w / n, x / n, y / n, z / n)
+    return np.array([r[0:3], r[3:6], r[6:9]])
 
 
 def matrix_to_quat_wxyz(R: ArrayLike) -> tuple[float, float, float, float]:
-    """Rotation matrix R_B^N -> unit quaternion (w, x, y, z) with w >= 0 (Shepperd's method)."""
-    R = np.asarray(R, dtype=float)
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    if tr > 0:
-        S = math.sqrt(tr + 1.0) * 2
-        w, x, y, z = (
-            0.25 * S,
-            (R[2, 1] - R[1, 2]) / S,
-            (R[0, 2] - R[2, 0]) / S,
-            (R[1, 0] - R[0, 1]) / S,
-        )
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        S = math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2
-        w, x, y, z = (
-            (R[2, 1] - R[1, 2]) / S,
-            0.25 * S,
-            (R[0, 1] + R[1, 0]) / S,
-            (R[0, 2] + R[2, 0]) / S,
-        )
-    elif R[1, 1] > R[2, 2]:
-        S = math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2
-        w, x, y, z = (
-            (R[0, 2] - R[2, 0]) / S,
-            (R[0, 1] + R[1, 0]) / S,
-            0.25 * S,
-            (R[1, 2] + R[2, 1]) / S,
-        )
-    else:
-        S = math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
-        w, x, y, z = (
-            (R[1, 0] - R[0, 1]) / S,
-            (R[0, 2] + R[2, 0]) / S,
-            (R[1, 2] + R[2, 1]) / S,
-            0.25 * S,
-        )
-    if w < 0:
-        w, x, y, z = -w, -x, -y, -z
-    n = math.sqrt(w * w + x * x + y * y + z * z)
-    return (w / n, x / n, y / n, z / n)
+    """Rotation matrix R_B^N -> unit quaternion (w, x, y, z) with w >= 0 (Shepperd's method:
+    :func:`mpf_mavlink.quaternion.quat_of_rows`)."""
+    return quat_of_rows(np.asarray(R, dtype=float).ravel().tolist())
 
 
 def euler_to_matrix(roll: float, pitch: float, yaw: float) -> Mat3:

@@ -5,9 +5,9 @@ malformed MAVLink can neither crash the loop nor put a NaN into the state. Encod
 (``ValueError``) to put a non-finite number on the wire.
 
 The attitude decoders (one per control step) compute the matrices of
-:func:`mpf_mavlink.core.frames.euler_to_matrix` /
-:func:`~mpf_mavlink.core.frames.quat_wxyz_to_matrix` in
-scalar arithmetic (same conventions; tests hold them to those functions).
+:func:`mpf_mavlink.core.frames.euler_to_matrix` in scalar arithmetic (same conventions; tests
+hold them to it) and, of a quaternion, :func:`mpf_mavlink.quaternion.rows_of_unit_quat` (the
+conversion :func:`~mpf_mavlink.core.frames.quat_wxyz_to_matrix` uses).
 """
 
 from __future__ import annotations
@@ -44,6 +44,7 @@ from mpf_mavlink.mavlink.wire_limits import (
     _finite,
     _geodetic_ok,
 )
+from mpf_mavlink.quaternion import rows_of_unit_quat
 
 # The wire limits the decoders apply (wire_limits) are re-exported: callers import decoders and
 # limits from this module, encoders and command ids from mpf_mavlink.mavlink.encode/wire_limits.
@@ -304,13 +305,7 @@ def _quat_to_matrix(q: Sequence[float]) -> np.ndarray | None:
     n = math.sqrt(n2) if n2 < math.inf else math.inf
     if not abs(n - 1.0) <= QUAT_NORM_TOL:
         return None
-    # frames.quat_wxyz_to_matrix, scalar (same operations, same rounding)
-    w, x, y, z = w / n, x / n, y / n, z / n
-    return _ro33(
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    )  # fmt: skip
+    return _ro33(*rows_of_unit_quat(w / n, x / n, y / n, z / n))
 
 
 def decode_attitude_quaternion(msg: Any) -> AttitudeSample | None:

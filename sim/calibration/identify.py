@@ -36,21 +36,10 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from mpf_mavlink.constants import GRAVITY_M_S2 as G  # noqa: E402
+from mpf_mavlink.quaternion import quat_of_euler  # noqa: E402
 from sim.rigs.gcs import recv_from  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def _quat(roll: float, pitch: float, yaw: float) -> list[float]:
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return [
-        cr * cp * cy + sr * sp * sy,
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-    ]
 
 
 # (duration s, roll deg, pitch offset deg) segments flown in order
@@ -259,7 +248,7 @@ def identify_arduplane(out: Path, bundle: Path, instance: int, alt: float) -> di
                 g.sys,
                 g.comp,
                 7 | 64,
-                _quat(roll, pitch, 0.0),
+                list(quat_of_euler(roll, pitch, 0.0)),
                 0,
                 0,
                 0,
@@ -310,7 +299,7 @@ def identify_px4(out: Path, bundle: Path, alt: float) -> dict[str, Any]:
                 g.sys,
                 1,
                 7,
-                _quat(roll, pitch, 0.0),
+                list(quat_of_euler(roll, pitch, 0.0)),
                 0,
                 0,
                 0,

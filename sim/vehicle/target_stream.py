@@ -12,6 +12,7 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from mpf_mavlink.bridge.controller import parse_marker
+from mpf_mavlink.quaternion import quat_of_rows
 from sim.plant.kinematic_plant import ned_to_geodetic_fast
 from sim.vehicle.clock import StepClock
 from sim.vehicle.link import Link
@@ -22,30 +23,6 @@ _AHEAD = 50  # position fixes computed at once (5 s at 10 Hz)
 
 def _floats(v: Any) -> list[float]:
     return v.tolist() if type(v) is np.ndarray else [float(x) for x in v]
-
-
-def quat_of_rows(R: Any) -> tuple[float, float, float, float]:
-    """:func:`mpf_mavlink.core.frames.matrix_to_quat_wxyz` of the rotation matrix whose rows are
-    ``R[0:9]`` (floats), with the same operations in the same order (the same bits), without
-    numpy's per-element indexing (a target fix's second largest cost)."""
-    r00, r01, r02, r10, r11, r12, r20, r21, r22 = R[0:9]
-    tr = r00 + r11 + r22
-    if tr > 0:
-        S = math.sqrt(tr + 1.0) * 2
-        w, x, y, z = 0.25 * S, (r21 - r12) / S, (r02 - r20) / S, (r10 - r01) / S
-    elif r00 > r11 and r00 > r22:
-        S = math.sqrt(1.0 + r00 - r11 - r22) * 2
-        w, x, y, z = (r21 - r12) / S, 0.25 * S, (r01 + r10) / S, (r02 + r20) / S
-    elif r11 > r22:
-        S = math.sqrt(1.0 + r11 - r00 - r22) * 2
-        w, x, y, z = (r02 - r20) / S, (r01 + r10) / S, 0.25 * S, (r12 + r21) / S
-    else:
-        S = math.sqrt(1.0 + r22 - r00 - r11) * 2
-        w, x, y, z = (r10 - r01) / S, (r02 + r20) / S, (r12 + r21) / S, 0.25 * S
-    if w < 0:
-        w, x, y, z = -w, -x, -y, -z
-    n = math.sqrt(w * w + x * x + y * y + z * z)
-    return (w / n, x / n, y / n, z / n)
 
 
 class TargetStream:
