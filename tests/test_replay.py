@@ -675,3 +675,12 @@ def test_replay_points_to_the_runs_own_config_when_the_markers_disagree(tmp_path
     assert hint is not None and str(own) in hint
     assert _config_hint(tlog, own, disagree) is None  # already replayed with it
     assert _config_hint(tlog, other, []) is None  # nothing disagreed
+
+
+def test_a_tlog_without_the_configured_vehicle_says_nothing_was_replayed() -> None:
+    # the real tlog's autopilot is system 1: told to expect system 7, the replay never sees its
+    # HEARTBEAT, steps nothing and says which key to check
+    cfg = load_config(REPLAY_CFG, ["mavlink.vehicle_sysid=7"])
+    res = replay(SHARED_TLOG, cfg)
+    assert res.steps == 0
+    assert any("no autopilot HEARTBEAT from system 7" in n for n in res.notes), res.notes

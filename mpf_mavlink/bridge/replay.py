@@ -503,6 +503,17 @@ def _write_replay(
     write_run(out, cols, metrics, rp.ctl.path.positions(), plots=plots and len(cols["t"]) >= 2)
 
 
+def _note_why_nothing_was_replayed(rp: _Replayer, vehicle_sysid: int) -> None:
+    """A note in the summary when the replay never reached a control step's state."""
+    if rp.phase in ("wait_heartbeat",):
+        rp.notes.append(
+            f"no autopilot HEARTBEAT from system {vehicle_sysid}: nothing was replayed "
+            "(mavlink.vehicle_sysid?)"
+        )
+    elif rp.ctl.t0 is None:
+        rp.notes.append(f"never a complete state: {rp.ctl.why_not}")
+
+
 def replay(
     tlog: str | os.PathLike[str],
     cfg: Config,
@@ -539,13 +550,7 @@ def replay(
     cols = rp.table.arrays()
     metrics = _replay_metrics(cols, cfg)
     gaps, thr = _gaps(rp.att_times, stats.t_first_s, m.telemetry_timeout_s)
-    if rp.phase in ("wait_heartbeat",):
-        rp.notes.append(
-            f"no autopilot HEARTBEAT from system {m.vehicle_sysid}: nothing was replayed "
-            "(mavlink.vehicle_sysid?)"
-        )
-    elif rp.ctl.t0 is None:
-        rp.notes.append(f"never a complete state: {rp.ctl.why_not}")
+    _note_why_nothing_was_replayed(rp, m.vehicle_sysid)
     res = ReplayResult(
         path=path,
         config=cfg.source,
