@@ -76,6 +76,10 @@ class BridgeResult:
     fallback: str = ""  # what the autopilot does if our setpoints stop
     fallback_detail: dict[str, Any] = field(default_factory=dict)  # PX4: params, hold, centre
     records_error: str | None = None  # why the run directory could not be written
+    # what the pre-engage checks were given by the autopilot (wind, airspeed, live target)
+    measured: dict[str, Any] = field(default_factory=dict)
+    # --force engaged despite these failed checks (their names); [] when none failed
+    forced: list[str] = field(default_factory=list)
     verdict: str = ""  # the flight's one-line verdict (mpf_mavlink/runs/verdict.py); "" = not flown
 
     def summary(self) -> str:

@@ -275,11 +275,21 @@ class Bridge:
             )
         self.phase.set(State.CHECKS)
         failed = self.session.checks(res, scripted_target=not self.ctl.live)
+        names = ", ".join(r.name for r in failed)
         if failed and self.opts.force:
-            self.log(f"[FORCED] engaging despite the failed check: {', '.join(failed)}")
+            res.forced = [r.name for r in failed]
+            self.log(
+                f"[FORCED] --force: ENGAGING DESPITE THE FAILED CHECK: {names} "
+                "(recorded in metrics.json: forced)"
+            )
             failed = []
         if failed:
-            raise _Refused(f"check failed: {', '.join(failed)}", log=False)
+            # the wording of `check` and `sim`'s gate: each failed check with its figures
+            raise _Refused(
+                "check failed: "
+                + "; ".join(f"{r.name} ({r.summary})" for r in failed)
+                + " (--force flies it anyway)"
+            )
 
     def _fly_until_stopped(self, res: BridgeResult) -> None:
         """Fly; after a loss hand back and, when configured, re-engage. Ends by raising."""

@@ -79,6 +79,7 @@ class Recorder:
             state_reached=res.state_reached, exit_reason=res.exit_reason, exit_code=res.exit_code,
             flavour=res.flavour, tracked_s=res.tracked_s, handback_requested=res.handback_requested,
             handback_confirmed=res.handback_confirmed, checks=res.checks, counters=counters,
+            checks_measured=res.measured, forced=res.forced,
             url=self.url, recording="lean" if self.every > 1 else "full",
         )  # fmt: skip
         res.metrics = metrics
