@@ -38,6 +38,7 @@ saw), ``setpoints.csv``, ``metrics.json`` (figures, counters, exit) and the plot
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import math
 import signal
@@ -70,6 +71,7 @@ from mpf_mavlink.bridge.controller import (
     ScriptedTarget,
     Step,
 )
+from mpf_mavlink.bridge.envelope import demand_of, envelope_monitor
 from mpf_mavlink.bridge.fallback import FallbackSetup
 from mpf_mavlink.bridge.link_io import VehicleLink
 from mpf_mavlink.bridge.operator import OperatorDisplay
@@ -139,7 +141,10 @@ class Bridge:
         self.vl = VehicleLink(m, live_target=self.ctl.live)
         self.phase = Phase(self._on_state)
         self.rec = Recorder(cfg, m, opts.url, Path(opts.out_dir))
-        self.loop = ControlLoop(self.ctl, self.vl, self.phase, self.rec.record, self._show)
+        self.envelope = envelope_monitor(cfg, self.ctl.ad_params)
+        self.loop = ControlLoop(
+            self.ctl, self.vl, self.phase, self.rec.record, self._show, self._envelope
+        )
         self.session = Session(cfg, self.loop, self.phase, self.display, log)
         self.streams = StreamNegotiator(self.vl, log)
         self.fallback = FallbackSetup(self.vl, self.ctl, cfg.path, log)
@@ -159,6 +164,24 @@ class Bridge:
         if sent != self._sent_at_tick:  # a setpoint went out in this wake-up
             self._sent_at_tick = sent
             _collect_young()
+
+    def _envelope(self, st: Step) -> tuple[bool, str | None]:
+        """The envelope monitor on one tracking step: its STATUSTEXTs go to the ground station
+        (severity WARNING, once per episode) and the log; (clipped, hand-back reason)."""
+        ctl, mon = self.ctl, self.envelope
+        p, a = ctl.ad_params, ctl.ad_state
+        trim = a.trim_hat if (p.adaptive and a.trim_hat is not None) else p.trim_pitch_rad
+        vs = st.estimate.vehicle
+        wind = vs.floats[12:15] if vs.floats is not None else vs.wind
+        d = demand_of(
+            st.t, st.cmd.omega_w1_I, st.w1, vs.airspeed, wind, st.setpoint,
+            a.turn_gain if p.adaptive else 1.0, trim, p.tau_pitch_s, False, mon.lim,
+        )  # fmt: skip
+        acts = mon.update(d)
+        for text in acts.texts:
+            self.log(f"[ENVELOPE] t = {st.t:.1f} s: {text}")
+            self.vl.send_text(text, dialect.MAV_SEVERITY_WARNING)
+        return d.clipped, acts.hand_back
 
     def _on_state(self, s: State) -> None:
         self.log(f"[{s.name}]")
@@ -273,6 +296,13 @@ class Bridge:
                 f"no usable telemetry within {m.heartbeat_timeout_s:g} s: "
                 f"{self.ctl.why_not or 'no attitude'}"
             )
+        # the checks judge the autopilot's wind: wait for its first WIND / WIND_COV (slower
+        # than the rest, 1-4 Hz), else they would run on our own estimate of it or on none
+        if not vl.spin(m.wind_stale_s, lambda: est.wind is not None):
+            self.log(
+                f"no WIND / WIND_COV within {m.wind_stale_s:g} s: the checks use the wind "
+                "estimated from ground velocity and airspeed"
+            )
         self.phase.set(State.CHECKS)
         failed = self.session.checks(res, scripted_target=not self.ctl.live)
         names = ", ".join(r.name for r in failed)
@@ -283,6 +313,14 @@ class Bridge:
                 "(recorded in metrics.json: forced)"
             )
             failed = []
+        # the wind the monitor holds the flight to: what the checks accepted plus its margin
+        mi = res.measured
+        if mi:
+            w = mi["wind_ned_m_s"]
+            self.envelope.lim = dataclasses.replace(
+                self.envelope.lim,
+                wind_max_m_s=math.hypot(w[0], w[1]) + float(mi["wind_margin_m_s"]),
+            )
         if failed:
             # the wording of `check` and `sim`'s gate: each failed check with its figures
             raise _Refused(
@@ -390,7 +428,10 @@ class Bridge:
             self.display.stopped(vl.link, res.exit_reason, res.exit_code == 0)
         res.counters = counters
         vl.close()
-        self.rec.finish(res, self.ctl, counters)
+        env = None
+        if self.envelope.steps:
+            env = self.envelope.summary(self.cfg.metrics.steady_after_s, loop.t_last)
+        self.rec.finish(res, self.ctl, counters, env)
         if res.records_error:
             self.log(f"could not write the run directory: {res.records_error}")
         return res
