@@ -76,8 +76,26 @@ def test_every_kind_has_its_own_episode_and_text():
     assert kinds == ["pitch", "sink", "airspeed", "thrust", "wind"]
     assert all(len(t) <= 50 for t in a.texts)  # MAVLink's STATUSTEXT carries 50 characters
     assert "pitch -28.6deg > -20.1deg" in a.texts[0]  # -0.5 rad against -0.35 rad
-    a = mon.update(calm(0.02, climb_m_s=4.5))
-    assert a.texts == ["MPF envelope: climb 4.5m/s > 4.0m/s"]
+    assert "sink 3.00m/s > 2.00m/s" in a.texts[1]
+
+
+def test_climb_and_sink_compare_a_sustained_demand():
+    # the climb capability is a steady one: the demand is low-passed over 5 s. From 0 at
+    # t = 10 s a held 4.5 m/s demand reaches the 4 m/s limit when 4.5 (1 - exp(-T / 5)) = 4,
+    # T = 5 ln 9 = 10.99 s: the first step beyond is the 550th (550 x 0.02 s = 11.00 s > 10.99)
+    mon = EnvelopeMonitor(LIM, policy="warn")
+    fly(mon, 0.0, 10.0)
+    texts, t_first = [], None
+    for i in range(800):
+        a = mon.update(calm(10.0 + i * DT, climb_m_s=4.5))
+        if a.texts and t_first is None:
+            texts, t_first = a.texts, 10.0 + i * DT
+    assert t_first == pytest.approx(10.0 + 549 * DT)
+    assert texts == ["MPF envelope: climb 4.00m/s > 4.00m/s"]  # just beyond, at 2 decimals
+    # a 2 s burst of -6 m/s from level: -6 (1 - exp(-2 / 5)) = -1.98 m/s, inside the 2 m/s sink
+    mon = EnvelopeMonitor(LIM, policy="warn")
+    fly(mon, 0.0, 10.0)
+    assert fly(mon, 10.0, 12.0, climb_m_s=-6.0)[0] == [] and mon.episodes() == []
 
 
 def test_the_hold_policy_hands_back_after_exceeded_for_s_once_armed():
@@ -102,6 +120,18 @@ def test_the_hold_policy_hands_back_after_exceeded_for_s_once_armed():
     assert mon.update(calm(75.02, bank_rad=0.7)).hand_back is None  # said once
 
 
+def test_the_hold_policy_does_not_act_on_the_wind_or_thrust_alone():
+    # a wind beyond the checked one, thrust at its ceiling: said (an episode and a text
+    # each), the flight goes on
+    mon = EnvelopeMonitor(LIM, policy="hold", exceeded_for_s=5.0, armed_after_s=0.0)
+    texts, hand = fly(mon, 0.0, 30.0, wind_m_s=12.0, thrust=1.0)
+    assert hand is None
+    assert texts == ["MPF envelope: thrust 1.00 > 1.00", "MPF envelope: wind 12.00m/s > 9.00m/s"]
+    # the airspeed leaving its window is acted on: 5 s after it left
+    _, hand = fly(mon, 30.0, 40.0, airspeed_m_s=14.0)
+    assert hand is not None and "airspeed beyond its limit for 5.0 s" in hand
+
+
 def test_the_warn_policy_never_hands_back():
     mon = EnvelopeMonitor(LIM, policy="warn", exceeded_for_s=5.0, armed_after_s=0.0)
     _, hand = fly(mon, 0.0, 30.0, thrust=1.0)
@@ -120,11 +150,16 @@ def test_the_summary_counts_the_steady_window_and_the_clipped_steps():
     assert k["steady_fraction"] == pytest.approx(9.98 / 40.0)
     # 1000 of the 5000 steps demanded a bank beyond the limit: the autopilot flew less
     assert s["clipped_fraction"] == pytest.approx(1000 / 5000)
-    assert (
-        verdict_words(s)
-        == "bank at its limit 25 % of the steady window (1 episode, longest 20.0 s)"
+    assert verdict_words(s) == (
+        "bank at its limit 25 % of the steady window (1 episode, longest 20.0 s)"
     )
     assert s["episodes"][0]["kind"] == "bank"
+    # an episode of the capture alone (before the steady window) is not named in the verdict
+    mon = EnvelopeMonitor(LIM, policy="warn")
+    fly(mon, 0.0, 5.0, thrust=1.0)
+    fly(mon, 5.0, 100.0)
+    assert verdict_words(mon.summary(60.0, 100.0)) == ""
+    assert mon.summary(60.0, 100.0)["kinds"]["thrust"]["episodes"] == 1
 
 
 def test_the_demanded_bank_uses_the_learned_turn_gain():

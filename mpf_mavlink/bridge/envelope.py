@@ -14,12 +14,15 @@ Kinds (each compared every step; an episode is a stretch where its condition hol
 - ``pitch``: the pitch set-point the law's flight-path demand needs (gamma + tau_pitch
   gamma_dot + trim) outside ``adapter.min_pitch_rad`` .. ``max_pitch_rad``.
 - ``climb`` / ``sink``: the climb rate that flight-path demand means, v sin(gamma + tau_pitch
-  gamma_dot), beyond ``vehicle.max_climb_rate_m_s`` / ``max_sink_rate_m_s`` (when known).
+  gamma_dot), low-passed over :data:`CLIMB_TAU_S` (a steady capability against a sustained
+  demand), beyond ``vehicle.max_climb_rate_m_s`` / ``max_sink_rate_m_s`` (when known).
 - ``airspeed``: the airspeed outside the verdict's window, [v_min (1 - tol), v_max (1 + tol)]
   (``metrics.airspeed_tolerance``).
 - ``thrust``: the thrust sent at ``adapter.thrust_max`` (within 0.005, as the verdict counts it).
 - ``wind``: the measured horizontal wind above what the pre-engage checks accepted plus their
-  margin (preflight.MeasuredInputs.wind_margin_m_s).
+  margin (preflight.MeasuredInputs.wind_margin_m_s) and the config's gust allowance (the
+  checks' turbulence allowance: a reported wind that follows the gusts is no new wind). A
+  warning: the hold policy does not act on it, nor on ``thrust`` (:data:`POLICY_KINDS`).
 
 An episode starts the first step its condition holds and ends once it has been clear for
 ``envelope.clear_s`` (a condition that flickers at 50 Hz is one episode, one STATUSTEXT); its
@@ -40,6 +43,17 @@ from mpf_mavlink.core.adapter import bank_and_load_factor, heading_and_path_angl
 
 #: the kinds in the order they are named
 KINDS = ("bank", "pitch", "climb", "sink", "airspeed", "thrust", "wind")
+#: the kinds the hold policy acts on: what the aircraft does not fly (bank, pitch, climb, sink)
+#: and the airspeed leaving its window. A wind beyond the checked one is a warning (the checks'
+#: premise is gone; what it does to the flight shows as the bank it needs), and so is thrust at
+#: its ceiling, which is how the energy control climbs (the capture's climb holds it there for
+#: seconds); its consequence, an airspeed that cannot be held, is the airspeed kind.
+POLICY_KINDS = ("bank", "pitch", "climb", "sink", "airspeed")
+#: time constant (s) of the low-pass on the demanded climb rate that ``climb`` / ``sink`` compare:
+#: the capability is a STEADY climb (full thrust) or sink (idle), and a short excess is paid
+#: from the airspeed reserve, (v^2 - v_min^2) / 2g of height (the X8 at 16 m/s down to 13.6:
+#: 3.6 m, a 1 m/s excess for 3.6 s; the climb check's energy budget, docs/checks.md)
+CLIMB_TAU_S = 5.0
 #: thrust within this of its ceiling is at the ceiling (runs/verdict.THRUST_CEILING_EPS)
 THRUST_EPS = 0.005
 #: a command within this of its limit (rad, rad/s) was clipped there: the adapter clips to the
@@ -118,7 +132,7 @@ def _fmt(kind: str, value: float) -> str:
         return f"{math.degrees(value):.1f}deg"
     if kind == "thrust":
         return f"{value:.2f}"
-    return f"{value:.1f}m/s"
+    return f"{value:.2f}m/s"
 
 
 class EnvelopeMonitor:
@@ -143,6 +157,8 @@ class EnvelopeMonitor:
         self.steps = 0
         self.clipped_steps = 0
         self.handed_back: str | None = None
+        self._climb_f: float | None = None  # m/s, the low-passed climb demand
+        self._t_prev: float | None = None
 
     # -- the comparisons -------------------------------------------------------------------------
     def beyond(self, d: Demand) -> dict[str, tuple[float, float]]:
@@ -154,10 +170,11 @@ class EnvelopeMonitor:
             out["pitch"] = (d.pitch_rad, lim.pitch_max_rad)
         elif d.pitch_rad < lim.pitch_min_rad - CLIP_EPS:
             out["pitch"] = (d.pitch_rad, lim.pitch_min_rad)
-        if lim.climb_max_m_s is not None and d.climb_m_s > lim.climb_max_m_s:
-            out["climb"] = (d.climb_m_s, lim.climb_max_m_s)
-        if lim.sink_max_m_s is not None and -d.climb_m_s > lim.sink_max_m_s:
-            out["sink"] = (-d.climb_m_s, lim.sink_max_m_s)
+        climb = d.climb_m_s if self._climb_f is None else self._climb_f
+        if lim.climb_max_m_s is not None and climb > lim.climb_max_m_s:
+            out["climb"] = (climb, lim.climb_max_m_s)
+        if lim.sink_max_m_s is not None and -climb > lim.sink_max_m_s:
+            out["sink"] = (-climb, lim.sink_max_m_s)
         if d.airspeed_m_s > lim.airspeed_max_m_s:
             out["airspeed"] = (d.airspeed_m_s, lim.airspeed_max_m_s)
         elif d.airspeed_m_s < lim.airspeed_min_m_s:
@@ -174,6 +191,12 @@ class EnvelopeMonitor:
         if self.t_engage is None:
             self.t_engage = d.t
         self.steps += 1
+        if self._climb_f is None or self._t_prev is None or not math.isfinite(self._climb_f):
+            self._climb_f = d.climb_m_s
+        else:
+            k = 1.0 - math.exp(-max(0.0, d.t - self._t_prev) / CLIMB_TAU_S)
+            self._climb_f += k * (d.climb_m_s - self._climb_f)
+        self._t_prev = d.t
         now = self.beyond(d)
         # a clip the monitor's kinds do not show (the law's own rate limit, body rates) counts
         # in the saturated fraction too: the command that went out is not the law's
@@ -197,7 +220,7 @@ class EnvelopeMonitor:
                     cur.peak = value
         armed = d.t - self.t_engage >= self.armed_after_s
         if self.policy == "hold" and armed and self.handed_back is None:
-            for kind in KINDS:
+            for kind in POLICY_KINDS:
                 ep = self.open.get(kind)
                 if ep is not None and kind in now and ep.duration >= self.exceeded_for_s:
                     self.handed_back = (
@@ -258,12 +281,21 @@ class EnvelopeMonitor:
         }
 
 
+#: a kind named in the verdict covers at least this fraction of the steady window (0.5 %: a
+#: second of a 200 s window); episodes of the capture alone are in metrics.json only
+VERDICT_MIN_FRACTION = 0.005
+
+
 def verdict_words(summary: dict[str, Any]) -> str:
     """The envelope as the verdict names it: ``bank at its limit 30 % of the steady window (4
-    episodes, longest 9.2 s)``, one clause per kind, "" without episodes."""
+    episodes, longest 9.2 s)``, one clause per kind that covers at least
+    :data:`VERDICT_MIN_FRACTION` of the steady window (each kind without one), then the
+    policy's hand-back; "" when there is nothing to name."""
     parts = []
     for kind, k in (summary.get("kinds") or {}).items():
         frac = k.get("steady_fraction")
+        if frac is not None and frac < VERDICT_MIN_FRACTION:
+            continue
         where = (
             f"{100 * frac:.0f} % of the steady window"
             if frac is not None
@@ -274,6 +306,8 @@ def verdict_words(summary: dict[str, Any]) -> str:
             f"{kind} at its limit {where} ({n} episode{'s' if n != 1 else ''}, longest "
             f"{k['longest_s']:.1f} s)"
         )
+    if summary.get("handed_back"):
+        parts.append("the hold policy handed back")
     return "; ".join(parts)
 
 
@@ -320,6 +354,19 @@ def demand_of(
     )
     wind = math.hypot(float(wind_ned[0]), float(wind_ned[1]))
     return Demand(t, bank, pitch, climb, v, float(setpoint.thrust), wind, clipped)
+
+
+def wind_limit_m_s(cfg: Any, measured: dict[str, Any]) -> float | None:
+    """The horizontal wind (m/s) the monitor holds a flight to: the one the pre-engage checks
+    measured, plus its margin and the config's gust allowance (preflight.scenario_wind); None
+    without a measurement."""
+    from mpf_mavlink.bridge.preflight import scenario_wind
+
+    if not measured:
+        return None
+    w = measured["wind_ned_m_s"]
+    _, gust = scenario_wind(cfg)
+    return math.hypot(w[0], w[1]) + float(measured["wind_margin_m_s"]) + gust
 
 
 def envelope_monitor(cfg: Any, ad: Any) -> EnvelopeMonitor:

@@ -71,7 +71,7 @@ from mpf_mavlink.bridge.controller import (
     ScriptedTarget,
     Step,
 )
-from mpf_mavlink.bridge.envelope import demand_of, envelope_monitor
+from mpf_mavlink.bridge.envelope import demand_of, envelope_monitor, wind_limit_m_s
 from mpf_mavlink.bridge.fallback import FallbackSetup
 from mpf_mavlink.bridge.link_io import VehicleLink
 from mpf_mavlink.bridge.operator import OperatorDisplay
@@ -314,13 +314,9 @@ class Bridge:
             )
             failed = []
         # the wind the monitor holds the flight to: what the checks accepted plus its margin
-        mi = res.measured
-        if mi:
-            w = mi["wind_ned_m_s"]
-            self.envelope.lim = dataclasses.replace(
-                self.envelope.lim,
-                wind_max_m_s=math.hypot(w[0], w[1]) + float(mi["wind_margin_m_s"]),
-            )
+        self.envelope.lim = dataclasses.replace(
+            self.envelope.lim, wind_max_m_s=wind_limit_m_s(self.cfg, res.measured)
+        )
         if failed:
             # the wording of `check` and `sim`'s gate: each failed check with its figures
             raise _Refused(
