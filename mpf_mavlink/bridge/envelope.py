@@ -356,6 +356,20 @@ def demand_of(
     return Demand(t, bank, pitch, climb, v, float(setpoint.thrust), wind, clipped)
 
 
+def demand_of_step(st: Any, ctl: Any, lim: EnvelopeLimits) -> Demand:
+    """:func:`demand_of` for a bridge :class:`~mpf_mavlink.bridge.controller.Step` and its
+    :class:`~mpf_mavlink.bridge.controller.Controller` (the adapter's learned turn gain and
+    pitch trim after the step): what the live bridge and tlog replay both compare."""
+    p, a = ctl.ad_params, ctl.ad_state
+    trim = a.trim_hat if (p.adaptive and a.trim_hat is not None) else p.trim_pitch_rad
+    vs = st.estimate.vehicle
+    wind = vs.floats[12:15] if vs.floats is not None else vs.wind
+    return demand_of(
+        st.t, st.cmd.omega_w1_I, st.w1, vs.airspeed, wind, st.setpoint,
+        a.turn_gain if p.adaptive else 1.0, trim, p.tau_pitch_s, False, lim,
+    )  # fmt: skip
+
+
 def wind_limit_m_s(cfg: Any, measured: dict[str, Any]) -> float | None:
     """The horizontal wind (m/s) the monitor holds a flight to: the one the pre-engage checks
     measured, plus its margin and the config's gust allowance (preflight.scenario_wind); None

@@ -71,7 +71,7 @@ from mpf_mavlink.bridge.controller import (
     ScriptedTarget,
     Step,
 )
-from mpf_mavlink.bridge.envelope import demand_of, envelope_monitor, wind_limit_m_s
+from mpf_mavlink.bridge.envelope import demand_of_step, envelope_monitor, wind_limit_m_s
 from mpf_mavlink.bridge.fallback import FallbackSetup
 from mpf_mavlink.bridge.link_io import VehicleLink
 from mpf_mavlink.bridge.operator import OperatorDisplay
@@ -168,15 +168,8 @@ class Bridge:
     def _envelope(self, st: Step) -> tuple[bool, str | None]:
         """The envelope monitor on one tracking step: its STATUSTEXTs go to the ground station
         (severity WARNING, once per episode) and the log; (clipped, hand-back reason)."""
-        ctl, mon = self.ctl, self.envelope
-        p, a = ctl.ad_params, ctl.ad_state
-        trim = a.trim_hat if (p.adaptive and a.trim_hat is not None) else p.trim_pitch_rad
-        vs = st.estimate.vehicle
-        wind = vs.floats[12:15] if vs.floats is not None else vs.wind
-        d = demand_of(
-            st.t, st.cmd.omega_w1_I, st.w1, vs.airspeed, wind, st.setpoint,
-            a.turn_gain if p.adaptive else 1.0, trim, p.tau_pitch_s, False, mon.lim,
-        )  # fmt: skip
+        mon = self.envelope
+        d = demand_of_step(st, self.ctl, mon.lim)
         acts = mon.update(d)
         for text in acts.texts:
             self.log(f"[ENVELOPE] t = {st.t:.1f} s: {text}")
