@@ -92,6 +92,10 @@ def test_forced_flight_reports_the_envelope_and_the_hold_policy_hands_back(tmp_p
         for _, msg in read_tlog(tmp_path / "mavlink.tlog", types=["STATUSTEXT"]).messages
         if msg.text.startswith("MPF envelope")
     ]
+    assert any(
+        msg.text == "MPF FORCED despite failed feasibility"
+        for _, msg in read_tlog(tmp_path / "mavlink.tlog", types=["STATUSTEXT"]).messages
+    )
     bank = [t for t in texts if t[1].startswith("MPF envelope: bank ")]
     assert bank and all(s == dialect.MAV_SEVERITY_WARNING for s, _ in texts)
     assert len([t for t in bank if "hold" not in t[1]]) == env["kinds"]["bank"]["episodes"]

@@ -305,6 +305,8 @@ class Bridge:
                 f"[FORCED] --force: ENGAGING DESPITE THE FAILED CHECK: {names} "
                 "(recorded in metrics.json: forced)"
             )
+            # the ground station hears it too (STATUSTEXT, WARNING, <= 50 characters)
+            vl.send_text(f"MPF FORCED despite failed {names}"[:50], dialect.MAV_SEVERITY_WARNING)
             failed = []
         # the wind the monitor holds the flight to: what the checks accepted plus its margin
         self.envelope.lim = dataclasses.replace(
