@@ -107,3 +107,19 @@ def test_a_live_targets_estimate_is_judged_like_a_scripted_target():
     m = MeasuredInputs((0.0, 0.0, 0.0), "WIND", target=got)
     names = [r.name for r in run_checks(cfg, scripted_target=False, measured=m)]
     assert "feasibility" in names and "assumption_1" in names
+
+
+def test_wind_cov_carries_its_variance_and_unknown_is_none():
+    # WIND_COV.var_horiz (m^2/s^2): the margin is 2 sigma of it; 0 and NaN are MAVLink's
+    # "unknown" (our SIL sends 0), WIND has none
+    from mpf_mavlink.mavlink import dialect
+    from mpf_mavlink.mavlink.codec import decode_wind_cov
+
+    def cov(var: float):
+        return dialect.MAVLink_wind_cov_message(1_000_000, 1.0, 2.0, 0.0, var, 0.0, 100.0, 0, 0)
+
+    assert decode_wind_cov(cov(0.36)).var_horiz_m2_s2 == pytest.approx(0.36)
+    assert decode_wind_cov(cov(0.0)).var_horiz_m2_s2 is None
+    assert decode_wind_cov(cov(float("nan"))).var_horiz_m2_s2 is None
+    m = MeasuredInputs((1.0, 2.0, 0.0), "WIND_COV", decode_wind_cov(cov(0.36)).var_horiz_m2_s2)
+    assert m.wind_margin_m_s()[0] == pytest.approx(1.2)  # 2 sqrt(0.36)
