@@ -5,14 +5,19 @@ States (``BridgeResult.state_reached`` is the furthest one):
   CONNECTING -> WAIT_HEARTBEAT -> CHECKS -> INIT -> PRESTREAM -> ENGAGE -> TRACKING -> HANDBACK
   -> DONE
 
-- CHECKS runs :func:`mpf_mavlink.bridge.preflight.run_checks` from the vehicle's first estimate; a
-  failure refuses to engage (no mode request is ever sent) and exits 3.
+- CHECKS runs :func:`mpf_mavlink.bridge.preflight.run_checks` from the vehicle's first estimate
+  with what it measures (its wind, airspeed, a live target's motion: ``MeasuredInputs``, after
+  waiting up to ``mavlink.wind_stale_s`` for its first WIND / WIND_COV); a failure refuses to
+  engage (no mode request is ever sent) and exits 3, unless ``--force``.
 - PRESTREAM streams setpoints (one per ATTITUDE sample, re-sent when telemetry is slower than
   ``mavlink.min_setpoint_rate_hz``) for ``mavlink.prestream_s`` at that rate before asking for
   OFFBOARD (PX4 main 6) / GUIDED (ArduPlane 15).
 - ENGAGE is confirmed only by an accepted COMMAND_ACK AND a HEARTBEAT in that mode.
 - TRACKING: one law evaluation and one setpoint per ATTITUDE sample; s integrates sdot over
   the autopilot's time stamps (never the wall clock).
+- TRACKING feeds each step to the envelope monitor (:mod:`mpf_mavlink.bridge.envelope`):
+  episodes beyond the aircraft's limits go to the ground station (STATUSTEXT, WARNING) and
+  metrics.json; its ``hold`` policy ends the run like a safety exit (hand-back, exit 4).
 - Exits: mission duration, Ctrl-C / SIGTERM / exception (hand back to the hold mode while
   streaming wings-level setpoints, confirm with ACK + HEARTBEAT); telemetry or live target
   stale (stop commanding at once, then request the hold mode); someone else changed the mode
