@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from mpf_mavlink._compiled import status as compiled_status
+from mpf_mavlink.bridge.envelope import verdict_words
 from mpf_mavlink.bridge.recording import LEAN_ROW_EVERY, is_lean
 from mpf_mavlink.config.scenario import build_path, build_target
 from mpf_mavlink.config.schema import Config
@@ -653,6 +654,12 @@ def _measure(
         vd = assess(cfg, cols["t"], cols["pt_norm"], -truth["position_ned"][sel, 2],
                     truth["airspeed"][sel], eul[:, 0], eul[:, 1], truth["throttle"][sel],
                     source="truth")  # fmt: skip
+        # what the bridge's envelope monitor saw the law demand beyond the aircraft's limits
+        env = bm.get("envelope")
+        metrics["bridge_envelope"] = env
+        words = verdict_words(env) if isinstance(env, dict) else ""
+        if words:
+            vd.notes.append(f"envelope: {words}")
         vd.record(metrics)
         metrics["bridge_verdict"] = bm.get("verdict")
     # real-time factor while the bridge was in control (the lockstep figure) and overall

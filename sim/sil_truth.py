@@ -84,6 +84,11 @@ def truth_table(
         tR = (tf[0:3], tf[3:6], tf[6:9])
         table.append(row_from(diag, p, (cmd.w2, cmd.w3), w_act, cmd.sdot, tf[9:12], tR, w))
     cols = table.arrays()
+    if "saturated" in bc and len(bt):
+        # what flew: the bridge's step in force at each frame clipped a command (its envelope
+        # monitor's word), not the law re-evaluated on the truth
+        idx = np.clip(np.searchsorted(bt, tm[sel], side="right") - 1, 0, len(bt) - 1)
+        cols["saturated"] = np.asarray(bc["saturated"], float)[idx]
     rel_all = np.column_stack([cols["rel_x"], cols["rel_y"], cols["rel_z"]])
     cross = distance_to_polyline(path.positions(), rel_all, bool(getattr(path, "closed", False)))
     info = {

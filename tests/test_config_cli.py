@@ -23,6 +23,16 @@ BAD_SETS = [
     ("path.radius_m=3", "path.radius_m", "not used"),
     ("kinematic.initial_position_ned_m=[1,2]", "kinematic.initial_position_ned_m", "3 numbers"),
     ("checks.c2=0.7", "checks.c2", "(0, 0.5)"),
+    # float() parses these, but a float-typed field needs a finite number
+    ("target.turn_rate_rad_s=inf", "target.turn_rate_rad_s", "finite"),
+    ("target.turn_rate_rad_s=-Infinity", "target.turn_rate_rad_s", "finite"),
+    ("target.turn_rate_rad_s=nan", "target.turn_rate_rad_s", "finite"),
+    ("target.turn_rate_rad_s=1e", "target.turn_rate_rad_s", "number"),
+    (
+        "kinematic.initial_position_ned_m=[1e-9,2,zz]",
+        "kinematic.initial_position_ned_m[2]",
+        "number",
+    ),
     # an origin without its AMSL altitude would put the vehicle far below the path in NED
     ("mavlink.origin_lat_deg=47.4", "mavlink.origin_lon_deg", "required with origin_lat_deg"),
 ]
@@ -35,6 +45,35 @@ def test_bad_values_are_one_line_naming_key_and_file(override, key, words, capsy
     assert rc == 2
     assert len(err.splitlines()) == 1
     assert CFG in err and key in err and words in err
+
+
+# PyYAML implements YAML 1.1, whose float needs a dot and a signed exponent: it reads 1e-9, 1E5
+# and +3 (as +3 an int) differently from Python. Each spelling here is one float() accepts, with
+# the value float() gives it (exact: the same parse, no arithmetic).
+FLOAT_SPELLINGS = [("1e-9", 1e-9), ("1E5", 1e5), (".5", 0.5), ("+3", 3.0), ("-2.5e-3", -2.5e-3)]
+
+
+@pytest.mark.parametrize("text,value", FLOAT_SPELLINGS)
+def test_every_python_float_spelling_is_a_number_in_set_and_yaml(tmp_path, text, value):
+    from mpf_mavlink.config.schema import load_config
+
+    cfg = load_config(CFG, [f"target.turn_rate_rad_s={text}"])
+    assert cfg.target.turn_rate_rad_s == value and type(cfg.target.turn_rate_rad_s) is float
+    f = _write(
+        tmp_path, f"path: {{type: circle, radius_m: 50}}\ntarget: {{turn_rate_rad_s: {text}}}\n"
+    )
+    assert load_config(f).target.turn_rate_rad_s == value
+    # inside a vector (each component is a float field) and through the CLI's check
+    cfg = load_config(CFG, [f"kinematic.initial_position_ned_m=[{text}, 0, {text}]"])
+    assert cfg.kinematic.initial_position_ned_m == (value, 0.0, value)
+    assert main(["check", CFG, "--set", f"target.turn_rate_rad_s={text}"]) in (0, 1)
+
+
+def test_a_number_spelled_as_a_string_is_still_refused_where_a_string_or_int_is_wanted(capsys):
+    # only float-typed fields coerce: an integer field keeps refusing "1e3" (a float in Python)
+    rc = main(["check", CFG, "--set", "sim.record_every=1e3"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "sim.record_every" in err and "integer" in err
 
 
 def _write(tmp_path, text):

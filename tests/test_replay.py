@@ -319,6 +319,8 @@ def test_bridge_tlog_replays_to_identical_commands(run, request, tmp_path):
     assert np.array_equal(ts_r["t"][rows], ts_b["t"])
     for k in ("s", "sdot", "pt_norm", "psi", "w2_cmd", "w3_cmd"):
         np.testing.assert_allclose(ts_r[k][rows], ts_b[k], rtol=0, atol=1e-7, err_msg=k)
+    # and the commands clipped at a limit (the envelope monitor's word): the same steps
+    assert np.array_equal(ts_r["saturated"][rows], ts_b["saturated"])
 
 
 def test_px4_low_rate_run_had_resends(px4_run):

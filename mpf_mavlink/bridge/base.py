@@ -26,7 +26,8 @@ class State(enum.IntEnum):
 
 # Exit codes (the CLI returns them): 0 mission flown and handed back; 3 a check failed;
 # 4 a safety exit (telemetry/target lost, pilot took over, engage refused, hand-back not
-# confirmed); 130 Ctrl-C; 143 SIGTERM; 1 an unexpected exception (re-raised after hand-back).
+# confirmed, the envelope monitor's hold policy handed back); 130 Ctrl-C; 143 SIGTERM; 1 an
+# unexpected exception (re-raised after hand-back).
 EXIT_OK, EXIT_CHECK, EXIT_SAFETY, EXIT_SIGINT, EXIT_SIGTERM = 0, 3, 4, 130, 143
 
 
@@ -35,7 +36,10 @@ class _Stop(Exception):
 
     def __init__(self, reason: str, kind: str) -> None:
         super().__init__(reason)
-        self.reason, self.kind = reason, kind  # kind: duration|telemetry|target|pilot|engage
+        self.reason, self.kind = (
+            reason,
+            kind,
+        )  # kind: duration|telemetry|target|pilot|engage|envelope
 
 
 class _Terminated(BaseException):
@@ -76,6 +80,10 @@ class BridgeResult:
     fallback: str = ""  # what the autopilot does if our setpoints stop
     fallback_detail: dict[str, Any] = field(default_factory=dict)  # PX4: params, hold, centre
     records_error: str | None = None  # why the run directory could not be written
+    # what the pre-engage checks were given by the autopilot (wind, airspeed, live target)
+    measured: dict[str, Any] = field(default_factory=dict)
+    # --force engaged despite these failed checks (their names); [] when none failed
+    forced: list[str] = field(default_factory=list)
     verdict: str = ""  # the flight's one-line verdict (mpf_mavlink/runs/verdict.py); "" = not flown
 
     def summary(self) -> str:

@@ -29,12 +29,15 @@ class ControlLoop:
         ctl: Controller,
         vl: VehicleLink,
         phase: Phase,
-        record: Callable[[Step], None],
+        record: Callable[[Step, bool], None],
         show: Callable[[Step], None],
+        envelope: Callable[[Step], tuple[bool, str | None]] | None = None,
     ) -> None:
         self.ctl, self.vl, self.phase = ctl, vl, phase
         self.m = m = vl.m
         self._record, self._show = record, show
+        # each tracking step: (a command was clipped, why the envelope policy hands back)
+        self._envelope = envelope
         # the longest a setpoint goes unrepeated: 10 % under 1 / min_setpoint_rate_hz, so that the
         # process's wake-up latency cannot pull the stream below that rate (a re-send exactly on
         # the period left a 10 Hz telemetry stream at 20 Hz at best, and PRESTREAM's check of it
@@ -140,9 +143,12 @@ class ControlLoop:
         self.last_good_mono, self.last_good_vt = time.monotonic(), self.vl.vehicle_t
         self._show(st)  # after the setpoint: off its path
         if self.phase.state == State.TRACKING:
-            self._record(st)
+            clipped, hand_back = self._envelope(st) if self._envelope else (False, None)
+            self._record(st, clipped)
             if self.t_engage is not None and st.t - self.t_engage >= self.m.mission_duration_s:
                 raise _Stop(f"mission duration {self.m.mission_duration_s:g} s reached", "duration")
+            if hand_back is not None:
+                raise _Stop(hand_back, "envelope")
 
     def send_setpoint(self, sp: Setpoint, time_boot_ms: int) -> None:
         vl = self.vl

@@ -264,6 +264,24 @@ def estimator_params(m: Any) -> EstimatorParams:
     )  # fmt: skip
 
 
+def target_as_constant_turn(st: TargetState, make: Any) -> Any:
+    """A live target's estimated state (at mission time 0) as the scripted target the checks
+    can judge (``make``: :class:`~mpf_mavlink.config.schema.TargetConfig`): ``constant_turn``
+    at its position, ground speed, course, climb rate and yaw rate (about down). Below 0.5 m/s
+    the course is noise: the heading is the target frame's yaw."""
+    p = [float(x) for x in st.position]
+    vn, ve, vd = (float(x) for x in st.velocity)
+    R = np.asarray(st.R_T_I, float)
+    yaw_rate = float((R @ np.asarray(st.omega_T, float))[2])
+    speed = math.hypot(vn, ve)
+    heading = math.atan2(ve, vn) if speed >= 0.5 else math.atan2(R[1, 0], R[0, 0])
+    return make(
+        type="constant_turn", position_ned_m=(p[0], p[1], p[2]),
+        speed_m_s=speed if speed >= 0.5 else 0.0, heading_rad=heading,
+        turn_rate_rad_s=yaw_rate, climb_rate_m_s=-vd,
+    )  # fmt: skip
+
+
 class Controller:
     """Estimator + target + s + law + adapter for one run (see the module docstring).
 
@@ -425,6 +443,37 @@ class Controller:
         """(position NED m, R_W^I) of the latest estimate, for the pre-flight checks."""
         est, _ = self.est.estimate()
         return None if est is None else (est.vehicle.position, est.vehicle.R_W_I)
+
+    def measured_inputs(self) -> Any:
+        """What the autopilot reports now for the pre-engage checks
+        (:class:`~mpf_mavlink.bridge.preflight.MeasuredInputs`): the estimator's wind with its
+        source (and WIND_COV's variance), VFR_HUD's airspeed as true airspeed, and the live
+        target's estimated motion at mission time 0 as a constant-turn target. None without a
+        state. Call after :meth:`set_origin`."""
+        from mpf_mavlink.bridge.estimator import eas_to_tas
+        from mpf_mavlink.bridge.preflight import MeasuredInputs
+        from mpf_mavlink.config.schema import TargetConfig
+
+        est, _ = self.est.estimate()
+        if est is None:
+            return None
+        wn, we, wd = (float(x) for x in est.vehicle.wind)
+        var = None
+        w = self.est.wind
+        if est.wind_source == "WIND_COV" and w is not None:
+            var = getattr(w, "var_horiz_m2_s2", None)
+        airspeed = None
+        vfr = self.est.vfr
+        if vfr is not None and math.isfinite(float(vfr.airspeed_m_s)):
+            airspeed = float(vfr.airspeed_m_s)
+            if self.est.p.airspeed_is_eas:
+                airspeed *= eas_to_tas(float(vfr.alt_amsl_m))
+        target = None
+        if self.live:
+            st = self.target.state(0.0)
+            if not isinstance(st, str):
+                target = target_as_constant_turn(st, TargetConfig)
+        return MeasuredInputs((wn, we, wd), est.wind_source, var, airspeed, target)
 
     # -- control ------------------------------------------------------------------------------
     def step(self) -> Step | None:

@@ -95,9 +95,11 @@ class VehicleLink:
     def send(self, msg: Any) -> None:
         self.link.send(msg)
 
-    def send_text(self, text: str) -> None:
-        """A STATUSTEXT (severity INFO) from us: the tlog's record of a decision."""
-        self.send(self.link.mav.statustext_encode(dialect.MAV_SEVERITY_INFO, text.encode("ascii")))
+    def send_text(self, text: str, severity: int | None = None) -> None:
+        """A STATUSTEXT from us (severity INFO unless given: the tlog's record of a decision;
+        the envelope monitor's are WARNING, for the ground station's operator)."""
+        sev = dialect.MAV_SEVERITY_INFO if severity is None else severity
+        self.send(self.link.mav.statustext_encode(sev, text.encode("ascii")))
 
     def last_tx_record_s(self) -> float | None:
         """The record time (s) of the latest message sent, as a tlog reader computes it."""

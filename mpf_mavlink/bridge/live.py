@@ -5,14 +5,19 @@ States (``BridgeResult.state_reached`` is the furthest one):
   CONNECTING -> WAIT_HEARTBEAT -> CHECKS -> INIT -> PRESTREAM -> ENGAGE -> TRACKING -> HANDBACK
   -> DONE
 
-- CHECKS runs :func:`mpf_mavlink.bridge.preflight.run_checks` from the vehicle's first estimate; a
-  failure refuses to engage (no mode request is ever sent) and exits 3.
+- CHECKS runs :func:`mpf_mavlink.bridge.preflight.run_checks` from the vehicle's first estimate
+  with what it measures (its wind, airspeed, a live target's motion: ``MeasuredInputs``, after
+  waiting up to ``mavlink.wind_stale_s`` for its first WIND / WIND_COV); a failure refuses to
+  engage (no mode request is ever sent) and exits 3, unless ``--force``.
 - PRESTREAM streams setpoints (one per ATTITUDE sample, re-sent when telemetry is slower than
   ``mavlink.min_setpoint_rate_hz``) for ``mavlink.prestream_s`` at that rate before asking for
   OFFBOARD (PX4 main 6) / GUIDED (ArduPlane 15).
 - ENGAGE is confirmed only by an accepted COMMAND_ACK AND a HEARTBEAT in that mode.
 - TRACKING: one law evaluation and one setpoint per ATTITUDE sample; s integrates sdot over
   the autopilot's time stamps (never the wall clock).
+- TRACKING feeds each step to the envelope monitor (:mod:`mpf_mavlink.bridge.envelope`):
+  episodes beyond the aircraft's limits go to the ground station (STATUSTEXT, WARNING) and
+  metrics.json; its ``hold`` policy ends the run like a safety exit (hand-back, exit 4).
 - Exits: mission duration, Ctrl-C / SIGTERM / exception (hand back to the hold mode while
   streaming wings-level setpoints, confirm with ACK + HEARTBEAT); telemetry or live target
   stale (stop commanding at once, then request the hold mode); someone else changed the mode
@@ -38,6 +43,7 @@ saw), ``setpoints.csv``, ``metrics.json`` (figures, counters, exit) and the plot
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import math
 import signal
@@ -70,6 +76,7 @@ from mpf_mavlink.bridge.controller import (
     ScriptedTarget,
     Step,
 )
+from mpf_mavlink.bridge.envelope import demand_of_step, envelope_monitor, wind_limit_m_s
 from mpf_mavlink.bridge.fallback import FallbackSetup
 from mpf_mavlink.bridge.link_io import VehicleLink
 from mpf_mavlink.bridge.operator import OperatorDisplay
@@ -139,7 +146,10 @@ class Bridge:
         self.vl = VehicleLink(m, live_target=self.ctl.live)
         self.phase = Phase(self._on_state)
         self.rec = Recorder(cfg, m, opts.url, Path(opts.out_dir))
-        self.loop = ControlLoop(self.ctl, self.vl, self.phase, self.rec.record, self._show)
+        self.envelope = envelope_monitor(cfg, self.ctl.ad_params)
+        self.loop = ControlLoop(
+            self.ctl, self.vl, self.phase, self.rec.record, self._show, self._envelope
+        )
         self.session = Session(cfg, self.loop, self.phase, self.display, log)
         self.streams = StreamNegotiator(self.vl, log)
         self.fallback = FallbackSetup(self.vl, self.ctl, cfg.path, log)
@@ -159,6 +169,17 @@ class Bridge:
         if sent != self._sent_at_tick:  # a setpoint went out in this wake-up
             self._sent_at_tick = sent
             _collect_young()
+
+    def _envelope(self, st: Step) -> tuple[bool, str | None]:
+        """The envelope monitor on one tracking step: its STATUSTEXTs go to the ground station
+        (severity WARNING, once per episode) and the log; (clipped, hand-back reason)."""
+        mon = self.envelope
+        d = demand_of_step(st, self.ctl, mon.lim)
+        acts = mon.update(d)
+        for text in acts.texts:
+            self.log(f"[ENVELOPE] t = {st.t:.1f} s: {text}")
+            self.vl.send_text(text, dialect.MAV_SEVERITY_WARNING)
+        return d.clipped, acts.hand_back
 
     def _on_state(self, s: State) -> None:
         self.log(f"[{s.name}]")
@@ -273,13 +294,36 @@ class Bridge:
                 f"no usable telemetry within {m.heartbeat_timeout_s:g} s: "
                 f"{self.ctl.why_not or 'no attitude'}"
             )
+        # the checks judge the autopilot's wind: wait for its first WIND / WIND_COV (slower
+        # than the rest, 1-4 Hz), else they would run on our own estimate of it or on none
+        if not vl.spin(m.wind_stale_s, lambda: est.wind is not None):
+            self.log(
+                f"no WIND / WIND_COV within {m.wind_stale_s:g} s: the checks use the wind "
+                "estimated from ground velocity and airspeed"
+            )
         self.phase.set(State.CHECKS)
         failed = self.session.checks(res, scripted_target=not self.ctl.live)
+        names = ", ".join(r.name for r in failed)
         if failed and self.opts.force:
-            self.log(f"[FORCED] engaging despite the failed check: {', '.join(failed)}")
+            res.forced = [r.name for r in failed]
+            self.log(
+                f"[FORCED] --force: ENGAGING DESPITE THE FAILED CHECK: {names} "
+                "(recorded in metrics.json: forced)"
+            )
+            # the ground station hears it too (STATUSTEXT, WARNING, <= 50 characters)
+            vl.send_text(f"MPF FORCED despite failed {names}"[:50], dialect.MAV_SEVERITY_WARNING)
             failed = []
+        # the wind the monitor holds the flight to: what the checks accepted plus its margin
+        self.envelope.lim = dataclasses.replace(
+            self.envelope.lim, wind_max_m_s=wind_limit_m_s(self.cfg, res.measured)
+        )
         if failed:
-            raise _Refused(f"check failed: {', '.join(failed)}", log=False)
+            # the wording of `check` and `sim`'s gate: each failed check with its figures
+            raise _Refused(
+                "check failed: "
+                + "; ".join(f"{r.name} ({r.summary})" for r in failed)
+                + " (--force flies it anyway)"
+            )
 
     def _fly_until_stopped(self, res: BridgeResult) -> None:
         """Fly; after a loss hand back and, when configured, re-engage. Ends by raising."""
@@ -380,7 +424,10 @@ class Bridge:
             self.display.stopped(vl.link, res.exit_reason, res.exit_code == 0)
         res.counters = counters
         vl.close()
-        self.rec.finish(res, self.ctl, counters)
+        env = None
+        if self.envelope.steps:
+            env = self.envelope.summary(self.cfg.metrics.steady_after_s, loop.t_last)
+        self.rec.finish(res, self.ctl, counters, env)
         if res.records_error:
             self.log(f"could not write the run directory: {res.records_error}")
         return res

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -78,6 +79,67 @@ def scenario_wind(cfg: Config) -> tuple[tuple[float, float, float], float]:
     wind = cfg.kinematic.wind
     gust = max((float(np.linalg.norm(g.velocity_ned_m_s)) for g in wind.gusts), default=0.0)
     return wind.steady_ned_m_s, gust
+
+
+#: The stated margin on a measured wind without the autopilot's variance (WIND, or WIND_COV with
+#: var_horiz unknown): the larger of 1 m/s and 20 % of its speed. An EKF's steady-wind estimate
+#: is good to about 1 m/s in light wind and lags a freshening one (ArduPlane SITL in an 8 m/s
+#: wind reported 7.7 m/s); the margin is what the warning ``wind_margin`` checks with.
+WIND_MARGIN_M_S = 1.0
+WIND_MARGIN_FRACTION = 0.2
+
+
+@dataclass(frozen=True)
+class MeasuredInputs:
+    """What the autopilot reports right before engaging, for :func:`run_checks`.
+
+    wind_ned_m_s: the estimator's wind (NED, m/s, the air mass's velocity); wind_source: "WIND"
+    (ArduPilot), "WIND_COV" (PX4) or "estimated" (our own low-pass of ground velocity minus
+    airspeed); wind_var_m2_s2: WIND_COV.var_horiz when the autopilot sends one; airspeed_m_s:
+    VFR_HUD's airspeed as true airspeed (None: none yet); target: the live target's estimated
+    motion as a constant-turn target from mission time 0 (None: a scripted target)."""
+
+    wind_ned_m_s: tuple[float, float, float]
+    wind_source: str
+    wind_var_m2_s2: float | None = None
+    airspeed_m_s: float | None = None
+    target: Any = None  # TargetConfig
+
+    def wind_margin_m_s(self) -> tuple[float, str]:
+        """(margin m/s, how it was chosen): 2 sigma of the autopilot's variance when given, else
+        :data:`WIND_MARGIN_M_S` or :data:`WIND_MARGIN_FRACTION` of the speed, the larger."""
+        if self.wind_var_m2_s2 is not None and self.wind_var_m2_s2 > 0.0:
+            return 2.0 * math.sqrt(self.wind_var_m2_s2), "2 sigma of WIND_COV.var_horiz"
+        speed = math.hypot(self.wind_ned_m_s[0], self.wind_ned_m_s[1])
+        return max(WIND_MARGIN_M_S, WIND_MARGIN_FRACTION * speed), (
+            f"max({WIND_MARGIN_M_S:g} m/s, {100 * WIND_MARGIN_FRACTION:g} %)"
+        )
+
+
+def wind_words(wind_ned: Any, source: str) -> str:
+    """The wind as the checks name it: ``7.7 m/s from 270 deg (WIND)`` (horizontal speed, the
+    direction it blows FROM, degrees clockwise from north, and where the figure came from)."""
+    n, e = float(wind_ned[0]), float(wind_ned[1])
+    speed = math.hypot(n, e)
+    if speed < 0.05:
+        return f"{speed:.1f} m/s ({source})"
+    frm = math.degrees(math.atan2(-e, -n)) % 360.0
+    return f"{speed:.1f} m/s from {frm:.0f} deg ({source})"
+
+
+def _with_wind(r: CheckResult, words: str, bank_margin_rad: float) -> CheckResult:
+    """The feasibility result led by what a reader needs first: the bank needed, the wind it
+    was judged with and the limit it is held to (the limit less the checks' margin)."""
+    f = r.figures
+    peak, lim = f.get("peak_bank_rad"), f.get("bank_limit_rad")
+    if not isinstance(peak, float) or not isinstance(lim, float):
+        return r  # pragma: no cover - feasibility always gives both
+    allowed = max(lim - bank_margin_rad, 0.0)
+    lead = (
+        f"peak bank {math.degrees(peak):.1f} deg needed with the {words}, limit "
+        f"{math.degrees(allowed):.1f} deg; "
+    )
+    return dataclasses.replace(r, summary=lead + r.summary)
 
 
 def gust_feasibility(
@@ -260,13 +322,30 @@ def airspeed_hold(cfg: Config) -> CheckResult | None:
     )
 
 
-def run_checks(cfg: Config, scripted_target: bool = True) -> list[CheckResult]:
-    """All checks for a config. With a live target only the gain condition can be checked."""
+def run_checks(
+    cfg: Config, scripted_target: bool = True, measured: MeasuredInputs | None = None
+) -> list[CheckResult]:
+    """All checks for a config. With a live target only the gain condition can be checked,
+    unless ``measured`` gives its estimated motion.
+
+    ``measured`` (the live bridge, right before engaging): the wind the autopilot reports
+    replaces the scenario's steady wind (the turbulence allowance stays the config's), the live
+    target's estimated motion replaces ``target`` and the measured airspeed adds a feasibility
+    at that airspeed (a warning); ``wind_margin`` warns when the wind's margin would not be
+    flyable. The start state is the caller's (``kinematic.initial_*``)."""
     results: list[CheckResult] = []
     ch = cfg.checks
     horizon = ch.horizon_s if ch.horizon_s is not None else cfg.sim.duration_s
     path = build_path(cfg.path)
     steady, gust = scenario_wind(cfg)
+    if measured is not None:
+        steady = measured.wind_ned_m_s
+        words = "measured wind " + wind_words(steady, measured.wind_source)
+        if measured.target is not None:
+            cfg = dataclasses.replace(cfg, target=measured.target)
+            scripted_target = True
+    else:
+        words = "wind " + wind_words(steady, scenario_wind_source(cfg))
     if scripted_target and cfg.target.type != "mavlink":
         target = build_target(cfg.target)
         results.append(
@@ -298,10 +377,12 @@ def run_checks(cfg: Config, scripted_target: bool = True) -> list[CheckResult]:
                 turn_gain=cfg.vehicle.turn_gain, demanded=at_v0[:2] if v == v0 else None,
             )  # fmt: skip
 
-        results.append(feasible_at(v0))
+        results.append(_with_wind(feasible_at(v0), words, ch.bank_margin_rad))
         results.append(climb_check(cfg, path, target, horizon, s0, steady, at_v0))
         if gust > 0.0:
             results.append(gust_feasibility(feasible_at, cfg.vehicle.airspeed_m_s, gust))
+        if measured is not None:
+            results.extend(_measured_checks(cfg, measured, path, target, horizon, s0))
         hold = airspeed_hold(cfg)
         if hold is not None:
             results.append(hold)
@@ -311,6 +392,60 @@ def run_checks(cfg: Config, scripted_target: bool = True) -> list[CheckResult]:
             gain_condition(build_gains(cfg), cfg.vehicle.v_min, cfg.vehicle.v_max, c1, ch.c2)
         )
     return results
+
+
+def _measured_checks(
+    cfg: Config, measured: MeasuredInputs, path: Any, target: Any, horizon: float, s0: float
+) -> list[CheckResult]:
+    """The warnings only a measured state gives: feasibility with the wind's margin
+    (``wind_margin``) and at the airspeed the aircraft flies now when that is higher than the
+    law's (``measured_airspeed``: more airspeed needs more bank for the same turn)."""
+    ch, v = cfg.checks, cfg.vehicle
+    out: list[CheckResult] = []
+
+    def feasible(speed: float, wind: tuple[float, float, float]) -> CheckResult:
+        return feasibility(
+            path, target, speed, horizon, bank_limit_rad(cfg), v.max_turn_rate_rad_s, s0, wind,
+            bank_margin_rad=ch.bank_margin_rad, turn_gain=v.turn_gain,
+        )  # fmt: skip
+
+    w = measured.wind_ned_m_s
+    margin, how = measured.wind_margin_m_s()
+    speed = math.hypot(w[0], w[1])
+    # the margin along the measured wind's direction (from the north when there is none)
+    ux, uy = (w[0] / speed, w[1] / speed) if speed > 1e-6 else (-1.0, 0.0)
+    wm = (w[0] + margin * ux, w[1] + margin * uy, w[2])
+    r = feasible(v.airspeed_m_s, wm)
+    what = (
+        f"with the measured wind plus its margin {margin:.1f} m/s ({how}), "
+        f"{wind_words(wm, measured.wind_source)}: {r.summary}"
+    )
+    out.append(
+        CheckResult("wind_margin", "pass" if r.ok else "warn",
+                    what + ("" if r.ok else "; expect the turn to saturate if the wind is that"),
+                    {**r.figures, "wind_margin_m_s": margin})
+    )  # fmt: skip
+    va = measured.airspeed_m_s
+    if va is not None and math.isfinite(va) and va > v.airspeed_m_s + 0.5:
+        r = feasible(va, w)
+        what = (
+            f"at the measured airspeed {va:.1f} m/s (VFR_HUD; the law flies "
+            f"{v.airspeed_m_s:g}): {r.summary}"
+        )
+        out.append(
+            CheckResult("measured_airspeed", "pass" if r.ok else "warn",
+                        what + ("" if r.ok else "; expect the turn to saturate until it slows"),
+                        {**r.figures, "measured_airspeed_m_s": va})
+        )  # fmt: skip
+    return out
+
+
+def scenario_wind_source(cfg: Config) -> str:
+    """Which key :func:`scenario_wind`'s steady wind came from (for the checks' wording)."""
+    sil = cfg.extra.get("sil")
+    if sil is not None and sil.link != "none":
+        return "sil.wind_ned_m_s"
+    return "kinematic.wind.steady_ned_m_s"
 
 
 def format_checks(results: list[CheckResult]) -> str:

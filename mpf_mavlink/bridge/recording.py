@@ -14,13 +14,15 @@ import numpy as np
 
 from mpf_mavlink.bridge.base import EXIT_OK, BridgeResult
 from mpf_mavlink.bridge.controller import Controller, Step, write_setpoints
+from mpf_mavlink.bridge.envelope import verdict_words
 from mpf_mavlink.config.schema import Config
-from mpf_mavlink.runs.rundir import RunTable, compute_metrics
+from mpf_mavlink.runs.rundir import COLUMNS, RunTable, compute_metrics
 from mpf_mavlink.runs.verdict import assess
 from mpf_mavlink.runs.write import limits_row, write_limits, write_run
 
 #: Lean recording keeps one tracking row in this many (50 Hz ATTITUDE: 10 Hz rows).
 LEAN_ROW_EVERY = 5
+_SATURATED = COLUMNS.index("saturated")
 
 
 def is_lean(m: Any) -> bool:
@@ -42,24 +44,38 @@ class Recorder:
         # the verdict's series, limits_row's: t, roll, pitch, airspeed, altitude, thrust
         self.judge_rows: list[tuple[float, ...]] = []
 
-    def record(self, st: Step) -> None:
-        """One tracking step's rows (every ``every``-th step)."""
+    def record(self, st: Step, clipped: bool = False) -> None:
+        """One tracking step's rows (every ``every``-th step). ``clipped``: a command of this
+        step was cut at a limit (the envelope monitor's word): the row's ``saturated`` says so
+        as well as the law's own rate limit."""
         if self._skip:
             self._skip -= 1
             return
         self._skip = self.every - 1
-        self.table.append(st.row())
+        row = st.row()
+        if clipped:
+            row[_SATURATED] = 1.0
+        self.table.append(row)
         self.sp_rows.append(tuple(st.setpoint_row()))
         self.judge_rows.append(limits_row(st.t, st.estimate, st.setpoint.thrust))
 
     # -- the end of the run ------------------------------------------------------------------------
-    def finish(self, res: BridgeResult, ctl: Controller, counters: dict[str, Any]) -> None:
+    def finish(
+        self,
+        res: BridgeResult,
+        ctl: Controller,
+        counters: dict[str, Any],
+        envelope: dict[str, Any] | None = None,
+    ) -> None:
         """Metrics, the verdict (which may set the exit code) and the run directory; a failure
-        to write is recorded in ``res.records_error``, never raised."""
+        to write is recorded in ``res.records_error``, never raised. ``envelope``: the envelope
+        monitor's summary (metrics.json ``envelope``; the verdict names its episodes)."""
         cols = self.table.arrays()
         metrics = compute_metrics(
             cols, self.cfg.metrics.steady_after_s, self.cfg.metrics.converge_threshold_m
         )
+        if envelope is not None:
+            metrics["envelope"] = envelope
         limits_rows = self._verdict(res, cols, metrics)
         if self.sp_rows:
             # thrust pinned at its ceiling: the airspeed the law assumes is not being held
@@ -79,6 +95,7 @@ class Recorder:
             state_reached=res.state_reached, exit_reason=res.exit_reason, exit_code=res.exit_code,
             flavour=res.flavour, tracked_s=res.tracked_s, handback_requested=res.handback_requested,
             handback_confirmed=res.handback_confirmed, checks=res.checks, counters=counters,
+            checks_measured=res.measured, forced=res.forced,
             url=self.url, recording="lean" if self.every > 1 else "full",
         )  # fmt: skip
         res.metrics = metrics
@@ -103,6 +120,10 @@ class Recorder:
             self.cfg, t_rel, cols["pt_norm"], J[:, 4], J[:, 3], J[:, 1], J[:, 2], thr,
             source="telemetry",
         )  # fmt: skip
+        env = metrics.get("envelope")
+        words = verdict_words(env) if isinstance(env, dict) else ""
+        if words:
+            vd.notes.append(f"envelope: {words}")
         res.verdict = vd.line()
         vd.record(metrics)
         if res.exit_code == EXIT_OK:

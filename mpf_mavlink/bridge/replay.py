@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from mpf_mavlink.bridge.controller import Controller, Step, parse_marker, write_setpoints
+from mpf_mavlink.bridge.envelope import demand_of_step, envelope_monitor
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.adapter import Setpoint, safe_setpoint
 from mpf_mavlink.errors import MpfError
@@ -77,9 +78,11 @@ from mpf_mavlink.runs.replay_result import (
     _largest_diff,
     _sat_fields,
 )
-from mpf_mavlink.runs.rundir import RunTable, compute_metrics, prepare_out_dir
+from mpf_mavlink.runs.rundir import COLUMNS, RunTable, compute_metrics, prepare_out_dir
 from mpf_mavlink.runs.verdict import assess
 from mpf_mavlink.runs.write import limits_row, write_limits, write_run
+
+_SATURATED = COLUMNS.index("saturated")
 
 
 class _LinkFilter:
@@ -140,6 +143,7 @@ class _Replayer:
         self.cfg = cfg
         self.m = m = cfg.section("mavlink")
         self.ctl = Controller(cfg)
+        self.env_lim = envelope_monitor(cfg, self.ctl.ad_params).lim
         self.link = _LinkFilter(m, self.ctl.live)
         self.own = (m.source_system, m.source_component)
         self.t_first = t_first
@@ -276,7 +280,11 @@ class _Replayer:
         self._pending = st
         self._pending_roll = self.ctl.roll()
         if self.win[0] <= t <= self.win[1]:
-            self.table.append(st.row())
+            row = st.row()
+            # a command clipped at a limit is ``saturated``, as the bridge recorded it
+            if demand_of_step(st, self.ctl, self.env_lim).clipped:
+                row[_SATURATED] = 1.0
+            self.table.append(row)
             self.sp_rows.append(tuple(st.setpoint_row()))
             self.lim_rows.append(limits_row(st.t, st.estimate, st.setpoint.thrust))
 

@@ -35,6 +35,25 @@ MODE_REASKS = 8
 MODE_REASK_AFTER_S = 0.3
 
 
+def _measured_record(m: Any) -> dict[str, Any]:
+    """The measured inputs of the pre-engage checks as metrics.json keeps them."""
+    if m is None:
+        return {}
+    t = m.target
+    return {
+        "wind_ned_m_s": list(m.wind_ned_m_s),
+        "wind_source": m.wind_source,
+        "wind_var_m2_s2": m.wind_var_m2_s2,
+        "wind_margin_m_s": m.wind_margin_m_s()[0],
+        "airspeed_m_s": m.airspeed_m_s,
+        "target": None if t is None else {
+            "position_ned_m": list(t.position_ned_m), "speed_m_s": t.speed_m_s,
+            "heading_rad": t.heading_rad, "turn_rate_rad_s": t.turn_rate_rad_s,
+            "climb_rate_m_s": t.climb_rate_m_s,
+        },
+    }  # fmt: skip
+
+
 class Session:
     """Modes, the pilot watch, checks, hand-back and re-engagement of one run."""
 
@@ -142,8 +161,9 @@ class Session:
         return self.vl.hb is not None and is_offboard(self.vl.flavour, self.vl.hb)
 
     # -- checks and the virtual point ------------------------------------------------------------
-    def checks(self, res: BridgeResult, scripted_target: bool) -> list[str]:
-        """The pre-flight checks from the vehicle's state now; the names of those failed."""
+    def checks(self, res: BridgeResult, scripted_target: bool) -> list[Any]:
+        """The pre-flight checks from the vehicle's state now, with what it measures (wind,
+        airspeed, a live target's motion); those failed (CheckResult)."""
         from mpf_mavlink.bridge.preflight import format_checks, run_checks
 
         self.ctl.set_origin()  # mission time 0: the checks' and the scripted target's origin
@@ -151,20 +171,28 @@ class Session:
         assert init is not None
         pos, R_W_I = init
         cfg = self.cfg
+        p0 = (float(pos[0]), float(pos[1]), float(pos[2]))
         cfg = dataclasses.replace(
             cfg,
             sim=dataclasses.replace(cfg.sim, duration_s=self.m.mission_duration_s),
             kinematic=dataclasses.replace(
                 cfg.kinematic,
-                initial_position_ned_m=(float(pos[0]), float(pos[1]), float(pos[2])),
+                initial_position_ned_m=p0,
                 initial_attitude_rpy_rad=matrix_to_euler(R_W_I),
             ),
         )
-        results = run_checks(cfg, scripted_target=scripted_target)
+        if cfg.sil.link != "none":  # the SIL's own start gives way to where the aircraft is
+            sil = dataclasses.replace(cfg.sil, initial_position_ned_m=p0)
+            cfg = dataclasses.replace(cfg, extra={**cfg.extra, "sil": sil})
+        # what the autopilot reports now (wind, airspeed, the live target's motion), not what
+        # the configuration assumes: a mission the measured wind makes infeasible is refused
+        measured = self.ctl.measured_inputs()
+        res.measured = _measured_record(measured)
+        results = run_checks(cfg, scripted_target=scripted_target, measured=measured)
         text = format_checks(results)
         res.checks = text.splitlines()
         self.log(text)
-        return [r.name for r in results if not r.ok]
+        return [r for r in results if not r.ok]
 
     def init_s(self) -> None:
         s0 = self.ctl.init_s()

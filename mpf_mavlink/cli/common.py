@@ -20,7 +20,8 @@ EXIT_CODES = {
     "plot": "0 figures drawn; 2 not a run directory",
     "run": "0 flown and handed back, verdict PASS; 2 bad configuration / URL / no vehicle; 3 a "
     "pre-flight check failed (no mode request was sent); 4 a safety exit (telemetry or target "
-    "lost, pilot took over, mode refused, hand-back not confirmed); 5 verdict FAIL; 6 verdict "
+    "lost, pilot took over, mode refused, hand-back not confirmed, the envelope monitor's hold "
+    "policy handed back); 5 verdict FAIL; 6 verdict "
     "NOT JUDGED (shorter than its steady window); 130 Ctrl-C; 143 SIGTERM",
     "vehicle": "0 stopped (--duration reached, Ctrl-C or SIGTERM); 2 bad configuration / "
     "--serve URL (unknown scheme, unresolvable host, port in use) / arguments",

@@ -40,6 +40,16 @@ def _describe(tp: Any) -> str:
     return str(tp)
 
 
+def _float_spelling(text: str, src: str, key: str) -> float:
+    """A number YAML 1.1 (PyYAML) left a string, for a float-typed field: ``1e-9``, ``1E5``,
+    ``+3`` and ``.5e1`` are numbers to anyone typing them as Python or C would, so every spelling
+    :func:`float` accepts is one (finiteness is still checked by the caller)."""
+    try:
+        return float(text)
+    except ValueError:
+        raise _fail(src, key, f"must be a number, got {text!r}") from None
+
+
 def _convert(tp: Any, value: Any, src: str, key: str) -> Any:
     origin = typing.get_origin(tp)
     if origin in (typing.Union, types.UnionType):
@@ -55,6 +65,8 @@ def _convert(tp: Any, value: Any, src: str, key: str) -> Any:
             raise _fail(src, key, f"must be a mapping, got {value!r}")
         return _build(typing.cast(type, tp), value, src, key)
     if tp is float:
+        if isinstance(value, str):
+            value = _float_spelling(value, src, key)
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise _fail(src, key, f"must be a number, got {value!r}")
         v = float(value)

@@ -272,6 +272,43 @@ class MetricsConfig:
     )  # fmt: skip
 
 
+@dataclass(frozen=True)
+class EnvelopeConfig:
+    """The bridge's envelope monitor (mpf_mavlink/bridge/envelope.py, docs/bridge.md): what
+    the law demands (bank, pitch, climb, sink, airspeed, thrust, the wind) against what the
+    aircraft can give, as episodes in metrics.json, the verdict and a STATUSTEXT each."""
+
+    policy: Literal["hold", "warn"] = field(
+        default="hold",
+        metadata=_doc(
+            "hold: hand back to the hold mode (exit 4) once one episode lasts exceeded_for_s; "
+            "warn: only report"
+        ),
+    )
+    exceeded_for_s: float = field(
+        default=5.0,
+        metadata=_pos(
+            "how long an envelope may stay exceeded before the hold policy hands back (5 s: "
+            "about two roll-loop settling times of a gust past, short of a lap of a 150 m "
+            "circle's downwind leg)"
+        ),
+    )
+    armed_after_s: float | None = field(
+        default=None,
+        metadata=_nonneg(
+            "the policy acts from this long after engagement (the capture turns at the bank "
+            "limit by design); null: metrics.steady_after_s"
+        ),
+    )
+    clear_s: float = field(
+        default=1.0,
+        metadata=_nonneg(
+            "an episode ends once its condition has been clear this long (one STATUSTEXT for "
+            "a limit touched on and off)"
+        ),
+    )
+
+
 #: the sections of the bridge, the SIL vehicle and the target estimator, by their YAML name
 SECTIONS: dict[str, type] = {
     "mavlink": MavlinkConfig,
@@ -300,6 +337,7 @@ class Config:
     sim: SimConfig = field(default_factory=SimConfig)
     checks: ChecksConfig = field(default_factory=ChecksConfig)
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
+    envelope: EnvelopeConfig = field(default_factory=EnvelopeConfig)
     source: str = field(default="<config>", metadata={"internal": True})
     extra: dict[str, Any] = field(default_factory=dict, metadata={"internal": True})
 

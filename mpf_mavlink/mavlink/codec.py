@@ -178,6 +178,9 @@ class WindSample:
     source: str  # "WIND" (ArduPilot) or "WIND_COV" (PX4)
     t_boot_s: float | None = None  # s, WIND_COV.time_usec / 1e6; WIND has no timestamp
     t_rx_s: float | None = None  # s, receive/log time
+    # m^2/s^2, WIND_COV.var_horiz: the autopilot's variance of its horizontal wind estimate
+    # (None: not sent, zero, NaN or negative: MAVLink's "unknown"; WIND carries none)
+    var_horiz_m2_s2: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -410,7 +413,12 @@ def decode_wind_cov(msg: Any) -> WindSample | None:
         wz = 0.0
     if not _finite(wx, wy, wz) or math.sqrt(wx * wx + wy * wy + wz * wz) > MAX_SPEED_M_S:
         return None
-    return WindSample(_ro((wx, wy, wz)), "WIND_COV", t, _t_rx(msg))
+    try:
+        var = float(msg.var_horiz)
+    except (AttributeError, TypeError, ValueError):
+        var = math.nan
+    var_h = var if math.isfinite(var) and 0.0 < var <= MAX_SPEED_M_S**2 else None
+    return WindSample(_ro((wx, wy, wz)), "WIND_COV", t, _t_rx(msg), var_h)
 
 
 def decode_home_position(msg: Any) -> HomeSample | None:

@@ -115,6 +115,9 @@ class Verdict:
     failures: list[tuple[str, str]] = field(default_factory=list)
     not_judged: str | None = None
     figures: dict[str, Any] = field(default_factory=dict)
+    # what the line names besides its judgement (the bridge's envelope episodes: a limit the
+    # law could not get is said, whether or not it failed the flight)
+    notes: list[str] = field(default_factory=list)
 
     @property
     def status(self) -> str:
@@ -138,11 +141,12 @@ class Verdict:
     def line(self) -> str:
         """One line: ``verdict: PASS``, ``verdict: FAIL (energy, tracking): energy: ...; ...``
         or ``verdict: NOT JUDGED: <why>``."""
+        note = "".join(f" [{n}]" for n in self.notes)
         if self.failures:
-            return f"verdict: FAIL ({', '.join(self.classes)}): " + "; ".join(self.clauses)
+            return f"verdict: FAIL ({', '.join(self.classes)}): " + "; ".join(self.clauses) + note
         if self.not_judged:
-            return f"verdict: NOT JUDGED: {self.not_judged}"
-        return "verdict: PASS"
+            return f"verdict: NOT JUDGED: {self.not_judged}" + note
+        return "verdict: PASS" + note
 
     def exit_code(self, code: int = 0) -> int:
         """The run's exit code: ``code`` when the run ended otherwise than normally (refused,
@@ -161,6 +165,7 @@ class Verdict:
         metrics["verdict_classes"] = self.classes
         metrics["verdict_failures"] = self.clauses
         metrics["verdict_figures"] = self.figures
+        metrics["verdict_notes"] = self.notes
 
 
 @dataclass

@@ -123,6 +123,7 @@ def _add_flight_options(ap: argparse.ArgumentParser) -> None:
 def _add_rig_options(ap: argparse.ArgumentParser) -> None:
     """How it is flown: SIL twin, speed-up, serial link, instance, altitude, lead, record."""
     ap.add_argument("--sil", action="store_true", help="fly the same mission in our SIL too")
+    ap.add_argument("--force", action="store_true", help="the bridge engages despite failed checks")
     _add_number(
         ap,
         "--speedup",
@@ -343,6 +344,7 @@ def _bridge_command(
         "--duration",
         f"{a.duration:g}",
         *[x for s in sets for x in ("--set", s)],
+        *(["--force"] if getattr(a, "force", False) else []),
     ]
 
 
