@@ -280,3 +280,47 @@ def test_compare_table_has_a_row_per_guidance():
     md = worlds.markdown(res)
     assert "| arduplane | MPF (mpf-mavlink run) | stationary, wind 6 m/s from 90 deg | 0.2 |" in md
     assert "| -0.18 |" in md and md.count("| arduplane |") == 2
+
+
+# -- PX4's ULog: EKF2 against SIH's truth ---------------------------------------------------
+
+
+def _ulog_msg(typ: str, body: bytes) -> bytes:
+    import struct
+
+    return struct.pack("<HB", len(body), ord(typ)) + body
+
+
+def test_the_ulog_reader_decodes_nested_arrays_and_restores_unlogged_trailing_padding(tmp_path):
+    import struct
+
+    from sim.rigs.ulog import read_topics
+
+    fmt = "uint64_t timestamp;float[4] q;uint8_t n;uint8_t[7] _padding0;"
+    data = b"ULog\x01\x12\x35" + b"\x01" + struct.pack("<Q", 0)
+    data += _ulog_msg("F", b"att:" + fmt.encode())
+    data += _ulog_msg("F", b"other:uint64_t timestamp;double x;")
+    data += _ulog_msg("A", struct.pack("<BH", 0, 3) + b"att")
+    data += _ulog_msg("A", struct.pack("<BH", 0, 4) + b"other")
+    for k in range(5):  # the trailing 7 bytes of padding are not in the file
+        payload = struct.pack("<Q4fB", 1000 * k, 1.0, 0.1 * k, 0.0, 0.0, k)
+        data += _ulog_msg("D", struct.pack("<H", 3) + payload)
+        data += _ulog_msg("D", struct.pack("<H", 4) + struct.pack("<Qd", 7, 2.5))
+    p = tmp_path / "x.ulg"
+    p.write_bytes(data)
+    u = read_topics(p, {"att"})
+    assert set(u) == {"att"} and len(u["att"]) == 5
+    assert u["att"]["timestamp"].tolist() == [0, 1000, 2000, 3000, 4000]
+    assert u["att"]["q"][3].tolist() == pytest.approx([1.0, 0.3, 0.0, 0.0])
+    assert u["att"]["n"].tolist() == [0, 1, 2, 3, 4]
+
+
+def test_euler_angles_of_a_known_quaternion():
+    from sim.rigs.ulog import _euler
+
+    r, pch, y = 0.3, -0.2, 2.0  # ZYX: q = qz(y) qy(p) qx(r)
+    cr, sr, cp, sp, cy, sy = (math.cos(r / 2), math.sin(r / 2), math.cos(pch / 2),
+                              math.sin(pch / 2), math.cos(y / 2), math.sin(y / 2))  # fmt: skip
+    q = np.array([[cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+                   cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy]])  # fmt: skip
+    assert _euler(q)[0].tolist() == pytest.approx([r, pch, y])

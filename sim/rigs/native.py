@@ -300,6 +300,7 @@ def fly_native(
             },  # fmt: skip
             "speed": speed,
             "origin": [origin.lat_deg, origin.lon_deg, origin.alt_amsl_m],
+            "t0_boot_s": t0,
             "modes": modes,
         },
         "figures": fig,
