@@ -189,7 +189,8 @@ def fly_native(
         )
     radius, clockwise = float(cfg.path.radius_m), bool(cfg.path.clockwise)
     c_T = np.asarray(cfg.path.center_m, float)
-    origin, ratio = _sample_origin_and_ratio(g, a.autopilot, 5.0)
+    t_placed = g.t_boot_s  # place_mission predicted the start --lead s from now
+    origin, ratio = _sample_origin_and_ratio(g, a.autopilot, min(4.0, a.lead * a.speedup))
     want = float(cfg.vehicle.airspeed_m_s)
     # ArduPlane's AIRSPEED_CRUISE is indicated; PX4's DO_CHANGE_SPEED flew the true airspeed
     # it was given (11.57 m/s commanded, 11.54 m/s true in SIH's still air)
@@ -206,7 +207,8 @@ def fly_native(
     else:
         g.command(MAV_CMD_DO_CHANGE_SPEED, *change_speed_params(indicated))
         speed["set"] = f"MAV_CMD_DO_CHANGE_SPEED airspeed {indicated:.3f} m/s"
-    g.wait_boot(a.lead * a.speedup)  # the same lead as the bridge's hand-over
+    # engage where place_mission put the start: --lead s after placing, as the bridge is given
+    g.wait_boot(max(0.0, a.lead * a.speedup - (g.t_boot_s - t_placed)))
 
     def centre_at(t: float) -> tuple[np.ndarray, Any]:
         st = target.state(t)

@@ -125,13 +125,13 @@ def _track(run: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, n
         rel = np.column_stack([d["rel_x"], d["rel_y"], d["rel_z"]])
         return d["t"] + t0, p, tp, _yaw(p, tp, rel), rel, run / "native_path_T.csv"
     d = np.genfromtxt(run / "bridge" / "timeseries.csv", delimiter=",", names=True)
-    t0 = _t0_of_bridge(run)
-    if t0 is None:
+    t0b = _t0_of_bridge(run)
+    if t0b is None:
         raise ValueError(f"{run}: no 'MPF t0=' in the bridge's tlog")
     p = np.column_stack([d["p_n"], d["p_e"], d["p_d"]])
     tp = np.column_stack([d["tgt_n"], d["tgt_e"], d["tgt_d"]])
     rel = np.column_stack([d["rel_x"], d["rel_y"], d["rel_z"]])
-    return d["t"] + t0, p, tp, d["tgt_yaw"], rel, run / "bridge" / "path_T.csv"
+    return d["t"] + t0b, p, tp, d["tgt_yaw"], rel, run / "bridge" / "path_T.csv"
 
 
 def _yaw(p: np.ndarray, tp: np.ndarray, rel: np.ndarray) -> np.ndarray:
