@@ -171,6 +171,34 @@ def _attitude_error(ul: dict[str, np.ndarray], tb: np.ndarray) -> dict[str, Any]
     }
 
 
+def _roll_error_explains_radial(
+    ul: dict[str, np.ndarray], tb: np.ndarray, rel: np.ndarray, P: np.ndarray, m: np.ndarray
+) -> dict[str, Any]:
+    """How much of the radial error (m, from the estimate) follows EKF2's roll error: the
+    correlation of the two (5 s moving means, steady window) with the radial error lagging by
+    0..15 s, at the lag where it is largest. An aircraft banked by its estimate turns by the
+    true bank: a roll error is a lateral acceleration error that the position shows seconds
+    later, whatever guidance flies it."""
+    a, g = ul.get("vehicle_attitude"), ul.get("vehicle_attitude_groundtruth")
+    if a is None or g is None or not len(a) or not len(g) or m.sum() < 100:
+        return {}
+    ra = np.unwrap(_euler(a["q"].astype(float))[:, 0])
+    rg = np.unwrap(_euler(g["q"].astype(float))[:, 0])
+    droll = np.interp(tb, a["timestamp"] / 1e6, ra) - np.interp(tb, g["timestamp"] / 1e6, rg)
+    c = P[:, :2].mean(axis=0)
+    rad = np.hypot(*(rel[:, :2] - c).T) - float(np.mean(np.hypot(*(P[:, :2] - c).T)))
+    dt = float(np.median(np.diff(tb)))
+    k = max(1, round(5.0 / dt))
+    x = np.convolve(droll, np.ones(k) / k, mode="same")[m]
+    y = np.convolve(rad, np.ones(k) / k, mode="same")[m]
+    best = (0.0, 0.0)
+    for lag in range(0, round(15.0 / dt) + 1, max(1, round(0.5 / dt))):
+        r = float(np.corrcoef(x[: len(x) - lag], y[lag:])[0, 1]) if lag < len(x) - 10 else 0.0
+        if abs(r) > abs(best[0]):
+            best = (r, lag * dt)
+    return {"radial_vs_roll_error_corr": best[0], "radial_lag_behind_roll_error_s": best[1]}
+
+
 def estimator_floor(run: Path, steady_after_s: float = 60.0) -> dict[str, Any]:
     """EKF2's position error against SIH's truth over the steady window, and e from both."""
     from mpf_mavlink.runs.compare import distance_to_polyline
@@ -190,6 +218,7 @@ def estimator_floor(run: Path, steady_after_s: float = 60.0) -> dict[str, Any]:
     est, tru = ul["vehicle_local_position"], ul["vehicle_local_position_groundtruth"]
     te, tt = est["timestamp"] / 1e6, tru["timestamp"] / 1e6
     tb, p, tp, yaw, rel, nodes_csv = _track(run)
+    P = np.genfromtxt(nodes_csv, delimiter=",", skip_header=1).reshape(-1, 3)
     t_rel = tb - tb[0]
     m = t_rel >= steady_after_s
     # the truth at the rig's samples, and the estimate at the same instants (the ULog's own)
@@ -201,7 +230,6 @@ def estimator_floor(run: Path, steady_after_s: float = 60.0) -> dict[str, Any]:
     c, s = np.cos(yaw), np.sin(yaw)
     q = truth + offset - tp
     rel_true = np.column_stack([c * q[:, 0] + s * q[:, 1], -s * q[:, 0] + c * q[:, 1], q[:, 2]])
-    P = np.genfromtxt(nodes_csv, delimiter=",", skip_header=1).reshape(-1, 3)
     e_est = distance_to_polyline(P, rel[m], True)
     e_true = distance_to_polyline(P, rel_true[m], True)
     # the part of the estimate's error that e sees: along the path's normal (radial) and height
@@ -213,6 +241,7 @@ def estimator_floor(run: Path, steady_after_s: float = 60.0) -> dict[str, Any]:
     )
     radial = np.sum(err_T[:, :2] * ur, axis=1)
     att = _attitude_error(ul, tb[m])
+    att.update(_roll_error_explains_radial(ul, tb, rel, P, m))
     return {
         "ulog": str(logs[-1]),
         **att,
