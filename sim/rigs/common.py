@@ -423,11 +423,23 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sitl: {e}", file=sys.stderr)
     finally:
         fw.stop()
+        if a.autopilot == "px4" and "figures" in summary:  # the ULog is complete once PX4 stops
+            summary["estimator_floor"] = _estimator_floor(out)
         (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
     print_table(summary, out)
     if a.record and "figures" in summary:
         record(summary)
     return rc
+
+
+def _estimator_floor(out: Path) -> dict[str, Any]:
+    """PX4: EKF2's error against SIH's truth over the steady window (:mod:`sim.rigs.ulog`)."""
+    from sim.rigs import ulog
+
+    try:
+        return ulog.estimator_floor(out)
+    except (OSError, ValueError, KeyError, IndexError) as e:
+        return {"error": f"no estimator figures: {e}"}
 
 
 def _flight_header(a: argparse.Namespace, v: dict[str, Any], bundle_dir: Path) -> dict[str, Any]:

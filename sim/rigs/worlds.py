@@ -65,7 +65,36 @@ def validate(argv: list[str]) -> tuple[Any, Path]:
     return a, v["out"]
 
 
+def render(dirs: list[str], record_it: bool) -> int:
+    """``scripts/sitl compare --render DIR... [--record]``: the table, figure and record of
+    compare directories already flown (their compare.json), computed again by this code."""
+    for d in dirs:
+        out = Path(d)
+        old = read_json(out / "compare.json")
+        if not old.get("rows"):
+            print(f"sitl compare: {d}: no compare.json", file=sys.stderr)
+            return 2
+        argv = old["command"].split()[2:]
+        from sim.rigs import common
+
+        a = common.parser().parse_args(argv)
+        codes = {r["guidance"]: r.get("exit_code") for r in old["rows"]}
+        res = collect(out, a, argv, codes)
+        res["commit"], res["date"] = old.get("commit"), old.get("date")
+        (out / "compare.json").write_text(json.dumps(res, indent=2, default=str) + "\n")
+        md = markdown(res)
+        (out / "compare.md").write_text(md + "\n")
+        overlay(out, res, out / "compare.png")
+        print(md)
+        if record_it:
+            record(res, out / "compare.png")
+    return 0
+
+
 def main(argv: list[str]) -> int:
+    if argv[:1] == ["--render"]:
+        rest = [x for x in argv[1:] if x != "--record"]
+        return render(rest, "--record" in argv)
     try:
         a, out = validate(argv)
     except RigError as e:
@@ -102,6 +131,11 @@ def collect(out: Path, a: Any, argv: list[str], codes: dict[str, int]) -> dict[s
     for gd in GUIDANCES:
         s = read_json(out / gd / "summary.json")
         f = s.get("figures") or {}
+        floor = s.get("estimator_floor")
+        if floor is None and a.autopilot == "px4" and f:
+            from sim.rigs.common import _estimator_floor
+
+            floor = _estimator_floor(out / gd)
         n = s.get("native") or {}
         rows.append(
             {
@@ -122,6 +156,7 @@ def collect(out: Path, a: Any, argv: list[str], codes: dict[str, int]) -> dict[s
                 "exit_code": codes.get(gd),
                 "flight": s.get("flight"),
                 "bundle": s.get("bundle"),
+                "estimator_floor": floor,
             }
         )
     from sim.rigs.common import _git_commit, flight_name
@@ -161,6 +196,30 @@ HEADER = [
 ]
 
 
+FLOOR_HEADER = [
+    "PX4: EKF2's estimate against SIH's truth over the same steady window (`python -m "
+    "sim.rigs.ulog`): the position error (its constant origin offset removed), the roll error, "
+    "how closely the radial error follows the roll error (correlation of 5 s means, the radial "
+    "lagging), and e measured from the truth instead of the estimate.",
+    "",
+    "| autopilot | guidance | position error RMS horiz. / vert. (m) | roll error mean / RMS (deg) "
+    "| radial vs roll error: corr., lag (s) | e RMS from estimate / truth (m) |",
+    "|---|---|---|---|---|---|",
+]
+
+
+def _floor_md(autopilot: str, guidance: str, fl: dict[str, Any]) -> str:
+    am = fl.get("attitude_error_mean_rpy_deg") or [None]
+    ar = fl.get("attitude_error_rms_about_mean_rpy_deg") or [None]
+    return (
+        f"| {autopilot} | {guidance} | {fmt(fl.get('estimate_error_rms_horizontal_m'))} / "
+        f"{fmt(fl.get('estimate_error_rms_vertical_m'))} | {_signed(am[0])} / {fmt(ar[0])} "
+        f"| {fmt(fl.get('radial_vs_roll_error_corr'), '.2f')}, "
+        f"{fmt(fl.get('radial_lag_behind_roll_error_s'), '.1f')} "
+        f"| {fmt(fl.get('e_rms_from_estimate_m'))} / {fmt(fl.get('e_rms_from_truth_m'))} |"
+    )
+
+
 def _wind_words(res: dict[str, Any]) -> str:
     w = res.get("wind")
     return f", wind {w[0]:g} m/s from {w[1]:g} deg" if w else ""
@@ -179,6 +238,11 @@ def markdown(res: dict[str, Any]) -> str:
         *HEADER,
         *(_row_md(res["autopilot"], r, _wind_words(res)) for r in res["rows"]),
     ]
+    floors = [
+        (r["guidance"], r["estimator_floor"]) for r in res["rows"] if r.get("estimator_floor")
+    ]
+    if floors and all("error" not in fl for _, fl in floors):
+        lines += ["", *FLOOR_HEADER, *(_floor_md(res["autopilot"], g, fl) for g, fl in floors)]
     for r in res["rows"]:
         sp = r.get("speed")
         if sp:
@@ -271,7 +335,8 @@ def write_results_table() -> Path:
         "",
         *HEADER,
     ]
-    cmds = []
+    cmds: list[str] = []
+    floors: list[str] = []
     for p in sorted(RESULTS.glob("native-*.json")):
         res = read_json(p)
         if not res.get("rows"):
@@ -281,10 +346,18 @@ def write_results_table() -> Path:
             extra = ", " + ", ".join(f"{k}={v:g}" for k, v in par.items()) if par else ""
             lines.append(_row_md(res["autopilot"], {**r, "words": r["words"] + extra},
                                  _wind_words(res)))  # fmt: skip
+        for r in res["rows"]:
+            fl = r.get("estimator_floor")
+            if fl and "error" not in fl:
+                floors.append(
+                    _floor_md(res["autopilot"], f"{r['guidance']}, {r.get('target')}", fl)
+                )
         cmds.append(
             f"- `{res['command']}` ({res.get('commit')}, {str(res.get('date'))[:10]}; "
             f"figure: native-{res['name']}.png)"
         )
+    if floors:
+        lines += ["", *FLOOR_HEADER, *floors]
     lines += ["", "Commands:", "", *cmds]
     md = RESULTS / "native.md"
     md.write_text("\n".join(lines) + "\n")
