@@ -162,9 +162,10 @@ def collect(out: Path, a: Any, argv: list[str], codes: dict[str, int]) -> dict[s
     from sim.rigs.common import _git_commit, flight_name
 
     a.guidance = "mpf"
-    name = "compare-" + flight_name(a).removeprefix(a.autopilot + "-")
+    # the MPF flight's name (its inputs are the compare's): the record's, unique per inputs
+    name = rows[0].get("flight") or flight_name(a)
     return {
-        "name": f"{a.autopilot}-{name.removeprefix('compare-')}",
+        "name": name,
         "autopilot": a.autopilot,
         "command": " ".join(["scripts/sitl", "compare", *argv]),
         "wind": list(a.wind) if a.wind else None,
@@ -289,14 +290,14 @@ def overlay(out: Path, res: dict[str, Any], png: Path) -> None:
         except (OSError, ValueError):
             continue
         lab = f"{r['words']} (RMS {fmt(r.get('e_rms_m'))} m)"
-        ax1.plot(t, e, color=colours[gd], lw=0.8, label=lab)
+        ax1.plot(t, np.maximum(e, 0.01), color=colours[gd], lw=0.8, label=lab)
         m = t >= 60.0
         ax2.plot(rel[m, 1], rel[m, 0], color=colours[gd], lw=0.6, label=gd)
         ax2.plot(P[:, 1], P[:, 0], "k--", lw=0.8)
     ax1.axvline(60.0, color="grey", lw=0.5)
     ax1.set_xlabel("time since engaging (s)")
     ax1.set_ylabel("e: distance from the moving path (m)")
-    ax1.set_yscale("symlog", linthresh=1.0)
+    ax1.set_yscale("log")
     ax1.legend(fontsize=8)
     ax1.set_title(f"{res['autopilot']}: {res['rows'][0].get('target')}{_wind_words(res)}")
     ax2.set_aspect("equal")
