@@ -324,3 +324,15 @@ def test_euler_angles_of_a_known_quaternion():
     q = np.array([[cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
                    cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy]])  # fmt: skip
     assert _euler(q)[0].tolist() == pytest.approx([r, pch, y])
+
+
+def test_a_flight_name_is_the_same_in_every_clone_and_changes_with_the_configs_content(tmp_path):
+    import shutil
+
+    a = _ns("px4", "--config", str(ROOT / "configs" / "bridge_px4.yaml"))
+    assert common.flight_name(a) == common.flight_name(_ns("px4"))  # the default is that file
+    c = tmp_path / "bridge_px4.yaml"
+    shutil.copy(ROOT / "configs" / "bridge_px4.yaml", c)
+    n1 = common.flight_name(_ns("px4", "--config", str(c)))
+    c.write_text(c.read_text().replace("K_R: 1.0", "K_R: 2.0"))
+    assert common.flight_name(_ns("px4", "--config", str(c))) != n1

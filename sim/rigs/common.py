@@ -381,7 +381,10 @@ def flight_name(a: argparse.Namespace, v: dict[str, Any] | None = None) -> str:
     if a.serial:
         parts.append("serial")
     key = {k: getattr(a, k, None) for k in _DISTINGUISHING}
-    key["config"] = str(Path(cfg_path).resolve())
+    cp = Path(cfg_path).resolve()
+    # the config by where it is in the checkout (the same name in every clone) and by content
+    key["config"] = str(cp.relative_to(ROOT)) if cp.is_relative_to(ROOT) else str(cp)
+    key["config_sha"] = hashlib.sha256(cp.read_bytes()).hexdigest() if cp.is_file() else None
     digest = hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()
     return "-".join(parts) + "-" + digest[:6]
 
