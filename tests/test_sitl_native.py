@@ -336,3 +336,28 @@ def test_a_flight_name_is_the_same_in_every_clone_and_changes_with_the_configs_c
     n1 = common.flight_name(_ns("px4", "--config", str(c)))
     c.write_text(c.read_text().replace("K_R: 1.0", "K_R: 2.0"))
     assert common.flight_name(_ns("px4", "--config", str(c))) != n1
+
+
+def test_the_results_table_has_every_recorded_compare_and_the_px4_floor(tmp_path, monkeypatch):
+    import json
+
+    monkeypatch.setattr(worlds, "RESULTS", tmp_path)
+    row = {"guidance": "mpf", "words": "MPF (mpf-mavlink run)", "target": "stationary",
+           "e_rms_m": 1.1, "e_max_m": 2.8, "e_mean_radial_m": -0.06, "e_mean_vertical_m": -0.2,
+           "tracked_s": 300.0, "verdict": "PASS"}  # fmt: skip
+    floor = {"estimate_error_rms_horizontal_m": 0.28, "estimate_error_rms_vertical_m": 0.33,
+             "attitude_error_mean_rpy_deg": [-0.2, 0, 0],
+             "attitude_error_rms_about_mean_rpy_deg": [1.0, 0, 0],
+             "radial_vs_roll_error_corr": 0.93, "radial_lag_behind_roll_error_s": 4.5,
+             "e_rms_from_estimate_m": 1.1, "e_rms_from_truth_m": 1.4}  # fmt: skip
+    nat = {**row, "guidance": "native", "words": "MAV_CMD_DO_ORBIT (Hold)", "verdict": "FLOWN",
+           "firmware_params": {"NPFG_PERIOD": 8.0}, "estimator_floor": floor}  # fmt: skip
+    for name, ap in (("px4-a", "px4"), ("arduplane-b", "arduplane")):
+        res = {"name": name, "autopilot": ap, "command": f"scripts/sitl compare {ap} --out X",
+               "commit": "c", "date": "2026-12-02", "rows": [row, nat]}  # fmt: skip
+        (tmp_path / f"native-{name}.json").write_text(json.dumps(res))
+    md = worlds.write_results_table().read_text()
+    assert md.count("| px4 |") == 3 and md.count("| arduplane |") == 3  # 2 rows + a floor row
+    assert "MAV_CMD_DO_ORBIT (Hold), NPFG_PERIOD=8 |" in md
+    assert "| 0.93, 4.5 | 1.1 / 1.4 |" in md
+    assert "`scripts/sitl compare px4 --out X`" in md
