@@ -201,7 +201,10 @@ FLOOR_HEADER = [
     "PX4: EKF2's estimate against SIH's truth over the same steady window (`python -m "
     "sim.rigs.ulog`): the position error (its constant origin offset removed), the roll error, "
     "how closely the radial error follows the roll error (correlation of 5 s means, the radial "
-    "lagging), and e measured from the truth instead of the estimate.",
+    "lagging), and e measured from the truth instead of the estimate. An aircraft banks by its "
+    "estimate and turns by its true bank: a roll error is a lateral acceleration error the "
+    "position shows seconds later, and a radial error that follows it closely is a floor that "
+    "neither guidance removes from the estimate it is given.",
     "",
     "| autopilot | guidance | position error RMS horiz. / vert. (m) | roll error mean / RMS (deg) "
     "| radial vs roll error: corr., lag (s) | e RMS from estimate / truth (m) |",
