@@ -427,6 +427,8 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         fw.stop()
         if a.autopilot == "px4" and "figures" in summary:  # the ULog is complete once PX4 stops
+            # (it reads the native flight's clock origin from summary.json: written first)
+            (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
             summary["estimator_floor"] = _estimator_floor(out)
         (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
     print_table(summary, out)

@@ -132,7 +132,7 @@ def collect(out: Path, a: Any, argv: list[str], codes: dict[str, int]) -> dict[s
         s = read_json(out / gd / "summary.json")
         f = s.get("figures") or {}
         floor = s.get("estimator_floor")
-        if floor is None and a.autopilot == "px4" and f:
+        if (floor is None or "error" in floor) and a.autopilot == "px4" and f:
             from sim.rigs.common import _estimator_floor
 
             floor = _estimator_floor(out / gd)
@@ -140,7 +140,7 @@ def collect(out: Path, a: Any, argv: list[str], codes: dict[str, int]) -> dict[s
         rows.append(
             {
                 "guidance": gd,
-                "words": "MPF (mpf-mavlink run)"
+                "words": "MPF (mpf-mavlink run)" + "".join(f", --set {x}" for x in a.overrides)
                 if gd == "mpf"
                 else f"{n.get('command', 'native')}, re-sent at {fmt(n.get('rate_hz'), 'g')} Hz",
                 "target": (s.get("mission") or {}).get("target"),
@@ -242,9 +242,7 @@ def markdown(res: dict[str, Any]) -> str:
         *HEADER,
         *(_row_md(res["autopilot"], r, _wind_words(res)) for r in res["rows"]),
     ]
-    floors = [
-        (r["guidance"], r["estimator_floor"]) for r in res["rows"] if r.get("estimator_floor")
-    ]
+    floors = [(r["words"], r["estimator_floor"]) for r in res["rows"] if r.get("estimator_floor")]
     if floors and all("error" not in fl for _, fl in floors):
         lines += ["", *FLOOR_HEADER, *(_floor_md(res["autopilot"], g, fl) for g, fl in floors)]
     for r in res["rows"]:
@@ -353,9 +351,7 @@ def write_results_table() -> Path:
         for r in res["rows"]:
             fl = r.get("estimator_floor")
             if fl and "error" not in fl:
-                floors.append(
-                    _floor_md(res["autopilot"], f"{r['guidance']}, {r.get('target')}", fl)
-                )
+                floors.append(_floor_md(res["autopilot"], f"{r['words']}, {r.get('target')}", fl))
         cmds.append(
             f"- `{res['command']}` ({res.get('commit')}, {str(res.get('date'))[:10]}; "
             f"figure: native-{res['name']}.png)"
