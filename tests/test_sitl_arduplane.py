@@ -11,6 +11,8 @@ and diverged after 60-90 s of good tracking. CI's load is of that kind: these fl
 
 from __future__ import annotations
 
+import math
+
 import pytest
 from sitl_flights import assert_hold, assert_tracked, marks, rig
 
@@ -33,7 +35,8 @@ def test_arduplane_engages_tracks_and_hands_back(tmp_path, moving, rms_max):
     real regression (an unstable capture, a lost stream, a bias of the old +0.53 m kind), and
     neither is a copy of one flight's figure.
     """
-    args = ["arduplane", "--duration", "120", *SPEEDUP, *(["--moving"] if moving else [])]
+    # the shipped config's target drifts 3 m/s east and flies as written; --still holds it
+    args = ["arduplane", "--duration", "120", *SPEEDUP, *([] if moving else ["--still"])]
     rc, s, log = rig(tmp_path / "rig", *args)
     assert_tracked(rc, s, log, rms_max, 0.3)
     # stock ArduPlane streams 1 Hz on this link: the bridge raised ATTITUDE to what the loop
@@ -47,7 +50,8 @@ def test_arduplane_over_a_serial_line(tmp_path):
     """README "CLI over serial": `mpf-mavlink run --connect /dev/pts/N:115200` on a
     pseudo-terminal relayed to ArduPlane's SERIAL1 (sim/rigs/pty_relay.py), 120 s. The link
     must not cost tracking: the same bounds as over TCP."""
-    rc, s, log = rig(tmp_path / "rig", "arduplane", "--duration", "120", "--serial", *SPEEDUP)
+    args = ["arduplane", "--duration", "120", "--serial", "--still", *SPEEDUP]
+    rc, s, log = rig(tmp_path / "rig", *args)
     assert s["serial"]["device"].startswith("/dev/pts/"), log
     assert s["serial"]["bytes_to_autopilot"] > 0 and s["serial"]["bytes_to_bridge"] > 0, log
     assert_tracked(rc, s, log, 0.5, 0.3)
@@ -57,8 +61,36 @@ def test_arduplane_over_a_serial_line(tmp_path):
 def test_arduplane_sigkill_falls_back_to_a_hold(tmp_path):
     """SIGKILL of the bridge 60 s into tracking: ArduPlane flies the GUIDED loiter about the
     path's centre the bridge set before engaging; judged by issue 22's hold (assert_hold)."""
-    args = ["arduplane", "--duration", "300", "--kill-after", "60", *SPEEDUP]
+    args = ["arduplane", "--duration", "300", "--kill-after", "60", "--still", *SPEEDUP]
     rc, s, log = rig(tmp_path / "rig", *args)
     assert s["figures"]["fallback"].startswith("ArduPlane GUIDED loiter"), log
     assert s["bridge_sent"].get("SET_ATTITUDE_TARGET", 0) > 0, log  # counted from its tlog
     assert_hold(rc, s, log)
+
+
+def test_arduplane_native_loiter_is_flown_and_judged_like_mpf(tmp_path):
+    """The firmware's own guidance on the same mission (`--guidance native`: GUIDED +
+    MAV_CMD_DO_REPOSITION with the circle's radius, re-sent at 1 Hz), 90 s, still target, so
+    that the head-to-head of docs/results/native.md cannot rot.
+
+    Bounds: the flight engaged GUIDED and every DO_REPOSITION was accepted; e (the same
+    function as MPF's) is computed and finite. Stock ArduPlane's loiter sits outside a 150 m
+    circle at this airspeed (NAVL1_LIM_BANK 0 widens the radius; no integrator for this
+    airframe's weak turn per bank): +16.2 m mean radial in a 90 s flight, +16.9 m in a 300 s one
+    at 23.5 m/s true (issue 42). 5..30 m holds that spread with room for the airspeed (the
+    offset grows with it) and fails on a regression that matters: a radius ignored (ArduPlane's
+    80 m WP_LOITER_RAD: -70 m) or the aircraft off the moving centre. The true airspeed flown
+    within 1 m/s of the config's 22 m/s: the indicated-to-true conversion the rig measured.
+    And the native figure above MPF's bound of the same mission (0.5 m RMS): the comparison's
+    point, checked on every run."""
+    args = ["arduplane", "--guidance", "native", "--duration", "90", "--still", *SPEEDUP]
+    rc, s, log = rig(tmp_path / "rig", *args)
+    f, n = s.get("figures", {}), s.get("native", {})
+    assert rc == 0 and s["verdict"] == "FLOWN", log
+    assert f["engaged"] is True and n["modes"][-1] == "GUIDED", log
+    assert all(r == 0 for r in n["acks"]["192"] if isinstance(r, int)), log
+    assert math.isfinite(f["e_rms_m"]) and f["e_steady_samples"] > 100, log
+    assert 5.0 <= f["e_mean_radial_m"] <= 30.0, log
+    assert f["e_rms_m"] > 0.5, log
+    assert abs(n["speed"]["true_airspeed_flown_m_s"] - 22.0) <= 1.0, log
+    assert (tmp_path / "rig" / "native_track.csv").is_file()

@@ -96,8 +96,9 @@ def fly_real(
         argv += ["--instance", str(instance)]
     if m.wind_m_s > 0:
         argv += ["--wind", f"{m.wind_m_s:g},{m.wind_dir_deg:g}"]
-    if m.moving:
-        argv.append("--moving")
+    # the rig flies a config's target as written: a still mission holds it still (the shipped
+    # ArduPlane config's target drifts east), a moving one moves a still one
+    argv.append("--moving" if m.moving else "--still")
     (out.parent / f"{m.name}.mission.json").write_text(json.dumps(m.__dict__))
     return rig(argv)
 

@@ -39,9 +39,17 @@ from typing import Any, NoReturn
 
 from mpf_mavlink.config.schema import load_config
 from mpf_mavlink.errors import MpfError
-from sim.rigs import arduplane, px4
+from sim.rigs import arduplane, native, px4
 from sim.rigs.bundles import ROOT, RigError, bundle_version, check_bundle, die_with_parent, unpack
-from sim.rigs.figures import cross_track, fmt, hold_figures, read_json, tlog_counts
+from sim.rigs.figures import (
+    cross_track,
+    fmt,
+    hold_figures,
+    read_json,
+    run_record_figures,
+    tlog_counts,
+    tlog_stream_hz,
+)
 from sim.rigs.gcs import Gcs
 
 AUTOPILOTS: dict[str, ModuleType] = {"px4": px4, "arduplane": arduplane}
@@ -71,6 +79,20 @@ def _wind(text: str) -> tuple[float, float]:
     if not (math.isfinite(spd) and math.isfinite(deg) and spd >= 0.0 and 0.0 <= deg <= 360.0):
         raise argparse.ArgumentTypeError(f"{text!r}: speed >= 0 m/s, direction 0..360 deg")
     return spd, deg
+
+
+def _param(text: str) -> tuple[str, float]:
+    name, eq, val = text.partition("=")
+    name = name.strip()
+    if not eq or not name or not name.replace("_", "").isalnum() or name.upper() != name:
+        raise argparse.ArgumentTypeError(f"--param {text!r}: expected NAME=VALUE (e.g. X_Y=1.5)")
+    try:
+        v = float(val)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--param {text!r}: {val!r} is not a number") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"--param {text!r}: not finite")
+    return name, v
 
 
 class _Parser(argparse.ArgumentParser):
@@ -104,10 +126,41 @@ def _add_flight_options(ap: argparse.ArgumentParser) -> None:
     _add_number(
         ap, "--duration", "time > 0 s", "seconds of tracking (autopilot time; default 300)", 300.0
     )
-    ap.add_argument(
+    tgt = ap.add_mutually_exclusive_group()
+    tgt.add_argument(
         "--moving",
         action="store_true",
-        help="moving target: the config's, or 3 m/s east if the config's is still",
+        help="a still config target replaced by one moving 3 m/s east (a moving or climbing "
+        "target flies as written, with or without this)",
+    )
+    tgt.add_argument(
+        "--still",
+        action="store_true",
+        help="the config's target held still at its start (default: the target as written)",
+    )
+    ap.add_argument(
+        "--guidance",
+        choices=("mpf", "native"),
+        default="mpf",
+        help="mpf: hand over to mpf-mavlink run (default); native: the firmware's own circle "
+        "re-centred on the target at --rate Hz (ArduPlane GUIDED + DO_REPOSITION, PX4 Hold + "
+        "DO_ORBIT), as a ground station's follow does",
+    )
+    _add_number(
+        ap,
+        "--rate",
+        "rate > 0 Hz",
+        "--guidance native: centre re-sent at this rate (default 1)",
+        1.0,
+    )
+    ap.add_argument(
+        "--param",
+        dest="params",
+        action="append",
+        default=[],
+        type=_param,
+        metavar="NAME=VALUE",
+        help="a firmware parameter set before take-off (repeatable; default: stock)",
     )
     ap.add_argument("--wind", type=_wind, help="SPEED,DIR_DEG (ArduPlane SIM_WIND_SPD/DIR)")
     _add_number(ap, "--turbulence", "speed >= 0 m/s", "ArduPlane SIM_WIND_TURB (m/s)")
@@ -161,7 +214,10 @@ def parser() -> argparse.ArgumentParser:
     ap = _Parser(
         prog="scripts/sitl",
         description="Fly mpf-mavlink against real PX4 / ArduPlane SITL firmware "
-        "(README 'Flying PX4 SITL', 'Flying ArduPilot SITL').",
+        "(README 'Flying PX4 SITL', 'Flying ArduPilot SITL'). "
+        "`scripts/sitl compare px4|arduplane --out DIR [options]` flies MPF and the firmware's "
+        "own guidance (--guidance native) one after the other with the same options and writes "
+        "DIR/compare.md, compare.png (docs/sitl.md 'Head-to-head on the firmware').",
     )
     _add_flight_options(ap)
     _add_rig_options(ap)
@@ -179,6 +235,8 @@ def validate(a: argparse.Namespace) -> dict[str, Any]:
         raise RigError(f"--instance {a.instance}: expected 0..200")
     if a.kill_after is not None and (a.sil or a.serial):
         raise RigError("--kill-after flies alone (no --sil, no --serial)")
+    if a.guidance == "native" and (a.kill_after is not None or a.sil or a.serial):
+        raise RigError("--guidance native: no bridge to kill, no SIL twin, no serial link")
     if a.binary is not None:
         b = Path(a.binary).expanduser()
         if not (b.is_file() and os.access(b, os.X_OK) and b.stat().st_mode & 0o111):
@@ -191,11 +249,16 @@ def validate(a: argparse.Namespace) -> dict[str, Any]:
         cfg = load_config(cfg_path, [*a.overrides, "target.position_ned_m=[0,0,-100]"])
     except MpfError as e:
         raise RigError(f"--config {cfg_path}: {e}") from None
-    tsets, label = target_sets(cfg, a.moving)
+    tsets, label = target_sets(cfg, a.moving, a.still)
     try:  # and with the target the rig will give it
         cfg = load_config(cfg_path, [*a.overrides, "target.position_ned_m=[0,0,-100]", *tsets])
     except MpfError as e:
         raise RigError(f"--config {cfg_path}: {e}") from None
+    if a.guidance == "native" and (cfg.path.type != "circle" or cfg.target.type == "mavlink"):
+        raise RigError(
+            f"--config {cfg_path}: --guidance native flies the firmware's circle about a "
+            f"scripted target (path.type circle, not {cfg.path.type}; target not mavlink)"
+        )
     flav = cfg.extra["mavlink"].flavour
     if flav not in (mod.FLAVOUR.value, "auto"):
         raise RigError(f"--config {cfg_path}: mavlink.flavour is {flav}, not {mod.FLAVOUR.value}")
@@ -245,27 +308,71 @@ def place_mission(g: Gcs, radius: float, lead_s: float) -> tuple[list[float], li
     return [x - radius * math.sin(chi2), y + radius * math.cos(chi2), lp.z], [x, y, lp.z]
 
 
-def target_sets(cfg: Any, moving: bool) -> tuple[list[str], str]:
-    """The target overrides and its label (what really flies, from the config)."""
+def _target_label(t: Any) -> str:
+    """What the config's target does, in words."""
+    if t.type == "mavlink":
+        return "live MAVLink target"
+    if t.type == "paper":
+        return "the paper's target profile"
+    if t.type == "stationary" or _is_still(t):
+        return "stationary"
+    parts = []
+    if t.speed_m_s:
+        parts.append(
+            f"moving {t.speed_m_s:g} m/s heading {math.degrees(t.heading_rad) % 360:.0f} deg"
+        )
+    if t.turn_rate_rad_s:
+        parts.append(f"turning {t.turn_rate_rad_s:g} rad/s")
+    if t.climb_rate_m_s:
+        parts.append(f"climbing {t.climb_rate_m_s:g} m/s")
+    return ", ".join(parts)
+
+
+def _is_still(t: Any) -> bool:
+    return t.type == "stationary" or (
+        t.type == "constant_turn"
+        and t.speed_m_s == 0.0
+        and t.turn_rate_rad_s == 0.0
+        and t.climb_rate_m_s == 0.0
+    )
+
+
+def target_sets(cfg: Any, moving: bool, still: bool = False) -> tuple[list[str], str]:
+    """The target overrides and the label of what really flies: the config's target as written;
+    ``still`` holds it at its start; ``moving`` replaces only a still one (3 m/s east)."""
     t = cfg.target
-    still = t.type == "stationary" or (t.speed_m_s == 0.0 and t.turn_rate_rad_s == 0.0)
-    if not moving:
-        return ["target.type=stationary"], "stationary"
-    sets: list[str] = []
-    typ, spd, hdg, turn = t.type, t.speed_m_s, t.heading_rad, t.turn_rate_rad_s
     if still:
+        was = "" if _is_still(t) else f" (--still: the config's is {_target_label(t)})"
+        return ["target.type=stationary"], "stationary" + was
+    if moving and _is_still(t):
         typ, spd, hdg = MOVING_DEFAULT
-        turn = 0.0
-        sets = [f"target.type={typ}", f"target.speed_m_s={spd:g}", f"target.heading_rad={hdg:.6f}"]
-    label = f"moving {spd:g} m/s heading {math.degrees(hdg) % 360:.0f} deg"
-    if turn:
-        label += f", turning {turn:g} rad/s"
-    return sets, label
+        sets = [f"target.type={typ}", f"target.speed_m_s={spd:g}", f"target.heading_rad={hdg:.6f}",
+                "target.turn_rate_rad_s=0", "target.climb_rate_m_s=0"]  # fmt: skip
+        label = f"moving {spd:g} m/s heading {math.degrees(hdg) % 360:.0f} deg"
+        return sets, label + " (--moving: the config's is still)"
+    return [], _target_label(t)
 
 
-def flight_name(a: argparse.Namespace) -> str:
-    """A flight's short name: autopilot, target, wind, kill, serial."""
-    parts = [a.autopilot, "moving" if a.moving else "stationary"]
+#: the inputs that make two flights different flights (their names then differ)
+_DISTINGUISHING = ("autopilot", "config", "overrides", "guidance", "rate", "params", "duration",
+                   "moving", "still", "wind", "turbulence", "kill_after", "watch_s", "serial",
+                   "speedup", "alt", "lead", "binary")  # fmt: skip
+
+
+def flight_name(a: argparse.Namespace, v: dict[str, Any] | None = None) -> str:
+    """A flight's name: autopilot, config stem, guidance, target, wind, kill, serial, and a
+    short hash of every input that makes it another flight (so --record never overwrites a
+    different flight's record)."""
+    import hashlib
+
+    cfg_path = v["config"] if v else Path(a.config or AUTOPILOTS[a.autopilot].DEFAULT_CONFIG)
+    label = v["target_label"] if v else ("moving" if a.moving else "stationary")
+    parts = [a.autopilot, Path(cfg_path).stem.removeprefix("bridge_")]
+    if parts[1] == a.autopilot:
+        parts.pop()  # the shipped config of that autopilot
+    if getattr(a, "guidance", "mpf") == "native":
+        parts.append(f"native{a.rate:g}hz")
+    parts.append("stationary" if label.startswith("stationary") else "moving")
     if a.wind is not None:
         parts.append(f"wind{a.wind[0]:g}")
     if a.turbulence:
@@ -274,10 +381,21 @@ def flight_name(a: argparse.Namespace) -> str:
         parts.append(f"kill{a.kill_after:g}")
     if a.serial:
         parts.append("serial")
-    return "-".join(parts)
+    key = {k: getattr(a, k, None) for k in _DISTINGUISHING}
+    cp = Path(cfg_path).resolve()
+    # the config by where it is in the checkout (the same name in every clone) and by content
+    key["config"] = str(cp.relative_to(ROOT)) if cp.is_relative_to(ROOT) else str(cp)
+    key["config_sha"] = hashlib.sha256(cp.read_bytes()).hexdigest() if cp.is_file() else None
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()
+    return "-".join(parts) + "-" + digest[:6]
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["compare"]:  # MPF and the firmware's own guidance, one after the other
+        from sim.rigs import worlds
+
+        return worlds.main(argv[1:])
     a = parser().parse_args(argv)
     try:
         v = validate(a)
@@ -296,7 +414,11 @@ def main(argv: list[str] | None = None) -> int:
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, _term)
-    summary: dict[str, Any] = {"flight": flight_name(a), "autopilot": a.autopilot}
+    summary: dict[str, Any] = {
+        "flight": flight_name(a, v),
+        "autopilot": a.autopilot,
+        "guidance": a.guidance,
+    }
     rc = 1
     try:
         rc = fly(a, v, fw, summary)
@@ -305,11 +427,25 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sitl: {e}", file=sys.stderr)
     finally:
         fw.stop()
+        if a.autopilot == "px4" and "figures" in summary:  # the ULog is complete once PX4 stops
+            # (it reads the native flight's clock origin from summary.json: written first)
+            (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
+            summary["estimator_floor"] = _estimator_floor(out)
         (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
     print_table(summary, out)
     if a.record and "figures" in summary:
         record(summary)
     return rc
+
+
+def _estimator_floor(out: Path) -> dict[str, Any]:
+    """PX4: EKF2's error against SIH's truth over the steady window (:mod:`sim.rigs.ulog`)."""
+    from sim.rigs import ulog
+
+    try:
+        return ulog.estimator_floor(out)
+    except (OSError, ValueError, KeyError, IndexError) as e:
+        return {"error": f"no estimator figures: {e}"}
 
 
 def _flight_header(a: argparse.Namespace, v: dict[str, Any], bundle_dir: Path) -> dict[str, Any]:
@@ -389,6 +525,9 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
     fw.start(bundle_dir, out / "firmware")
     g = Gcs(fw.gcs_url, mod.FLAVOUR)
     summary["autopilot_params"] = fw.configure(g)
+    for name, value in a.params:  # the user's tuning, before take-off (stock without)
+        g.set_param(name, value)
+    summary["firmware_params"] = dict(a.params)
     fw.take_off(g, a.alt)
     cruise = fw.cruise_airspeed(g)
     radius = float(cfg.path.radius_m) if cfg.path.type == "circle" else 0.0
@@ -410,6 +549,12 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
         "autopilot_cruise_airspeed_m_s": cruise,
         "overrides": sets,
     }
+    if a.guidance == "native":
+        try:
+            summary.update(native.fly_native(a, v, g, centre, sets, out))
+        finally:
+            g.close()
+        return 0 if summary["verdict"] == "FLOWN" else 1
     relay = None
     url = fw.bridge_url
     if a.serial:
@@ -501,13 +646,17 @@ def figures_of(
         "turn_gain": (m.get("adapter_learned") or {}).get("turn_gain"),
         "loop_delay_s": (m.get("delay_compensation") or {}).get("loop_delay_s"),
         "loop_delay_source": (m.get("delay_compensation") or {}).get("loop_delay_source"),
-        "attitude_hz": (((m.get("streams") or {}).get("messages") or {}).get("ATTITUDE") or {}).get(
-            "measured_hz"
-        ),
+        # as flown: ATTITUDE received over the tracking span (the bridge's start-up sample of its
+        # rate was taken before the rates it asked for had all arrived)
+        "attitude_hz": tlog_stream_hz(run / "mavlink.tlog"),
+        "attitude_hz_at_start": (
+            ((m.get("streams") or {}).get("messages") or {}).get("ATTITUDE") or {}
+        ).get("measured_hz"),
     }
     if cfg.path.type == "circle":
         f["steady_mean_radial_m"] = m.get("steady_mean_radial_m")
     f.update(cross_track(run, cfg.metrics.steady_after_s))
+    f.update(run_record_figures(run, cfg))  # e: the same function as --guidance native's
     out: dict[str, Any] = {"figures": f}
     if kill:
         counts = tlog_counts(run / "mavlink.tlog")
@@ -587,8 +736,11 @@ def sil_leg(
         r = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, check=False)
     sm = read_json(out / "sil" / "metrics.json")
     real, ours = summary["figures"].get("steady_rms_m"), sm.get("steady_rms_m")
-    warn = [ln for ln in (out / "sil.log").read_text().splitlines() if "[WARN]" in ln]
+    log = (out / "sil.log").read_text(errors="replace").splitlines()
+    warn = [ln for ln in log if "[WARN]" in ln]
+    refused = sil_refusal(r.returncode, log)
     return {
+        **({"error": refused} if refused else {}),
         "exit_code": r.returncode,
         "steady_rms_m": ours,
         "steady_mean_vertical_m": sm.get("steady_mean_vertical_m"),
@@ -598,10 +750,33 @@ def sil_leg(
     }
 
 
+def sil_refusal(code: int, log: list[str]) -> str | None:
+    """Why ``mpf-mavlink sim`` did not fly (its log's lines): the refusal line of exit 3 (a
+    failed check), or the last line of another non-flown exit; None when it flew."""
+    from mpf_mavlink.runs.compare import FLOWN_EXIT_CODES
+
+    if code in FLOWN_EXIT_CODES:
+        return None
+    lines = [ln.strip() for ln in log if ln.strip()]
+    line = next((ln for ln in reversed(lines) if "refused to fly" in ln), None)
+    if line is None:
+        line = lines[-1] if lines else "no output"
+    what = "refused by check" if code == 3 else "not flown"
+    return f"{what} (exit {code}): {line.split('refused to fly: ', 1)[-1]}"
+
+
 def _rows_setting(s: dict[str, Any]) -> list[tuple[str, str]]:
     """What was flown: flight, firmware, mission, wind, speed-up, serial link."""
     ms = s.get("mission", {})
     r = [("flight", s.get("flight", "?")), ("firmware", s.get("bundle", "?"))]
+    r.append(("guidance", _guidance_words(s)))
+    if s.get("firmware_params"):
+        r.append(
+            (
+                "firmware parameters",
+                ", ".join(f"{k}={v:g}" for k, v in s["firmware_params"].items()),
+            )
+        )
     if ms:
         r += [
             ("mission", f"{ms['path']} r {fmt(ms['radius_m'])} m, {ms['target']}"),
@@ -623,6 +798,60 @@ def _rows_setting(s: dict[str, Any]) -> list[tuple[str, str]]:
     if "serial" in s:
         r.append(("serial", f"{s['serial']['device']} <-> {s['serial']['relayed_to']}"))
     return r
+
+
+def _guidance_words(s: dict[str, Any]) -> str:
+    if s.get("guidance") != "native":
+        return "MPF (mpf-mavlink run)"
+    n = s.get("native") or {}
+    return f"the firmware's own: {n.get('command', '?')} at {fmt(n.get('rate_hz'), 'g')} Hz"
+
+
+def _rows_e(f: dict[str, Any]) -> list[tuple[str, str]]:
+    """The head-to-head's figures: e, the 3D distance from the moving path (the same function
+    for both guidances, :func:`sim.rigs.figures.moving_path_figures`)."""
+    r = [
+        (
+            "steady e RMS / max (to moving path)",
+            f"{fmt(f.get('e_rms_m'))} / {fmt(f.get('e_max_m'))} m",
+        ),
+        (
+            "steady e mean vertical (up +)",
+            f"{fmt(f.get('e_mean_vertical_m'))} m",
+        ),
+    ]
+    if "e_mean_radial_m" in f:
+        r.append(("steady e mean radial (out +)", f"{fmt(f.get('e_mean_radial_m'))} m"))
+    return r
+
+
+def _rows_native(s: dict[str, Any], f: dict[str, Any]) -> list[tuple[str, str]]:
+    """The firmware's own guidance: what the rig set and sent, and the same figures as MPF's."""
+    n = s.get("native") or {}
+    sp = n.get("speed") or {}
+    return [
+        ("engaged (mode + accepted)", "yes" if f.get("engaged") else "NO"),
+        ("modes", " -> ".join(n.get("modes", []))),
+        ("centre commands sent / acks", f"{n.get('centre_commands_sent')} / {n.get('acks')}"),
+        ("speed set", str(sp.get("set"))),
+        (
+            "true airspeed: wanted / flown (steady)",
+            f"{fmt(sp.get('true_airspeed_wanted_m_s'))} / "
+            f"{fmt(sp.get('true_airspeed_flown_m_s'))} m/s "
+            f"(true/indicated {fmt(sp.get('true_over_indicated_measured'), '.4f')})",
+        ),
+        ("tracked", f"{fmt(f.get('tracked_s'), '.1f')} s"),
+        (
+            "e first within / stays within",
+            f"{fmt(f.get('e_first_within_s'), '.1f')} / {fmt(f.get('e_stays_within_s'), '.1f')} s",
+        ),
+        *_rows_e(f),
+        (
+            "steady cross-track RMS / max",
+            f"{fmt(f.get('cross_track_rms_m'))} / {fmt(f.get('cross_track_max_m'))} m",
+        ),
+        ("steady mean cross-track (left +)", f"{fmt(f.get('cross_track_mean_m'))} m"),
+    ]
 
 
 def _rows_after_kill(
@@ -670,6 +899,7 @@ def _rows_tracking(f: dict[str, Any]) -> list[tuple[str, str]]:
     ]
     if "steady_mean_radial_m" in f:
         r.append(("steady mean radial (out +)", f"{fmt(f.get('steady_mean_radial_m'))} m"))
+    r += _rows_e(f)
     r += [
         (
             "thrust at ceiling",
@@ -712,6 +942,8 @@ def rows(s: dict[str, Any]) -> list[tuple[str, str]]:
     r = _rows_setting(s)
     if not f:
         return r + [("verdict", s.get("verdict", "?"))]
+    if s.get("guidance") == "native":
+        return r + _rows_native(s, f) + [("verdict", s.get("verdict", "?"))]
     h = s.get("hold")
     r += [
         ("bridge exit", s.get("bridge_exit", "?")),
@@ -736,7 +968,12 @@ def print_table(s: dict[str, Any], out: Path) -> None:
     print("-" * (w + 50))
     for k, val in rr:
         print(f"{k:<{w}}  {val}")
-    print(f"{'run directory':<{w}}  {out}  (summary.json, bridge/, bridge.log, firmware/)")
+    what = (
+        "summary.json, native_track.csv, firmware/"
+        if s.get("guidance") == "native"
+        else "summary.json, bridge/, bridge.log, firmware/"
+    )
+    print(f"{'run directory':<{w}}  {out}  ({what})")
 
 
 def record(s: dict[str, Any]) -> None:
@@ -761,6 +998,9 @@ def record(s: dict[str, Any]) -> None:
             "verdict",
             "bridge_verdict",
             "command",
+            "guidance",
+            "native",
+            "firmware_params",
         )
     }
     (RESULTS / f"sitl-{s['flight']}.json").write_text(
@@ -796,6 +1036,8 @@ def write_results_table() -> Path:
         thr = f.get("thrust_at_ceiling")
         sil = s.get("sil") or {}
         sil_txt = f"{fmt(sil.get('steady_rms_m'))}, {fmt(sil.get('real_over_sil'))}x" if sil else ""
+        if sil.get("error"):
+            sil_txt = str(sil["error"]).replace("|", "/")
         lines.append(
             f"| {s.get('flight')} | {s.get('bundle', '')} | {s.get('config')} "
             f"| {fmt(f.get('tracked_s'), '.0f')} "
