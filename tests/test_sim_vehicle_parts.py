@@ -1,5 +1,5 @@
-"""The SIL vehicle's pieces alone (sim/vehicle/, sim/autopilot/): framing against pymavlink's
-own bytes, the lockstep bookkeeping, the setpoint and mode rules, the step clock, the config and
+"""The SIL vehicle's pieces alone (sim/vehicle/, sim/autopilot/): framing (pymavlink's, with the
+sequence bookkeeping of MAVLink.send), the lockstep bookkeeping, the setpoint and mode rules, the step clock, the config and
 the truth record. No sockets, no plant: each piece is driven by hand."""
 
 from __future__ import annotations
@@ -21,8 +21,7 @@ from sim.autopilot.modes import GUIDED, LOITER, OFFBOARD, Modes, Tunables  # noq
 from sim.autopilot.setpoints import PX4_OFFBOARD_MIN_STREAM_S, Setpoints  # noqa: E402
 from sim.vehicle.clock import LockstepClock, StepClock  # noqa: E402
 from sim.vehicle.config import TelemetryRates, VehicleConfig, stock_rates  # noqa: E402
-from sim.vehicle.framing import Framer, crc_mcrf4xx, decode_set_attitude_target  # noqa: E402
-from sim.vehicle.link import _ignored  # noqa: E402
+from sim.vehicle.link import Framer, _ignored  # noqa: E402
 from sim.vehicle.lockstep import Lockstep, is_mode_request  # noqa: E402
 from sim.vehicle.truth import TruthRecorder  # noqa: E402
 
@@ -82,8 +81,8 @@ FRAMES = [
 
 @pytest.mark.parametrize("cls,args", FRAMES, ids=[c.msgname for c, _ in FRAMES])
 def test_framer_writes_pymavlinks_bytes(cls, args):
-    """The framer's bytes are pymavlink's, sequence numbers and counters included: a peer
-    cannot tell the two apart."""
+    """The framer's bytes are pymavlink's ``MAVLink.send``'s, sequence numbers and counters
+    included: a peer cannot tell the two apart."""
     for ids in ((1, 1), (2, 191)):  # the vehicle's and the target's system
         ours, ref = M.MAVLink(_Sink(), *ids), M.MAVLink(_Sink(), *ids)
         framer = Framer(ours)
@@ -92,51 +91,6 @@ def test_framer_writes_pymavlinks_bytes(cls, args):
             assert buf == bytes(cls(*args).pack(ref)), (ids, seq)
             ref.seq = (ref.seq + 1) & 0xFF
         assert ours.seq == 3 and ours.total_packets_sent == 3
-
-
-def test_crc_is_mavlinks_mcrf4xx():
-    """The C-speed CRCs (fastcrc's, and binascii's on reversed bytes without it) agree with
-    pymavlink's x25crc on arbitrary bytes."""
-    from pymavlink.dialects.v20.ardupilotmega import x25crc
-
-    from mpf_mavlink.mavlink.fastparse import _mcrf4xx_hqx
-
-    rng = np.random.default_rng(0)
-    for n in (0, 1, 7, 40, 255):
-        data = bytes(rng.integers(0, 256, n, dtype=np.uint8))
-        assert crc_mcrf4xx(data, 0xFFFF) == x25crc(data).crc
-        assert _mcrf4xx_hqx(data, 0xFFFF) == x25crc(data).crc
-
-
-def test_setpoint_decoder_reads_what_pymavlink_reads():
-    mav = M.MAVLink(_Sink(), 255, 190)
-    msg = M.MAVLink_set_attitude_target_message(
-        5000, 1, 1, 128, [1.0, 0.0, 0.0, 0.0], 0.1, -0.2, 0.0, 0.0
-    )
-    buf = bytes(msg.pack(mav))  # trailing zeros (thrust 0) trimmed by MAVLink 2
-    ours = decode_set_attitude_target(buf)
-    ref = M.MAVLink(None, 1, 1).parse_buffer(buf)[0]
-    assert ours is not None and ours.get_type() == ref.get_type()
-    for f in ref.get_fieldnames():
-        assert getattr(ours, f) == getattr(ref, f), f
-    assert (ours.get_srcSystem(), ours.get_srcComponent()) == (255, 190)
-    assert ours.get_msgbuf() == buf
-
-
-def test_setpoint_decoder_leaves_the_rest_to_pymavlink():
-    """A bad CRC, a signed frame, another message, two messages or a fragment: None."""
-    mav = M.MAVLink(_Sink(), 255, 190)
-    sat = bytes(
-        M.MAVLink_set_attitude_target_message(1, 1, 1, 128, [1, 0, 0, 0], 0, 0, 0, 0.5).pack(mav)
-    )
-    other = bytes(M.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(mav))
-    assert decode_set_attitude_target(sat[:-1] + bytes([sat[-1] ^ 1])) is None
-    signed = bytearray(sat)
-    signed[2] = 1  # MAVLINK_IFLAG_SIGNED
-    assert decode_set_attitude_target(bytes(signed)) is None
-    assert decode_set_attitude_target(other) is None
-    assert decode_set_attitude_target(sat + other) is None
-    assert decode_set_attitude_target(sat[:20]) is None
 
 
 def test_datagrams_of_dropped_messages_are_counted_unparsed_and_the_rest_parsed():
@@ -485,7 +439,6 @@ def test_target_positions_computed_ahead_are_the_bytes_computed_on_time(monkeypa
     import sim.vehicle.target_stream as TS
     from mpf_mavlink.core.target import ConstantTurn
     from sim.plant.jsbsim_plant import LocalNED
-    from sim.vehicle.framing import Framer
 
     def fly(ahead: int) -> list[bytes]:
         monkeypatch.setattr(TS, "_AHEAD", ahead)

@@ -27,8 +27,6 @@ from typing import Any
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.mavlink.boot_clock import BootClockGate
 from mpf_mavlink.mavlink.encode import encode_companion_heartbeat
-from mpf_mavlink.mavlink.fastpack import pack_v2, sent
-from mpf_mavlink.mavlink.fastparse import HotDecoder
 from mpf_mavlink.mavlink.ports import _Serial, _TcpClient
 from mpf_mavlink.mavlink.pymav import DIALECT_NAME, dialect, mavutil
 from mpf_mavlink.mavlink.tlog import TlogWriter
@@ -94,22 +92,18 @@ class DatagramReader:
     COMMAND_ACK) is thrown away. Here such a leftover is dropped (counted in ``bad_data``)
     before the next datagram is parsed.
 
-    A datagram's leading hot telemetry (unsigned MAVLink 2 frames with good CRCs:
-    :class:`~mpf_mavlink.mavlink.fastparse.HotDecoder`) is decoded in one pass, to the same
-    message objects; the rest goes to pymavlink's parser, as does every datagram while
-    signing is on or a pymavlink callback is set.
+    Every datagram goes to pymavlink's parser (the only MAVLink framer here).
 
     The socket is read here, not through ``mavudp.recv`` (whose bookkeeping of the sender's
     address is kept): a datagram is read once ``poll`` says one is waiting, so a control
     frame costs one wait and one read instead of a read that fails (an exception), a wait and
     a read."""
 
-    __slots__ = ("conn", "counters", "hot", "_pending", "_port", "_poll")
+    __slots__ = ("conn", "counters", "_pending", "_port", "_poll")
 
     def __init__(self, conn: Any, counters: LinkCounters) -> None:
         self.conn = conn
         self.counters = counters
-        self.hot = HotDecoder()
         self._pending: list[Any] = []  # the current datagram's messages, last first
         self._port = conn.port
         self._poll = select.poll()
@@ -156,18 +150,6 @@ class DatagramReader:
         mav = conn.mav
         if conn.first_byte:
             conn.auto_mavlink_version(data)
-        elif mav.signing.secret_key is None and mav.callback is None:
-            msgs, used = self.hot.decode(data)
-            if msgs:
-                mav.total_bytes_received += len(data)  # pymavlink's own tallies
-                mav.total_packets_received += len(msgs)
-                if used < len(data):
-                    # the rest, as pymavlink's parser would hold it after those frames
-                    mav.buf, mav.buf_index = bytearray(data[used:]), 0
-                    mav.expected_length = dialect.HEADER_LEN_V2 + 2
-                msgs.reverse()
-                self._pending = msgs
-                return True
         try:
             msg = mav.parse_char(data)
         except Exception:  # noqa: BLE001 - a pymavlink parse bug must not take the loop down
@@ -447,18 +429,8 @@ class Link:
         # logged before it is written: a process killed between the two (SIGKILL) never leaves
         # a packet the vehicle received out of the tlog (write-ahead; a packet the socket then
         # refuses stays in the tlog, counted in io_errors)
-        buf = pack_v2(mav, msg)
-        if buf is None:  # signed (or a send callback): pymavlink packs and writes
-            if not self._send_pymavlink(mav, msg):
-                return
-        else:
-            self._log_tx(buf)
-            try:
-                self._write(buf)
-            except OSError:
-                self.counters.io_errors += 1
-                return
-            sent(mav, buf)
+        if not self._send_pymavlink(mav, msg):
+            return
         self.counters.tx_packets += 1
         self.counters.tx_by_type[msg.get_type()] += 1
 
@@ -469,15 +441,17 @@ class Link:
         if self._closed:
             raise MpfError(f"link {self.url} is closed")
         mav = self.conn.mav
+        if self.signing_enabled or mav.send_callback is not None:
+            for m in msgs:  # each signed (its own timestamp) or handed to the callback
+                self.send(m)
+            return
         bufs: list[bytes] = []
-        for i, msg in enumerate(msgs):
-            buf = None if self.signing_enabled else pack_v2(mav, msg)
-            if buf is None:  # pymavlink must pack this one: it and the rest one by one
-                self._send_bufs(mav, bufs, msgs[:i])
-                for m in msgs[i:]:
-                    self.send(m)
-                return
-            sent(mav, buf)  # the next packet's sequence number
+        for msg in msgs:
+            buf = msg.pack(mav)  # pymavlink's packer, with mav's sequence number and ids
+            # the bookkeeping pymavlink's MAVLink.send does after packing
+            mav.seq = (mav.seq + 1) % 256
+            mav.total_packets_sent += 1
+            mav.total_bytes_sent += len(buf)
             bufs.append(buf)
         self._send_bufs(mav, bufs, msgs)
 

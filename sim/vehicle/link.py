@@ -15,11 +15,27 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from sim.vehicle.clock import StepClock
-from sim.vehicle.framing import Framer, decode_set_attitude_target
 from sim.vehicle.lockstep import Lockstep, is_mode_request
 
 _DATAGRAM_MAX = 1400  # a UDP datagram carries several packets (as PX4 does), up to this size
 _READS_MAX = 10000  # datagrams read per poll at most (a flood cannot hold the frame forever)
+
+
+class Framer:
+    """Frames messages with pymavlink for one ``MAVLink`` object (its ids, sequence counter and
+    signing), returning the bytes (the vehicle batches them into datagrams)."""
+
+    def __init__(self, mav: Any) -> None:
+        self.mav = mav
+
+    def pack(self, cls: Any, *args: Any) -> bytes:
+        """One framed message from the field values in pymavlink's ``*_encode`` order."""
+        mav = self.mav
+        buf = bytes(cls(*args).pack(mav))
+        mav.seq = (mav.seq + 1) & 0xFF  # what MAVLink.send does after packing
+        mav.total_packets_sent += 1
+        mav.total_bytes_sent += len(buf)
+        return buf
 
 
 def _ignored(data: bytes, wanted: frozenset[int]) -> int:
@@ -290,9 +306,8 @@ class Link:
 
     def _drain_udp(self, until_answered: bool = False) -> None:
         """Read whole datagrams (``until_answered``: until the lockstep's awaited answer has
-        come, else until none is left); a datagram that is one unsigned SET_ATTITUDE_TARGET
-        (the bridge's answer, 50 per simulated second) is decoded without pymavlink, one made of
-        messages the vehicle drops is not decoded at all (unless it is routed to other peers)."""
+        come, else until none is left); pymavlink parses each, except one made only of messages
+        the vehicle drops, which is not decoded at all (unless it is routed to other peers)."""
         conn = self.conn
         port, server, parse = conn.port, conn.udp_server, conn.mav.parse_buffer
         fast = conn.mav.signing.secret_key is None  # a signed link: pymavlink checks every frame
@@ -313,15 +328,11 @@ class Link:
                 conn.clients.add(addr)
                 conn.clients_last_alive[addr] = time.time()
             routed = server and len(conn.clients) > 1
-            sat = decode_set_attitude_target(data) if fast else None
-            if sat is not None:
-                msgs: Any = (sat,)
-            else:
-                skipped = _ignored(data, wanted) if fast and not routed else 0
-                if skipped:
-                    self.rx_count += skipped
-                    continue
-                msgs = parse(data) or ()
+            skipped = _ignored(data, wanted) if fast and not routed else 0
+            if skipped:
+                self.rx_count += skipped
+                continue
+            msgs = parse(data) or ()
             for msg in msgs:
                 self._on_msg(msg)
             if routed:
