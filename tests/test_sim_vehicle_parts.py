@@ -1,6 +1,6 @@
-"""The SIL vehicle's pieces alone (sim/vehicle/, sim/autopilot/): framing (pymavlink's, with the
-sequence bookkeeping of MAVLink.send), the lockstep bookkeeping, the setpoint and mode rules, the step clock, the config and
-the truth record. No sockets, no plant: each piece is driven by hand."""
+"""The SIL vehicle's pieces alone (sim/vehicle/, sim/autopilot/): framing (pymavlink's, with
+MAVLink.send's sequence bookkeeping), the lockstep bookkeeping, the setpoint and mode rules, the
+step clock, the config and the truth record. No sockets, no plant: each piece is driven by hand."""
 
 from __future__ import annotations
 
