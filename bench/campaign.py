@@ -36,17 +36,9 @@ def _fly(path: str, workers: int, samples: int | None = None) -> dict[str, Any]:
     if samples is not None:
         spec = dataclasses.replace(spec, samples=samples)
     load0 = os.getloadavg()[0]
-    # the workers load what `mpf-mavlink campaign` gives them (_compiled.prefer_for_simulation:
-    # the compiled hot paths when built, unless MPF_COMPILED is set), this process unchanged
-    had = os.environ.get("MPF_COMPILED")
-    os.environ.setdefault("MPF_COMPILED", "1")
-    try:
-        with tempfile.TemporaryDirectory(prefix="mpf-bench-campaign-") as d:
-            # a copy of the campaign file with the sample count used (the fingerprint reads it)
-            res = run_campaign(spec, Path(d), workers=workers, progress=False, log=lambda _s: None)
-    finally:
-        if had is None:
-            os.environ.pop("MPF_COMPILED", None)
+    with tempfile.TemporaryDirectory(prefix="mpf-bench-campaign-") as d:
+        # a copy of the campaign file with the sample count used (the fingerprint reads it)
+        res = run_campaign(spec, Path(d), workers=workers, progress=False, log=lambda _s: None)
     s = summarise(spec, res.rows)
     wall = [float(r.get("wall_s") or 0.0) for r in res.rows]
     cpu = [float(r.get("cpu_s") or 0.0) for r in res.rows]
@@ -62,7 +54,6 @@ def _fly(path: str, workers: int, samples: int | None = None) -> dict[str, Any]:
         "success_rate": s["success_rate"], "converged_rate": s["converged_rate"],
         "status": s["status"], "percentiles": s["percentiles"],
         "load_avg_1min_before": load0, "load_avg_1min_after": os.getloadavg()[0],
-        "mpf_compiled": had or "1",
     }  # fmt: skip
 
 

@@ -2,8 +2,7 @@
 
 Both fly the default demo (configs/default.yaml) with the SIL vehicle and the bridge as two
 processes over UDP loopback (sim/sil.py), measured on the plant's truth; each flight is
-``mpf-mavlink sim`` in a process of its own, so with the build that command uses
-(mpf_mavlink._compiled: compiled when built, MPF_COMPILED=0 for pure Python; ``hot_paths``).
+``mpf-mavlink sim`` in a process of its own.
 
 sil_real_time_factor: the demo as shipped (JSBSim X8, PX4 flavour, lockstep clock), flown three
 times; the median is the figure. ``tracking`` is simulated seconds per wall second while the
@@ -48,9 +47,8 @@ CONDITIONS: dict[str, tuple[list[str], float]] = {
 
 
 def _fly(overrides: list[str], out: Path) -> dict[str, Any]:
-    """The demo as ``mpf-mavlink sim -q --no-plots`` flies it, in a process of its own: with
-    the build that command chooses (``hot_paths`` in the metrics; MPF_COMPILED=0 measures pure
-    Python), not whatever this process imported for the other groups. Its metrics.json."""
+    """The demo as ``mpf-mavlink sim -q --no-plots`` flies it, in a process of its own (not
+    whatever this process imported for the other groups). Its metrics.json."""
     run = out / "run"
     cmd = [sys.executable, "-m", "mpf_mavlink.cli.main", "sim", DEMO, "-q", "--no-plots"]
     cmd += ["--out", str(run), *(a for s in overrides for a in ("--set", s))]
@@ -138,7 +136,6 @@ def _timed_run(recording: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
             "lockstep_overlapped": m.get("vehicle_lockstep_overlapped"),
             "steady_rms_m": m.get("steady_rms_m"),
             "steal_pct": steal,
-            "hot_paths": m.get("hot_paths"),
             "recording": recording,
         }
     )

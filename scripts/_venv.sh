@@ -34,12 +34,5 @@ elif [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ] || [ "$ROOT/re
   "$VENV/bin/python" -m pip install --quiet -c "$ROOT/requirements.lock" -e "$ROOT[dev]" >&2
   touch "$STAMP"
 fi
-# The optional compiled hot paths (mpf_mavlink/_compiled.py): rebuilt whenever a compiled module's
-# .py or .pxd, Cython or the flags changed; a quick no-op otherwise. Without Cython or a C
-# compiler it says so. Built so that tests/test_compiled.py checks them against pure Python;
-# used only with MPF_COMPILED=1 (mpf_mavlink/_compiled.py says why). MPF_PURE_PYTHON=1 skips it.
-if [ "${MPF_PURE_PYTHON:-0}" = 0 ]; then
-  nice -n 19 "$VENV/bin/python" -m mpf_mavlink._build --if-stale >&2
-fi
 export PATH="$VENV/bin:$PATH"
 export JSBSIM_DEBUG=0

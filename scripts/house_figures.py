@@ -32,7 +32,7 @@ SHIPPED = ("mpf_mavlink", "sim")  # pyproject's packages: what the wheel holds
 #: The layers, bottom first: a module may import its own layer and those below. ``bench`` is
 #: tooling beside the product (above everything it measures).
 LAYERS = [
-    ("mpf_mavlink.errors", "mpf_mavlink.constants", "mpf_mavlink._compiled", "mpf_mavlink._build"),
+    ("mpf_mavlink.errors", "mpf_mavlink.constants"),
     ("mpf_mavlink.core",),
     ("mpf_mavlink.mavlink",),
     ("mpf_mavlink.config",),
@@ -173,7 +173,7 @@ def _free_port() -> int:
 
 def run_closure(root: Path, fly: bool) -> dict[str, Any]:
     python = str(root / ".venv" / "bin" / "python")
-    env = dict(os.environ, MPF_PURE_PYTHON="1", MPF_COMPILED="0")
+    env = dict(os.environ)
     cfg = "configs/default.yaml"
     if not fly:
         # what `mpf-mavlink run` has imported when it starts the bridge (cli/run.py: cmd_run)

@@ -9,7 +9,6 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink._compiled import status as compiled_status
 from mpf_mavlink.config.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.frames import euler_to_matrix
@@ -87,5 +86,4 @@ def run_kinematic(cfg: Config, progress: bool = True) -> SimResult:
     cols = table.arrays()
     m = compute_metrics(cols, cfg.metrics.steady_after_s, cfg.metrics.converge_threshold_m)
     m.update({"sim_time_s": float(cols["t"][-1]), "wall_time_s": wall, "plant": "kinematic"})
-    m["hot_paths"] = compiled_status()  # which build flew: the wall time depends on it
     return SimResult(cols, m, loop.path.positions())

@@ -39,7 +39,6 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink._compiled import status as compiled_status
 from mpf_mavlink.bridge.envelope import verdict_words
 from mpf_mavlink.bridge.recording import LEAN_ROW_EVERY, is_lean
 from mpf_mavlink.config.scenario import build_path, build_target
@@ -514,8 +513,6 @@ def run_sil(
     res = _measure(cfg, truth, vinfo, bres, bridge_dir, wall)
     res.metrics.update(_cpu_per_frame(bar, sil.frame_period_s))
     res.metrics["clock"] = clock or sil.clock
-    # which build flew (the cost figures above depend on it; mpf_mavlink._compiled)
-    res.metrics["hot_paths"] = compiled_status()
     res.out_dir = out
     _write(out, res, truth, plots, LEAN_ROW_EVERY if is_lean(cfg.section("mavlink")) else 1)
     if interrupted:

@@ -30,21 +30,3 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[Any]) -> No
         )  # fmt: skip
         if names:
             item._id = coerce_node_id(f"{item.nodeid}@{'_'.join(names)}")
-
-
-@pytest.fixture(autouse=True)
-def _hot_paths_as_the_session_started() -> Any:
-    """A command run in-process (main(["sim", ...])) asks for the compiled hot paths for itself
-    and the processes it starts (mpf_mavlink._compiled.prefer_for_simulation); the next test
-    gets the environment and the import hooks the session started with."""
-    import os
-    import sys
-
-    had = os.environ.get("MPF_COMPILED")
-    hooks = list(sys.meta_path)
-    yield
-    if had is None:
-        os.environ.pop("MPF_COMPILED", None)
-    else:
-        os.environ["MPF_COMPILED"] = had
-    sys.meta_path[:] = hooks

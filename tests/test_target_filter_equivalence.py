@@ -126,7 +126,7 @@ def test_demo_feed_agrees_with_the_numpy_filter():
 def radio_feed() -> list[tuple[float, dict[str, Any]]]:
     """The paper's manoeuvring target through a radio, as (receive time s, report fields) in
     receive order: 5 Hz fixes (2 m, 0.3 m/s noise), 10 % lost, 5 % of them 0.4 s late, and
-    ATTITUDE-only turn-rate reports between them (also tests/_compiled_probe.py's feed)."""
+    ATTITUDE-only turn-rate reports between them."""
     rng = np.random.default_rng(2)
     m = PaperProfile()
     stream: list[tuple[float, dict[str, Any]]] = []

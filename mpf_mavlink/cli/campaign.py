@@ -43,9 +43,6 @@ def add_campaign_parser(sub: Any) -> None:
 
 
 def cmd_campaign(args: argparse.Namespace) -> int:
-    from mpf_mavlink._compiled import prefer_for_simulation
-
-    prefer_for_simulation()  # before the hot modules load; the workers inherit it
     from mpf_mavlink.campaign.design import load_campaign
     from mpf_mavlink.campaign.report import format_summary, plots, reflown_dirs, summarise
     from mpf_mavlink.campaign.run import run_campaign

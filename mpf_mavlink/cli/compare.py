@@ -161,9 +161,6 @@ def run_compare(
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from mpf_mavlink._compiled import prefer_for_simulation
-
-    prefer_for_simulation()  # before the hot modules load
     from mpf_mavlink.config.schema import load_config
     from mpf_mavlink.runs.compare import FLOWN_EXIT_CODES
     from mpf_mavlink.runs.rundir import prepare_out_dir

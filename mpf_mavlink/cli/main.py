@@ -102,9 +102,6 @@ def _gate(cfg: Config, force: bool) -> None:
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
-    from mpf_mavlink._compiled import prefer_for_simulation
-
-    prefer_for_simulation()  # before the hot modules load
     from mpf_mavlink.runs.rundir import prepare_out_dir
     from mpf_mavlink.runs.write import write_run
 
@@ -148,13 +145,10 @@ class _OneLineErrors(argparse.ArgumentParser):
 
 
 class _Version(argparse.Action):
-    """--version: the version and whether the hot paths run compiled (mpf_mavlink._compiled),
-    worked out only when asked (it imports them)."""
+    """--version: the version."""
 
     def __call__(self, parser: argparse.ArgumentParser, *_: Any) -> None:
-        from mpf_mavlink._compiled import status
-
-        print(f"{parser.prog} {__version__} ({status()})")
+        print(f"{parser.prog} {__version__}")
         parser.exit(0)
 
 

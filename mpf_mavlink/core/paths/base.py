@@ -187,8 +187,7 @@ def _closing_angles(Tl: list[Tuple3], F2l: list[Tuple3]) -> list[float]:
 
 def _cell_point(cell: _Cell, s: float) -> PathPointFlat:
     """:meth:`TabulatedPath.eval_flat` at arc length s (m) inside the cell ``cell`` (see
-    :meth:`TabulatedPath._hermite_cells`). A function of floats, not a method: its .pxd gives
-    every name a C double type when the module is compiled (mpf_mavlink._compiled)."""
+    :meth:`TabulatedPath._hermite_cells`), on floats (it runs once per law evaluation)."""
     (si, p0, p1, p2, ta0, ta1, ta2, b0, b1, b2, c0, c1, c2, bb0, bb1, bb2, cc0, cc1, cc2,
      v0, v1, v2, twist, k1a, k1s, k2a, k2s) = cell  # fmt: skip
     x = s - si
