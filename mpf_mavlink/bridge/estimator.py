@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,6 +44,9 @@ from numpy.typing import NDArray
 from mpf_mavlink.core.frames import wind_frame_from_velocity
 from mpf_mavlink.core.guidance.law import VehicleState, vehicle_state_of_floats
 from mpf_mavlink.core.so3 import exp as so3_exp
+
+if TYPE_CHECKING:  # the decoded samples' types (mavlink.codec), for the checker only
+    from mpf_mavlink.mavlink.codec import AttitudeSample, LocalPositionSample
 
 
 def eas_to_tas(alt_amsl_m: float) -> float:
@@ -288,12 +291,12 @@ class Estimator:
 
     def __init__(self, params: EstimatorParams = EstimatorParams()) -> None:
         self.p = params
-        self.att: Any = None  # AttitudeSample (decoded samples: mavlink.codec)
+        self.att: AttitudeSample | None = None
         self.att_rx: float | None = None
         self.att_source: str | None = None  # fixed by lock_attitude_source()
         self.att_seen: set[str] = set()  # the attitude sources heard so far
         self.att_ignored = 0  # attitude samples of the source not chosen
-        self.local: Any = None  # LocalPositionSample
+        self.local: LocalPositionSample | None = None
         self.local_rx: float | None = None
         self.glob: Any = None  # GlobalPositionSample
         self.glob_rx: float | None = None
@@ -334,14 +337,15 @@ class Estimator:
                 return False
         self._gen += 1  # a new sample: the fused inputs cached for estimate() are out of date
         if name == "AttitudeSample":
-            self.att, self.att_rx = sample, t_rx
+            att = cast("AttitudeSample", sample)  # (its class name said so)
+            self.att, self.att_rx = att, t_rx
             # the wind low-pass advances at each control instant, here, with the telemetry
             # received so far: advanced by whoever asked for an estimate first, its input
             # would depend on thread timing and a replay of the tlog could not reproduce it
-            self._advance_wind()
+            self._advance_wind(att)
             return True
         if name == "LocalPositionSample":
-            self.local, self.local_rx = sample, t_rx
+            self.local, self.local_rx = cast("LocalPositionSample", sample), t_rx
         elif name == "GlobalPositionSample":
             self.glob, self.glob_rx = sample, t_rx
         elif name == "HomeSample":
@@ -418,11 +422,10 @@ class Estimator:
         last = max(x.t_boot_s for x in (loc, g) if x is not None)
         return f"position stale ({t - last:.2f} s behind the attitude)"
 
-    def _attitude_lag(self) -> float:
+    def _attitude_lag(self, a: AttitudeSample) -> float:
         """How far (s) the other telemetry has gone on since the attitude sample, 0 if not at all:
         by receive time (one clock for every stream; a sample that stopped coming cannot hold
         the attitude hostage), or by the position's boot time when there are no receive times."""
-        a = self.att
         lag = 0.0
         if self.att_rx is not None:
             # not the wind: it is optional, and a single odd wind sample must not stall control
@@ -443,7 +446,7 @@ class Estimator:
         a = self.att
         if a is None:
             return None, "no attitude yet"
-        lag = self._attitude_lag()
+        lag = self._attitude_lag(a)
         if lag > self.p.attitude_stale_s:
             return None, f"attitude stale ({lag:.2f} s behind the other telemetry)"
         t = a.t_boot_s
@@ -484,13 +487,13 @@ class Estimator:
         self._fused = (self._gen, at_position, f)
         return f
 
-    def _advance_wind(self) -> None:
+    def _advance_wind(self, att: AttitudeSample) -> None:
         """Advance the wind low-pass to the attitude sample just stored (once per sample).
 
         Our wind: a low-pass of vg - v_air x_b, started at the first measurement (not at zero:
         a calm start would bias w1 by the drift angle for several tau) and restarted when the
         autopilot's clock goes back (a reboot)."""
-        t = self.att.t_boot_s
+        t = att.t_boot_s
         if self._wind_lp_t is not None and t < self._wind_lp_t:
             self._wind_lp = self._wind_lp_t = None
         f = self._fused_now()
@@ -527,6 +530,7 @@ class Estimator:
         xb0, xb1, xb2 = R_rows[0][0], R_rows[1][0], R_rows[2][0]  # body x-axis (NED)
         p = self.p
         a = self.att
+        assert a is not None  # a fused estimate has an attitude sample
         w = self.wind
         if w is not None and (
             self.wind_rx is None

@@ -41,10 +41,11 @@ class ControlInstants:
             self.att_period_s = _period(self.att_period_s, prev_att, sample)
             self.at_position = False
             return True
-        if type(sample).__name__ != "LocalPositionSample" or est.local is not sample:
+        loc = est.local
+        if type(sample).__name__ != "LocalPositionSample" or loc is None or loc is not sample:
             return False
         self.pos_period_s = _period(self.pos_period_s, prev_loc, sample)
-        if self.position_instants and self._position_instant(sample.t_boot_s):
+        if self.position_instants and self._position_instant(loc.t_boot_s):
             self.at_position = True
             return True
         return False

@@ -290,7 +290,7 @@ def density_ratio(h_m: float, h_ref_m: float) -> float:
 
     def rho(h: float) -> float:
         h = min(max(h, -500.0), 11000.0) if math.isfinite(h) else 0.0
-        return (1.0 - 2.25577e-5 * h) ** 4.255876
+        return math.pow(1.0 - 2.25577e-5 * h, 4.255876)  # a float (the base is > 0)
 
     return rho(h_m) / rho(h_ref_m)
 
