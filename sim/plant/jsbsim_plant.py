@@ -308,6 +308,32 @@ def _load(root_dir: Path, model: str, dt: float) -> tuple[Any, str]:
     return fdm, outdir
 
 
+def _initial_conditions(
+    origin: LocalNED,
+    position_ned: tuple[float, float, float] | np.ndarray,
+    ground_alt_m: float,
+    heading: float,
+    airspeed: float,
+) -> dict[str, float]:
+    """JSBSim's initial-condition properties: at ``position_ned`` (m about ``origin``), wings
+    level on ``heading`` (rad) at ``airspeed`` (m/s), the terrain at ``ground_alt_m`` (AMSL)."""
+    from mpf_mavlink.core.frames import ned_to_geodetic  # pymap3d, once at start-up only
+
+    lat, lon, alt = ned_to_geodetic(position_ned, origin.lat0_deg, origin.lon0_deg, origin.alt0_m)
+    return {
+        "ic/lat-geod-deg": lat,
+        "ic/long-gc-deg": lon,
+        "ic/terrain-elevation-ft": ground_alt_m / FT_TO_M,
+        "ic/h-sl-ft": alt / FT_TO_M,
+        "ic/psi-true-deg": math.degrees(heading),
+        "ic/vt-fps": airspeed / FT_TO_M,
+        "ic/alpha-deg": 0.0,
+        "ic/beta-deg": 0.0,
+        "ic/phi-deg": 0.0,
+        "ic/theta-deg": 0.0,
+    }
+
+
 class JSBSimPlant:
     """A JSBSim aircraft driven by normalized commands; see module docstring."""
 
@@ -339,24 +365,8 @@ class JSBSimPlant:
         pm = fdm.get_property_manager()
         self._pm = pm
         self._nodes: dict[str, Any] = {}
-        # Initial conditions.
-        from mpf_mavlink.core.frames import ned_to_geodetic  # pymap3d, once at start-up only
-
-        lat, lon, alt = ned_to_geodetic(position_ned, lat0_deg, lon0_deg, alt0_m)
-        ic = {
-            "ic/lat-geod-deg": lat,
-            "ic/long-gc-deg": lon,
-            "ic/terrain-elevation-ft": self.ground_alt_m / FT_TO_M,
-            "ic/h-sl-ft": alt / FT_TO_M,
-            "ic/psi-true-deg": math.degrees(heading),
-            "ic/vt-fps": airspeed / FT_TO_M,
-            "ic/alpha-deg": 0.0,
-            "ic/beta-deg": 0.0,
-            "ic/phi-deg": 0.0,
-            "ic/theta-deg": 0.0,
-            **(extra or {}),
-        }
-        for k, v in ic.items():
+        ic = _initial_conditions(self.origin, position_ned, self.ground_alt_m, heading, airspeed)
+        for k, v in {**ic, **(extra or {})}.items():
             self._set(k, v)
         with _QuietStderr():  # run_ic opens the model's output files
             ok = fdm.run_ic()
@@ -365,6 +375,13 @@ class JSBSimPlant:
         thr_prop, thr_sign = dict(DEFAULT_CONTROLS, **(controls or {}))["throttle"]
         self._spin_up(thr_prop, thr_sign, throttle)
         self._bind_controls(model, controls or {})
+        self._bind_state()
+        self._run = fdm.run
+        self._steady_wind = (0.0, 0.0, 0.0)  # m/s NED, what set_wind last set
+        self.random_wind: SitlTurbulence | None = None
+
+    def _bind_state(self) -> None:
+        """The state nodes and their bound getters (what state() and the rate loops read)."""
         n = self._node
         # state nodes
         self._n_t = n("simulation/sim-time-sec")
@@ -404,9 +421,6 @@ class JSBSimPlant:
         self._get_pqr_vt = tuple(
             x.get_double_value for x in (self._n_p, self._n_q, self._n_r, self._n_vt)
         )
-        self._run = fdm.run
-        self._steady_wind = (0.0, 0.0, 0.0)  # m/s NED, what set_wind last set
-        self.random_wind: SitlTurbulence | None = None
 
     def _bind_controls(self, model: str, controls: dict[str, tuple[str, float]]) -> None:
         """Command nodes and signs: the autopilot's convention (aileron > 0 rolls right,
