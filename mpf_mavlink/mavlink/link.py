@@ -30,7 +30,7 @@ from mpf_mavlink.mavlink.encode import encode_companion_heartbeat
 from mpf_mavlink.mavlink.ports import _Serial, _TcpClient
 from mpf_mavlink.mavlink.pymav import DIALECT_NAME, dialect, mavutil
 from mpf_mavlink.mavlink.tlog import TlogWriter
-from mpf_mavlink.mavlink.url import MAV_COMP_ID_ONBOARD_COMPUTER, parse_url
+from mpf_mavlink.mavlink.url import MAV_COMP_ID_ONBOARD_COMPUTER, ParsedUrl, parse_url
 
 UDP_MAX_PACKET_LEN = 65535  # pymavlink's mavutil.UDP_MAX_PACKET_LEN
 
@@ -280,9 +280,10 @@ class Link:
     def _read_one(self) -> tuple[bool, Any]:
         """(more, msg): msg is an accepted message or None; more=False when no data is left.
 
-        Every message received passes here (a few a control frame): the checks are written
-        out inline, with the link's fields read once, rather than as calls
-        (:meth:`accepts`)."""
+        Every message received passes here (a few a control frame): the source checks are
+        written out inline, with the link's fields read once, rather than as calls
+        (:meth:`accepts`); the record (:meth:`_record`) and the clock gate
+        (:meth:`_clock_rejects`) are one call each."""
         udp = self._udp
         try:
             msg = udp.recv() if udp is not None else self.conn.recv_msg()
@@ -308,19 +309,7 @@ class Link:
             tb = getattr(msg, "time_boot_ms", None)
             if isinstance(tb, int):
                 tb_s = tb * 1e-3  # the vehicle's clock
-        # one receive time for the record and the clock gate, quantised as the tlog stores it
-        # (us): a replay of the tlog can then take exactly the gate's decisions
-        vt = self.vehicle_time
-        t_rec = round((self._clock() if vt is None else vt.stamp(tb_s)) * 1e6) * 1e-6
-        # the receive time a consumer sees, with or without a tlog: the record's time exactly
-        msg._timestamp = t_rec
-        tlog = self.tlog
-        if tlog is not None:
-            try:
-                tlog.write(msg.get_msgbuf(), t_rec)
-            except (OSError, ValueError):
-                c.io_errors += 1
-                c.tlog_write_errors += 1
+        t_rec = self._record(msg, tb_s)
         if mtype.startswith("UNKNOWN_"):
             c.unknown_msgid += 1
             return True, None
@@ -346,22 +335,45 @@ class Link:
         ):
             c.rejected_identity += 1
             return True, None
-        if tb_s is not None:
-            gate = self.clock_gate
-            why = gate.check(mtype, tb_s, t_rec)
-            c.clock_resets = gate.resets
-            if vt is not None and why != "time":
-                vt.commit(t_rec)  # a sample of the vehicle's clock: time moves on
-            if why is not None:
-                if why == "time":
-                    c.rejected_time += 1
-                elif why == "settling":
-                    c.clock_settling += 1
-                else:
-                    c.rejected_stale += 1
-                return True, None
+        if tb_s is not None and self._clock_rejects(mtype, tb_s, t_rec):
+            return True, None
         c.rx_by_type[mtype] += 1
         return True, msg
+
+    def _record(self, msg: Any, tb_s: float | None) -> float:
+        """Stamp ``msg`` with its receive time (s) and write it to the tlog; the time."""
+        # one receive time for the record and the clock gate, quantised as the tlog stores it
+        # (us): a replay of the tlog can then take exactly the gate's decisions
+        vt = self.vehicle_time
+        t_rec: float = round((self._clock() if vt is None else vt.stamp(tb_s)) * 1e6) * 1e-6
+        # the receive time a consumer sees, with or without a tlog: the record's time exactly
+        msg._timestamp = t_rec
+        tlog = self.tlog
+        if tlog is not None:
+            try:
+                tlog.write(msg.get_msgbuf(), t_rec)
+            except (OSError, ValueError):
+                self.counters.io_errors += 1
+                self.counters.tlog_write_errors += 1
+        return t_rec
+
+    def _clock_rejects(self, mtype: str, tb_s: float, t_rec: float) -> bool:
+        """Whether the clock gate rejects a vehicle message stamped ``tb_s`` (its boot time, s)
+        received at ``t_rec`` (s), counted by why; the vehicle's clock moves on otherwise."""
+        c, gate, vt = self.counters, self.clock_gate, self.vehicle_time
+        why = gate.check(mtype, tb_s, t_rec)
+        c.clock_resets = gate.resets
+        if vt is not None and why != "time":
+            vt.commit(t_rec)  # a sample of the vehicle's clock: time moves on
+        if why is None:
+            return False
+        if why == "time":
+            c.rejected_time += 1
+        elif why == "settling":
+            c.clock_settling += 1
+        else:
+            c.rejected_stale += 1
+        return True
 
     def recv(self, timeout_s: float = 0.0) -> Any:
         """Next accepted message, waiting at most ``timeout_s`` (0 = poll). Never raises on
@@ -629,33 +641,7 @@ def open_link(
     parsed = parse_url(url, baud)
     mavutil.set_dialect(DIALECT_NAME)  # another module may have switched pymavlink's global
     kw = dict(source_system=int(source_system), source_component=int(source_component))
-    try:
-        if parsed.kind == "serial":
-            if not os.path.exists(parsed.device):
-                raise MpfError(f"serial device {parsed.device} does not exist")
-            conn = _Serial(parsed.device, parsed.baud, **kw)
-        elif parsed.kind == "tcp":
-            conn = _TcpClient(f"{parsed.host}:{parsed.port}", float(timeout_s), **kw)
-        else:
-            conn = mavutil.mavlink_connection(parsed.pymavlink_device, **kw)
-    except MpfError:
-        raise
-    except socket.gaierror:
-        raise MpfError(f"MAVLink URL {url!r}: cannot resolve host {parsed.host!r}") from None
-    except ConnectionRefusedError:
-        raise MpfError(
-            f"MAVLink URL {url!r}: connection refused (is the autopilot/SITL running?)"
-        ) from None
-    except TimeoutError:
-        raise MpfError(f"MAVLink URL {url!r}: no TCP connection within {timeout_s:g} s") from None
-    except PermissionError:
-        what = parsed.device or f"{parsed.host}:{parsed.port}"
-        raise MpfError(f"MAVLink URL {url!r}: permission denied for {what}") from None
-    except OSError as e:
-        what = parsed.device or f"{parsed.host}:{parsed.port}"
-        raise MpfError(f"MAVLink URL {url!r}: cannot open {what}: {e.strerror or e}") from None
-    except ValueError as e:
-        raise MpfError(f"MAVLink URL {url!r}: {e}") from None
+    conn = _connect(url, parsed, float(timeout_s), kw)
     if type(conn.mav).__module__ != dialect.__name__:  # pragma: no cover - defensive
         conn.mav = dialect.MAVLink(
             conn, srcSystem=kw["source_system"], srcComponent=kw["source_component"]
@@ -686,6 +672,37 @@ def open_link(
         tlog=tlog,
         vehicle_time=vehicle_time,
     )
+
+
+def _connect(url: str, parsed: ParsedUrl, timeout_s: float, kw: dict[str, int]) -> Any:
+    """pymavlink's connection for ``parsed`` (of ``url``), or MpfError (one line) saying why
+    not; ``kw`` the source ids."""
+    try:
+        if parsed.kind == "serial":
+            if not os.path.exists(parsed.device):
+                raise MpfError(f"serial device {parsed.device} does not exist")
+            return _Serial(parsed.device, parsed.baud, **kw)
+        if parsed.kind == "tcp":
+            return _TcpClient(f"{parsed.host}:{parsed.port}", timeout_s, **kw)
+        return mavutil.mavlink_connection(parsed.pymavlink_device, **kw)
+    except MpfError:
+        raise
+    except socket.gaierror:
+        raise MpfError(f"MAVLink URL {url!r}: cannot resolve host {parsed.host!r}") from None
+    except ConnectionRefusedError:
+        raise MpfError(
+            f"MAVLink URL {url!r}: connection refused (is the autopilot/SITL running?)"
+        ) from None
+    except TimeoutError:
+        raise MpfError(f"MAVLink URL {url!r}: no TCP connection within {timeout_s:g} s") from None
+    except PermissionError:
+        what = parsed.device or f"{parsed.host}:{parsed.port}"
+        raise MpfError(f"MAVLink URL {url!r}: permission denied for {what}") from None
+    except OSError as e:
+        what = parsed.device or f"{parsed.host}:{parsed.port}"
+        raise MpfError(f"MAVLink URL {url!r}: cannot open {what}: {e.strerror or e}") from None
+    except ValueError as e:
+        raise MpfError(f"MAVLink URL {url!r}: {e}") from None
 
 
 AUTOPILOTS = (dialect.MAV_AUTOPILOT_PX4, dialect.MAV_AUTOPILOT_ARDUPILOTMEGA)
