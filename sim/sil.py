@@ -472,15 +472,7 @@ def run_sil(
     truth_msg: Any = None
     try:
         try:
-            ready = rx.poll(120.0) and rx.recv()
-            if not ready or ready[0] != "ready":
-                raise MpfError(
-                    f"the SIL vehicle did not start: {ready[1] if ready else 'no answer in 120 s'}"
-                )
-            bar.note(
-                f"vehicle ready ({sil.plant}, {sil.flavour}, {clock or sil.clock} clock) in "
-                f"{ready[1]['mode']}"
-            )
+            _await_vehicle(rx, bar, f"{sil.plant}, {sil.flavour}, {clock or sil.clock} clock")
             # what the figures after the flight need (~0.3 s), loaded now while the hand-over
             # paces at real time and this process only waits
             import scipy.spatial  # noqa: F401
@@ -518,6 +510,19 @@ def run_sil(
     if interrupted:
         raise KeyboardInterrupt
     return res
+
+
+def _await_vehicle(rx: Any, bar: _Progress, what: str) -> None:
+    """Wait (up to 120 s) for the SIL vehicle's "ready" on ``rx`` and note it (``what``: its
+    plant, flavour and clock); MpfError when it does not come."""
+    from mpf_mavlink.errors import MpfError
+
+    ready = rx.poll(120.0) and rx.recv()
+    if not ready or ready[0] != "ready":
+        raise MpfError(
+            f"the SIL vehicle did not start: {ready[1] if ready else 'no answer in 120 s'}"
+        )
+    bar.note(f"vehicle ready ({what}) in {ready[1]['mode']}")
 
 
 def _start_peers(
@@ -631,34 +636,7 @@ def _measure(
         )
         info: dict[str, Any] = {}
     else:
-        cols, info = truth_table(cfg, truth, bc)
-        metrics = compute_metrics(
-            cols, cfg.metrics.steady_after_s, cfg.metrics.converge_threshold_m
-        )
-        m = cols["t"] >= cfg.metrics.steady_after_s
-        ct = info["cross_track_m"]
-        metrics["steady_rms_cross_track_m"] = (
-            float(np.sqrt(np.mean(ct[m] ** 2))) if m.any() else None
-        )
-        metrics["alignment_residual_m"] = info["alignment_residual_m"]
-        bm = bres.metrics
-        metrics["bridge_steady_rms_m"] = bm.get("steady_rms_m")
-        metrics["bridge_thrust_saturated_fraction"] = bm.get("thrust_saturated_fraction")
-        metrics["bridge_adapter_learned"] = bm.get("adapter_learned")
-        # the verdict on the plant's truth while the bridge was flying it
-        sel = info["rows"]
-        eul = truth["euler"][sel]
-        vd = assess(cfg, cols["t"], cols["pt_norm"], -truth["position_ned"][sel, 2],
-                    truth["airspeed"][sel], eul[:, 0], eul[:, 1], truth["throttle"][sel],
-                    source="truth")  # fmt: skip
-        # what the bridge's envelope monitor saw the law demand beyond the aircraft's limits
-        env = bm.get("envelope")
-        metrics["bridge_envelope"] = env
-        words = verdict_words(env) if isinstance(env, dict) else ""
-        if words:
-            vd.notes.append(f"envelope: {words}")
-        vd.record(metrics)
-        metrics["bridge_verdict"] = bm.get("verdict")
+        cols, metrics, info, vd = _judge_truth(cfg, truth, bc, bres.metrics)
     # real-time factor while the bridge was in control (the lockstep figure) and overall
     ml = vinfo["mode_log"]
     rtf_track = _tracking_rtf(ml, float(vinfo["sim_time_s"]))
@@ -689,6 +667,36 @@ def _measure(
     return SilResult(cols, metrics, path.positions(), Path("."), bridge_dir,
                      bridge_dir / "mavlink.tlog", code, bres.exit_reason, truth, bres,
                      info.get("t_vehicle", np.zeros(0)))  # fmt: skip
+
+
+def _judge_truth(
+    cfg: Config, truth: dict[str, np.ndarray], bc: dict[str, np.ndarray], bm: dict[str, Any]
+) -> tuple[dict[str, np.ndarray], dict[str, Any], dict[str, Any], Verdict]:
+    """The plant's truth against the bridge's rows ``bc`` (its metrics ``bm``): the truth's
+    table, metrics, alignment info and verdict while the bridge was flying it."""
+    cols, info = truth_table(cfg, truth, bc)
+    metrics = compute_metrics(cols, cfg.metrics.steady_after_s, cfg.metrics.converge_threshold_m)
+    m = cols["t"] >= cfg.metrics.steady_after_s
+    ct = info["cross_track_m"]
+    metrics["steady_rms_cross_track_m"] = float(np.sqrt(np.mean(ct[m] ** 2))) if m.any() else None
+    metrics["alignment_residual_m"] = info["alignment_residual_m"]
+    metrics["bridge_steady_rms_m"] = bm.get("steady_rms_m")
+    metrics["bridge_thrust_saturated_fraction"] = bm.get("thrust_saturated_fraction")
+    metrics["bridge_adapter_learned"] = bm.get("adapter_learned")
+    sel = info["rows"]
+    eul = truth["euler"][sel]
+    vd = assess(cfg, cols["t"], cols["pt_norm"], -truth["position_ned"][sel, 2],
+                truth["airspeed"][sel], eul[:, 0], eul[:, 1], truth["throttle"][sel],
+                source="truth")  # fmt: skip
+    # what the bridge's envelope monitor saw the law demand beyond the aircraft's limits
+    env = bm.get("envelope")
+    metrics["bridge_envelope"] = env
+    words = verdict_words(env) if isinstance(env, dict) else ""
+    if words:
+        vd.notes.append(f"envelope: {words}")
+    vd.record(metrics)
+    metrics["bridge_verdict"] = bm.get("verdict")
+    return cols, metrics, info, vd
 
 
 def _tracking_rtf(mode_log: list[Any], sim_end_s: float) -> float | None:
