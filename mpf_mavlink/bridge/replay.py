@@ -380,15 +380,22 @@ class _Replayer:
             self._rolls = [0.0, self._pending_roll]
         self._pending = None
         self._last_sent, self._last_expected, self._last_safe = rec, exp, False
-        d, name = _largest_diff(rec, exp)
-        if math.isfinite(d) and name not in _INT_FIELDS:
-            c.max_diff = max(c.max_diff, d)
-        if not d <= TOLERANCE:
-            c.differing += 1
-            c.max_diff = max(c.max_diff, d) if math.isfinite(d) else math.inf
-            self._difference(
-                f"{where}: {name} recorded {rec[name]!r}, replayed {exp[name]!r} (|diff| {d:.3g})"
-            )
+        text = _judge(c, rec, exp)
+        if text is not None:
+            self._difference(f"{where}: {text}")
+
+
+def _judge(c: CommandCheck, rec: dict[str, float], exp: dict[str, float]) -> str | None:
+    """Count a recorded setpoint ``rec`` against the replayed ``exp`` in ``c``: what differs
+    beyond TOLERANCE, or None."""
+    d, name = _largest_diff(rec, exp)
+    if math.isfinite(d) and name not in _INT_FIELDS:
+        c.max_diff = max(c.max_diff, d)
+    if d <= TOLERANCE:
+        return None
+    c.differing += 1
+    c.max_diff = max(c.max_diff, d) if math.isfinite(d) else math.inf
+    return f"{name} recorded {rec[name]!r}, replayed {exp[name]!r} (|diff| {d:.3g})"
 
 
 def _has_markers(messages: list[tuple[int, float, Any]], own: tuple[int, int]) -> bool:
