@@ -389,6 +389,23 @@ def _resync(data: bytes, start: int, n: int) -> int:
         p = s + 1
 
 
+def _count_skip(st: TlogStats, i: int, j: int, n: int, zeros: int) -> None:
+    """Count in ``st`` the bytes [i, j) skipped of a tlog of ``n`` bytes whose trailing zeros
+    begin at ``zeros``."""
+    if j >= n and n - zeros and zeros - i <= _MAX_RECORD:
+        # the record a crashed mapped writer was copying when it died, then its zeros: a
+        # cut-off tail (never sent: a record is whole before its packet leaves), not a
+        # corrupt stretch
+        st.truncated_tail_bytes += zeros - i
+        st.skipped_bytes += zeros - i
+        st.zero_tail_bytes += n - zeros
+        return
+    st.skipped_regions += 1
+    st.skipped_bytes += j - i
+    if j >= n:  # nothing decodable after i: a cut-off or garbled end of file
+        st.truncated_tail_bytes += n - i
+
+
 def iter_tlog(
     path: str | os.PathLike[str],
     *,
@@ -422,21 +439,6 @@ def iter_tlog(
     if n - zeros < 8:  # fewer than a time stamp's: the end of a record (a CRC byte), or cut
         zeros = n
     i = 0
-
-    def skip_to(j: int) -> None:
-        if j >= n and n - zeros and zeros - i <= _MAX_RECORD:
-            # the record a crashed mapped writer was copying when it died, then its zeros: a
-            # cut-off tail (never sent: a record is whole before its packet leaves), not a
-            # corrupt stretch
-            st.truncated_tail_bytes += zeros - i
-            st.skipped_bytes += zeros - i
-            st.zero_tail_bytes += n - zeros
-            return
-        st.skipped_regions += 1
-        st.skipped_bytes += j - i
-        if j >= n:  # nothing decodable after i: a cut-off or garbled end of file
-            st.truncated_tail_bytes += n - i
-
     while i < n:
         if i >= zeros:
             st.zero_tail_bytes += n - i
@@ -445,7 +447,7 @@ def iter_tlog(
         end = i + 8 + hdr[1] if hdr is not None else n + 1
         if hdr is None or end > n:
             j = _resync(data, i + 1, n)
-            skip_to(j)
+            _count_skip(st, i, j, n, zeros)
             i = j
             continue
         pkt = data[i + 8 : end]
@@ -462,7 +464,7 @@ def iter_tlog(
             ok = False
         if not ok:
             j = _resync(data, i + 1, n)
-            skip_to(j)
+            _count_skip(st, i, j, n, zeros)
             i = j
             continue
         t = hdr[0] * 1e-6
