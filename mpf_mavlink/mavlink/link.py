@@ -162,6 +162,22 @@ class DatagramReader:
         return True
 
 
+def _pack(mav: Any, msg: Any) -> bytes | None:
+    """The unsigned packet pymavlink's ``mav.send(msg)`` would write (its packer, ``mav``'s
+    sequence number and ids), without writing it; None when ``mav.send`` must do it itself
+    (signing, a send callback). Does not advance ``mav.seq`` (:func:`_sent` does)."""
+    if mav.signing.sign_outgoing or mav.send_callback is not None:
+        return None
+    return bytes(msg.pack(mav))
+
+
+def _sent(mav: Any, buf: bytes) -> None:
+    """The bookkeeping pymavlink's ``MAVLink.send`` does after writing ``buf``."""
+    mav.seq = (mav.seq + 1) % 256
+    mav.total_packets_sent += 1
+    mav.total_bytes_sent += len(buf)
+
+
 def _count_bad(c: LinkCounters, msg: Any, signing_counts_itself: bool) -> None:
     """Count a BAD_DATA: an unsigned or badly signed packet while signing is on, or a bad
     frame (a hardened signing setup counts its bad signatures itself)."""
@@ -441,8 +457,18 @@ class Link:
         # logged before it is written: a process killed between the two (SIGKILL) never leaves
         # a packet the vehicle received out of the tlog (write-ahead; a packet the socket then
         # refuses stays in the tlog, counted in io_errors)
-        if not self._send_pymavlink(mav, msg):
-            return
+        buf = _pack(mav, msg)
+        if buf is None:  # signed (or a send callback): pymavlink packs and writes
+            if not self._send_pymavlink(mav, msg):
+                return
+        else:
+            self._log_tx(buf)
+            try:
+                self._write(buf)
+            except OSError:
+                self.counters.io_errors += 1
+                return
+            _sent(mav, buf)
         self.counters.tx_packets += 1
         self.counters.tx_by_type[msg.get_type()] += 1
 
@@ -453,17 +479,15 @@ class Link:
         if self._closed:
             raise MpfError(f"link {self.url} is closed")
         mav = self.conn.mav
-        if self.signing_enabled or mav.send_callback is not None:
-            for m in msgs:  # each signed (its own timestamp) or handed to the callback
-                self.send(m)
-            return
         bufs: list[bytes] = []
-        for msg in msgs:
-            buf = msg.pack(mav)  # pymavlink's packer, with mav's sequence number and ids
-            # the bookkeeping pymavlink's MAVLink.send does after packing
-            mav.seq = (mav.seq + 1) % 256
-            mav.total_packets_sent += 1
-            mav.total_bytes_sent += len(buf)
+        for i, msg in enumerate(msgs):
+            buf = None if self.signing_enabled else _pack(mav, msg)
+            if buf is None:  # pymavlink must send this one: it and the rest one by one
+                self._send_bufs(mav, bufs, msgs[:i])
+                for m in msgs[i:]:
+                    self.send(m)
+                return
+            _sent(mav, buf)  # the next packet's sequence number
             bufs.append(buf)
         self._send_bufs(mav, bufs, msgs)
 
