@@ -299,7 +299,7 @@ class Link:
         Every message received passes here (a few a control frame): the source checks are
         written out inline, with the link's fields read once, rather than as calls
         (:meth:`accepts`); the record (:meth:`_record`) and the clock gate
-        (:meth:`_clock_rejects`) are one call each."""
+        (:func:`_clock_rejects`) are one call each."""
         udp = self._udp
         try:
             msg = udp.recv() if udp is not None else self.conn.recv_msg()
@@ -351,7 +351,7 @@ class Link:
         ):
             c.rejected_identity += 1
             return True, None
-        if tb_s is not None and self._clock_rejects(mtype, tb_s, t_rec):
+        if tb_s is not None and _clock_rejects(self, mtype, tb_s, t_rec):
             return True, None
         c.rx_by_type[mtype] += 1
         return True, msg
@@ -372,24 +372,6 @@ class Link:
                 self.counters.io_errors += 1
                 self.counters.tlog_write_errors += 1
         return t_rec
-
-    def _clock_rejects(self, mtype: str, tb_s: float, t_rec: float) -> bool:
-        """Whether the clock gate rejects a vehicle message stamped ``tb_s`` (its boot time, s)
-        received at ``t_rec`` (s), counted by why; the vehicle's clock moves on otherwise."""
-        c, gate, vt = self.counters, self.clock_gate, self.vehicle_time
-        why = gate.check(mtype, tb_s, t_rec)
-        c.clock_resets = gate.resets
-        if vt is not None and why != "time":
-            vt.commit(t_rec)  # a sample of the vehicle's clock: time moves on
-        if why is None:
-            return False
-        if why == "time":
-            c.rejected_time += 1
-        elif why == "settling":
-            c.clock_settling += 1
-        else:
-            c.rejected_stale += 1
-        return True
 
     def recv(self, timeout_s: float = 0.0) -> Any:
         """Next accepted message, waiting at most ``timeout_s`` (0 = poll). Never raises on
@@ -634,6 +616,25 @@ class VehicleTimeStamps:
     def commit(self, t: float) -> None:
         """A sample stamped ``t`` (from :meth:`stamp`) was accepted: time moves on to it."""
         self.t_last = t if self.t_last is None else max(self.t_last, t)
+
+
+def _clock_rejects(link: Link, mtype: str, tb_s: float, t_rec: float) -> bool:
+    """Whether ``link``'s clock gate rejects a vehicle message stamped ``tb_s`` (its boot time,
+    s) received at ``t_rec`` (s), counted by why; the vehicle's clock moves on otherwise."""
+    c, gate, vt = link.counters, link.clock_gate, link.vehicle_time
+    why = gate.check(mtype, tb_s, t_rec)
+    c.clock_resets = gate.resets
+    if vt is not None and why != "time":
+        vt.commit(t_rec)  # a sample of the vehicle's clock: time moves on
+    if why is None:
+        return False
+    if why == "time":
+        c.rejected_time += 1
+    elif why == "settling":
+        c.clock_settling += 1
+    else:
+        c.rejected_stale += 1
+    return True
 
 
 def open_link(
