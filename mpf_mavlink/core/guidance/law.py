@@ -210,7 +210,8 @@ def vehicle_vectors(vehicle: VehicleState, ext: Extensions) -> tuple[Mat3, Vec3,
         return R, (f[9], f[10], f[11]), (f[12], f[13], f[14])
     (a0, b0, c0), (a1, b1, c1), (a2, b2, c2) = vehicle.R_W_I.tolist()
     eta = tuple(vehicle.wind.tolist()) if ext.wind_compensation else _ZERO3
-    return ((a0, a1, a2), (b0, b1, b2), (c0, c1, c2)), tuple(vehicle.position.tolist()), eta  # type: ignore[return-value]
+    p = tuple(vehicle.position.tolist())
+    return ((a0, a1, a2), (b0, b1, b2), (c0, c1, c2)), p, eta
 
 
 TargetVectors = tuple[Mat3, Vec3, Vec3, Vec3, Vec3, Vec3]
@@ -228,7 +229,7 @@ def target_vectors(target: TargetState) -> TargetVectors:
         ((a0, a1, a2), (b0, b1, b2), (c0, c1, c2)), tuple(target.position.tolist()),
         tuple(target.velocity.tolist()), tuple(target.acceleration.tolist()),
         tuple(target.omega_T.tolist()), tuple(target.omega_dot_T.tolist()),
-    )  # type: ignore[return-value]  # fmt: skip
+    )  # fmt: skip
 
 
 # --------------------------------------------------------------------------- the equations
