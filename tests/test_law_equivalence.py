@@ -23,6 +23,7 @@ commands (the last test).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import zlib
 
@@ -31,6 +32,8 @@ import pytest
 
 from mpf_mavlink.core import so3
 from mpf_mavlink.core.guidance import Extensions, Gains, VehicleState, mpf_law
+from mpf_mavlink.core.guidance.law import mpf_errors, vehicle_state_of_floats
+from mpf_mavlink.core.guidance.law_unrolled import mpf_law_unrolled
 from mpf_mavlink.core.paths import circle, helix, lemniscate
 from mpf_mavlink.core.target import ConstantTurn, PaperProfile
 from tests._law_reference import reference_mpf_law
@@ -178,3 +181,21 @@ def test_outside_assumption_1_the_command_stays_finite():
         assert all(math.isfinite(v) for v in (c.w2, c.w3, c.sdot, *c.omega_w1_I, *d.omega_DI))
         assert max(abs(c.w2), abs(c.w3)) <= 1.0
     assert outside > 50
+
+
+@pytest.mark.parametrize("scenario", _scenarios(), ids=lambda sc: sc[0])
+def test_the_unrolled_law_is_the_plain_law_bit_for_bit(scenario):
+    # law_unrolled.py performs the same IEEE operations in the same order as law.py (its module
+    # docstring): equal, not close, on every field, with the target's and the vehicle's floats
+    # or their arrays, with and without the record, and for mpf_errors' record.
+    name, path, motion, gains, ext, v_w, wind = scenario
+    rng = np.random.default_rng(zlib.crc32(name.encode()) + 1)
+    for s, t, p, R, eta, tgt, _, _ in _states(path, motion, 100, rng, wind):
+        floats = tuple(float(v) for v in (*R[0], *R[1], *R[2], *p, *eta))
+        for veh in (VehicleState(t, p, R, v_w, eta), vehicle_state_of_floats(t, floats, v_w)):
+            for tg in (tgt, dataclasses.replace(tgt)):
+                for keep in (True, False):
+                    got = mpf_law_unrolled(s, veh, tg, path, gains, ext, keep)
+                    assert got == mpf_law(s, veh, tg, path, gains, ext, keep)
+                errors = mpf_law_unrolled(s, veh, tg, path, gains, ext, True, "law+sat")[1]
+                assert errors == mpf_errors(s, veh, tg, path, gains, ext, "law+sat")
