@@ -2,12 +2,14 @@
 
 Read law.py for the law: this is the same IEEE operations in the same order, written out on
 named components instead of 3-tuples and one call per equation, so it returns the same numbers
-bit for bit (tests/test_law_equivalence.py asserts it over 1,600 states). It stays because it
-pays in a user's flow: ``mpf-mavlink sim`` of the paper's kinematic closed loop (4 law
-evaluations per RK4 step) takes 1.36x the CPU time with law.py's form (farm-bench A/B,
-2.58 s against 3.52 s median); the bridge uses law.py. ``mpf_law_unrolled`` is one 190-line
-function (the exception to the house's 80 lines): splitting it costs the calls and tuples
-it exists to avoid.
+bit for bit (tests/test_law_equivalence.py asserts it). It stays where it pays in a user's
+flow: ``mpf-mavlink sim`` of the paper's kinematic closed loop (4 law evaluations per RK4
+step) takes 1.36x the CPU time with law.py's form (whole-process A/B, 5 runs each: 3.52 s
+against 2.58 s median), so sim/plant/kinematic.py uses this one. The bridge uses law.py: its
+control path measured 1.16x the CPU time with it (a recorded 600 s demo's 30,134 steps, 5
+passes) and the SIL demo 1.12x, under the 1.2x that would pay for a second form there.
+``mpf_law_unrolled`` is one 190-line function (the exception to the house's 80 lines):
+splitting it costs the calls and tuples it exists to avoid.
 
 Vectors are named components (x, y, z in {T}; n, e, d in NED; 1, 2, 3 on a frame's axes, as
 wd21 is the second component of wd1) and matrices their columns (R_F^T = (f1, f2, f3)). No I/O,
