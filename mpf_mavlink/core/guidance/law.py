@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Literal, NamedTuple, cast
+from typing import Literal, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -442,6 +442,7 @@ def apply_extensions(
 # --------------------------------------------------------------------------- the law
 
 _NO_EXTENSIONS = Extensions()
+_LawResult = tuple[MpfCommand, MpfDiagnostics | None]
 _new_tuple = tuple.__new__  # the NamedTuples without their keyword-parsing constructor (~0.3 us)
 
 
@@ -546,7 +547,7 @@ def mpf_law(
     """
     x = law_instant(float(s), vehicle, target, path, gains, ext)
     if errors_mode is not None:  # mpf_errors: the record without the rates
-        return cast(Any, (None, errors_record(x, errors_mode)))
+        return cast(_LawResult, (None, errors_record(x, errors_mode)))  # mpf_errors unwraps it
     omega_DI = desired_rate(x, gains.alpha)  # (10)
     law, ff = autopilot_reference(gains.K_R, x.e, omega_DI, x.R_W_I)  # (23)
     cmd2, cmd3, mode = apply_extensions(law, ff, x.psi, x.d1, x.R_W_I, gains.K_R, ext)

@@ -19,7 +19,7 @@ no clock.
 from __future__ import annotations
 
 import math
-from typing import Any, cast
+from typing import cast
 
 from mpf_mavlink.core.guidance.law import (
     Extensions,
@@ -41,6 +41,7 @@ Vec5 = tuple[float, float, float, float, float]
 Mat3 = tuple[Vec3, Vec3, Vec3]
 
 _NO_EXTENSIONS = Extensions()
+_LawResult = tuple[MpfCommand, MpfDiagnostics | None]
 
 
 def _steady_state_frame(u_f2: float, u_f3: float, v_w: float) -> WdFrame:
@@ -247,7 +248,7 @@ def mpf_law_unrolled(
              (tn + pdn, te + pde, td + pdd), psi, (e2, e3), y_w, z_w,
              v_w - math.sqrt(uF1 * uF1 + uF2 * uF2 + uF3 * uF3), errors_mode),
         )  # fmt: skip
-        return cast(Any, (None, errors))
+        return cast(_LawResult, (None, errors))  # mpf_errors unwraps it
 
     # (10) omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d}, each the exact rate
     # of its frame along the closed-loop flow. omega_FT^F = sdot (tau, -kappa_2, kappa_1).
