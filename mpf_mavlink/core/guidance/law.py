@@ -236,12 +236,12 @@ def target_vectors(target: TargetState) -> TargetVectors:
 
 
 def relative_kinematics(
-    R_T_I: Mat3, p: Vec3, p_t: Vec3, v_t: Vec3, eta: Vec3, w1: Vec3, v_w: float, wind: bool
+    R_T_I: Mat3, r: Vec3, v_t: Vec3, eta: Vec3, w1: Vec3, v_w: float, wind: bool
 ) -> tuple[Vec3, Vec3, Vec3]:
-    """(1) [UAVKinematics] pdot = v_w w1 + eta_hat, seen from the target, in {T}:
-    q = R_I^T (p - p_t) (m), uu = R_I^T (v_t - eta_hat) (m/s, eta_hat only when ``wind``) and
+    """(1) [UAVKinematics] pdot = v_w w1 + eta_hat, seen from the target, in {T}: with
+    r = p - p_t (NED), q = R_I^T r (m), uu = R_I^T (v_t - eta_hat) (m/s, eta_hat only when ``wind``) and
     c = R_I^T pdot - uu = v_w w1^T - uu, the vehicle's velocity relative to the target (m/s)."""
-    q = mat_T_vec(R_T_I, sub(p, p_t))
+    q = mat_T_vec(R_T_I, r)
     uu = mat_T_vec(R_T_I, sub(v_t, eta) if wind else v_t)
     c = sub(scale(v_w, mat_T_vec(R_T_I, w1)), uu)
     return q, uu, c
@@ -487,7 +487,7 @@ def law_instant(
     tv = target_vectors(target)
     R_T_I, p_t, v_t, _, omega_T, _ = tv
     r = sub(p, p_t)
-    q, uu, c = relative_kinematics(R_T_I, p, p_t, v_t, eta, R_W_I[0], v_w, ext.wind_compensation)
+    q, uu, c = relative_kinematics(R_T_I, r, v_t, eta, R_W_I[0], v_w, ext.wind_compensation)
     point = path.eval_with_rate(s)
     p_d, f1, f2, f3 = point[:4]
     R_F_T = (f1, f2, f3)
