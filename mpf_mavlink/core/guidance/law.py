@@ -239,8 +239,9 @@ def relative_kinematics(
     R_T_I: Mat3, r: Vec3, v_t: Vec3, eta: Vec3, w1: Vec3, v_w: float, wind: bool
 ) -> tuple[Vec3, Vec3, Vec3]:
     """(1) [UAVKinematics] pdot = v_w w1 + eta_hat, seen from the target, in {T}: with
-    r = p - p_t (NED), q = R_I^T r (m), uu = R_I^T (v_t - eta_hat) (m/s, eta_hat only when ``wind``) and
-    c = R_I^T pdot - uu = v_w w1^T - uu, the vehicle's velocity relative to the target (m/s)."""
+    r = p - p_t (NED), q = R_I^T r (m), uu = R_I^T (v_t - eta_hat) (m/s, eta_hat only when
+    ``wind``) and c = R_I^T pdot - uu = v_w w1^T - uu, the vehicle's velocity relative to the
+    target (m/s)."""
     q = mat_T_vec(R_T_I, r)
     uu = mat_T_vec(R_T_I, sub(v_t, eta) if wind else v_t)
     c = sub(scale(v_w, mat_T_vec(R_T_I, w1)), uu)
