@@ -22,6 +22,7 @@ from mpf_mavlink.core.adapter import (
     reserve_airspeed,
     safe_setpoint,
 )
+from mpf_mavlink.core.energy import EnergyState
 from mpf_mavlink.core.frames import euler_to_matrix, quat_wxyz_to_matrix
 
 P = AdapterParams()
@@ -35,7 +36,7 @@ def test_level_flight_gives_zero_rates_and_trim_thrust():
     assert sp.body_rates_frd == (0.0, 0.0, 0.0)
     assert sp.bank_rad == 0.0 and sp.load_factor == pytest.approx(1.0)
     assert sp.thrust == pytest.approx(P.trim_thrust)  # trim + 0 * kp + 0 integrator + 0 * k_n
-    assert st_.integ == 0.0
+    assert st_.energy.integ == 0.0
     # ArduPlane quaternion: roll 0, pitch = flight-path angle 0 + trim alpha, yaw 0
     a = P.trim_pitch_rad / 2
     assert sp.q_wxyz == pytest.approx((math.cos(a), 0.0, math.sin(a), 0.0), abs=1e-12)
@@ -85,14 +86,16 @@ def test_airspeed_hold_integrates_and_anti_windup():
     # the airspeed PI (energy control off): 2 m/s slow: kp e = 0.1, integrator +ki e dt each call
     P = dataclasses.replace(globals()["P"], energy_control=False)
     sp, s1 = adapt((0.0, 0.0, 0.0), 13.0, LEVEL, NORTH, 0.5, P)
-    assert s1.integ == pytest.approx(P.airspeed_ki * 2.0 * 0.5)
-    assert sp.thrust == pytest.approx(P.trim_thrust + 0.1 + s1.integ)
+    assert s1.energy.integ == pytest.approx(P.airspeed_ki * 2.0 * 0.5)
+    assert sp.thrust == pytest.approx(P.trim_thrust + 0.1 + s1.energy.integ)
     # 20 m/s slow for a long time: output saturates at thrust_max and the integrator freezes
     s = AdapterState()
     for _ in range(200):
         sp, s = adapt((0.0, 0.0, 0.0), 1.0, LEVEL, NORTH, 0.1, P, s)
     assert sp.thrust == P.thrust_max
-    assert s.integ < P.integrator_limit  # frozen as soon as the output saturated (0.5 + 0.7 > 1)
+    assert (
+        s.energy.integ < P.integrator_limit
+    )  # frozen as soon as the output saturated (0.5 + 0.7 > 1)
 
 
 finite = st.floats(-1e6, 1e6)
@@ -112,7 +115,7 @@ def test_limits_never_exceeded(om, v, rpy, w1, dt, integ):
             R = np.full((3, 3), math.nan)
         n = math.sqrt(sum(x * x for x in w1)) if all(math.isfinite(x) for x in w1) else 1.0
     w1n = tuple(x / n for x in w1) if n > 1e-9 and math.isfinite(n) else w1
-    sp, s = adapt(om, v, R, w1n, dt, P, AdapterState(integ))
+    sp, s = adapt(om, v, R, w1n, dt, P, AdapterState(energy=EnergyState(integ)))
     vals = (*sp.body_rates_frd, *sp.q_wxyz, sp.thrust, sp.bank_rad, sp.pitch_rad)
     assert all(math.isfinite(x) for x in vals)
     assert abs(sp.body_rates_frd[0]) <= P.max_roll_rate_rad_s
@@ -121,7 +124,7 @@ def test_limits_never_exceeded(om, v, rpy, w1, dt, integ):
     assert P.thrust_min <= sp.thrust <= P.thrust_max
     assert abs(sp.bank_rad) <= P.max_bank_rad
     assert P.min_pitch_rad <= sp.pitch_rad <= P.max_pitch_rad
-    assert abs(s.integ) <= P.integrator_limit
+    assert abs(s.energy.integ) <= P.integrator_limit
     assert math.isclose(sum(x * x for x in sp.q_wxyz), 1.0, rel_tol=1e-9)
     # roll and pitch come from R's last row (yaw does not enter it, nor the adapter)
     bad = not all(math.isfinite(x) for x in (*om, v, *w1n, dt, *R[2]))
@@ -210,7 +213,7 @@ def test_airspeed_integrator_can_reach_the_thrust_ceiling():
     for _ in range(5000):
         sp, st_ = adapt((0.0, 0.0, 0.0), 12.0, LEVEL, NORTH, 0.02, P, st_)
     assert sp.thrust == P.thrust_max
-    assert st_.integ <= P.thrust_max - P.trim_thrust + 1e-12
+    assert st_.energy.integ <= P.thrust_max - P.trim_thrust + 1e-12
 
 
 def test_roll_rate_gain_is_the_zero_order_hold_equivalent_of_the_time_constant():
@@ -370,8 +373,8 @@ def test_energy_feedforward_flies_a_steady_climb_at_trim_plus_k_gamma():
     for _ in range(5):
         sp, s = adapt((0.0, 0.0, 0.0), 16.0, R, w1, 0.02, E, s)
     assert sp.thrust == pytest.approx(E.trim_thrust + E.thrust_per_gamma * g_, abs=1e-9)
-    assert s.integ == pytest.approx(0.0, abs=1e-12)
-    assert s.balance == 0.0
+    assert s.energy.integ == pytest.approx(0.0, abs=1e-12)
+    assert s.energy.balance == 0.0
 
 
 def test_energy_saturation_anti_windup_and_airspeed_priority():
@@ -383,17 +386,17 @@ def test_energy_saturation_anti_windup_and_airspeed_priority():
     for _ in range(n):
         sp, s = adapt((0.0, 0.0, 0.0), 13.0, R, w1, dt, E, s)  # 13 m/s: below v_min + 1
     assert sp.thrust == E.thrust_max
-    assert s.integ <= 1e-12  # never grew (its only move was toward the limit's room)
+    assert s.energy.integ <= 1e-12  # never grew (its only move was toward the limit's room)
     # airspeed priority, airspeed at or below v_min + 1 (weight 1): the flight path moves to
     # what full thrust sustains, gamma_c - u, u = (T_raw - 1) / (k_T + k_E) > 0: the offset is
     # negative, and after 10 time constants it has reached its target to exp(-10) ~ 5e-5
-    assert s.balance < -0.1
+    assert s.energy.balance < -0.1
     # the pitch set-point carries it: the same state under "height" keeps the path's demand
     h = dataclasses.replace(E, priority="height")
     sh = AdapterState(trim_hat=0.05)
     for _ in range(n):
         sph, sh = adapt((0.0, 0.0, 0.0), 13.0, R, w1, dt, h, sh)
-    assert sh.balance == 0.0
+    assert sh.energy.balance == 0.0
     assert sp.pitch_rad < sph.pitch_rad - 0.1
 
 
@@ -404,7 +407,7 @@ def test_energy_priority_leaves_the_path_alone_while_the_airspeed_has_room():
     for _ in range(100):
         sp, s = adapt((0.0, 0.0, 0.0), 16.0, R, w1, 0.02, E, s)
     assert sp.thrust == E.thrust_max
-    assert s.balance == 0.0
+    assert s.energy.balance == 0.0
 
 
 def test_energy_updraft_surplus_goes_into_height_near_vmax():
@@ -415,23 +418,25 @@ def test_energy_updraft_surplus_goes_into_height_near_vmax():
     for _ in range(200):
         sp, s = adapt((0.0, 0.0, 0.0), 17.5, R, w1, 0.02, E, s)
     assert sp.thrust == E.thrust_min
-    assert s.balance > 0.05
+    assert s.energy.balance > 0.05
 
 
 def test_energy_reengagement_starts_from_the_autopilots_thrust():
     # the autopilot flies 0.8 where the configured trim is 0.3: the first set-point after
     # (re-)engagement is 0.8 exactly (no step), the integrator holds the difference
     w1, R = _climb(0.0)
-    s = AdapterState(integ=0.4, trim_hat=0.05, balance=0.2).for_reengage(thrust_engaged=0.8)
-    assert s.balance == 0.0 and s.v_prev is None
+    s = AdapterState(trim_hat=0.05, energy=EnergyState(integ=0.4, balance=0.2)).for_reengage(
+        thrust_engaged=0.8
+    )
+    assert s.energy.balance == 0.0 and s.energy.v_prev is None
     sp, s = adapt((0.0, 0.0, 0.0), 16.0, R, w1, 0.02, E, s)
     assert sp.thrust == pytest.approx(0.8, abs=1e-12)
-    assert s.integ == pytest.approx(0.5, abs=1e-9)
-    assert s.thrust_engaged is None  # used once
+    assert s.energy.integ == pytest.approx(0.5, abs=1e-9)
+    assert s.energy.thrust_engaged is None  # used once
     # unknown thrust (no VFR_HUD): the configured trim, integrator at 0
-    s2 = AdapterState(integ=0.4).for_reengage(None)
+    s2 = AdapterState(energy=EnergyState(integ=0.4)).for_reengage(None)
     sp2, _ = adapt((0.0, 0.0, 0.0), 16.0, R, w1, 0.02, E, AdapterState(trim_hat=0.05))
-    assert s2.integ == 0.0 and sp2.thrust == pytest.approx(E.trim_thrust, abs=1e-9)
+    assert s2.energy.integ == 0.0 and sp2.thrust == pytest.approx(E.trim_thrust, abs=1e-9)
 
 
 # ------------------------------------------------------------------ energy reserve (issue 25)
@@ -468,8 +473,8 @@ def test_reserve_raises_the_set_point_for_a_sustained_climb_at_its_rate_limit():
     dt, n = 0.02, 1500  # 30 s
     _, sts = _fly_path(R_, 1.5, n * dt, dt)
     # the first difference starts the filter: a steady climb is known from the second step
-    assert sts[-1].climb_f == pytest.approx(1.5, rel=1e-9)
-    vres = np.array([s.v_res for s in sts])
+    assert sts[-1].energy.climb_f == pytest.approx(1.5, rel=1e-9)
+    vres = np.array([s.energy.v_res for s in sts])
     # never faster than reserve_rate_m_s2 (0.1 m/s^2): 2 m/s take 20 s ...
     assert np.max(np.abs(np.diff(vres))) <= 0.1 * dt + 1e-12
     assert vres[int(10.0 / dt)] == pytest.approx(16.0 + 0.1 * 10.0, abs=0.1 * dt + 1e-9)
@@ -479,20 +484,30 @@ def test_reserve_raises_the_set_point_for_a_sustained_climb_at_its_rate_limit():
     # a path whose climb changes moves the filter by dt / reserve_tau_s of the step each step
     w1, R = _climb(0.0)
     s = sts[-1]
-    _, s2 = adapt((0.0, 0.0, 0.0), 16.0, R, w1, dt, R_, s, path_down_m=s.path_down_prev)
-    assert s2.climb_f == pytest.approx(1.5 + dt / 20.0 * (0.0 - 1.5), rel=1e-9)
+    _, s2 = adapt((0.0, 0.0, 0.0), 16.0, R, w1, dt, R_, s, path_down_m=s.energy.path_down_prev)
+    assert s2.energy.climb_f == pytest.approx(1.5 + dt / 20.0 * (0.0 - 1.5), rel=1e-9)
 
 
 def test_reserve_speed_error_asks_more_thrust_and_nothing_changes_when_off():
     sps, sts = _fly_path(R_, 1.5, 30.0)
     sps0, sts0 = _fly_path(E, 1.5, 30.0)  # no design gust: off, as before
-    assert sts0[-1].v_res is None and sts0[-1].climb_f is None
+    assert sts0[-1].energy.v_res is None and sts0[-1].energy.climb_f is None
     # flying 16 m/s under a set-point that has risen: the speed error asks for more energy
-    assert sts[-1].v_res > 16.5
+    assert sts[-1].energy.v_res > 16.5
     assert sps[-1].thrust > sps0[-1].thrust + 0.01
     # a level path keeps the configured set-point
     _, stl = _fly_path(R_, 0.0, 30.0)
-    assert stl[-1].v_res == 16.0
+    assert stl[-1].energy.v_res == 16.0
     # a hand-back keeps what the path's climb was (the mission's), the step differences afresh
     s = sts[-1].for_reengage(0.5)
-    assert s.climb_f == sts[-1].climb_f and s.path_down_prev is None
+    assert s.energy.climb_f == sts[-1].energy.climb_f and s.energy.path_down_prev is None
+
+
+def test_the_energy_control_is_the_adapters_parameters_of_its_names():
+    # AdapterParams is the configuration's surface; Tecs (core/energy.py) takes its fields by
+    # name, built once per parameter set.
+    params = AdapterParams(energy_kp=0.7, priority="height", reserve_gust_m_s=2.0)
+    tecs = params.tecs
+    for f in dataclasses.fields(tecs):
+        assert getattr(tecs, f.name) == getattr(params, f.name), f.name
+    assert params.tecs is tecs

@@ -13,6 +13,7 @@ PURE = [
     "mpf_mavlink/core/guidance/law.py",
     "mpf_mavlink/core/guidance/checks.py",
     "mpf_mavlink/core/adapter.py",
+    "mpf_mavlink/core/energy.py",
 ]
 FORBIDDEN = {
     "socket",

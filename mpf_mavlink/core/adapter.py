@@ -7,11 +7,16 @@ in NED), of which the part normal to w1 is lift; the bank is the angle of the li
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, NamedTuple
 
 from mpf_mavlink.constants import GRAVITY_M_S2
+from mpf_mavlink.core.energy import EnergyState, Tecs, reserve_airspeed
+
+__all__ = ["AdapterParams", "AdapterState", "Setpoint", "adapt", "reserve_airspeed"]
 
 Vec = tuple[float, float, float]
 
@@ -97,7 +102,8 @@ class AdapterParams:
     tau_roll_s: first-order time constant to reach the bank set-point (PX4 roll rate);
     tau_pitch_s: look-ahead on the flight-path-angle rate (ArduPlane pitch);
     trim_pitch_rad: angle of attack at trim (pitch = flight-path angle + trim_pitch);
-    airspeed hold: thrust = trim_thrust + kp e + ki integral(e) + k_n (n - 1), e = v_sp - v.
+    the energy control's parameters (thrust, airspeed envelope, priority, reserve) are those
+    of :class:`~mpf_mavlink.core.energy.Tecs` (same names), which :attr:`tecs` composes.
     """
 
     max_bank_rad: float = 0.785398
@@ -149,14 +155,20 @@ class AdapterParams:
     reserve_tau_s: float = 20.0
     reserve_rate_m_s2: float = 0.1
 
+    @cached_property
+    def tecs(self) -> Tecs:
+        """The energy controller (core/energy.py) of these parameters: the fields of its names.
+        Built once per parameter set (a frozen dataclass keeps it)."""
+        return Tecs(**{f.name: getattr(self, f.name) for f in dataclasses.fields(Tecs)})
+
 
 class AdapterState(NamedTuple):
-    """Memory of the adapter: the airspeed integrator (thrust units), the learned pitch offset
-    trim_hat (rad, None until the first measurement) and turn gain (achieved heading rate per
-    coordinated-turn rate, 1 = ideal). A NamedTuple (immutable like a frozen dataclass): a new
-    one is built at every control step, ~0.3 us against ~2.3 us for the dataclass."""
+    """Memory of the adapter: the learned pitch offset trim_hat (rad, None until the first
+    measurement) and turn gain (achieved heading rate per coordinated-turn rate, 1 = ideal),
+    what was sent last, and the energy controller's :class:`EnergyState`. A NamedTuple
+    (immutable like a frozen dataclass): a new one is built at every control step, ~0.3 us
+    against ~2.3 us for the dataclass."""
 
-    integ: float = 0.0
     trim_hat: float | None = None
     turn_gain: float = 1.0
     bank_prev: float | None = None  # rad, the bank set-point sent last
@@ -166,23 +178,7 @@ class AdapterState(NamedTuple):
     # rate sent last (None: not sent, or sent clipped: learn nothing from it)
     q_bias: float = 0.0
     q_sent: float | None = None
-    # energy control: the previous airspeed and set-point (m/s, None: none yet), the filtered
-    # dV/dt (m/s^2) and fed-forward flight-path angle (rad, None: none yet), and the flight-path
-    # offset (rad, <= 0 when thrust is short) that the priority takes off the pitch demand
-    v_prev: float | None = None
-    v_sp_prev: float | None = None
-    vdot_f: float = 0.0
-    gam_f: float | None = None
-    balance: float = 0.0
-    gam_m_f: float | None = None  # rad, the measured flight-path angle, low-passed
-    # the thrust (0..1) the autopilot flies at engagement: the first step sets the integrator
-    # so that the first thrust sent is this one (no step), then None
-    thrust_engaged: float | None = None
-    # energy reserve: the path point's down coordinate last step (m, None: none yet), the path's
-    # climb low-passed over reserve_tau_s (m/s, None: none yet) and the set-point (m/s) flown
-    path_down_prev: float | None = None
-    climb_f: float | None = None
-    v_res: float | None = None
+    energy: EnergyState = EnergyState()
 
     def for_reengage(self, thrust_engaged: float | None = None) -> AdapterState:
         """After a hand-back: the thrust and pitch-rate integrators and the energy filters start
@@ -193,10 +189,7 @@ class AdapterState(NamedTuple):
         te = (
             thrust_engaged if thrust_engaged is not None and math.isfinite(thrust_engaged) else None
         )
-        return AdapterState(
-            0.0, self.trim_hat, self.turn_gain, None, None, thrust_engaged=te,
-            climb_f=self.climb_f, v_res=self.v_res,
-        )  # fmt: skip
+        return AdapterState(self.trim_hat, self.turn_gain, energy=self.energy.for_reengage(te))
 
 
 class Setpoint(NamedTuple):
@@ -309,8 +302,9 @@ def adapt(
     loop), with R_B_N the attitude when it starts acting (:func:`roll_rate_gain`).
     ``airspeed_sp`` (m/s): the airspeed set-point now (None: ``params.airspeed_sp_m_s``, raised
     by the energy reserve, :func:`reserve_airspeed`); its rate is fed forward
-    (:func:`energy_thrust`). ``path_down_m`` (m, NED down): where the law's path point is now;
-    its rate, low-passed over reserve_tau_s, is the sustained climb the reserve is sized for.
+    (:meth:`Tecs.energy_rate_thrust`). ``path_down_m`` (m, NED down): where the law's path
+    point is now; its rate, low-passed over reserve_tau_s, is the sustained climb the reserve
+    is sized for.
     """
     roll, pitch, ok = _roll_pitch_if_finite(omega_w1_I, airspeed, R_B_N, w1, dt)
     if not ok:
@@ -326,18 +320,9 @@ def adapt(
     trim_hat, k_turn = state.trim_hat, state.turn_gain
     gamma = math.asin(_clip(-w1[2], -1.0, 1.0))
     chid, gamd_law = heading_and_path_angle_rates(w1, omega_w1_I)
-    res = _reserve_step(params, state, path_down_m, dt, g)
-    v_sp = params.airspeed_sp_m_s
-    if airspeed_sp is not None and math.isfinite(airspeed_sp):
-        v_sp = airspeed_sp
-    elif res[2] is not None:
-        v_sp = res[2]
-    # The priority's offset (previous step's, low-passed) lowers (raises) the flight-path
-    # demand while thrust is at its ceiling (floor): the law's gamma_dot plus the rate that
-    # takes the offset out over one tau_pitch, for both the pitch set-point and the body rates.
-    lead0 = params.tau_pitch_s if params.tau_pitch_s > 0.0 else 1.0
-    bal = state.balance if params.energy_control else 0.0
-    gamd = gamd_law + bal / lead0
+    tecs = params.tecs
+    v_sp, energy = tecs.airspeed_setpoint(state.energy, path_down_m, dt, g, airspeed_sp)
+    gamd, bal = tecs.flight_path_rate(energy, gamd_law)
     if params.adaptive and meas is not None:
         # the law's demand is what trim_hat integrates; not while the priority overrides it
         # (the standing vertical error is then the energy's, not a pitch offset's)
@@ -352,7 +337,7 @@ def adapt(
         params, state, meas, dt, hold_s, roll, pitch, bank, chid, gamd
     )
     trim, pitch_sp = _pitch_setpoint(params, trim_hat, gamma, gamd)
-    thrust, en = _thrust(params, state, v, v_sp, gamma, gamd_law, trim, n, bal, dt, g)
+    thrust, energy = tecs.thrust(energy, v, v_sp, gamma, gamd_law, trim, n, bal, dt, g)
     qw, qx, qy, qz = quat = _euler_to_quat_wxyz(bank, pitch_sp, 0.0)
     if not (
         math.isfinite(p) and math.isfinite(q) and math.isfinite(r) and math.isfinite(thrust)
@@ -360,72 +345,13 @@ def adapt(
         and math.isfinite(qx) and math.isfinite(qy) and math.isfinite(qz)
     ):  # fmt: skip
         return safe_setpoint(params, roll), state
-    integ, v_prev, v_sp_prev, vdot_f, gam_f, balance, gam_m_f, thrust_engaged = en
     # tuple.__new__: the NamedTuples without their keyword-parsing constructors (every step)
     return tuple.__new__(Setpoint, ((p, q, r), quat, thrust, bank, pitch_sp, n, False)), (
         tuple.__new__(AdapterState, (
-            integ, trim_hat, k_turn, bank, None if clipped else chid, q_bias,
-            q if q_free else None, v_prev, v_sp_prev, vdot_f, gam_f, balance, gam_m_f,
-            thrust_engaged, *res,
+            trim_hat, k_turn, bank, None if clipped else chid, q_bias, q if q_free else None,
+            energy,
         ))
     )  # fmt: skip
-
-
-def reserve_airspeed(
-    v_sp: float,
-    v_max: float,
-    climb: float,
-    max_climb: float,
-    gust: float,
-    gust_s: float,
-    g: float = GRAVITY_M_S2,
-) -> float:
-    """The airspeed set-point (m/s) that carries the kinetic energy a design downdraft needs.
-
-    A steady climb ``climb`` (m/s, the path's) leaves ``max_climb - climb`` of the climb at full
-    thrust for gusts. A downdraft of ``gust`` m/s lasting ``gust_s`` s beyond that spare is
-    R = (gust - (max_climb - climb)) gust_s metres of height that thrust cannot supply; the
-    total energy equation (Lambregts: E = m g h + m V^2 / 2, so dh = -V dV / g at constant E)
-    pays it from speed if the aircraft flies V_r = sqrt(v_sp^2 + 2 g R) before the gust and
-    may slow to the set-point's floor. Flying faster costs some climb (drag); the SIL X8 at
-    430 m loses 0.05 m/s of its 4.2 m/s going from 16 to 18 m/s (the cost is not in R: the
-    reserve is sized for the set-point's capability). Within [v_sp, v_max]; v_sp itself when a
-    figure is not finite or the spare covers the gust."""
-    r = (gust - (max_climb - max(climb, 0.0))) * gust_s
-    if not (math.isfinite(r) and r > 0.0 and v_max > v_sp):
-        return v_sp
-    return min(v_max, math.sqrt(v_sp * v_sp + 2.0 * g * r))
-
-
-def _reserve_step(
-    p: AdapterParams, st: AdapterState, path_down: float | None, dt: float, g: float
-) -> tuple[float | None, float | None, float | None]:
-    """(path_down_prev, climb_f, v_res) of the energy reserve after this step: the path's climb
-    from the path point's down coordinate, low-passed over reserve_tau_s, and the set-point
-    :func:`reserve_airspeed` gives for it, moved at most reserve_rate_m_s2. Off (None, None,
-    None) without a design gust, a known climb capability or the path point."""
-    if not (
-        p.reserve_gust_m_s > 0.0 and math.isfinite(p.max_climb_m_s) and path_down is not None
-        and math.isfinite(path_down)
-    ):  # fmt: skip
-        return None, None, None
-    climb_f = st.climb_f
-    prev = st.path_down_prev
-    if prev is not None and dt > 0.0:
-        # a jump of the path point (a re-planned s) is not a climb: at most the airspeed
-        c = _clip((prev - path_down) / dt, -p.airspeed_sp_m_s, p.airspeed_sp_m_s)
-        a = min(1.0, dt / p.reserve_tau_s) if p.reserve_tau_s > 0.0 else 1.0
-        climb_f = c if climb_f is None else climb_f + a * (c - climb_f)
-    v0 = p.airspeed_sp_m_s
-    v_res = v0 if st.v_res is None else st.v_res
-    if climb_f is not None:
-        want = reserve_airspeed(
-            v0, p.airspeed_max_m_s, climb_f, p.max_climb_m_s, p.reserve_gust_m_s,
-            p.reserve_gust_s, g,
-        )  # fmt: skip
-        step = p.reserve_rate_m_s2 * max(dt, 0.0)
-        v_res = _clip(want, v_res - step, v_res + step)
-    return path_down, climb_f, v_res
 
 
 def _roll_pitch_if_finite(
@@ -499,168 +425,6 @@ def _body_rates(
         -sphi * gamd_b + cphi * cth * chid, -params.max_yaw_rate_rad_s, params.max_yaw_rate_rad_s
     )
     return p, q, r, q_bias, q_free
-
-
-def _thrust(
-    params: AdapterParams,
-    state: AdapterState,
-    v: float,
-    v_sp: float,
-    gamma: float,
-    gamd_law: float,
-    trim: float,
-    n: float,
-    bal: float,
-    dt: float,
-    g: float,
-) -> tuple[float, EnergyState]:
-    """Thrust (0..1) and the energy controller's memory: :func:`energy_thrust` when
-    ``energy_control`` is on, else the airspeed PI; ``n`` the load factor (feed-forward)."""
-    ff = params.load_factor_ff * (n - 1.0)
-    en = tuple.__new__(EnergyState, (
-        state.integ, state.v_prev, state.v_sp_prev, state.vdot_f, state.gam_f, bal,
-        state.gam_m_f, state.thrust_engaged,
-    ))  # fmt: skip
-    if params.energy_control:
-        # the flight-path angle the law aims at one tau_pitch ahead (pitch limits included)
-        gamma_law = gamma + gamd_law * params.tau_pitch_s
-        gamma_c = _clip(gamma_law, params.min_pitch_rad - trim, params.max_pitch_rad - trim)
-        return energy_thrust(params, en, v, v_sp, gamma, gamma_c, ff, dt, g, gamma_law)
-    thrust, integ = _airspeed_pi(params, state.integ, v_sp - v, ff, dt)
-    return thrust, en._replace(integ=integ)
-
-
-class EnergyState(NamedTuple):
-    """The energy controller's memory (see :class:`AdapterState` for the fields)."""
-
-    integ: float
-    v_prev: float | None
-    v_sp_prev: float | None
-    vdot_f: float
-    gam_f: float | None
-    balance: float
-    gam_m_f: float | None = None
-    thrust_engaged: float | None = None
-
-
-def _airspeed_pi(
-    params: AdapterParams, integ: float, e: float, ff: float, dt: float
-) -> tuple[float, float]:
-    """The airspeed PI (``energy_control`` off): (thrust, integrator). Conditional integration:
-    the integrator moves only when the output is not saturated in the direction e pushes."""
-    base = params.trim_thrust + params.airspeed_kp * e + ff
-    raw = base + integ
-    if dt > 0.0 and not (
-        (raw >= params.thrust_max and e > 0) or (raw <= params.thrust_min and e < 0)
-    ):
-        lo = max(-params.integrator_limit, params.thrust_min - base)
-        hi = min(params.integrator_limit, params.thrust_max - base)
-        integ = _clip(integ + params.airspeed_ki * e * dt, min(lo, 0.0), max(hi, 0.0))
-    return _clip(base + integ, params.thrust_min, params.thrust_max), integ
-
-
-def energy_thrust(
-    params: AdapterParams,
-    st: EnergyState,
-    v: float,
-    v_sp: float,
-    gamma: float,
-    gamma_c: float,
-    ff: float,
-    dt: float,
-    g: float = GRAVITY_M_S2,
-    gamma_law: float | None = None,
-) -> tuple[float, EnergyState]:
-    """Thrust from the total specific energy rate, and the priority's flight-path offset.
-
-    Lambregts' total energy control (TECS; A. A. Lambregts, "Vertical flight path and speed
-    control autopilot design using total energy principles", AIAA 83-2239, 1983; and
-    "Functional integration of vertical flight path and speed control using energy
-    principles", NASA CP-2296, 1984): the specific total energy rate normalised by V,
-    E_dot / (m g V) = gamma + V_dot / g, is what thrust changes (T - D = W (gamma + V_dot / g)
-    for small angles), while the balance gamma - V_dot / g is what the elevator moves at
-    constant thrust. Here:
-
-      E_c = gamma_c + V_dot_c / g,  V_dot_c = V_dot_sp + (V_sp - V) / tau_V  (the demand)
-      E   = gamma + V_dot / g                                           (what is flown)
-      T   = T_trim + k_T E_c~ + k_E (E_c - E) + k_I integral(E_c - E) dt + k_n (n - 1)
-
-    gamma_c: the flight-path angle the law aims at one tau_pitch ahead, which carries the path's
-    slope, the target's climb and the law's correction (gamma + gamma_dot tau). gamma_c, gamma and
-    V_dot (from the airspeed's difference) are low-passed over vdot_tau_s before they enter:
-    gusts tilt the air-relative gamma and the law's correction rings with them: over 0.5 s the
-    throttle chattered between idle and 0.8 in light turbulence and swung 0-0.7 through a
-    circle's capture (airspeed to 20 m/s, captured in 36 s); over 2 s the capture took 10 s. k_T
-    (thrust_per_gamma) is the airframe's throttle per rad of steady climb, so the feed-forward
-    alone flies a demanded climb at constant speed; k_E, k_I close the loop on what it misses.
-    Anti-windup: the integrator moves only when the output is not saturated in the direction
-    the error pushes, and never beyond what takes the output to a limit.
-
-    Priority (when thrust cannot meet E_c): the unmet rate u = (T_raw - T_limit) / (k_T + k_E)
-    (rad; > 0 short of thrust, < 0 a surplus at the floor, e.g. an updraft at idle), so the
-    flight path thrust sustains at its limit is gamma_c - u. ``priority`` "airspeed" (the
-    default: the safe one) holds the airspeed inside its envelope [airspeed_min_m_s,
-    airspeed_max_m_s]: the path's flight-path angle stands while the airspeed has room, and from
-    1 m/s inside the limit to the limit the law's flight-path demand ``gamma_law`` (gamma +
-    gamma_dot tau, unclipped; None: gamma_c) is moved to the sustainable one (weight ramping 0
-    -> 1, low-passed over balance_tau_s): at the ceiling the aircraft climbs only as steeply as
-    full thrust sustains, at the floor it puts an updraft's surplus into height rather than
-    speed. "height": the flight path never gives way (the airspeed may leave its envelope).
-    Moving the flight path at the set-point already (weight 1 at any airspeed) put every
-    updraft of moderate turbulence into height: 1.48 m RMS, 10.9 m max in SIL against 0.83 /
-    6.0 m with the envelope rule.
-    Returns (thrust, state); the state's ``balance`` is that offset (rad).
-    """
-    p = params
-    integ, v_prev, v_sp_prev, vdot_f, gam_f, bal, gam_m_f, t_eng = st
-    a = min(1.0, dt / p.vdot_tau_s) if p.vdot_tau_s > 0.0 and dt > 0.0 else 1.0
-    if v_prev is not None and dt > 0.0:
-        vdot_f += a * ((v - v_prev) / dt - vdot_f)
-    vsp_dot = (v_sp - v_sp_prev) / dt if v_sp_prev is not None and dt > 0.0 else 0.0
-    gam_f = gamma_c if gam_f is None else gam_f + a * (gamma_c - gam_f)
-    gam_m_f = gamma if gam_m_f is None else gam_m_f + a * (gamma - gam_m_f)
-    tau_v = p.speed_tau_s if p.speed_tau_s > 0.0 else 1.0
-    vdot_c = vsp_dot + (v_sp - v) / tau_v
-    e_E = (gam_f - gam_m_f) + (vdot_c - vdot_f) / g
-    base = p.trim_thrust + p.thrust_per_gamma * (gam_f + vdot_c / g) + p.energy_kp * e_E + ff
-    if t_eng is not None:  # engagement: start from the autopilot's thrust (no step)
-        lim = p.integrator_limit
-        integ = _clip(_clip(t_eng, p.thrust_min, p.thrust_max) - base, -lim, lim)
-        t_eng = None
-    raw = base + integ
-    if dt > 0.0 and not ((raw >= p.thrust_max and e_E > 0) or (raw <= p.thrust_min and e_E < 0)):
-        lo = max(-p.integrator_limit, p.thrust_min - base)
-        hi = min(p.integrator_limit, p.thrust_max - base)
-        integ = _clip(integ + p.energy_ki * e_E * dt, min(lo, 0.0), max(hi, 0.0))
-    raw = base + integ
-    thrust = _clip(raw, p.thrust_min, p.thrust_max)
-    law = gamma_c if gamma_law is None else gamma_law
-    bal = _priority_balance(p, bal, raw - thrust, v, gamma_c, law, dt)
-    return thrust, tuple.__new__(EnergyState, (integ, v, v_sp, vdot_f, gam_f, bal, gam_m_f, t_eng))
-
-
-def _priority_balance(
-    p: AdapterParams, bal: float, unmet: float, v: float, gamma_c: float, law: float, dt: float
-) -> float:
-    """The priority's flight-path offset (rad, low-passed) of :func:`energy_thrust`: ``unmet``
-    the thrust its limit cut off (raw - applied), ``law`` the law's flight-path demand."""
-    k = p.thrust_per_gamma + p.energy_kp
-    u = unmet / k if k > 0.0 else 0.0
-    # the flight path thrust sustains at its limit, against what the law asks (unclipped)
-    sus = gamma_c - u
-    off = min(0.0, sus - law) if u > 0.0 else max(0.0, sus - law) if u < 0.0 else 0.0
-    w = 0.0  # height: the flight path never gives way
-    if p.priority == "airspeed":  # ... but near the envelope's edges (1 m/s ramp) it does
-        w = _clip(p.airspeed_min_m_s + 1.0 - v, 0.0, 1.0) if u > 0.0 else 0.0
-        w = _clip(v - p.airspeed_max_m_s + 1.0, 0.0, 1.0) if u < 0.0 else w
-    span = p.max_pitch_rad - p.min_pitch_rad  # at most the whole pitch range
-    target = _clip(w * off, -span, span)
-    if dt > 0.0:
-        b = min(1.0, dt / p.balance_tau_s) if p.balance_tau_s > 0.0 else 1.0
-        bal += b * (target - bal)
-        if abs(bal) < 1e-6 and target == 0.0:
-            bal = 0.0
-    return bal
 
 
 def _pitch_rate_bias(

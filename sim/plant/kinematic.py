@@ -24,8 +24,11 @@ from mpf_mavlink.core.guidance.law import (
     MpfCommand,
     MpfDiagnostics,
     VehicleState,
-    mpf_law,
 )
+
+# law.py's law written out on floats, bit for bit its numbers: 4 evaluations per RK4 step make
+# the law most of this loop's time (law_unrolled.py's docstring has the figure).
+from mpf_mavlink.core.guidance.law_unrolled import mpf_law_unrolled as mpf_law
 from mpf_mavlink.core.paths import TabulatedPath
 from mpf_mavlink.core.target import TargetMotion, TargetState
 

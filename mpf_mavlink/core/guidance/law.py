@@ -1,31 +1,35 @@
 """The 3D moving-path-following law (Jain, de Sousa, Aguiar, Theorem 1), pure and exact.
 
-Read it beside the paper. Equation numbers are the paper's as its LaTeX source numbers them
+Read it beside the paper: one function per equation, named as the paper names the quantities,
+its number in the docstring. Numbers are the paper's as its LaTeX source numbers them
 (IEEEtran, in order), with its labels in brackets:
 
-- (1)  [UAVKinematics] pdot = v_w w1 (plus the wind estimate eta_hat, the paper's Remark).
-- (5)  [MPFpositionerrorkinematics] the position error's rate, used for the feedforward.
-- (6)  [attitudeErrorFunction] Psi = (1 - Rt11) / 2, Rt = R_W^D.
-- (9)  [ertilde] e = [Rt13, -Rt12] / 2.
-- (10) [ffomega] omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d} (where (11)
-  and (23) print omega_{W_d D}^{W_d}, the rate of {W_d} relative to {F} is meant).
-- (15) [wdbasis] the steady-state frame {W_d} in {F}: :func:`steady_state_frame` and
+- (1)  [UAVKinematics] pdot = v_w w1 (+ eta_hat, the Remark): :func:`relative_kinematics`.
+- (5)  [MPFpositionerrorkinematics] the position error's rate: :func:`error_rates`.
+- (6)  [attitudeErrorFunction] Psi = (1 - Rt11) / 2 and (9) [ertilde] e = [Rt13, -Rt12] / 2,
+  Rt = R_W^D: :func:`attitude_error`.
+- (10) [ffomega] omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d}
+  (:func:`desired_frame_rate`; where (11) and (23) print omega_{W_d D}^{W_d}, the rate of
+  {W_d} relative to {F} is meant).
+- (15) [wdbasis] the steady-state frame {W_d} in {F}: :func:`steady_state_frame`, its rate
   :func:`steady_state_frame_rate`.
-- (17)-(19) the cross-track error pt_x and y_w, z_w.
-- (20) R_D^{W_d}, the transient frame {D} in {W_d}: :func:`transient_direction` (its d1)
-  and :func:`transient_frame_rate`.
-- (22) [sdot] the virtual point's progression.
-- (23) [omega] -K_R e + Pi_R Rt^T omega_DI^D, the reference for the autopilot.
+- (17)-(19) the cross-track error pt_x and y_w, z_w: :func:`cross_track_errors`, their rates
+  :func:`cross_track_rates`.
+- (20) R_D^{W_d}, the transient frame {D} in {W_d}: :func:`transient_direction` (its d1) and
+  :func:`transient_frame_rate`.
+- (22) [sdot] the virtual point's progression: :func:`progression`.
+- (23) [omega] -K_R e + Pi_R Rt^T omega_DI^D, the reference for the autopilot:
+  :func:`autopilot_reference`.
 
-:func:`mpf_law` evaluates them in this order, one paragraph per equation, headed by its number.
+:func:`mpf_law` composes them: :func:`law_instant` evaluates (1), (22), (15), (17)-(20), (6),
+(9) in that order, :func:`desired_rate` the rates (5) and (10), then (23) and the extensions.
 
 Frames: {I} NED; {W} wind frame (w1 along the air-relative velocity); {T} target; {F}
 parallel-transport frame at p_d(s); {W_d} steady-state desired velocity frame; {D} transient
-desired frame. The frames are built in {T}, where the path is fixed. Vectors are written out
-as named components (x, y, z in {T}; n, e, d in NED; 1, 2, 3 on a frame's axes, as wd21 is
-the second component of wd1) and matrices as their columns (R_F^T = (f1, f2, f3)): this runs
-once per bridge step and four times per step of the kinematic simulator, and in CPython a
-tuple or a function call costs several products, so the law works on floats throughout.
+desired frame. The frames are built in {T}, where the path is fixed. Vectors are 3-tuples of
+floats and rotation matrices R_A^B the tuples of A's axes in B (core/vec3.py: R_F^T = (f1, f2,
+f3)): this runs once per bridge step and four times per step of the kinematic simulator, where
+a numpy call on a 3-vector costs ~10x the arithmetic.
 
 The feedforward omega_DI (10) must be the exact rate of {D} along the closed-loop flow: each
 term is differentiated analytically along the known kinematics (pdot = v_w w1 + eta_hat,
@@ -39,21 +43,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Literal, NamedTuple, cast
+from typing import Literal, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
 from mpf_mavlink.core.float_arrays import FloatArrays
 from mpf_mavlink.core.paths import TabulatedPath
+from mpf_mavlink.core.paths.base import PathPointRate
 from mpf_mavlink.core.target import TargetState
-from mpf_mavlink.core.vec3 import (
-    Mat3,
-    Vec3,
-    cross,
-    dot,
-    norm,
-)
+from mpf_mavlink.core.vec3 import Mat3, Vec3, add, cross, dot, mat_T_vec, mat_vec, norm, scale, sub
 
 Vec = Vec3  # the records' vector fields
 
@@ -194,45 +193,135 @@ class MpfErrors(NamedTuple):
     mode: str  # as the caller gave it (mpf_errors)
 
 
-# The flat results of steady_state_frame and transient_direction (see each).
-WdFrame = tuple[float, float, float, float, float, float, float, float, float, float]
-Vec5 = tuple[float, float, float, float, float]
+# --------------------------------------------------------------------------- the inputs
+# Vectors are 3-tuples and rotation matrices tuples of their columns (core/vec3.py): R_W^I =
+# (w1, w2, w3) in NED, R_T^I = {T}'s axes in NED, R_F^T = (f1, f2, f3), R_{W_d}^F = (wd1, wd2,
+# wd3). A numpy call on a 3-vector costs ~1 us; these helpers ~0.1 us.
+
+_ZERO3: Vec3 = (0.0, 0.0, 0.0)
 
 
-def steady_state_frame(u_f2: float, u_f3: float, v_w: float) -> WdFrame:
-    """(15) [wdbasis] R_{W_d}^F = (wd1, wd2, wd3), components in {F}, as (wd11, wd21, wd31,
-    wd12, wd22, wd13, wd23, wd33) (wd32 = 0), then nn = wd11^2 + wd21^2 and n = sqrt(nn)
-    (cos^2 and cos of wd1's climb in {F}), which :func:`steady_state_frame_rate` reuses.
+def vehicle_vectors(vehicle: VehicleState, ext: Extensions) -> tuple[Mat3, Vec3, Vec3]:
+    """(R_W^I, p, eta_hat) of the vehicle (NED; m, m/s), from its floats when it has them;
+    eta_hat is zero without wind compensation (the paper's simulations ignore it)."""
+    f = vehicle.floats
+    if f is not None:
+        R = (f[0], f[3], f[6]), (f[1], f[4], f[7]), (f[2], f[5], f[8])
+        return R, (f[9], f[10], f[11]), (f[12], f[13], f[14])
+    (a0, b0, c0), (a1, b1, c1), (a2, b2, c2) = vehicle.R_W_I.tolist()
+    eta = tuple(vehicle.wind.tolist()) if ext.wind_compensation else _ZERO3
+    p = tuple(vehicle.position.tolist())
+    return ((a0, a1, a2), (b0, b1, b2), (c0, c1, c2)), p, eta
 
-    u_f2, u_f3: u = v_t t1 + v_d (- eta_hat with wind compensation) on f2 and f3, the velocity
-    the path point asks of the vehicle (m/s); v_w airspeed (m/s).
+
+TargetVectors = tuple[Mat3, Vec3, Vec3, Vec3, Vec3, Vec3]
+
+
+def target_vectors(target: TargetState) -> TargetVectors:
+    """(R_T^I, p_t, v_t, pddot_t, omega_TI^T, its rate) of the target (NED but the last two,
+    in {T}; m, m/s, m/s^2, rad/s, rad/s^2), from its floats when it has them."""
+    f = target.floats
+    if f is not None:
+        R = (f[0], f[3], f[6]), (f[1], f[4], f[7]), (f[2], f[5], f[8])
+        return R, f[9:12], f[12:15], f[15:18], f[18:21], f[21:24]  # type: ignore[return-value]
+    (a0, b0, c0), (a1, b1, c1), (a2, b2, c2) = target.R_T_I.tolist()
+    return (
+        ((a0, a1, a2), (b0, b1, b2), (c0, c1, c2)), tuple(target.position.tolist()),
+        tuple(target.velocity.tolist()), tuple(target.acceleration.tolist()),
+        tuple(target.omega_T.tolist()), tuple(target.omega_dot_T.tolist()),
+    )  # fmt: skip
+
+
+# --------------------------------------------------------------------------- the equations
+
+
+def relative_kinematics(
+    R_T_I: Mat3, r: Vec3, v_t: Vec3, eta: Vec3, w1: Vec3, v_w: float, wind: bool
+) -> tuple[Vec3, Vec3, Vec3]:
+    """(1) [UAVKinematics] pdot = v_w w1 + eta_hat, seen from the target, in {T}: with
+    r = p - p_t (NED), q = R_I^T r (m), uu = R_I^T (v_t - eta_hat) (m/s, eta_hat only when
+    ``wind``) and c = R_I^T pdot - uu = v_w w1^T - uu, the vehicle's velocity relative to the
+    target (m/s)."""
+    q = mat_T_vec(R_T_I, r)
+    uu = mat_T_vec(R_T_I, sub(v_t, eta) if wind else v_t)
+    c = sub(scale(v_w, mat_T_vec(R_T_I, w1)), uu)
+    return q, uu, c
+
+
+def progression(K_p: float, pt_F: Vec3, c: Vec3, v_d: Vec3, f1: Vec3) -> float:
+    """(22) [sdot] sdot = (K_p pt + v_w w1 + eta_hat - v_t t1 - v_d) . f1 (m/s): pt_F the
+    position error in {F} (m), c = v_w w1 + eta_hat - v_t t1 and v_d = omega_TI x p_d in {T}."""
+    return K_p * pt_F[0] + dot(sub(c, v_d), f1)
+
+
+def steady_state_frame(u_F: Vec3, v_w: float) -> tuple[Mat3, float, float]:
+    """(15) [wdbasis] R_{W_d}^F = (wd1, wd2, wd3), components in {F}, from u = v_t t1 + v_d
+    (- eta_hat) in {F} (m/s, the velocity the path point asks of the vehicle) and v_w (m/s);
+    then nn = wd11^2 + wd21^2 and n = sqrt(nn), which :func:`steady_state_frame_rate` reuses.
     """
-    wd21 = u_f2 / v_w
-    wd31 = u_f3 / v_w
+    wd21 = u_F[1] / v_w
+    wd31 = u_F[2] / v_w
     radicand = 1.0 - wd21 * wd21 - wd31 * wd31
     # Assumption 1 keeps the radicand > 0; outside it the frame stays defined (the
     # diagnostics' path_speed_margin says so).
     wd11 = math.sqrt(radicand) if radicand > 1e-12 else 1e-6
     nn = wd11 * wd11 + wd21 * wd21
     n = math.sqrt(nn)
-    wd12, wd22 = -wd21 / n, wd11 / n  # wd32 = 0
-    # wd3 = wd1 x wd2, written out with wd32 = 0.
-    return (
-        wd11, wd21, wd31, wd12, wd22, -wd31 * wd22, wd31 * wd12, wd11 * wd22 - wd21 * wd12,
-        nn, n,
-    )  # fmt: skip
+    wd1 = (wd11, wd21, wd31)
+    wd2 = (-wd21 / n, wd11 / n, 0.0)
+    return (wd1, wd2, cross(wd1, wd2)), nn, n
+
+
+def cross_track_errors(pt_F: Vec3, R_Wd_F: Mat3) -> tuple[Vec3, float, float]:
+    """(17)-(19) pt_x = pt - (pt . f1) f1 in {F} (m) and y_w = pt_x . wd2, z_w = pt_x . wd3."""
+    pt_x = (0.0, pt_F[1], pt_F[2])
+    return pt_x, dot(pt_x, R_Wd_F[1]), dot(pt_x, R_Wd_F[2])
+
+
+def transient_direction(y_w: float, z_w: float, alpha: float) -> Vec3:
+    """(20) d1 = (alpha, -y_w, -z_w) / |.|, the first column of R_D^{W_d} (in {W_d}; y_w, z_w
+    and the look-ahead alpha in m): all that (6) and (9) use. d2 = (y_w, alpha, 0) / |.| and
+    d3 = d1 x d2 enter only through the frame's rate (:func:`transient_frame_rate`)."""
+    n1 = norm((alpha, -y_w, -z_w))
+    return alpha / n1, -y_w / n1, -z_w / n1
+
+
+def attitude_error(R_W_I: Mat3, d1: Vec3) -> tuple[float, tuple[float, float]]:
+    """(6) [attitudeErrorFunction] Psi = (1 - Rt11) / 2 and (9) [ertilde] e = (Rt13, -Rt12) / 2,
+    where Rt = R_W^D = (R_D^I)^T R_W^I has the first row (d1 . w1, d1 . w2, d1 . w3); d1 NED."""
+    w1, w2, w3 = R_W_I
+    return 0.5 * (1.0 - dot(w1, d1)), (0.5 * dot(w3, d1), -0.5 * dot(w2, d1))
+
+
+def error_rates(
+    c: Vec3, q: Vec3, uu: Vec3, p_d: Vec3, dp_ds: Vec3, sdot: float, omega_FT_F: Vec3,
+    R_F_T: Mat3, pt_F: Vec3, u_F: Vec3, a_t: Vec3, omega_T: Vec3, omega_dot_T: Vec3,
+) -> tuple[Vec3, Vec3]:  # fmt: skip
+    """(5) [MPFpositionerrorkinematics] pt_dot and u_dot (u = v_t t1 + v_d - eta_hat) in {F}
+    (m/s, m/s^2), each the rate of its {F} components: d(x^F)/dt = R_T^F x_dot - omega_FT^F x x^F.
+
+    In {T}: pt_dot = qdot - p_d_dot with qdot = c - omega_TI x q and p_d_dot = sdot dp_d/ds;
+    u = uu + v_d with d(uu)/dt = a_t - omega_TI x uu (eta_hat held) and v_d = omega_TI x p_d,
+    so u_dot = a_t + omega_dot x p_d + omega_TI x (p_d_dot - uu), a_t = R_I^T pddot_t.
+    """
+    p_d_dot = scale(sdot, dp_ds)
+    pt_dot = sub(sub(c, cross(omega_T, q)), p_d_dot)
+    u_dot = add(add(a_t, cross(omega_dot_T, p_d)), cross(omega_T, sub(p_d_dot, uu)))
+    pt_F_dot = sub(mat_T_vec(R_F_T, pt_dot), cross(omega_FT_F, pt_F))
+    u_F_dot = sub(mat_T_vec(R_F_T, u_dot), cross(omega_FT_F, u_F))
+    return pt_F_dot, u_F_dot
 
 
 def steady_state_frame_rate(
-    wd11: float, wd21: float, wd31: float, wd12: float, wd22: float, nn: float, n: float,
-    wd21_dot: float, wd31_dot: float,
-) -> Vec3:  # fmt: skip
-    """omega_{W_d F}^F (rad/s): (15) differentiated, given the rates of wd21 and wd31 (1/s),
-    the frame's wd11 ... wd22 and nn, n from :func:`steady_state_frame`.
+    R_Wd_F: Mat3, nn: float, n: float, wd21_dot: float, wd31_dot: float
+) -> Vec3:
+    """omega_{W_d F}^F (rad/s): (15) differentiated, given the rates of wd21 and wd31 (1/s)
+    and nn, n from :func:`steady_state_frame`.
 
     wd1 = (cos g cos x, cos g sin x, sin g) and wd2 = (-sin x, cos x, 0): heading x then climb g
     in {F}, so omega_{W_d F} = x_dot f3 - g_dot wd2.
     """
+    (wd11, wd21, wd31), (wd12, wd22, _), _ = R_Wd_F
     # wd11 = sqrt(1 - wd21^2 - wd31^2); held at its floor outside Assumption 1.
     wd11_dot = -(wd21 * wd21_dot + wd31 * wd31_dot) / wd11 if wd11 > 1e-6 else 0.0
     heading_dot = (wd11 * wd21_dot - wd21 * wd11_dot) / nn
@@ -241,32 +330,58 @@ def steady_state_frame_rate(
     return m_climb_dot * wd12, m_climb_dot * wd22, heading_dot
 
 
-def transient_direction(y_w: float, z_w: float, alpha: float) -> Vec5:
-    """(20) d1, the first column of R_D^{W_d} (components in {W_d}; y_w, z_w the cross-track
-    errors (17)-(19), alpha the look-ahead, m): all that (6) and (9) use; then nn1 = alpha^2
-    + y_w^2 + z_w^2 and nn2 = alpha^2 + y_w^2, which :func:`transient_frame_rate` reuses.
-    The frame's other columns, d2 = (y_w, alpha, 0) / |(alpha, y_w)| and d3 = d1 x d2, enter
-    only through its rate."""
-    nn2 = alpha * alpha + y_w * y_w
-    nn1 = nn2 + z_w * z_w
-    n1 = math.sqrt(nn1)
-    return alpha / n1, -y_w / n1, -z_w / n1, nn1, nn2
+def cross_track_rates(
+    pt_x: Vec3, pt_F_dot: Vec3, R_Wd_F: Mat3, omega_WdF_F: Vec3
+) -> tuple[float, float]:
+    """(17)-(19) differentiated: (y_w_dot, z_w_dot) (m/s) while {W_d} turns at omega_{W_d F}^F:
+    d(pt_x . wd_k)/dt = pt_x_dot . wd_k + pt_x . (omega_{W_d F} x wd_k), pt_x_dot = (0, pt_F_dot
+    along f2, f3) in {F}."""
+    _, wd2, wd3 = R_Wd_F
+    pt_x_dot = (0.0, pt_F_dot[1], pt_F_dot[2])
+    # pt_x . (omega_{W_d F} x wd2) = pt_x2 x_dot wd12, as omega_{W_d F} = x_dot f3 - g_dot wd2.
+    y_w_dot = dot(pt_x_dot, wd2) + pt_x[1] * omega_WdF_F[2] * wd2[0]
+    return y_w_dot, dot(pt_x_dot, wd3) + dot(pt_x, cross(omega_WdF_F, wd3))
 
 
 def transient_frame_rate(
-    y_w: float, z_w: float, y_w_dot: float, z_w_dot: float, alpha: float, nn1: float, nn2: float
+    y_w: float, z_w: float, y_w_dot: float, z_w_dot: float, alpha: float
 ) -> Vec3:
-    """omega_{D W_d}^{W_d} (rad/s): (20) differentiated, given the cross-track errors (m), their
-    rates (m/s) and nn1, nn2 from :func:`transient_direction`.
+    """omega_{D W_d}^{W_d} (rad/s): (20) differentiated, given the cross-track errors (m) and
+    their rates (m/s).
 
     d1 = (alpha, -y_w, -z_w) / n1 and d2 = (y_w, alpha, 0) / n2 are heading
     x = atan2(-y_w, alpha) then climb g = atan2(-z_w, n2) in {W_d}, n2 = |(alpha, y_w)|, so
     omega_{D W_d} = x_dot wd3 - g_dot d2.
     """
+    nn2 = alpha * alpha + y_w * y_w
+    nn1 = nn2 + z_w * z_w
     n2 = math.sqrt(nn2)
     heading_dot = -alpha * y_w_dot / nn2
     m_climb_dot = -((z_w * y_w * y_w_dot / n2 - n2 * z_w_dot) / nn1)
     return m_climb_dot * y_w / n2, m_climb_dot * alpha / n2, heading_dot
+
+
+def desired_frame_rate(
+    R_T_I: Mat3, omega_T: Vec3, R_F_T: Mat3, omega_FT_F: Vec3, R_Wd_F: Mat3,
+    omega_WdF_F: Vec3, omega_DWd_Wd: Vec3,
+) -> Vec3:  # fmt: skip
+    """(10) [ffomega] omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d} (NED,
+    rad/s): summed in {F}, into {T} by R_F^T plus omega_TI^T, into NED by R_T^I."""
+    omega_DT_F = add(omega_FT_F, add(omega_WdF_F, mat_vec(R_Wd_F, omega_DWd_Wd)))
+    return mat_vec(R_T_I, add(omega_T, mat_vec(R_F_T, omega_DT_F)))
+
+
+def autopilot_reference(
+    K_R: float, e: tuple[float, float], omega_DI: Vec3, R_W_I: Mat3
+) -> tuple[tuple[float, float], tuple[float, float]]:
+    """(23) [omega] [w2, w3] = -K_R e + Pi_R Rt^T omega_DI^D (rad/s), the last term being
+    omega_DI on w2, w3 (the feedforward); returns (command, feedforward)."""
+    ff = (dot(omega_DI, R_W_I[1]), dot(omega_DI, R_W_I[2]))
+    m_K_R = -K_R
+    return (m_K_R * e[0] + ff[0], m_K_R * e[1] + ff[1]), ff
+
+
+# --------------------------------------------------------------------------- extensions
 
 
 def psi_turn_direction(R_W_I: Mat3, d1: Vec3) -> tuple[float, float]:
@@ -299,10 +414,8 @@ def limit_rates(w2: float, w3: float, ext: Extensions) -> tuple[float, float, bo
 
 
 def apply_extensions(
-    law2: float,
-    law3: float,
-    ff2: float,
-    ff3: float,
+    law: tuple[float, float],
+    ff: tuple[float, float],
     psi: float,
     d1: Vec3,
     R_W_I: Mat3,
@@ -311,14 +424,14 @@ def apply_extensions(
 ) -> tuple[float, float, str]:
     """The command [w2, w3] (rad/s) after the :class:`Extensions` (the psi turn, then the rate
     limit) from the law's command and its feedforward, and the mode it was made in."""
+    cmd2, cmd3 = law
     if not (ext.psi_turn or ext.rate_limit is not None):
-        return law2, law3, "law"
-    cmd2, cmd3 = law2, law3
+        return cmd2, cmd3, "law"
     mode = "law"
     if ext.psi_turn and psi >= ext.psi_turn_threshold:
         rate = ext.psi_turn_rate if ext.psi_turn_rate is not None else 0.5 * K_R
         v2, v3 = psi_turn_direction(R_W_I, d1)
-        cmd2, cmd3 = rate * v2 + ff2, rate * v3 + ff3
+        cmd2, cmd3 = rate * v2 + ff[0], rate * v3 + ff[1]
         mode = "psi_turn"
     if ext.rate_limit is not None:
         cmd2, cmd3, saturated = limit_rates(cmd2, cmd3, ext)
@@ -327,7 +440,92 @@ def apply_extensions(
     return cmd2, cmd3, mode
 
 
+# --------------------------------------------------------------------------- the law
+
 _NO_EXTENSIONS = Extensions()
+_LawResult = tuple[MpfCommand, MpfDiagnostics | None]
+_new_tuple = tuple.__new__  # the NamedTuples without their keyword-parsing constructor (~0.3 us)
+
+
+class Instant(NamedTuple):
+    """What (1), (6), (9), (15)-(22) give at one instant: the law's errors and frames, which
+    its rates (5), (10), (23) and the records read. Frames as in the module docstring."""
+
+    t: float  # s
+    s: float  # virtual point arc length (m)
+    v_w: float  # airspeed (m/s)
+    R_W_I: Mat3
+    R_T_I: Mat3
+    target: TargetVectors
+    r: Vec3  # p - p_t (NED, m)
+    q: Vec3  # p - p_t in {T} (m)
+    uu: Vec3  # v_t - eta_hat in {T} (m/s)
+    c: Vec3  # pdot - v_t in {T} (m/s)
+    point: PathPointRate  # p_d, f1, f2, f3, k1, k2, dp_d/ds, rate of {F} per unit s (in {T})
+    R_F_T: Mat3
+    pt_F: Vec3  # position error in {F} (m)
+    pt_T: Vec3  # position error in {T} (m)
+    u_F: Vec3  # v_t t1 + v_d - eta_hat in {F} (m/s)
+    sdot: float  # m/s
+    R_Wd_F: Mat3
+    nn: float  # wd11^2 + wd21^2
+    n: float  # its root
+    pt_x: Vec3  # cross-track error in {F} (m)
+    y_w: float  # m
+    z_w: float  # m
+    d1: Vec3  # NED
+    psi: float
+    e: tuple[float, float]
+
+
+def law_instant(
+    s: float, vehicle: VehicleState, target: TargetState, path: TabulatedPath, gains: Gains,
+    ext: Extensions,
+) -> Instant:  # fmt: skip
+    """(1), (22), (15), (17)-(19), (20), (6), (9) in that order at arc length s (m)."""
+    v_w = float(vehicle.airspeed)
+    R_W_I, p, eta = vehicle_vectors(vehicle, ext)
+    tv = target_vectors(target)
+    R_T_I, p_t, v_t, _, omega_T, _ = tv
+    r = sub(p, p_t)
+    q, uu, c = relative_kinematics(R_T_I, r, v_t, eta, R_W_I[0], v_w, ext.wind_compensation)
+    point = path.eval_with_rate(s)
+    p_d, f1, f2, f3 = point[:4]
+    R_F_T = (f1, f2, f3)
+    pt_T = sub(q, p_d)  # the position error pt = p - p_f, in {T}
+    pt_F = mat_T_vec(R_F_T, pt_T)
+    v_d = cross(omega_T, p_d)  # the path point's velocity from the target's rotation
+    sdot = progression(gains.K_p, pt_F, c, v_d, f1)  # (22)
+    u_F = mat_T_vec(R_F_T, add(uu, v_d))
+    R_Wd_F, nn, n = steady_state_frame(u_F, v_w)  # (15)
+    pt_x, y_w, z_w = cross_track_errors(pt_F, R_Wd_F)  # (17)-(19)
+    d1_Wd = transient_direction(y_w, z_w, gains.alpha)  # (20)
+    d1 = mat_vec(R_T_I, mat_vec(R_F_T, mat_vec(R_Wd_F, d1_Wd)))  # R_T^I R_F^T R_{W_d}^F d1
+    psi, e = attitude_error(R_W_I, d1)  # (6), (9)
+    return _new_tuple(Instant, (
+        float(vehicle.t), s, v_w, R_W_I, R_T_I, tv, r, q, uu, c, point, R_F_T, pt_F, pt_T, u_F,
+        sdot, R_Wd_F, nn, n, pt_x, y_w, z_w, d1, psi, e,
+    ))  # fmt: skip
+
+
+def desired_rate(x: Instant, alpha: float) -> Vec3:
+    """(5), (15)', (17)-(20)' and (10): omega_DI (NED, rad/s), the exact rate of {D} along the
+    closed-loop flow at the instant x, each frame's rate in turn."""
+    _, _, _, a_I, omega_T, omega_dot_T = x.target
+    p_d, dp_ds, rate_F = x.point[0], x.point[6], x.point[7]
+    omega_FT_F = scale(x.sdot, rate_F)  # parallel transport: sdot (tau, -kappa_2, kappa_1)
+    pt_F_dot, u_F_dot = error_rates(
+        x.c, x.q, x.uu, p_d, dp_ds, x.sdot, omega_FT_F, x.R_F_T, x.pt_F, x.u_F,
+        mat_T_vec(x.R_T_I, a_I), omega_T, omega_dot_T,
+    )  # (5)  # fmt: skip
+    omega_WdF_F = steady_state_frame_rate(
+        x.R_Wd_F, x.nn, x.n, u_F_dot[1] / x.v_w, u_F_dot[2] / x.v_w
+    )  # (15) differentiated
+    y_w_dot, z_w_dot = cross_track_rates(x.pt_x, pt_F_dot, x.R_Wd_F, omega_WdF_F)
+    omega_DWd_Wd = transient_frame_rate(x.y_w, x.z_w, y_w_dot, z_w_dot, alpha)
+    return desired_frame_rate(
+        x.R_T_I, omega_T, x.R_F_T, omega_FT_F, x.R_Wd_F, omega_WdF_F, omega_DWd_Wd
+    )  # (10)
 
 
 def mpf_law(
@@ -347,188 +545,48 @@ def mpf_law(
     Returns the command and the diagnostics record (None when ``diagnostics`` is False, which
     saves the cost of building it inside integrators). ``errors_mode``: :func:`mpf_errors`'s
     (it then returns None and an :class:`MpfErrors` recorded with that mode).
-
-    One paragraph per equation of the paper, in the order the law needs them, written out on
-    floats (the module docstring says why and how the components are named).
     """
-    t = float(vehicle.t)
-    s = float(s)
-    v_w = float(vehicle.airspeed)
-    K_p, K_R, alpha = gains.K_p, gains.K_R, gains.alpha
-    # ndarray.tolist() gives lists, which are only unpacked. R_W^I's rows hold the north, east
-    # and down components of w1, w2, w3; R_T^I's rows are NED's axes in {T} (R_I^T's columns).
-    # The target's numbers come as floats when its producer kept them (TargetState.floats).
-    # The vehicle's too (VehicleState.floats).
-    vf = vehicle.floats
-    if vf is not None:
-        w1n, w2n, w3n, w1e, w2e, w3e, w1d, w2d, w3d, pn, pe, pd, hn, he, hd = vf
-    else:
-        (w1n, w2n, w3n), (w1e, w2e, w3e), (w1d, w2d, w3d) = vehicle.R_W_I.tolist()
-        pn, pe, pd = vehicle.position.tolist()
-        hn, he, hd = vehicle.wind.tolist() if ext.wind_compensation else (0.0, 0.0, 0.0)
-    tf = target.floats
-    if tf is not None:
-        (xn, yn, zn, xe, ye, ze, xd, yd, zd, tn, te, td, vn, ve, vd, an, ae, ad,
-         ox, oy, oz, dx, dy, dz) = tf  # fmt: skip
-    else:
-        (xn, yn, zn), (xe, ye, ze), (xd, yd, zd) = target.R_T_I.tolist()
-        tn, te, td = target.position.tolist()  # p_t (NED)
-        vn, ve, vd = target.velocity.tolist()  # v_t (NED)
-        an, ae, ad = target.acceleration.tolist()  # pddot_t (NED)
-        ox, oy, oz = target.omega_T.tolist()  # omega_TI^T
-        dx, dy, dz = target.omega_dot_T.tolist()  # its rate
-
-    # Into {T}, where the path is fixed: q = R_I^T (p - p_t), the vehicle relative to the
-    # target; uu = R_I^T (v_t - eta_hat), the target's velocity less the wind; and c = R_I^T
-    # (v_w w1 + eta_hat - v_t) = v_w w1^T - uu, the vehicle's velocity (1) relative to it.
-    rn, re, rd = pn - tn, pe - te, pd - td  # p - p_t (NED)
-    qx = xn * rn + xe * re + xd * rd
-    qy = yn * rn + ye * re + yd * rd
-    qz = zn * rn + ze * re + zd * rd
-    a0, a1, a2 = vn, ve, vd
-    if ext.wind_compensation:
-        a0, a1, a2 = a0 - hn, a1 - he, a2 - hd
-    ux = xn * a0 + xe * a1 + xd * a2
-    uy = yn * a0 + ye * a1 + yd * a2
-    uz = zn * a0 + ze * a1 + zd * a2
-    cx = v_w * (xn * w1n + xe * w1e + xd * w1d) - ux
-    cy = v_w * (yn * w1n + ye * w1e + yd * w1d) - uy
-    cz = v_w * (zn * w1n + ze * w1e + zd * w1d) - uz
-
-    # The virtual point: p_d(s), R_F^T = (f1, f2, f3), the curvatures k1, k2, dp_d/ds and the
-    # rate of {F} per unit s, (tau, -kappa_2, kappa_1) (TabulatedPath.eval_with_rate).
-    (pdx, pdy, pdz, f1x, f1y, f1z, f2x, f2y, f2z, f3x, f3y, f3z, k1, k2,
-     gx, gy, gz, tau, m_kappa_2, kappa_1) = path.eval_flat(s)  # fmt: skip
-    ex, ey, ez = qx - pdx, qy - pdy, qz - pdz  # the position error pt = p - p_f, in {T}
-    pt1 = f1x * ex + f1y * ey + f1z * ez  # pt in {F}: along-track, along f2, along f3
-    pt2 = f2x * ex + f2y * ey + f2z * ez
-    pt3 = f3x * ex + f3y * ey + f3z * ez
-    vdx, vdy, vdz = oy * pdz - oz * pdy, oz * pdx - ox * pdz, ox * pdy - oy * pdx  # omega_TI x p_d
-
-    # (22) [sdot] = (K_p pt + v_w w1 + eta_hat - v_t t1 - v_d) . f1 (m/s), in {T}.
-    sdot = K_p * pt1 + ((cx - vdx) * f1x + (cy - vdy) * f1y + (cz - vdz) * f1z)
-
-    # (15) {W_d} from u = v_t t1 + v_d - eta_hat, in {F} (u_F1 only enters its rate).
-    a0, a1, a2 = ux + vdx, uy + vdy, uz + vdz
-    uF1 = f1x * a0 + f1y * a1 + f1z * a2
-    uF2 = f2x * a0 + f2y * a1 + f2z * a2
-    uF3 = f3x * a0 + f3y * a1 + f3z * a2
-    wd11, wd21, wd31, wd12, wd22, wd13, wd23, wd33, nn, n = steady_state_frame(uF2, uF3, v_w)
-    # (17)-(19): y_w = pt_x . wd2, z_w = pt_x . wd3 (m), pt_x = (0, pt.f2, pt.f3) in {F}.
-    y_w = pt2 * wd22
-    z_w = pt2 * wd23 + pt3 * wd33
-    # (20) d1 in {W_d}, then in NED: d1 = R_T^I R_F^T R_{W_d}^F d1^{W_d} (wd32 = 0).
-    x0, x1, x2, nn1, nn2 = transient_direction(y_w, z_w, alpha)
-    a0 = x0 * wd11 + x1 * wd12 + x2 * wd13
-    a1 = x0 * wd21 + x1 * wd22 + x2 * wd23
-    a2 = x0 * wd31 + x2 * wd33
-    b0 = a0 * f1x + a1 * f2x + a2 * f3x
-    b1 = a0 * f1y + a1 * f2y + a2 * f3y
-    b2 = a0 * f1z + a1 * f2z + a2 * f3z
-    d1n = xn * b0 + yn * b1 + zn * b2
-    d1e = xe * b0 + ye * b1 + ze * b2
-    d1d = xd * b0 + yd * b1 + zd * b2
-
-    # (6) Psi = (1 - Rt11) / 2 and (9) e = (Rt13, -Rt12) / 2, where Rt = R_W^D = (R_D^I)^T R_W^I
-    # has the first row (d1.w1, d1.w2, d1.w3).
-    psi = 0.5 * (1.0 - (w1n * d1n + w1e * d1e + w1d * d1d))
-    e2 = 0.5 * (w3n * d1n + w3e * d1e + w3d * d1d)
-    e3 = -0.5 * (w2n * d1n + w2e * d1e + w2d * d1d)
-    if errors_mode is not None:  # mpf_errors: the record below without the rates
-        pdn = xn * pdx + yn * pdy + zn * pdz
-        pde = xe * pdx + ye * pdy + ze * pdz
-        pdd = xd * pdx + yd * pdy + zd * pdz
-        errors = tuple.__new__(
-            MpfErrors,
-            (t, s, (rn - pdn, re - pde, rd - pdd), math.sqrt(ex * ex + ey * ey + ez * ez),
-             (tn + pdn, te + pde, td + pdd), psi, (e2, e3), y_w, z_w,
-             v_w - math.sqrt(uF1 * uF1 + uF2 * uF2 + uF3 * uF3), errors_mode),
-        )  # fmt: skip
-        return cast(Any, (None, errors))
-
-    # (10) omega_DI = omega_TI + omega_FT + omega_{W_d F} + omega_{D W_d}, each the exact rate
-    # of its frame along the closed-loop flow. omega_FT^F = sdot (tau, -kappa_2, kappa_1).
-    o1, o2, o3 = sdot * tau, sdot * m_kappa_2, sdot * kappa_1
-    # (5) in {T}: pt_dot = qdot - p_d_dot with qdot = c - omega_TI x q and p_d_dot = sdot
-    # dp_d/ds; u = uu + v_d with d(uu)/dt = a_t - omega_TI x uu (eta_hat held) and v_d =
-    # omega_TI x p_d, so u_dot = a_t + omega_dot x p_d + omega_TI x (p_d_dot - uu), where
-    # a_t = R_I^T pddot_t and omega_dot is omega_TI^T's rate.
-    g0, g1, g2 = sdot * gx, sdot * gy, sdot * gz  # p_d_dot
-    pt_dot0 = cx - (oy * qz - oz * qy) - g0
-    pt_dot1 = cy - (oz * qx - ox * qz) - g1
-    pt_dot2 = cz - (ox * qy - oy * qx) - g2
-    g0, g1, g2 = g0 - ux, g1 - uy, g2 - uz
-    u_dot0 = (xn * an + xe * ae + xd * ad) + (dy * pdz - dz * pdy) + (oy * g2 - oz * g1)
-    u_dot1 = (yn * an + ye * ae + yd * ad) + (dz * pdx - dx * pdz) + (oz * g0 - ox * g2)
-    u_dot2 = (zn * an + ze * ae + zd * ad) + (dx * pdy - dy * pdx) + (ox * g1 - oy * g0)
-    # Their f2, f3 components (all that (15), (18), (19) use) in {F}, which turns at
-    # omega_FT: d(f_k . x)/dt = f_k . x_dot - (omega_FT^F x x^F)_k.
-    pt_f2_dot = f2x * pt_dot0 + f2y * pt_dot1 + f2z * pt_dot2 - (o3 * pt1 - o1 * pt3)
-    pt_f3_dot = f3x * pt_dot0 + f3y * pt_dot1 + f3z * pt_dot2 - (o1 * pt2 - o2 * pt1)
-    wd21_dot = (f2x * u_dot0 + f2y * u_dot1 + f2z * u_dot2 - (o3 * uF1 - o1 * uF3)) / v_w
-    wd31_dot = (f3x * u_dot0 + f3y * u_dot1 + f3z * u_dot2 - (o1 * uF2 - o2 * uF1)) / v_w
-    a0, a1, a2 = steady_state_frame_rate(
-        wd11, wd21, wd31, wd12, wd22, nn, n, wd21_dot, wd31_dot
-    )  # omega_{W_d F}^F
-    # d/dt of (18)-(19) while {W_d} turns at omega_{W_d F}^F = a: d(wd_k)/dt = a x wd_k, of
-    # which the components used here are written out (d(wd22)/dt = a2 wd12 as wd32 = 0).
-    y_w_dot = pt_f2_dot * wd22 + pt2 * a2 * wd12
-    z_w_dot = pt_f2_dot * wd23 + pt_f3_dot * wd33
-    z_w_dot += pt2 * (a2 * wd13 - a0 * wd33) + pt3 * (a0 * wd23 - a1 * wd13)
-    b0, b1, b2 = transient_frame_rate(y_w, z_w, y_w_dot, z_w_dot, alpha, nn1, nn2)
-    # Summed in {F}: omega_FT^F + omega_{W_d F}^F + R_{W_d}^F omega_{D W_d}^{W_d} (wd32 = 0),
-    # into {T} by R_F^T plus omega_TI^T, then into NED by R_T^I.
-    o1 += a0 + (b0 * wd11 + b1 * wd12 + b2 * wd13)
-    o2 += a1 + (b0 * wd21 + b1 * wd22 + b2 * wd23)
-    o3 += a2 + (b0 * wd31 + b2 * wd33)
-    a0 = ox + (o1 * f1x + o2 * f2x + o3 * f3x)
-    a1 = oy + (o1 * f1y + o2 * f2y + o3 * f3y)
-    a2 = oz + (o1 * f1z + o2 * f2z + o3 * f3z)
-    on = xn * a0 + yn * a1 + zn * a2  # omega_DI (NED)
-    oe = xe * a0 + ye * a1 + ze * a2
-    od = xd * a0 + yd * a1 + zd * a2
-
-    # (23) [omega]: -K_R e + Pi_R Rt^T omega_DI^D, the last term being omega_DI on w2, w3.
-    ff2 = on * w2n + oe * w2e + od * w2d
-    ff3 = on * w3n + oe * w3e + od * w3d
-    m_K_R = -K_R
-    law2, law3 = m_K_R * e2 + ff2, m_K_R * e3 + ff3
-    if ext.psi_turn or ext.rate_limit is not None:
-        R_W_I = (w1n, w1e, w1d), (w2n, w2e, w2d), (w3n, w3e, w3d)
-        cmd2, cmd3, mode = apply_extensions(
-            law2, law3, ff2, ff3, psi, (d1n, d1e, d1d), R_W_I, K_R, ext
-        )
-    else:  # the paper's law as it is (apply_extensions would return it unchanged)
-        cmd2, cmd3, mode = law2, law3, "law"
-    # tuple.__new__ builds the NamedTuples without their keyword-parsing constructor (~0.3 us
-    # each). The command's omega_w1_I is R_W^I [0, w2, w3], in NED.
-    cmd: MpfCommand = tuple.__new__(
-        MpfCommand,
-        (t, cmd2, cmd3, sdot,
-         (cmd2 * w2n + cmd3 * w3n, cmd2 * w2e + cmd3 * w3e, cmd2 * w2d + cmd3 * w3d)),
-    )  # fmt: skip
+    x = law_instant(float(s), vehicle, target, path, gains, ext)
+    if errors_mode is not None:  # mpf_errors: the record without the rates
+        return cast(_LawResult, (None, errors_record(x, errors_mode)))  # mpf_errors unwraps it
+    omega_DI = desired_rate(x, gains.alpha)  # (10)
+    law, ff = autopilot_reference(gains.K_R, x.e, omega_DI, x.R_W_I)  # (23)
+    cmd2, cmd3, mode = apply_extensions(law, ff, x.psi, x.d1, x.R_W_I, gains.K_R, ext)
+    # The command's omega_w1_I is R_W^I [0, w2, w3], in NED.
+    omega_w1_I = add(scale(cmd2, x.R_W_I[1]), scale(cmd3, x.R_W_I[2]))
+    cmd: MpfCommand = _new_tuple(MpfCommand, (x.t, cmd2, cmd3, x.sdot, omega_w1_I))
     if not diagnostics:
         return cmd, None
+    return cmd, diagnostics_record(x, omega_DI, ff, law, mode)
 
-    # The record, its vectors into NED by R_T^I: p_d (p_f = p_t + p_d and pt = (p - p_t) -
-    # p_d), wd1 = R_T^I R_F^T wd1^F and f1; the Assumption 1 margin v_w - |u| (|u| = |u_F|).
-    pdn = xn * pdx + yn * pdy + zn * pdz
-    pde = xe * pdx + ye * pdy + ze * pdz
-    pdd = xd * pdx + yd * pdy + zd * pdz
-    a0 = wd11 * f1x + wd21 * f2x + wd31 * f3x
-    a1 = wd11 * f1y + wd21 * f2y + wd31 * f3y
-    a2 = wd11 * f1z + wd21 * f2z + wd31 * f3z
-    return cmd, tuple.__new__(
-        MpfDiagnostics,
-        (t, s, (rn - pdn, re - pde, rd - pdd), math.sqrt(ex * ex + ey * ey + ez * ez),
-         (pt1, pt2, pt3), (tn + pdn, te + pde, td + pdd), psi, (e2, e3), y_w, z_w,
-         (d1n, d1e, d1d),
-         (xn * a0 + yn * a1 + zn * a2, xe * a0 + ye * a1 + ze * a2, xd * a0 + yd * a1 + zd * a2),
-         (xn * f1x + yn * f1y + zn * f1z, xe * f1x + ye * f1y + ze * f1z,
-          xd * f1x + yd * f1y + zd * f1z),
-         (on, oe, od), (ff2, ff3), (law2, law3),
-         v_w - math.sqrt(uF1 * uF1 + uF2 * uF2 + uF3 * uF3), mode, k1, k2),
-    )  # fmt: skip
+
+def _record_vectors(x: Instant) -> tuple[Vec3, float, Vec3, float]:
+    """(pt NED, |pt|, p_f NED, v_w - |u|): the position error pt = (p - p_t) - R_T^I p_d (m),
+    the desired point p_f = p_t + R_T^I p_d (m) and the Assumption 1 margin (m/s, |u| = |u_F|)."""
+    p_d_I = mat_vec(x.R_T_I, x.point[0])
+    return sub(x.r, p_d_I), norm(x.pt_T), add(x.target[1], p_d_I), x.v_w - norm(x.u_F)
+
+
+def errors_record(x: Instant, mode: str) -> MpfErrors:
+    """The :class:`MpfErrors` of the instant x, recorded with ``mode``."""
+    pt, pt_norm, p_f, margin = _record_vectors(x)
+    return _new_tuple(
+        MpfErrors, (x.t, x.s, pt, pt_norm, p_f, x.psi, x.e, x.y_w, x.z_w, margin, mode)
+    )
+
+
+def diagnostics_record(
+    x: Instant, omega_DI: Vec3, ff: tuple[float, float], law: tuple[float, float], mode: str
+) -> MpfDiagnostics:
+    """The :class:`MpfDiagnostics` of the instant x and its rates; wd1 = R_T^I R_F^T wd1^F and
+    f1 into NED."""
+    pt, pt_norm, p_f, margin = _record_vectors(x)
+    wd1 = mat_vec(x.R_T_I, mat_vec(x.R_F_T, x.R_Wd_F[0]))
+    f1 = mat_vec(x.R_T_I, x.R_F_T[0])
+    return _new_tuple(MpfDiagnostics, (
+        x.t, x.s, pt, pt_norm, x.pt_F, p_f, x.psi, x.e, x.y_w, x.z_w, x.d1, wd1, f1, omega_DI,
+        ff, law, margin, mode, x.point[4], x.point[5],
+    ))  # fmt: skip
 
 
 def mpf_errors(
@@ -545,4 +603,4 @@ def mpf_errors(
     instant when the command comes from a predicted state), at half the law's cost. The same
     code as the law's up to (9), so the same floats as its :class:`MpfDiagnostics`; ``mode``
     is recorded as given (the mode of the evaluation that was flown)."""
-    return cast(MpfErrors, mpf_law(s, vehicle, target, path, gains, ext, True, mode)[1])
+    return errors_record(law_instant(float(s), vehicle, target, path, gains, ext), mode)
