@@ -72,7 +72,8 @@ def test_the_bounds_hold_on_random_inputs_beyond_the_capture_distance():
     for _ in range(2000):
         veh, cmd, f1, wd1, pt_norm, pt_along, floor_d = _random_case(rng)
         diag = _diag(pt_norm, pt_along, f1, wd1)
-        out, beta = cap.guard(cmd, diag, veh, floor_d, K_p, P)
+        ceil_d = floor_d - rng.uniform(0.0, 60.0)
+        out, beta = cap.guard(cmd, diag, veh, floor_d, K_p, P, ceil_d)
         assert beta == 1.0
         R, v = np.asarray(veh.R_W_I), veh.airspeed
         # (a) sdot within +-v_w of the on-path rate
@@ -89,6 +90,8 @@ def test_the_bounds_hold_on_random_inputs_beyond_the_capture_distance():
         gdot = (out.w2 * R[2, 2] - out.w3 * R[2, 1]) / math.cos(gamma)
         g_cmd = gamma + gdot * P.tau_s
         assert g_cmd <= P.pitch_max_rad - P.pitch_margin_rad + 1e-6
+        if veh.position[2] <= ceil_d:  # at or above the ceiling: no climb
+            assert g_cmd <= 1e-6 or g_cmd <= P.pitch_min_rad + P.pitch_margin_rad + 1e-6
         if veh.position[2] >= floor_d:
             assert g_cmd >= -1e-6
         else:

@@ -19,7 +19,11 @@ point, blended in over ``blend_m`` so that nothing jumps at the threshold:
     the pitch band less ``pitch_margin_rad``, and above a floor-dependent lower bound: the sink
     allowed is the height above the floor over ``floor_tau_s`` (so at the floor, or below it,
     the aircraft never descends). The floor is the moving path's lowest point less
-    ``floor_margin_m``, never below ``metrics.altitude_floor_m`` above home.
+    ``floor_margin_m``, never below ``metrics.altitude_floor_m`` above home. Symmetrically it
+    does not climb above the path's highest point plus the margin (measured on real ArduPlane,
+    circle, 300 m off: the aircraft pitched up in the reversal turn, the adapter held that
+    flight path while the law's vertical feedback is weak far off, it climbed 54 m above the
+    path and then dove at the pitch limit to come back).
 
 Inside ``distance_m`` the command is the law's, bit for bit. Pure: no I/O, no clock. Frames:
 NED, the wind frame's columns w1, w2, w3 in NED; SI units, radians.
@@ -63,7 +67,7 @@ class CaptureParams:
     turn_gain: float = 1.0
     pitch_min_rad: float = -0.38
     pitch_max_rad: float = 0.32
-    pitch_margin_rad: float = 0.05
+    pitch_margin_rad: float = 0.08
     tau_s: float = 1.0
     floor_margin_m: float = 5.0
     altitude_floor_m: float = 10.0
@@ -104,22 +108,37 @@ def turn_rate_limit(v_w: float, w3_down: float, p: CaptureParams, g: float = GRA
 def floor_down(target: TargetState, path_nodes_T: NDArray[np.float64], p: CaptureParams) -> float:
     """The floor (NED down, m): the moving path's lowest point (its nodes in {T} placed by the
     target now) less floor_margin_m, never lower than altitude_floor_m above home."""
+    return floor_and_ceiling_down(target, path_nodes_T, p)[0]
+
+
+def floor_and_ceiling_down(
+    target: TargetState, path_nodes_T: NDArray[np.float64], p: CaptureParams
+) -> tuple[float, float]:
+    """(floor, ceiling) NED down (m): :func:`floor_down`, and the moving path's highest point
+    plus floor_margin_m (above which the capture does not climb)."""
     r3 = np.asarray(target.R_T_I)[2]  # NED down of each {T} axis
-    lowest = float(target.position[2]) + float((path_nodes_T @ r3).max())
-    return min(lowest + p.floor_margin_m, -p.altitude_floor_m)
+    downs = path_nodes_T @ r3
+    td = float(target.position[2])
+    lowest, highest = td + float(downs.max()), td + float(downs.min())
+    return min(lowest + p.floor_margin_m, -p.altitude_floor_m), highest - p.floor_margin_m
 
 
 def flight_path_band(gamma: float, v_w: float, height_above_floor_m: float,
-                     p: CaptureParams) -> tuple[float, float]:  # fmt: skip
+                     p: CaptureParams, depth_below_ceiling_m: float = math.inf,
+                     ) -> tuple[float, float]:  # fmt: skip
     """(c) [lo, hi] (rad/s) for the flight-path rate gamma_dot at flight-path angle gamma (rad):
     gamma + gamma_dot tau within the pitch band less its margin, and above
     -asin(h / (floor_tau v_w)) (h the height above the floor, m): no sink at or below the floor,
-    a climb back (at most the band's top) below it."""
+    a climb back (at most the band's top) below it. Symmetrically no climb above the ceiling
+    (depth_below_ceiling_m <= 0; the path's highest point plus the same margin), but no forced
+    descent either: a start above the path comes down at the law's own rate."""
     top = p.pitch_max_rad - p.pitch_margin_rad
     bottom = p.pitch_min_rad + p.pitch_margin_rad
     x = height_above_floor_m / (p.floor_tau_s * max(v_w, 1.0))
     g_floor = -math.asin(min(x, 1.0)) if x >= 0.0 else math.asin(min(-x, math.sin(top)))
     bottom = min(max(bottom, g_floor), top)
+    y = depth_below_ceiling_m / (p.floor_tau_s * max(v_w, 1.0))
+    top = max(min(top, math.asin(min(max(y, 0.0), 1.0))), bottom)
     tau = max(p.tau_s, 1e-3)
     return (bottom - gamma) / tau, (top - gamma) / tau
 
@@ -131,11 +150,13 @@ def guard(
     floor_down_m: float,
     K_p: float,
     p: CaptureParams,
+    ceiling_down_m: float = -math.inf,
 ) -> tuple[MpfCommand, float]:
     """The law's command with the guards applied, blended by :func:`capture_weight` of |pt|,
     and that weight (0: the law's command itself, returned as it is).
 
-    floor_down_m: :func:`floor_down` (NED down, m); K_p (1/s) the gain sdot (22) used."""
+    floor_down_m, ceiling_down_m: :func:`floor_and_ceiling_down` (NED down, m); K_p (1/s) the
+    gain sdot (22) used."""
     beta = capture_weight(diag.pt_norm, p.distance_m, p.blend_m)
     if beta == 0.0:
         return cmd, 0.0
@@ -153,7 +174,7 @@ def guard(
     gamma = math.asin(min(max(-w1d, -1.0), 1.0))
     cg = max(math.cos(gamma), 1e-3)
     h = floor_down_m - float(vehicle.position[2])
-    lo, hi = flight_path_band(gamma, v_w, h, p)
+    lo, hi = flight_path_band(gamma, v_w, h, p, float(vehicle.position[2]) - ceiling_down_m)
     w3d_safe = w3d if abs(w3d) > 0.1 else math.copysign(0.1, w3d or 1.0)
     gamma_dot = (cmd.w2 * w3d - w3 * w2d) / cg
     gamma_dot = min(max(gamma_dot, lo), hi)
@@ -185,6 +206,6 @@ class CaptureGuard:
         guards acted (weight > 0)."""
         if capture_weight(diag.pt_norm, self.params.distance_m, self.params.blend_m) == 0.0:
             return cmd, diag
-        fd = floor_down(target, self.nodes, self.params)
-        out, beta = guard(cmd, diag, vehicle, fd, K_p, self.params)
+        fd, cd = floor_and_ceiling_down(target, self.nodes, self.params)
+        out, _ = guard(cmd, diag, vehicle, fd, K_p, self.params, cd)
         return out, diag._replace(mode=diag.mode + "+capture")
