@@ -278,3 +278,17 @@ def test_a_capture_from_300_m_away_in_our_sil_keeps_the_floor_and_the_bank(tmp_p
     assert on["bank_over_s"] <= 1.0 and on["verdict"] == "PASS", on
     assert off["lowest_alt_m"] < off["floor_alt_m"], off  # what the guards fix
     json.dumps(figs)
+
+
+def test_the_capture_matrix_is_recorded_with_every_row_and_its_command():
+    """docs/results/capture.md (scripts/capture-figures --record): the 12 rows of the matrix
+    (both autopilots x circle, spline x away, below, above), each PASS, its guards-off rows,
+    and the command that wrote it."""
+    text = (ROOT / "docs" / "results" / "capture.md").read_text()
+    assert "Command: `scripts/capture-figures" in text
+    rows = [r for r in text.splitlines() if r.startswith(("| arduplane |", "| px4 |"))]
+    on = [r for r in rows if r.split("|")[4].strip() == "on"]
+    keys = {tuple(c.strip().split(" ")[0] for c in r.split("|")[1:4]) for r in on}
+    assert len(on) == 12 and len(keys) == 12, on
+    assert all(r.rstrip(" |").endswith("PASS") for r in on), on
+    assert any(r.split("|")[4].strip() == "off" for r in rows)
