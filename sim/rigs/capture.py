@@ -11,7 +11,8 @@ record: ``bridge/timeseries.csv``, ``bridge/limits.csv``, ``bridge/metrics.json`
 - captured: the bridge's convergence time, |pt| < 5 m (``metrics.converge_threshold_m`` of the
   shipped configs) from then to the end of the flight;
 - bound: d0 / (v_a - v_t) + 2 pi R / v_a + 20 s (:func:`capture_bound_s`);
-- lowest altitude against the moving path's lowest point less 10 m (above home);
+- lowest altitude against the moving path's lowest point less 10 m (above home), or, from a
+  start below that (30 m under a circle), against the start altitude less 1 m: no descent;
 - time with |bank| beyond the autopilot's limit + 2 deg (at most 1 s) and the largest bank;
 - verdict: PASS when captured within the bound, never below the floor, and beyond the bank
   limit + 2 deg for at most 1 s.
@@ -50,6 +51,7 @@ STARTS = {"away": (300.0, 0.0, 0.0), "below": (0.0, 0.0, 30.0), "above": (0.0, 0
 #: the "before" rows: the same starts with the guards off
 BEFORE = (("arduplane", "spline", "away"), ("px4", "spline", "away"))
 FLOOR_MARGIN_M = 10.0  # the acceptance: never below the path's lowest point less this
+START_TOLERANCE_M = 1.0  # ... or, starting below that, below the start (its altitude noise)
 BANK_OVER_DEG = 2.0  # ... nor beyond the autopilot's bank limit + this for more than 1 s
 BANK_OVER_MAX_S = 1.0
 SETTLE_S = 20.0  # the law's settling once near the path (bound), see capture_bound_s
@@ -113,7 +115,6 @@ def row_figures(flight_dir: Path, cfg: Any) -> dict[str, Any]:
     # the path's lowest point (level targets: the target's down plus the lowest node's)
     lowest_alt = -(ts["tgt_d"] + zmax)
     alt = -ts["p_d"]
-    k = int(np.argmin(alt - lowest_alt))
     t = ts["t"]
     d0 = float(m.get("initial_pt_m") or ts["pt_norm"][0])
     bound = capture_bound_s(cfg, d0)
@@ -121,7 +122,10 @@ def row_figures(flight_dir: Path, cfg: Any) -> dict[str, Any]:
     lim_deg = bank_limit_deg(cfg)
     roll = np.degrees(np.abs(lim["roll"]))
     over_s = _time_over(roll > lim_deg + BANK_OVER_DEG, lim["t"])
-    floor_ok = bool(np.all(alt >= lowest_alt - FLOOR_MARGIN_M))
+    # the floor; a start below it (30 m under a circle) must not descend from where it engaged
+    floor = np.minimum(lowest_alt - FLOOR_MARGIN_M, alt[0] - START_TOLERANCE_M)
+    k = int(np.argmin(alt - floor))
+    floor_ok = bool(np.all(alt >= floor))
     cap_ok = cap is not None and float(cap) <= bound
     ok = cap_ok and floor_ok and over_s <= BANK_OVER_MAX_S
     why = [w for w, bad in (("not captured in the bound", not cap_ok),
@@ -133,7 +137,7 @@ def row_figures(flight_dir: Path, cfg: Any) -> dict[str, Any]:
         "bound_s": bound,
         "lowest_alt_m": float(alt[k]),
         "path_lowest_alt_m": float(lowest_alt[k]),
-        "floor_alt_m": float(lowest_alt[k] - FLOOR_MARGIN_M),
+        "floor_alt_m": float(floor[k]),
         "lowest_at_s": float(t[k]),
         "bank_over_s": over_s,
         "bank_limit_deg": lim_deg,
@@ -186,8 +190,9 @@ def table(out: Path, command: str) -> str:
         "engagement. Captured: |pt| < 5 m from then to the end. Bound: d0 / (v_a - v_t) + "
         "2 pi R / v_a + 20 s, R = v_a^2 / (g k tan(bank limit - 5 deg)): flown straight back "
         "against the target, one full turn at the guarded bank, the law's settling. Lowest: "
-        "the aircraft's lowest altitude above home, against the moving path's lowest point "
-        f"- {FLOOR_MARGIN_M:g} m. Bank: time beyond the autopilot's limit + "
+        "the aircraft's lowest altitude above home, against the floor: the moving path's lowest "
+        f"point - {FLOOR_MARGIN_M:g} m, or from a start below that the start altitude - "
+        f"{START_TOLERANCE_M:g} m (no descent). Bank: time beyond the autopilot's limit + "
         f"{BANK_OVER_DEG:g} deg (at most {BANK_OVER_MAX_S:g} s) and the largest bank.",
         "",
         "| autopilot | path | start | guards | start (m) | captured (s) | bound (s) | lowest / "
