@@ -76,7 +76,7 @@ def capture_bound_s(cfg: Any, d0_m: float) -> float:
     )
     bank = lim - cfg.guidance.capture_bank_margin_rad
     radius = va * va / (GRAVITY_M_S2 * v.turn_gain * math.tan(bank))
-    return d0_m / max(va - vt, 1.0) + 2.0 * math.pi * radius / va + SETTLE_S
+    return float(d0_m / max(va - vt, 1.0) + 2.0 * math.pi * radius / va + SETTLE_S)
 
 
 def bank_limit_deg(cfg: Any) -> float:
