@@ -127,8 +127,11 @@ def row_figures(flight_dir: Path, cfg: Any) -> dict[str, Any]:
     k = int(np.argmin(alt - floor))
     floor_ok = bool(np.all(alt >= floor))
     cap_ok = cap is not None and float(cap) <= bound
-    ok = cap_ok and floor_ok and over_s <= BANK_OVER_MAX_S
-    why = [w for w, bad in (("not captured in the bound", not cap_ok),
+    exit_reason = str(m.get("exit_reason") or "")
+    cut = "mission duration" not in exit_reason  # a safety exit of the bridge, not the end
+    ok = cap_ok and floor_ok and over_s <= BANK_OVER_MAX_S and not cut
+    why = [w for w, bad in ((f"bridge stopped: {exit_reason}", cut),
+                            ("not captured in the bound", not cap_ok),
                             ("below the floor", not floor_ok),
                             ("over-banked", over_s > BANK_OVER_MAX_S)) if bad]  # fmt: skip
     return {
