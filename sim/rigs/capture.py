@@ -110,6 +110,7 @@ def row_figures(flight_dir: Path, cfg: Any) -> dict[str, Any]:
     m = json.loads((b / "metrics.json").read_text())
     ts = _read_csv(b / "timeseries.csv")
     lim = _read_csv(b / "limits.csv")
+    sp = _read_csv(b / "setpoints.csv")
     nodes = _read_csv(b / "path_T.csv")
     zmax = float(np.max(nodes[list(nodes)[-1]]))  # {T} down of the path's lowest node
     # the path's lowest point (level targets: the target's down plus the lowest node's)
@@ -147,6 +148,12 @@ def row_figures(flight_dir: Path, cfg: Any) -> dict[str, Any]:
         "max_bank_deg": float(np.max(roll)),
         "tracked_s": float(t[-1]),
         "steady_rms_m": m.get("steady_rms_m"),
+        "sdot_range_m_s": [float(ts["sdot"].min()), float(ts["sdot"].max())],
+        "pitch_sp_range_deg": [
+            float(np.degrees(sp["pitch"].min())),
+            float(np.degrees(sp["pitch"].max())),
+        ],  # fmt: skip
+        "max_bank_sp_deg": float(np.degrees(np.abs(sp["bank"]).max())),
         "verdict": "PASS" if ok else "FAIL: " + ", ".join(why),
     }
 
@@ -168,6 +175,26 @@ def fly_row(out: Path, ap: str, path: str, start: str, before: bool) -> Path:
     cmd = [sys.executable, "-m", "sim.rigs", ap, "--out", str(d), "--config", cfg_path,
            "--start-offset", ",".join(f"{x:g}" for x in off), "--duration", f"{duration:.0f}",
            *[x for s in sets for x in ("--set", s)]]  # fmt: skip
+    print("capture: " + " ".join(cmd[2:]), flush=True)
+    with open(out / f"{d.name}.log", "w") as log:
+        subprocess.run(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, check=False)
+    return d
+
+
+def _rng(x: Any) -> str:
+    return "n/a" if x is None else f"{x[0]:.1f}..{x[1]:.1f}"
+
+
+def fly_sil(out: Path, guards: bool) -> Path:
+    """Our SIL (JSBSim X8 with ArduPlane's rules behind MAVLink, the real bridge over UDP) on
+    the ArduPlane spline from 300 m beyond its southern point, flying south: the same start
+    with the guards on and off, run to run repeatable where the firmware's loiter is not."""
+    d = out / f"sil-arduplane-spline-away-guards-{'on' if guards else 'off'}"
+    cmd = [sys.executable, "-m", "mpf_mavlink.cli", "sim", CONFIGS[("arduplane", "spline")],
+           "--out", str(d), "--set", "sil.link=udp", "--set", "sim.duration_s=100",
+           "--set", "kinematic.initial_position_ned_m=[-520,0,-100]",
+           "--set", "kinematic.initial_attitude_rpy_rad=[0,0,3.14159]",
+           "--set", f"guidance.capture_guards={'true' if guards else 'false'}"]  # fmt: skip
     print("capture: " + " ".join(cmd[2:]), flush=True)
     with open(out / f"{d.name}.log", "w") as log:
         subprocess.run(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, check=False)
@@ -199,15 +226,19 @@ def table(out: Path, command: str) -> str:
         f"{BANK_OVER_DEG:g} deg (at most {BANK_OVER_MAX_S:g} s) and the largest bank.",
         "",
         "| autopilot | path | start | guards | start (m) | captured (s) | bound (s) | lowest / "
-        "floor (m) | bank > limit + 2 (s) | max bank / limit (deg) | steady RMS (m) | verdict |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "floor (m) | bank > limit + 2 (s) | max bank / limit (deg) | steady RMS (m) | sdot "
+        "(m/s) | pitch, max bank set-point (deg) | verdict |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     flown: list[dict[str, Any]] = []
     keys = [(a, p, s, False) for a in ("arduplane", "px4") for p in ("circle", "spline")
             for s in STARTS] + [(a, p, s, True) for a, p, s in BEFORE]  # fmt: skip
+    keys += [("sil-arduplane", "spline", "away", b) for b in (False, True)]
     for ap, path, start, before in keys:
         d = out / _flight(ap, path, start, before)
-        cfg = load_config(ROOT / CONFIGS[(ap, path)])
+        if ap.startswith("sil"):
+            d = out / f"{ap}-{path}-{start}-guards-{'off' if before else 'on'}"
+        cfg = load_config(ROOT / CONFIGS[(ap.removeprefix("sil-"), path)])
         try:
             f = row_figures(d, cfg)
         except (OSError, ValueError, KeyError, IndexError) as e:
@@ -221,7 +252,8 @@ def table(out: Path, command: str) -> str:
             f"{_fmt(f.get('lowest_alt_m'))} / {_fmt(f.get('floor_alt_m'))} | "
             f"{_fmt(f.get('bank_over_s'))} | {_fmt(f.get('max_bank_deg'))} / "
             f"{_fmt(f.get('bank_limit_deg'))} | {_fmt(f.get('steady_rms_m'), '.2f')} | "
-            f"{f['verdict']} |"
+            f"{_rng(f.get('sdot_range_m_s'))} | {_rng(f.get('pitch_sp_range_deg'))}, "
+            f"{_fmt(f.get('max_bank_sp_deg'))} | {f['verdict']} |"
         )
     (out / "capture.json").write_text(json.dumps(flown, indent=2) + "\n")
     date = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
@@ -243,6 +275,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--start", choices=tuple(STARTS), help="one start's rows")
     ap.add_argument("--before", action="store_true", help="also the guards-off rows")
     ap.add_argument("--no-matrix", action="store_true", help="only the guards-off rows")
+    ap.add_argument("--sil", action="store_true", help="also our SIL's rows (guards on, off)")
     ap.add_argument("--render", action="store_true", help="fly nothing: the table of --out")
     ap.add_argument("--record", action="store_true", help="write docs/results/capture.md")
     a = ap.parse_args(argv)
@@ -259,6 +292,11 @@ def main(argv: list[str] | None = None) -> int:
             if (out / _flight(p_, q, s, before) / "summary.json").is_file():
                 continue  # flown already (the directory is reused, never overwritten)
             fly_row(out, p_, q, s, before)
+    if a.sil and not a.render:
+        for guards in (True, False):
+            if not (out / f"sil-arduplane-spline-away-guards-{'on' if guards else 'off'}"
+                    / "metrics.json").is_file():  # fmt: skip
+                fly_sil(out, guards)
     command = "scripts/capture-figures " + " ".join(sys.argv[1:] if argv is None else argv)
     text = table(out, command)
     (out / "capture.md").write_text(text)
