@@ -246,7 +246,8 @@ def table(out: Path, command: str) -> str:
         f.update(autopilot=ap, path=path, start=start, guards=not before)
         flown.append(f)
         lines.append(
-            f"| {ap} | {path} ({CONFIGS[(ap, path)]}) | {start} {STARTS[start]} | "
+            f"| {ap} | {path} ({CONFIGS[(ap.removeprefix('sil-'), path)]}) | "
+            f"{start} {STARTS[start]} | "
             f"{'off' if before else 'on'} | {_fmt(f.get('start_m'), '.0f')} | "
             f"{_fmt(f.get('captured_s'))} | {_fmt(f.get('bound_s'), '.0f')} | "
             f"{_fmt(f.get('lowest_alt_m'))} / {_fmt(f.get('floor_alt_m'))} | "
