@@ -223,7 +223,14 @@ def table(out: Path, command: str) -> str:
         "the aircraft's lowest altitude above home, against the floor: the moving path's lowest "
         f"point - {FLOOR_MARGIN_M:g} m, or from a start below that the start altitude - "
         f"{START_TOLERANCE_M:g} m (no descent). Bank: time beyond the autopilot's limit + "
-        f"{BANK_OVER_DEG:g} deg (at most {BANK_OVER_MAX_S:g} s) and the largest bank.",
+        f"{BANK_OVER_DEG:g} deg (at most {BANK_OVER_MAX_S:g} s) and the largest bank (the "
+        "aircraft's own loiter bank at engagement included). sdot: the virtual point's "
+        "progression, its range; set-points: the pitch range and the largest bank sent. "
+        "Guards off: `--set guidance.capture_guards=false`. The sil-arduplane rows are our SIL "
+        "(`mpf-mavlink sim --set sil.link=udp`: JSBSim X8, ArduPlane rules, the real bridge) "
+        "from 300 m beyond the spline's southern point flying south, with the guards on and "
+        "off: the same start each time, where the firmware's loiter gives another start per "
+        "flight.",
         "",
         "| autopilot | path | start | guards | start (m) | captured (s) | bound (s) | lowest / "
         "floor (m) | bank > limit + 2 (s) | max bank / limit (deg) | steady RMS (m) | sdot "
