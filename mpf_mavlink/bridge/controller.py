@@ -40,7 +40,13 @@ from mpf_mavlink.bridge.estimator import Estimate, Estimator, EstimatorParams
 from mpf_mavlink.bridge.instants import ControlInstants
 from mpf_mavlink.bridge.loop_delay import LoopDelay
 from mpf_mavlink.bridge.target_sources import ExtrapolatedTarget, LiveTarget, ScriptedTarget
-from mpf_mavlink.config.scenario import build_extensions, build_gains, build_path, build_target
+from mpf_mavlink.config.scenario import (
+    build_capture,
+    build_extensions,
+    build_gains,
+    build_path,
+    build_target,
+)
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.adapter import AdapterParams, AdapterState, Setpoint, adapt, safe_setpoint
 from mpf_mavlink.core.guidance.baselines import guidance_law
@@ -308,6 +314,7 @@ class Controller:
         self.gains = build_gains(cfg)
         self.ext = build_extensions(cfg)
         self.cfg_law = cfg.guidance.law  # MPF or a baseline (core/guidance/baselines.py)
+        self.capture = build_capture(cfg)  # the capture guards (core/guidance/capture.py)
         self.s = 0.0
         self.t0: float | None = None  # mission-time origin (autopilot boot time, s)
         self.t_prev: float | None = None
@@ -524,6 +531,8 @@ class Controller:
         law = self.cfg_law
         cmd, diag_law = guidance_law(law, s_law, vl, tgt_law, self.path, gains, self.ext, True)
         assert diag_law is not None
+        if self.capture is not None:  # far from the path: bounded sdot, bank, flight path
+            cmd, diag_law = self.capture.apply(cmd, diag_law, vl, tgt_law, gains.K_p)
         self.law_evals += 1
         sp, self.ad_state = adapt(
             cmd.omega_w1_I, vl.airspeed, R_B_N, w1l, dt, self.ad_params, self.ad_state,

@@ -5,6 +5,7 @@ free of configuration."""
 from __future__ import annotations
 
 from mpf_mavlink.config.schema import Config, PathConfig, TargetConfig
+from mpf_mavlink.core.guidance.capture import CaptureGuard, CaptureParams
 from mpf_mavlink.core.guidance.law import Extensions, Gains
 from mpf_mavlink.core.paths import TabulatedPath, circle, helix, lemniscate, line, spline
 from mpf_mavlink.core.target import ConstantTurn, PaperProfile, Stationary, TargetMotion
@@ -65,3 +66,30 @@ def build_extensions(cfg: Config) -> Extensions:
         psi_turn_rate=g.psi_turn_rate_rad_s,
         wind_compensation=g.wind_compensation,
     )
+
+
+def build_capture(cfg: Config) -> CaptureGuard | None:
+    """The capture guards of ``guidance`` (core/guidance/capture.py) for the config's path, or
+    None when ``guidance.capture_guards`` is off or the law is a baseline."""
+    g = cfg.guidance
+    if not g.capture_guards or g.law != "mpf":
+        return None
+    v, a = cfg.vehicle, cfg.section("adapter")
+    bank = (
+        v.max_bank_rad
+        if v.autopilot_bank_limit_rad is None
+        else min(v.max_bank_rad, v.autopilot_bank_limit_rad)
+    )
+    trim = a.trim_pitch_rad
+    params = CaptureParams(
+        distance_m=g.capture_distance_m,
+        bank_limit_rad=bank,
+        bank_margin_rad=g.capture_bank_margin_rad,
+        turn_gain=v.turn_gain,
+        pitch_min_rad=a.min_pitch_rad - trim,
+        pitch_max_rad=a.max_pitch_rad - trim,
+        tau_s=a.tau_pitch_s if a.tau_pitch_s > 0.0 else 1.0,
+        floor_margin_m=g.capture_floor_margin_m,
+        altitude_floor_m=cfg.metrics.altitude_floor_m,
+    )
+    return CaptureGuard(build_path(cfg.path).positions(), params)

@@ -116,6 +116,33 @@ class GuidanceConfig:
     initial_s_m: float | None = field(
         default=None, metadata=_doc("initial path parameter; null: the closest point")
     )
+    capture_guards: bool = field(
+        default=True,
+        metadata=_doc(
+            "beyond capture_distance_m of the virtual point: sdot within +-airspeed of the "
+            "on-path rate, the turn within the bank limit less capture_bank_margin_rad, the "
+            "flight path within the pitch band and never sinking at the floor "
+            "(core/guidance/capture.py); false: the law's command as it is"
+        ),
+    )
+    capture_distance_m: float = field(
+        default=150.0,
+        metadata=_pos(
+            "|pt| (m) beyond which the capture guards act (fully from 30 m further); within "
+            "it the law is untouched"
+        ),
+    )
+    capture_bank_margin_rad: float = field(
+        default=0.0873,
+        metadata=_nonneg("kept below the autopilot's bank limit while capturing (5 deg)"),
+    )
+    capture_floor_margin_m: float = field(
+        default=5.0,
+        metadata=_nonneg(
+            "while capturing, the aircraft does not sink below the path's lowest point less "
+            "this (nor below metrics.altitude_floor_m)"
+        ),
+    )
 
 
 @dataclass(frozen=True)

@@ -81,6 +81,15 @@ def _wind(text: str) -> tuple[float, float]:
     return spd, deg
 
 
+def _offset(text: str) -> tuple[float, float, float]:
+    from sim.rigs.placement import parse_offset
+
+    try:
+        return parse_offset(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
 def _param(text: str) -> tuple[str, float]:
     name, eq, val = text.partition("=")
     name = name.strip()
@@ -196,6 +205,13 @@ def _add_rig_options(ap: argparse.ArgumentParser) -> None:
         ap, "--lead", "time >= 0 s", "wall seconds from placing the mission to engaging", 6.0
     )
     ap.add_argument(
+        "--start-offset",
+        type=_offset,
+        metavar="X,Y,D",
+        help="the aircraft's start from the placed path (m: X along its track, Y to its "
+        "right, D down; 300,0,0: 300 m out, flying away); default: on the path",
+    )
+    ap.add_argument(
         "--record",
         action="store_true",
         help="write docs/results/sitl-<flight>.json and regenerate docs/results/sitl.md",
@@ -290,6 +306,32 @@ def validate(a: argparse.Namespace) -> dict[str, Any]:
 def place_mission(g: Gcs, radius: float, lead_s: float) -> tuple[list[float], list[float]]:
     """(circle centre NED, predicted aircraft position NED): the aircraft on a clockwise circle
     of ``radius``, tangent to its flight, where its current turn takes it in ``lead_s``."""
+    (x, y, z), chi2 = predict_start(g, lead_s)
+    # clockwise seen from above: the centre is to the right of the flight direction
+    return [x - radius * math.sin(chi2), y + radius * math.cos(chi2), z], [x, y, z]
+
+
+def place_any(
+    g: Gcs, cfg: Any, lead_s: float, offset: tuple[float, float, float] | None
+) -> tuple[list[float], list[float]]:
+    """(target position NED, predicted aircraft position NED) for any path shape: the shipped
+    circle as :func:`place_mission` places it; any other shape, or any ``--start-offset``, by
+    :func:`sim.rigs.placement.place_path` (the aircraft on the path tangent to its flight, or
+    at the offset from it)."""
+    if cfg.path.type == "circle" and not offset and tuple(cfg.path.center_m) == (0.0, 0.0, 0.0):
+        return place_mission(g, float(cfg.path.radius_m), lead_s)
+    from mpf_mavlink.config.scenario import build_path, build_target
+    from sim.rigs.placement import place_path
+
+    (x, y, z), chi2 = predict_start(g, lead_s)
+    nodes = build_path(cfg.path).positions()
+    R = build_target(cfg.target).state(0.0).R_T_I
+    target, _ = place_path(nodes, R, (x, y, z), chi2, offset or (0.0, 0.0, 0.0))
+    return target, [x, y, z]
+
+
+def predict_start(g: Gcs, lead_s: float) -> tuple[tuple[float, float, float], float]:
+    """(aircraft position NED, track rad): where its current turn takes it in ``lead_s``."""
     lp, att = g.last["LOCAL_POSITION_NED"], g.last["ATTITUDE"]
     vx, vy = lp.vx, lp.vy
     v = math.hypot(vx, vy)
@@ -304,8 +346,7 @@ def place_mission(g: Gcs, radius: float, lead_s: float) -> tuple[list[float], li
     else:
         chi2 = chi
         x, y = x + vx * lead_s, y + vy * lead_s
-    # clockwise seen from above: the centre is to the right of the flight direction
-    return [x - radius * math.sin(chi2), y + radius * math.cos(chi2), lp.z], [x, y, lp.z]
+    return (x, y, lp.z), chi2
 
 
 def _target_label(t: Any) -> str:
@@ -356,7 +397,7 @@ def target_sets(cfg: Any, moving: bool, still: bool = False) -> tuple[list[str],
 #: the inputs that make two flights different flights (their names then differ)
 _DISTINGUISHING = ("autopilot", "config", "overrides", "guidance", "rate", "params", "duration",
                    "moving", "still", "wind", "turbulence", "kill_after", "watch_s", "serial",
-                   "speedup", "alt", "lead", "binary")  # fmt: skip
+                   "speedup", "alt", "lead", "binary", "start_offset")  # fmt: skip
 
 
 def flight_name(a: argparse.Namespace, v: dict[str, Any] | None = None) -> str:
@@ -533,7 +574,7 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
     radius = float(cfg.path.radius_m) if cfg.path.type == "circle" else 0.0
     tsets, label = v["tsets"], v["target_label"]
     g.pump(0.3)
-    centre, start = place_mission(g, radius, a.lead * a.speedup)
+    centre, start = place_any(g, cfg, a.lead * a.speedup, a.start_offset)
     sets = [
         *a.overrides,
         f"target.position_ned_m=[{centre[0]:.2f},{centre[1]:.2f},{centre[2]:.2f}]",
@@ -547,6 +588,8 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
         "target": label,
         "airspeed_m_s": cfg.vehicle.airspeed_m_s,
         "autopilot_cruise_airspeed_m_s": cruise,
+        "start_offset_m": list(a.start_offset) if a.start_offset else None,
+        "start_ned_m": start,
         "overrides": sets,
     }
     if a.guidance == "native":
