@@ -20,8 +20,8 @@ import yaml
 
 from mpf_mavlink.config.bridge import AdapterSection, MavlinkConfig
 from mpf_mavlink.config.build import S, _build
-from mpf_mavlink.config.fleet import FleetConfig, validate_fleet  # fleet: cooperative MPF
 from mpf_mavlink.config.fields import Vec3, _doc, _fail, _nonneg, _open, _pos, _rng
+from mpf_mavlink.config.fleet import FleetConfig, validate_fleet  # fleet: cooperative MPF
 from mpf_mavlink.config.sil import AircraftConfig, SilConfig
 from mpf_mavlink.config.target import TargetEstimatorConfig
 from mpf_mavlink.errors import ConfigError
