@@ -42,6 +42,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 Vec3 = tuple[float, float, float]
 
@@ -183,3 +184,75 @@ class LowPass:
         elif dt > 0.0:
             self.y += (x - self.y) * (1.0 - math.exp(-dt / self.tau_s))
         return self.y
+
+
+def fleet_checks(
+    fleet: Any,
+    vehicle: Any,
+    path: Any,
+    target: Any,
+    wind_I: Vec3,
+    horizon_s: float,
+    speed_tau_s: float,
+) -> tuple[list[Any], float]:
+    """The fleet's pre-flight checks (``check`` and the bridge before engaging) and the fastest
+    airspeed (m/s) the coordination may ask, for the bank feasibility at it:
+
+    - ``fleet_convergence``: :func:`convergence_margin` > 0 (fail otherwise);
+    - ``fleet_speed``: at u_ref the airspeed :func:`airspeed_for` asks over the path and the
+      target's motion stays inside the window less ``airspeed_margin_m_s`` (fail otherwise: the
+      formation cannot be held); with the full correction -/+ du_max outside it, a warning
+      (the window clips the correction there and convergence is slower).
+    """
+    from mpf_mavlink.core.guidance.checks import CheckResult
+
+    n = len(fleet.slots_deg)
+    m = convergence_margin(fleet.k_c, n, fleet.rate_hz, fleet.max_latency_s + fleet.filter_tau_s,
+                           speed_tau_s)  # fmt: skip
+    tau = 1.0 / fleet.rate_hz + fleet.max_latency_s + fleet.filter_tau_s + speed_tau_s
+    conv = CheckResult(
+        "fleet_convergence",
+        "pass" if m > 0.0 else "fail",
+        f"k_c lambda_max tau = {fleet.k_c:g} x {lambda_max(n):.2f} x {tau:.2f} s = "
+        f"{0.5 * math.pi - m:.2f} {'<' if m > 0 else '>='} pi/2 (N {n}; tau: 1/rate + latency "
+        f"+ filter + speed lag)",
+        {"margin": m, "tau_s": tau},
+    )
+    u = fleet.u_ref_m_s if fleet.u_ref_m_s is not None else float(vehicle.airspeed_m_s)
+    L = float(path.length)
+    ss = [L * k / 240.0 for k in range(240)]
+    ts = [horizon_s * k / 12.0 for k in range(13)]
+    tangents: list[Vec3] = []
+    vps: list[Vec3] = []
+    for t in ts:
+        st = target.state(t)
+        R = st.R_T_I
+        w = st.omega_T
+        for s in ss:
+            pt = path.eval(s)
+            p, f = pt[0], pt[1]
+            f1 = R @ f
+            wxp = (w[1] * p[2] - w[2] * p[1], w[2] * p[0] - w[0] * p[2], w[0] * p[1] - w[1] * p[0])
+            rot = R @ wxp
+            tangents.append((float(f1[0]), float(f1[1]), float(f1[2])))
+            vps.append(tuple(float(st.velocity[k] + rot[k]) for k in range(3)))  # type: ignore[arg-type]
+    fe = feasibility(tangents, vps, wind_I, u, fleet.du_max_m_s)
+    lo_w = (vehicle.airspeed_min_m_s or 0.0) + fleet.airspeed_margin_m_s
+    hi_w = (vehicle.airspeed_max_m_s or math.inf) - fleet.airspeed_margin_m_s
+    figs = {"airspeed_lo_m_s": fe.lo, "airspeed_hi_m_s": fe.hi, "with_du_lo_m_s": fe.lo_full,
+            "with_du_hi_m_s": fe.hi_full, "window_lo_m_s": lo_w, "window_hi_m_s": hi_w}  # fmt: skip
+    if fe.lo < lo_w or fe.hi > hi_w:
+        st_, why = "fail", "outside"
+    elif fe.lo_full < lo_w or fe.hi_full > hi_w:
+        st_, why = "warn", "inside; the full correction is clipped by"
+    else:
+        st_, why = "pass", "inside"
+    speed = CheckResult(
+        "fleet_speed",
+        st_,
+        f"u_ref {u:.1f} m/s along the path asks {fe.lo:.1f}-{fe.hi:.1f} m/s of airspeed "
+        f"({fe.lo_full:.1f}-{fe.hi_full:.1f} with du_max {fleet.du_max_m_s:g}): {why} the "
+        f"window {lo_w:.1f}-{hi_w:.1f} m/s",
+        figs,  # type: ignore[arg-type]
+    )
+    return [conv, speed], min(fe.hi_full, hi_w)
