@@ -285,6 +285,16 @@ class FleetMember:
         vp = tuple(float(tgt.velocity[k] + rot[k]) for k in range(3))
         wind = tuple(float(x) for x in getattr(vs, "wind", (0.0, 0.0, 0.0)))
         a = co.airspeed_for(u, f1, vp, wind)  # type: ignore[arg-type]
+        k_u = self.f.speed_gain
+        if k_u > 0.0:
+            # the along-path speed flown now against the one asked: the energy control alone
+            # follows a set-point that swings every lap with ~30 % less amplitude (measured)
+            here = self.path.eval(s)
+            f1n = R @ here[1]
+            v_a = float(vs.airspeed)
+            w1 = vs.R_W_I[:, 0]
+            u_now = sum(float((v_a * w1[k] + wind[k] - vp[k]) * f1n[k]) for k in range(3))
+            a += k_u * (u - u_now)
         return min(max(a, self.window[0]), self.window[1])
 
     # -- records ----------------------------------------------------------------------------
