@@ -37,7 +37,7 @@ import numpy as np
 
 from sim.rigs import arduplane
 from sim.rigs.bundles import RigError, die_with_parent, unpack
-from sim.rigs.figures import fmt, hold_figures
+from sim.rigs.figures import fmt, hold_figures, read_json
 from sim.rigs.gcs import Gcs
 
 
@@ -492,3 +492,29 @@ def main(a: argparse.Namespace, v: dict[str, Any]) -> int:
 
 
 __all__ = ["add_options", "main", "spacing_series", "spacing_figures", "arduplane"]
+
+
+def reanalyse(out: Path, converge_m: float = 10.0) -> dict[str, Any]:
+    """The fleet figures of a finished rig directory again, from its fleet.json (engagement and
+    kill times) and the bridges' fleet.csv: ``python -m sim.rigs.fleet DIR``."""
+    from mpf_mavlink.config.scenario import build_path
+    from mpf_mavlink.config.schema import load_config
+
+    s = read_json(out / "fleet.json")
+    n = len(s["aircraft"])
+    cfg = load_config(Path(s.get("config", "configs/bridge_arduplane.yaml")))
+    L = float(build_path(cfg.path).length)
+    tracks = [read_fleet_csv(out / f"bridge{k}" / "fleet.csv") for k in range(n)]
+    engaged = [f.get("engaged_unix_s") for f in s["aircraft"]]
+    t_all = max(e for e in engaged if e)
+    ser = spacing_series(tracks, [j / n for j in range(n)], L, True)
+    kill = next((f["hold"] for f in s["aircraft"] if "hold" in f), None)
+    t_kill = t_all + kill["killed_after_s"] if kill else None
+    fl = spacing_figures(ser, t_all, t_kill if t_kill else math.inf, converge_m, n)
+    if t_kill is not None:
+        fl["after_kill"] = spacing_figures(ser, t_kill, math.inf, converge_m, n - 1)
+    return fl
+
+
+if __name__ == "__main__":
+    print(json.dumps(reanalyse(Path(sys.argv[1])), indent=2))
