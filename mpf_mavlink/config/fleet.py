@@ -33,7 +33,7 @@ class FleetConfig:
         metadata=_doc("MAVLink URLs of the coordination link (udpin: read only; others: both)"),
     )
     k_c: float = field(
-        default=0.1, metadata=_pos("consensus gain (1/s) on the along-path spacing error")
+        default=0.2, metadata=_pos("consensus gain (1/s) on the along-path spacing error")
     )
     du_max_m_s: float = field(
         default=2.5, metadata=_pos("largest along-path speed correction (m/s)")
@@ -47,16 +47,16 @@ class FleetConfig:
         metadata=_nonneg("the set-point stays this far inside the vehicle's airspeed window"),
     )
     filter_tau_s: float = field(
-        default=1.0, metadata=_nonneg("low-pass time constant (s) of the speed correction")
+        default=0.5, metadata=_nonneg("low-pass time constant (s) of the speed correction")
     )
     speed_gain: float = field(
-        default=1.0,
+        default=0.0,
         metadata=_nonneg(
             "airspeed set-point per m/s of along-path speed error (0: feed-forward alone)"
         ),
     )
     lead_s: float = field(
-        default=0.0,
+        default=1.0,
         metadata=_nonneg("the airspeed feed-forward looks this far (s) ahead along the path"),
     )
     rate_hz: float = field(default=5.0, metadata=_rng(0.2, 50.0, "reports sent per second"))
