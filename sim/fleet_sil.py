@@ -42,7 +42,10 @@ def fly(a: argparse.Namespace) -> dict[str, Any]:
     n, out = a.fleet, Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     r = float(cfg.path.radius_m)
-    c = [float(x) for x in cfg.target.position_ned_m]
+    c = [
+        float(x) + float(y)
+        for x, y in zip(cfg.target.position_ned_m, cfg.path.center_m, strict=True)
+    ]
     L = float(build_path(cfg.path).length)
     ports = _free_udp_ports(2 * n)
     vports, fports = ports[:n], ports[n:]

@@ -200,10 +200,10 @@ def test_exchange_encode_decode_and_the_law() -> None:
         a.lp.y = b.lp.y = None
         a.step(0.5, 11.0, 22.0, vs, tgt)
         b.step(0.5, L150 / 2 + 21.0, 22.0, vs, tgt)
-        # a's error -10 m (behind): du = 2.5 tanh(0.1 * 10 / 2.5) = +0.9499 m/s; b's -0.9499
+        # a's error -10 m (behind): du = 2.5 tanh(0.2 * 10 / 2.5) = +1.6600 m/s; b's -1.6600
         assert a.last["e_m"] == pytest.approx(-10.0, abs=1e-3)
-        assert a.last["du_m_s"] == pytest.approx(2.5 * math.tanh(0.4), abs=1e-4)
-        assert b.last["du_m_s"] == pytest.approx(-2.5 * math.tanh(0.4), abs=1e-4)
+        assert a.last["du_m_s"] == pytest.approx(2.5 * math.tanh(0.8), abs=1e-4)
+        assert b.last["du_m_s"] == pytest.approx(-2.5 * math.tanh(0.8), abs=1e-4)
         assert report_name(a.pid) == "MPF" + a.pid and len(a.name) == 10
     finally:
         a.close()
