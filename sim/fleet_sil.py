@@ -63,8 +63,10 @@ def fly(a: argparse.Namespace) -> dict[str, Any]:
                 "sil.initial_mode=cruise",
                 "sil.clock=realtime",
             ]
-            cmd = [*py, "vehicle", a.config, "--serve", f"udpin:127.0.0.1:{vports[k]}",
-                   "--duration", f"{a.duration + 60:g}", *[x for s in sets for x in ("--set", s)]]  # fmt: skip
+            serve = f"udpin:127.0.0.1:{vports[k]}"
+            extra = [x for s in sets for x in ("--set", s)]
+            cmd = [*py, "vehicle", a.config, "--serve", serve, "--duration",
+                   f"{a.duration + 60:g}", *extra]  # fmt: skip
             with open(out / f"vehicle{k}.log", "w") as log:
                 procs.append(subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
                                               text=True, preexec_fn=die_with_parent))  # fmt: skip
