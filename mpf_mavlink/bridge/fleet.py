@@ -285,6 +285,7 @@ class FleetMember:
         vp = tuple(float(tgt.velocity[k] + rot[k]) for k in range(3))
         wind = tuple(float(x) for x in getattr(vs, "wind", (0.0, 0.0, 0.0)))
         a = co.airspeed_for(u, f1, vp, wind)  # type: ignore[arg-type]
+        a = u + self.f.ff_gain * (a - u)  # the lap's swing, scaled
         k_u = self.f.speed_gain
         if k_u > 0.0:
             # the along-path speed flown now against the one asked: the energy control alone

@@ -57,7 +57,16 @@ class FleetConfig:
     )
     lead_s: float = field(
         default=1.0,
-        metadata=_nonneg("the airspeed feed-forward looks this far (s) ahead along the path"),
+        metadata=_ge(
+            -5.0, "the airspeed feed-forward looks this far (s) ahead along the path (< 0: behind)"
+        ),
+    )
+    ff_gain: float = field(
+        default=1.0,
+        metadata=_nonneg(
+            "gain on the feed-forward's swing about the along-path speed (the speed loop's "
+            "attenuation made up)"
+        ),
     )
     rate_hz: float = field(default=5.0, metadata=_rng(0.2, 50.0, "reports sent per second"))
     max_latency_s: float = field(
