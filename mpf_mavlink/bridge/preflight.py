@@ -404,7 +404,8 @@ def _fleet_checks(
     from mpf_mavlink.core.guidance.coordination import fleet_checks
 
     out, v_hi = fleet_checks(
-        cfg.section("fleet"), cfg.vehicle, path, target, tuple(float(x) for x in steady),
+        cfg.section("fleet"), cfg.vehicle, path, target,
+        (float(steady[0]), float(steady[1]), float(steady[2])),
         horizon, cfg.adapter.speed_tau_s,
     )  # fmt: skip
     r = feasible_at(v_hi)

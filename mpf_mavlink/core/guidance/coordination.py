@@ -253,6 +253,6 @@ def fleet_checks(
         f"u_ref {u:.1f} m/s along the path asks {fe.lo:.1f}-{fe.hi:.1f} m/s of airspeed "
         f"({fe.lo_full:.1f}-{fe.hi_full:.1f} with du_max {fleet.du_max_m_s:g}): {why} the "
         f"window {lo_w:.1f}-{hi_w:.1f} m/s",
-        figs,  # type: ignore[arg-type]
+        figs,
     )
     return [conv, speed], min(fe.hi_full, hi_w)
