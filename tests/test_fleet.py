@@ -272,3 +272,27 @@ def test_bad_link_url_is_one_line() -> None:
     m = FleetMember(cfg, build_path(cfg.path), lambda _t: None)
     with pytest.raises(MpfError, match="bogus"):
         m.open()
+
+
+def test_rig_spacing_figures() -> None:
+    """The rig's judge (sim/rigs/fleet.py) on synthetic tracks: three members at 22 m/s, the
+    third 30 m behind its slot until t = 50 s, then on it: converged at 50 s (the first grid
+    instant after the last one beyond 10 m), RMS and max 0 after; after member 1 stops (t 80 s)
+    the two survivors are judged against 180 deg (respace): member 2 is 120 deg from member 0
+    where 180 is wanted, L/6 = 157 m."""
+    from sim.rigs.fleet import spacing_figures, spacing_series
+
+    t = np.arange(0.0, 120.0, 0.1)
+    L = L150
+    s0 = 22.0 * t
+    s1 = 22.0 * t + L / 3
+    s2 = 22.0 * t + 2 * L / 3 - np.where(t < 50.0, 30.0, 0.0)
+    tracks = [{"t_unix_s": t, "s_m": s} for s in (s0, s1, s2)]
+    tracks[1] = {"t_unix_s": t[t < 80.0], "s_m": s1[t < 80.0]}
+    ser = spacing_series(tracks, [0.0, 1 / 3, 2 / 3], L, True)  # type: ignore[arg-type]
+    f = spacing_figures(ser, 0.0, 79.0, 10.0, 3)
+    assert f["converged"] and f["converge_s"] == pytest.approx(50.0, abs=0.5)
+    assert f["spacing_rms_m"] == pytest.approx(0.0, abs=1e-6)
+    assert f["start_spread_worst_m"] == pytest.approx(30.0, abs=1e-6)
+    after = spacing_figures(ser, 81.0, 200.0, 10.0, 2)
+    assert not after["converged"] and after["worst_at_end_m"] == pytest.approx(L / 6, abs=0.5)
