@@ -296,3 +296,19 @@ def test_rig_spacing_figures() -> None:
     assert f["start_spread_worst_m"] == pytest.approx(30.0, abs=1e-6)
     after = spacing_figures(ser, 81.0, 200.0, 10.0, 2)
     assert not after["converged"] and after["worst_at_end_m"] == pytest.approx(L / 6, abs=0.5)
+
+
+def test_fleet_csv_is_written_as_the_flight_goes(tmp_path: Path) -> None:
+    """A SIGKILLed bridge never reaches write(): its rows must be on disk already."""
+    a, b, clock = _pair()
+    vs, tgt = _vs_tgt()
+    try:
+        a.csv_path = tmp_path / "fleet.csv"
+        a.step(0.0, 0.0, 22.0, vs, tgt)  # the first row is flushed at once
+        lines = (tmp_path / "fleet.csv").read_text().splitlines()
+        assert lines[0].startswith("t_unix_s,") and len(lines) == 2
+        a.write(tmp_path)
+        assert len((tmp_path / "fleet.csv").read_text().splitlines()) == 2
+    finally:
+        a.close()
+        b.close()
