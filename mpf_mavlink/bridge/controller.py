@@ -323,6 +323,8 @@ class Controller:
         self.ad_state = AdapterState()
         self.why_not = ""
         self.law_evals = 0
+        # fleet (bridge/fleet.py): (t, s, sdot, vehicle, target) -> the airspeed set-point (m/s)
+        self.airspeed_hook: Callable[[float, float, float, Any, Any], float] | None = None
         # delay compensation: the step period (s, filtered), the loop delay (loop_delay.py)
         self.period_s = 0.0
         self.rates_pipeline = getattr(m, "flavour", "auto") == "px4"
@@ -534,9 +536,11 @@ class Controller:
         if self.capture is not None:  # far from the path: bounded sdot, bank, flight path
             cmd, diag_law = self.capture.apply(cmd, diag_law, vl, tgt_law, gains.K_p)
         self.law_evals += 1
+        hook = self.airspeed_hook
+        v_sp = None if hook is None else hook(t, self.s, self.sdot_prev, vl, tgt_law)
         sp, self.ad_state = adapt(
             cmd.omega_w1_I, vl.airspeed, R_B_N, w1l, dt, self.ad_params, self.ad_state,
-            meas=(R_m, rates_m), hold_s=hold, path_down_m=diag_law.p_f[2],
+            meas=(R_m, rates_m), hold_s=hold, path_down_m=diag_law.p_f[2], airspeed_sp=v_sp,
         )  # fmt: skip
         if not math.isfinite(cmd.sdot):
             sp = safe_setpoint(self.ad_params)

@@ -53,6 +53,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from mpf_mavlink.bridge import fleet as fleet_link
 from mpf_mavlink.bridge.base import (
     EXIT_CHECK,
     EXIT_OK,
@@ -160,6 +161,7 @@ class Bridge:
         vl.due = self.loop.due
         vl.on_tick = self._tick
         self._sent_at_tick = 0
+        self.fleet = fleet_link.attach(self)  # fleet: None unless fleet.enabled
 
     def _tick(self) -> None:
         now = time.monotonic()
@@ -239,6 +241,7 @@ class Bridge:
         )  # fmt: skip
         if signing_key is not None:
             enable_signing(vl.link, signing_key, m.signing_link_id)
+        fleet_link.open_(self.fleet, m)  # fleet: the coordination link
         self.phase.set(State.WAIT_HEARTBEAT)
         hb = wait_heartbeat(vl.link, m.heartbeat_timeout_s)
         vl.compid = hb.get_srcComponent()
@@ -428,6 +431,7 @@ class Bridge:
         if self.envelope.steps:
             env = self.envelope.summary(self.cfg.metrics.steady_after_s, loop.t_last)
         self.rec.finish(res, self.ctl, counters, env)
+        fleet_link.finish(self.fleet, Path(self.opts.out_dir))  # fleet: fleet.csv, metrics
         if res.records_error:
             self.log(f"could not write the run directory: {res.records_error}")
         return res

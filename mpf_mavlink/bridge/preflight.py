@@ -386,12 +386,36 @@ def run_checks(
         hold = airspeed_hold(cfg)
         if hold is not None:
             results.append(hold)
+        if cfg.section("fleet").enabled:  # fleet: convergence, speed window, bank at speed
+            results.extend(_fleet_checks(cfg, path, target, steady, horizon, feasible_at))
     else:
         c1 = ch.c1_m if ch.c1_m is not None else 50.0
         results.append(
             gain_condition(build_gains(cfg), cfg.vehicle.v_min, cfg.vehicle.v_max, c1, ch.c2)
         )
     return results
+
+
+def _fleet_checks(
+    cfg: Config, path: Any, target: Any, steady: Any, horizon: float, feasible_at: Any
+) -> list[CheckResult]:
+    """:func:`~mpf_mavlink.core.guidance.coordination.fleet_checks` and the bank feasibility
+    at the fastest airspeed the coordination may ask (``fleet_feasibility``)."""
+    from mpf_mavlink.core.guidance.coordination import fleet_checks
+
+    out, v_hi = fleet_checks(
+        cfg.section("fleet"), cfg.vehicle, path, target,
+        (float(steady[0]), float(steady[1]), float(steady[2])),
+        horizon, cfg.adapter.speed_tau_s,
+    )  # fmt: skip
+    r = feasible_at(v_hi)
+    # a warning at most: that airspeed is asked only where the path runs with the target's
+    # motion, and the check applies it all round the path (an upper bound on the bank)
+    out.append(dataclasses.replace(
+        r, name="fleet_feasibility", status="warn" if r.status == "fail" else r.status,
+        summary=f"at {v_hi:.1f} m/s all round the path (the fastest the fleet asks, an upper "
+        "bound): " + r.summary))  # fmt: skip
+    return out
 
 
 def _measured_checks(

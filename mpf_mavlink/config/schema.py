@@ -21,6 +21,7 @@ import yaml
 from mpf_mavlink.config.bridge import AdapterSection, MavlinkConfig
 from mpf_mavlink.config.build import S, _build
 from mpf_mavlink.config.fields import Vec3, _doc, _fail, _nonneg, _open, _pos, _rng
+from mpf_mavlink.config.fleet import FleetConfig, validate_fleet  # fleet: cooperative MPF
 from mpf_mavlink.config.sil import AircraftConfig, SilConfig
 from mpf_mavlink.config.target import TargetEstimatorConfig
 from mpf_mavlink.errors import ConfigError
@@ -343,6 +344,7 @@ SECTIONS: dict[str, type] = {
     "target_estimator": TargetEstimatorConfig,
     "sil": SilConfig,
     "aircraft": AircraftConfig,
+    "fleet": FleetConfig,
 }
 
 
@@ -406,6 +408,8 @@ class Config:
     def section(self, name: Literal["sil"]) -> SilConfig: ...
     @overload
     def section(self, name: Literal["aircraft"]) -> AircraftConfig: ...
+    @overload
+    def section(self, name: Literal["fleet"]) -> FleetConfig: ...
     def section(self, name: str) -> object:
         """The section called ``name`` (one of :data:`SECTIONS`), with its type."""
         if name not in SECTIONS:
@@ -527,6 +531,7 @@ def config_from_dict(raw: dict[str, Any], src: str = "<config>") -> Config:
     cfg.target_estimator.validate(src)
     cfg.sil.validate(src, cfg.target.type, cfg.mavlink)
     cfg.aircraft.validate(src, cfg.sil)
+    validate_fleet(cfg, src)
     return cfg
 
 

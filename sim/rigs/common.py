@@ -39,7 +39,7 @@ from typing import Any, NoReturn
 
 from mpf_mavlink.config.schema import load_config
 from mpf_mavlink.errors import MpfError
-from sim.rigs import arduplane, native, px4
+from sim.rigs import arduplane, fleet, native, px4
 from sim.rigs.bundles import ROOT, RigError, bundle_version, check_bundle, die_with_parent, unpack
 from sim.rigs.figures import (
     cross_track,
@@ -237,6 +237,7 @@ def parser() -> argparse.ArgumentParser:
     )
     _add_flight_options(ap)
     _add_rig_options(ap)
+    fleet.add_options(ap)  # --fleet N (sim/rigs/fleet.py)
     return ap
 
 
@@ -443,6 +444,8 @@ def main(argv: list[str] | None = None) -> int:
     except RigError as e:
         print(f"sitl: {e}", file=sys.stderr)
         return 2
+    if a.fleet:  # N aircraft on one path (sim/rigs/fleet.py)
+        return fleet.main(a, v)
     mod, out = v["mod"], v["out"]
     try:
         fw = mod.Firmware(a)  # ArduPlane: takes a free instance's lock (or refuses)

@@ -1,0 +1,258 @@
+"""Coordination of N aircraft on one moving path (cooperative moving path following). Pure.
+
+Each aircraft i follows the same path fixed to the target (the MPF law, unchanged) and has a
+slot ``sigma_i`` (a fraction of a closed path's length L). Its coordination state is the
+along-path position less its slot, ``xi_i = s_i - sigma_i L`` (m, wrapped to one lap). The fleet
+is in formation when every ``xi_i`` agrees; the along-path spacing error of a pair is
+``wrap(xi_j - xi_i)`` (m).
+
+The law (Ghabcheloo, Aguiar, Pascoal, Silvestre, Kaminer, Hespanha, "Coordinated
+path-following in the presence of communication losses and time delays", SIAM J. Control
+Optim. 47(1), 2009; the virtual-leader speed of Xargay et al., "Time-critical cooperative path
+following of multiple UAVs", IEEE CSM 2013): every aircraft flies the common reference speed
+``u_ref`` along the path plus a consensus correction on the neighbours it hears,
+
+    e_i  = (1 / |N_i|) sum_j wrap(xi_i - xi_j_hat),   xi_j_hat = xi_j + sdot_j (t - t_j)
+    du_i = -du_max tanh(k_c e_i / du_max)
+
+where ``xi_j_hat`` is peer j's last report propagated to now with its own sdot (the delay
+compensation: a report t - t_j old is as good as a fresh one while the peer holds its speed).
+``tanh``: slope k_c at the origin, never more than ``du_max`` (m/s): the correction is smooth
+and bounded, so an aircraft is asked only for a speed inside its airspeed window and the MPF
+law (which takes sdot from the aircraft's own motion) keeps it on the path.
+
+The correction acts through the airspeed: the aircraft's along-path speed relative to the
+moving path is ``u = (v_air + wind - v_point) . f1``; the airspeed set-point that makes it
+``u_ref + du`` is ``|(u_ref + du) f1 + v_point - wind|`` (:func:`airspeed_for`), which also
+feeds forward the speed variation a moving target imposes around the path (at a constant
+airspeed an aircraft on the target's downwind side is faster along the path than one on its
+upwind side, and the spacing would oscillate by tens of metres).
+
+Convergence (the condition ``check`` states, :func:`convergence_margin`): with all-to-all
+communication the averaged Laplacian's largest eigenvalue is ``N / (N - 1)``; a consensus
+``xi_dot = -k_c Lbar xi(t - tau)`` with a delay tau converges iff ``k_c lambda_max tau < pi/2``
+(Olfati-Saber and Murray 2004, the delayed case of the cited papers). The delay here is the
+uncompensated information age (one update period plus the worst link latency) plus the speed
+loop's lag ``tau_V`` (the energy control's time constant, treated as a delay: conservative), so
+the condition checked is ``k_c N/(N-1) (1/rate + latency + tau_V) < pi/2``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class PeerReport:
+    """What one peer said: its slot (fraction of L), s (m, along the path), sdot (m/s) and the
+    common time t (s) at which s held."""
+
+    slot: float
+    s_m: float
+    sdot_m_s: float
+    t_s: float
+
+
+@dataclass(frozen=True)
+class CoordParams:
+    """L (m) of the closed path, k_c (1/s) the consensus gain, du_max (m/s) the largest
+    speed correction, u_ref (m/s) the common along-path reference speed."""
+
+    length_m: float
+    k_c: float
+    du_max_m_s: float
+    u_ref_m_s: float
+
+
+def wrap_m(x: float, length_m: float) -> float:
+    """x (m) wrapped to [-L/2, L/2): the shorter way round a closed path of length L."""
+    return (x + 0.5 * length_m) % length_m - 0.5 * length_m
+
+
+def xi_m(s_m: float, slot: float, length_m: float) -> float:
+    """The coordination state s - slot L (m), wrapped to [0, L)."""
+    return (s_m - slot * length_m) % length_m
+
+
+def coordination_error_m(
+    s_m: float, slot: float, peers: Iterable[PeerReport], now_s: float, length_m: float
+) -> tuple[float, int]:
+    """(e, n): the mean wrapped coordination error (m) of this aircraft against the ``peers``
+    propagated to ``now_s`` (s, common time), and how many were used; (0, 0) without peers.
+    e > 0: this aircraft is ahead of its slot and must slow down."""
+    own = xi_m(s_m, slot, length_m)
+    tot, n = 0.0, 0
+    for p in peers:
+        age = max(0.0, now_s - p.t_s)  # a clock ahead of ours is no reason to go back
+        other = xi_m(p.s_m + p.sdot_m_s * age, p.slot, length_m)
+        tot += wrap_m(own - other, length_m)
+        n += 1
+    return (tot / n if n else 0.0), n
+
+
+def speed_correction(e_m: float, k_c: float, du_max_m_s: float) -> float:
+    """du (m/s) = -du_max tanh(k_c e / du_max): slope -k_c at e = 0, |du| < du_max."""
+    if du_max_m_s <= 0.0:
+        return 0.0
+    return -du_max_m_s * math.tanh(k_c * e_m / du_max_m_s)
+
+
+def airspeed_for(u_m_s: float, f1_I: Vec3, v_point_I: Vec3, wind_I: Vec3) -> float:
+    """The airspeed (m/s) at which an aircraft on the path moves along it at u (m/s) relative
+    to the moving path: |u f1 + v_point - wind|, all in NED (f1 the unit tangent, v_point the
+    inertial velocity of the path point, wind the air mass's)."""
+    a = (u_m_s * f1_I[0] + v_point_I[0] - wind_I[0],
+         u_m_s * f1_I[1] + v_point_I[1] - wind_I[1],
+         u_m_s * f1_I[2] + v_point_I[2] - wind_I[2])  # fmt: skip
+    return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+
+
+def respaced_slots(slots: Sequence[float], alive: Sequence[bool]) -> list[float | None]:
+    """The slots the living members fly after a loss (``on_peer_lost: respace``): in their
+    configured order, evenly spaced from the first living one's own slot; None for the dead.
+    Every survivor computes the same from the same living set."""
+    order = sorted((s % 1.0, k) for k, s in enumerate(slots) if alive[k])
+    out: list[float | None] = [None] * len(slots)
+    if not order:
+        return out
+    base, n = order[0][0], len(order)
+    for rank, (_, k) in enumerate(order):
+        out[k] = (base + rank / n) % 1.0
+    return out
+
+
+def lambda_max(n: int) -> float:
+    """Largest eigenvalue of the averaged Laplacian of n all-to-all members, n / (n - 1)."""
+    return n / (n - 1) if n > 1 else 0.0
+
+
+def convergence_margin(
+    k_c: float, n: int, rate_hz: float, latency_s: float, speed_tau_s: float
+) -> float:
+    """pi/2 - k_c lambda_max (1/rate + latency + tau_V): > 0 where the consensus converges."""
+    tau = 1.0 / rate_hz + latency_s + speed_tau_s
+    return 0.5 * math.pi - k_c * lambda_max(n) * tau
+
+
+@dataclass(frozen=True)
+class Feasibility:
+    """The airspeed (m/s) the coordination asks for over the path: at u_ref alone (lo, hi) and
+    with the full correction (lo_full at u_ref - du_max, hi_full at u_ref + du_max)."""
+
+    lo: float
+    hi: float
+    lo_full: float
+    hi_full: float
+
+
+def feasibility(
+    tangents_I: Iterable[Vec3], v_points_I: Iterable[Vec3], wind_I: Vec3, u_ref: float, du: float
+) -> Feasibility:
+    """The airspeeds :func:`airspeed_for` gives at sampled path points (tangent f1 and point
+    velocity, NED), at u_ref and u_ref -/+ du (m/s)."""
+    lo = hi = lo_f = hi_f = float("nan")
+    first = True
+    for f1, vp in zip(tangents_I, v_points_I, strict=True):
+        a = airspeed_for(u_ref, f1, vp, wind_I)
+        a_lo = airspeed_for(max(0.0, u_ref - du), f1, vp, wind_I)
+        a_hi = airspeed_for(u_ref + du, f1, vp, wind_I)
+        if first:
+            lo, hi, lo_f, hi_f, first = a, a, a_lo, a_hi, False
+        else:
+            lo, hi = min(lo, a), max(hi, a)
+            lo_f, hi_f = min(lo_f, a_lo), max(hi_f, a_hi)
+    return Feasibility(lo, hi, lo_f, hi_f)
+
+
+class LowPass:
+    """First-order low-pass (time constant tau s) of the speed correction: the airspeed
+    set-point moves smoothly, so that the energy control's thrust steps do not disturb the
+    attitude loop (the lost run's spacing and tracking both suffered from a raw correction)."""
+
+    def __init__(self, tau_s: float) -> None:
+        self.tau_s = tau_s
+        self.y: float | None = None
+
+    def __call__(self, x: float, dt: float) -> float:
+        if self.y is None or self.tau_s <= 0.0:
+            self.y = x
+        elif dt > 0.0:
+            self.y += (x - self.y) * (1.0 - math.exp(-dt / self.tau_s))
+        return self.y
+
+
+def fleet_checks(
+    fleet: Any,
+    vehicle: Any,
+    path: Any,
+    target: Any,
+    wind_I: Vec3,
+    horizon_s: float,
+    speed_tau_s: float,
+) -> tuple[list[Any], float]:
+    """The fleet's pre-flight checks (``check`` and the bridge before engaging) and the fastest
+    airspeed (m/s) the coordination may ask, for the bank feasibility at it:
+
+    - ``fleet_convergence``: :func:`convergence_margin` > 0 (fail otherwise);
+    - ``fleet_speed``: at u_ref the airspeed :func:`airspeed_for` asks over the path and the
+      target's motion stays inside the window less ``airspeed_margin_m_s`` (fail otherwise: the
+      formation cannot be held); with the full correction -/+ du_max outside it, a warning
+      (the window clips the correction there and convergence is slower).
+    """
+    from mpf_mavlink.core.guidance.checks import CheckResult
+
+    n = len(fleet.slots_deg)
+    m = convergence_margin(fleet.k_c, n, fleet.rate_hz, fleet.max_latency_s + fleet.filter_tau_s,
+                           speed_tau_s)  # fmt: skip
+    tau = 1.0 / fleet.rate_hz + fleet.max_latency_s + fleet.filter_tau_s + speed_tau_s
+    conv = CheckResult(
+        "fleet_convergence",
+        "pass" if m > 0.0 else "fail",
+        f"k_c lambda_max tau = {fleet.k_c:g} x {lambda_max(n):.2f} x {tau:.2f} s = "
+        f"{0.5 * math.pi - m:.2f} {'<' if m > 0 else '>='} pi/2 (N {n}; tau: 1/rate + latency "
+        f"+ filter + speed lag)",
+        {"margin": m, "tau_s": tau},
+    )
+    u = fleet.u_ref_m_s if fleet.u_ref_m_s is not None else float(vehicle.airspeed_m_s)
+    L = float(path.length)
+    ss = [L * k / 240.0 for k in range(240)]
+    ts = [horizon_s * k / 12.0 for k in range(13)]
+    tangents: list[Vec3] = []
+    vps: list[Vec3] = []
+    for t in ts:
+        st = target.state(t)
+        R = st.R_T_I
+        w = st.omega_T
+        for s in ss:
+            pt = path.eval(s)
+            p, f = pt[0], pt[1]
+            f1 = R @ f
+            wxp = (w[1] * p[2] - w[2] * p[1], w[2] * p[0] - w[0] * p[2], w[0] * p[1] - w[1] * p[0])
+            rot = R @ wxp
+            tangents.append((float(f1[0]), float(f1[1]), float(f1[2])))
+            vps.append(tuple(float(st.velocity[k] + rot[k]) for k in range(3)))  # type: ignore[arg-type]
+    fe = feasibility(tangents, vps, wind_I, u, fleet.du_max_m_s)
+    lo_w = (vehicle.airspeed_min_m_s or 0.0) + fleet.airspeed_margin_m_s
+    hi_w = (vehicle.airspeed_max_m_s or math.inf) - fleet.airspeed_margin_m_s
+    figs = {"airspeed_lo_m_s": fe.lo, "airspeed_hi_m_s": fe.hi, "with_du_lo_m_s": fe.lo_full,
+            "with_du_hi_m_s": fe.hi_full, "window_lo_m_s": lo_w, "window_hi_m_s": hi_w}  # fmt: skip
+    if fe.lo < lo_w or fe.hi > hi_w:
+        st_, why = "fail", "outside"
+    elif fe.lo_full < lo_w or fe.hi_full > hi_w:
+        st_, why = "warn", "inside; the full correction is clipped by"
+    else:
+        st_, why = "pass", "inside"
+    speed = CheckResult(
+        "fleet_speed",
+        st_,
+        f"u_ref {u:.1f} m/s along the path asks {fe.lo:.1f}-{fe.hi:.1f} m/s of airspeed "
+        f"({fe.lo_full:.1f}-{fe.hi_full:.1f} with du_max {fleet.du_max_m_s:g}): {why} the "
+        f"window {lo_w:.1f}-{hi_w:.1f} m/s",
+        figs,
+    )
+    return [conv, speed], min(fe.hi_full, hi_w)

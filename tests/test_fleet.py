@@ -1,0 +1,314 @@
+"""The fleet: the coordination law (pure), the ``fleet`` section, the DEBUG_VECT exchange."""
+
+from __future__ import annotations
+
+import math
+import socket
+import time
+from collections import deque
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from mpf_mavlink.bridge.fleet import FleetMember, report_name
+from mpf_mavlink.config.scenario import build_path
+from mpf_mavlink.config.schema import load_config
+from mpf_mavlink.core.guidance import coordination as co
+from mpf_mavlink.errors import ConfigError, MpfError
+
+ROOT = Path(__file__).resolve().parents[1]
+AP = ROOT / "configs" / "bridge_arduplane.yaml"
+L150 = 2.0 * math.pi * 150.0  # the shipped circle's lap (m)
+
+
+# -- the law -------------------------------------------------------------------------------
+def _fly(k_c: float, delay_s: float, tau_v: float, t_end: float, compensate: bool = True):
+    """Three aircraft on one lap: xi' = v, v' = (u_ref + du - v) / tau_v, each hearing the
+    others' reports ``delay_s`` old (propagated with their sdot when ``compensate``)."""
+    dt, u_ref, L = 0.05, 22.0, L150
+    s = np.array([0.0, 40.0, -60.0])  # 40 m and 60 m out of the 0/120/240 slots
+    slots = [0.0, 1 / 3, 2 / 3]
+    s = s + np.array(slots) * L
+    v = np.full(3, u_ref)
+    hist: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
+    lag = round(delay_s / dt)
+    errs = []
+    for k in range(round(t_end / dt)):
+        t = k * dt
+        hist.append((t, s.copy(), v.copy()))
+        t_r, s_r, v_r = hist[0] if len(hist) > lag else hist[0]
+        if len(hist) > lag:
+            hist.popleft()
+        for i in range(3):
+            peers = [
+                co.PeerReport(slots[j], s_r[j], v_r[j] if compensate else 0.0, t_r)
+                for j in range(3)
+                if j != i
+            ]
+            e, _ = co.coordination_error_m(s[i], slots[i], peers, t, L)
+            du = co.speed_correction(e, k_c, 3.0)
+            v[i] += (u_ref + du - v[i]) * dt / tau_v
+        s = s + v * dt
+        xi = [co.xi_m(s[i], slots[i], L) for i in range(3)]
+        errs.append(max(abs(co.wrap_m(xi[i] - xi[0], L)) for i in range(3)))
+    return np.array(errs)
+
+
+def test_converges_inside_the_condition() -> None:
+    # k_c 0.05, N 3 (lambda 1.5), 0.5 s old reports at 5 Hz, tau_V 2 s: margin > 0, and the
+    # linear decay rate k_c lambda = 0.075 /s takes 60 m to ~0.7 m in 60 s beyond a ~20 s lag
+    assert co.convergence_margin(0.05, 3, 5.0, 0.5, 2.0) > 0.0
+    err = _fly(0.05, 0.5, 2.0, 160.0)
+    assert err[0] == pytest.approx(60.0, abs=1.5)  # the worst start offset, against aircraft 0
+    assert err[-1] < 0.5
+
+
+def test_diverges_outside_the_condition_and_compensation_saves_it() -> None:
+    # k_c 1 on 2 s old reports: k_c lambda tau = 1 * 1.5 * 2.1 = 3.2 > pi/2 (the delayed
+    # consensus' bound): uncompensated, a sustained oscillation (bounded by du_max), never a
+    # formation; propagated with the peers' sdot the same reports converge
+    assert co.convergence_margin(1.0, 3, 10.0, 2.0, 0.1) < 0.0
+    err = _fly(1.0, 2.0, 0.1, 120.0, compensate=False)
+    assert err[-400:].max() > 5.0
+    assert _fly(1.0, 2.0, 0.1, 120.0, compensate=True)[-1] < 0.1
+
+
+def test_delay_compensation() -> None:
+    # a 2 s old report of a peer at 22 m/s is 44 m behind where the peer is: compensated, the
+    # error is the slot error alone (0); uncompensated it is the 44 m of travel
+    rep = co.PeerReport(1 / 3, L150 / 3 - 44.0, 22.0, 98.0)
+    e, n = co.coordination_error_m(0.0, 0.0, [rep], 100.0, L150)
+    assert n == 1 and e == pytest.approx(0.0, abs=1e-9)
+    rep0 = co.PeerReport(1 / 3, L150 / 3 - 44.0, 0.0, 98.0)
+    e0, _ = co.coordination_error_m(0.0, 0.0, [rep0], 100.0, L150)
+    assert e0 == pytest.approx(44.0)
+
+
+def test_correction_is_bounded_and_smooth() -> None:
+    for e in (-1e6, -500.0, -1.0, 0.0, 1.0, 500.0, 1e6):
+        du = co.speed_correction(e, 0.05, 2.5)
+        assert abs(du) <= 2.5
+    # slope -k_c at the origin: 1 m of error asks for 0.05 m/s (tanh(0.02) = 0.019997)
+    assert co.speed_correction(1.0, 0.05, 2.5) == pytest.approx(-0.05, rel=2e-4)
+    assert co.wrap_m(L150 - 1.0, L150) == pytest.approx(-1.0)
+
+
+def test_airspeed_feed_forward() -> None:
+    # 22 m/s along a north tangent with the path point moving 3 m/s east: |(22, 3, 0)|
+    assert co.airspeed_for(22.0, (1, 0, 0), (0, 3, 0), (0, 0, 0)) == pytest.approx(
+        math.hypot(22.0, 3.0)
+    )
+    # tangent east, target east: 22 + 3; a 5 m/s wind blowing east takes 5 off
+    assert co.airspeed_for(22.0, (0, 1, 0), (0, 3, 0), (0, 5, 0)) == pytest.approx(20.0)
+    f = co.feasibility([(0, 1, 0), (0, -1, 0)], [(0, 3, 0)] * 2, (0, 0, 0), 22.0, 1.0)
+    assert (f.lo, f.hi, f.lo_full, f.hi_full) == pytest.approx((19.0, 25.0, 18.0, 26.0))
+
+
+def test_respace() -> None:
+    assert co.respaced_slots([0.0, 1 / 3, 2 / 3], [True, False, True]) == [0.0, None, 0.5]
+    assert co.respaced_slots([0.0, 1 / 3, 2 / 3], [False, True, True]) == pytest.approx(
+        [None, 1 / 3, 1 / 3 + 0.5]
+    )
+
+
+# -- the section ---------------------------------------------------------------------------
+def _cfg(*sets: str):
+    return load_config(AP, ["fleet.enabled=true", *sets])
+
+
+def test_config_errors() -> None:
+    links = 'fleet.links=["udpin:127.0.0.1:14600"]'
+    with pytest.raises(ConfigError, match=r"fleet.slots_deg\[2\]: 480 deg is member 1's slot"):
+        _cfg("fleet.slots_deg=[0,120,480]", links)
+    with pytest.raises(ConfigError, match="fleet.member: 3 but only 3 slots"):
+        _cfg("fleet.slots_deg=[0,120,240]", "fleet.member=3", links)
+    with pytest.raises(ConfigError, match="fleet.links"):
+        _cfg("fleet.slots_deg=[0,180]")
+    with pytest.raises(ConfigError, match="fleet.on_peer_lost"):
+        _cfg("fleet.slots_deg=[0,180]", links, "fleet.on_peer_lost=land")
+    with pytest.raises(ConfigError, match="fleet.slots_deg: a fleet needs at least 2"):
+        _cfg("fleet.slots_deg=[0]", links)
+
+
+# -- the exchange --------------------------------------------------------------------------
+def _ports(n: int) -> list[int]:
+    out, socks = [], []
+    for _ in range(n):
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.bind(("127.0.0.1", 0))
+        out.append(s.getsockname()[1])
+        socks.append(s)
+    for s in socks:
+        s.close()
+    return out
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.t = time.time()
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def _pair(extra_b: tuple[str, ...] = (), signing: tuple[bytes | None, bytes | None] = (None, None)):
+    pa, pb = _ports(2)
+    clock = _Clock()
+    members = []
+    for k, (mine, theirs) in enumerate(((pa, pb), (pb, pa))):
+        sets = [
+            "fleet.slots_deg=[0,180]", f"fleet.member={k}",
+            f'fleet.links=["udpin:127.0.0.1:{mine}","udpout:127.0.0.1:{theirs}"]',
+        ]  # fmt: skip
+        if k == 1:
+            sets += list(extra_b)
+        cfg = _cfg(*sets)
+        key = signing[k]
+        m = FleetMember(cfg, build_path(cfg.path), lambda _t: None, clock,
+                        (key, k) if key is not None else None)  # fmt: skip
+        m.open()
+        members.append(m)
+    return members[0], members[1], clock
+
+
+def _vs_tgt():
+    vs = SimpleNamespace(wind=np.zeros(3), airspeed=22.0, R_W_I=np.eye(3))
+    tgt = SimpleNamespace(R_T_I=np.eye(3), omega_T=np.zeros(3), velocity=np.array([0.0, 3.0, 0]))
+    return vs, tgt
+
+
+def _settle(*ms: FleetMember) -> None:
+    time.sleep(0.05)
+    for m in ms:
+        m.poll()
+
+
+def test_exchange_encode_decode_and_the_law() -> None:
+    a, b, clock = _pair()
+    vs, tgt = _vs_tgt()
+    try:
+        # b 10 m ahead of its slot (half a lap from a): a must speed up, b slow down
+        a.step(0.0, 0.0, 22.0, vs, tgt)
+        b.step(0.0, L150 / 2 + 10.0, 22.0, vs, tgt)
+        _settle(a, b)
+        assert a.n.accepted == 1 and b.n.accepted == 1
+        rep = b.peers[a.f.link_sysid].report
+        assert rep is not None and (rep.s_m, rep.sdot_m_s, rep.slot) == (0.0, 22.0, 0.0)
+        clock.t += 0.5  # both at 22 m/s for 0.5 s: the propagated peer is 11 m on
+        a.lp.y = b.lp.y = None
+        a.step(0.5, 11.0, 22.0, vs, tgt)
+        b.step(0.5, L150 / 2 + 21.0, 22.0, vs, tgt)
+        # a's error -10 m (behind): du = 2.5 tanh(0.2 * 10 / 2.5) = +1.6600 m/s; b's -1.6600
+        assert a.last["e_m"] == pytest.approx(-10.0, abs=1e-3)
+        assert a.last["du_m_s"] == pytest.approx(2.5 * math.tanh(0.8), abs=1e-4)
+        assert b.last["du_m_s"] == pytest.approx(-2.5 * math.tanh(0.8), abs=1e-4)
+        assert report_name(a.pid) == "MPF" + a.pid and len(a.name) == 10
+    finally:
+        a.close()
+        b.close()
+
+
+def test_out_of_order_and_timeout() -> None:
+    a, b, clock = _pair()
+    vs, tgt = _vs_tgt()
+    try:
+        t0 = clock.t
+        a.send(100.0, 22.0, t0)
+        a.send(50.0, 22.0, t0 - 1.0)  # older than the one before it: discarded
+        a.send(100.0, 22.0, t0)  # a duplicate: discarded
+        _settle(b)
+        assert b.n.accepted == 1 and b.n.stale_or_reordered == 2
+        clock.t = t0 + 3.5  # silent beyond peer_timeout_s 3
+        b.step(3.5, 0.0, 22.0, vs, tgt)
+        assert b.last["n_peers"] == 0.0 and b.n.peers_lost == 1
+    finally:
+        a.close()
+        b.close()
+
+
+def test_path_mismatch_and_same_slot_refused() -> None:
+    a, b, _ = _pair(("path.radius_m=160",))
+    try:
+        a.send(0.0, 22.0, time.time())
+        _settle(b)
+        assert b.n.other_path == 1 and b.n.accepted == 0
+    finally:
+        a.close()
+        b.close()
+    a, b, _ = _pair(("fleet.slots_deg=[180,0]", "fleet.member=1"))  # b claims a's slot 0
+    try:
+        b.send(0.0, 22.0, time.time())
+        _settle(a)
+        assert a.n.same_slot == 1 and a.n.accepted == 0
+    finally:
+        a.close()
+        b.close()
+
+
+def test_signed_exchange(tmp_path: Path) -> None:
+    key = bytes(range(32))
+    a, b, _ = _pair(signing=(key, key))
+    try:
+        a.send(0.0, 22.0, time.time())
+        _settle(b)
+        assert b.n.accepted == 1
+    finally:
+        a.close()
+        b.close()
+    a, b, _ = _pair(signing=(None, key))  # a unsigned, b signing: a's reports are dropped
+    try:
+        a.send(0.0, 22.0, time.time())
+        _settle(b)
+        assert b.n.accepted == 0
+    finally:
+        a.close()
+        b.close()
+
+
+def test_bad_link_url_is_one_line() -> None:
+    cfg = _cfg("fleet.slots_deg=[0,180]", 'fleet.links=["bogus:1"]')
+    m = FleetMember(cfg, build_path(cfg.path), lambda _t: None)
+    with pytest.raises(MpfError, match="bogus"):
+        m.open()
+
+
+def test_rig_spacing_figures() -> None:
+    """The rig's judge (sim/rigs/fleet.py) on synthetic tracks: three members at 22 m/s, the
+    third 30 m behind its slot until t = 50 s, then on it: converged at 50 s (the first grid
+    instant after the last one beyond 10 m), RMS and max 0 after; after member 1 stops (t 80 s)
+    the two survivors are judged against 180 deg (respace): member 2 is 120 deg from member 0
+    where 180 is wanted, L/6 = 157 m."""
+    from sim.rigs.fleet import spacing_figures, spacing_series
+
+    t = np.arange(0.0, 120.0, 0.1)
+    L = L150
+    s0 = 22.0 * t
+    s1 = 22.0 * t + L / 3
+    s2 = 22.0 * t + 2 * L / 3 - np.where(t < 50.0, 30.0, 0.0)
+    tracks = [{"t_unix_s": t, "s_m": s} for s in (s0, s1, s2)]
+    tracks[1] = {"t_unix_s": t[t < 80.0], "s_m": s1[t < 80.0]}
+    ser = spacing_series(tracks, [0.0, 1 / 3, 2 / 3], L, True)  # type: ignore[arg-type]
+    f = spacing_figures(ser, 0.0, 79.0, 10.0, 3)
+    assert f["converged"] and f["converge_s"] == pytest.approx(50.0, abs=0.5)
+    assert f["spacing_rms_m"] == pytest.approx(0.0, abs=1e-6)
+    assert f["start_spread_worst_m"] == pytest.approx(30.0, abs=1e-6)
+    after = spacing_figures(ser, 81.0, 200.0, 10.0, 2)
+    assert not after["converged"] and after["worst_at_end_m"] == pytest.approx(L / 6, abs=0.5)
+
+
+def test_fleet_csv_is_written_as_the_flight_goes(tmp_path: Path) -> None:
+    """A SIGKILLed bridge never reaches write(): its rows must be on disk already."""
+    a, b, clock = _pair()
+    vs, tgt = _vs_tgt()
+    try:
+        a.csv_path = tmp_path / "fleet.csv"
+        a.step(0.0, 0.0, 22.0, vs, tgt)  # the first row is flushed at once
+        lines = (tmp_path / "fleet.csv").read_text().splitlines()
+        assert lines[0].startswith("t_unix_s,") and len(lines) == 2
+        a.write(tmp_path)
+        assert len((tmp_path / "fleet.csv").read_text().splitlines()) == 2
+    finally:
+        a.close()
+        b.close()
