@@ -278,11 +278,9 @@ def build_vehicle(cfg: Config, url: str, clock: str | None = None, **over: Any) 
     vc = vehicle_config(cfg, url, clock, **over)
     v = SimVehicle(vc)
     sil = cfg.section("sil")
-    prof_path = sil.profile_path(cfg.source)
-    if prof_path is not None:
-        from mpf_mavlink.config.autopilot_profile import load_profile
-
-        prof = load_profile(prof_path)
+    res = sil.profile(cfg.source)
+    if res is not None:
+        prof = res.profile
         full = None
         if prof.thrust.full_thrust_airspeed_m_s is not None and sil.plant == "jsbsim":
             full = full_thrust_throttle(cfg, vc, prof.thrust.full_thrust_airspeed_m_s)
