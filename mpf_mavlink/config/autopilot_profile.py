@@ -183,3 +183,19 @@ def resolve_profile(value: str | None, flavour: str, base: Path | None) -> Resol
                 break
     prof = load_profile(p)
     return ResolvedProfile(prof, p, f"file: {value}", False)
+
+
+def calibrated_sets(cfg: object) -> tuple[list[str], str]:
+    """The overrides that make a SIL flow (the rig's ``--sil`` leg, ``compare --plant sil``,
+    ``campaign``, ``certify``) fly the calibrated SIL: ``sil.autopilot_profile=auto`` when the
+    config names no profile (a config's own choice, ``none`` included, stands), and the words
+    naming the profile flown."""
+    sil = getattr(cfg, "extra", {}).get("sil")
+    if sil is None:
+        return [], "none"
+    sets = [] if sil.autopilot_profile is not None else ["sil.autopilot_profile=auto"]
+    value = sil.autopilot_profile if sil.autopilot_profile is not None else "auto"
+    src = str(getattr(cfg, "source", ""))
+    base = Path(src).resolve().parent if src and not src.startswith("<") else None
+    res = resolve_profile(value, sil.flavour, base)
+    return sets, "none (the plain emulation)" if res is None else res.label
