@@ -170,8 +170,8 @@ def _figures(out: Path, cert: dict[str, Any], rows: list[dict[str, Any]]) -> lis
     q = round(100 * cert["quantile"])
     flew = [r for r in rows if r["status"] in ("ok", "failed")]
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
-    for ax, key, what in zip(axes, ("steady_rms_m", "steady_max_m"),
-                             ("steady RMS |pt| (m)", "steady max |pt| (m)"), strict=True):  # fmt: skip
+    panels = (("steady_rms_m", "steady RMS |pt| (m)"), ("steady_max_m", "steady max |pt| (m)"))
+    for ax, (key, what) in zip(axes, panels, strict=True):
         v = np.sort([x for x in (_num(r.get(key)) for r in flew) if x is not None])
         if len(v):
             ax.step(v, np.arange(1, len(v) + 1) / len(v), where="post")

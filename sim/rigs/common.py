@@ -396,6 +396,10 @@ def main(argv: list[str] | None = None) -> int:
         from sim.rigs import worlds
 
         return worlds.main(argv[1:])
+    if any(x == "--certificate" or x.startswith("--certificate=") for x in argv):
+        from sim.rigs import validate  # flights drawn from a certificate's conditions
+
+        return validate.main(argv)
     a = parser().parse_args(argv)
     try:
         v = validate(a)
