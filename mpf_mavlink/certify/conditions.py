@@ -135,6 +135,8 @@ def parse_conditions(path: str | Path) -> Conditions:
         ) from None
     if not isinstance(raw, dict):
         raise ConfigError(f"{src}: the top level must be a mapping")
+    if not isinstance(raw.get("name"), str) or not raw["name"]:
+        raise _fail(src, "name", "required (a name for the certificate)")
     c: Conditions = _build(Conditions, raw, src, "")
     c = Conditions(**{**c.__dict__, "source": src})
     for key, (lo, hi) in _ranges(c).items():

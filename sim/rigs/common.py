@@ -397,9 +397,9 @@ def main(argv: list[str] | None = None) -> int:
 
         return worlds.main(argv[1:])
     if any(x == "--certificate" or x.startswith("--certificate=") for x in argv):
-        from sim.rigs import validate  # flights drawn from a certificate's conditions
+        from sim.rigs import validate as drawn  # flights drawn from a certificate's conditions
 
-        return validate.main(argv)
+        return drawn.main(argv)
     a = parser().parse_args(argv)
     try:
         v = validate(a)
