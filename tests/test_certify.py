@@ -226,7 +226,7 @@ def test_the_validation_table_says_inside_or_outside(tmp_path):
 # --------------------------------------------------------------------------- end to end
 @pytest.mark.slow
 def test_a_tiny_certify_flies_3_flights_and_a_rerun_only_the_missing(tmp_path):
-    cond = _write(tmp_path, "name: tiny\nduration_s: 30\nsteady_after_s: 10\n"
+    cond = _write(tmp_path, "name: tiny\nduration_s: 40\nsteady_after_s: 15\n"
                   "target: {speed_m_s: [2, 4]}\nlink: {latency_s: [0, 0.02]}\n")  # fmt: skip
     out = tmp_path / "cert"
     env = {**os.environ, "MPF_PURE_PYTHON": os.environ.get("MPF_PURE_PYTHON", "1")}
