@@ -81,7 +81,9 @@ def _bound(cert: dict[str, Any], key: str) -> float | None:
     return float(b) if b is not None else (s.get(f"p{q}") if s.get(f"p{q}") is not None else None)
 
 
-def verdict_row(cert: dict[str, Any], j: int, d: dict[str, Any], fig: dict[str, Any]) -> dict:
+def verdict_row(
+    cert: dict[str, Any], j: int, d: dict[str, Any], fig: dict[str, Any]
+) -> dict[str, Any]:
     """Where one real flight lands against the certificate."""
     # the link's latency is the real link's own on the rig: not a drawn condition there
     out: dict[str, Any] = {"flight": j, "conditions": describe(_rig_drawn(d))}
