@@ -672,6 +672,7 @@ def _measure(
         real_time_factor_overall=sim_total / wall if wall > 0 else None,
         plant=cfg.section("sil").plant,
         flavour=cfg.section("sil").flavour,
+        autopilot_profile=_profile_label(cfg),
         bridge_exit_code=bres.exit_code,
         bridge_exit_reason=bres.exit_reason,
         bridge_state_reached=bres.state_reached,
@@ -690,6 +691,12 @@ def _measure(
     return SilResult(cols, metrics, path.positions(), Path("."), bridge_dir,
                      bridge_dir / "mavlink.tlog", code, bres.exit_reason, truth, bres,
                      info.get("t_vehicle", np.zeros(0)))  # fmt: skip
+
+
+def _profile_label(cfg: Config) -> str:
+    """Which autopilot profile the SIL flew (metrics.json says it beside the flavour)."""
+    res = cfg.section("sil").profile(cfg.source)
+    return "none (the plain emulation)" if res is None else res.label
 
 
 def _tracking_rtf(mode_log: list[Any], sim_end_s: float) -> float | None:
