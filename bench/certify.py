@@ -1,8 +1,9 @@
 """``scripts/bench --only certify``: what a certificate costs (issue 41's bar: 200 flights of a
 300 s mission in <= 15 min on 2 cores, 13.3 flights/min). Flies ``MPF_BENCH_CERTIFY_FLIGHTS``
-(default 20) flights of configs/certify/px4_turning_target.yaml lengthened to 300 s on 2 local
-workers and prints flights/min, CPU-s per flight and the minutes 200 flights would take at that
-rate, with the machine's load average (a shared machine's figures are pessimistic)."""
+(default 20) flights of configs/certify/px4_turning_target.yaml lengthened to 300 s on
+``MPF_BENCH_CERTIFY_WORKERS`` (default 2) local workers and prints flights/min, CPU-s per
+flight and the minutes 200 flights would take at that rate, with the machine's load average
+(a shared machine's figures are pessimistic)."""
 
 from __future__ import annotations
 
@@ -17,11 +18,13 @@ CONDITIONS = ROOT / "configs" / "certify" / "px4_turning_target.yaml"
 CONFIG = ROOT / "configs" / "bridge_px4.yaml"
 
 
-def certify(flights: int | None = None, workers: int = 2) -> dict[str, Any]:
+def certify(flights: int | None = None, workers: int | None = None) -> dict[str, Any]:
     from mpf_mavlink.certify.conditions import parse_conditions
     from mpf_mavlink.certify.run import fly_all, mission
 
     n = flights or int(os.environ.get("MPF_BENCH_CERTIFY_FLIGHTS", "20"))
+    # more workers than cores overlap one flight's real-time-paced hand-over with another's work
+    workers = workers or int(os.environ.get("MPF_BENCH_CERTIFY_WORKERS", "2"))
     cond = dataclasses.replace(parse_conditions(CONDITIONS), duration_s=300.0)
     m = mission(CONFIG, [], "px4", cond)
     load0 = os.getloadavg()[0]
