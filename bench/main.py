@@ -151,6 +151,9 @@ def _optional_groups() -> None:
     GROUPS["campaign_roa"] = campaign_roa
     GROUPS["campaign_demo_robustness"] = campaign_demo_robustness
     GROUPS["campaign_sil_flight"] = campaign_sil_flight
+    from bench.certify import certify
+
+    GROUPS["certify"] = certify
 
 
 def main(argv: list[str] | None = None) -> int:

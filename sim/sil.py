@@ -277,11 +277,9 @@ def build_vehicle(cfg: Config, url: str, clock: str | None = None, **over: Any) 
     vc = vehicle_config(cfg, url, clock, **over)
     v = SimVehicle(vc)
     sil = cfg.section("sil")
-    prof_path = sil.profile_path(cfg.source)
-    if prof_path is not None:
-        from mpf_mavlink.config.autopilot_profile import load_profile
-
-        prof = load_profile(prof_path)
+    res = sil.profile(cfg.source)
+    if res is not None:
+        prof = res.profile
         full = None
         if prof.thrust.full_thrust_airspeed_m_s is not None and sil.plant == "jsbsim":
             full = full_thrust_throttle(cfg, vc, prof.thrust.full_thrust_airspeed_m_s)
@@ -649,6 +647,7 @@ def _measure(
         real_time_factor_overall=sim_total / wall if wall > 0 else None,
         plant=cfg.section("sil").plant,
         flavour=cfg.section("sil").flavour,
+        autopilot_profile=_profile_label(cfg),
         bridge_exit_code=bres.exit_code,
         bridge_exit_reason=bres.exit_reason,
         bridge_state_reached=bres.state_reached,
@@ -697,6 +696,12 @@ def _judge_truth(
     vd.record(metrics)
     metrics["bridge_verdict"] = bm.get("verdict")
     return cols, metrics, info, vd
+
+
+def _profile_label(cfg: Config) -> str:
+    """Which autopilot profile the SIL flew (metrics.json says it beside the flavour)."""
+    res = cfg.section("sil").profile(cfg.source)
+    return "none (the plain emulation)" if res is None else res.label
 
 
 def _tracking_rtf(mode_log: list[Any], sim_end_s: float) -> float | None:

@@ -18,6 +18,7 @@ from mpf_mavlink.core.frames import euler_to_matrix
 from mpf_mavlink.core.guidance.checks import (
     CheckResult,
     assumption1,
+    autopilot_profile_limits,
     climb_feasibility,
     demanded_directions,
     feasibility,
@@ -383,6 +384,10 @@ def run_checks(
             results.append(gust_feasibility(feasible_at, cfg.vehicle.airspeed_m_s, gust))
         if measured is not None:
             results.extend(_measured_checks(cfg, measured, path, target, horizon, s0))
+        else:
+            prof = profile_check(cfg, path, target, horizon, s0, steady, at_v0)
+            if prof is not None:
+                results.append(prof)
         hold = airspeed_hold(cfg)
         if hold is not None:
             results.append(hold)
@@ -416,6 +421,30 @@ def _fleet_checks(
         summary=f"at {v_hi:.1f} m/s all round the path (the fastest the fleet asks, an upper "
         "bound): " + r.summary))  # fmt: skip
     return out
+
+
+def profile_check(
+    cfg: Config, path: Any, target: Any, horizon: float, s0: float, steady: Any, at_v0: Any
+) -> CheckResult | None:
+    """``autopilot_profile``: what the SIL's autopilot profile can fly (None: no SIL or no
+    profile). A check of the simulated autopilot, not of a live one: the live bridge's
+    pre-flight (``measured``) never runs it."""
+    sil = cfg.extra.get("sil")
+    if sil is None or sil.link == "none":
+        return None
+    res = sil.profile(cfg.source)
+    if res is None:
+        return None
+    k = res.profile.turn.turn_gain
+    ch = cfg.checks
+    turned = feasibility(
+        path, target, cfg.vehicle.airspeed_m_s, horizon, bank_limit_rad(cfg),
+        cfg.vehicle.max_turn_rate_rad_s, s0, steady, bank_margin_rad=ch.bank_margin_rad,
+        turn_gain=k, demanded=at_v0[:2],
+    )  # fmt: skip
+    return autopilot_profile_limits(
+        res.label, cfg.vehicle.airspeed_m_s, res.profile.thrust.full_thrust_airspeed_m_s, turned, k
+    )
 
 
 def _measured_checks(

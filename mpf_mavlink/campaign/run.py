@@ -16,6 +16,7 @@ for the run and closed after it.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import hashlib
 import json
 import os
@@ -126,6 +127,15 @@ def run_campaign(
     redo = FINISHED if retry_errors else (*FINISHED, *RETRYABLE)
     done = {i for i, r in rows.items() if r.get("status") in redo}
     base = load_config(spec.base_path, spec.set)
+    if spec.plant == "sil":
+        from mpf_mavlink.config.autopilot_profile import calibrated_sets
+
+        # the calibrated SIL unless the campaign or its base names a profile (none included)
+        extra, label = calibrated_sets(base)
+        if extra:
+            spec = dataclasses.replace(spec, set=[*spec.set, *extra])
+            base = load_config(spec.base_path, spec.set)
+        log(f"campaign {spec.name}: SIL autopilot profile {label}")
     all_samples = samples(spec)
     todo = [i for i in range(spec.samples) if i not in done]
     # the workers first: a scheduler that does not answer leaves no directory behind

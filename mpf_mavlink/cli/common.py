@@ -27,6 +27,9 @@ EXIT_CODES = {
     "--serve URL (unknown scheme, unresolvable host, port in use) / arguments",
     "campaign": "0 every flight ran to its end (whatever its figures or verdict); 1 some "
     "flights errored or timed out; 2 bad campaign file / arguments / no scheduler; 130 Ctrl-C",
+    "certify": "0 every flight ran to its end (whatever its verdict: the certificate's "
+    "P(FAIL)); 1 some flights errored or timed out; 2 bad configuration / conditions / "
+    "arguments / no scheduler; 130 Ctrl-C",
     "compare": "0 every flight ran to its end (a FAIL or NOT JUDGED verdict is a result: the "
     "table's verdict column); 2 bad configuration / arguments, or a flight could not run to its "
     "end (a safety exit, no flight recorded); 130 Ctrl-C",

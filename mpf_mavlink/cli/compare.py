@@ -166,6 +166,13 @@ def cmd_compare(args: argparse.Namespace) -> int:
     from mpf_mavlink.runs.rundir import prepare_out_dir
 
     cfg = load_config(args.config, args.overrides)
+    if args.plant == "sil":
+        from mpf_mavlink.config.autopilot_profile import calibrated_sets
+
+        # the calibrated SIL unless the config names a profile (none included)
+        extra, label = calibrated_sets(cfg)
+        cfg = load_config(args.config, [*args.overrides, *extra]) if extra else cfg
+        print(f"compare: SIL autopilot profile {label}", file=sys.stderr, flush=True)
     laws = parse_laws(args.laws)
     out = args.out or Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-compare-{cfg.name}"
     out = prepare_out_dir(out)

@@ -211,6 +211,9 @@ def build_parser() -> argparse.ArgumentParser:
     from mpf_mavlink.cli.campaign import add_campaign_parser
 
     add_campaign_parser(sub)
+    from mpf_mavlink.cli.certify import add_certify_parser
+
+    add_certify_parser(sub)
     from mpf_mavlink.cli.compare import add_compare_parser
 
     add_compare_parser(sub, _add_config)

@@ -9,6 +9,7 @@ errors naming the key and the file. Units SI, radians.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -134,3 +135,67 @@ def load_profile(path: str | Path) -> AutopilotProfile:
     if not isinstance(raw, dict):
         raise ConfigError(f"{p}: an autopilot profile is a mapping")
     return _build(AutopilotProfile, raw, str(p), "")
+
+
+_REPO = Path(__file__).resolve().parents[2]
+
+# the identified firmware of each flavour that ``sil.autopilot_profile: auto`` flies
+SHIPPED = {
+    "px4": _REPO / "configs" / "autopilots" / "px4-1.16-sih.yaml",
+    "arduplane": _REPO / "configs" / "autopilots" / "arduplane-4.7.yaml",
+}
+
+
+@dataclass(frozen=True)
+class ResolvedProfile:
+    """The profile a SIL flies: ``profile`` as applied, ``path`` its file, ``label`` the
+    words a flow prints for it, ``split``: only the autopilot's part (the airframe's dropped)."""
+
+    profile: AutopilotProfile
+    path: Path
+    label: str
+    split: bool
+
+
+def autopilot_part(p: AutopilotProfile) -> AutopilotProfile:
+    """What belongs to the autopilot (estimator errors, attitude loops and lags, turn and
+    sideslip): the profile without its ``thrust`` section, which is the identified airframe's
+    (PX4 SIH's thrust ceiling), so that it applies to any JSBSim airframe."""
+    return dataclasses.replace(p, thrust=ThrustResponse())
+
+
+def resolve_profile(value: str | None, flavour: str, base: Path | None) -> ResolvedProfile | None:
+    """``sil.autopilot_profile``: None or ``none``: the plain emulation (None); ``auto``: the
+    shipped identified profile of ``flavour`` (px4 / ardupilot), its autopilot part; a FILE
+    (absolute, relative to ``base`` or to the repository): applied as written, thrust too."""
+    if value is None or value == "none":
+        return None
+    want = "px4" if flavour == "px4" else "arduplane"
+    if value == "auto":
+        path = SHIPPED[want]
+        prof = autopilot_part(load_profile(path))
+        return ResolvedProfile(prof, path, f"auto: {path.stem} (autopilot part)", True)
+    p = Path(value).expanduser()
+    if not p.is_absolute():
+        for b in ([base] if base is not None else []) + [_REPO]:
+            if (b / p).is_file():
+                p = b / p
+                break
+    prof = load_profile(p)
+    return ResolvedProfile(prof, p, f"file: {value}", False)
+
+
+def calibrated_sets(cfg: object) -> tuple[list[str], str]:
+    """The overrides that make a SIL flow (the rig's ``--sil`` leg, ``compare --plant sil``,
+    ``campaign``, ``certify``) fly the calibrated SIL: ``sil.autopilot_profile=auto`` when the
+    config names no profile (a config's own choice, ``none`` included, stands), and the words
+    naming the profile flown."""
+    sil = getattr(cfg, "extra", {}).get("sil")
+    if sil is None:
+        return [], "none"
+    sets = [] if sil.autopilot_profile is not None else ["sil.autopilot_profile=auto"]
+    value = sil.autopilot_profile if sil.autopilot_profile is not None else "auto"
+    src = str(getattr(cfg, "source", ""))
+    base = Path(src).resolve().parent if src and not src.startswith("<") else None
+    res = resolve_profile(value, sil.flavour, base)
+    return sets, "none (the plain emulation)" if res is None else res.label

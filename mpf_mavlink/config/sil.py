@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from mpf_mavlink.config.autopilot_profile import load_profile
+from mpf_mavlink.config.autopilot_profile import ResolvedProfile, resolve_profile
 from mpf_mavlink.config.bridge import MavlinkConfig, hold_mode_error
 from mpf_mavlink.config.fields import Vec3, _doc, _fail, _ge, _nonneg, _open, _pos, _rng
 from mpf_mavlink.errors import ConfigError
@@ -194,40 +194,38 @@ class SilConfig:
         default=None,
         metadata=_doc(
             "the firmware's identified behaviour the vehicle emulates (sim/autopilot/profile.py): "
-            "a file absolute, relative to the config file, or to the repository "
-            "(configs/autopilots/*.yaml)"
+            "auto (the identified profile of sil.flavour, its autopilot part: SIH's thrust "
+            "ceiling dropped), none (the plain emulation; as left out) or a file absolute, "
+            "relative to the config file, or to the repository (configs/autopilots/*.yaml), "
+            "applied as written"
         ),
     )
 
+    def profile(self, src: str) -> ResolvedProfile | None:
+        """The profile the vehicle flies (None: the plain emulation); ConfigError naming
+        ``sil.autopilot_profile`` when it cannot be read."""
+        base = Path(src).resolve().parent if src and not src.startswith("<") else None
+        try:
+            return resolve_profile(self.autopilot_profile, self.flavour, base)
+        except ConfigError as e:
+            raise _fail(src, "sil.autopilot_profile", str(e)) from None
+
     def profile_path(self, src: str) -> Path | None:
-        """The profile's file (None: no profile); the first of the places above that exists."""
-        if self.autopilot_profile is None:
-            return None
-        p = Path(self.autopilot_profile).expanduser()
-        if p.is_absolute():
-            return p
-        bases = [Path(src).resolve().parent] if src and not src.startswith("<") else []
-        bases.append(_REPO)
-        for b in bases:
-            if (b / p).is_file():
-                return b / p
-        return p
+        """The profile's file (None: no profile)."""
+        r = self.profile(src)
+        return None if r is None else r.path
 
     def validate(self, src: str, target_type: str, m: MavlinkConfig) -> None:
         """Contradictions with ``target.type`` and the ``mavlink`` section."""
         if self.link == "none":
             return
-        prof_path = self.profile_path(src)
-        if prof_path is not None:
-            try:
-                prof = load_profile(prof_path)
-            except ConfigError as e:
-                raise _fail(src, "sil.autopilot_profile", str(e)) from None
+        res = self.profile(src)
+        if res is not None:
             want = "px4" if self.flavour == "px4" else "arduplane"
-            if prof.autopilot != want:
+            if res.profile.autopilot != want:
                 raise _fail(
                     src, "sil.autopilot_profile",
-                    f"{prof_path} is a {prof.autopilot} profile but sil.flavour is "
+                    f"{res.path} is a {res.profile.autopilot} profile but sil.flavour is "
                     f"{self.flavour!r}",
                 )  # fmt: skip
         if self.plant == "kinematic" and (

@@ -438,6 +438,10 @@ def main(argv: list[str] | None = None) -> int:
         from sim.rigs import worlds
 
         return worlds.main(argv[1:])
+    if any(x == "--certificate" or x.startswith("--certificate=") for x in argv):
+        from sim.rigs import validate as drawn  # flights drawn from a certificate's conditions
+
+        return drawn.main(argv)
     a = parser().parse_args(argv)
     try:
         v = validate(a)
@@ -762,6 +766,11 @@ def sil_leg(
         f"kinematic.initial_attitude_rpy_rad=[0,0,{hdg:.4f}]",
         f"aircraft.trim_airspeed_m_s={v['cfg'].vehicle.airspeed_m_s:g}",
     ]
+    from mpf_mavlink.config.autopilot_profile import calibrated_sets
+
+    # the calibrated SIL: the flavour's identified profile unless the config names one
+    prof_sets, prof_label = calibrated_sets(v["cfg"])
+    sil_sets += prof_sets
     if a.wind is not None:
         sil_sets.append(arduplane.sil_wind_set(*a.wind))
     if a.turbulence:
@@ -792,6 +801,7 @@ def sil_leg(
         "steady_mean_vertical_m": sm.get("steady_mean_vertical_m"),
         "steady_mean_radial_m": sm.get("steady_mean_radial_m"),
         "real_over_sil": (real / ours) if (real is not None and ours) else None,
+        "autopilot_profile": prof_label,
         "warnings": warn,
     }
 
@@ -975,6 +985,7 @@ def _rows_sil(sil: dict[str, Any]) -> list[tuple[str, str]]:
             f"{fmt(sil.get('steady_mean_vertical_m'))} / {fmt(sil.get('steady_mean_radial_m'))} m",
         ),
         ("real / our SIL RMS", fmt(sil.get("real_over_sil"))),
+        ("our SIL: autopilot profile", str(sil.get("autopilot_profile", "none"))),
         (
             "our SIL: check warnings",
             "; ".join(w.split("]", 1)[1].split(":")[0].strip() for w in sil.get("warnings", []))

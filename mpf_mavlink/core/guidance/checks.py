@@ -574,3 +574,46 @@ def feasibility(
             "turn_gain": turn_gain,
         },
     )
+
+
+def autopilot_profile_limits(
+    label: str,
+    airspeed_m_s: float,
+    full_thrust_airspeed_m_s: float | None,
+    turned: CheckResult,
+    turn_gain: float,
+) -> CheckResult:
+    """What the SIL's autopilot profile can fly (``label`` names it): the law's airspeed
+    (m/s) below the level airspeed the profile's full thrust flies (level flight at full
+    thrust leaves nothing to climb or turn with), and the path's bank within the limit at the
+    profile's turn per bank (``turned``: :func:`feasibility` at ``turn_gain``)."""
+    fig: dict[str, float | bool | None] = {
+        "airspeed_m_s": airspeed_m_s,
+        "full_thrust_airspeed_m_s": full_thrust_airspeed_m_s,
+        "turn_gain": turn_gain,
+        "peak_bank_rad": turned.figures.get("peak_bank_rad"),
+        "bank_limit_rad": turned.figures.get("bank_limit_rad"),
+    }
+    if full_thrust_airspeed_m_s is not None and airspeed_m_s >= full_thrust_airspeed_m_s:
+        return CheckResult(
+            "autopilot_profile", "fail",
+            f"{label}: airspeed {airspeed_m_s:g} m/s needs more thrust than the profile's full "
+            f"thrust flies (level {full_thrust_airspeed_m_s:g} m/s at thrust 1); fly slower or "
+            "use sil.autopilot_profile: auto (the autopilot's part, the airframe's own thrust)",
+            fig,
+        )  # fmt: skip
+    if not turned.ok:
+        pb = math.degrees(float(turned.figures.get("peak_bank_rad") or 0.0))
+        lim = math.degrees(float(turned.figures.get("bank_limit_rad") or 0.0))
+        mg = math.degrees(float(turned.figures.get("bank_margin_rad") or 0.0))
+        return CheckResult(
+            "autopilot_profile", "fail",
+            f"{label}: bank {pb:.1f} deg beyond the limit {lim:.1f} deg"
+            + (f" - {mg:.1f} margin" if mg > 0 else "")
+            + f" at the profile's turn gain {turn_gain:g} ({turned.summary})",
+            fig,
+        )  # fmt: skip
+    words = f"{label}: turn gain {turn_gain:g}, {turned.summary}"
+    if full_thrust_airspeed_m_s is not None:
+        words += f"; full thrust flies {full_thrust_airspeed_m_s:g} m/s level"
+    return CheckResult("autopilot_profile", "pass", words, fig)

@@ -1,0 +1,1 @@
+"""`mpf-mavlink certify`: a bound on a mission before it flies (docs/certify.md)."""
