@@ -3,7 +3,7 @@
 Each bridge tells its peers where its virtual point is, at ``fleet.rate_hz``, in one standard
 MAVLink message, DEBUG_VECT (#250):
 
-- ``name``: ``"MPF"`` + the path id (:func:`mpf_mavlink.config.fleet.path_id`, 7 hex digits of
+- ``name``: ``"MPF"`` + the path id (:func:`path_id`, 7 hex digits of
   the path, the target and its epoch): a peer whose id differs flies another path and is refused;
 - ``time_usec``: Unix time (us) at which s held (the hosts' clocks are the common time base:
   NTP or GPS on real aircraft; one clock in the SITL rig);
@@ -26,6 +26,7 @@ aircraft then flies its reference speed alone and the failure is counted.
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import math
 import time
@@ -34,7 +35,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mpf_mavlink.config.fleet import FleetConfig, path_id
+from mpf_mavlink.config.fleet import FleetConfig
+from mpf_mavlink.config.schema import config_to_dict
 from mpf_mavlink.core.guidance import coordination as co
 from mpf_mavlink.errors import MpfError
 
@@ -45,6 +47,15 @@ MAV_COMP_ID_ONBOARD_COMPUTER = 191
 def report_name(pid: str) -> str:
     """The DEBUG_VECT name of a path id: "MPF" + 7 hex digits (the field holds 10 chars)."""
     return (MSG_PREFIX + pid)[:10]
+
+
+def path_id(cfg: Any) -> str:
+    """Seven hex digits naming the moving path (path, target and the target's epoch): the
+    coordination messages carry it, and a peer whose id differs flies another path."""
+    d = config_to_dict(cfg)
+    key = {"path": d["path"], "target": d["target"], "epoch": d["fleet"]["target_epoch_unix_s"]}
+    text = json.dumps(key, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:7]
 
 
 @dataclass

@@ -9,8 +9,6 @@ station or router is one ``udpout``/``tcp`` both ways).
 
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -136,14 +134,3 @@ def _closed(p: Any) -> bool:
     if p.type in ("circle", "lemniscate"):
         return True
     return p.type == "spline" and bool(getattr(p, "closed", False))
-
-
-def path_id(cfg: Any) -> str:
-    """Seven hex digits naming the moving path (path, target and the target's epoch): the
-    coordination messages carry it, and a peer whose id differs flies another path."""
-    from mpf_mavlink.config.schema import config_to_dict
-
-    d = config_to_dict(cfg)
-    key = {"path": d["path"], "target": d["target"], "epoch": d["fleet"]["target_epoch_unix_s"]}
-    text = json.dumps(key, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:7]
