@@ -35,7 +35,7 @@ from typing import Any, Literal
 
 import yaml
 
-from mpf_mavlink.config.build import _build
+from mpf_mavlink.config.build import _build, parse_yaml
 from mpf_mavlink.config.fields import _fail, _nonneg, _pos
 from mpf_mavlink.errors import ConfigError
 
@@ -137,14 +137,10 @@ def parse_campaign(path: str | Path) -> CampaignSpec:
     by :func:`mpf_mavlink.campaign.design.load_campaign`)."""
     src = str(path)
     try:
-        raw = yaml.safe_load(Path(path).read_text())
+        text = Path(path).read_text()
     except OSError as e:
         raise ConfigError(f"{src}: cannot read the campaign ({e.strerror})") from None
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        raise ConfigError(
-            f"{src}: not valid YAML" + (f" at line {mark.line + 1}" if mark else "")
-        ) from None
+    raw = parse_yaml(text, src)
     if not isinstance(raw, dict):
         raise ConfigError(f"{src}: the top level must be a mapping")
     spec: CampaignSpec = _build(CampaignSpec, _normalise(raw), src, "")

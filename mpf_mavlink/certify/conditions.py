@@ -29,9 +29,8 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-import yaml
 
-from mpf_mavlink.config.build import _build
+from mpf_mavlink.config.build import _build, parse_yaml
 from mpf_mavlink.config.fields import _fail, _open, _pos
 from mpf_mavlink.errors import ConfigError
 
@@ -126,13 +125,7 @@ def parse_conditions(path: str | Path) -> Conditions:
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"{src}: no such conditions file")
-    try:
-        raw = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        raise ConfigError(
-            f"{src}: not valid YAML" + (f" at line {mark.line + 1}" if mark else "")
-        ) from None
+    raw = parse_yaml(p.read_text(), src)
     if not isinstance(raw, dict):
         raise ConfigError(f"{src}: the top level must be a mapping")
     if not isinstance(raw.get("name"), str) or not raw["name"]:

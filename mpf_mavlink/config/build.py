@@ -10,7 +10,10 @@ import types
 import typing
 from typing import Any, Literal, TypeVar
 
+import yaml
+
 from mpf_mavlink.config.fields import _fail
+from mpf_mavlink.errors import ConfigError
 
 S = TypeVar("S")
 
@@ -156,3 +159,14 @@ def _build(cls: type[S], data: dict[str, Any], src: str, prefix: str) -> S:
         _check(fields[k].metadata, val, src, key)
         kwargs[k] = val
     return cls(**kwargs)
+
+
+def parse_yaml(text: str, src: str) -> Any:
+    """``text`` parsed as YAML; ConfigError "SRC: not valid YAML at line N" otherwise (every
+    file the project reads: configuration, campaign, certify conditions)."""
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(f"{src}: not valid YAML{where}") from None

@@ -19,7 +19,7 @@ from typing import Any, Literal, overload
 import yaml
 
 from mpf_mavlink.config.bridge import AdapterSection, MavlinkConfig
-from mpf_mavlink.config.build import S, _build
+from mpf_mavlink.config.build import S, _build, parse_yaml
 from mpf_mavlink.config.fields import Vec3, _doc, _fail, _nonneg, _open, _pos, _rng
 from mpf_mavlink.config.fleet import FleetConfig, validate_fleet  # fleet: cooperative MPF
 from mpf_mavlink.config.sil import AircraftConfig, SilConfig
@@ -453,12 +453,7 @@ def load_config(path: str | Path, overrides: list[str] | None = None) -> Config:
         text = Path(path).read_text()
     except OSError as e:
         raise ConfigError(f"{src}: cannot read the configuration ({e.strerror})") from None
-    try:
-        raw = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(f"{src}: not valid YAML{where}") from None
+    raw = parse_yaml(text, src)
     if raw is None:
         raw = {}
     if not isinstance(raw, dict):
