@@ -292,3 +292,28 @@ def test_the_capture_matrix_is_recorded_with_every_row_and_its_command():
     assert len(on) == 12 and len(keys) == 12, on
     assert all(r.rstrip(" |").endswith("PASS") for r in on), on
     assert any(r.split("|")[4].strip() == "off" for r in rows)
+
+
+def test_the_guards_name_exactly_the_bounds_that_changed_the_command():
+    """guard_limited names (a) "sdot" iff the law's sdot was outside sdot_0 +- v_w, (b) "turn"
+    iff |w3| was beyond the bank's turn-rate limit, and changes nothing it does not name; the
+    envelope monitor shows these names to the user."""
+    rng = np.random.default_rng(41)
+    K_p, seen = 1.0, set()
+    for _ in range(2000):
+        veh, cmd, f1, wd1, pt_norm, pt_along, floor_d = _random_case(rng)
+        diag = _diag(pt_norm, pt_along, f1, wd1)
+        out, beta, limited = cap.guard_limited(cmd, diag, veh, floor_d, K_p, P)
+        R, v = np.asarray(veh.R_W_I), veh.airspeed
+        sdot_0 = cap.on_path_rate(cmd.sdot, K_p, pt_along, v, float(R[:, 0] @ f1),
+                                  float(np.dot(wd1, f1)))  # fmt: skip
+        assert ("sdot" in limited) == (abs(cmd.sdot - sdot_0) > v)
+        assert ("turn" in limited) == (abs(cmd.w3) > cap.turn_rate_limit(v, R[2, 2], P))
+        if "sdot" not in limited:
+            assert out.sdot == cmd.sdot
+        if "turn" not in limited:
+            assert out.w3 == cmd.w3
+        if not limited:
+            assert (out.w2, out.w3, out.sdot) == (cmd.w2, cmd.w3, cmd.sdot)
+        seen.update(limited)
+    assert seen == {"sdot", "turn", "path"}  # the random cases reach every guard

@@ -198,3 +198,18 @@ def test_the_monitor_of_a_config_reads_its_limits_and_policy():
                       "envelope.exceeded_for_s=2", "envelope.armed_after_s=0"])  # fmt: skip
     mon = envelope_monitor(cfg, AdapterParams())
     assert (mon.policy, mon.exceeded_for_s, mon.armed_after_s) == ("warn", 2.0, 0.0)
+
+
+def test_the_capture_guards_acting_is_a_warning_episode_the_user_sees():
+    """A far capture whose guards bound the turn for 20 s: one episode of kind capture, one
+    STATUSTEXT naming the guard and the distance, in the summary; never a hand-back (the guards
+    are how the capture stays in the envelope: POLICY_KINDS leaves them out)."""
+    lim = EnvelopeLimits(**{**LIM.__dict__, "capture_m": 150.0})
+    mon = EnvelopeMonitor(lim, policy="hold", exceeded_for_s=5.0, armed_after_s=0.0)
+    texts, hand = fly(mon, 0.0, 20.0, capture=("turn", "path"), pt_m=412.0)
+    texts += fly(mon, 20.0, 25.0)[0]
+    assert hand is None and mon.handed_back is None
+    assert texts == ["MPF capture: turn,path bounded at 412m"]
+    (ep,) = mon.episodes()
+    assert ep.kind == "capture" and ep.limit == 150.0 and ep.peak == 412.0
+    assert mon.summary(10.0, 25.0)["kinds"]["capture"]["episodes"] == 1

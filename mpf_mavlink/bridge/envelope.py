@@ -23,6 +23,10 @@ Kinds (each compared every step; an episode is a stretch where its condition hol
   margin (preflight.MeasuredInputs.wind_margin_m_s) and the config's gust allowance (the
   checks' turbulence allowance: a reported wind that follows the gusts is no new wind). A
   warning: the hold policy does not act on it, nor on ``thrust`` (:data:`POLICY_KINDS`).
+- ``capture``: the capture guards (core/guidance/capture.py) changed the law's command, far
+  from the path: its progression, its turn or its flight path was bounded. A warning: the
+  guards are how a far capture stays inside the envelope, and the user sees that they acted
+  (value: the distance |pt|, m; limit: ``guidance.capture_distance_m``).
 
 An episode starts the first step its condition holds and ends once it has been clear for
 ``envelope.clear_s`` (a condition that flickers at 50 Hz is one episode, one STATUSTEXT); its
@@ -35,6 +39,7 @@ the mission not being flown); ``warn`` only tells.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -42,7 +47,7 @@ from typing import Any
 from mpf_mavlink.core.adapter import bank_and_load_factor, heading_and_path_angle_rates
 
 #: the kinds in the order they are named
-KINDS = ("bank", "pitch", "climb", "sink", "airspeed", "thrust", "wind")
+KINDS = ("bank", "pitch", "climb", "sink", "airspeed", "thrust", "wind", "capture")
 #: the kinds the hold policy acts on: what the aircraft does not fly (bank, pitch, climb, sink)
 #: and the airspeed leaving its window. A wind beyond the checked one is a warning (the checks'
 #: premise is gone; what it does to the flight shows as the bank it needs), and so is thrust at
@@ -76,6 +81,7 @@ class EnvelopeLimits:
     wind_max_m_s: float | None = None  # the checked wind plus its margin (horizontal)
     adapter_bank_rad: float = math.inf  # the adapter's own clip (vehicle.max_bank_rad)
     rate_max_rad_s: tuple[float, float, float] = (math.inf, math.inf, math.inf)  # p, q, r
+    capture_m: float = math.inf  # |pt| beyond which the capture guards act (m)
 
 
 @dataclass(frozen=True)
@@ -83,7 +89,9 @@ class Demand:
     """One control step: what the law demands and what was sent. t: mission time (s); bank_rad,
     pitch_rad, climb_m_s: demanded (before any clip; pitch is the set-point before the
     adapter's pitch clip); airspeed_m_s, wind_m_s: measured; thrust: sent; clipped: some command
-    of this step was cut at a limit (bank, pitch, body rates, the law's rate limit)."""
+    of this step was cut at a limit (bank, pitch, body rates, the law's rate limit); capture:
+    the capture guards that changed the law's command ("sdot", "turn", "path"), at |pt| = pt_m
+    (m)."""
 
     t: float
     bank_rad: float
@@ -93,6 +101,8 @@ class Demand:
     thrust: float
     wind_m_s: float
     clipped: bool = False
+    capture: tuple[str, ...] = ()
+    pt_m: float = 0.0
 
 
 @dataclass
@@ -128,6 +138,8 @@ class Actions:
 
 
 def _fmt(kind: str, value: float) -> str:
+    if kind == "capture":
+        return f"{value:.0f}m"
     if kind in ("bank", "pitch"):
         return f"{math.degrees(value):.1f}deg"
     if kind == "thrust":
@@ -183,6 +195,8 @@ class EnvelopeMonitor:
             out["thrust"] = (d.thrust, lim.thrust_max)
         if lim.wind_max_m_s is not None and d.wind_m_s > lim.wind_max_m_s:
             out["wind"] = (d.wind_m_s, lim.wind_max_m_s)
+        if d.capture:
+            out["capture"] = (d.pt_m, lim.capture_m)
         return out
 
     # -- one step ------------------------------------------------------------------------------
@@ -213,7 +227,7 @@ class EnvelopeMonitor:
             cur = self.open.get(kind)
             if cur is None:
                 new = self.open[kind] = Episode(kind, d.t, d.t, value, limit)
-                acts.texts.append(self.text(new))
+                acts.texts.append(self.text(new, d.capture))
             else:
                 cur.end = d.t
                 if abs(value) > abs(cur.peak):
@@ -234,8 +248,11 @@ class EnvelopeMonitor:
         return acts
 
     @staticmethod
-    def text(ep: Episode) -> str:
-        """The STATUSTEXT of an episode's start (<= 50 characters, MAVLink's text field)."""
+    def text(ep: Episode, guards: tuple[str, ...] = ()) -> str:
+        """The STATUSTEXT of an episode's start (<= 50 characters, MAVLink's text field);
+        guards: for a capture episode, the guards that acted."""
+        if ep.kind == "capture":
+            return f"MPF capture: {','.join(guards)} bounded at {_fmt('capture', ep.peak)}"[:50]
         s = f"MPF envelope: {ep.kind} {_fmt(ep.kind, ep.peak)} > {_fmt(ep.kind, ep.limit)}"
         return s[:50]
 
@@ -364,10 +381,15 @@ def demand_of_step(st: Any, ctl: Any, lim: EnvelopeLimits) -> Demand:
     trim = a.trim_hat if (p.adaptive and a.trim_hat is not None) else p.trim_pitch_rad
     vs = st.estimate.vehicle
     wind = vs.floats[12:15] if vs.floats is not None else vs.wind
-    return demand_of(
+    d = demand_of(
         st.t, st.cmd.omega_w1_I, st.w1, vs.airspeed, wind, st.setpoint,
         a.turn_gain if p.adaptive else 1.0, trim, p.tau_pitch_s, False, lim,
     )  # fmt: skip
+    guard = getattr(ctl, "capture", None)
+    act = guard.last if guard is not None else None
+    if act is None or not act.limited:
+        return d
+    return dataclasses.replace(d, capture=act.limited, pt_m=act.pt_m)
 
 
 def wind_limit_m_s(cfg: Any, measured: dict[str, Any]) -> float | None:
@@ -398,6 +420,7 @@ def envelope_monitor(cfg: Any, ad: Any) -> EnvelopeMonitor:
         climb_max_m_s=v.max_climb_rate_m_s, sink_max_m_s=v.max_sink_rate_m_s,
         adapter_bank_rad=ad.max_bank_rad,
         rate_max_rad_s=(ad.max_roll_rate_rad_s, ad.max_pitch_rate_rad_s, ad.max_yaw_rate_rad_s),
+        capture_m=cfg.guidance.capture_distance_m,
     )  # fmt: skip
     armed = e.armed_after_s if e.armed_after_s is not None else m.steady_after_s
     return EnvelopeMonitor(lim, e.policy, e.exceeded_for_s, armed, e.clear_s)

@@ -157,9 +157,24 @@ def guard(
 
     floor_down_m, ceiling_down_m: :func:`floor_and_ceiling_down` (NED down, m); K_p (1/s) the
     gain sdot (22) used."""
+    out, beta, _ = guard_limited(cmd, diag, vehicle, floor_down_m, K_p, p, ceiling_down_m)
+    return out, beta
+
+
+def guard_limited(
+    cmd: MpfCommand,
+    diag: MpfDiagnostics,
+    vehicle: VehicleState,
+    floor_down_m: float,
+    K_p: float,
+    p: CaptureParams,
+    ceiling_down_m: float = -math.inf,
+) -> tuple[MpfCommand, float, tuple[str, ...]]:
+    """:func:`guard`, and which guards changed the law's command: a subset of ("sdot", "turn",
+    "path") in that order, (a), (b), (c); empty when the law's command was inside every bound."""
     beta = capture_weight(diag.pt_norm, p.distance_m, p.blend_m)
     if beta == 0.0:
-        return cmd, 0.0
+        return cmd, 0.0, ()
     (w1n, w2n, w3n), (w1e, w2e, w3e), (w1d, w2d, w3d) = np.asarray(vehicle.R_W_I).tolist()
     v_w = float(vehicle.airspeed)
     f1, wd1 = diag.f1, diag.wd1
@@ -176,15 +191,34 @@ def guard(
     h = floor_down_m - float(vehicle.position[2])
     lo, hi = flight_path_band(gamma, v_w, h, p, float(vehicle.position[2]) - ceiling_down_m)
     w3d_safe = w3d if abs(w3d) > 0.1 else math.copysign(0.1, w3d or 1.0)
-    gamma_dot = (cmd.w2 * w3d - w3 * w2d) / cg
-    gamma_dot = min(max(gamma_dot, lo), hi)
+    gamma_dot_law = (cmd.w2 * w3d - w3 * w2d) / cg
+    gamma_dot = min(max(gamma_dot_law, lo), hi)
     w2 = (gamma_dot * cg + w3 * w2d) / w3d_safe
+    limited = tuple(
+        name
+        for name, hit in (
+            ("sdot", sdot != cmd.sdot),
+            ("turn", w3 != cmd.w3),
+            ("path", gamma_dot != gamma_dot_law),
+        )
+        if hit
+    )
     # blended: a convex mix of the law's and the guarded values (each bound is an interval)
     w2 = cmd.w2 + beta * (w2 - cmd.w2)
     w3 = cmd.w3 + beta * (w3 - cmd.w3)
     sdot = cmd.sdot + beta * (sdot - cmd.sdot)
     om: Vec = (w2 * w2n + w3 * w3n, w2 * w2e + w3 * w3e, w2 * w2d + w3 * w3d)
-    return tuple.__new__(MpfCommand, (cmd.t, w2, w3, sdot, om)), beta
+    return tuple.__new__(MpfCommand, (cmd.t, w2, w3, sdot, om)), beta, limited
+
+
+@dataclass(frozen=True)
+class GuardAction:
+    """What the guards did at one step: their weight (0..1), which of them changed the law's
+    command (:func:`guard_limited`) and the distance |pt| (m) they acted at."""
+
+    weight: float
+    limited: tuple[str, ...]
+    pt_m: float
 
 
 class CaptureGuard:
@@ -193,6 +227,8 @@ class CaptureGuard:
     def __init__(self, path_nodes_T: NDArray[np.float64], params: CaptureParams) -> None:
         self.nodes = np.asarray(path_nodes_T, dtype=float)
         self.params = params
+        #: the last step's action; None when the guards did not act (within distance_m)
+        self.last: GuardAction | None = None
 
     def apply(
         self,
@@ -203,9 +239,11 @@ class CaptureGuard:
         K_p: float,
     ) -> tuple[MpfCommand, MpfDiagnostics]:
         """The guarded command and the diagnostics, their mode marked "+capture" when the
-        guards acted (weight > 0)."""
+        guards acted (weight > 0); :attr:`last` says which of them changed the command."""
         if capture_weight(diag.pt_norm, self.params.distance_m, self.params.blend_m) == 0.0:
+            self.last = None
             return cmd, diag
         fd, cd = floor_and_ceiling_down(target, self.nodes, self.params)
-        out, _ = guard(cmd, diag, vehicle, fd, K_p, self.params, cd)
+        out, beta, limited = guard_limited(cmd, diag, vehicle, fd, K_p, self.params, cd)
+        self.last = GuardAction(beta, limited, diag.pt_norm)
         return out, diag._replace(mode=diag.mode + "+capture")
