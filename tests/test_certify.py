@@ -262,3 +262,34 @@ def test_certify_refuses_bad_input_leaving_nothing(tmp_path):
     )  # fmt: skip
     assert p.returncode == 2 and not out.exists()
     assert p.stderr.strip().count("\n") == 0 and "wind.speed_m_s" in p.stderr
+
+
+# --------------------------------------------------------------------------- model error
+def test_the_model_error_factors_are_the_calibration_tables():
+    """The ratios are the committed tables' real / SIL column, to their printed 2 decimals."""
+    import re
+    from pathlib import Path
+
+    from mpf_mavlink.certify.model_error import CALIBRATION_RATIOS, model_error
+
+    root = Path(__file__).resolve().parents[1]
+    for name, ratios in CALIBRATION_RATIOS.items():
+        doc = (root / f"docs/calibration-{name.split('-')[0]}.md").read_text()
+        rows = re.findall(r"^\| (\w+) \| [\d.]+ \| [^|]+ \| ([\d.]+) \|", doc, re.M)
+        assert {m: float(r) for m, r in rows[: len(ratios)]} == ratios
+    px4 = model_error("auto: px4-1.16-sih (autopilot part)")
+    assert px4 is not None and px4["factor"] == 1.33 and px4["worst_mission"] == "r200"
+    # ArduPlane's SIL was pessimistic on every mission: the bound is not shrunk
+    ap = model_error("auto: arduplane-4.7 (autopilot part)")
+    assert ap is not None and ap["factor"] == 1.0
+    assert model_error("none (the plain emulation)") is None
+
+
+def test_the_bound_carries_the_model_error(tmp_path):
+    c = parse_conditions(_write(tmp_path, "name: x\n"))
+    cert = certificate(_rows([0.1 * (i + 1) for i in range(59)]), c,
+                       {"name": "x", "profile": "auto: px4-1.16-sih (autopilot part)"})  # fmt: skip
+    # the SIL's bound 5.9 m (the largest of 59) times the profile's worst ratio 1.33
+    assert cert["steady_rms_m"]["bound_with_model_error"] == pytest.approx(5.9 * 1.33)
+    assert cert["steady_max_m"]["bound_with_model_error"] == pytest.approx(11.8 * 1.33)
+    assert any("x 1.33" in s for s in cert["not_modelled"])

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from mpf_mavlink.certify.conditions import Conditions, describe
+from mpf_mavlink.certify.model_error import model_error
 from mpf_mavlink.certify.stats import clopper_pearson, flights_needed, quantile_interval
 
 NOT_MODELLED = [
@@ -55,6 +56,8 @@ def certificate(
         "quantile": q,
         "confidence": conf,
     }
+    me = model_error(str(mission.get("profile", "")))
+    cert["model_error"] = me
     for key in ("steady_rms_m", "steady_max_m"):
         vals = [v for v in (_num(r.get(key)) for r in flew) if v is not None]
         med = quantile_interval(vals, 0.5, conf)
@@ -66,6 +69,12 @@ def certificate(
             f"p{round(100 * q)}_interval": [top["low"], top["high"]],
             "upper_bound": top["upper_bound"],
             "upper_bound_rank": top["upper_bound_rank"],
+            # the bound a real flight is judged against: the SIL's, times its measured error
+            "bound_with_model_error": (
+                top["upper_bound"] * float(me["factor"])
+                if me is not None and top["upper_bound"] is not None
+                else top["upper_bound"]
+            ),
             "max": max(vals) if vals else None,
             "n": len(vals),
         }
@@ -89,7 +98,13 @@ def certificate(
          "conditions": json.loads(r["conditions"]) if r.get("conditions") else {}}
         for r in rows if r["status"] != "ok" or r.get("verdict_status") == "FAIL"
     ]  # fmt: skip
-    cert["not_modelled"] = NOT_MODELLED
+    cert["not_modelled"] = list(NOT_MODELLED)
+    if me is not None:
+        cert["not_modelled"].append(
+            f"the SIL's own error beyond its calibration: the bound a real flight is judged "
+            f"against is the SIL's x {float(me['factor']):.2f} (the worst real/SIL RMS ratio, "
+            f"{me['worst_mission']}, of {me['source']}, floored at 1; max |pt| takes the same)"
+        )
     cpu = [v for v in (_num(r.get("cpu_s")) for r in rows) if v is not None]
     cert["cpu_s_per_flight"] = sum(cpu) / len(cpu) if cpu else None
     return cert
@@ -117,6 +132,11 @@ def summary_lines(cert: dict[str, Any]) -> list[str]:
             f"  {what}: median {_f(s['median'])} m [{_f(mlo)}, {_f(mhi)}], p{q} "
             f"{_f(s[f'p{q}'])} m [{_f(lo)}, {_f(hi)}] ({c} % CI), one-sided {c} % bound "
             f"{_f(s['upper_bound'])} m"
+            + (
+                f", with the model's error {_f(s['bound_with_model_error'])} m"
+                if s.get("bound_with_model_error") not in (None, s["upper_bound"])
+                else ""
+            )
         )
     pf = cert["p_fail"]
     lo, hi = pf["interval"]

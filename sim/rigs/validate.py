@@ -77,7 +77,8 @@ def _bound(cert: dict[str, Any], key: str) -> float | None:
     """The certificate's one-sided bound of ``key`` (its p95 estimate if too few flights)."""
     s = cert.get(key, {})
     q = round(100 * float(cert.get("quantile", 0.95)))
-    b = s.get("upper_bound")
+    # a certificate that carries its model's error is judged by it (mpf_mavlink.certify.model_error)
+    b = s.get("bound_with_model_error", s.get("upper_bound"))
     return float(b) if b is not None else (s.get(f"p{q}") if s.get(f"p{q}") is not None else None)
 
 
