@@ -164,7 +164,7 @@ class Session:
     def checks(self, res: BridgeResult, scripted_target: bool) -> list[Any]:
         """The pre-flight checks from the vehicle's state now, with what it measures (wind,
         airspeed, a live target's motion); those failed (CheckResult)."""
-        from mpf_mavlink.bridge.preflight import format_checks, run_checks
+        from mpf_mavlink.bridge.preflight import format_checks, run_checks, simulated_plant
 
         self.ctl.set_origin()  # mission time 0: the checks' and the scripted target's origin
         init = self.ctl.initial_state()
@@ -181,14 +181,14 @@ class Session:
                 initial_attitude_rpy_rad=matrix_to_euler(R_W_I),
             ),
         )
-        if cfg.sil.link != "none":  # the SIL's own start gives way to where the aircraft is
-            sil = dataclasses.replace(cfg.sil, initial_position_ned_m=p0)
-            cfg = dataclasses.replace(cfg, extra={**cfg.extra, "sil": sil})
+        plant = simulated_plant(cfg)
+        if plant is not None:  # the SIL's own start gives way to where the aircraft is
+            plant = dataclasses.replace(plant, initial_position_ned_m=p0)
         # what the autopilot reports now (wind, airspeed, the live target's motion), not what
         # the configuration assumes: a mission the measured wind makes infeasible is refused
         measured = self.ctl.measured_inputs()
         res.measured = _measured_record(measured)
-        results = run_checks(cfg, scripted_target=scripted_target, measured=measured)
+        results = run_checks(cfg, scripted_target, measured, plant)
         text = format_checks(results)
         res.checks = text.splitlines()
         self.log(text)
