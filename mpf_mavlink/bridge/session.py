@@ -111,23 +111,24 @@ class Session:
 
         def done() -> bool:
             nonlocal last
-            for a in vl.acks:
-                if a.command == MAV_CMD_DO_SET_MODE:
-                    acked.append(a.accepted)
-                    last = a.result_name
-            vl.acks.clear()
+            for a in vl.commands.take(MAV_CMD_DO_SET_MODE):
+                acked.append(a.accepted)
+                last = a.result_name
             return any(acked) and confirm()
 
         def send() -> float:
-            vl.send(encode_set_mode(vl.link.mav, vl.sysid, vl.compid, vl.flavour, name))
+            # the ACKs of this mode's earlier attempts are taken first (done), not forgotten
+            done()
+            msg = encode_set_mode(vl.link.mav, vl.sysid, vl.compid, vl.flavour, name)
+            vl.commands.send(msg, MAV_CMD_DO_SET_MODE)
             self.n["mode_requests"] += 1
             return time.monotonic()
 
         # lockstep: each attempt counts vehicle time; all of them together at most
         # lockstep_wall_timeout_s of wall time (a dead vehicle shows no time at all)
         wall_s = max(m.mode_timeout_s, m.lockstep_wall_timeout_s / m.mode_retries)
+        vl.commands.take(MAV_CMD_DO_SET_MODE)  # answers to an earlier request
         for attempt in range(m.mode_retries):
-            vl.acks.clear()
             t_sent = send()
             t0, vt0 = t_sent, vl.vehicle_t  # the attempt's start (lockstep: vehicle time)
             while (left := vl.left(t0, vt0, m.mode_timeout_s, wall_s)) > 0.0:
