@@ -270,7 +270,7 @@ def bridge_link_us(frames: int = 800, rounds: int = 15) -> dict[str, float | int
     ``rounds`` (a CPU-time figure: less sensitive to a busy machine than the SIL's)."""
     from types import SimpleNamespace
 
-    from mpf_mavlink.bridge.link_io import VehicleLink
+    from mpf_mavlink.bridge.link_io import LinkHandlers, VehicleLink
     from mpf_mavlink.mavlink import Flavour, encode_set_attitude_target_rates, open_link
 
     port = free_udp_port()
@@ -291,7 +291,7 @@ def bridge_link_us(frames: int = 800, rounds: int = 15) -> dict[str, float | int
                                                          0.3, 0.5))  # fmt: skip
 
         tb_now = [0]
-        vl.on_vehicle = on_vehicle
+        vl.subscribe(LinkHandlers(vehicle=on_vehicle))
         dest, sink = ("127.0.0.1", port), ("127.0.0.1", free_udp_port())
         best = best_send = math.inf
         t_ms = 100_000

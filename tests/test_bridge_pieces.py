@@ -16,7 +16,7 @@ from mpf_mavlink.bridge import control_step, link_io, session, streams
 from mpf_mavlink.bridge.base import BridgeResult, Phase, State, _Stop
 from mpf_mavlink.bridge.control_step import ControlLoop
 from mpf_mavlink.bridge.controller import Controller
-from mpf_mavlink.bridge.link_io import VehicleLink
+from mpf_mavlink.bridge.link_io import LinkHandlers, VehicleLink
 from mpf_mavlink.bridge.operator import OperatorDisplay
 from mpf_mavlink.bridge.session import Session
 from mpf_mavlink.bridge.streams import StreamNegotiator
@@ -188,7 +188,7 @@ def vehicle_link(vehicle: FakeVehicle, flavour: Flavour = Flavour.PX4, **m_over:
     vl = VehicleLink(m)
     vl.link = FakeLink(vehicle)
     vl.flavour = flavour
-    vl.on_tick = lambda: vl.duties(vehicle.clock.t)
+    vl.subscribe(LinkHandlers(tick=lambda: vl.duties(vehicle.clock.t)))
     return vl
 
 
@@ -239,8 +239,9 @@ def make_session(v: FakeVehicle) -> tuple[Session, ControlLoop, Phase]:
     phase = Phase(lambda s: None)
     loop = ControlLoop(ctl, vl, phase, lambda st: None, lambda st: None)
     s = Session(cfg, loop, phase, OperatorDisplay(False), lambda s: None)
-    vl.on_heartbeat = s.on_heartbeat
-    vl.on_vehicle = loop.on_vehicle
+    vl.subscribe(
+        dataclasses.replace(vl.handlers, heartbeat=s.on_heartbeat, vehicle=loop.on_vehicle)
+    )
     return s, loop, phase
 
 
@@ -298,7 +299,7 @@ def test_watchdog_stops_when_attitude_stops(clock: FakeClock) -> None:
     v = FakeVehicle(clock)
     s, loop, phase = make_session(v)
     vl = s.vl
-    vl.on_tick = lambda: loop.tick(clock.t)
+    vl.subscribe(dataclasses.replace(vl.handlers, tick=lambda: loop.tick(clock.t)))
     phase.set(State.TRACKING)
     loop.start()  # streaming, no ATTITUDE ever comes
     t0 = clock.t

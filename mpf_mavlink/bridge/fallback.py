@@ -93,16 +93,14 @@ class FallbackSetup:
             self.log(f"fallback if the bridge dies: {res.fallback} ({got})")
             return
         lat, lon, alt, _r, _ccw = got
-        vl.acks.clear()
         try:
             msg = encode_do_reposition(
                 vl.link.mav, vl.sysid, vl.compid, lat, lon, alt, 100.0, False, px4=True
             )
-            vl.send(msg)
         except ValueError as e:
             self.log(f"fallback: no reposition point ({e})")
             return
-        ack = self._reposition_ack()
+        ack = vl.commands.command(msg, MAV_CMD_DO_REPOSITION, REPOSITION_ACK_S)
         where = f"the path's centre {lat:.7f}, {lon:.7f} at {alt:.1f} m AMSL"
         centre = None
         if ack is not None and ack.accepted:
@@ -129,15 +127,14 @@ class FallbackSetup:
                 res.fallback = f"ArduPlane's own GUIDED loiter ({got})"
             return
         lat, lon, alt, radius, ccw = got
-        vl.acks.clear()
         try:
-            vl.send(encode_do_reposition(
-                vl.link.mav, vl.sysid, vl.compid, lat, lon, alt, radius, ccw))  # fmt: skip
+            msg = encode_do_reposition(
+                vl.link.mav, vl.sysid, vl.compid, lat, lon, alt, radius, ccw)  # fmt: skip
         except ValueError as e:
             res.fallback = f"ArduPlane's own GUIDED loiter (reposition not sent: {e})"
             self.log(f"fallback if the bridge dies: {res.fallback}")
             return
-        ack = self._reposition_ack()
+        ack = vl.commands.command(msg, MAV_CMD_DO_REPOSITION, REPOSITION_ACK_S)
         what = (
             f"ArduPlane GUIDED loiter r = {radius:.0f} m {'CCW' if ccw else 'CW'} about "
             f"{lat:.7f}, {lon:.7f} at {alt:.1f} m AMSL (the path's centre)"
@@ -148,19 +145,6 @@ class FallbackSetup:
             why = ack.result_name if ack is not None else "no COMMAND_ACK"
             res.fallback = f"NOT set ({why}): ArduPlane's own GUIDED loiter; asked for {what}"
         self.log(f"fallback if the bridge dies: {res.fallback}")
-
-    def _reposition_ack(self) -> Any | None:
-        """The autopilot's COMMAND_ACK to the DO_REPOSITION just sent, or None."""
-        vl = self.vl
-        acks: list[Any] = []
-
-        def acked() -> bool:
-            acks.extend(a for a in vl.acks if a.command == MAV_CMD_DO_REPOSITION)
-            vl.acks.clear()
-            return bool(acks)
-
-        vl.spin(REPOSITION_ACK_S, acked)
-        return acks[0] if acks else None
 
     def path_centre(self) -> tuple[float, float, float, float, bool] | str:
         """(lat, lon, alt AMSL, radius m, counter-clockwise) of the path's centre now, or why

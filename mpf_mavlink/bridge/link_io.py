@@ -1,6 +1,7 @@
 """The bridge's link to one vehicle (:class:`VehicleLink`): what the vehicle tells us
-(heartbeat, acks, parameters, its clock, arrival times), what we send, the timeouts on the
-wall or the vehicle's clock, and the bounded wait every life-cycle step spins in."""
+(samples to its :class:`LinkHandlers`, acknowledgements to its commands, parameters, its
+clock, arrival times), what we send, the timeouts on the wall or the vehicle's clock, and the
+bounded wait every life-cycle step spins in."""
 
 from __future__ import annotations
 
@@ -9,8 +10,10 @@ import struct
 import time
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
+from mpf_mavlink.bridge.commands import CommandChannel
 from mpf_mavlink.mavlink import CommandAckSample, Flavour, HeartbeatSample, decode, dialect
 from mpf_mavlink.mavlink.codec import AttitudeSample, GlobalPositionSample, LocalPositionSample
 
@@ -60,13 +63,28 @@ def _never(now: float) -> float:
     return math.inf
 
 
+@dataclass(frozen=True)
+class LinkHandlers:
+    """Who receives what the vehicle link delivers (``rx``: the receive time, s since the
+    epoch, as the tlog records it): ``heartbeat`` the autopilot's HeartbeatSamples,
+    ``vehicle`` its other decoded samples (attitude, positions, VFR_HUD, wind, home, set-point
+    echoes, TIMESYNC; COMMAND_ACKs go to :attr:`VehicleLink.commands`, PARAM_VALUEs to
+    :attr:`VehicleLink.params`), ``target`` the live target's samples, ``tick()`` after every
+    wait and every datagram's messages (a stream link: every message), ``due(now)`` the
+    monotonic time (s) by which ``tick`` must run next."""
+
+    heartbeat: Callable[[HeartbeatSample, float | None], None] = _ignore_sample
+    vehicle: Callable[[Any, float | None], None] = _ignore_sample
+    target: Callable[[Any, float | None], None] = _ignore_sample
+    tick: Callable[[], None] = _nothing
+    due: Callable[[float], float] = _never
+
+
 class VehicleLink:
     """One vehicle over one MAVLink link (``link``: :class:`~mpf_mavlink.mavlink.link.Link`,
-    opened by the bridge). Hooks the bridge wires: ``on_heartbeat(sample, rx)`` for the
-    autopilot's HEARTBEATs, ``on_vehicle(sample, rx)`` for its other decoded samples,
-    ``on_target(sample, rx)`` for the live target's, ``on_tick()`` after every wait and
-    after every datagram's messages (a stream link: every message), ``due(now)`` the
-    monotonic time by which ``on_tick`` must run next."""
+    opened by the bridge). What it receives goes to the :class:`LinkHandlers` given to
+    :meth:`subscribe` (none: dropped); commands and their acknowledgements go through
+    :attr:`commands` (:class:`~mpf_mavlink.bridge.commands.CommandChannel`)."""
 
     def __init__(self, m: Any, live_target: bool = False) -> None:
         self.m = m
@@ -76,7 +94,6 @@ class VehicleLink:
         self.flavour = Flavour.UNKNOWN
         self.compid = 1
         self.hb: Any = None  # latest autopilot HeartbeatSample
-        self.acks: list[Any] = []
         self.params: dict[str, float] = {}  # PARAM_VALUE answers (name -> value)
         self.param_types: dict[str, int] = {}  # name -> MAV_PARAM_TYPE
         # arrival times (monotonic s) per message type while the stream rates are measured
@@ -85,11 +102,18 @@ class VehicleLink:
         self.vehicle_t: float | None = None
         self.last_hb_tx_mono = -math.inf
         self.last_ts_tx_mono = -math.inf  # the latest TIMESYNC request (PX4's loop delay)
-        self.on_heartbeat: Callable[[Any, float | None], None] = _ignore_sample
-        self.on_vehicle: Callable[[Any, float | None], None] = _ignore_sample
-        self.on_target: Callable[[Any, float | None], None] = _ignore_sample
-        self.on_tick: Callable[[], None] = _nothing
-        self.due: Callable[[float], float] = _never
+        self.commands = CommandChannel(self)
+        self._to = LinkHandlers()
+
+    @property
+    def handlers(self) -> LinkHandlers:
+        """The handlers subscribed now (none: :class:`LinkHandlers`' defaults drop all)."""
+        return self._to
+
+    def subscribe(self, handlers: LinkHandlers) -> None:
+        """Where the received samples and the ticks go from now on (replacing the handlers
+        subscribed before; a wait already under way keeps its tick and due)."""
+        self._to = handlers
 
     # -- sending -----------------------------------------------------------------------------
     def send(self, msg: Any) -> None:
@@ -157,20 +181,20 @@ class VehicleLink:
         if sample is None:
             return
         if not own:
-            self.on_target(sample, rx)
+            self._to.target(sample, rx)
             return
         cls = type(sample)
         if cls is HeartbeatSample:
             if sample.autopilot != dialect.MAV_AUTOPILOT_INVALID:  # not a GCS on our system id
                 self.hb = sample
-                self.on_heartbeat(sample, rx)
+                self._to.heartbeat(sample, rx)
             return
         if cls is CommandAckSample:
-            self.acks.append(sample)
+            self.commands.deliver(sample)
             return
         if cls in _CLOCK_SAMPLES:
             self.vehicle_t = sample.t_boot_s
-        self.on_vehicle(sample, rx)
+        self._to.vehicle(sample, rx)
 
     def _param(self, msg: Any) -> None:
         name = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else ""
@@ -187,7 +211,8 @@ class VehicleLink:
     def spin(self, timeout_s: float, until: Callable[[], bool] | None = None) -> bool:
         """Pump messages and duties until ``until()`` (True) or the timeout (False)."""
         t_end = time.monotonic() + timeout_s
-        link, due, dispatch = self.link, self.due, self.dispatch
+        link, dispatch, to = self.link, self.dispatch, self._to
+        due, tick = to.due, to.tick
         while True:
             if until is not None and until():
                 return True
@@ -205,7 +230,7 @@ class VehicleLink:
                 if until is not None and until():
                     return True
                 msg = link.recv(0.0)
-            self.on_tick()
+            tick()
 
     # -- timeouts ----------------------------------------------------------------------------
     def left(

@@ -79,7 +79,7 @@ from mpf_mavlink.bridge.controller import (
 )
 from mpf_mavlink.bridge.envelope import demand_of_step, envelope_monitor, wind_limit_m_s
 from mpf_mavlink.bridge.fallback import FallbackSetup
-from mpf_mavlink.bridge.link_io import VehicleLink
+from mpf_mavlink.bridge.link_io import LinkHandlers, VehicleLink
 from mpf_mavlink.bridge.operator import OperatorDisplay
 from mpf_mavlink.bridge.recording import Recorder, is_lean
 from mpf_mavlink.bridge.session import Session
@@ -154,12 +154,15 @@ class Bridge:
         self.session = Session(cfg, self.loop, self.phase, self.display, log)
         self.streams = StreamNegotiator(self.vl, log)
         self.fallback = FallbackSetup(self.vl, self.ctl, cfg.path, log)
-        vl = self.vl
-        vl.on_heartbeat = self.session.on_heartbeat
-        vl.on_vehicle = self.loop.on_vehicle
-        vl.on_target = self.ctl.feed_target
-        vl.due = self.loop.due
-        vl.on_tick = self._tick
+        self.vl.subscribe(
+            LinkHandlers(
+                heartbeat=self.session.on_heartbeat,
+                vehicle=self.loop.on_vehicle,
+                target=self.ctl.feed_target,
+                tick=self._tick,
+                due=self.loop.due,
+            )
+        )
         self._sent_at_tick = 0
         self.fleet = fleet_link.attach(self)  # fleet: None unless fleet.enabled
 
@@ -396,21 +399,17 @@ class Bridge:
     def _arm(self) -> None:
         """ARM, confirmed by an armed HEARTBEAT; a rejected ARM ends the wait at once."""
         vl, m = self.vl, self.m
-        vl.acks.clear()
-        vl.send(encode_arm(vl.link.mav, vl.sysid, vl.compid, True))
-        refused: list[str] = []
+        timeout = m.mode_timeout_s * m.mode_retries
+        t_end = time.monotonic() + timeout
 
-        def armed_or_refused() -> bool:
-            refused.extend(
-                a.result_name for a in vl.acks
-                if a.command == MAV_CMD_COMPONENT_ARM_DISARM and not a.accepted
-                and a.result != dialect.MAV_RESULT_IN_PROGRESS
-            )  # fmt: skip
-            vl.acks.clear()
-            return bool(refused) or (vl.hb is not None and vl.hb.armed)
+        def armed() -> bool:
+            return vl.hb is not None and vl.hb.armed
 
-        if not vl.spin(m.mode_timeout_s * m.mode_retries, armed_or_refused) or refused:
-            why = f"ARM refused ({refused[0]})" if refused else "no armed HEARTBEAT"
+        msg = encode_arm(vl.link.mav, vl.sysid, vl.compid, True)
+        ack = vl.commands.command(msg, MAV_CMD_COMPONENT_ARM_DISARM, timeout, armed)
+        refused = ack is not None and not ack.accepted
+        if refused or not vl.spin(max(0.0, t_end - time.monotonic()), armed):
+            why = f"ARM refused ({ack.result_name})" if refused and ack else "no armed HEARTBEAT"
             raise _Stop(f"vehicle did not arm: {why}", "engage")
 
     def _finish(self, res: BridgeResult) -> BridgeResult:

@@ -6,10 +6,12 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
+from mpf_mavlink.config.autopilot_profile import ResolvedProfile
+from mpf_mavlink.config.fields import Vec3
 from mpf_mavlink.config.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.constants import GRAVITY_M_S2
@@ -29,9 +31,52 @@ from mpf_mavlink.core.guidance.law import VehicleState, mpf_law
 from mpf_mavlink.runs.verdict import bank_limit_rad
 
 
-def initial_errors(cfg: Config) -> tuple[float, float, float]:
-    """(|pt(0)| m, Psi(0), s(0) m) for the kinematic initial state of the config."""
-    path, target = build_path(cfg.path), build_target(cfg.target)
+@dataclass(frozen=True)
+class SimulatedPlant:
+    """What the checks judge of a simulated plant (the SIL vehicle) instead of the kinematic
+    one: its steady wind (NED, m/s), the largest of its gust events (m/s), its Dryden
+    turbulence level, the height above sea level of its home (m), its start position (NED, m;
+    None: ``kinematic.initial_position_ned_m``) and the autopilot profile it flies (None: the
+    plain emulation, no ``autopilot_profile`` check)."""
+
+    wind_ned_m_s: Vec3
+    gust_m_s: float
+    turbulence: Literal["none", "light", "moderate", "severe"]
+    home_alt_m: float
+    initial_position_ned_m: Vec3 | None
+    profile: ResolvedProfile | None
+
+
+def simulated_plant(cfg: Config) -> SimulatedPlant | None:
+    """The SIL vehicle of ``cfg`` as the checks see it (None when ``sil.link`` is none: the
+    kinematic plant). The one place the checks read the ``sil`` section."""
+    sil = cfg.sil
+    if sil.link == "none":
+        return None
+    return SimulatedPlant(
+        sil.wind_ned_m_s,
+        max((g.magnitude_m_s for g in sil.gusts), default=0.0),
+        sil.turbulence,
+        sil.home_alt_m,
+        sil.initial_position_ned_m,
+        sil.profile(cfg.source),
+    )
+
+
+#: ``plant`` argument meaning "the config's own" (:func:`simulated_plant` of it)
+FROM_CONFIG: Literal["config"] = "config"
+PlantArg = SimulatedPlant | None | Literal["config"]
+
+
+def _plant(cfg: Config, plant: PlantArg) -> SimulatedPlant | None:
+    return simulated_plant(cfg) if isinstance(plant, str) else plant
+
+
+def initial_errors(cfg: Config, path: Any = None, target: Any = None) -> tuple[float, float, float]:
+    """(|pt(0)| m, Psi(0), s(0) m) for the kinematic initial state of the config (``path`` and
+    ``target``: the config's, when the caller has already built them)."""
+    path = build_path(cfg.path) if path is None else path
+    target = build_target(cfg.target) if target is None else target
     k = cfg.kinematic
     p0 = np.asarray(k.initial_position_ned_m, float)
     st = target.state(0.0)
@@ -67,16 +112,14 @@ def auto_c1(cfg: Config, pt0: float, c2: float) -> float:
 TURBULENCE_ALLOWANCE_M_S = {"none": 0.0, "light": 2.0, "moderate": 4.0, "severe": 6.0}
 
 
-def scenario_wind(cfg: Config) -> tuple[tuple[float, float, float], float]:
-    """(steady wind NED m/s, gust allowance m/s) of the plant the scenario flies: the SIL
-    vehicle's atmosphere when ``sil.link`` is on, else the kinematic plant's."""
-    sil = cfg.extra.get("sil")
-    if sil is not None and sil.link != "none":
-        gust = (
-            max((g.magnitude_m_s for g in sil.gusts), default=0.0)
-            + TURBULENCE_ALLOWANCE_M_S[sil.turbulence]
-        )
-        return sil.wind_ned_m_s, gust
+def scenario_wind(
+    cfg: Config, plant: PlantArg = FROM_CONFIG
+) -> tuple[tuple[float, float, float], float]:
+    """(steady wind NED m/s, gust allowance m/s) of the plant the scenario flies: the simulated
+    plant's atmosphere when there is one, else the kinematic plant's."""
+    sim = _plant(cfg, plant)
+    if sim is not None:
+        return sim.wind_ned_m_s, sim.gust_m_s + TURBULENCE_ALLOWANCE_M_S[sim.turbulence]
     wind = cfg.kinematic.wind
     gust = max((float(np.linalg.norm(g.velocity_ned_m_s)) for g in wind.gusts), default=0.0)
     return wind.steady_ned_m_s, gust
@@ -165,15 +208,18 @@ def gust_feasibility(
     )  # fmt: skip
 
 
-def start_altitude(cfg: Config) -> CheckResult:
+def start_altitude(
+    cfg: Config, path: Any = None, target: Any = None, plant: PlantArg = FROM_CONFIG
+) -> CheckResult:
     """The start position against the path's altitude at t = 0: more than
     ``checks.max_start_below_m`` below its lowest point is a failure (e.g. an aircraft on the
     ground under a path 100 m up: take off first)."""
-    path, target = build_path(cfg.path), build_target(cfg.target)
+    path = build_path(cfg.path) if path is None else path
+    target = build_target(cfg.target) if target is None else target
     p0 = np.asarray(cfg.kinematic.initial_position_ned_m, float)
-    sil = cfg.extra.get("sil")
-    if sil is not None and sil.link != "none" and sil.initial_position_ned_m is not None:
-        p0 = np.asarray(sil.initial_position_ned_m, float)
+    sim = _plant(cfg, plant)
+    if sim is not None and sim.initial_position_ned_m is not None:
+        p0 = np.asarray(sim.initial_position_ned_m, float)
     st = target.state(0.0)
     pts = st.position + (st.R_T_I @ np.asarray(path.positions(), float).T).T
     lowest_down = float(np.max(pts[:, 2]))  # NED: the lowest point has the largest "down"
@@ -204,6 +250,7 @@ def climb_check(
     s0: float,
     steady: Any,
     demanded: tuple[Any, Any, Any] | None = None,
+    plant: PlantArg = FROM_CONFIG,
 ) -> CheckResult:
     """:func:`climb_feasibility` of the config: the vehicle's climb/sink capability (given where
     the aircraft starts, scaled by the air density at the highest point the path reaches over
@@ -219,14 +266,9 @@ def climb_check(
         )
     ts, W1, P = demanded
     gusts = None
-    sil = cfg.extra.get("sil")
-    sil = sil if sil is not None and sil.link != "none" else None
-    home = (
-        sil.home_alt_m
-        if sil is not None
-        else getattr(cfg.extra.get("mavlink"), "origin_alt_m", None)
-    )
-    home = float(home) if home is not None else 0.0
+    sil = _plant(cfg, plant)
+    home_alt = sil.home_alt_m if sil is not None else cfg.mavlink.origin_alt_m
+    home = float(home_alt) if home_alt is not None else 0.0
     if sil is not None and sil.turbulence != "none":
         gusts = vertical_gusts(sil.turbulence, home - P[:, 2], v.airspeed_m_s)
     # the capability is the aircraft's where it starts; the top of the path over the horizon is
@@ -262,10 +304,10 @@ def energy_reserves(cfg: Config, ts: np.ndarray, P: np.ndarray) -> tuple[np.ndar
     the adapter does: core/adapter.reserve_airspeed) down to vehicle.airspeed_min_m_s, where
     its airspeed priority gives the path up, and up to vehicle.airspeed_max_m_s."""
     v = cfg.vehicle
-    a = cfg.extra.get("adapter")
+    a = cfg.adapter
     v0, lo, hi = v.airspeed_m_s, v.v_min, v.v_max
     vs = np.full(len(ts), v0)
-    if a is not None and a.reserve_gust_m_s > 0.0 and v.max_climb_rate_m_s is not None:
+    if a.reserve_gust_m_s > 0.0 and v.max_climb_rate_m_s is not None:
         dts = np.diff(ts, prepend=ts[0])
         climb = np.gradient(-P[:, 2], ts) if len(ts) > 1 else np.zeros(len(ts))
         cf = float(climb[0])
@@ -296,13 +338,11 @@ def density_ratio(h_m: float, h_ref_m: float) -> float:
     return rho(h_m) / rho(h_ref_m)
 
 
-def airspeed_hold(cfg: Config) -> CheckResult | None:
+def airspeed_hold(cfg: Config) -> CheckResult:
     """An airspeed the aircraft cannot hold: the thrust it needs in level flight
     (adapter.trim_thrust) at the ceiling (adapter.thrust_max), or no climb left
-    (vehicle.max_climb_rate_m_s 0). None without an adapter section."""
-    a = cfg.extra.get("adapter")
-    if a is None:
-        return None
+    (vehicle.max_climb_rate_m_s 0)."""
+    a = cfg.adapter
     v = cfg.vehicle
     fig: dict[str, float | bool | None] = {"trim_thrust": a.trim_thrust, "thrust_max": a.thrust_max}
     if a.trim_thrust >= a.thrust_max or (
@@ -324,7 +364,10 @@ def airspeed_hold(cfg: Config) -> CheckResult | None:
 
 
 def run_checks(
-    cfg: Config, scripted_target: bool = True, measured: MeasuredInputs | None = None
+    cfg: Config,
+    scripted_target: bool = True,
+    measured: MeasuredInputs | None = None,
+    plant: PlantArg = FROM_CONFIG,
 ) -> list[CheckResult]:
     """All checks for a config. With a live target only the gain condition can be checked,
     unless ``measured`` gives its estimated motion.
@@ -333,12 +376,14 @@ def run_checks(
     replaces the scenario's steady wind (the turbulence allowance stays the config's), the live
     target's estimated motion replaces ``target`` and the measured airspeed adds a feasibility
     at that airspeed (a warning); ``wind_margin`` warns when the wind's margin would not be
-    flyable. The start state is the caller's (``kinematic.initial_*``)."""
+    flyable. The start state is the caller's (``kinematic.initial_*``). ``plant``: the
+    simulated plant the scenario flies (None: the kinematic one; by default the config's)."""
     results: list[CheckResult] = []
+    sim = _plant(cfg, plant)
     ch = cfg.checks
     horizon = ch.horizon_s if ch.horizon_s is not None else cfg.sim.duration_s
     path = build_path(cfg.path)
-    steady, gust = scenario_wind(cfg)
+    steady, gust = scenario_wind(cfg, sim)
     if measured is not None:
         steady = measured.wind_ned_m_s
         words = "measured wind " + wind_words(steady, measured.wind_source)
@@ -346,7 +391,7 @@ def run_checks(
             cfg = dataclasses.replace(cfg, target=measured.target)
             scripted_target = True
     else:
-        words = "wind " + wind_words(steady, scenario_wind_source(cfg))
+        words = "wind " + wind_words(steady, scenario_wind_source(sim))
     if scripted_target and cfg.target.type != "mavlink":
         target = build_target(cfg.target)
         results.append(
@@ -354,8 +399,8 @@ def run_checks(
                 path, target, cfg.vehicle.v_min, horizon, steady, gust, ch.assumption1_margin_m_s
             )
         )
-        results.append(start_altitude(cfg))
-        pt0, psi0, s0 = initial_errors(cfg)
+        results.append(start_altitude(cfg, path, target, sim))
+        pt0, psi0, s0 = initial_errors(cfg, path, target)
         c2 = ch.c2
         c1 = ch.c1_m if ch.c1_m is not None else auto_c1(cfg, pt0, c2)
         results.append(
@@ -379,18 +424,16 @@ def run_checks(
             )  # fmt: skip
 
         results.append(_with_wind(feasible_at(v0), words, ch.bank_margin_rad))
-        results.append(climb_check(cfg, path, target, horizon, s0, steady, at_v0))
+        results.append(climb_check(cfg, path, target, horizon, s0, steady, at_v0, sim))
         if gust > 0.0:
             results.append(gust_feasibility(feasible_at, cfg.vehicle.airspeed_m_s, gust))
         if measured is not None:
             results.extend(_measured_checks(cfg, measured, path, target, horizon, s0))
         else:
-            prof = profile_check(cfg, path, target, horizon, s0, steady, at_v0)
+            prof = profile_check(cfg, path, target, horizon, s0, steady, at_v0, sim)
             if prof is not None:
                 results.append(prof)
-        hold = airspeed_hold(cfg)
-        if hold is not None:
-            results.append(hold)
+        results.append(airspeed_hold(cfg))
         if cfg.section("fleet").enabled:  # fleet: convergence, speed window, bank at speed
             results.extend(_fleet_checks(cfg, path, target, steady, horizon, feasible_at))
     else:
@@ -424,15 +467,19 @@ def _fleet_checks(
 
 
 def profile_check(
-    cfg: Config, path: Any, target: Any, horizon: float, s0: float, steady: Any, at_v0: Any
+    cfg: Config,
+    path: Any,
+    target: Any,
+    horizon: float,
+    s0: float,
+    steady: Any,
+    at_v0: Any,
+    plant: SimulatedPlant | None,
 ) -> CheckResult | None:
-    """``autopilot_profile``: what the SIL's autopilot profile can fly (None: no SIL or no
-    profile). A check of the simulated autopilot, not of a live one: the live bridge's
-    pre-flight (``measured``) never runs it."""
-    sil = cfg.extra.get("sil")
-    if sil is None or sil.link == "none":
-        return None
-    res = sil.profile(cfg.source)
+    """``autopilot_profile``: what the simulated plant's autopilot profile can fly (None: no
+    simulated plant or no profile). A check of the simulated autopilot, not of a live one: the
+    live bridge's pre-flight (``measured``) never runs it."""
+    res = None if plant is None else plant.profile
     if res is None:
         return None
     k = res.profile.turn.turn_gain
@@ -493,10 +540,9 @@ def _measured_checks(
     return out
 
 
-def scenario_wind_source(cfg: Config) -> str:
+def scenario_wind_source(plant: SimulatedPlant | None) -> str:
     """Which key :func:`scenario_wind`'s steady wind came from (for the checks' wording)."""
-    sil = cfg.extra.get("sil")
-    if sil is not None and sil.link != "none":
+    if plant is not None:
         return "sil.wind_ned_m_s"
     return "kinematic.wind.steady_ned_m_s"
 

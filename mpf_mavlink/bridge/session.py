@@ -111,23 +111,24 @@ class Session:
 
         def done() -> bool:
             nonlocal last
-            for a in vl.acks:
-                if a.command == MAV_CMD_DO_SET_MODE:
-                    acked.append(a.accepted)
-                    last = a.result_name
-            vl.acks.clear()
+            for a in vl.commands.take(MAV_CMD_DO_SET_MODE):
+                acked.append(a.accepted)
+                last = a.result_name
             return any(acked) and confirm()
 
         def send() -> float:
-            vl.send(encode_set_mode(vl.link.mav, vl.sysid, vl.compid, vl.flavour, name))
+            # the ACKs of this mode's earlier attempts are taken first (done), not forgotten
+            done()
+            msg = encode_set_mode(vl.link.mav, vl.sysid, vl.compid, vl.flavour, name)
+            vl.commands.send(msg, MAV_CMD_DO_SET_MODE)
             self.n["mode_requests"] += 1
             return time.monotonic()
 
         # lockstep: each attempt counts vehicle time; all of them together at most
         # lockstep_wall_timeout_s of wall time (a dead vehicle shows no time at all)
         wall_s = max(m.mode_timeout_s, m.lockstep_wall_timeout_s / m.mode_retries)
+        vl.commands.take(MAV_CMD_DO_SET_MODE)  # answers to an earlier request
         for attempt in range(m.mode_retries):
-            vl.acks.clear()
             t_sent = send()
             t0, vt0 = t_sent, vl.vehicle_t  # the attempt's start (lockstep: vehicle time)
             while (left := vl.left(t0, vt0, m.mode_timeout_s, wall_s)) > 0.0:
@@ -164,7 +165,7 @@ class Session:
     def checks(self, res: BridgeResult, scripted_target: bool) -> list[Any]:
         """The pre-flight checks from the vehicle's state now, with what it measures (wind,
         airspeed, a live target's motion); those failed (CheckResult)."""
-        from mpf_mavlink.bridge.preflight import format_checks, run_checks
+        from mpf_mavlink.bridge.preflight import format_checks, run_checks, simulated_plant
 
         self.ctl.set_origin()  # mission time 0: the checks' and the scripted target's origin
         init = self.ctl.initial_state()
@@ -181,14 +182,14 @@ class Session:
                 initial_attitude_rpy_rad=matrix_to_euler(R_W_I),
             ),
         )
-        if cfg.sil.link != "none":  # the SIL's own start gives way to where the aircraft is
-            sil = dataclasses.replace(cfg.sil, initial_position_ned_m=p0)
-            cfg = dataclasses.replace(cfg, extra={**cfg.extra, "sil": sil})
+        plant = simulated_plant(cfg)
+        if plant is not None:  # the SIL's own start gives way to where the aircraft is
+            plant = dataclasses.replace(plant, initial_position_ned_m=p0)
         # what the autopilot reports now (wind, airspeed, the live target's motion), not what
         # the configuration assumes: a mission the measured wind makes infeasible is refused
         measured = self.ctl.measured_inputs()
         res.measured = _measured_record(measured)
-        results = run_checks(cfg, scripted_target=scripted_target, measured=measured)
+        results = run_checks(cfg, scripted_target, measured, plant)
         text = format_checks(results)
         res.checks = text.splitlines()
         self.log(text)

@@ -8,6 +8,7 @@ import time
 from collections.abc import Callable
 
 from mpf_mavlink.bridge.base import BridgeResult
+from mpf_mavlink.bridge.commands import is_final
 from mpf_mavlink.bridge.link_io import VehicleLink
 from mpf_mavlink.mavlink import (
     Flavour,
@@ -82,9 +83,13 @@ class StreamNegotiator:
         vl, m = self.vl, self.m
         plan = self.plan()
         vl.arrivals = {}
-        vl.acks.clear()
-        for _name, mid, hz, _ in plan:
-            vl.send(encode_set_message_interval(vl.link.mav, vl.sysid, vl.compid, mid, hz))
+        interval = MAV_CMD_SET_MESSAGE_INTERVAL
+        # one request per message, their ACKs taken as they come (the rates decide)
+        vl.commands.send_all(
+            [encode_set_message_interval(vl.link.mav, vl.sysid, vl.compid, mid, hz)
+             for _name, mid, hz, _ in plan],
+            interval,
+        )  # fmt: skip
         method = "MAV_CMD_SET_MESSAGE_INTERVAL"
         t_req = t0 = time.monotonic()
         refused: list[str] = []
@@ -93,10 +98,8 @@ class StreamNegotiator:
             while True:
                 vl.spin(0.1)
                 now = time.monotonic()
-                interval = MAV_CMD_SET_MESSAGE_INTERVAL
-                refused += [a.result_name for a in vl.acks
-                            if a.command == interval and not a.accepted]  # fmt: skip
-                vl.acks.clear()
+                refused += [a.result_name for a in vl.commands.take(interval)
+                            if is_final(a) and not a.accepted]  # fmt: skip
                 if (
                     vl.flavour is Flavour.ARDUPILOT
                     and not fallback_sent
