@@ -4,6 +4,7 @@ GUIDED loiter about the path's centre (after engaging)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -23,6 +24,10 @@ FALLBACK_ATTEMPTS = 6
 PARAM_WAIT_S = 0.6
 #: How long a DO_REPOSITION's COMMAND_ACK is waited for (s).
 REPOSITION_ACK_S = 1.5
+#: How far (m) the path's centre moves before the fallback point follows it.
+FOLLOW_MOVED_M = 5.0
+#: Mean Earth radius (m), for the small distances :meth:`FallbackSetup.follow` compares.
+EARTH_RADIUS_M = 6_371_000.0
 #: The loiter radius about the path's centre is the path's extent, within these bounds (m).
 LOITER_RADIUS_M = (50.0, 1000.0)
 
@@ -35,6 +40,11 @@ class FallbackSetup:
     ) -> None:
         self.vl, self.ctl, self.path_cfg, self.log = vl, ctl, path_cfg, log
         self.set_from: float | None = None  # the COM_OBL_RC_ACT we replaced
+        self.follow_s = float(vl.m.fallback_follow_s)
+        self._placed: tuple[float, float, bool] | None = None  # lat, lon (deg), PX4's form
+        self._placed_t = 0.0  # mission time (s) of the last placement
+        self.replaced = 0  # placements after the first (a moving target's)
+        self._refused: str | None = None
 
     def px4_params(self, res: BridgeResult) -> str | None:
         """PX4, before engaging: read what an offboard loss does (px4_fallback.py), make it Hold
@@ -105,6 +115,7 @@ class FallbackSetup:
         centre = None
         if ack is not None and ack.accepted:
             centre = where
+            self._placed = (lat, lon, True)
         else:
             why = ack.result_name if ack is not None else "no COMMAND_ACK"
             self.log(f"fallback: DO_REPOSITION to {where} not accepted ({why})")
@@ -141,10 +152,45 @@ class FallbackSetup:
         )
         if ack is not None and ack.accepted:
             res.fallback = what
+            self._placed = (lat, lon, False)
         else:
             why = ack.result_name if ack is not None else "no COMMAND_ACK"
             res.fallback = f"NOT set ({why}): ArduPlane's own GUIDED loiter; asked for {what}"
         self.log(f"fallback if the bridge dies: {res.fallback}")
+
+    def follow(self, t: float) -> None:
+        """While tracking, at mission time ``t`` (s): every ``mavlink.fallback_follow_s`` of it,
+        re-place the fallback point at the path's centre once the centre has moved more than
+        :data:`FOLLOW_MOVED_M` from it, so that an aircraft whose bridge dies loiters where the
+        target is, not where it was at engagement. The DO_REPOSITION is not waited for (the
+        control loop must not stall); a refusal is read at the next placement and logged once."""
+        if self._placed is None or self.follow_s <= 0.0 or t - self._placed_t < self.follow_s:
+            return
+        self._placed_t = t
+        for ack in self.vl.commands.take(MAV_CMD_DO_REPOSITION):
+            if not ack.accepted and self._refused is None:
+                self._refused = ack.result_name
+                self.log(f"fallback: re-placing the loiter point refused ({ack.result_name})")
+        got = self.path_centre()
+        if isinstance(got, str):
+            return
+        lat, lon, alt, radius, ccw = got
+        lat0, lon0, px4 = self._placed
+        dn = math.radians(lat - lat0) * EARTH_RADIUS_M
+        de = math.radians(lon - lon0) * EARTH_RADIUS_M * math.cos(math.radians(lat0))
+        if math.hypot(dn, de) < FOLLOW_MOVED_M:
+            return
+        vl = self.vl
+        try:
+            msg = encode_do_reposition(
+                vl.link.mav, vl.sysid, vl.compid, lat, lon, alt,
+                100.0 if px4 else radius, False if px4 else ccw, px4=px4,
+            )  # fmt: skip
+        except ValueError:
+            return
+        vl.commands.send(msg, MAV_CMD_DO_REPOSITION)
+        self._placed = (lat, lon, px4)
+        self.replaced += 1
 
     def path_centre(self) -> tuple[float, float, float, float, bool] | str:
         """(lat, lon, alt AMSL, radius m, counter-clockwise) of the path's centre now, or why

@@ -170,6 +170,8 @@ class Bridge:
         now = time.monotonic()
         self.vl.duties(now)
         self.loop.tick(now)
+        if self.phase.state is State.TRACKING and self.loop.t_last is not None:
+            self.fallback.follow(self.loop.t_last)
         sent = self.loop.n["setpoints_sent"]
         if sent != self._sent_at_tick:  # a setpoint went out in this wake-up
             self._sent_at_tick = sent

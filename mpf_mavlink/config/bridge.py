@@ -233,6 +233,14 @@ class MavlinkConfig:
             "is read or set (bridge/px4_fallback.py)"
         ),
     )
+    fallback_follow_s: float = field(
+        default=5.0,
+        metadata=_nonneg(
+            "with set_fallback, while tracking: every this many seconds re-place that loiter "
+            "point at the path's centre once it has moved 5 m (a moving target), so an "
+            "aircraft whose bridge dies circles where the target is; 0: placed once"
+        ),
+    )
 
     def validate(self, src: str, target_type: str) -> None:
         """Contradictions between keys (and with ``target.type``), found before anything is

@@ -323,8 +323,9 @@ def fly_fleet(a: argparse.Namespace, v: dict[str, Any]) -> int:
         codes = [b.wait() if b is not None else None for b in bridges]
         if t_kill is not None:
             km = a.kill_member
-            te = engaged[km] or t_kill
-            hc = _target_position(cfg, centre, te - epoch)
+            # the bridge re-places its fallback loiter with the target (fallback_follow_s), so
+            # the hold is judged about where the target was at the kill
+            hc = _target_position(cfg, centre, t_kill - epoch)
             h = hold_figures(trace, (float(hc[0]), float(hc[1])), -centre[2], radius)
             h["modes"] = modes_after
             if modes_after and any(m != mod.TRACK_MODE and m != mod.HOLD_MODE for m in modes_after):
