@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -511,3 +512,77 @@ def test_the_energy_control_is_the_adapters_parameters_of_its_names():
     for f in dataclasses.fields(tecs):
         assert getattr(tecs, f.name) == getattr(params, f.name), f.name
     assert params.tecs is tecs
+
+
+# ----------------------------------------------------------------------------- trim schedule
+def _fly_schedule(
+    params: AdapterParams,
+    v_sp_of_t: Callable[[float], float],
+    y_of_vsp: Callable[[float], float],
+    t_end: float = 300.0,
+) -> tuple[list[float], AdapterState]:
+    """A level aircraft whose measured theta - gamma is y_of_vsp(v_sp) (rad) while the airspeed
+    set-point is v_sp_of_t(t) (m/s); no law demand, so trim_hat stays where it starts. Returns
+    the pitch set-points (rad) and the last state."""
+    st_, dt, out = AdapterState(trim_hat=0.0), 0.1, []
+    for i in range(int(t_end / dt)):
+        vs = v_sp_of_t(i * dt)
+        R = euler_to_matrix(0.0, y_of_vsp(vs), 0.0)
+        sp, st_ = adapt(
+            (0.0, 0.0, 0.0), 22.0, R, NORTH, dt, params, st_, meas=(R, (0.0, 0.0, 0.0)),
+            airspeed_sp=vs,
+        )  # fmt: skip
+        out.append(sp.pitch_rad)
+    return out, st_
+
+
+AP22 = AdapterParams(airspeed_sp_m_s=22.0)
+
+
+def test_trim_schedule_learns_the_lift_slope_of_a_lap_periodic_set_point():
+    """theta - gamma = -0.03 + 0.05 (22 / v_sp)^2 (the lift's 0.05 rad at 22 m/s), the set-point
+    swinging 22 +- 2 m/s over a 43 s lap: the regression finds K_hat = 0.05 and the pitch
+    set-point carries trim_hat + K_hat (x - mean x), so it follows theta - gamma's swing."""
+
+    def vsp(t: float) -> float:
+        return 22.0 + 2.0 * math.sin(2.0 * math.pi * t / 43.0)
+
+    def y(v: float) -> float:
+        return -0.03 + 0.05 * (22.0 / v) ** 2
+
+    pitch, st_ = _fly_schedule(AP22, vsp, y)
+    # the set-point enters one tau_pitch ahead through a rate low-passed over 2 s: at the lap's
+    # frequency that swings x ~5 % wider (and 0.9 s ahead), so K_hat comes out ~5 % lower
+    assert st_.sched.k == pytest.approx(0.05 / 1.048, rel=0.02)
+    # over the last lap the pitch set-point's swing is theta - gamma's (the mean is trim_hat's)
+    n = int(43.0 / 0.1)
+    ys = [y(vsp(i * 0.1)) for i in range(3000 - n, 3000)]
+    sw = np.ptp(pitch[-n:])
+    assert sw == pytest.approx(np.ptp(ys), rel=0.05)
+    # scheduled: faster -> less trim
+    assert st_.sched.offset((22.0 / 24.0) ** 2) < 0.0 < st_.sched.offset((22.0 / 20.0) ** 2)
+
+
+def test_trim_schedule_is_nothing_at_a_constant_set_point():
+    """A single aircraft at its set airspeed: nothing to regress on, the set-points are those
+    without the schedule."""
+
+    def y(v: float) -> float:
+        return 0.02
+
+    on, st_on = _fly_schedule(AP22, lambda t: 22.0, y, 30.0)
+    off, _ = _fly_schedule(dataclasses.replace(AP22, trim_schedule=False), lambda t: 22.0, y, 30.0)
+    assert st_on.sched.k == 0.0 and on == off
+
+
+def test_trim_schedule_slope_is_never_negative_and_survives_reengagement():
+    """A measured offset that rises with speed is no lift curve (K_hat clipped at 0); what was
+    learnt is the airframe's and stays over a hand-back."""
+
+    def vsp(t: float) -> float:
+        return 22.0 + 2.0 * math.sin(2.0 * math.pi * t / 43.0)
+
+    _, st_ = _fly_schedule(AP22, vsp, lambda v: 0.01 * (v - 22.0), 120.0)
+    assert st_.sched.k == 0.0
+    _, st2 = _fly_schedule(AP22, vsp, lambda v: 0.05 * (22.0 / v) ** 2, 120.0)
+    assert st2.sched.k > 0.0 and st2.for_reengage(0.5).sched == st2.sched

@@ -88,6 +88,7 @@ class Recorder:
             "trim_pitch_rad": st.trim_hat,
             "turn_gain": st.turn_gain,
             "pitch_rate_bias_rad_s": st.q_bias,
+            "trim_schedule_rad": st.sched.k,
         }
         metrics["delay_compensation"] = delay_metrics(ctl, bool(self.m.delay_compensation))
         metrics.update(

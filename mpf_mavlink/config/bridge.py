@@ -336,6 +336,21 @@ class AdapterSection:
         ),
     )
     trim_tau_s: float = field(default=4.0, metadata=_pos())
+    trim_schedule: bool = field(
+        default=True,
+        metadata=_doc(
+            "schedule the learnt pitch offset with the airspeed set-point (lift ~ 1 / V^2): its "
+            "slope on (airspeed_m_s / set-point)^2 regressed online on the measured pitch less "
+            "flight-path angle; needs adaptive"
+        ),
+    )
+    trim_schedule_tau_s: float = field(
+        default=60.0, metadata=_pos("the schedule's regression: forgetting time (s)")
+    )
+    trim_schedule_min_dv_m_s: float = field(
+        default=0.3,
+        metadata=_nonneg("the set-point's spread (m/s RMS) below which the slope is not learnt"),
+    )
     turn_gain_tau_s: float = field(default=8.0, metadata=_pos())
     rate_bias_tau_s: float = field(
         default=1.0,

@@ -16,7 +16,9 @@ from typing import Any, NamedTuple
 from mpf_mavlink.constants import GRAVITY_M_S2
 from mpf_mavlink.core.energy import EnergyState, Tecs, reserve_airspeed
 
-__all__ = ["AdapterParams", "AdapterState", "Setpoint", "adapt", "reserve_airspeed"]
+__all__ = [
+    "AdapterParams", "AdapterState", "Setpoint", "TrimSchedule", "adapt", "reserve_airspeed",
+]  # fmt: skip
 
 Vec = tuple[float, float, float]
 
@@ -62,6 +64,22 @@ def bank_and_load_factor(w1: Vec, accel: Vec, g: float = GRAVITY_M_S2) -> tuple[
 #   gamma_dot_cmd (not while the pitch set-point is saturated that way). The law demands a
 #   flight-path rate only while there is a vertical error, so none stands: integral action
 #   that also absorbs a bias of the autopilot's pitch loop.
+# - pitch trim scheduled with airspeed: at a given load factor the lift coefficient goes as
+#   1 / V^2, so the angle of attack (and with it theta - gamma, which in a level turn is
+#   alpha cos(phi) = alpha_0 cos(phi) + K / V^2, the bank cancelling) changes with every airspeed
+#   change asked; the integrator above follows it only with its lag (a ramp leaves an error
+#   proportional to its rate: a fleet's lap-periodic airspeed set-point left a vertical error of
+#   0.94 m per m/s^2 of d(v_sp)/dt). The trim flown is trim_hat + K_hat (x - x_mean) with
+#   x = (V_0 / v_sp)^2 (V_0: airspeed_sp_m_s), K_hat the least-squares slope of the measured
+#   theta - gamma on x over trim_schedule_tau_s (exponential forgetting) and x_mean that
+#   window's mean, so trim_hat keeps the mean and the schedule only the deviation. Regressed on
+#   the set-point's x (not the measured airspeed's), K_hat is the feed-forward gain of the
+#   signal it multiplies, the autopilot's speed response included; no learning below
+#   trim_schedule_min_dv_m_s of set-point spread (a constant set-point: the schedule is 0).
+#   The set-point enters one tau_pitch ahead (v_sp + tau_pitch dv_sp/dt, the rate low-passed
+#   over vdot_tau_s), as the flight-path angle does: the pitch set-point aims there (ArduPlane
+#   SITL fleet, 3 x 300 s: theta - gamma fitted (22 / v_sp)^2 best 1.5 s ahead, R^2 0.98
+#   against 0.93 with the set-point of the instant).
 # - lateral: the bank for a turn rate is atan(V chi_dot / g) only in a coordinated turn that the
 #   autopilot banks exactly as told; with the rudder elsewhere (sideslip) or a roll-loop bias
 #   the aircraft turns less per commanded bank (0.69x measured on ArduPlane SITL with yaw = 0:
@@ -129,7 +147,12 @@ class AdapterParams:
     load_factor_ff: float = 0.2  # thrust per g of extra load (n - 1)
     adaptive: bool = True  # learn trim_hat and turn_gain (else the fixed trim, ideal turn)
     trim_tau_s: float = 4.0
-    trim_limit_rad: float = 0.2  # |trim_hat| <= this
+    trim_limit_rad: float = 0.2  # |trim_hat| <= this; also the bound of K_hat (0..this)
+    # pitch trim scheduled with the airspeed set-point (module comment): on/off, the
+    # regression's forgetting time (s) and the set-point spread (m/s RMS) it needs to learn
+    trim_schedule: bool = True
+    trim_schedule_tau_s: float = 60.0
+    trim_schedule_min_dv_m_s: float = 0.3
     turn_gain_tau_s: float = 8.0
     turn_gain_min: float = 0.5
     turn_gain_max: float = 1.5
@@ -162,6 +185,24 @@ class AdapterParams:
         return Tecs(**{f.name: getattr(self, f.name) for f in dataclasses.fields(Tecs)})
 
 
+class TrimSchedule(NamedTuple):
+    """The pitch trim's airspeed schedule (module comment): exponentially weighted moments of
+    x = (V_0 / v_sp)^2 (dimensionless) and of the measured theta - gamma y (rad), and the slope
+    K_hat (rad per unit x, 0..trim_limit_rad; 0 until the set-point has spread enough)."""
+
+    mx: float | None = None  # mean of x (None: no sample yet)
+    my: float = 0.0  # mean of y (rad)
+    sxx: float = 0.0  # variance of x
+    sxy: float = 0.0  # covariance of x and y (rad)
+    k: float = 0.0  # K_hat (rad)
+    v_prev: float | None = None  # the set-point last step (m/s)
+    vdot_f: float = 0.0  # its rate, low-passed over vdot_tau_s (m/s^2)
+
+    def offset(self, x: float) -> float:
+        """The scheduled trim (rad) at x: K_hat (x - mean x), 0 before any sample."""
+        return 0.0 if self.mx is None else self.k * (x - self.mx)
+
+
 class AdapterState(NamedTuple):
     """Memory of the adapter: the learned pitch offset trim_hat (rad, None until the first
     measurement) and turn gain (achieved heading rate per coordinated-turn rate, 1 = ideal),
@@ -179,6 +220,7 @@ class AdapterState(NamedTuple):
     q_bias: float = 0.0
     q_sent: float | None = None
     energy: EnergyState = EnergyState()
+    sched: TrimSchedule = TrimSchedule()
 
     def for_reengage(self, thrust_engaged: float | None = None) -> AdapterState:
         """After a hand-back: the thrust and pitch-rate integrators and the energy filters start
@@ -189,7 +231,9 @@ class AdapterState(NamedTuple):
         te = (
             thrust_engaged if thrust_engaged is not None and math.isfinite(thrust_engaged) else None
         )
-        return AdapterState(self.trim_hat, self.turn_gain, energy=self.energy.for_reengage(te))
+        return AdapterState(
+            self.trim_hat, self.turn_gain, energy=self.energy.for_reengage(te), sched=self.sched
+        )
 
 
 class Setpoint(NamedTuple):
@@ -323,11 +367,12 @@ def adapt(
     tecs = params.tecs
     v_sp, energy = tecs.airspeed_setpoint(state.energy, path_down_m, dt, g, airspeed_sp)
     gamd, bal = tecs.flight_path_rate(energy, gamd_law)
+    sched, x_sp = _schedule_input(params, state.sched, v_sp, dt)
     if params.adaptive and meas is not None:
         # the law's demand is what trim_hat integrates; not while the priority overrides it
         # (the standing vertical error is then the energy's, not a pitch offset's)
-        trim_hat, k_turn = _learn(
-            params, state, meas, w1, v, dt, g, gamd_law, gamma, freeze_trim=bal != 0.0
+        trim_hat, k_turn, sched = _learn(
+            params, state, meas, w1, v, dt, g, gamd_law, gamma, bal != 0.0, x_sp, sched
         )
     if params.adaptive and k_turn != 1.0:
         bank = math.atan(math.tan(_clip(bank, -1.4, 1.4)) / k_turn)
@@ -336,7 +381,7 @@ def adapt(
     p, q, r, q_bias, q_free = _body_rates(
         params, state, meas, dt, hold_s, roll, pitch, bank, chid, gamd
     )
-    trim, pitch_sp = _pitch_setpoint(params, trim_hat, gamma, gamd)
+    trim, pitch_sp = _pitch_setpoint(params, trim_hat, gamma, gamd, sched.offset(x_sp))
     thrust, energy = tecs.thrust(energy, v, v_sp, gamma, gamd_law, trim, n, bal, dt, g)
     qw, qx, qy, qz = quat = _euler_to_quat_wxyz(bank, pitch_sp, 0.0)
     if not (
@@ -349,7 +394,7 @@ def adapt(
     return tuple.__new__(Setpoint, ((p, q, r), quat, thrust, bank, pitch_sp, n, False)), (
         tuple.__new__(AdapterState, (
             trim_hat, k_turn, bank, None if clipped else chid, q_bias, q if q_free else None,
-            energy,
+            energy, sched,
         ))
     )  # fmt: skip
 
@@ -376,13 +421,40 @@ def _roll_pitch_if_finite(
     return roll, pitch, ok
 
 
+def _schedule_input(
+    params: AdapterParams, st: TrimSchedule, v_sp: float, dt: float
+) -> tuple[TrimSchedule, float]:
+    """The schedule's memory after this step's set-point v_sp (m/s) and its x = (V_0 / v_ahead)^2
+    with v_ahead the set-point one tau_pitch ahead (module comment); x is 1 when the schedule
+    is off or v_sp not a positive finite airspeed."""
+    if not (params.trim_schedule and params.adaptive and v_sp > 1.0 and math.isfinite(v_sp)):
+        return st, 1.0
+    vdot_f = st.vdot_f
+    if st.v_prev is not None and dt > 0.0:
+        a = min(1.0, dt / params.vdot_tau_s) if params.vdot_tau_s > 0.0 else 1.0
+        vdot_f += a * ((v_sp - st.v_prev) / dt - vdot_f)
+    # never outside the airspeed window the set-point itself keeps to
+    v_ahead = _clip(
+        v_sp + params.tau_pitch_s * vdot_f,
+        max(params.airspeed_min_m_s, 1.0),
+        max(params.airspeed_max_m_s, v_sp),
+    )
+    r = params.airspeed_sp_m_s / v_ahead
+    st = st._replace(v_prev=v_sp, vdot_f=vdot_f)
+    return st, (r * r if math.isfinite(r) else 1.0)
+
+
 def _pitch_setpoint(
-    params: AdapterParams, trim_hat: float | None, gamma: float, gamd: float
+    params: AdapterParams, trim_hat: float | None, gamma: float, gamd: float, sched: float = 0.0
 ) -> tuple[float, float]:
     """(trim, pitch set-point) rad: the flight-path angle of w1 (= theta - alpha) advanced by
-    tau_pitch, plus the trim angle of attack (learnt when ``adaptive``). Adding the trim to the
-    *measured* pitch would integrate it each cycle."""
-    trim = trim_hat if (params.adaptive and trim_hat is not None) else params.trim_pitch_rad
+    tau_pitch, plus the trim angle of attack (learnt when ``adaptive``, with the airspeed
+    schedule's ``sched`` rad). Adding the trim to the *measured* pitch would integrate it each
+    cycle."""
+    if params.adaptive and trim_hat is not None:
+        trim = trim_hat + sched
+    else:
+        trim = params.trim_pitch_rad
     pitch_sp = _clip(
         gamma + gamd * params.tau_pitch_s + trim,
         params.min_pitch_rad,
@@ -462,11 +534,16 @@ def _learn(
     gamd: float,
     gamma: float,
     freeze_trim: bool = False,
-) -> tuple[float | None, float]:
-    """One step of the two estimates (module comment) from the measured attitude and rates and
-    the law's flight-path-angle rate demand gamd (rad/s); a non-finite or missing measurement
-    changes nothing."""
+    x_sp: float = 1.0,
+    sched: TrimSchedule | None = None,
+) -> tuple[float | None, float, TrimSchedule]:
+    """One step of the three estimates (module comment) from the measured attitude and rates,
+    the law's flight-path-angle rate demand gamd (rad/s) and the trim schedule's x_sp of the
+    airspeed set-point (``sched``: the schedule's memory this step, default the state's); a
+    non-finite or missing measurement changes nothing."""
     trim_hat, k_turn = state.trim_hat, state.turn_gain
+    sched = state.sched if sched is None else sched
+    sched_in = sched
     try:
         R, rates = meas
         R2 = R[2].tolist() if hasattr(R, "tolist") else R[2]
@@ -474,17 +551,19 @@ def _learn(
         theta = math.asin(_clip(-R2[0], -1.0, 1.0))
         q_m, r_m = float(rates[1]), float(rates[2])
     except (TypeError, ValueError, IndexError):
-        return trim_hat, k_turn
+        return trim_hat, k_turn, sched
     off = theta - gamma
     if not (
         math.isfinite(off) and math.isfinite(q_m) and math.isfinite(r_m) and math.isfinite(gamd)
     ):
-        return trim_hat, k_turn
+        return trim_hat, k_turn, sched
     lim = params.trim_limit_rad
+    if params.trim_schedule and dt > 0.0:
+        sched = _schedule_step(params, sched, x_sp, off, dt)
     if trim_hat is None:
         trim_hat = _clip(off, -lim, lim)
     elif dt > 0.0:
-        pitch_sp = gamma + gamd * params.tau_pitch_s + trim_hat
+        pitch_sp = gamma + gamd * params.tau_pitch_s + trim_hat + sched_in.offset(x_sp)
         pushing_out = (pitch_sp >= params.max_pitch_rad and gamd > 0) or (
             pitch_sp <= params.min_pitch_rad and gamd < 0
         )
@@ -508,4 +587,27 @@ def _learn(
                 k_turn + a * k_turn * _clip(err, -0.5, 0.5),
                 params.turn_gain_min, params.turn_gain_max,
             )  # fmt: skip
-    return trim_hat, k_turn
+    return trim_hat, k_turn, sched
+
+
+def _schedule_step(
+    params: AdapterParams, st: TrimSchedule, x: float, y: float, dt: float
+) -> TrimSchedule:
+    """One step of the trim schedule's regression of y = theta - gamma (rad) on x (module
+    comment): exponentially weighted moments over trim_schedule_tau_s, and K_hat = cov / var
+    once the set-point's spread exceeds trim_schedule_min_dv_m_s (else K_hat stays)."""
+    if st.mx is None:
+        return st._replace(mx=x, my=y)
+    a = min(1.0, dt / params.trim_schedule_tau_s)
+    dx, dy = x - st.mx, y - st.my
+    mx, my = st.mx + a * dx, st.my + a * dy
+    sxx = (1.0 - a) * (st.sxx + a * dx * dx)
+    sxy = (1.0 - a) * (st.sxy + a * dx * dy)
+    # x's spread for the set-point's: dx = -2 dv / V_0 near V_0
+    v0 = params.airspeed_sp_m_s
+    dx_min = 2.0 * params.trim_schedule_min_dv_m_s / v0 if v0 > 0.0 else math.inf
+    k = st.k
+    if sxx > dx_min * dx_min:
+        # lift falls with 1 / V^2: the slope on x is the lift's share of the angle, >= 0
+        k = _clip(sxy / sxx, 0.0, params.trim_limit_rad)
+    return tuple.__new__(TrimSchedule, (mx, my, sxx, sxy, k, st.v_prev, st.vdot_f))
