@@ -6,11 +6,10 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from mpf_mavlink.config.autopilot_profile import ResolvedProfile
 from mpf_mavlink.config.fields import Vec3
 from mpf_mavlink.config.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.config.schema import Config, bank_limit_rad
@@ -28,6 +27,9 @@ from mpf_mavlink.core.guidance.checks import (
     vertical_gusts,
 )
 from mpf_mavlink.core.guidance.law import VehicleState, mpf_law
+
+if TYPE_CHECKING:
+    from mpf_mavlink.config.autopilot_profile import ResolvedProfile
 
 
 @dataclass(frozen=True)
