@@ -13,7 +13,7 @@ import numpy as np
 from mpf_mavlink.bridge.estimator import wind_frame_rows
 from mpf_mavlink.config.scenario import build_extensions, build_gains, build_path, build_target
 from mpf_mavlink.config.schema import Config
-from mpf_mavlink.core.guidance.baselines import guidance_law
+from mpf_mavlink.core.guidance.dispatch import guidance_law
 from mpf_mavlink.core.guidance.law import vehicle_state_of_floats
 from mpf_mavlink.core.target import state_floats
 from mpf_mavlink.runs.compare import distance_to_polyline

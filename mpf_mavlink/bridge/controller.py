@@ -49,7 +49,7 @@ from mpf_mavlink.config.scenario import (
 )
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.adapter import AdapterParams, AdapterState, Setpoint, adapt, safe_setpoint
-from mpf_mavlink.core.guidance.baselines import guidance_law
+from mpf_mavlink.core.guidance.dispatch import guidance_law
 from mpf_mavlink.core.guidance.law import (
     Gains,
     MpfCommand,

@@ -409,7 +409,7 @@ def envelope_monitor(cfg: Any, ad: Any) -> EnvelopeMonitor:
     """The monitor of a configuration (``envelope`` section; the limits of ``vehicle``,
     ``metrics`` and the adapter's parameters ``ad``, core/adapter.AdapterParams). The wind's
     limit is set once the pre-engage checks have measured it."""
-    from mpf_mavlink.runs.verdict import bank_limit_rad
+    from mpf_mavlink.config.schema import bank_limit_rad
 
     v, m, e = cfg.vehicle, cfg.metrics, cfg.envelope
     tol = m.airspeed_tolerance

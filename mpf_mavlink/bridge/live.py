@@ -53,7 +53,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from mpf_mavlink.bridge import fleet as fleet_link
+from mpf_mavlink.bridge import fleet_hooks as fleet_link
 from mpf_mavlink.bridge.base import (
     EXIT_CHECK,
     EXIT_OK,

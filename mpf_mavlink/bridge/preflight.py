@@ -6,14 +6,13 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from mpf_mavlink.config.autopilot_profile import ResolvedProfile
 from mpf_mavlink.config.fields import Vec3
 from mpf_mavlink.config.scenario import build_extensions, build_gains, build_path, build_target
-from mpf_mavlink.config.schema import Config
+from mpf_mavlink.config.schema import Config, bank_limit_rad
 from mpf_mavlink.constants import GRAVITY_M_S2
 from mpf_mavlink.core.adapter import reserve_airspeed
 from mpf_mavlink.core.frames import euler_to_matrix
@@ -28,7 +27,9 @@ from mpf_mavlink.core.guidance.checks import (
     vertical_gusts,
 )
 from mpf_mavlink.core.guidance.law import VehicleState, mpf_law
-from mpf_mavlink.runs.verdict import bank_limit_rad
+
+if TYPE_CHECKING:
+    from mpf_mavlink.config.autopilot_profile import ResolvedProfile
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,6 @@ from mpf_mavlink.bridge.controller import Controller, Step, write_setpoints
 from mpf_mavlink.bridge.envelope import verdict_words
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.runs.rundir import COLUMNS, RunTable, compute_metrics
-from mpf_mavlink.runs.verdict import assess
 from mpf_mavlink.runs.write import limits_row, write_limits, write_run
 
 #: Lean recording keeps one tracking row in this many (50 Hz ATTITUDE: 10 Hz rows).
@@ -117,6 +116,9 @@ class Recorder:
         thr_sent = np.array([r[8] for r in self.sp_rows], float)
         t_rel = cols["t"] - cols["t"][0]
         thr = thr_sent if len(thr_sent) == len(t_rel) else None
+        # the verdict's module loads once the run has ended, not before the flight
+        from mpf_mavlink.runs.verdict import assess
+
         vd = assess(
             self.cfg, t_rel, cols["pt_norm"], J[:, 4], J[:, 3], J[:, 1], J[:, 2], thr,
             source="telemetry",

@@ -67,7 +67,7 @@ from mpf_mavlink.mavlink import (
 )
 from mpf_mavlink.mavlink.boot_clock import BootClockGate
 from mpf_mavlink.mavlink.link import AUTOPILOTS, MAV_COMP_ID_AUTOPILOT1
-from mpf_mavlink.mavlink.tlog import TlogStats
+from mpf_mavlink.mavlink.tlog_read import TlogStats
 from mpf_mavlink.runs.replay_result import (
     _INT_FIELDS,
     _SAT,

@@ -5,41 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
-from typing import Any
-
-from mpf_mavlink.cli.common import exit_codes_epilog
-
-
-def add_campaign_parser(sub: Any) -> None:
-    c = sub.add_parser(
-        "campaign",
-        help="fly a Monte-Carlo campaign of a mission on dask (local cores or a cluster)",
-        description=(
-            "Fly every sample of a campaign file (a base configuration, distributions over its "
-            "keys, a sample design; see configs/campaign_*.yaml) on dask.distributed, one flight "
-            "per task. Each finished flight is a row of DIR/results.csv at once; running the same "
-            "command again flies only the samples without a row. Then DIR gets summary.json, "
-            "ecdf.png, parameters.png, roa.png (when the start is varied: the empirical region "
-            "of attraction against the one the gain condition certifies) and worst/<sample>/ run "
-            "directories of the worst flights for `mpf-mavlink plot`."
-        ),
-        epilog=exit_codes_epilog("campaign"),
-    )
-    c.add_argument("campaign", metavar="CAMPAIGN", type=Path, help="campaign YAML file")
-    c.add_argument("--out", type=Path, required=True, help="output directory (resumable)")
-    g = c.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=int, default=None,
-                   help="local worker processes (default: one per core)")  # fmt: skip
-    g.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
-                   help="an existing dask scheduler to run on instead of local "
-                        "workers")  # fmt: skip
-    c.add_argument("--retry-errors", action="store_true",
-                   help="fly again the samples whose row is an error or a timeout")  # fmt: skip
-    c.add_argument("--no-report", action="store_true",
-                   help="only fly; skip the plots and the re-flown worst flights")  # fmt: skip
-    c.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
-    c.set_defaults(func=cmd_campaign)
 
 
 def cmd_campaign(args: argparse.Namespace) -> int:

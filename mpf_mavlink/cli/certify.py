@@ -7,42 +7,6 @@ import argparse
 import shlex
 import sys
 import time
-from pathlib import Path
-from typing import Any
-
-from mpf_mavlink.cli.common import exit_codes_epilog
-
-
-def add_certify_parser(sub: Any) -> None:
-    c = sub.add_parser(
-        "certify",
-        help="bound a mission's tracking on the calibrated SIL over stated conditions",
-        description=(
-            "Fly the mission CONFIG on the calibrated SIL (the autopilot's identified profile, "
-            "sil.autopilot_profile auto unless CONFIG names one) under conditions drawn from "
-            "FILE (configs/certify/*.yaml; docs/certify.md), on dask.distributed as `campaign` "
-            "does: as many flights as a one-sided bound of the quantile at the confidence needs "
-            "(59 for 95 %% at 95 %%) or --flights N. Writes DIR/flights.csv (row by row; the "
-            "same command again flies only the missing flights), DIR/certificate.json and "
-            "DIR/report.md with ecdf.png and conditions.png."
-        ),
-        epilog=exit_codes_epilog("certify"),
-    )
-    c.add_argument("config", metavar="CONFIG", type=Path, help="the mission's configuration")
-    c.add_argument("--autopilot", required=True, choices=("px4", "arduplane"))
-    c.add_argument("--conditions", required=True, type=Path, help="conditions YAML")
-    c.add_argument("--out", required=True, type=Path, help="output directory (resumable)")
-    c.add_argument("--flights", type=int, default=None,
-                   help="flights to fly (default: what the bound needs)")  # fmt: skip
-    c.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a key of CONFIG (repeatable)")  # fmt: skip
-    g = c.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=int, default=None,
-                   help="local worker processes (default: one per core)")  # fmt: skip
-    g.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
-                   help="an existing dask scheduler")  # fmt: skip
-    c.add_argument("-q", "--quiet", action="store_true", help="no per-flight progress")
-    c.set_defaults(func=cmd_certify)
 
 
 def cmd_certify(args: argparse.Namespace) -> int:

@@ -15,7 +15,6 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple, cast
 
-from mpf_mavlink.cli.common import exit_codes_epilog, positive
 from mpf_mavlink.errors import MpfError
 
 if TYPE_CHECKING:
@@ -197,38 +196,4 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_compare_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentParser:
-    p: argparse.ArgumentParser = subparsers.add_parser(
-        "compare",
-        help="fly the same mission with MPF and the baseline guidance laws; one table",
-        description="Fly the same mission (same seeds, start, adapter) with each guidance law "
-        "(mpf; npfg = PX4 NPFG on the moving path with path-relative velocities; npfg_static = "
-        "the same path re-sent as if it stood still; l1_loiter = ArduPlane's L1 loiter about the "
-        "moving centre, circular paths only; pursuit = carrot chasing) and write a table "
-        "(convergence, steady RMS / max of |pt| and of the cross-track distance, max bank, rate "
-        "effort, time saturated, verdict) and overlay plots.",
-        epilog=exit_codes_epilog("compare"),
-    )
-    add_config(p)
-    p.add_argument(
-        "--laws",
-        default="mpf,npfg,npfg_static,pursuit",
-        help="comma-separated laws (default: %(default)s)",
-    )
-    p.add_argument("--plant", choices=["kinematic", "sil"], default="kinematic",
-                   help="kinematic (in-process, the paper's plant) or sil (JSBSim + bridge "
-                        "over MAVLink)")  # fmt: skip
-    p.add_argument(
-        "--duration",
-        type=positive,
-        metavar="S",
-        help="seconds of each flight (default sim.duration_s)",
-    )
-    p.add_argument("--out", type=Path, help="directory (default runs/<time>-compare-<name>)")
-    p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
-    p.set_defaults(func=cmd_compare)
-    return p
-
-
-__all__ = ["add_compare_parser", "cmd_compare", "parse_laws", "run_compare"]
+__all__ = ["cmd_compare", "parse_laws", "run_compare"]

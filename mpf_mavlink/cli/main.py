@@ -200,23 +200,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pl.add_argument("run_dir", metavar="RUN_DIR", type=Path)
     pl.set_defaults(func=cmd_plot)
+    from mpf_mavlink.cli import parsers
     from mpf_mavlink.cli.run import add_run_parser
-    from mpf_mavlink.cli.sim import add_vehicle_parser
 
     add_run_parser(sub)
-    from mpf_mavlink.cli.replay import add_replay_parser
-
-    add_replay_parser(sub)
-    add_vehicle_parser(sub, _add_config)
-    from mpf_mavlink.cli.campaign import add_campaign_parser
-
-    add_campaign_parser(sub)
-    from mpf_mavlink.cli.certify import add_certify_parser
-
-    add_certify_parser(sub)
-    from mpf_mavlink.cli.compare import add_compare_parser
-
-    add_compare_parser(sub, _add_config)
+    parsers.add_replay_parser(sub)
+    parsers.add_vehicle_parser(sub, _add_config)
+    parsers.add_campaign_parser(sub)
+    parsers.add_certify_parser(sub)
+    parsers.add_compare_parser(sub, _add_config)
     return p
 
 

@@ -13,47 +13,12 @@ from typing import TYPE_CHECKING, Any
 
 from mpf_mavlink.cli.common import (
     check_host,
-    exit_codes_epilog,
     figure_lines,
-    positive,
 )
 from mpf_mavlink.errors import MpfError
 
 if TYPE_CHECKING:
     from mpf_mavlink.config.schema import Config
-
-VEHICLE_DESCRIPTION = """\
-Run the simulated vehicle of a scenario alone, paced to the wall clock, so that MAVProxy, a
-ground station (QGroundControl, Mission Planner) or your own pymavlink / MAVSDK code can connect
-to it as to a real autopilot. What it simulates comes from the config: sil.plant (the JSBSim
-aircraft of the aircraft section, by default the Skywalker X8, or the kinematic plant),
-sil.flavour (PX4: OFFBOARD after >= 1 s of SET_ATTITUDE_TARGET, Hold after 1 s without;
-ArduPlane: GUIDED, attitude quaternion only), wind, turbulence, gusts, telemetry rates and
-latencies. It starts armed, in trimmed level flight, loitering (PX4 AUTO.LOITER, ArduPlane
-LOITER) at kinematic.initial_position_ned_m (or sil.initial_position_ned_m) about the home
-sil.home_*. The config's scripted target is published as its own MAVLink system
-(sil.target_system, FOLLOW_TARGET and GLOBAL_POSITION_INT), as a live target for the bridge.
-
-Connections (--serve):
-  udpout:127.0.0.1:14550   send to a ground station listening on 14550 (QGroundControl's and
-                           MAVProxy's default; this is what PX4 SITL does)
-  udpin:0.0.0.0:14540      listen; answer whoever sends first (the bridge: mpf-mavlink run
-                           CONFIG --connect udpout:127.0.0.1:14540)
-  tcpin:0.0.0.0:5760       listen for one TCP client (as ArduPilot SITL does)
-
-Identity: system 1, component 1 (the target: system 2). Ctrl-C (or SIGTERM) stops it cleanly.
-A ground station gets what it asks of an autopilot, per flavour (sim/vehicle/gcs_services.py): the
-parameter list with the firmware's names (setting them changes the run), the mission protocol,
-AUTOPILOT_VERSION, GPS_RAW_INT; MAVLink FTP is refused (NAK) and unknown commands are answered
-UNSUPPORTED. Messages a peer sends not addressed to the vehicle reach its other UDP peers (a
-ground station beside the bridge sees the bridge's MPF_* values and texts).
-
-example:
-  mpf-mavlink vehicle configs/default.yaml --serve udpin:127.0.0.1:14540 &
-  mpf-mavlink run configs/default.yaml --connect udpout:127.0.0.1:14540
-"""
-
-SERVE_HELP = "MAVLink connection to serve: udpout:HOST:PORT, udpin:HOST:PORT or tcpin:HOST:PORT"
 
 
 def _check_serve_url(url: str) -> None:
@@ -112,39 +77,6 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
         flush=True,
     )
     return 0
-
-
-def add_vehicle_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentParser:
-    """Add the ``vehicle`` sub-command (with ``func``)."""
-    p: argparse.ArgumentParser = subparsers.add_parser(
-        "vehicle",
-        help="serve the simulated vehicle alone (real time) for MAVProxy, a GCS or your own code",
-        description=VEHICLE_DESCRIPTION,
-        epilog=exit_codes_epilog("vehicle"),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    add_config(p)
-    p.add_argument("--serve", required=True, metavar="URL", help=SERVE_HELP)
-    p.add_argument(
-        "--clock", choices=["realtime", "lockstep"], default="realtime",
-        help="realtime (default): paced to the wall clock; lockstep: advance as soon as the peer "
-        "answers each telemetry frame with a SET_ATTITUDE_TARGET (real time while nobody "
-        "commands it)",
-    )  # fmt: skip
-    p.add_argument(
-        "--speed",
-        type=positive,
-        metavar="X",
-        help="realtime clock at X times real time (default 1)",
-    )
-    p.add_argument(
-        "--duration",
-        type=positive,
-        metavar="S",
-        help="stop after S seconds of simulated flight (default: run until Ctrl-C)",
-    )
-    p.set_defaults(func=cmd_vehicle)
-    return p
 
 
 # ----------------------------------------------------------------------------- sim (SIL)
@@ -218,4 +150,4 @@ def cmd_sim_sil(cfg: Config, out: Path, quiet: bool, no_plots: bool, force: bool
     return int(res.exit_code)
 
 
-__all__ = ["add_vehicle_parser", "cmd_sim_sil", "cmd_vehicle", "sil_summary"]
+__all__ = ["cmd_sim_sil", "cmd_vehicle", "sil_summary"]

@@ -417,6 +417,13 @@ class Config:
         return self._get(name, SECTIONS[name])
 
 
+def bank_limit_rad(cfg: Config) -> float:
+    """The bank the vehicle may fly (rad): ours, or the autopilot's own when it is smaller."""
+    v = cfg.vehicle
+    ap = v.autopilot_bank_limit_rad
+    return v.max_bank_rad if ap is None else min(v.max_bank_rad, ap)
+
+
 def _validate_cross(cfg: Config) -> None:
     src = cfg.source
     p = cfg.path

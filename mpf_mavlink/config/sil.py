@@ -14,12 +14,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
-from mpf_mavlink.config.autopilot_profile import ResolvedProfile, resolve_profile
 from mpf_mavlink.config.bridge import MavlinkConfig, hold_mode_error
 from mpf_mavlink.config.fields import Vec3, _doc, _fail, _ge, _nonneg, _open, _pos, _rng
 from mpf_mavlink.errors import ConfigError
+
+if TYPE_CHECKING:
+    from mpf_mavlink.config.autopilot_profile import ResolvedProfile
 
 _REPO = Path(__file__).resolve().parents[2]
 
@@ -204,6 +206,10 @@ class SilConfig:
     def profile(self, src: str) -> ResolvedProfile | None:
         """The profile the vehicle flies (None: the plain emulation); ConfigError naming
         ``sil.autopilot_profile`` when it cannot be read."""
+        if self.autopilot_profile is None or self.autopilot_profile == "none":
+            return None  # the plain emulation: the profiles' module need not load
+        from mpf_mavlink.config.autopilot_profile import resolve_profile
+
         base = Path(src).resolve().parent if src and not src.startswith("<") else None
         try:
             return resolve_profile(self.autopilot_profile, self.flavour, base)

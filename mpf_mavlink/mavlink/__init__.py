@@ -15,6 +15,9 @@ MAVLink 1 (0xFE) and MAVLink 2 (0xFD) frames are parsed; we always *send* MAVLin
 
 from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from mpf_mavlink.mavlink.codec import (
     AttitudeSample,
     CommandAckSample,
@@ -48,8 +51,27 @@ from mpf_mavlink.mavlink.modes import (
 )
 from mpf_mavlink.mavlink.pymav import DIALECT_NAME, dialect, mavutil
 from mpf_mavlink.mavlink.signing import enable_signing, load_signing_key
-from mpf_mavlink.mavlink.tlog import TlogReadResult, TlogWriter, iter_tlog, read_tlog
 from mpf_mavlink.mavlink.url import parse_url
+
+if TYPE_CHECKING:
+    from mpf_mavlink.mavlink.tlog import TlogWriter
+    from mpf_mavlink.mavlink.tlog_read import TlogReadResult, iter_tlog, read_tlog
+
+#: the tlog's names, imported when first asked for: a flight that does not record loads neither
+_LAZY = {
+    "TlogWriter": "mpf_mavlink.mavlink.tlog",
+    "TlogReadResult": "mpf_mavlink.mavlink.tlog_read",
+    "iter_tlog": "mpf_mavlink.mavlink.tlog_read",
+    "read_tlog": "mpf_mavlink.mavlink.tlog_read",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """The tlog's names of :data:`_LAZY`, from their module (PEP 562)."""
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "DIALECT_NAME",

@@ -22,15 +22,17 @@ import time
 from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.mavlink.boot_clock import BootClockGate
 from mpf_mavlink.mavlink.encode import encode_companion_heartbeat
 from mpf_mavlink.mavlink.ports import _Serial, _TcpClient
 from mpf_mavlink.mavlink.pymav import DIALECT_NAME, dialect, mavutil
-from mpf_mavlink.mavlink.tlog import TlogWriter
 from mpf_mavlink.mavlink.url import MAV_COMP_ID_ONBOARD_COMPUTER, ParsedUrl, parse_url
+
+if TYPE_CHECKING:
+    from mpf_mavlink.mavlink.tlog import TlogWriter
 
 UDP_MAX_PACKET_LEN = 65535  # pymavlink's mavutil.UDP_MAX_PACKET_LEN
 
@@ -679,6 +681,8 @@ def open_link(
             # would put them, for a copy's cost); where it cannot be mapped, held until the
             # link sends or pauses (Link.recv, Link._log_tx); with fsync_every_s 0, neither:
             # each record written and on the disk at once
+            from mpf_mavlink.mavlink.tlog import TlogWriter  # only a recording link loads it
+
             tlog = TlogWriter(
                 tlog_path,
                 fsync_every_s=tlog_fsync_every_s,

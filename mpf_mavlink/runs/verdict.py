@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.config.schema import Config, MetricsConfig, VehicleConfig
+from mpf_mavlink.config.schema import Config, MetricsConfig, VehicleConfig, bank_limit_rad
 
 #: exit code of a flight that ran to its end but failed its verdict (3: refused by the checks,
 #: 4: a safety exit of the bridge)
@@ -93,13 +93,6 @@ def _time_fraction(mask: np.ndarray, t: np.ndarray) -> tuple[float, float, float
     secs = float(np.sum(dt[mask]))
     first = float(t[int(np.argmax(mask))]) if mask.any() else math.nan
     return (secs / total if total > 0 else float(mask.mean())), secs, first
-
-
-def bank_limit_rad(cfg: Config) -> float:
-    """The bank the vehicle may fly (rad): ours, or the autopilot's own when it is smaller."""
-    v = cfg.vehicle
-    ap = v.autopilot_bank_limit_rad
-    return v.max_bank_rad if ap is None else min(v.max_bank_rad, ap)
 
 
 def thrust_ceiling(cfg: Config) -> float:

@@ -11,7 +11,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mpf_mavlink.runs.plots import plot_run
 from mpf_mavlink.runs.rundir import COLUMNS, _clean
 
 #: the header of ``limits.csv``: what the verdict judged against the limits (t s since engagement;
@@ -66,5 +65,8 @@ def write_run(
     (out / "metrics.json").write_text(json.dumps(_clean(metrics), indent=2) + "\n")
     written = [out / "timeseries.csv", out / "metrics.json"]
     if plots:
+        # matplotlib and the figures load only when a run is drawn, at its end
+        from mpf_mavlink.runs.plots import plot_run
+
         written += plot_run(out)
     return written

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from mpf_mavlink.core.guidance.baselines import guidance_law
+from mpf_mavlink.core.guidance.dispatch import guidance_law
 from mpf_mavlink.core.guidance.law import (
     Extensions,
     Gains,

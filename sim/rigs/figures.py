@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.mavlink.tlog import iter_tlog
+from mpf_mavlink.mavlink.tlog_read import iter_tlog
 
 
 def read_json(p: Path) -> dict[str, Any]:

@@ -102,7 +102,7 @@ def read_topics(path: Path, topics: set[str]) -> dict[str, np.ndarray]:
 
 def _t0_of_bridge(run: Path) -> float | None:
     """The bridge's mission time origin (s, autopilot boot), from its tlog's ``MPF t0=``."""
-    from mpf_mavlink.mavlink.tlog import iter_tlog
+    from mpf_mavlink.mavlink.tlog_read import iter_tlog
 
     for _, m in iter_tlog(run / "bridge" / "mavlink.tlog", types=("STATUSTEXT",)):
         text = str(m.text)

@@ -45,12 +45,9 @@ from typing import Any
 
 from mpf_mavlink.constants import GRAVITY_M_S2
 from mpf_mavlink.core.guidance.law import (
-    Extensions,
-    Gains,
     MpfCommand,
     MpfDiagnostics,
     VehicleState,
-    mpf_law,
 )
 from mpf_mavlink.core.paths import TabulatedPath
 from mpf_mavlink.core.target import TargetState
@@ -448,20 +445,3 @@ def baseline_law(
         mode, k1, k2,
     )  # fmt: skip
     return cmd, diag
-
-
-def guidance_law(
-    law: str,
-    s: float,
-    vehicle: VehicleState,
-    target: TargetState,
-    path: TabulatedPath,
-    gains: Gains,
-    ext: Extensions,
-    diagnostics: bool = True,
-    params: BaselineParams = _DEFAULT,
-) -> tuple[MpfCommand, MpfDiagnostics | None]:
-    """``guidance.law`` dispatch: MPF or one of the baselines, one command type."""
-    if law == "mpf":
-        return mpf_law(s, vehicle, target, path, gains, ext, diagnostics)
-    return baseline_law(law, s, vehicle, target, path, params)
