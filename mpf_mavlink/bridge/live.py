@@ -369,7 +369,7 @@ class Bridge:
             raise _Stop(
                 f"could not stream setpoints at {rate:g} Hz for {m.prestream_s:g} s", "engage"
             )
-        span = loop.last_send_mono - (loop.first_send_mono or loop.last_send_mono)
+        span = loop.prestream_span_s()
         self.log(f"pre-streamed {loop.prestream_sends} setpoints in {span:.2f} s")
         if m.arm and not (vl.hb is not None and vl.hb.armed):
             self._arm()

@@ -97,7 +97,8 @@ class Link:
         self._wanted = frozenset(
             mid
             for mid, cls in M.mavlink_map.items()
-            if cls.msgname in accept or cls.msgname in ("SET_ATTITUDE_TARGET", "STATUSTEXT")
+            if cls.msgname in accept
+            or cls.msgname in ("SET_ATTITUDE_TARGET", "STATUSTEXT", "SYSTEM_TIME")
         )
         self.conn = mavutil.mavlink_connection(
             url,
@@ -376,6 +377,11 @@ class Link:
                 due = max(now, tw + self.command_latency_s)
         elif mt == "STATUSTEXT":
             self.on_epoch(msg)
+            return
+        elif mt == "SYSTEM_TIME":
+            # a lockstep peer's clock answer (it let a frame pass without a setpoint): the
+            # frame stamped so is answered; the autopilot has nothing to act on
+            self.lockstep.on_clock(msg.time_boot_ms)
             return
         elif mt not in self.accept:
             return

@@ -192,7 +192,8 @@ class SimVehicle:
         self.time = StepClock(self.dt, int(round(self.plant.t / self.dt)))
         self.clock = make_clock(cfg.clock, answer_timeout_s=cfg.answer_timeout_s,
                                 spin_s=cfg.lockstep_spin_s, speed=cfg.realtime_speed)  # fmt: skip
-        self.lockstep = Lockstep(self.frame_period, cfg.command_latency_s, cfg.lockstep_overlap)
+        self.lockstep = Lockstep(self.frame_period, cfg.command_latency_s, cfg.lockstep_overlap,
+                                 modes_end_waits=not cfg.lockstep_from_connect)  # fmt: skip
         self.link = Link(cfg.url, self.sysid, self.compid,
                          (int(cfg.target_system), int(cfg.target_component)), self.time,
                          self.lockstep, telemetry_latency_s=cfg.telemetry_latency_s,
@@ -395,6 +396,11 @@ class SimVehicle:
         self._record()
         return self.time.t
 
+    def _poll_or_stop(self, timeout: float) -> bool:
+        """:meth:`poll` in slices of 50 ms that a :meth:`stop` ends: a peer gone for good (the
+        bridge done) is not waited for the full lockstep timeout."""
+        return self.link.poll(min(timeout, 0.05)) or self._stop.is_set()
+
     def run(self, duration_s: float) -> None:
         """Advance ``duration_s`` of sim time, paced by the clock (lockstep or realtime)."""
         clock = self.time
@@ -403,9 +409,16 @@ class SimVehicle:
         self.clock.start(clock.boot_s)
         try:
             peer = self._lockstep_peer if self.config.realtime_until_engaged else self.has_peer
+            poll = self.link.poll
+            if self.config.lockstep_from_connect and self.clock.mode == "lockstep":
+                peer, poll = self.has_peer, self._poll_or_stop
+                # the peer's arrival is a wall-clock instant: the vehicle waits for it rather
+                # than fly on, so the hand-over starts from the same state every time
+                while not self._stop.is_set() and not self.has_peer():
+                    self.link.poll(0.01)
             while not self._stop.is_set() and (end_k is None or clock.k < end_k):
                 self.step_once()
-                self.clock.wait(clock.boot_s, self.link.poll, peer)
+                self.clock.wait(clock.boot_s, poll, peer)
         finally:
             self.wall_time_running += time.perf_counter() - w0
             self.sim_time_running += (clock.k - k0) * self.dt
