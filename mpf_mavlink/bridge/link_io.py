@@ -224,15 +224,22 @@ class VehicleLink:
             self.dispatch(msg)
 
     def spin(self, timeout_s: float, until: Callable[[], bool] | None = None) -> bool:
-        """Pump messages and duties until ``until()`` (True) or the timeout (False)."""
+        """Pump messages and duties until ``until()`` (True) or the timeout (False). Lockstep
+        (once the vehicle's clock is known): the timeout counts vehicle time, so a wait ends
+        after the same simulated time however fast the host runs, bounded by
+        ``lockstep_wall_timeout_s`` of wall time for a vehicle that sends nothing."""
         t_end = time.monotonic() + timeout_s
+        vt_end = math.inf
+        if self.m.lockstep and self.vehicle_t is not None:
+            vt_end = self.vehicle_t + timeout_s
+            t_end = time.monotonic() + max(timeout_s, self.m.lockstep_wall_timeout_s)
         link, dispatch, to = self.link, self.dispatch, self._to
         due, tick = to.due, to.tick
         while True:
             if until is not None and until():
                 return True
             now = time.monotonic()
-            if now >= t_end:
+            if now >= t_end or (self.vehicle_t is not None and self.vehicle_t >= vt_end):
                 return False
             wait = min(t_end - now, MAX_WAIT_S, max(0.0, due(now) - now))
             msg = link.recv(wait)

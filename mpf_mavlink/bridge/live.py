@@ -246,7 +246,7 @@ class Bridge:
             enable_signing(vl.link, signing_key, m.signing_link_id)
         fleet_link.open_(self.fleet, m)  # fleet: the coordination link
         self.phase.set(State.WAIT_HEARTBEAT)
-        hb = wait_heartbeat(vl.link, m.heartbeat_timeout_s)
+        hb = wait_heartbeat(vl.link, m.heartbeat_timeout_s, on_other=self._before_heartbeat)
         vl.compid = hb.get_srcComponent()
         vl.dispatch(hb)
         seen = flavour_from_heartbeat(hb)
@@ -265,6 +265,16 @@ class Bridge:
         self.log(
             f"heartbeat from system {m.vehicle_sysid}: {want.value}, mode {self.session.mode_str()}"
         )
+
+    def _before_heartbeat(self, msg: Any) -> None:
+        """Lockstep: the vehicle's ATTITUDE read while its HEARTBEAT is awaited is answered
+        (with a clock answer), or the simulation would wait for it on the wall clock."""
+        if (
+            self.m.lockstep
+            and msg.get_type() == "ATTITUDE"
+            and msg.get_srcSystem() == self.vl.sysid
+        ):
+            self.vl.answer_clock(msg.time_boot_ms * 1e-3)
 
     def _prepare(self, res: BridgeResult) -> None:
         """Streams, home, the autopilot's fallback, a complete state, the checks; raises
@@ -361,7 +371,8 @@ class Bridge:
         gc.freeze()
         # the checks (and that collection) take a while without pumping: take the backlog in
         # (state only, no setpoints for old samples), then start the staleness clocks afresh
-        vl.drain()
+        if not m.lockstep:  # lockstep: the vehicle waited for us, there is no backlog
+            vl.drain()
         vl.send_text(STREAM_TEXT)  # for replay: control steps start after this record
         loop.start()
         rate = m.min_setpoint_rate_hz

@@ -68,6 +68,7 @@ import math
 import os
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -409,7 +410,7 @@ class SimVehicle:
         self.clock.start(clock.boot_s)
         try:
             peer = self._lockstep_peer if self.config.realtime_until_engaged else self.has_peer
-            poll = self.link.poll
+            poll: Callable[[float], bool] = self.link.poll
             if self.config.lockstep_from_connect and self.clock.mode == "lockstep":
                 peer, poll = self.has_peer, self._poll_or_stop
                 # the peer's arrival is a wall-clock instant: the vehicle waits for it rather
