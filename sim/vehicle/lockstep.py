@@ -84,6 +84,10 @@ class Lockstep:
         """A mode change for the vehicle was read (it is applied when due)."""
         self.modes_pending += 1
 
+    def answered_t(self) -> float | None:
+        """The boot time (s) the telemetry of the latest answer received left at, if known."""
+        return self._att_t.get(self.answer_ms)
+
     def on_clock(self, stamp_ms: int) -> None:
         """A clock answer (SYSTEM_TIME) stamped ``stamp_ms``: frames up to it are answered."""
         if stamp_ms > self.answer_ms:

@@ -200,6 +200,7 @@ class SimVehicle:
                          self.lockstep, telemetry_latency_s=cfg.telemetry_latency_s,
                          command_latency_s=cfg.command_latency_s,
                          lockstep_clock=self.clock.mode == "lockstep", accept=_QUEUED)  # fmt: skip
+        self.link.commands_on_answers = cfg.lockstep_from_connect and self.clock.mode == "lockstep"
         if isinstance(self.clock, LockstepClock):
             self.clock.ready = self.link.readable
         self.tun = tunables(cfg)
