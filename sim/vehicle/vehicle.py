@@ -191,8 +191,12 @@ class SimVehicle:
         self._gusts = sorted((float(g["start_s"]), {k: x for k, x in g.items() if k != "start_s"})
                              for g in cfg.gusts)  # fmt: skip
         self.time = StepClock(self.dt, int(round(self.plant.t / self.dt)))
+        # a peer in lockstep throughout is waited for through its slow steps (the checks, a
+        # first import on a loaded host): a frame let go unanswered would change the flight
+        answered_s = 5.0 if cfg.lockstep_from_connect else 1.0
         self.clock = make_clock(cfg.clock, answer_timeout_s=cfg.answer_timeout_s,
-                                spin_s=cfg.lockstep_spin_s, speed=cfg.realtime_speed)  # fmt: skip
+                                answered_timeout_s=answered_s, spin_s=cfg.lockstep_spin_s,
+                                speed=cfg.realtime_speed)  # fmt: skip
         self.lockstep = Lockstep(self.frame_period, cfg.command_latency_s, cfg.lockstep_overlap,
                                  modes_end_waits=not cfg.lockstep_from_connect)  # fmt: skip
         self.link = Link(cfg.url, self.sysid, self.compid,
