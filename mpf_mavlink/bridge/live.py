@@ -31,12 +31,13 @@ States (``BridgeResult.state_reached`` is the furthest one):
 The per-sample computation (estimator, target, s, law, adapter, safe setpoints) lives in
 :class:`mpf_mavlink.bridge.controller.Controller`, which replay drives the same way. The wall clock
 (time.monotonic) is used only for link timeouts (against a lockstep simulation,
-``mavlink.lockstep``, the telemetry and mode timeouts count the vehicle's time instead, bounded
-by ``lockstep_wall_timeout_s`` of wall time), rates and the resend timer; the receive time
-the estimator and a live target see is the message's tlog record time (microseconds), and the
-decisions taken from the wall clock are written to the tlog as STATUSTEXT: ``MPF t0=``,
-``MPF s0=`` after INIT and ``MPF stream`` when setpoints start (see controller.py), so a replay
-of the tlog reproduces every setpoint.
+``mavlink.lockstep``, every wait of the life cycle, the prestream, re-sends and stream rates
+count the vehicle's time instead, bounded by ``lockstep_wall_timeout_s`` of wall time, and each
+ATTITUDE no setpoint answers gets a SYSTEM_TIME clock answer), rates and the resend timer; the
+receive time the estimator and a live target see is the message's tlog record time
+(microseconds), and the decisions taken from the wall clock are written to the tlog as
+STATUSTEXT: ``MPF t0=``, ``MPF s0=`` after INIT and ``MPF stream`` when setpoints start (see
+controller.py), so a replay of the tlog reproduces every setpoint.
 Records: ``mavlink.tlog`` (both directions), ``timeseries.csv`` (TRACKING rows, what the law
 saw), ``setpoints.csv``, ``metrics.json`` (figures, counters, exit) and the plots.
 """
