@@ -261,7 +261,9 @@ def vehicle_config(cfg: Config, url: str, clock: str | None = None, **over: Any)
         gusts=[dataclasses.asdict(g) for g in sil.gusts],
         plant_options=plant_options,
         autopilot=build_autopilot(cfg),
-        realtime_until_engaged=True,
+        # lockstep: the bridge answers every frame in every phase (mavlink.lockstep), so the
+        # hand-over runs on vehicle time too; a realtime clock ignores this
+        lockstep_from_connect=True,
         # the bridge's own scripted target counts from its mission origin: so must the world's
         target_epoch="ready" if sil.target_live else "bridge",
         target_feed=None if sil.target_feed is None else dataclasses.asdict(sil.target_feed),

@@ -52,6 +52,9 @@ class ControlLoop:
         self.last_good_vt: float | None = None
         self.last_send_mono = -math.inf
         self.first_send_mono: float | None = None
+        # the same instants on the vehicle's clock (lockstep: the prestream and re-sends count it)
+        self.last_send_vt: float | None = None
+        self.first_send_vt: float | None = None
         self.prestream_sends = 0
         self.t_engage: float | None = None  # mission time (s) tracking started
         self.t_last: float | None = None  # mission time (s) of the latest step
@@ -83,7 +86,7 @@ class ControlLoop:
         if self.phase.state != State.HANDBACK:  # HANDBACK: wings level until the hold is confirmed
             self._watchdog(att_left, timeout)
         if att_left >= self.period_s and self.last_sp is not None:
-            if now - self.last_send_mono >= self.period_s:
+            if vl.elapsed(self.last_send_mono, self.last_send_vt) >= self.period_s:
                 self.send_setpoint(self.last_sp, self.last_time_boot_ms)
                 self.n["setpoints_resent"] += 1
 
@@ -106,7 +109,7 @@ class ControlLoop:
     # -- streaming ---------------------------------------------------------------------------
     def start(self) -> None:
         """Start streaming, the staleness clocks afresh (the checks did not pump messages)."""
-        self.first_send_mono, self.prestream_sends = None, 0
+        self.first_send_mono, self.first_send_vt, self.prestream_sends = None, None, 0
         self.streaming = True
         self.last_good_mono = self.last_att_mono = time.monotonic()
         self.last_good_vt = self.last_att_vt = self.vl.vehicle_t
@@ -115,11 +118,20 @@ class ControlLoop:
         """Setpoints have streamed for ``prestream_s`` at ``min_setpoint_rate_hz`` or faster."""
         if self.first_send_mono is None:
             return False
-        span = self.last_send_mono - self.first_send_mono  # first to last setpoint sent
+        span = self.prestream_span_s()
         return bool(
             span >= self.m.prestream_s
             and (self.prestream_sends - 1) / span >= self.m.min_setpoint_rate_hz
         )
+
+    def prestream_span_s(self) -> float:
+        """From the first to the last setpoint of the prestream (s; lockstep: vehicle time)."""
+        if self.first_send_mono is None:
+            return 0.0
+        if self.m.lockstep:
+            first, last = self.first_send_vt, self.last_send_vt
+            return 0.0 if first is None or last is None else max(0.0, last - first)
+        return self.last_send_mono - self.first_send_mono
 
     def hold_wings_level(self) -> None:
         """From now on re-send a wings-level setpoint (the hand-back's)."""
@@ -169,9 +181,11 @@ class ControlLoop:
             return self.send_setpoint(safe_setpoint(self.ctl.ad_params), time_boot_ms)
         vl.send(msg)
         now = time.monotonic()
-        self.last_send_mono = now
+        self.last_send_mono, self.last_send_vt = now, vl.vehicle_t
+        if time_boot_ms > vl.answered_ms:
+            vl.answered_ms = time_boot_ms  # lockstep: this frame needs no clock answer
         self.n["setpoints_sent"] += 1
         if self.phase.state == State.PRESTREAM:
             if self.first_send_mono is None:
-                self.first_send_mono = now
+                self.first_send_mono, self.first_send_vt = now, vl.vehicle_t
             self.prestream_sends += 1

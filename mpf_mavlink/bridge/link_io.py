@@ -102,6 +102,9 @@ class VehicleLink:
         self.vehicle_t: float | None = None
         self.last_hb_tx_mono = -math.inf
         self.last_ts_tx_mono = -math.inf  # the latest TIMESYNC request (PX4's loop delay)
+        # lockstep: the latest ATTITUDE stamp (ms of the boot clock) answered, by a setpoint or
+        # a clock answer; the simulation advances past a frame only once it is answered
+        self.answered_ms = -1
         self.commands = CommandChannel(self)
         self._to = LinkHandlers()
 
@@ -168,7 +171,7 @@ class VehicleLink:
         if own:
             if self.arrivals is not None:
                 q = self.arrivals.setdefault(mtype, deque(maxlen=400))
-                q.append(time.monotonic())
+                q.append(self.clock())
             if mtype == "PARAM_VALUE":
                 self._param(msg)
                 return
@@ -195,6 +198,18 @@ class VehicleLink:
         if cls in _CLOCK_SAMPLES:
             self.vehicle_t = sample.t_boot_s
         self._to.vehicle(sample, rx)
+        if cls is AttitudeSample and self.m.lockstep:
+            self.answer_clock(sample.t_boot_s)
+
+    def answer_clock(self, t_boot_s: float) -> None:
+        """Lockstep: let the simulation past the frame of the ATTITUDE stamped ``t_boot_s`` (s of
+        the boot clock) when no setpoint answered it, with a SYSTEM_TIME carrying that stamp
+        (time_unix_usec 0: no wall time is claimed), so every phase of the life cycle runs on
+        the vehicle's time and the flight does not depend on when either process got the CPU."""
+        ms = int(round(t_boot_s * 1e3))
+        if ms > self.answered_ms:
+            self.answered_ms = ms
+            self.send(self.link.mav.system_time_encode(0, ms))
 
     def _param(self, msg: Any) -> None:
         name = msg.param_id.rstrip("\x00") if isinstance(msg.param_id, str) else ""
@@ -209,15 +224,22 @@ class VehicleLink:
             self.dispatch(msg)
 
     def spin(self, timeout_s: float, until: Callable[[], bool] | None = None) -> bool:
-        """Pump messages and duties until ``until()`` (True) or the timeout (False)."""
+        """Pump messages and duties until ``until()`` (True) or the timeout (False). Lockstep
+        (once the vehicle's clock is known): the timeout counts vehicle time, so a wait ends
+        after the same simulated time however fast the host runs, bounded by
+        ``lockstep_wall_timeout_s`` of wall time for a vehicle that sends nothing."""
         t_end = time.monotonic() + timeout_s
+        vt_end = math.inf
+        if self.m.lockstep and self.vehicle_t is not None:
+            vt_end = self.vehicle_t + timeout_s
+            t_end = time.monotonic() + max(timeout_s, self.m.lockstep_wall_timeout_s)
         link, dispatch, to = self.link, self.dispatch, self._to
         due, tick = to.due, to.tick
         while True:
             if until is not None and until():
                 return True
             now = time.monotonic()
-            if now >= t_end:
+            if now >= t_end or (self.vehicle_t is not None and self.vehicle_t >= vt_end):
                 return False
             wait = min(t_end - now, MAX_WAIT_S, max(0.0, due(now) - now))
             msg = link.recv(wait)
@@ -233,6 +255,20 @@ class VehicleLink:
             tick()
 
     # -- timeouts ----------------------------------------------------------------------------
+    def clock(self) -> float:
+        """The life cycle's clock (s): the vehicle's (its latest state's stamp) in lockstep once
+        it has one, else the wall clock (monotonic); only differences of it mean anything."""
+        if self.m.lockstep and self.vehicle_t is not None:
+            return self.vehicle_t
+        return time.monotonic()
+
+    def elapsed(self, since_mono: float, since_vt: float | None) -> float:
+        """Seconds since an instant (``since_mono`` on the wall clock, ``since_vt`` on the
+        vehicle's): vehicle time in lockstep, wall time on a real link."""
+        if self.m.lockstep:
+            return self.vehicle_since(since_vt)
+        return time.monotonic() - since_mono
+
     def left(
         self, since_mono: float, since_vt: float | None, timeout_s: float, wall_s: float = 0.0
     ) -> float:

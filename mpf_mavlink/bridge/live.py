@@ -31,12 +31,13 @@ States (``BridgeResult.state_reached`` is the furthest one):
 The per-sample computation (estimator, target, s, law, adapter, safe setpoints) lives in
 :class:`mpf_mavlink.bridge.controller.Controller`, which replay drives the same way. The wall clock
 (time.monotonic) is used only for link timeouts (against a lockstep simulation,
-``mavlink.lockstep``, the telemetry and mode timeouts count the vehicle's time instead, bounded
-by ``lockstep_wall_timeout_s`` of wall time), rates and the resend timer; the receive time
-the estimator and a live target see is the message's tlog record time (microseconds), and the
-decisions taken from the wall clock are written to the tlog as STATUSTEXT: ``MPF t0=``,
-``MPF s0=`` after INIT and ``MPF stream`` when setpoints start (see controller.py), so a replay
-of the tlog reproduces every setpoint.
+``mavlink.lockstep``, every wait of the life cycle, the prestream, re-sends and stream rates
+count the vehicle's time instead, bounded by ``lockstep_wall_timeout_s`` of wall time, and each
+ATTITUDE no setpoint answers gets a SYSTEM_TIME clock answer), rates and the resend timer; the
+receive time the estimator and a live target see is the message's tlog record time
+(microseconds), and the decisions taken from the wall clock are written to the tlog as
+STATUSTEXT: ``MPF t0=``, ``MPF s0=`` after INIT and ``MPF stream`` when setpoints start (see
+controller.py), so a replay of the tlog reproduces every setpoint.
 Records: ``mavlink.tlog`` (both directions), ``timeseries.csv`` (TRACKING rows, what the law
 saw), ``setpoints.csv``, ``metrics.json`` (figures, counters, exit) and the plots.
 """
@@ -248,7 +249,7 @@ class Bridge:
             enable_signing(vl.link, signing_key, m.signing_link_id)
         fleet_link.open_(self.fleet, m)  # fleet: the coordination link
         self.phase.set(State.WAIT_HEARTBEAT)
-        hb = wait_heartbeat(vl.link, m.heartbeat_timeout_s)
+        hb = wait_heartbeat(vl.link, m.heartbeat_timeout_s, on_other=self._before_heartbeat)
         vl.compid = hb.get_srcComponent()
         vl.dispatch(hb)
         seen = flavour_from_heartbeat(hb)
@@ -267,6 +268,16 @@ class Bridge:
         self.log(
             f"heartbeat from system {m.vehicle_sysid}: {want.value}, mode {self.session.mode_str()}"
         )
+
+    def _before_heartbeat(self, msg: Any) -> None:
+        """Lockstep: the vehicle's ATTITUDE read while its HEARTBEAT is awaited is answered
+        (with a clock answer), or the simulation would wait for it on the wall clock."""
+        if (
+            self.m.lockstep
+            and msg.get_type() == "ATTITUDE"
+            and msg.get_srcSystem() == self.vl.sysid
+        ):
+            self.vl.answer_clock(msg.time_boot_ms * 1e-3)
 
     def _prepare(self, res: BridgeResult) -> None:
         """Streams, home, the autopilot's fallback, a complete state, the checks; raises
@@ -363,7 +374,8 @@ class Bridge:
         gc.freeze()
         # the checks (and that collection) take a while without pumping: take the backlog in
         # (state only, no setpoints for old samples), then start the staleness clocks afresh
-        vl.drain()
+        if not m.lockstep:  # lockstep: the vehicle waited for us, there is no backlog
+            vl.drain()
         vl.send_text(STREAM_TEXT)  # for replay: control steps start after this record
         loop.start()
         rate = m.min_setpoint_rate_hz
@@ -371,7 +383,7 @@ class Bridge:
             raise _Stop(
                 f"could not stream setpoints at {rate:g} Hz for {m.prestream_s:g} s", "engage"
             )
-        span = loop.last_send_mono - (loop.first_send_mono or loop.last_send_mono)
+        span = loop.prestream_span_s()
         self.log(f"pre-streamed {loop.prestream_sends} setpoints in {span:.2f} s")
         if m.arm and not (vl.hb is not None and vl.hb.armed):
             self._arm()

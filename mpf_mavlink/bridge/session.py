@@ -116,13 +116,13 @@ class Session:
                 last = a.result_name
             return any(acked) and confirm()
 
-        def send() -> float:
+        def send() -> tuple[float, float | None]:
             # the ACKs of this mode's earlier attempts are taken first (done), not forgotten
             done()
             msg = encode_set_mode(vl.link.mav, vl.sysid, vl.compid, vl.flavour, name)
             vl.commands.send(msg, MAV_CMD_DO_SET_MODE)
             self.n["mode_requests"] += 1
-            return time.monotonic()
+            return time.monotonic(), vl.vehicle_t
 
         # lockstep: each attempt counts vehicle time; all of them together at most
         # lockstep_wall_timeout_s of wall time (a dead vehicle shows no time at all)
@@ -130,12 +130,12 @@ class Session:
         vl.commands.take(MAV_CMD_DO_SET_MODE)  # answers to an earlier request
         for attempt in range(m.mode_retries):
             t_sent = send()
-            t0, vt0 = t_sent, vl.vehicle_t  # the attempt's start (lockstep: vehicle time)
+            t0, vt0 = t_sent  # the attempt's start (lockstep: vehicle time)
             while (left := vl.left(t0, vt0, m.mode_timeout_s, wall_s)) > 0.0:
                 if vl.spin(min(left, 0.1), done):
                     return True, "confirmed"
                 lost_ack = confirm() and not any(acked)
-                if lost_ack and asks_left and time.monotonic() - t_sent >= MODE_REASK_AFTER_S:
+                if lost_ack and asks_left and vl.elapsed(*t_sent) >= MODE_REASK_AFTER_S:
                     # the HEARTBEAT already reports the mode but the ACK was lost (a lossy
                     # radio): asking again is harmless (the autopilot ACKs the mode it is in)
                     # and brings the confirmation the life cycle requires

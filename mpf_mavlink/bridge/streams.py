@@ -82,6 +82,8 @@ class StreamNegotiator:
         within INTERVAL_GRACE_S)."""
         vl, m = self.vl, self.m
         plan = self.plan()
+        if m.lockstep:  # the rates are measured on the vehicle's clock: have it first
+            vl.spin(m.heartbeat_timeout_s, lambda: vl.vehicle_t is not None)
         vl.arrivals = {}
         interval = MAV_CMD_SET_MESSAGE_INTERVAL
         # one request per message, their ACKs taken as they come (the rates decide)
@@ -91,13 +93,14 @@ class StreamNegotiator:
             interval,
         )  # fmt: skip
         method = "MAV_CMD_SET_MESSAGE_INTERVAL"
-        t_req = t0 = time.monotonic()
+        t_req = t0 = vl.clock()
+        wall0 = time.monotonic()  # lockstep: a vehicle that sends nothing shows no time at all
         refused: list[str] = []
         fallback_sent = False
         try:
             while True:
                 vl.spin(0.1)
-                now = time.monotonic()
+                now = vl.clock()
                 refused += [a.result_name for a in vl.commands.take(interval)
                             if is_final(a) and not a.accepted]  # fmt: skip
                 if (
@@ -110,7 +113,9 @@ class StreamNegotiator:
                     fallback_sent, t_req = True, now
                 if now - t_req >= RATE_WINDOW_S + 0.2 and not self.short(plan, now):
                     break
-                if now - t0 >= m.stream_timeout_s:
+                if now - t0 >= m.stream_timeout_s or (
+                    m.lockstep and time.monotonic() - wall0 >= m.lockstep_wall_timeout_s
+                ):
                     lacking = self.short(plan, now)
                     if lacking:
                         extra = f"; refused: {', '.join(sorted(set(refused)))}" if refused else ""
@@ -139,7 +144,7 @@ class StreamNegotiator:
             )
 
     def _report(self, res: BridgeResult, plan: Plan, method: str) -> None:
-        now = time.monotonic()
+        now = self.vl.clock()
         msgs = {
             name: {"requested_hz": hz, "min_hz": lo,
                    "measured_hz": round(self.measured(name, now), 2)}

@@ -109,12 +109,13 @@ class SilConfig:
     plant: ``jsbsim`` (the ``aircraft`` section) or ``kinematic`` (bank-to-turn, steady wind only).
     flavour: which autopilot the vehicle presents (the bridge flies it in OFFBOARD / GUIDED).
     clock: ``lockstep`` (the vehicle advances once the bridge has answered the last telemetry,
-      waiting at most ``answer_timeout_s`` of wall time, 1 s after a frame the bridge answered;
-      a mode change the bridge asked for ends the waits until it is applied; real time until
-      the bridge has taken control; ``lockstep_spin_s``: how long the vehicle polls for the
-      answer before it sleeps, which spares the bridge's send a wake-up of the vehicle: only the
-      wait changes, never the flight; sim/vehicle/clock.py) or ``realtime`` (paced to
-      ``realtime_speed`` x the wall clock).
+      waiting at most ``answer_timeout_s`` of wall time, 5 s after a frame the bridge answered;
+      from the bridge's first message on, in every phase: the bridge answers each ATTITUDE with
+      a setpoint or a SYSTEM_TIME clock answer and counts its hand-over on the vehicle's clock,
+      so the same seed flies the same flight bit for bit; ``lockstep_spin_s``: how long the
+      vehicle polls for the answer before it sleeps, which spares the bridge's send a wake-up of
+      the vehicle: only the wait changes, never the flight; sim/vehicle/clock.py) or
+      ``realtime`` (paced to ``realtime_speed`` x the wall clock).
     target_live: the bridge takes the moving target from the vehicle's MAVLink stream (the
       target is its own system ``target_system``: FOLLOW_TARGET + GLOBAL_POSITION_INT at
       ``target_rate_hz``) instead of its own copy of the scripted motion; ``target_feed``: a

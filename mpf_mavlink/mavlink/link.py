@@ -745,8 +745,10 @@ def wait_heartbeat(
     pin: bool = True,
     compid: int | None = None,
     autopilots: Iterable[int] | None = AUTOPILOTS,
+    on_other: Callable[[Any], None] | None = None,
 ) -> Any:
-    """First HEARTBEAT of the vehicle's autopilot. MpfError after ``timeout_s``.
+    """First HEARTBEAT of the vehicle's autopilot. MpfError after ``timeout_s``. ``on_other``
+    sees every other message read meanwhile (a lockstep peer answers the ATTITUDE among them).
 
     Only from component ``compid`` (default: the link's ``vehicle_compid``, else 1, the id of
     PX4's and ArduPilot's autopilot) and with a MAV_AUTOPILOT in ``autopilots`` (None: any but
@@ -792,6 +794,8 @@ def wait_heartbeat(
                 + ")"
             )
         msg = link.recv(max(0.0, min(remaining, next_hb - time.monotonic())))
+        if msg is not None and on_other is not None and msg.get_type() != "HEARTBEAT":
+            on_other(msg)
         if (
             msg is None
             or msg.get_type() != "HEARTBEAT"

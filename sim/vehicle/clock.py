@@ -191,7 +191,9 @@ def make_clock(clock: str | Clock = "lockstep", **kw: float) -> Clock:
         return clock
     if clock == "lockstep":
         return LockstepClock(
-            answer_timeout_s=kw.get("answer_timeout_s", 0.05), spin_s=kw.get("spin_s", 0.0)
+            answer_timeout_s=kw.get("answer_timeout_s", 0.05),
+            answered_timeout_s=kw.get("answered_timeout_s", 1.0),
+            spin_s=kw.get("spin_s", 0.0),
         )
     if clock == "realtime":
         return RealtimeClock(speed=kw.get("speed", 1.0))

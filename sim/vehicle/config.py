@@ -72,6 +72,10 @@ class VehicleConfig:
     realtime_speed: float = 1.0  # realtime clock: times real time
     # pace at real time until the bridge commands the vehicle (see SimVehicle._lockstep_peer)
     realtime_until_engaged: bool = False
+    # lockstep from the peer's first message on, in every phase (a peer that answers every
+    # ATTITUDE, with a setpoint or a clock answer: the bridge with mavlink.lockstep): no frame
+    # advances before a peer is there, nor unanswered, so the hand-over runs on vehicle time
+    lockstep_from_connect: bool = False
     # the point (m NED about home) and heading (rad) where the trim flight ends, its airspeed
     position_ned: tuple[float, float, float] = (0.0, 0.0, -100.0)
     heading: float = 0.0

@@ -93,11 +93,16 @@ class Link:
         self.command_latency_s = float(command_latency_s)
         self._lockstep_clock = lockstep_clock  # an answer's latency runs from its telemetry
         self.accept = accept
+        # a peer in lockstep in every phase: its commands act a frame after the latency from the
+        # telemetry its latest answer answered (not from when they were read), so the frame a
+        # mode request acts in does not depend on which wait read it
+        self.commands_on_answers = False
         # ids of what _on_msg acts on: a datagram with none of them is not parsed (see _ignored)
         self._wanted = frozenset(
             mid
             for mid, cls in M.mavlink_map.items()
-            if cls.msgname in accept or cls.msgname in ("SET_ATTITUDE_TARGET", "STATUSTEXT")
+            if cls.msgname in accept
+            or cls.msgname in ("SET_ATTITUDE_TARGET", "STATUSTEXT", "SYSTEM_TIME")
         )
         self.conn = mavutil.mavlink_connection(
             url,
@@ -377,10 +382,19 @@ class Link:
         elif mt == "STATUSTEXT":
             self.on_epoch(msg)
             return
+        elif mt == "SYSTEM_TIME":
+            # a lockstep peer's clock answer (it let a frame pass without a setpoint): the
+            # frame stamped so is answered; the autopilot has nothing to act on
+            self.lockstep.on_clock(msg.time_boot_ms)
+            return
         elif mt not in self.accept:
             return
         elif is_mode_request(msg, mt, self.sysid):
             self.lockstep.on_mode_request()
+        if self.commands_on_answers and mt != "SET_ATTITUDE_TARGET":
+            ta = self.lockstep.answered_t()
+            if ta is not None:
+                due = max(now, ta + self.command_latency_s + self.lockstep.frame_period)
         q = self.incoming
         i = len(q)
         while i > 0 and q[i - 1][0] > due:  # kept in order of due time

@@ -48,8 +48,17 @@ def is_mode_request(msg: Any, mtype: str, sysid: int) -> bool:
 class Lockstep:
     """Stamps written, answers received, the stamp awaited (all ms of the boot clock)."""
 
-    def __init__(self, frame_period: float, command_latency_s: float, overlap: bool = True) -> None:
+    def __init__(
+        self,
+        frame_period: float,
+        command_latency_s: float,
+        overlap: bool = True,
+        modes_end_waits: bool = True,
+    ) -> None:
         self.frame_period = float(frame_period)
+        # False: a peer that answers every frame (clock answers included) is awaited through
+        # its mode changes too, so the frame a mode request is read in never depends on timing
+        self.modes_end_waits = bool(modes_end_waits)
         self.command_latency_s = float(command_latency_s)
         self.overlap = bool(overlap)
         self.overlapped = 0  # frames that awaited an earlier frame's answer, not the last one's
@@ -65,11 +74,24 @@ class Lockstep:
 
     @property
     def answered(self) -> bool:
-        return self.answer_ms >= self.await_ms or self.unstamped or self.modes_pending > 0
+        return (
+            self.answer_ms >= self.await_ms
+            or self.unstamped
+            or (self.modes_pending > 0 and self.modes_end_waits)
+        )
 
     def on_mode_request(self) -> None:
         """A mode change for the vehicle was read (it is applied when due)."""
         self.modes_pending += 1
+
+    def answered_t(self) -> float | None:
+        """The boot time (s) the telemetry of the latest answer received left at, if known."""
+        return self._att_t.get(self.answer_ms)
+
+    def on_clock(self, stamp_ms: int) -> None:
+        """A clock answer (SYSTEM_TIME) stamped ``stamp_ms``: frames up to it are answered."""
+        if stamp_ms > self.answer_ms:
+            self.answer_ms = stamp_ms
 
     def mode_request_applied(self) -> None:
         """A mode change read before was applied (or one never read here: nothing pending)."""

@@ -68,6 +68,7 @@ import math
 import os
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -190,14 +191,20 @@ class SimVehicle:
         self._gusts = sorted((float(g["start_s"]), {k: x for k, x in g.items() if k != "start_s"})
                              for g in cfg.gusts)  # fmt: skip
         self.time = StepClock(self.dt, int(round(self.plant.t / self.dt)))
+        # a peer in lockstep throughout is waited for through its slow steps (the checks, a
+        # first import on a loaded host): a frame let go unanswered would change the flight
+        answered_s = 5.0 if cfg.lockstep_from_connect else 1.0
         self.clock = make_clock(cfg.clock, answer_timeout_s=cfg.answer_timeout_s,
-                                spin_s=cfg.lockstep_spin_s, speed=cfg.realtime_speed)  # fmt: skip
-        self.lockstep = Lockstep(self.frame_period, cfg.command_latency_s, cfg.lockstep_overlap)
+                                answered_timeout_s=answered_s, spin_s=cfg.lockstep_spin_s,
+                                speed=cfg.realtime_speed)  # fmt: skip
+        self.lockstep = Lockstep(self.frame_period, cfg.command_latency_s, cfg.lockstep_overlap,
+                                 modes_end_waits=not cfg.lockstep_from_connect)  # fmt: skip
         self.link = Link(cfg.url, self.sysid, self.compid,
                          (int(cfg.target_system), int(cfg.target_component)), self.time,
                          self.lockstep, telemetry_latency_s=cfg.telemetry_latency_s,
                          command_latency_s=cfg.command_latency_s,
                          lockstep_clock=self.clock.mode == "lockstep", accept=_QUEUED)  # fmt: skip
+        self.link.commands_on_answers = cfg.lockstep_from_connect and self.clock.mode == "lockstep"
         if isinstance(self.clock, LockstepClock):
             self.clock.ready = self.link.readable
         self.tun = tunables(cfg)
@@ -395,6 +402,11 @@ class SimVehicle:
         self._record()
         return self.time.t
 
+    def _poll_or_stop(self, timeout: float) -> bool:
+        """:meth:`poll` in slices of 50 ms that a :meth:`stop` ends: a peer gone for good (the
+        bridge done) is not waited for the full lockstep timeout."""
+        return self.link.poll(min(timeout, 0.05)) or self._stop.is_set()
+
     def run(self, duration_s: float) -> None:
         """Advance ``duration_s`` of sim time, paced by the clock (lockstep or realtime)."""
         clock = self.time
@@ -403,9 +415,16 @@ class SimVehicle:
         self.clock.start(clock.boot_s)
         try:
             peer = self._lockstep_peer if self.config.realtime_until_engaged else self.has_peer
+            poll: Callable[[float], bool] = self.link.poll
+            if self.config.lockstep_from_connect and self.clock.mode == "lockstep":
+                peer, poll = self.has_peer, self._poll_or_stop
+                # the peer's arrival is a wall-clock instant: the vehicle waits for it rather
+                # than fly on, so the hand-over starts from the same state every time
+                while not self._stop.is_set() and not self.has_peer():
+                    self.link.poll(0.01)
             while not self._stop.is_set() and (end_k is None or clock.k < end_k):
                 self.step_once()
-                self.clock.wait(clock.boot_s, self.link.poll, peer)
+                self.clock.wait(clock.boot_s, poll, peer)
         finally:
             self.wall_time_running += time.perf_counter() - w0
             self.sim_time_running += (clock.k - k0) * self.dt
