@@ -667,15 +667,9 @@ def watch_hold(
     t0 = g.t_boot_s
     modes: list[str] = []
     trace: list[tuple[float, float, float, float, float]] = []
-    last_t = -1.0
     while g.t_boot_s - t0 < secs:
         g.pump(0.1)
-        if not modes or modes[-1] != g.mode():
-            modes.append(g.mode())
-        att, lp = g.last.get("ATTITUDE"), g.last.get("LOCAL_POSITION_NED")
-        if att is not None and lp is not None and g.t_boot_s != last_t:
-            last_t = g.t_boot_s
-            trace.append((g.t_boot_s - t0, att.roll, lp.x, lp.y, lp.z))
+        g.note_hold(modes, trace, g.t_boot_s - t0)
     with open(out / "after_kill.csv", "w") as f:
         f.write("t_s,roll_rad,north_m,east_m,down_m\n")
         f.writelines(",".join(f"{x:.4f}" for x in r) + "\n" for r in trace)

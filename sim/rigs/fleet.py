@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -30,7 +31,6 @@ import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -175,14 +175,9 @@ def spacing_figures(
 
 
 def fleet_spacing(
-    out: Path,
-    n: int,
-    path: Any,
-    respace: bool,
-    t_all: float,
-    t_kill: float | None,
+    out: Path, n: int, path: Any, respace: bool, t_all: float, t_kill: float | None,
     converge_m: float,
-) -> tuple[dict[str, Any], dict[str, Any], float]:
+) -> tuple[dict[str, Any], dict[str, Any], float]:  # fmt: skip
     """The spacing series of DIR's bridges' fleet.csv, its figures from ``t_all`` (Unix s, the
     last engagement) to the kill and the survivors' after it, and the path's length (m)."""
     from mpf_mavlink.config.scenario import build_path
@@ -198,32 +193,26 @@ def fleet_spacing(
     return ser, fl, L
 
 
-def _target_position(cfg: Any, centre: list[float], t: float) -> np.ndarray:
-    import dataclasses
-
-    from mpf_mavlink.config.scenario import build_target
-
-    tc = dataclasses.replace(cfg.target, position_ned_m=tuple(centre))
-    st = build_target(tc).state(t)
-    return np.asarray(st.position, float)
-
-
-@dataclass
+@dataclasses.dataclass
 class _Fleet:
     """The fleet's live parts (firmware, ground stations, bridges, relays) and what the rig saw
     of them: each engagement (wall time, s), the last one's, the kill and the hold after it."""
 
     n: int
-    fws: list[Any] = field(default_factory=list)
-    gcs: list[Gcs] = field(default_factory=list)
-    bridges: list[subprocess.Popen[str] | None] = field(default_factory=list)
-    relays: list[Any] = field(default_factory=list)
-    engaged: list[float | None] = field(default_factory=list)
+    centre: list[float] = dataclasses.field(default_factory=list)  # the placed circle's (m, NED)
+    radius: float = 0.0
+    epoch: float = 0.0  # the common target epoch (Unix s)
+    ports: tuple[list[int], list[int]] = ([], [])  # each member's own, the one sent to
+    fws: list[Any] = dataclasses.field(default_factory=list)
+    gcs: list[Gcs] = dataclasses.field(default_factory=list)
+    bridges: list[subprocess.Popen[str] | None] = dataclasses.field(default_factory=list)
+    relays: list[Any] = dataclasses.field(default_factory=list)
+    engaged: list[float | None] = dataclasses.field(default_factory=list)
     t_all: float = 0.0
     t_kill: float | None = None
-    kill_info: dict[str, Any] = field(default_factory=dict)
-    trace: list[tuple[float, float, float, float, float]] = field(default_factory=list)
-    modes_after: list[str] = field(default_factory=list)
+    kill_info: dict[str, Any] = dataclasses.field(default_factory=dict)
+    trace: list[tuple[float, float, float, float, float]] = dataclasses.field(default_factory=list)
+    modes_after: list[str] = dataclasses.field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.bridges, self.engaged = [None] * self.n, [None] * self.n
@@ -250,21 +239,6 @@ class _Fleet:
         }
         print(f"bridge {km} SIGKILLed {t_kill - self.t_all:.1f} s after the last engagement",
               flush=True)  # fmt: skip
-
-    def watch(self, g: Gcs) -> None:
-        """One sample of the killed aircraft's autopilot: its mode when it changes, and (s after
-        the kill, roll rad, N, E, D m) when the time moved on."""
-        if not self.modes_after or self.modes_after[-1] != g.mode():
-            self.modes_after.append(g.mode())
-        assert self.t_kill is not None
-        att, lp = g.last.get("ATTITUDE"), g.last.get("LOCAL_POSITION_NED")
-        tr = self.trace
-        if (
-            att is not None
-            and lp is not None
-            and (not tr or tr[-1][0] != time.time() - self.t_kill)
-        ):
-            tr.append((time.time() - self.t_kill, att.roll, lp.x, lp.y, lp.z))
 
 
 def _start_fleet(a: argparse.Namespace, v: dict[str, Any], f: _Fleet, s: dict[str, Any]) -> None:
@@ -300,20 +274,17 @@ def _start_fleet(a: argparse.Namespace, v: dict[str, Any], f: _Fleet, s: dict[st
         raise RigError("; ".join(errs))
 
 
-def _place_fleet(
-    a: argparse.Namespace, v: dict[str, Any], f: _Fleet, s: dict[str, Any]
-) -> tuple[list[float], float, tuple[list[int], list[int]]]:
-    """The circle's centre (m, NED) about the first aircraft's loiter, the common target epoch
-    (Unix s) and the coordination ports: each member's own, and the one the others send to (its
-    relay's under ``--fleet-loss`` / ``--fleet-jitter``)."""
+def _place_fleet(a: argparse.Namespace, v: dict[str, Any], f: _Fleet, s: dict[str, Any]) -> None:
+    """The circle about the first aircraft's loiter, the common target epoch and the coordination
+    ports (the one sent to: a relay's under ``--fleet-loss`` / ``--fleet-jitter``)."""
     from sim.rigs.common import place_mission
 
     cfg = v["cfg"]
-    radius = float(cfg.path.radius_m) if cfg.path.type == "circle" else 0.0
+    f.radius = radius = float(cfg.path.radius_m) if cfg.path.type == "circle" else 0.0
     for g in f.gcs:
         g.pump(0.2, echo=False)
-    centre, _ = place_mission(f.gcs[0], radius, a.lead * a.speedup)
-    epoch = time.time() + a.lead
+    f.centre, _ = place_mission(f.gcs[0], radius, a.lead * a.speedup)
+    f.epoch = time.time() + a.lead
     listen = _free_udp_ports(f.n)
     send_to = list(listen)
     if a.fleet_loss or a.fleet_jitter:
@@ -324,31 +295,21 @@ def _place_fleet(
             r = UdpRelay(0, listen[k], down=imp, seed=k, keep_log=False).start()
             f.relays.append(r)
             send_to[k] = r.vehicle_port
+    f.ports = (listen, send_to)
     s["mission"] = {
-        "centre_ned_m": centre,
-        "radius_m": radius,
-        "target": v["target_label"],
-        "epoch_unix_s": epoch,
-        "link": {"loss": a.fleet_loss, "jitter_s": a.fleet_jitter},
-    }
-    return centre, epoch, (listen, send_to)
+        "centre_ned_m": f.centre, "radius_m": radius, "target": v["target_label"],
+        "epoch_unix_s": f.epoch, "link": {"loss": a.fleet_loss, "jitter_s": a.fleet_jitter},
+    }  # fmt: skip
 
 
-def _start_bridges(
-    a: argparse.Namespace,
-    v: dict[str, Any],
-    f: _Fleet,
-    centre: list[float],
-    epoch: float,
-    ports: tuple[list[int], list[int]],
-) -> None:
+def _start_bridges(a: argparse.Namespace, v: dict[str, Any], f: _Fleet) -> None:
     """Start the n bridges ``--fleet-gap`` s apart (each to end about when the last does),
     noting engagements in between."""
     from sim.rigs.common import _bridge_command, mission_sets, start_bridge
 
     n, out = f.n, v["out"]
     for k in range(n):
-        sets = [*mission_sets(a, v, centre), *fleet_sets(n, k, *ports, epoch)]
+        sets = [*mission_sets(a, v, f.centre), *fleet_sets(n, k, *f.ports, f.epoch)]
         dur = a.duration + (n - 1 - k) * a.fleet_gap  # every bridge ends about together
         ak = argparse.Namespace(**{**vars(a), "duration": dur})
         cmd = _bridge_command(ak, v, f.fws[k].bridge_url, sets)
@@ -374,19 +335,20 @@ def _fly_until_done(a: argparse.Namespace, track_mode: str, f: _Fleet) -> None:
             if time.time() - f.t_all >= a.kill_after:
                 f.kill(a.kill_member)
         if f.t_kill is not None and time.time() - f.t_kill <= a.watch_s:
-            f.watch(f.gcs[a.kill_member])
+            f.gcs[a.kill_member].note_hold(f.modes_after, f.trace, time.time() - f.t_kill)
 
 
-def _kill_hold(
-    a: argparse.Namespace, v: dict[str, Any], f: _Fleet, centre: list[float], epoch: float
-) -> None:
+def _kill_hold(a: argparse.Namespace, v: dict[str, Any], f: _Fleet) -> None:
     """The killed aircraft's hold about the path's centre where the target was when it engaged
     (into ``kill_info``); FAIL when its autopilot left the track and hold modes."""
+    from mpf_mavlink.config.scenario import build_target
+
     mod, cfg = v["mod"], v["cfg"]
     assert f.t_kill is not None
-    radius = float(cfg.path.radius_m) if cfg.path.type == "circle" else 0.0
-    hc = _target_position(cfg, centre, (f.engaged[a.kill_member] or f.t_kill) - epoch)
-    h = hold_figures(f.trace, (float(hc[0]), float(hc[1])), -centre[2], radius)
+    tc = dataclasses.replace(cfg.target, position_ned_m=tuple(f.centre))
+    st = build_target(tc).state((f.engaged[a.kill_member] or f.t_kill) - f.epoch)
+    hc = np.asarray(st.position, float)
+    h = hold_figures(f.trace, (float(hc[0]), float(hc[1])), -f.centre[2], f.radius)
     ma = h["modes"] = f.modes_after
     if ma and any(m != mod.TRACK_MODE and m != mod.HOLD_MODE for m in ma):
         h["hold_verdict"] = f"FAIL: modes {ma}"
@@ -462,12 +424,12 @@ def fly_fleet(a: argparse.Namespace, v: dict[str, Any]) -> int:
     rc = 1
     try:
         _start_fleet(a, v, f, summary)
-        centre, epoch, ports = _place_fleet(a, v, f, summary)
-        _start_bridges(a, v, f, centre, epoch, ports)
+        _place_fleet(a, v, f, summary)
+        _start_bridges(a, v, f)
         _fly_until_done(a, v["mod"].TRACK_MODE, f)
         codes = [b.wait() if b is not None else None for b in f.bridges]
         if f.t_kill is not None:
-            _kill_hold(a, v, f, centre, epoch)
+            _kill_hold(a, v, f)
         _fleet_figures(a, v, f, codes, summary)
         summary["verdict"] = verdict(summary, a)
         rc = 0 if summary["verdict"] == "PASS" else 1
