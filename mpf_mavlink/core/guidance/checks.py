@@ -421,13 +421,10 @@ def _demand(
 
 
 def _turbulence_odds(
-    ts: np.ndarray,
-    c: np.ndarray,
-    caps: tuple[float, float],
-    v_w: float,
+    ts: np.ndarray, c: np.ndarray, caps: tuple[float, float], v_w: float,
     turbulence: tuple[str, np.ndarray, np.ndarray, np.ndarray],
     figs: dict[str, float | bool | None],
-) -> tuple[GustOdds, str]:
+) -> tuple[GustOdds, str]:  # fmt: skip
     """The likelier of a downdraft and an updraft exhausting its reserve (:func:`gust_odds`
     against the climb and sink capability ``caps``, m/s), and the sentence that says so; the
     two probabilities go into ``figs``."""
@@ -448,15 +445,9 @@ def _turbulence_odds(
 
 
 def _marginal(
-    up: float,
-    dn: float,
-    dfc: _Deficits,
-    caps: tuple[float, float],
-    reserves: tuple[float, float],
-    marginal: float,
-    gust_marg: bool,
-    with_gusts: bool,
-) -> tuple[bool, str]:
+    up: float, dn: float, dfc: _Deficits, caps: tuple[float, float],
+    reserves: tuple[float, float], marginal: float, gust_marg: bool, with_gusts: bool,
+) -> tuple[bool, str]:  # fmt: skip
     """Whether the demand is marginal (the steady peak above ``marginal`` x the capability
     ``caps`` (m/s), a gust's above the capability itself, or half a reserve (m) spent), and the
     words that say how close it is."""
