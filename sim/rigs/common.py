@@ -532,6 +532,39 @@ def _bridge_command(
     ]
 
 
+def connect(fw: Any, mod: ModuleType, params: list[tuple[str, float]]) -> tuple[Gcs, Any]:
+    """A ground station on started firmware, configured, with the user's ``--param`` tuning
+    before take-off (stock without); returns it and what the configuring set."""
+    g = Gcs(fw.gcs_url, mod.FLAVOUR)
+    configured = fw.configure(g)
+    for name, value in params:
+        g.set_param(name, value)
+    return g, configured
+
+
+def mission_sets(a: argparse.Namespace, v: dict[str, Any], centre: list[float]) -> list[str]:
+    """The bridge's ``--set`` overrides of the placed mission: the user's, the target at
+    ``centre`` (m, local NED), the target's own, no plots."""
+    ned = f"[{centre[0]:.2f},{centre[1]:.2f},{centre[2]:.2f}]"
+    return [*a.overrides, f"target.position_ned_m={ned}", *v["tsets"], "mavlink.plots=false"]
+
+
+def start_bridge(cmd: list[str], log: Path) -> subprocess.Popen[str]:
+    """``mpf-mavlink run`` as the rig's child (dying with it), its output into ``log``."""
+    with open(log, "w") as blog:
+        return subprocess.Popen(
+            cmd, stdout=blog, stderr=subprocess.STDOUT, text=True, preexec_fn=die_with_parent
+        )
+
+
+def stop_bridge(bridge: subprocess.Popen[str] | None) -> None:
+    """Terminate a bridge still running and give it 20 s to hand back."""
+    if bridge is not None and bridge.poll() is None:
+        bridge.terminate()
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            bridge.wait(20)
+
+
 def _until_bridge_exits(
     a: argparse.Namespace,
     g: Gcs,
@@ -571,28 +604,19 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
     summary.update(_flight_header(a, v, bundle_dir))
     print(f"{summary['bundle']}: starting ({bundle_dir})", flush=True)
     fw.start(bundle_dir, out / "firmware")
-    g = Gcs(fw.gcs_url, mod.FLAVOUR)
-    summary["autopilot_params"] = fw.configure(g)
-    for name, value in a.params:  # the user's tuning, before take-off (stock without)
-        g.set_param(name, value)
+    g, summary["autopilot_params"] = connect(fw, mod, a.params)
     summary["firmware_params"] = dict(a.params)
     fw.take_off(g, a.alt)
     cruise = fw.cruise_airspeed(g)
     radius = float(cfg.path.radius_m) if cfg.path.type == "circle" else 0.0
-    tsets, label = v["tsets"], v["target_label"]
     g.pump(0.3)
     centre, start = place_any(g, cfg, a.lead * a.speedup, a.start_offset)
-    sets = [
-        *a.overrides,
-        f"target.position_ned_m=[{centre[0]:.2f},{centre[1]:.2f},{centre[2]:.2f}]",
-        *tsets,
-        "mavlink.plots=false",
-    ]
+    sets = mission_sets(a, v, centre)
     summary["mission"] = {
         "path": cfg.path.type,
         "radius_m": radius or None,
         "centre_ned_m": centre,
-        "target": label,
+        "target": v["target_label"],
         "airspeed_m_s": cfg.vehicle.airspeed_m_s,
         "autopilot_cruise_airspeed_m_s": cruise,
         "start_offset_m": list(a.start_offset) if a.start_offset else None,
@@ -615,19 +639,13 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
         summary["serial"] = {"device": relay.device, "relayed_to": fw.bridge_url}
     cmd = _bridge_command(a, v, url, sets)
     print("hand-over: mpf-mavlink " + " ".join(cmd[3:]), flush=True)
-    with open(out / "bridge.log", "w") as blog:
-        bridge = subprocess.Popen(
-            cmd, stdout=blog, stderr=subprocess.STDOUT, text=True, preexec_fn=die_with_parent
-        )
+    bridge = start_bridge(cmd, out / "bridge.log")
     kill: dict[str, Any] = {}
     try:
         kill = _until_bridge_exits(a, g, mod, bridge, (centre, radius), out)
         code = bridge.wait()
     finally:
-        if bridge.poll() is None:
-            bridge.terminate()
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                bridge.wait(20)
+        stop_bridge(bridge)
         if relay is not None:
             summary["serial"].update(
                 bytes_to_autopilot=relay.bytes_up,
@@ -649,15 +667,9 @@ def watch_hold(
     t0 = g.t_boot_s
     modes: list[str] = []
     trace: list[tuple[float, float, float, float, float]] = []
-    last_t = -1.0
     while g.t_boot_s - t0 < secs:
         g.pump(0.1)
-        if not modes or modes[-1] != g.mode():
-            modes.append(g.mode())
-        att, lp = g.last.get("ATTITUDE"), g.last.get("LOCAL_POSITION_NED")
-        if att is not None and lp is not None and g.t_boot_s != last_t:
-            last_t = g.t_boot_s
-            trace.append((g.t_boot_s - t0, att.roll, lp.x, lp.y, lp.z))
+        g.note_hold(modes, trace, g.t_boot_s - t0)
     with open(out / "after_kill.csv", "w") as f:
         f.write("t_s,roll_rad,north_m,east_m,down_m\n")
         f.writelines(",".join(f"{x:.4f}" for x in r) + "\n" for r in trace)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -36,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from sim.rigs import arduplane
-from sim.rigs.bundles import RigError, die_with_parent, unpack
+from sim.rigs.bundles import RigError, unpack
 from sim.rigs.figures import fmt, hold_figures, read_json
 from sim.rigs.gcs import Gcs
 
@@ -173,222 +174,268 @@ def spacing_figures(
     }
 
 
-def _target_position(cfg: Any, centre: list[float], t: float) -> np.ndarray:
-    import dataclasses
+def fleet_spacing(
+    out: Path, n: int, path: Any, respace: bool, t_all: float, t_kill: float | None,
+    converge_m: float,
+) -> tuple[dict[str, Any], dict[str, Any], float]:  # fmt: skip
+    """The spacing series of DIR's bridges' fleet.csv, its figures from ``t_all`` (Unix s, the
+    last engagement) to the kill and the survivors' after it, and the path's length (m)."""
+    from mpf_mavlink.config.scenario import build_path
 
+    L = float(build_path(path).length)
+    tracks = [read_fleet_csv(out / f"bridge{k}" / "fleet.csv") for k in range(n)]
+    if all(tr is None for tr in tracks):
+        raise RigError("no fleet.csv from any bridge")
+    ser = spacing_series(tracks, [j / n for j in range(n)], L, respace)
+    fl = spacing_figures(ser, t_all, t_kill if t_kill is not None else math.inf, converge_m, n)
+    if t_kill is not None:
+        fl["after_kill"] = spacing_figures(ser, t_kill, math.inf, converge_m, n - 1)
+    return ser, fl, L
+
+
+@dataclasses.dataclass
+class _Fleet:
+    """The fleet's live parts (firmware, ground stations, bridges, relays) and what the rig saw
+    of them: each engagement (wall time, s), the last one's, the kill and the hold after it."""
+
+    n: int
+    centre: list[float] = dataclasses.field(default_factory=list)  # the placed circle's (m, NED)
+    radius: float = 0.0
+    epoch: float = 0.0  # the common target epoch (Unix s)
+    ports: tuple[list[int], list[int]] = ([], [])  # each member's own, the one sent to
+    fws: list[Any] = dataclasses.field(default_factory=list)
+    gcs: list[Gcs] = dataclasses.field(default_factory=list)
+    bridges: list[subprocess.Popen[str] | None] = dataclasses.field(default_factory=list)
+    relays: list[Any] = dataclasses.field(default_factory=list)
+    engaged: list[float | None] = dataclasses.field(default_factory=list)
+    t_all: float = 0.0
+    t_kill: float | None = None
+    kill_info: dict[str, Any] = dataclasses.field(default_factory=dict)
+    trace: list[tuple[float, float, float, float, float]] = dataclasses.field(default_factory=list)
+    modes_after: list[str] = dataclasses.field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.bridges, self.engaged = [None] * self.n, [None] * self.n
+
+    def pump(self, track_mode: str) -> None:
+        """Pump every ground station 0.05 s, noting each started aircraft's first ``track_mode``."""
+        for j, g in enumerate(self.gcs):
+            g.pump(0.05, echo=False)
+            if self.engaged[j] is None and g.mode() == track_mode and self.bridges[j] is not None:
+                self.engaged[j] = time.time()
+                print(f"aircraft {j} in {track_mode}", flush=True)
+
+    def kill(self, km: int) -> None:
+        """SIGKILL bridge ``km`` and note when, after the last engagement and its own."""
+        b = self.bridges[km]
+        assert b is not None
+        os.kill(b.pid, signal.SIGKILL)
+        b.wait()
+        self.t_kill = t_kill = time.time()
+        self.kill_info = {
+            "member": km,
+            "killed_after_s": t_kill - self.t_all,
+            "killed_after_engaged_s": t_kill - (self.engaged[km] or t_kill),
+        }
+        print(f"bridge {km} SIGKILLed {t_kill - self.t_all:.1f} s after the last engagement",
+              flush=True)  # fmt: skip
+
+
+def _start_fleet(a: argparse.Namespace, v: dict[str, Any], f: _Fleet, s: dict[str, Any]) -> None:
+    """Start the n instances (each takes a free instance's lock), configure and take them off
+    ``--takeoff-gap`` s apart, along the climb-out and loiter."""
+    from sim.rigs.common import _flight_header, connect
+
+    mod = v["mod"]
+    for _ in range(f.n):
+        f.fws.append(mod.Firmware(argparse.Namespace(**{**vars(a), "instance": None})))
+    bundle_dir = unpack(a.autopilot, v["bundle"])
+    s.update(_flight_header(a, v, bundle_dir))
+    s["instances"] = [fw.instance for fw in f.fws]
+    print(f"{s['bundle']}: starting {f.n} instances {s['instances']}", flush=True)
+    for k, fw in enumerate(f.fws):
+        fw.start(bundle_dir, v["out"] / f"firmware{k}")
+    f.gcs.extend(connect(fw, mod, a.params)[0] for fw in f.fws)
+    errs: list[str] = []
+
+    def up(k: int) -> None:
+        try:
+            time.sleep(k * a.takeoff_gap)
+            f.fws[k].take_off(f.gcs[k], a.alt)
+        except Exception as e:  # noqa: BLE001 - reported below
+            errs.append(f"aircraft {k}: {e}")
+
+    ths = [threading.Thread(target=up, args=(k,), daemon=True) for k in range(f.n)]
+    for th in ths:
+        th.start()
+    while any(th.is_alive() for th in ths):
+        time.sleep(0.5)
+    if errs:
+        raise RigError("; ".join(errs))
+
+
+def _place_fleet(a: argparse.Namespace, v: dict[str, Any], f: _Fleet, s: dict[str, Any]) -> None:
+    """The circle about the first aircraft's loiter, the common target epoch and the coordination
+    ports (the one sent to: a relay's under ``--fleet-loss`` / ``--fleet-jitter``)."""
+    from sim.rigs.common import place_mission
+
+    cfg = v["cfg"]
+    f.radius = radius = float(cfg.path.radius_m) if cfg.path.type == "circle" else 0.0
+    for g in f.gcs:
+        g.pump(0.2, echo=False)
+    f.centre, _ = place_mission(f.gcs[0], radius, a.lead * a.speedup)
+    f.epoch = time.time() + a.lead
+    listen = _free_udp_ports(f.n)
+    send_to = list(listen)
+    if a.fleet_loss or a.fleet_jitter:
+        from sim.soak.relay import Impairment, UdpRelay
+
+        imp = Impairment(loss=a.fleet_loss, jitter_s=a.fleet_jitter)
+        for k in range(f.n):  # every member's reports to k pass k's relay
+            r = UdpRelay(0, listen[k], down=imp, seed=k, keep_log=False).start()
+            f.relays.append(r)
+            send_to[k] = r.vehicle_port
+    f.ports = (listen, send_to)
+    s["mission"] = {
+        "centre_ned_m": f.centre, "radius_m": radius, "target": v["target_label"],
+        "epoch_unix_s": f.epoch, "link": {"loss": a.fleet_loss, "jitter_s": a.fleet_jitter},
+    }  # fmt: skip
+
+
+def _start_bridges(a: argparse.Namespace, v: dict[str, Any], f: _Fleet) -> None:
+    """Start the n bridges ``--fleet-gap`` s apart (each to end about when the last does),
+    noting engagements in between."""
+    from sim.rigs.common import _bridge_command, mission_sets, start_bridge
+
+    n, out = f.n, v["out"]
+    for k in range(n):
+        sets = [*mission_sets(a, v, f.centre), *fleet_sets(n, k, *f.ports, f.epoch)]
+        dur = a.duration + (n - 1 - k) * a.fleet_gap  # every bridge ends about together
+        ak = argparse.Namespace(**{**vars(a), "duration": dur})
+        cmd = _bridge_command(ak, v, f.fws[k].bridge_url, sets)
+        cmd[cmd.index("--out") + 1] = str(out / f"bridge{k}")
+        (out / f"bridge{k}.cmd").write_text(" ".join(cmd) + "\n")
+        f.bridges[k] = start_bridge(cmd, out / f"bridge{k}.log")
+        t_next = time.time() + a.fleet_gap
+        print(f"bridge {k} started on {f.fws[k].bridge_url}", flush=True)
+        while time.time() < t_next and k < n - 1:
+            f.pump(v["mod"].TRACK_MODE)
+    e = f.engaged
+    f.t_all = max(t for t in e if t is not None) if all(e) else time.time()
+
+
+def _fly_until_done(a: argparse.Namespace, track_mode: str, f: _Fleet) -> None:
+    """Pump until every bridge has exited; SIGKILL ``--kill-member`` ``--kill-after`` s after
+    the last engagement and watch its autopilot for ``--watch-s`` s."""
+    while any(b is not None and b.poll() is None for b in f.bridges):
+        f.pump(track_mode)
+        if all(f.engaged):
+            f.t_all = max(t for t in f.engaged if t is not None)
+        if a.kill_after is not None and f.t_kill is None and all(f.engaged):
+            if time.time() - f.t_all >= a.kill_after:
+                f.kill(a.kill_member)
+        if f.t_kill is not None and time.time() - f.t_kill <= a.watch_s:
+            f.gcs[a.kill_member].note_hold(f.modes_after, f.trace, time.time() - f.t_kill)
+
+
+def _kill_hold(a: argparse.Namespace, v: dict[str, Any], f: _Fleet) -> None:
+    """The killed aircraft's hold about the path's centre where the target was at the kill (the
+    bridge re-places its fallback loiter with the target: ``mavlink.fallback_follow_s``), into
+    ``kill_info``; FAIL when its autopilot left the track and hold modes."""
     from mpf_mavlink.config.scenario import build_target
 
-    tc = dataclasses.replace(cfg.target, position_ned_m=tuple(centre))
-    st = build_target(tc).state(t)
-    return np.asarray(st.position, float)
+    mod, cfg = v["mod"], v["cfg"]
+    assert f.t_kill is not None
+    tc = dataclasses.replace(cfg.target, position_ned_m=tuple(f.centre))
+    st = build_target(tc).state(f.t_kill - f.epoch)
+    hc = np.asarray(st.position, float)
+    h = hold_figures(f.trace, (float(hc[0]), float(hc[1])), -f.centre[2], f.radius)
+    ma = h["modes"] = f.modes_after
+    if ma and any(m != mod.TRACK_MODE and m != mod.HOLD_MODE for m in ma):
+        h["hold_verdict"] = f"FAIL: modes {ma}"
+    f.kill_info["hold"] = h
+
+
+def _fleet_figures(
+    a: argparse.Namespace, v: dict[str, Any], f: _Fleet, codes: list[int | None], s: dict[str, Any]
+) -> None:
+    """Per aircraft its bridge's figures, for the fleet the spacing's; DIR/spacing.npz and the
+    figures (a failure to draw is noted, never fatal)."""
+    from sim.rigs.common import figures_of
+
+    n, out, cfg = f.n, v["out"], v["cfg"]
+    s["aircraft"] = []
+    for k in range(n):
+        kk = f.kill_info if (f.t_kill is not None and k == a.kill_member) else {}
+        if kk:
+            kk = {**kk, "hold_verdict": kk["hold"]["hold_verdict"]}
+        fk = figures_of(
+            out / f"bridge{k}", out / f"bridge{k}.log", codes[k] or 0, kk, cfg, v["mod"]
+        )
+        fk["instance"] = f.fws[k].instance
+        fk["engaged_unix_s"] = f.engaged[k]
+        s["aircraft"].append(fk)
+    respace = "fleet.on_peer_lost=hold" not in a.overrides
+    ser, sp, L = fleet_spacing(out, n, cfg.path, respace, f.t_all, f.t_kill, a.converge_m)
+    e = f.engaged
+    spread = (f.t_all - min(t for t in e if t)) if any(e) else None
+    s["fleet"] = {
+        "n": n,
+        "converge_m": a.converge_m,
+        **sp,
+        "length_m": L,
+        "engage_spread_s": spread,
+    }
+    np.savez(
+        out / "spacing.npz",
+        t_unix_s=ser["t_unix_s"],
+        worst_m=ser["worst_m"],
+        n_alive=ser["n_alive"],
+    )
+    try:
+        from sim.fleet_figures import draw
+
+        draw(out, n, ser, f.t_all, f.t_kill)
+    except Exception as e:  # noqa: BLE001 - figures never fail a flight
+        s["figures_error"] = f"{type(e).__name__}: {e}"
+
+
+def _tear_down(f: _Fleet) -> None:
+    """Stop what still runs: bridges (given their hand-back), relays, ground stations, firmware."""
+    from sim.rigs.common import stop_bridge
+
+    for b in f.bridges:
+        stop_bridge(b)
+    for r in f.relays:
+        r.stop()
+    for g in f.gcs:
+        with contextlib.suppress(Exception):
+            g.close()
+    for fw in f.fws:
+        fw.stop()
 
 
 def fly_fleet(a: argparse.Namespace, v: dict[str, Any]) -> int:
     """The whole fleet flight; DIR/fleet.json and the table; 0 only when every verdict passed."""
-    from sim.rigs.common import _bridge_command, _flight_header, figures_of, place_mission
-
-    n, out, cfg, mod = a.fleet, v["out"], v["cfg"], v["mod"]
+    n, out = a.fleet, v["out"]
     if a.kill_after is not None and not 0 <= a.kill_member < n:
         raise RigError(f"--kill-member {a.kill_member}: expected 0..{n - 1}")
     summary: dict[str, Any] = {"flight": f"arduplane-fleet{n}", "autopilot": "arduplane"}
-    fws: list[Any] = []
-    gcs: list[Gcs] = []
-    bridges: list[subprocess.Popen[str] | None] = [None] * n
-    relays: list[Any] = []
+    f = _Fleet(n)
     rc = 1
     try:
-        for _ in range(n):
-            ak = argparse.Namespace(**{**vars(a), "instance": None})
-            fws.append(mod.Firmware(ak))  # each takes a free instance's lock
-        bundle_dir = unpack(a.autopilot, v["bundle"])
-        summary.update(_flight_header(a, v, bundle_dir))
-        summary["instances"] = [fw.instance for fw in fws]
-        print(f"{summary['bundle']}: starting {n} instances {summary['instances']}", flush=True)
-        for k, fw in enumerate(fws):
-            fw.start(bundle_dir, out / f"firmware{k}")
-        gcs = [Gcs(fw.gcs_url, mod.FLAVOUR) for fw in fws]
-        for g, fw in zip(gcs, fws, strict=True):
-            fw.configure(g)
-            for name, value in a.params:
-                g.set_param(name, value)
-        errs: list[str] = []
-
-        def up(k: int) -> None:
-            try:
-                time.sleep(k * a.takeoff_gap)  # spread along the climb-out and loiter
-                fws[k].take_off(gcs[k], a.alt)
-            except Exception as e:  # noqa: BLE001 - reported below
-                errs.append(f"aircraft {k}: {e}")
-
-        ths = [threading.Thread(target=up, args=(k,), daemon=True) for k in range(n)]
-        for th in ths:
-            th.start()
-        while any(th.is_alive() for th in ths):
-            time.sleep(0.5)
-        if errs:
-            raise RigError("; ".join(errs))
-        radius = float(cfg.path.radius_m) if cfg.path.type == "circle" else 0.0
-        for g in gcs:
-            g.pump(0.2, echo=False)
-        centre, _ = place_mission(gcs[0], radius, a.lead * a.speedup)
-        epoch = time.time() + a.lead
-        listen = _free_udp_ports(n)
-        send_to = list(listen)
-        if a.fleet_loss or a.fleet_jitter:
-            from sim.soak.relay import Impairment, UdpRelay
-
-            imp = Impairment(loss=a.fleet_loss, jitter_s=a.fleet_jitter)
-            for k in range(n):  # every member's reports to k pass k's relay
-                r = UdpRelay(0, listen[k], down=imp, seed=k, keep_log=False).start()
-                relays.append(r)
-                send_to[k] = r.vehicle_port
-        summary["mission"] = {
-            "centre_ned_m": centre,
-            "radius_m": radius,
-            "target": v["target_label"],
-            "epoch_unix_s": epoch,
-            "link": {"loss": a.fleet_loss, "jitter_s": a.fleet_jitter},
-        }
-        engaged: list[float | None] = [None] * n  # wall time of GUIDED
-        started: list[float] = []
-        kill_info: dict[str, Any] = {}
-        trace: list[tuple[float, float, float, float, float]] = []
-        modes_after: list[str] = []
-        t_kill: float | None = None
-        for k in range(n):
-            sets = [
-                *a.overrides,
-                f"target.position_ned_m=[{centre[0]:.2f},{centre[1]:.2f},{centre[2]:.2f}]",
-                *v["tsets"],
-                "mavlink.plots=false",
-                *fleet_sets(n, k, listen, send_to, epoch),
-            ]
-            va = {**v, "out": out}
-            dur = a.duration + (n - 1 - k) * a.fleet_gap  # every bridge ends about together
-            ak = argparse.Namespace(**{**vars(a), "duration": dur})
-            cmd = _bridge_command(ak, va, fws[k].bridge_url, sets)
-            cmd[cmd.index("--out") + 1] = str(out / f"bridge{k}")
-            (out / f"bridge{k}.cmd").write_text(" ".join(cmd) + "\n")
-            with open(out / f"bridge{k}.log", "w") as blog:
-                bridges[k] = subprocess.Popen(
-                    cmd, stdout=blog, stderr=subprocess.STDOUT, text=True,
-                    preexec_fn=die_with_parent,
-                )  # fmt: skip
-            started.append(time.time())
-            print(f"bridge {k} started on {fws[k].bridge_url}", flush=True)
-            t_next = started[-1] + a.fleet_gap
-            while time.time() < t_next and k < n - 1:
-                for j, g in enumerate(gcs):
-                    g.pump(0.05, echo=False)
-                    if engaged[j] is None and g.mode() == mod.TRACK_MODE and bridges[j] is not None:
-                        engaged[j] = time.time()
-                        print(f"aircraft {j} in {mod.TRACK_MODE}", flush=True)
-        t_all = max(e for e in engaged if e is not None) if all(engaged) else time.time()
-        while any(b is not None and b.poll() is None for b in bridges):
-            for j, g in enumerate(gcs):
-                g.pump(0.05, echo=False)
-                if engaged[j] is None and g.mode() == mod.TRACK_MODE:
-                    engaged[j] = time.time()
-                    print(f"aircraft {j} in {mod.TRACK_MODE}", flush=True)
-            if all(engaged):
-                t_all = max(e for e in engaged if e is not None)
-            km = a.kill_member
-            if a.kill_after is not None and t_kill is None and all(engaged):
-                if time.time() - t_all >= a.kill_after:
-                    b = bridges[km]
-                    assert b is not None
-                    os.kill(b.pid, signal.SIGKILL)
-                    b.wait()
-                    t_kill = time.time()
-                    kill_info = {
-                        "member": km,
-                        "killed_after_s": t_kill - t_all,
-                        "killed_after_engaged_s": t_kill - (engaged[km] or t_kill),
-                    }
-                    print(
-                        f"bridge {km} SIGKILLed {t_kill - t_all:.1f} s after the last engagement",
-                        flush=True,
-                    )
-            if t_kill is not None and time.time() - t_kill <= a.watch_s:
-                g = gcs[a.kill_member]
-                if not modes_after or modes_after[-1] != g.mode():
-                    modes_after.append(g.mode())
-                att, lp = g.last.get("ATTITUDE"), g.last.get("LOCAL_POSITION_NED")
-                if (
-                    att is not None
-                    and lp is not None
-                    and (not trace or trace[-1][0] != time.time() - t_kill)
-                ):
-                    trace.append((time.time() - t_kill, att.roll, lp.x, lp.y, lp.z))
-        codes = [b.wait() if b is not None else None for b in bridges]
-        if t_kill is not None:
-            km = a.kill_member
-            # the bridge re-places its fallback loiter with the target (fallback_follow_s), so
-            # the hold is judged about where the target was at the kill
-            hc = _target_position(cfg, centre, t_kill - epoch)
-            h = hold_figures(trace, (float(hc[0]), float(hc[1])), -centre[2], radius)
-            h["modes"] = modes_after
-            if modes_after and any(m != mod.TRACK_MODE and m != mod.HOLD_MODE for m in modes_after):
-                h["hold_verdict"] = f"FAIL: modes {modes_after}"
-            kill_info["hold"] = h
-        # -- figures ----------------------------------------------------------------------
-        aircraft = []
-        for k in range(n):
-            kk = kill_info if (t_kill is not None and k == a.kill_member) else {}
-            if kk:
-                kk = {**kk, "hold_verdict": kk["hold"]["hold_verdict"]}
-            f = figures_of(out / f"bridge{k}", out / f"bridge{k}.log", codes[k] or 0, kk, cfg, mod)
-            f["instance"] = fws[k].instance
-            f["engaged_unix_s"] = engaged[k]
-            aircraft.append(f)
-        summary["aircraft"] = aircraft
-        fleet_cfg = {"n": n, "converge_m": a.converge_m}
-        from mpf_mavlink.config.scenario import build_path
-
-        L = float(build_path(cfg.path).length)
-        slots = [j / n for j in range(n)]
-        tracks = [read_fleet_csv(out / f"bridge{k}" / "fleet.csv") for k in range(n)]
-        if all(tr is None for tr in tracks):
-            raise RigError("no fleet.csv from any bridge")
-        respace = "fleet.on_peer_lost=hold" not in a.overrides
-        ser = spacing_series(tracks, slots, L, respace)
-        t_end = t_kill if t_kill is not None else math.inf
-        fl = spacing_figures(ser, t_all, t_end, a.converge_m, n)
-        fleet_cfg.update(fl)
-        if t_kill is not None:
-            fleet_cfg["after_kill"] = spacing_figures(ser, t_kill, math.inf, a.converge_m, n - 1)
-        fleet_cfg["length_m"] = L
-        fleet_cfg["engage_spread_s"] = (
-            (t_all - min(e for e in engaged if e)) if any(engaged) else None
-        )
-        summary["fleet"] = fleet_cfg
-        np.savez(
-            out / "spacing.npz",
-            t_unix_s=ser["t_unix_s"],
-            worst_m=ser["worst_m"],
-            n_alive=ser["n_alive"],
-        )
-        try:
-            from sim.fleet_figures import draw
-
-            draw(out, n, ser, t_all, t_kill)
-        except Exception as e:  # noqa: BLE001 - figures never fail a flight
-            summary["figures_error"] = f"{type(e).__name__}: {e}"
+        _start_fleet(a, v, f, summary)
+        _place_fleet(a, v, f, summary)
+        _start_bridges(a, v, f)
+        _fly_until_done(a, v["mod"].TRACK_MODE, f)
+        codes = [b.wait() if b is not None else None for b in f.bridges]
+        if f.t_kill is not None:
+            _kill_hold(a, v, f)
+        _fleet_figures(a, v, f, codes, summary)
         summary["verdict"] = verdict(summary, a)
         rc = 0 if summary["verdict"] == "PASS" else 1
     finally:
-        for b in bridges:
-            if b is not None and b.poll() is None:
-                b.terminate()
-                with contextlib.suppress(subprocess.TimeoutExpired):
-                    b.wait(20)
-        for r in relays:
-            r.stop()
-        for g in gcs:
-            with contextlib.suppress(Exception):
-                g.close()
-        for fw in fws:
-            fw.stop()
+        _tear_down(f)
         (out / "fleet.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
     print_fleet_table(summary)
     return rc
@@ -498,23 +545,14 @@ __all__ = ["add_options", "main", "spacing_series", "spacing_figures", "arduplan
 def reanalyse(out: Path, converge_m: float = 10.0) -> dict[str, Any]:
     """The fleet figures of a finished rig directory again, from its fleet.json (engagement and
     kill times) and the bridges' fleet.csv: ``python -m sim.rigs.fleet DIR``."""
-    from mpf_mavlink.config.scenario import build_path
     from mpf_mavlink.config.schema import load_config
 
     s = read_json(out / "fleet.json")
-    n = len(s["aircraft"])
     cfg = load_config(Path(s.get("config", "configs/bridge_arduplane.yaml")))
-    L = float(build_path(cfg.path).length)
-    tracks = [read_fleet_csv(out / f"bridge{k}" / "fleet.csv") for k in range(n)]
-    engaged = [f.get("engaged_unix_s") for f in s["aircraft"]]
-    t_all = max(e for e in engaged if e)
-    ser = spacing_series(tracks, [j / n for j in range(n)], L, True)
+    t_all = max(e for f in s["aircraft"] if (e := f.get("engaged_unix_s")))
     kill = next((f["hold"] for f in s["aircraft"] if "hold" in f), None)
     t_kill = t_all + kill["killed_after_s"] if kill else None
-    fl = spacing_figures(ser, t_all, t_kill if t_kill else math.inf, converge_m, n)
-    if t_kill is not None:
-        fl["after_kill"] = spacing_figures(ser, t_kill, math.inf, converge_m, n - 1)
-    return fl
+    return fleet_spacing(out, len(s["aircraft"]), cfg.path, True, t_all, t_kill, converge_m)[1]
 
 
 if __name__ == "__main__":

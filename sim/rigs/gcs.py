@@ -107,6 +107,16 @@ class Gcs:
         hb = self.last.get("HEARTBEAT")
         return bool(hb and hb.base_mode & 128)
 
+    def note_hold(
+        self, modes: list[str], trace: list[tuple[float, float, float, float, float]], t: float
+    ) -> None:
+        """Append the mode when it changed, and (t s, roll rad, N, E, D m) when t moved on."""
+        if not modes or modes[-1] != self.mode():
+            modes.append(self.mode())
+        att, lp = self.last.get("ATTITUDE"), self.last.get("LOCAL_POSITION_NED")
+        if att is not None and lp is not None and (not trace or trace[-1][0] != t):
+            trace.append((t, att.roll, lp.x, lp.y, lp.z))
+
     def arm_retrying(self, t_end: float, attempt: Callable[[], None], late: str) -> None:
         """Runs ``attempt()`` (a take-off request and an arm) every 3 s until the vehicle is
         armed; RuntimeError(``late``) past ``t_end`` (monotonic s)."""

@@ -171,6 +171,125 @@ class _Acks:
             self.seen.setdefault(int(m.command), []).append(int(m.result))
 
 
+@dataclass(frozen=True)
+class _MovingCircle:
+    """The firmware's circle about the moving path's centre: the target, the centre in the
+    target's frame (m), the autopilot's local origin, the radius (m) and the direction."""
+
+    autopilot: str
+    target: Any
+    c_T: np.ndarray
+    origin: Origin
+    radius: float
+    clockwise: bool
+
+    def centre_at(self, t: float) -> tuple[np.ndarray, Any]:
+        """The centre (m, local NED) at the target's time t (s), and the target's state."""
+        st = self.target.state(t)
+        return st.position + st.R_T_I @ self.c_T, st
+
+    def send(self, g: Gcs, t: float) -> None:
+        """Re-centre the firmware's circle on where the centre is at t (s)."""
+        lat, lon, alt = self.origin.to_global(*self.centre_at(t)[0])
+        c = centre_command(self.autopilot, lat, lon, alt, self.radius, self.clockwise)
+        send_command_int(g, c)
+
+
+def _command_speed(a: argparse.Namespace, g: Gcs, cfg: Any, ratio: float | None) -> dict[str, Any]:
+    """Command the config's true airspeed (m/s) as each autopilot takes it; returns what was
+    wanted, measured and set."""
+    want = float(cfg.vehicle.airspeed_m_s)
+    # ArduPlane's AIRSPEED_CRUISE is indicated; PX4's DO_CHANGE_SPEED flew the true airspeed
+    # it was given (11.57 m/s commanded, 11.54 m/s true in SIH's still air)
+    indicated = want / ratio if (ratio is not None and a.autopilot == "arduplane") else want
+    speed: dict[str, Any] = {
+        "true_airspeed_wanted_m_s": want,
+        "true_over_indicated_measured": ratio,
+        "indicated_commanded_m_s": indicated,
+    }
+    if a.autopilot == "arduplane":
+        g.set_param("AIRSPEED_CRUISE", indicated)
+        speed["set"] = f"AIRSPEED_CRUISE={indicated:.3f}"
+    else:
+        g.command(MAV_CMD_DO_CHANGE_SPEED, *change_speed_params(indicated))
+        speed["set"] = f"MAV_CMD_DO_CHANGE_SPEED airspeed {indicated:.3f} m/s"
+    return speed
+
+
+def _track(
+    a: argparse.Namespace, g: Gcs, circle: _MovingCircle, lp0: Any
+) -> tuple[np.ndarray, list[str], int, _Acks]:
+    """Re-centre at ``--rate`` Hz for ``--duration`` s of the target's time (0 at ``lp0``);
+    returns the track's rows, the modes seen, the commands sent and their acks."""
+    t0 = lp0.time_boot_ms / 1000.0
+    period = 1.0 / a.rate
+    next_send = period
+    rows: list[tuple[float, ...]] = []
+    modes: list[str] = []
+    last_ms = lp0.time_boot_ms
+    sends, acks = 1, _Acks()
+    while True:
+        g.pump(0.05, echo=True)
+        acks.poll(g)
+        if not modes or modes[-1] != g.mode():
+            modes.append(g.mode())
+        lp = g.last.get("LOCAL_POSITION_NED")
+        if lp is None or lp.time_boot_ms == last_ms:
+            continue
+        last_ms = lp.time_boot_ms
+        t = lp.time_boot_ms / 1000.0 - t0
+        if t >= next_send:
+            circle.send(g, t)
+            sends += 1
+            next_send += period * max(1.0, math.floor((t - next_send) / period) + 1.0)
+        _, st = circle.centre_at(t)
+        p = np.array([lp.x, lp.y, lp.z])
+        tp = st.position
+        rel = st.R_T_I.T @ (p - tp)
+        w = g.last.get("WIND")
+        wn, we = wind_to_ned(w) if w is not None else (math.nan, math.nan)
+        rows.append((t, lp.x, lp.y, lp.z, lp.vx, lp.vy, lp.vz, *tp, *rel, wn, we))
+        if t >= a.duration:
+            break
+    return np.array(rows, float), modes, sends, acks
+
+
+def _track_figures(cols: np.ndarray, path: Any, cfg: Any, out: Path) -> tuple[dict[str, Any], Any]:
+    """Write DIR/native_track.csv and DIR/native_path_T.csv; the track's figures and the mean
+    true airspeed (m/s) flown over the steady window (None without one)."""
+    names = "t,p_n,p_e,p_d,v_n,v_e,v_d,tgt_n,tgt_e,tgt_d,rel_x,rel_y,rel_z,wind_n,wind_e"
+    np.savetxt(out / "native_track.csv", cols, delimiter=",", header=names, comments="",
+               fmt="%.4f")  # fmt: skip
+    nodes = path.positions()
+    np.savetxt(out / "native_path_T.csv", nodes, delimiter=",", header="x,y,z", comments="",
+               fmt="%.6f")  # fmt: skip
+    t_col = cols[:, 0]
+    fig = moving_path_figures(
+        t_col, cols[:, 10:13], nodes, path.closed, cfg.metrics.steady_after_s,
+        cfg.metrics.converge_threshold_m, circle=True,
+    )  # fmt: skip
+    m = t_col >= cfg.metrics.steady_after_s
+    wind_ok = np.isfinite(cols[:, 13])
+    wn_, we_ = np.where(wind_ok, cols[:, 13], 0.0), np.where(wind_ok, cols[:, 14], 0.0)
+    tas = np.sqrt((cols[:, 4] - wn_) ** 2 + (cols[:, 5] - we_) ** 2 + cols[:, 6] ** 2)
+    return fig, float(np.mean(tas[m])) if m.any() else None
+
+
+def _why_not_flown(cmd: int, results: list[int], modes: list[str], mode: str, fig: Any) -> str:
+    """The verdict: FLOWN, or FAIL with every reason (no or refused acks of ``cmd``, the mode
+    left, no steady window)."""
+    why = []
+    if not results:
+        why.append(f"no COMMAND_ACK for command {cmd}")
+    elif any(r != 0 for r in results):
+        why.append(f"command {cmd} refused {sum(r != 0 for r in results)} of {len(results)} times")
+    if not modes or modes[-1] != mode:
+        why.append(f"not in {mode} at the end (modes {' -> '.join(modes)})")
+    if fig.get("e_rms_m") is None or not math.isfinite(fig["e_rms_m"]):
+        why.append("no steady window")
+    return "FLOWN" if not why else "FAIL: " + "; ".join(why)
+
+
 def fly_native(
     a: argparse.Namespace,
     v: dict[str, Any],
@@ -187,107 +306,30 @@ def fly_native(
         raise RuntimeError(
             "--guidance native flies the firmware's circle: path.type must be circle"
         )
-    radius, clockwise = float(cfg.path.radius_m), bool(cfg.path.clockwise)
-    c_T = np.asarray(cfg.path.center_m, float)
     t_placed = g.t_boot_s  # place_mission predicted the start --lead s from now
     origin, ratio = _sample_origin_and_ratio(g, a.autopilot, min(4.0, a.lead * a.speedup))
-    want = float(cfg.vehicle.airspeed_m_s)
-    # ArduPlane's AIRSPEED_CRUISE is indicated; PX4's DO_CHANGE_SPEED flew the true airspeed
-    # it was given (11.57 m/s commanded, 11.54 m/s true in SIH's still air)
-    indicated = want / ratio if (ratio is not None and a.autopilot == "arduplane") else want
-    speed: dict[str, Any] = {
-        "true_airspeed_wanted_m_s": want,
-        "true_over_indicated_measured": ratio,
-        "indicated_commanded_m_s": indicated,
-    }
-    acks = _Acks()
-    if a.autopilot == "arduplane":
-        g.set_param("AIRSPEED_CRUISE", indicated)
-        speed["set"] = f"AIRSPEED_CRUISE={indicated:.3f}"
-    else:
-        g.command(MAV_CMD_DO_CHANGE_SPEED, *change_speed_params(indicated))
-        speed["set"] = f"MAV_CMD_DO_CHANGE_SPEED airspeed {indicated:.3f} m/s"
+    circle = _MovingCircle(
+        a.autopilot, target, np.asarray(cfg.path.center_m, float), origin,
+        float(cfg.path.radius_m), bool(cfg.path.clockwise),
+    )  # fmt: skip
+    speed = _command_speed(a, g, cfg, ratio)
     # engage where place_mission put the start: --lead s after placing, as the bridge is given
     g.wait_boot(max(0.0, a.lead * a.speedup - (g.t_boot_s - t_placed)))
-
-    def centre_at(t: float) -> tuple[np.ndarray, Any]:
-        st = target.state(t)
-        return st.position + st.R_T_I @ c_T, st
-
-    def send_centre(t: float) -> None:
-        q, _ = centre_at(t)
-        lat, lon, alt = origin.to_global(*q)
-        send_command_int(g, centre_command(a.autopilot, lat, lon, alt, radius, clockwise))
-
     mode = NATIVE_MODE[a.autopilot]
     if g.mode() != mode:
         g.set_mode(mode)
-    lp0 = g.last["LOCAL_POSITION_NED"]
-    t0 = lp0.time_boot_ms / 1000.0  # the target's clock: t = 0 when the rig engages
-    send_centre(0.0)
+    lp0 = g.last["LOCAL_POSITION_NED"]  # the target's clock: t = 0 when the rig engages
+    circle.send(g, 0.0)
     print(f"native: {mode}, centre re-sent at {a.rate:g} Hz, {speed['set']}", flush=True)
     if a.autopilot == "px4":  # PX4 takes the speed while it loiters: once more, now in orbit
         g.pump(0.3, echo=False)
-        g.command(MAV_CMD_DO_CHANGE_SPEED, *change_speed_params(indicated))
-    period = 1.0 / a.rate
-    next_send = period
-    rows: list[tuple[float, ...]] = []
-    modes: list[str] = []
-    last_ms = lp0.time_boot_ms
-    sends = 1
-    while True:
-        g.pump(0.05, echo=True)
-        acks.poll(g)
-        if not modes or modes[-1] != g.mode():
-            modes.append(g.mode())
-        lp = g.last.get("LOCAL_POSITION_NED")
-        if lp is None or lp.time_boot_ms == last_ms:
-            continue
-        last_ms = lp.time_boot_ms
-        t = lp.time_boot_ms / 1000.0 - t0
-        if t >= next_send:
-            send_centre(t)
-            sends += 1
-            next_send += period * max(1.0, math.floor((t - next_send) / period) + 1.0)
-        q, st = centre_at(t)
-        p = np.array([lp.x, lp.y, lp.z])
-        tp = st.position
-        rel = st.R_T_I.T @ (p - tp)
-        w = g.last.get("WIND")
-        wn, we = wind_to_ned(w) if w is not None else (math.nan, math.nan)
-        rows.append((t, lp.x, lp.y, lp.z, lp.vx, lp.vy, lp.vz, *tp, *rel, wn, we))
-        if t >= a.duration:
-            break
-    cols = np.array(rows, float)
-    names = "t,p_n,p_e,p_d,v_n,v_e,v_d,tgt_n,tgt_e,tgt_d,rel_x,rel_y,rel_z,wind_n,wind_e"
-    np.savetxt(out / "native_track.csv", cols, delimiter=",", header=names, comments="",
-               fmt="%.4f")  # fmt: skip
-    nodes = path.positions()
-    np.savetxt(out / "native_path_T.csv", nodes, delimiter=",", header="x,y,z", comments="",
-               fmt="%.6f")  # fmt: skip
-    t_col = cols[:, 0]
-    fig = moving_path_figures(
-        t_col, cols[:, 10:13], nodes, path.closed, cfg.metrics.steady_after_s,
-        cfg.metrics.converge_threshold_m, circle=True,
-    )  # fmt: skip
-    m = t_col >= cfg.metrics.steady_after_s
-    wind_ok = np.isfinite(cols[:, 13])
-    wn_, we_ = np.where(wind_ok, cols[:, 13], 0.0), np.where(wind_ok, cols[:, 14], 0.0)
-    tas = np.sqrt((cols[:, 4] - wn_) ** 2 + (cols[:, 5] - we_) ** 2 + cols[:, 6] ** 2)
-    speed["true_airspeed_flown_m_s"] = float(np.mean(tas[m])) if m.any() else None
+        g.command(MAV_CMD_DO_CHANGE_SPEED, *change_speed_params(speed["indicated_commanded_m_s"]))
+    cols, modes, sends, acks = _track(a, g, circle, lp0)
+    fig, speed["true_airspeed_flown_m_s"] = _track_figures(cols, path, cfg, out)
     cmd = MAV_CMD_DO_REPOSITION if a.autopilot == "arduplane" else MAV_CMD_DO_ORBIT
     results = acks.seen.get(cmd, [])
     fig["engaged"] = bool(results) and results[0] == 0 and mode in modes
-    fig["tracked_s"] = float(t_col[-1]) if len(t_col) else 0.0
-    why = []
-    if not results:
-        why.append(f"no COMMAND_ACK for command {cmd}")
-    elif any(r != 0 for r in results):
-        why.append(f"command {cmd} refused {sum(r != 0 for r in results)} of {len(results)} times")
-    if not modes or modes[-1] != mode:
-        why.append(f"not in {mode} at the end (modes {' -> '.join(modes)})")
-    if fig.get("e_rms_m") is None or not math.isfinite(fig["e_rms_m"]):
-        why.append("no steady window")
+    fig["tracked_s"] = float(cols[-1, 0]) if len(cols) else 0.0
     return {
         "guidance": "native",
         "native": {
@@ -302,9 +344,9 @@ def fly_native(
             },  # fmt: skip
             "speed": speed,
             "origin": [origin.lat_deg, origin.lon_deg, origin.alt_amsl_m],
-            "t0_boot_s": t0,
+            "t0_boot_s": lp0.time_boot_ms / 1000.0,
             "modes": modes,
         },
         "figures": fig,
-        "verdict": "FLOWN" if not why else "FAIL: " + "; ".join(why),
+        "verdict": _why_not_flown(cmd, results, modes, mode, fig),
     }

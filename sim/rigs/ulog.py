@@ -116,21 +116,17 @@ def _t0_of_bridge(run: Path) -> float | None:
 
 def _track(run: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, Path]:
     """(t boot s, aircraft NED, target NED, target yaw rad, rel (n,3), path nodes file)."""
-    if (run / "native_track.csv").is_file():
-        d = np.genfromtxt(run / "native_track.csv", delimiter=",", names=True)
-        s = json.loads((run / "summary.json").read_text())
-        t0 = float(s["native"]["t0_boot_s"])
-        p = np.column_stack([d["p_n"], d["p_e"], d["p_d"]])
-        tp = np.column_stack([d["tgt_n"], d["tgt_e"], d["tgt_d"]])
-        rel = np.column_stack([d["rel_x"], d["rel_y"], d["rel_z"]])
+    native = (run / "native_track.csv").is_file()
+    d = np.genfromtxt(run / ("native_track.csv" if native else "bridge/timeseries.csv"),
+                      delimiter=",", names=True)  # fmt: skip
+    p, tp, rel = (np.column_stack([d[f"{w}{x}"] for x in xs]) for w, xs in
+                  (("p_", "ned"), ("tgt_", "ned"), ("rel_", "xyz")))  # fmt: skip
+    if native:
+        t0 = float(json.loads((run / "summary.json").read_text())["native"]["t0_boot_s"])
         return d["t"] + t0, p, tp, _yaw(p, tp, rel), rel, run / "native_path_T.csv"
-    d = np.genfromtxt(run / "bridge" / "timeseries.csv", delimiter=",", names=True)
     t0b = _t0_of_bridge(run)
     if t0b is None:
         raise ValueError(f"{run}: no 'MPF t0=' in the bridge's tlog")
-    p = np.column_stack([d["p_n"], d["p_e"], d["p_d"]])
-    tp = np.column_stack([d["tgt_n"], d["tgt_e"], d["tgt_d"]])
-    rel = np.column_stack([d["rel_x"], d["rel_y"], d["rel_z"]])
     return d["t"] + t0b, p, tp, d["tgt_yaw"], rel, run / "bridge" / "path_T.csv"
 
 

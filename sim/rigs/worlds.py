@@ -261,18 +261,12 @@ def e_series(run: Path, guidance: str) -> tuple[np.ndarray, np.ndarray, np.ndarr
     """(t s, e m, rel (n, 3) m, path nodes (m, 3) m) of one flight's record."""
     from mpf_mavlink.runs.compare import distance_to_polyline
 
-    if guidance == "mpf":
-        d = np.genfromtxt(run / "bridge" / "timeseries.csv", delimiter=",", names=True)
-        P = np.genfromtxt(run / "bridge" / "path_T.csv", delimiter=",", skip_header=1)
-        t = d["t"]
-        rel = np.column_stack([d["rel_x"], d["rel_y"], d["rel_z"]])
-    else:
-        d = np.genfromtxt(run / "native_track.csv", delimiter=",", names=True)
-        P = np.genfromtxt(run / "native_path_T.csv", delimiter=",", skip_header=1)
-        t = d["t"]
-        rel = np.column_stack([d["rel_x"], d["rel_y"], d["rel_z"]])
-    P = P.reshape(-1, 3)
-    return t, distance_to_polyline(P, rel, True), rel, P
+    track, nodes = ("bridge/timeseries.csv", "bridge/path_T.csv") if guidance == "mpf" else (
+        "native_track.csv", "native_path_T.csv")  # fmt: skip
+    d = np.genfromtxt(run / track, delimiter=",", names=True)
+    P = np.genfromtxt(run / nodes, delimiter=",", skip_header=1).reshape(-1, 3)
+    rel = np.column_stack([d["rel_x"], d["rel_y"], d["rel_z"]])
+    return d["t"], distance_to_polyline(P, rel, True), rel, P
 
 
 def overlay(out: Path, res: dict[str, Any], png: Path) -> None:

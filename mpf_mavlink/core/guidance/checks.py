@@ -401,6 +401,73 @@ def _add_gust_deficits(
             dfc.worst_dn, dfc.t_dn = gd, float(ts[k])
 
 
+def _demand(
+    ts: np.ndarray, W1: np.ndarray, v_w: float, max_climb: float | None, max_sink: float | None
+) -> tuple[np.ndarray, float, float, dict[str, float | bool | None], str]:
+    """The air-relative climb c = -v_w wd1_z (m/s) per sample, its peak climb and sink (m/s, >= 0),
+    the check's first figures and the sentence that heads its summary."""
+    c = -v_w * W1[:, 2]
+    k_up, k_dn = int(np.argmax(c)), int(np.argmin(c))
+    up, dn = max(0.0, float(c[k_up])) + 0.0, max(0.0, float(-c[k_dn])) + 0.0
+    figs: dict[str, float | bool | None] = {
+        "peak_climb_m_s": up, "peak_sink_m_s": dn,
+        "max_climb_m_s": max_climb, "max_sink_m_s": max_sink,
+    }  # fmt: skip
+    head = (
+        f"the path demands up to {up:.2f} m/s of climb at t = {ts[k_up]:.1f} s and "
+        f"{dn:.2f} m/s of sink at t = {ts[k_dn]:.1f} s"
+    )
+    return c, up, dn, figs, head
+
+
+def _turbulence_odds(
+    ts: np.ndarray, c: np.ndarray, caps: tuple[float, float], v_w: float,
+    turbulence: tuple[str, np.ndarray, np.ndarray, np.ndarray],
+    figs: dict[str, float | bool | None],
+) -> tuple[GustOdds, str]:  # fmt: skip
+    """The likelier of a downdraft and an updraft exhausting its reserve (:func:`gust_odds`
+    against the climb and sink capability ``caps``, m/s), and the sentence that says so; the
+    two probabilities go into ``figs``."""
+    level, hts, r_up, r_dn = turbulence
+    o_up = gust_odds(ts, c - caps[0], r_up, level, hts, v_w)
+    o_dn = gust_odds(ts, -c - caps[1], r_dn, level, hts, v_w)
+    figs.update(gust_p_down=o_up.p, gust_p_up=o_dn.p)
+    worst, what = (o_up, "downdraft") if o_up.p >= o_dn.p else (o_dn, "updraft")
+    r_at = float(np.interp(worst.t_s, ts, r_up if what == "downdraft" else r_dn))
+    odds = (
+        f"a {worst.window_s:g} s {what} of {worst.gust_m_s:.1f} m/s "
+        f"({worst.gust_m_s / max(worst.sigma_m_s, 1e-9):.1f} sigma of {level} turbulence's "
+        f"{worst.window_s:g} s mean, {worst.sigma_m_s:.2f} m/s) near t = {worst.t_s:.0f} s "
+        f"exhausts the {r_at:.1f} m energy reserve: {100.0 * worst.p:.0f} % likely over the "
+        f"{ts[-1] - ts[0]:.0f} s"
+    )
+    return worst, odds
+
+
+def _marginal(
+    up: float, dn: float, dfc: _Deficits, caps: tuple[float, float],
+    reserves: tuple[float, float], marginal: float, gust_marg: bool, with_gusts: bool,
+) -> tuple[bool, str]:  # fmt: skip
+    """Whether the demand is marginal (the steady peak above ``marginal`` x the capability
+    ``caps`` (m/s), a gust's above the capability itself, or half a reserve (m) spent), and the
+    words that say how close it is."""
+    (max_climb, max_sink), (res_up, res_dn) = caps, reserves
+    marg = (
+        gust_marg
+        or up > marginal * max_climb or dn > marginal * max_sink
+        or dfc.need_up > max_climb or dfc.need_dn > max_sink
+        or dfc.worst_up > 0.5 * res_up or dfc.worst_dn > 0.5 * res_dn
+    )  # fmt: skip
+    why = (
+        f": marginal: climb up to {dfc.need_up:.2f} and sink up to {dfc.need_dn:.2f} m/s needed"
+        + (" with the turbulence's 2-sigma gusts" if with_gusts else "")
+        + f" (warn above the capability, {marginal:g} x without gusts), deficits "
+        f"{dfc.worst_up:.1f} / {dfc.worst_dn:.1f} m of the {res_up:.1f} / {res_dn:.1f} m "
+        "reserves (warn above half)"
+    )
+    return marg, why
+
+
 def climb_feasibility(
     ts: np.ndarray,
     W1: np.ndarray,
@@ -434,75 +501,39 @@ def climb_feasibility(
     horizon is refused, GUST_WARN_P warns. The reserves are the adapter's (from the airspeed it
     flies to the airspeed where it gives the path up), not the verdict's window.
     """
-    c = -v_w * W1[:, 2]
-    k_up, k_dn = int(np.argmax(c)), int(np.argmin(c))
-    up, dn = max(0.0, float(c[k_up])) + 0.0, max(0.0, float(-c[k_dn])) + 0.0
-    figs: dict[str, float | bool | None] = {
-        "peak_climb_m_s": up, "peak_sink_m_s": dn,
-        "max_climb_m_s": max_climb_m_s, "max_sink_m_s": max_sink_m_s,
-    }  # fmt: skip
-    head = (
-        f"the path demands up to {up:.2f} m/s of climb at t = {ts[k_up]:.1f} s and "
-        f"{dn:.2f} m/s of sink at t = {ts[k_dn]:.1f} s"
-    )
+    c, up, dn, figs, head = _demand(ts, W1, v_w, max_climb_m_s, max_sink_m_s)
     if max_climb_m_s is None or max_sink_m_s is None:
         st = "warn" if max(up, dn) > 0.5 else "pass"
         return CheckResult(
             "climb", st, head + " (capability unknown: set vehicle.max_climb_rate_m_s and "
             "vehicle.max_sink_rate_m_s)", figs,
         )  # fmt: skip
+    caps = (max_climb_m_s, max_sink_m_s)
     res_up = max(v_w * v_w - v_min * v_min, 0.0) / (2.0 * g)
     res_dn = max(v_max * v_max - v_w * v_w, 0.0) / (2.0 * g)
     dts = np.diff(ts, prepend=ts[0])
     dfc = _steady_deficits(ts, c, dts, max_climb_m_s, max_sink_m_s, up, dn)
     if gusts is not None:
         _add_gust_deficits(dfc, ts, c, dts, gusts, max_climb_m_s, max_sink_m_s)
-    worst_up, worst_dn, need_up, need_dn = dfc.worst_up, dfc.worst_dn, dfc.need_up, dfc.need_dn
-    figs.update(deficit_climb_m=worst_up, deficit_sink_m=worst_dn, reserve_climb_m=res_up,
+    figs.update(deficit_climb_m=dfc.worst_up, deficit_sink_m=dfc.worst_dn, reserve_climb_m=res_up,
                 reserve_sink_m=res_dn)  # fmt: skip
     cap = f" (capability at {v_w:g} m/s: climb {max_climb_m_s:g}, sink {max_sink_m_s:g} m/s)"
     refused = dfc.refusal(res_up, res_dn, v_w, v_min, v_max)
     if refused is not None:
         return CheckResult("climb", "fail", refused + head + cap, figs)
-    odds = ""
+    odds, gust_marg = "", False
     if turbulence is not None:
-        level, hts, r_up, r_dn = turbulence
-        o_up = gust_odds(ts, c - max_climb_m_s, r_up, level, hts, v_w)
-        o_dn = gust_odds(ts, -c - max_sink_m_s, r_dn, level, hts, v_w)
-        figs.update(gust_p_down=o_up.p, gust_p_up=o_dn.p)
-        worst, what = (o_up, "downdraft") if o_up.p >= o_dn.p else (o_dn, "updraft")
-        r_at = float(np.interp(worst.t_s, ts, r_up if what == "downdraft" else r_dn))
-        odds = (
-            f"a {worst.window_s:g} s {what} of {worst.gust_m_s:.1f} m/s "
-            f"({worst.gust_m_s / max(worst.sigma_m_s, 1e-9):.1f} sigma of {level} turbulence's "
-            f"{worst.window_s:g} s mean, {worst.sigma_m_s:.2f} m/s) near t = {worst.t_s:.0f} s "
-            f"exhausts the {r_at:.1f} m energy reserve: {100.0 * worst.p:.0f} % likely over the "
-            f"{ts[-1] - ts[0]:.0f} s"
-        )
+        worst, odds = _turbulence_odds(ts, c, caps, v_w, turbulence, figs)
         if worst.p >= GUST_REFUSE_P:
             return CheckResult(
                 "climb", "fail",
                 f"turbulence beyond the aircraft's energy: {odds} (refused from "
                 f"{100.0 * GUST_REFUSE_P:.0f} %); " + head + cap, figs,
             )  # fmt: skip
-    figs.update(need_climb_m_s=need_up, need_sink_m_s=need_dn)
-    # marginal: the steady demand above ``marginal`` x the capability, a gust's above the
-    # capability itself, or half a reserve spent
-    gust_marg = (
-        turbulence is not None
-        and max(float(figs["gust_p_down"] or 0.0), float(figs["gust_p_up"] or 0.0)) >= GUST_WARN_P
-    )
-    marg = (
-        gust_marg
-        or up > marginal * max_climb_m_s or dn > marginal * max_sink_m_s
-        or need_up > max_climb_m_s or need_dn > max_sink_m_s
-        or worst_up > 0.5 * res_up or worst_dn > 0.5 * res_dn
-    )  # fmt: skip
-    why = (
-        f": marginal: climb up to {need_up:.2f} and sink up to {need_dn:.2f} m/s needed"
-        + (" with the turbulence's 2-sigma gusts" if gusts is not None else "")
-        + f" (warn above the capability, {marginal:g} x without gusts), deficits {worst_up:.1f} / "
-        f"{worst_dn:.1f} m of the {res_up:.1f} / {res_dn:.1f} m reserves (warn above half)"
+        gust_marg = worst.p >= GUST_WARN_P  # the likelier sign's odds
+    figs.update(need_climb_m_s=dfc.need_up, need_sink_m_s=dfc.need_dn)
+    marg, why = _marginal(
+        up, dn, dfc, caps, (res_up, res_dn), marginal, gust_marg, gusts is not None
     )
     if gust_marg:
         why += f"; {odds} (warn from {100.0 * GUST_WARN_P:.0f} %)"
