@@ -121,8 +121,17 @@ class ControlLoop:
         span = self.prestream_span_s()
         return bool(
             span >= self.m.prestream_s
-            and (self.prestream_sends - 1) / span >= self.m.min_setpoint_rate_hz
+            and (self.prestream_sends - 1) / span >= self.prestream_rate_hz()
         )
+
+    def prestream_rate_hz(self) -> float:
+        """The setpoint rate the prestream must reach (Hz): ``min_setpoint_rate_hz``; in
+        lockstep the setpoints answer the vehicle's frames on its clock, so no faster than the
+        slowest ATTITUDE stream accepted (``attitude_min_hz``) can be asked of them."""
+        m = self.m
+        if m.lockstep and m.attitude_min_hz > 0.0:
+            return float(min(m.min_setpoint_rate_hz, m.attitude_min_hz))
+        return float(m.min_setpoint_rate_hz)
 
     def prestream_span_s(self) -> float:
         """From the first to the last setpoint of the prestream (s; lockstep: vehicle time)."""

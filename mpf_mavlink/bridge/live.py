@@ -378,7 +378,7 @@ class Bridge:
             vl.drain()
         vl.send_text(STREAM_TEXT)  # for replay: control steps start after this record
         loop.start()
-        rate = m.min_setpoint_rate_hz
+        rate = loop.prestream_rate_hz()
         if not vl.spin(m.prestream_s + 3.0, loop.prestreamed):
             raise _Stop(
                 f"could not stream setpoints at {rate:g} Hz for {m.prestream_s:g} s", "engage"
