@@ -5,7 +5,7 @@ N ArduPlane SITL instances (each its own free ``-I``, lock and ports), taken off
 loiter, then N ``mpf-mavlink run`` bridges started one after another ``--fleet-gap`` s apart
 (each with ``fleet.member`` k, the slots 360/N apart, a direct UDP mesh on loopback and the
 same target epoch). ``--fleet-loss`` / ``--fleet-jitter`` put the soak relay
-(:mod:`sim.soak.relay`) in front of every bridge's coordination port; ``--kill-after S``
+(:mod:`lab.soak.relay`) in front of every bridge's coordination port; ``--kill-after S``
 SIGKILLs bridge ``--kill-member`` S s after the last engagement and watches that aircraft's
 autopilot (mode and hold) while the others fly on.
 
@@ -35,10 +35,10 @@ from typing import Any
 
 import numpy as np
 
-from sim.rigs import arduplane
-from sim.rigs.bundles import RigError, die_with_parent, unpack
-from sim.rigs.figures import fmt, hold_figures, read_json
-from sim.rigs.gcs import Gcs
+from lab.rigs import arduplane
+from lab.rigs.bundles import RigError, die_with_parent, unpack
+from lab.rigs.figures import fmt, hold_figures, read_json
+from lab.rigs.gcs import Gcs
 
 
 def _free_udp_ports(n: int) -> list[int]:
@@ -185,7 +185,7 @@ def _target_position(cfg: Any, centre: list[float], t: float) -> np.ndarray:
 
 def fly_fleet(a: argparse.Namespace, v: dict[str, Any]) -> int:
     """The whole fleet flight; DIR/fleet.json and the table; 0 only when every verdict passed."""
-    from sim.rigs.common import _bridge_command, _flight_header, figures_of, place_mission
+    from lab.rigs.common import _bridge_command, _flight_header, figures_of, place_mission
 
     n, out, cfg, mod = a.fleet, v["out"], v["cfg"], v["mod"]
     if a.kill_after is not None and not 0 <= a.kill_member < n:
@@ -235,7 +235,7 @@ def fly_fleet(a: argparse.Namespace, v: dict[str, Any]) -> int:
         listen = _free_udp_ports(n)
         send_to = list(listen)
         if a.fleet_loss or a.fleet_jitter:
-            from sim.soak.relay import Impairment, UdpRelay
+            from lab.soak.relay import Impairment, UdpRelay
 
             imp = Impairment(loss=a.fleet_loss, jitter_s=a.fleet_jitter)
             for k in range(n):  # every member's reports to k pass k's relay
@@ -496,7 +496,7 @@ __all__ = ["add_options", "main", "spacing_series", "spacing_figures", "arduplan
 
 def reanalyse(out: Path, converge_m: float = 10.0) -> dict[str, Any]:
     """The fleet figures of a finished rig directory again, from its fleet.json (engagement and
-    kill times) and the bridges' fleet.csv: ``python -m sim.rigs.fleet DIR``."""
+    kill times) and the bridges' fleet.csv: ``python -m lab.rigs.fleet DIR``."""
     from mpf_mavlink.config.scenario import build_path
     from mpf_mavlink.config.schema import load_config
 
