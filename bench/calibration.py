@@ -1,9 +1,9 @@
 """Bench group ``calibration`` (``python -m bench --only calibration``): how far our
 SIL, with the shipped autopilot profiles, is from the real firmware on the calibration matrix.
 
-The real side is stored in the repository (sim/calibration/flights/<autopilot>.json: each real
+The real side is stored in the repository (lab/calibration/flights/<autopilot>.json: each real
 flight's mission, the rig's overrides, its start state and the bridge's metrics, written by
-``python -m sim.calibration.calibrate store``); only the SIL legs fly here, from each real
+``python -m lab.calibration.calibrate store``); only the SIL legs fly here, from each real
 flight's start state, so the group runs on a bare clone (no firmware bundle). Per row: the real
 and SIL steady RMS (the bridge's view on both sides), their ratio real / SIL, the mean radial and
 vertical of both, and whether the row is within issue 24's band (ratio in [0.67, 1.5], means
@@ -44,7 +44,7 @@ def calibration(
 ) -> dict[str, Any]:
     """Fly the SIL legs of the stored calibration matrix with the shipped profiles; per
     autopilot and mission the real and SIL figures, and the count of rows within the band."""
-    from sim.calibration.calibrate import ROOT, sil_rows
+    from lab.calibration.calibrate import ROOT, sil_rows
 
     say = log or (lambda s: print(s, file=sys.stderr, flush=True))
     out: dict[str, Any] = {}

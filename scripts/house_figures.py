@@ -29,8 +29,9 @@ from typing import Any
 
 HERE = Path(__file__).resolve().parents[1]
 SHIPPED = ("mpf_mavlink", "sim")  # pyproject's packages: what the wheel holds
-#: The layers, bottom first: a module may import its own layer and those below. ``bench`` is
-#: tooling beside the product (above everything it measures).
+TOOLING = ("bench", "lab")  # top-level packages beside them: benchmarks, rigs, soak, calibration
+#: The layers, bottom first: a module may import its own layer and those below. ``bench`` and
+#: ``lab`` are tooling beside the product (above everything they measure or fly).
 LAYERS = [
     ("mpf_mavlink.errors", "mpf_mavlink.constants"),
     ("mpf_mavlink.core",),
@@ -41,7 +42,7 @@ LAYERS = [
     ("sim",),
     ("mpf_mavlink.campaign",),
     ("mpf_mavlink.cli",),
-    ("mpf_mavlink.bench", "bench"),
+    ("mpf_mavlink.bench", "bench", "lab"),
 ]
 LONG_CLASS, LONG_FUNCTION = 250, 80
 
@@ -80,6 +81,12 @@ def source_lines(root: Path) -> dict[str, Any]:
         **by_top,
         "of_which_mpf_mavlink/bench": per.get("mpf_mavlink/bench", 0) if bench.is_dir() else 0,
         "largest_packages": dict(per.most_common(8)),
+        # beside the product, not shipped (counted so that a move out of the wheel shows)
+        "tooling_not_shipped": {
+            t: sum(_lines(f) for f in (root / t).rglob("*.py"))
+            for t in TOOLING
+            if (root / t).is_dir()
+        },
     }
 
 
@@ -125,7 +132,7 @@ def _imports(root: Path, path: Path) -> list[tuple[int, str]]:
                 up = here[: len(here) - (node.level - 1)]
                 base = ".".join(up + ([base] if base else []))
             out.append((node.lineno, base))
-    return [(ln, m) for ln, m in out if m.split(".")[0] in (*SHIPPED, "bench")]
+    return [(ln, m) for ln, m in out if m.split(".")[0] in (*SHIPPED, *TOOLING)]
 
 
 def arrows_back_up(root: Path) -> dict[str, Any]:

@@ -1,4 +1,4 @@
-"""Shared by tests/test_sitl_*.py: run the real-firmware rig (sim/rigs) and judge its summary.
+"""Shared by tests/test_sitl_*.py: run the real-firmware rig (lab/rigs) and judge its summary.
 
 The SITL tests run whenever the bundles are there (``MPF_SITL_DIR``, or ``shared/sitl`` beside
 the checkout: README "Flying PX4 SITL") and skip, saying why, on a bare clone. Each autopilot's
@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest
 
-from sim.rigs.bundles import why_missing
+from lab.rigs.bundles import why_missing
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 1800  # a flight is minutes; this includes waiting for another user's PX4 lock
@@ -37,7 +37,7 @@ def rig(out: Path, *args: str) -> tuple[int, dict[str, Any], str]:
     """Run the rig (scripts/sitl); (exit code, its summary.json, the tail of its output)."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     r = subprocess.run(
-        [sys.executable, "-m", "sim.rigs", *args, "--out", str(out)],
+        [sys.executable, "-m", "lab.rigs", *args, "--out", str(out)],
         cwd=ROOT, env=env, capture_output=True, text=True, timeout=TIMEOUT_S,
     )  # fmt: skip
     p = out / "summary.json"

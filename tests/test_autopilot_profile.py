@@ -242,8 +242,8 @@ def test_gauss_markov_errors_have_their_sigma_and_correlation_time_and_every_see
 
 
 def test_the_ekf_error_fit_recovers_a_gauss_markov_process():
+    from lab.calibration.identify import _gm_fit
     from sim.autopilot.profile import GaussMarkov
-    from sim.calibration.identify import _gm_fit
 
     dt, tau, sig = 0.1, 3.0, 0.25
     gm = GaussMarkov((sig,), (tau,), np.random.default_rng(3))

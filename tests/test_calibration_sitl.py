@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from sim.calibration.calibrate import BAND, MEAN_TOL_M, find_bundle, sitl_dir
+from lab.calibration.calibrate import BAND, MEAN_TOL_M, find_bundle, sitl_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -35,7 +35,7 @@ pytestmark = [
 
 def _row(out, autopilot: str, profile: str, seeds: int, timeout: float) -> tuple[dict, str]:
     r = subprocess.run(
-        [sys.executable, "-m", "sim.calibration.calibrate", "sil", autopilot, "--out", str(out),
+        [sys.executable, "-m", "lab.calibration.calibrate", "sil", autopilot, "--out", str(out),
          "--profile", str(ROOT / "configs" / "autopilots" / profile), "--seeds", str(seeds)],
         cwd=ROOT, capture_output=True, text=True, timeout=timeout,
     )  # fmt: skip
@@ -61,7 +61,7 @@ def test_px4_profile_predicts_the_real_firmware(tmp_path):
         pytest.skip(f"no PX4 bundle in {sitl_dir()}")
     out = tmp_path / "cal"
     r = subprocess.run(
-        [sys.executable, "-m", "sim.calibration.calibrate", "real", "px4", "--out", str(out),
+        [sys.executable, "-m", "lab.calibration.calibrate", "real", "px4", "--out", str(out),
          "--only", "stationary", "--duration", "180", "--bundle", str(bundle)],
         cwd=ROOT, capture_output=True, text=True, timeout=1800,  # the PX4 lock may be held
     )  # fmt: skip
@@ -96,7 +96,7 @@ def test_arduplane_profile_predicts_the_real_firmware(tmp_path):
         pytest.skip(f"no ArduPlane bundle in {sitl_dir()}")
     out = tmp_path / "cal"
     r = subprocess.run(
-        [sys.executable, "-m", "sim.calibration.calibrate", "real", "arduplane", "--out", str(out),
+        [sys.executable, "-m", "lab.calibration.calibrate", "real", "arduplane", "--out", str(out),
          "--only", "stationary", "--duration", "240", "--instance", str(_free_instance()),
          "--bundle", str(bundle)],
         cwd=ROOT, capture_output=True, text=True, timeout=900,

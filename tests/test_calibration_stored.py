@@ -1,4 +1,4 @@
-"""The stored real calibration flights (sim/calibration/flights/) and what flies their SIL legs
+"""The stored real calibration flights (lab/calibration/flights/) and what flies their SIL legs
 on a bare clone: the bench group ``calibration`` and the robustness bench's ``--profile``. No
 flight here (the bench groups fly; these check what they are given and refuse)."""
 
@@ -12,9 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from mpf_mavlink.config.autopilot_profile import load_profile
-from mpf_mavlink.errors import ConfigError
-from sim.calibration.calibrate import (
+from lab.calibration.calibrate import (
     ARDUPLANE_MATRIX,
     BAND,
     PX4_MATRIX,
@@ -22,6 +20,8 @@ from sim.calibration.calibrate import (
     load_flights,
     sil_command,
 )
+from mpf_mavlink.config.autopilot_profile import load_profile
+from mpf_mavlink.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -142,7 +142,7 @@ def test_calibrate_store_writes_what_load_flights_reads(tmp_path):
     (run / "bridge" / "timeseries.csv").write_text("\n".join([cols, *rows]) + "\n")
     to = tmp_path / "flights.json"
     r = subprocess.run(
-        [sys.executable, "-m", "sim.calibration.calibrate", "store", "arduplane",
+        [sys.executable, "-m", "lab.calibration.calibrate", "store", "arduplane",
          "--out", str(tmp_path / "runs"), "--firmware", "test", "--to", str(to)],
         cwd=ROOT, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
@@ -152,7 +152,7 @@ def test_calibrate_store_writes_what_load_flights_reads(tmp_path):
     assert rec["start_heading_rad"] == pytest.approx(0.0)  # flying north
     assert rec["real"]["steady_mean_radial_se_m"] == pytest.approx(0.0, abs=1e-6)  # on the circle
     r = subprocess.run(
-        [sys.executable, "-m", "sim.calibration.calibrate", "store", "arduplane",
+        [sys.executable, "-m", "lab.calibration.calibrate", "store", "arduplane",
          "--out", str(tmp_path / "none"), "--firmware", "x", "--to", str(tmp_path / "f2.json")],
         cwd=ROOT, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
@@ -163,7 +163,7 @@ def test_calibrate_store_writes_what_load_flights_reads(tmp_path):
 def test_mean_standard_error_counts_the_independent_samples_of_a_correlated_series():
     import numpy as np
 
-    from sim.calibration.calibrate import mean_standard_error
+    from lab.calibration.calibrate import mean_standard_error
 
     rng = np.random.default_rng(5)
     dt, n = 0.02, 60000  # 1200 s at 50 Hz

@@ -1,5 +1,5 @@
 """The capture guards (mpf_mavlink/core/guidance/capture.py), the rig's path placement and
---start-offset (sim/rigs/placement.py), and a capture from far in our SIL (docs/bridge.md
+--start-offset (lab/rigs/placement.py), and a capture from far in our SIL (docs/bridge.md
 "Capture from far")."""
 
 from __future__ import annotations
@@ -14,13 +14,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from lab.rigs.placement import parse_offset, place_path
 from mpf_mavlink.config.scenario import build_capture, build_path, build_target
 from mpf_mavlink.config.schema import load_config
 from mpf_mavlink.constants import GRAVITY_M_S2
 from mpf_mavlink.core.guidance import capture as cap
 from mpf_mavlink.core.guidance.law import Gains, MpfCommand, VehicleState, mpf_law
 from mpf_mavlink.core.paths import circle, helix, lemniscate, line, spline
-from sim.rigs.placement import parse_offset, place_path
 
 ROOT = Path(__file__).resolve().parents[1]
 P = cap.CaptureParams()
@@ -223,7 +223,7 @@ def test_start_offset_parses(text, ok):
 def test_a_bad_start_offset_is_one_line_and_exit_2(tmp_path, text):
     out = tmp_path / "out"
     r = subprocess.run(
-        [sys.executable, "-m", "sim.rigs", "arduplane", "--start-offset", text, "--out", str(out)],
+        [sys.executable, "-m", "lab.rigs", "arduplane", "--start-offset", text, "--out", str(out)],
         cwd=ROOT, capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert r.returncode == 2 and "--start-offset" in r.stderr, r.stderr
@@ -231,7 +231,7 @@ def test_a_bad_start_offset_is_one_line_and_exit_2(tmp_path, text):
 
 
 def test_the_start_offset_names_another_flight():
-    from sim.rigs import common
+    from lab.rigs import common
 
     base = ["arduplane", "--out", "x", "--config", "configs/bridge_arduplane_spline.yaml"]
     a = common.parser().parse_args(base)
@@ -240,7 +240,7 @@ def test_the_start_offset_names_another_flight():
 
 
 def test_the_capture_bound_is_distance_over_closing_speed_plus_a_turn_and_settling():
-    from sim.rigs.capture import SETTLE_S, capture_bound_s
+    from lab.rigs.capture import SETTLE_S, capture_bound_s
 
     cfg = load_config(ROOT / "configs" / "bridge_arduplane.yaml")
     # 22 m/s against 3 m/s; bank 35 - 5 deg with the 0.745 turn gain: R = 113.7 m
@@ -255,7 +255,7 @@ def test_a_capture_from_300_m_away_in_our_sil_keeps_the_floor_and_the_bank(tmp_p
     300 m beyond the path's southern point flying south: the floor (the path's lowest point
     - 10 m) and the bank limit + 2 deg hold, and it captures within the stated bound; with the
     guards off the same start dives below that floor (measured: 70 m against 78 m)."""
-    from sim.rigs.capture import row_figures
+    from lab.rigs.capture import row_figures
 
     cfg_path = ROOT / "configs" / "bridge_arduplane_spline.yaml"
     cfg = load_config(cfg_path)

@@ -202,7 +202,7 @@ def test_the_certificate_of_59_flights(tmp_path):
 
 # --------------------------------------------------------------------------- validation table
 def test_the_validation_table_says_inside_or_outside(tmp_path):
-    from sim.rigs.validate import table, verdict_row
+    from lab.rigs.validate import table, verdict_row
 
     cert = {"quantile": 0.95, "flights": {"judged": 59},
             "mission": {"name": "m", "autopilot": "px4", "profile": "auto", "duration_s": 180,

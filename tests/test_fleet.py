@@ -275,12 +275,12 @@ def test_bad_link_url_is_one_line() -> None:
 
 
 def test_rig_spacing_figures() -> None:
-    """The rig's judge (sim/rigs/fleet.py) on synthetic tracks: three members at 22 m/s, the
+    """The rig's judge (lab/rigs/fleet.py) on synthetic tracks: three members at 22 m/s, the
     third 30 m behind its slot until t = 50 s, then on it: converged at 50 s (the first grid
     instant after the last one beyond 10 m), RMS and max 0 after; after member 1 stops (t 80 s)
     the two survivors are judged against 180 deg (respace): member 2 is 120 deg from member 0
     where 180 is wanted, L/6 = 157 m."""
-    from sim.rigs.fleet import spacing_figures, spacing_series
+    from lab.rigs.fleet import spacing_figures, spacing_series
 
     t = np.arange(0.0, 120.0, 0.1)
     L = L150

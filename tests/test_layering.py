@@ -5,9 +5,10 @@
   configuration
   (``config.scenario`` builds the core's objects from it, one layer up), the MAVLink boundary,
   the live bridge, run output, the CLI or ``sim``;
-- the benchmarks (top-level ``bench/``, run by scripts/bench) are tooling, not product: nothing
-  that ships (``mpf_mavlink``, ``sim``: pyproject's packages) imports them, and they are no
-  package the wheel holds;
+- the benchmarks (top-level ``bench/``, run by scripts/bench) and the laboratory (top-level
+  ``lab/``: the firmware rigs, the soak, the profiles' identification) are tooling, not
+  product: nothing that ships (``mpf_mavlink``, ``sim``: pyproject's packages) imports them,
+  and they are no package the wheel holds;
 - ``mavlink`` is the only package that imports pymavlink, and it knows nothing of guidance;
 - ``quaternion`` (the one quaternion <-> matrix conversion of each kind) and ``constants`` are
   leaves that import nothing of ours, so that the core and the MAVLink boundary share them;
@@ -98,11 +99,13 @@ def _top_level_imports(path: Path) -> set[str]:
     return out
 
 
-def test_what_ships_never_imports_the_benchmarks_and_the_wheel_leaves_them_out():
-    assert (ROOT / "bench" / "main.py").is_file()
+def test_what_ships_never_imports_the_tooling_and_the_wheel_leaves_it_out():
+    assert (ROOT / "bench" / "main.py").is_file() and (
+        ROOT / "lab" / "rigs" / "common.py"
+    ).is_file()
     assert not (PKG / "bench").exists()
     for path in [*PKG.rglob("*.py"), *(ROOT / "sim").rglob("*.py")]:
-        assert "bench" not in _top_level_imports(path), path.relative_to(ROOT)
+        assert not {"bench", "lab"} & _top_level_imports(path), path.relative_to(ROOT)
     # setuptools' own discovery with pyproject's include list: what the wheel packages
     import tomllib
 
@@ -111,7 +114,9 @@ def test_what_ships_never_imports_the_benchmarks_and_the_wheel_leaves_them_out()
     find = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
     shipped = find_packages(str(ROOT), include=find["packages"]["find"]["include"])
     assert "mpf_mavlink" in shipped and "sim" in shipped
-    assert not [p for p in shipped if p.split(".")[0] in ("bench", "tests", "scripts")], shipped
+    assert not [p for p in shipped if p.split(".")[0] in ("bench", "lab", "tests", "scripts")], (
+        shipped
+    )
 
 
 def test_core_is_pure_of_io_layers():

@@ -1,4 +1,4 @@
-"""The UDP impairment relay (sim/soak/relay.py) on real loopback sockets.
+"""The UDP impairment relay (lab/soak/relay.py) on real loopback sockets.
 
 A "vehicle" socket sends numbered datagrams to the relay's vehicle port; a "bridge" socket
 listens where the relay forwards them (and answers back through it). Counts are exact; timing
@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from sim.soak.relay import DOWN, UP, Blackout, Impairment, UdpRelay, mavlink_sysid, split_frames
+from lab.soak.relay import DOWN, UP, Blackout, Impairment, UdpRelay, mavlink_sysid, split_frames
 
 N = 400
 

@@ -1,5 +1,5 @@
 """Reliability and security (issue 6): the link's defences, the fuzzer, bad input, and the
-campaign's scenarios (sim/soak/campaign.py) as tests.
+campaign's scenarios (lab/soak/campaign.py) as tests.
 
 Fast: the vehicle-clock gate and identity pinning of the link, the fuzzer, configuration
 cross-checks, one-line CLI errors, and three campaign scenarios in a short form (bad input,
@@ -15,13 +15,13 @@ from pathlib import Path
 
 import pytest
 
+from lab.soak import campaign as soak
+from lab.soak.mavfuzz import CLASSES, FrameFuzzer
 from mpf_mavlink.config import bridge as bridge_config  # noqa: F401  (registers the sections)
 from mpf_mavlink.config.schema import load_config
 from mpf_mavlink.errors import ConfigError
 from mpf_mavlink.mavlink import decode, dialect, mavutil
 from mpf_mavlink.mavlink.link import BootClockGate, open_link, wait_heartbeat
-from sim.soak import campaign as soak
-from sim.soak.mavfuzz import CLASSES, FrameFuzzer
 
 ROOT = Path(__file__).resolve().parents[1]
 PX4_CFG = ROOT / "configs" / "bridge_px4.yaml"
@@ -392,7 +392,7 @@ def test_tap_measures_the_vehicles_timeouts_on_its_clock():
     # waiting: 0.6 s of wall time with no simulated time (its ATTITUDEs at 50 Hz stop and go
     # on from the next frame). Its 1 s loss timeout runs on its own clock, which the tap reads
     # from the ATTITUDEs it relayed: 1.0 s there, 1.6 s on the wall clock.
-    from sim.soak.rig import Tap
+    from lab.soak.rig import Tap
 
     tap = Tap(None, "px4")  # type: ignore[arg-type]  # no relay: the records are given
     wall = [0.02 * k for k in range(26)] + [0.6 + 0.02 * k for k in range(26, 80)]

@@ -48,7 +48,7 @@ def test_arduplane_engages_tracks_and_hands_back(tmp_path, moving, rms_max):
 
 def test_arduplane_over_a_serial_line(tmp_path):
     """README "CLI over serial": `mpf-mavlink run --connect /dev/pts/N:115200` on a
-    pseudo-terminal relayed to ArduPlane's SERIAL1 (sim/rigs/pty_relay.py), 120 s. The link
+    pseudo-terminal relayed to ArduPlane's SERIAL1 (lab/rigs/pty_relay.py), 120 s. The link
     must not cost tracking: the same bounds as over TCP."""
     args = ["arduplane", "--duration", "120", "--serial", "--still", *SPEEDUP]
     rc, s, log = rig(tmp_path / "rig", *args)

@@ -1,5 +1,5 @@
 """Two real ArduPlane SITL instances coordinated on the shipped 150 m circle (the target drifts
-3 m/s east): ``scripts/sitl arduplane --fleet 2`` (sim/rigs/fleet.py), 100 s. Skips without the
+3 m/s east): ``scripts/sitl arduplane --fleet 2`` (lab/rigs/fleet.py), 100 s. Skips without the
 bundles in ../shared/sitl (tests/sitl_flights.py), as the single flights do.
 
 ~3.5 min: take-off together (~60 s), the second bridge 20 s after the first, 100 s of tracking.
@@ -30,7 +30,7 @@ def test_two_aircraft_converge_to_their_slots(tmp_path):
     out = tmp_path / "rig"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     r = subprocess.run(
-        [sys.executable, "-m", "sim.rigs", "arduplane", "--fleet", "2", "--duration", "100",
+        [sys.executable, "-m", "lab.rigs", "arduplane", "--fleet", "2", "--duration", "100",
          "--out", str(out), "--spacing-bar", "8", "--rms-bar", "0.8", "--set", "fleet.k_c=0.1"],
         cwd=ROOT, env=env, capture_output=True, text=True, timeout=TIMEOUT_S,
     )  # fmt: skip

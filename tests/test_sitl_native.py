@@ -1,4 +1,4 @@
-"""The rig's firmware-guidance flights and head-to-head figures without firmware (sim/rigs/
+"""The rig's firmware-guidance flights and head-to-head figures without firmware (lab/rigs/
 native.py, figures.moving_path_figures, worlds.py), and issue 40 item 4's rig pieces: the
 config's target as written, unique flight names, ATTITUDE rate from the tlog, a refused SIL
 leg's reason. The flights themselves: tests/test_sitl_arduplane.py, test_sitl_px4.py."""
@@ -16,13 +16,13 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import common as mavlink2  # noqa: E402
 
+from lab.rigs import common, native, worlds  # noqa: E402
+from lab.rigs.bundles import RigError  # noqa: E402
+from lab.rigs.figures import moving_path_figures, tlog_stream_hz  # noqa: E402
 from mpf_mavlink.config.scenario import build_path  # noqa: E402
 from mpf_mavlink.config.schema import load_config  # noqa: E402
 from mpf_mavlink.core.target import ConstantTurn  # noqa: E402
 from mpf_mavlink.mavlink.tlog import TlogWriter  # noqa: E402
-from sim.rigs import common, native, worlds  # noqa: E402
-from sim.rigs.bundles import RigError  # noqa: E402
-from sim.rigs.figures import moving_path_figures, tlog_stream_hz  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -122,7 +122,7 @@ def test_e_on_a_synthetic_moving_track_is_the_known_offset():
 
 
 def test_e_of_a_run_record_is_the_same_function(tmp_path):
-    from sim.rigs.figures import run_record_figures
+    from lab.rigs.figures import run_record_figures
 
     cfg = load_config(ROOT / "configs" / "bridge_px4.yaml")
     nodes = build_path(cfg.path).positions()
@@ -294,7 +294,7 @@ def _ulog_msg(typ: str, body: bytes) -> bytes:
 def test_the_ulog_reader_decodes_nested_arrays_and_restores_unlogged_trailing_padding(tmp_path):
     import struct
 
-    from sim.rigs.ulog import read_topics
+    from lab.rigs.ulog import read_topics
 
     fmt = "uint64_t timestamp;float[4] q;uint8_t n;uint8_t[7] _padding0;"
     data = b"ULog\x01\x12\x35" + b"\x01" + struct.pack("<Q", 0)
@@ -316,7 +316,7 @@ def test_the_ulog_reader_decodes_nested_arrays_and_restores_unlogged_trailing_pa
 
 
 def test_euler_angles_of_a_known_quaternion():
-    from sim.rigs.ulog import _euler
+    from lab.rigs.ulog import _euler
 
     r, pch, y = 0.3, -0.2, 2.0  # ZYX: q = qz(y) qy(p) qx(r)
     cr, sr, cp, sp, cy, sy = (math.cos(r / 2), math.sin(r / 2), math.cos(pch / 2),

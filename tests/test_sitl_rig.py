@@ -1,4 +1,4 @@
-"""The real-firmware rig's own logic, without firmware (sim/rigs): arguments refused before
+"""The real-firmware rig's own logic, without firmware (lab/rigs): arguments refused before
 anything is created, nothing deleted, --out relative to the caller, the figures it computes
 (cross-track for any shape, the hold after a kill) and the serial relay."""
 
@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.rigs import common
-from sim.rigs.bundles import RigError
-from sim.rigs.figures import cross_track, hold_figures
-from sim.rigs.pty_relay import PtyRelay
+from lab.rigs import common
+from lab.rigs.bundles import RigError
+from lab.rigs.figures import cross_track, hold_figures
+from lab.rigs.pty_relay import PtyRelay
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def run_rig(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     return subprocess.run(
-        [sys.executable, "-m", "sim.rigs", *args], cwd=cwd, env=env, capture_output=True,
+        [sys.executable, "-m", "lab.rigs", *args], cwd=cwd, env=env, capture_output=True,
         text=True, timeout=60,
     )  # fmt: skip
 
@@ -235,7 +235,7 @@ def test_a_bundle_member_outside_the_cache_is_refused_with_or_without_tarfiles_f
     import io
     import tarfile
 
-    from sim.rigs import bundles
+    from lab.rigs import bundles
 
     if with_filter and not hasattr(tarfile, "tar_filter"):
         pytest.skip("this interpreter's tarfile has no filters (Python before 3.11.4)")

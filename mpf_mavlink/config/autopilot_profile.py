@@ -1,5 +1,5 @@
 """The autopilot profile's schema: what the real firmware does that the SIL's emulation must
-reproduce, identified from flights of the firmware (``python -m sim.calibration.identify``) and
+reproduce, identified from flights of the firmware (``python -m lab.calibration.identify``) and
 named by ``sil.autopilot_profile: configs/autopilots/<name>.yaml``. The emulation that uses it is
 sim/autopilot/profile.py (its docstring says what each section changes in the SIL).
 

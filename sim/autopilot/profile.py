@@ -1,5 +1,5 @@
 """An autopilot profile: what the real firmware does that the SIL's emulation must reproduce,
-identified from flights of the firmware (``python -m sim.calibration.identify``) and loaded by the
+identified from flights of the firmware (``python -m lab.calibration.identify``) and loaded by the
 SIL with ``sil.autopilot_profile: configs/autopilots/<name>.yaml``.
 
 The profile is validated as strictly as a config (unknown keys, wrong types and impossible values

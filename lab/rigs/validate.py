@@ -193,7 +193,7 @@ def main(argv: list[str]) -> int:
         print(f"[{j + 1}/{a.flights}] {describe(_rig_drawn(d))}", flush=True)
         if not a.rejudge:
             with open(out / f"flight-{j}.log", "w") as f:
-                subprocess.run([sys.executable, "-m", "sim.rigs", *args], cwd=ROOT, stdout=f,
+                subprocess.run([sys.executable, "-m", "lab.rigs", *args], cwd=ROOT, stdout=f,
                                stderr=subprocess.STDOUT, check=False)  # fmt: skip
         s = _read(fdir / "summary.json")
         fig = dict(s.get("figures", {}))

@@ -19,9 +19,9 @@ import time
 from pathlib import Path
 from typing import IO, Any
 
+from lab.rigs.bundles import ROOT, die_with_parent, stop_process_group
+from lab.rigs.gcs import Gcs
 from mpf_mavlink.mavlink.modes import Flavour
-from sim.rigs.bundles import ROOT, die_with_parent, stop_process_group
-from sim.rigs.gcs import Gcs
 
 NAME = "px4"
 FLAVOUR = Flavour.PX4

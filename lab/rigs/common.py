@@ -5,8 +5,8 @@ It does what a user does by hand, and nothing more to the autopilot:
 1. checks every argument (bundle, config, numbers, the run directory) before touching anything;
 2. unpacks the bundle (``../shared/sitl``, or ``--bundle``) into the git-ignored ``.cache/sitl``
    and starts the firmware with stock parameters in a scratch directory of the run directory;
-3. takes off as a ground station does (the autopilot module: ``sim/rigs/px4.py``,
-   ``sim/rigs/arduplane.py``) and lets the autopilot loiter;
+3. takes off as a ground station does (the autopilot module: ``lab/rigs/px4.py``,
+   ``lab/rigs/arduplane.py``) and lets the autopilot loiter;
 4. places the mission where the aircraft is: ``--config``'s path (default the autopilot's
    ``configs/bridge_*.yaml``, as shipped) about a centre chosen so that the aircraft is on the
    path, tangent to its flight, where its own loiter will have taken it when the bridge engages;
@@ -37,11 +37,9 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any, NoReturn
 
-from mpf_mavlink.config.schema import load_config
-from mpf_mavlink.errors import MpfError
-from sim.rigs import arduplane, fleet, native, px4
-from sim.rigs.bundles import ROOT, RigError, bundle_version, check_bundle, die_with_parent, unpack
-from sim.rigs.figures import (
+from lab.rigs import arduplane, fleet, native, px4
+from lab.rigs.bundles import ROOT, RigError, bundle_version, check_bundle, die_with_parent, unpack
+from lab.rigs.figures import (
     cross_track,
     fmt,
     hold_figures,
@@ -50,7 +48,9 @@ from sim.rigs.figures import (
     tlog_counts,
     tlog_stream_hz,
 )
-from sim.rigs.gcs import Gcs
+from lab.rigs.gcs import Gcs
+from mpf_mavlink.config.schema import load_config
+from mpf_mavlink.errors import MpfError
 
 AUTOPILOTS: dict[str, ModuleType] = {"px4": px4, "arduplane": arduplane}
 RESULTS = ROOT / "docs" / "results"
@@ -82,7 +82,7 @@ def _wind(text: str) -> tuple[float, float]:
 
 
 def _offset(text: str) -> tuple[float, float, float]:
-    from sim.rigs.placement import parse_offset
+    from lab.rigs.placement import parse_offset
 
     try:
         return parse_offset(text)
@@ -237,7 +237,7 @@ def parser() -> argparse.ArgumentParser:
     )
     _add_flight_options(ap)
     _add_rig_options(ap)
-    fleet.add_options(ap)  # --fleet N (sim/rigs/fleet.py)
+    fleet.add_options(ap)  # --fleet N (lab/rigs/fleet.py)
     return ap
 
 
@@ -317,12 +317,12 @@ def place_any(
 ) -> tuple[list[float], list[float]]:
     """(target position NED, predicted aircraft position NED) for any path shape: the shipped
     circle as :func:`place_mission` places it; any other shape, or any ``--start-offset``, by
-    :func:`sim.rigs.placement.place_path` (the aircraft on the path tangent to its flight, or
+    :func:`lab.rigs.placement.place_path` (the aircraft on the path tangent to its flight, or
     at the offset from it)."""
     if cfg.path.type == "circle" and not offset and tuple(cfg.path.center_m) == (0.0, 0.0, 0.0):
         return place_mission(g, float(cfg.path.radius_m), lead_s)
+    from lab.rigs.placement import place_path
     from mpf_mavlink.config.scenario import build_path, build_target
-    from sim.rigs.placement import place_path
 
     (x, y, z), chi2 = predict_start(g, lead_s)
     nodes = build_path(cfg.path).positions()
@@ -435,11 +435,11 @@ def flight_name(a: argparse.Namespace, v: dict[str, Any] | None = None) -> str:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["compare"]:  # MPF and the firmware's own guidance, one after the other
-        from sim.rigs import worlds
+        from lab.rigs import worlds
 
         return worlds.main(argv[1:])
     if any(x == "--certificate" or x.startswith("--certificate=") for x in argv):
-        from sim.rigs import validate as drawn  # flights drawn from a certificate's conditions
+        from lab.rigs import validate as drawn  # flights drawn from a certificate's conditions
 
         return drawn.main(argv)
     a = parser().parse_args(argv)
@@ -448,7 +448,7 @@ def main(argv: list[str] | None = None) -> int:
     except RigError as e:
         print(f"sitl: {e}", file=sys.stderr)
         return 2
-    if a.fleet:  # N aircraft on one path (sim/rigs/fleet.py)
+    if a.fleet:  # N aircraft on one path (lab/rigs/fleet.py)
         return fleet.main(a, v)
     mod, out = v["mod"], v["out"]
     try:
@@ -487,8 +487,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _estimator_floor(out: Path) -> dict[str, Any]:
-    """PX4: EKF2's error against SIH's truth over the steady window (:mod:`sim.rigs.ulog`)."""
-    from sim.rigs import ulog
+    """PX4: EKF2's error against SIH's truth over the steady window (:mod:`lab.rigs.ulog`)."""
+    from lab.rigs import ulog
 
     try:
         return ulog.estimator_floor(out)
@@ -632,7 +632,7 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
     relay = None
     url = fw.bridge_url
     if a.serial:
-        from sim.rigs.pty_relay import PtyRelay
+        from lab.rigs.pty_relay import PtyRelay
 
         relay = PtyRelay(fw.bridge_port)
         url = f"{relay.device}:115200"
@@ -877,7 +877,7 @@ def _guidance_words(s: dict[str, Any]) -> str:
 
 def _rows_e(f: dict[str, Any]) -> list[tuple[str, str]]:
     """The head-to-head's figures: e, the 3D distance from the moving path (the same function
-    for both guidances, :func:`sim.rigs.figures.moving_path_figures`)."""
+    for both guidances, :func:`lab.rigs.figures.moving_path_figures`)."""
     r = [
         (
             "steady e RMS / max (to moving path)",

@@ -1,4 +1,4 @@
-"""The soak campaign's rig (:mod:`sim.soak`): the vehicle and bridge processes, the relay's tap
+"""The soak campaign's rig (:mod:`lab.soak`): the vehicle and bridge processes, the relay's tap
 of all traffic, a mission (vehicle + relay + bridge), the checks on what the tap saw, result
 rows."""
 
@@ -23,15 +23,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from lab.soak.relay import DOWN, Blackout, Impairment, UdpRelay
 from mpf_mavlink.mavlink.modes import is_offboard, mode_name
 from mpf_mavlink.mavlink.url import free_udp_port
-from sim.soak.relay import DOWN, Blackout, Impairment, UdpRelay
 
 if TYPE_CHECKING:
     from mpf_mavlink.core.target import ConstantTurn, Stationary
     from sim.vehicle.vehicle import SimVehicle
 
-ROOT = Path(__file__).resolve().parents[2]  # the repository (sim/soak/rig.py)
+ROOT = Path(__file__).resolve().parents[2]  # the repository (lab/soak/rig.py)
 CONFIGS = {
     "px4": ROOT / "configs" / "bridge_px4.yaml",
     "ardupilot": ROOT / "configs" / "bridge_arduplane.yaml",
@@ -56,7 +56,7 @@ def mpf_mavlink_cmd() -> list[str]:
 
 # ----------------------------------------------------------------------------- the vehicle process
 def _vehicle_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m sim.soak vehicle")
+    ap = argparse.ArgumentParser(prog="python -m lab.soak vehicle")
     ap.add_argument("--flavour", choices=("px4", "ardupilot"), default="px4")
     ap.add_argument("--url", required=True)
     ap.add_argument("--plant", choices=("jsbsim", "kinematic"), default="jsbsim")
@@ -143,7 +143,7 @@ def _vehicle_report(v: SimVehicle) -> dict[str, Any]:
 
 
 def vehicle_main(argv: list[str]) -> int:
-    """``python -m sim.soak vehicle``: a SimVehicle until SIGTERM, then a JSON report."""
+    """``python -m lab.soak vehicle``: a SimVehicle until SIGTERM, then a JSON report."""
     a = _vehicle_parser().parse_args(argv)
     target = _vehicle_target(a.target)
 
@@ -205,7 +205,7 @@ class VehicleProc:
         cmd = [
             sys.executable,
             "-m",
-            "sim.soak",
+            "lab.soak",
             "vehicle",
             "--flavour",
             self.flavour,

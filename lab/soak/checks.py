@@ -1,4 +1,4 @@
-"""The soak campaign's checks (:mod:`sim.soak`) on what the relay's tap saw: every setpoint
+"""The soak campaign's checks (:mod:`lab.soak`) on what the relay's tap saw: every setpoint
 within the adapter's limits for the config (:class:`Limits`), gaps in a stream, the bridge's
 silences; ``_r`` rounds figures for the result rows."""
 
@@ -8,8 +8,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from lab.soak.rig import CONFIGS, VEHICLE_COMPID, VEHICLE_SYSID, Tap
 from mpf_mavlink.mavlink.codec import TYPE_MASK_ARDUPLANE_ATTITUDE
-from sim.soak.rig import CONFIGS, VEHICLE_COMPID, VEHICLE_SYSID, Tap
 
 
 @dataclass

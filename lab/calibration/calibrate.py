@@ -1,8 +1,8 @@
 """Calibration check: the same missions on the real firmware and in our SIL with a profile.
 
-``python -m sim.calibration.calibrate real arduplane --out DIR`` flies the matrix on the ArduPlane
-SITL bundle (one run directory per mission, the rig of :mod:`sim.rigs` on instance ``--instance``);
-``python -m sim.calibration.calibrate sil --out DIR [--profile P]`` re-flies every real run of DIR
+``python -m lab.calibration.calibrate real arduplane --out DIR`` flies the matrix on the ArduPlane
+SITL bundle (one run directory per mission, the rig of :mod:`lab.rigs` on instance ``--instance``);
+``python -m lab.calibration.calibrate sil --out DIR [--profile P]`` re-flies every real run of DIR
 in our SIL from the real flight's start state and writes ``DIR/calibration.json`` and a Markdown
 table (``--doc``). Real flights take real time; the SIL leg takes seconds per mission, so a profile
 can be re-checked against the same real flights as often as needed.
@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sim.rigs.arduplane import sil_wind_set
-from sim.rigs.bundles import sitl_dir
+from lab.rigs.arduplane import sil_wind_set
+from lab.rigs.bundles import sitl_dir
 
 ROOT = Path(__file__).resolve().parents[2]
 BAND = (0.67, 1.5)  # real / SIL steady RMS (issue 24's acceptance)
@@ -60,7 +60,7 @@ PX4_MATRIX = (
 def find_bundle(autopilot: str) -> Path | None:
     """The bundle of ``autopilot`` the rig flies (its tarball in ``MPF_SITL_DIR`` or
     ``../shared/sitl``; the rig unpacks it into its cache), or None on a bare clone."""
-    from sim.rigs.bundles import TARBALLS, why_missing
+    from lab.rigs.bundles import TARBALLS, why_missing
 
     d = sitl_dir()
     return None if d is None or why_missing(autopilot) else d / TARBALLS[autopilot]
@@ -69,11 +69,11 @@ def find_bundle(autopilot: str) -> Path | None:
 def fly_real(
     autopilot: str, m: Mission, out: Path, bundle: Path, instance: int | None, duration: float
 ) -> int:
-    """One real flight with the real-firmware rig (:mod:`sim.rigs`, what ``scripts/sitl`` runs):
+    """One real flight with the real-firmware rig (:mod:`lab.rigs`, what ``scripts/sitl`` runs):
     the mission's radius, altitude, wind (ArduPlane SIM_WIND_*) and target, the shipped bridge
     config. ArduPlane on ``-I instance`` (None: the rig takes a free one); PX4 under the rig's
     ``/tmp/mpf-px4.lock``."""
-    from sim.rigs.common import main as rig
+    from lab.rigs.common import main as rig
 
     config = ROOT / "configs" / f"bridge_{autopilot}.yaml"
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -407,14 +407,14 @@ def _parser() -> argparse.ArgumentParser:
     sl.add_argument(
         "--stored",
         action="store_true",
-        help="compare with the stored real flights (sim/calibration/flights/, written by "
+        help="compare with the stored real flights (lab/calibration/flights/, written by "
         "`store`) instead of real runs under --out; the SIL legs go under --out",
     )
     st = sub.add_parser("store", help="keep the real runs of --out as a small JSON summary")
     st.add_argument("autopilot", choices=("arduplane", "px4"))
     st.add_argument("--out", required=True, help="the real runs (as `real` wrote them)")
     st.add_argument("--firmware", required=True, help="what flew them (bundle, parameters)")
-    st.add_argument("--to", default=None, help="file (default sim/calibration/flights/AP.json)")
+    st.add_argument("--to", default=None, help="file (default lab/calibration/flights/AP.json)")
     return ap
 
 
@@ -498,7 +498,7 @@ def _sil(a: argparse.Namespace, argv: list[str] | None) -> int:
         return 2
     out.mkdir(parents=True, exist_ok=True)
     argv_s = " ".join(argv if argv is not None else sys.argv[1:])
-    title = f"{a.autopilot}, SIL {tag} (written by `python -m sim.calibration.calibrate {argv_s}`)"
+    title = f"{a.autopilot}, SIL {tag} (written by `python -m lab.calibration.calibrate {argv_s}`)"
     text = table(rows, title)
     print(text)
     (out / f"calibration_{tag}.json").write_text(json.dumps(rows, indent=1))

@@ -1,4 +1,4 @@
-"""The soak campaign's security and bad-input scenarios (:mod:`sim.soak`): spoofed and signed
+"""The soak campaign's security and bad-input scenarios (:mod:`lab.soak`): spoofed and signed
 links, malformed configuration and command lines, unwritable output directories."""
 
 from __future__ import annotations
@@ -16,11 +16,10 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from mpf_mavlink.mavlink.url import free_udp_port
-from sim.soak.checks import Limits, _r, bridge_silence, max_gap
-from sim.soak.missions import FLOWN, _completed, _mission_common, _timeseries, _tracking_window
-from sim.soak.relay import DOWN
-from sim.soak.rig import (
+from lab.soak.checks import Limits, _r, bridge_silence, max_gap
+from lab.soak.missions import FLOWN, _completed, _mission_common, _timeseries, _tracking_window
+from lab.soak.relay import DOWN
+from lab.soak.rig import (
     CONFIGS,
     ROOT,
     TARGET_SYSID,
@@ -33,6 +32,7 @@ from sim.soak.rig import (
     Row,
     mpf_mavlink_cmd,
 )
+from mpf_mavlink.mavlink.url import free_udp_port
 
 
 def _signed_mav(key: bytes, sysid: int, compid: int, link_id: int = 3) -> Any:
@@ -114,7 +114,7 @@ class _Spoofer:
 
     def _replay(self) -> None:
         """One of the vehicle's own signed datagrams, about 1 s old, verbatim."""
-        from sim.soak.relay import split_frames
+        from lab.soak.relay import split_frames
 
         relay = self.m.relay
         old = [

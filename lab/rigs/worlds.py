@@ -6,7 +6,7 @@ It runs the rig twice with the same options, each flight with its own firmware s
 placement, start, duration and target), then writes ``DIR/compare.md`` (one table: guidance,
 target, RMS e, max e, mean radial, mean vertical), ``DIR/compare.json`` and ``DIR/compare.png``
 (e against time for both; both tracks in the target's frame). e is the same function for both
-rows (:func:`sim.rigs.figures.moving_path_figures`). ``--record`` also writes
+rows (:func:`lab.rigs.figures.moving_path_figures`). ``--record`` also writes
 ``docs/results/native-<flight>.json`` and regenerates ``docs/results/native.md`` from all of them.
 """
 
@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from sim.rigs.bundles import ROOT, RigError
-from sim.rigs.figures import fmt, read_json
+from lab.rigs.bundles import ROOT, RigError
+from lab.rigs.figures import fmt, read_json
 
 RESULTS = ROOT / "docs" / "results"
 GUIDANCES = ("mpf", "native")
@@ -51,7 +51,7 @@ def sub_argv(argv: list[str], guidance: str, out: Path) -> list[str]:
 
 def validate(argv: list[str]) -> tuple[Any, Path]:
     """The compare's options, checked as the rig checks a flight's (nothing created)."""
-    from sim.rigs import common
+    from lab.rigs import common
 
     a = common.parser().parse_args(argv)
     if a.guidance != "mpf" and "--guidance" in " ".join(argv):
@@ -75,7 +75,7 @@ def render(dirs: list[str], record_it: bool) -> int:
             print(f"sitl compare: {d}: no compare.json", file=sys.stderr)
             return 2
         argv = old["command"].split()[2:]
-        from sim.rigs import common
+        from lab.rigs import common
 
         a = common.parser().parse_args(argv)
         codes = {r["guidance"]: r.get("exit_code") for r in old["rows"]}
@@ -104,7 +104,7 @@ def main(argv: list[str]) -> int:
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     codes: dict[str, int] = {}
     for gd in GUIDANCES:
-        cmd = [sys.executable, "-m", "sim.rigs", *sub_argv(argv, gd, out / gd)]
+        cmd = [sys.executable, "-m", "lab.rigs", *sub_argv(argv, gd, out / gd)]
         print(f"compare: flying {gd}: scripts/sitl {' '.join(cmd[3:])}", flush=True)
         with open(out / f"{gd}.log", "w") as log:
             r = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, check=False)
@@ -133,7 +133,7 @@ def collect(out: Path, a: Any, argv: list[str], codes: dict[str, int]) -> dict[s
         f = s.get("figures") or {}
         floor = s.get("estimator_floor")
         if (floor is None or "error" in floor) and a.autopilot == "px4" and f:
-            from sim.rigs.common import _estimator_floor
+            from lab.rigs.common import _estimator_floor
 
             floor = _estimator_floor(out / gd)
         n = s.get("native") or {}
@@ -159,7 +159,7 @@ def collect(out: Path, a: Any, argv: list[str], codes: dict[str, int]) -> dict[s
                 "estimator_floor": floor,
             }
         )
-    from sim.rigs.common import _git_commit, flight_name
+    from lab.rigs.common import _git_commit, flight_name
 
     a.guidance = "mpf"
     # the MPF flight's name (its inputs are the compare's): the record's, unique per inputs
@@ -199,7 +199,7 @@ HEADER = [
 
 FLOOR_HEADER = [
     "PX4: EKF2's estimate against SIH's truth over the same steady window (`python -m "
-    "sim.rigs.ulog`): the position error (its constant origin offset removed), the roll error, "
+    "lab.rigs.ulog`): the position error (its constant origin offset removed), the roll error, "
     "how closely the radial error follows the roll error (correlation of 5 s means, the radial "
     "lagging), and e measured from the truth instead of the estimate. An aircraft banks by its "
     "estimate and turns by its true bank: a roll error is a lateral acceleration error the "

@@ -5,7 +5,7 @@ its track there (rad from north), the target's position that puts the path
 
 - with no offset, through the aircraft, tangent to its flight: at the path node whose
   horizontal tangent is closest to the aircraft's track (a clockwise circle: the aircraft on
-  it, the centre to its right, as :func:`sim.rigs.common.place_mission` places it);
+  it, the centre to its right, as :func:`lab.rigs.common.place_mission` places it);
 - with ``--start-offset X,Y,D`` (m: X along the aircraft's track, Y to its right, D down), with
   the aircraft that far from the path: a horizontal offset puts it beyond the path's support
   point in that direction (the node farthest out that way, so every other point of the path is

@@ -1,4 +1,4 @@
-"""The soak campaign's flight scenarios (:mod:`sim.soak`): baseline, fuzzed link, loss and
+"""The soak campaign's flight scenarios (:mod:`lab.soak`): baseline, fuzzed link, loss and
 jitter, corruption, blackouts, target loss, a pilot taking over, autopilot reboots, a SIGKILLed
 bridge."""
 
@@ -13,11 +13,9 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from mpf_mavlink.mavlink.modes import is_offboard
-from mpf_mavlink.runs.verdict import EXIT_NOT_JUDGED
-from sim.soak.checks import Limits, _r, bridge_silence, max_gap, setpoint_violations
-from sim.soak.relay import DOWN, UP, Blackout, Impairment
-from sim.soak.rig import (
+from lab.soak.checks import Limits, _r, bridge_silence, max_gap, setpoint_violations
+from lab.soak.relay import DOWN, UP, Blackout, Impairment
+from lab.soak.rig import (
     TARGET_SYSID,
     VEHICLE_COMPID,
     VEHICLE_SYSID,
@@ -29,6 +27,8 @@ from sim.soak.rig import (
     Row,
     Tap,
 )
+from mpf_mavlink.mavlink.modes import is_offboard
+from mpf_mavlink.runs.verdict import EXIT_NOT_JUDGED
 
 # a soak mission's bridge ran to its end: verdict PASS, or NOT JUDGED when shorter than its
 # steady window (the verdict is not what a soak row judges)
@@ -107,7 +107,7 @@ def _tracking_window(tap: Tap) -> tuple[float | None, float | None]:
 
 def scenario_fuzz(o: Opts, n_frames: int | None = None, dur: float | None = None) -> Row:
     """>= 100,000 random and mutated frames into the bridge's link during a mission."""
-    from sim.soak.mavfuzz import FrameFuzzer
+    from lab.soak.mavfuzz import FrameFuzzer
 
     row = Row("fuzz")
     n_frames = n_frames or (12_000 if o.quick else 100_000)

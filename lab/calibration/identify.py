@@ -1,6 +1,6 @@
 """Identify an autopilot profile from the real firmware.
 
-``python -m sim.calibration.identify arduplane --out DIR``.
+``python -m lab.calibration.identify arduplane --out DIR``.
 
 Flies short manoeuvres on the SITL firmware through pymavlink (its ground-station link) and fits
 the parameters :mod:`sim.autopilot.profile` needs (scipy least squares), then writes
@@ -35,9 +35,9 @@ import numpy as np
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from lab.rigs.gcs import recv_from  # noqa: E402
 from mpf_mavlink.constants import GRAVITY_M_S2 as G  # noqa: E402
 from mpf_mavlink.quaternion import quat_of_euler  # noqa: E402
-from sim.rigs.gcs import recv_from  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -208,9 +208,9 @@ def estimator_stats(
 
 # --------------------------------------------------------------------------- ArduPlane
 def identify_arduplane(out: Path, bundle: Path, instance: int, alt: float) -> dict[str, Any]:
+    from lab.rigs.arduplane import take_off
+    from lab.rigs.gcs import Gcs
     from mpf_mavlink.mavlink.modes import Flavour
-    from sim.rigs.arduplane import take_off
-    from sim.rigs.gcs import Gcs
 
     port = 5760 + 10 * instance
     work = out / "sitl"
@@ -272,12 +272,12 @@ def identify_arduplane(out: Path, bundle: Path, instance: int, alt: float) -> di
 
 def identify_px4(out: Path, bundle: Path, alt: float) -> dict[str, Any]:
     """Bank steps and steady turns in OFFBOARD attitude (quaternion + thrust) on real PX4 SIH,
-    started and taken off by the rig (:mod:`sim.rigs.px4`, under its /tmp/mpf-px4.lock)."""
+    started and taken off by the rig (:mod:`lab.rigs.px4`, under its /tmp/mpf-px4.lock)."""
     from types import SimpleNamespace
 
+    from lab.rigs.gcs import Gcs
+    from lab.rigs.px4 import Firmware
     from mpf_mavlink.mavlink.modes import Flavour
-    from sim.rigs.gcs import Gcs
-    from sim.rigs.px4 import Firmware
 
     fw = Firmware(SimpleNamespace(speedup=1.0))
     fw.start(bundle, out / "firmware")
@@ -688,7 +688,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     a = ap.parse_args(argv)
     out = Path(a.out).resolve()
-    cmd = "python -m sim.calibration.identify " + " ".join(
+    cmd = "python -m lab.calibration.identify " + " ".join(
         argv if argv is not None else sys.argv[1:]
     )
     if a.ulog:
@@ -739,8 +739,8 @@ def _identify(a: Any, out: Path) -> dict[str, Any]:
         y = np.array([r["chi_dot"] for r in turns])
         res["turn"]["turn_gain"] = float(x @ y / (x @ x))
         return res
-    from sim.calibration.calibrate import find_bundle
-    from sim.rigs.bundles import RigError, check_bundle, unpack
+    from lab.calibration.calibrate import find_bundle
+    from lab.rigs.bundles import RigError, check_bundle, unpack
 
     spec = a.bundle or find_bundle(a.autopilot)
     if spec is None:

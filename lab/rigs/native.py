@@ -17,7 +17,7 @@ The centre is the moving path's centre (the target's position plus the path's ``
 the target's frame) at the autopilot's time, the target's motion exactly the bridge's: the
 config's target at the placed centre, its clock started when the rig engages. The track is
 recorded from LOCAL_POSITION_NED (the frame the mission was placed in) and judged by
-:func:`sim.rigs.figures.moving_path_figures`, the same function that judges MPF's run record.
+:func:`lab.rigs.figures.moving_path_figures`, the same function that judges MPF's run record.
 """
 
 from __future__ import annotations
@@ -30,10 +30,10 @@ from typing import Any
 
 import numpy as np
 
+from lab.rigs.figures import moving_path_figures
+from lab.rigs.gcs import Gcs
 from mpf_mavlink.config.scenario import build_path, build_target
 from mpf_mavlink.config.schema import load_config
-from sim.rigs.figures import moving_path_figures
-from sim.rigs.gcs import Gcs
 
 MAV_CMD_DO_ORBIT = 34
 MAV_CMD_DO_CHANGE_SPEED = 178

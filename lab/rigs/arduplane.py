@@ -16,9 +16,9 @@ import time
 from pathlib import Path
 from typing import IO, Any
 
+from lab.rigs.bundles import ROOT, RigError, die_with_parent, stop_process_group
+from lab.rigs.gcs import Gcs
 from mpf_mavlink.mavlink.modes import Flavour
-from sim.rigs.bundles import ROOT, RigError, die_with_parent, stop_process_group
-from sim.rigs.gcs import Gcs
 
 
 def sil_wind_set(speed_m_s: float, from_deg: float) -> str:
@@ -135,7 +135,7 @@ class Firmware:
 
 def take_off(g: Gcs, alt_m: float, timeout_s: float = 300.0) -> None:
     """TAKEOFF to alt_m (TKOFF_ALT), then LOITER; arming is retried until pre-arm passes
-    (the rig's and the identification flights' take-off, :mod:`sim.calibration.identify`)."""
+    (the rig's and the identification flights' take-off, :mod:`lab.calibration.identify`)."""
     g.set_param("TKOFF_ALT", alt_m)
     g.set_mode("TAKEOFF")
     t_end = time.monotonic() + timeout_s

@@ -5,7 +5,7 @@ N ArduPlane SITL instances (each its own free ``-I``, lock and ports), taken off
 loiter, then N ``mpf-mavlink run`` bridges started one after another ``--fleet-gap`` s apart
 (each with ``fleet.member`` k, the slots 360/N apart, a direct UDP mesh on loopback and the
 same target epoch). ``--fleet-loss`` / ``--fleet-jitter`` put the soak relay
-(:mod:`sim.soak.relay`) in front of every bridge's coordination port; ``--kill-after S``
+(:mod:`lab.soak.relay`) in front of every bridge's coordination port; ``--kill-after S``
 SIGKILLs bridge ``--kill-member`` S s after the last engagement and watches that aircraft's
 autopilot (mode and hold) while the others fly on.
 
@@ -36,10 +36,10 @@ from typing import Any
 
 import numpy as np
 
-from sim.rigs import arduplane
-from sim.rigs.bundles import RigError, unpack
-from sim.rigs.figures import fmt, hold_figures, read_json
-from sim.rigs.gcs import Gcs
+from lab.rigs import arduplane
+from lab.rigs.bundles import RigError, unpack
+from lab.rigs.figures import fmt, hold_figures, read_json
+from lab.rigs.gcs import Gcs
 
 
 def _free_udp_ports(n: int) -> list[int]:
@@ -244,7 +244,7 @@ class _Fleet:
 def _start_fleet(a: argparse.Namespace, v: dict[str, Any], f: _Fleet, s: dict[str, Any]) -> None:
     """Start the n instances (each takes a free instance's lock), configure and take them off
     ``--takeoff-gap`` s apart, along the climb-out and loiter."""
-    from sim.rigs.common import _flight_header, connect
+    from lab.rigs.common import _flight_header, connect
 
     mod = v["mod"]
     for _ in range(f.n):
@@ -277,7 +277,7 @@ def _start_fleet(a: argparse.Namespace, v: dict[str, Any], f: _Fleet, s: dict[st
 def _place_fleet(a: argparse.Namespace, v: dict[str, Any], f: _Fleet, s: dict[str, Any]) -> None:
     """The circle about the first aircraft's loiter, the common target epoch and the coordination
     ports (the one sent to: a relay's under ``--fleet-loss`` / ``--fleet-jitter``)."""
-    from sim.rigs.common import place_mission
+    from lab.rigs.common import place_mission
 
     cfg = v["cfg"]
     f.radius = radius = float(cfg.path.radius_m) if cfg.path.type == "circle" else 0.0
@@ -288,7 +288,7 @@ def _place_fleet(a: argparse.Namespace, v: dict[str, Any], f: _Fleet, s: dict[st
     listen = _free_udp_ports(f.n)
     send_to = list(listen)
     if a.fleet_loss or a.fleet_jitter:
-        from sim.soak.relay import Impairment, UdpRelay
+        from lab.soak.relay import Impairment, UdpRelay
 
         imp = Impairment(loss=a.fleet_loss, jitter_s=a.fleet_jitter)
         for k in range(f.n):  # every member's reports to k pass k's relay
@@ -305,7 +305,7 @@ def _place_fleet(a: argparse.Namespace, v: dict[str, Any], f: _Fleet, s: dict[st
 def _start_bridges(a: argparse.Namespace, v: dict[str, Any], f: _Fleet) -> None:
     """Start the n bridges ``--fleet-gap`` s apart (each to end about when the last does),
     noting engagements in between."""
-    from sim.rigs.common import _bridge_command, mission_sets, start_bridge
+    from lab.rigs.common import _bridge_command, mission_sets, start_bridge
 
     n, out = f.n, v["out"]
     for k in range(n):
@@ -361,7 +361,7 @@ def _fleet_figures(
 ) -> None:
     """Per aircraft its bridge's figures, for the fleet the spacing's; DIR/spacing.npz and the
     figures (a failure to draw is noted, never fatal)."""
-    from sim.rigs.common import figures_of
+    from lab.rigs.common import figures_of
 
     n, out, cfg = f.n, v["out"], v["cfg"]
     s["aircraft"] = []
@@ -402,7 +402,7 @@ def _fleet_figures(
 
 def _tear_down(f: _Fleet) -> None:
     """Stop what still runs: bridges (given their hand-back), relays, ground stations, firmware."""
-    from sim.rigs.common import stop_bridge
+    from lab.rigs.common import stop_bridge
 
     for b in f.bridges:
         stop_bridge(b)
@@ -544,7 +544,7 @@ __all__ = ["add_options", "main", "spacing_series", "spacing_figures", "arduplan
 
 def reanalyse(out: Path, converge_m: float = 10.0) -> dict[str, Any]:
     """The fleet figures of a finished rig directory again, from its fleet.json (engagement and
-    kill times) and the bridges' fleet.csv: ``python -m sim.rigs.fleet DIR``."""
+    kill times) and the bridges' fleet.csv: ``python -m lab.rigs.fleet DIR``."""
     from mpf_mavlink.config.schema import load_config
 
     s = read_json(out / "fleet.json")

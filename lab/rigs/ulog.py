@@ -1,6 +1,6 @@
 """PX4's ULog, read for what the rig needs: EKF2's estimate against SIH's truth.
 
-``python -m sim.rigs.ulog RUN_DIR`` (a PX4 rig run directory, MPF or ``--guidance native``):
+``python -m lab.rigs.ulog RUN_DIR`` (a PX4 rig run directory, MPF or ``--guidance native``):
 the ULog in ``RUN_DIR/firmware/px4-work/log/`` gives ``vehicle_local_position`` (EKF2's
 estimate, what PX4 flies on and streams as LOCAL_POSITION_NED) and
 ``vehicle_local_position_groundtruth`` (SIH's truth). It prints the estimate's error against the
@@ -264,7 +264,7 @@ def _show(v: Any) -> str:
 
 def main(argv: list[str]) -> int:
     if not argv:
-        print("usage: python -m sim.rigs.ulog RUN_DIR...", file=sys.stderr)
+        print("usage: python -m lab.rigs.ulog RUN_DIR...", file=sys.stderr)
         return 2
     for d in argv:
         try:

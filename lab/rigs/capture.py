@@ -2,7 +2,7 @@
 
 Both autopilots x {the shipped circle, a closed 3D spline over a moving target} x {300 m from
 the path flying away, 30 m below it, 30 m above it}: 12 flights of the rig
-(``scripts/sitl AUTOPILOT --start-offset X,Y,D``, :mod:`sim.rigs.common`), each as long as its
+(``scripts/sitl AUTOPILOT --start-offset X,Y,D``, :mod:`lab.rigs.common`), each as long as its
 capture bound plus ~30 s of tracking, then ``--before``'s rows with the capture guards off
 (``guidance.capture_guards=false``) to show what they fix. Per row (from the bridge's run
 record: ``bridge/timeseries.csv``, ``bridge/limits.csv``, ``bridge/metrics.json``):
@@ -35,9 +35,9 @@ from typing import Any
 
 import numpy as np
 
+from lab.rigs.bundles import ROOT
 from mpf_mavlink.config.schema import load_config
 from mpf_mavlink.constants import GRAVITY_M_S2
-from sim.rigs.bundles import ROOT
 
 RESULT = ROOT / "docs" / "results" / "capture.md"
 CONFIGS = {
@@ -172,7 +172,7 @@ def fly_row(out: Path, ap: str, path: str, start: str, before: bool) -> Path:
     duration = max(90.0, capture_bound_s(cfg, d_plan) + STEADY_S)
     d = out / _flight(ap, path, start, before)
     sets = [*SETS, *(["guidance.capture_guards=false"] if before else [])]
-    cmd = [sys.executable, "-m", "sim.rigs", ap, "--out", str(d), "--config", cfg_path,
+    cmd = [sys.executable, "-m", "lab.rigs", ap, "--out", str(d), "--config", cfg_path,
            "--start-offset", ",".join(f"{x:g}" for x in off), "--duration", f"{duration:.0f}",
            *[x for s in sets for x in ("--set", s)]]  # fmt: skip
     print("capture: " + " ".join(cmd[2:]), flush=True)

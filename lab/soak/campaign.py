@@ -2,14 +2,14 @@
 
 Every mission scenario is a real software-in-the-loop flight over real loopback UDP:
 
-    python -m sim.soak vehicle ...  (SimVehicle, JSBSim X8, realtime clock, its own process)
-        <-> sim.soak.relay.UdpRelay (this process: impairments, injection, a tap of all traffic)
+    python -m lab.soak vehicle ...  (SimVehicle, JSBSim X8, realtime clock, its own process)
+        <-> lab.soak.relay.UdpRelay (this process: impairments, injection, a tap of all traffic)
         <-> mpf-mavlink run CONFIG --connect udpin:... (the real bridge CLI, its own process)
 
 The judge of each scenario is the traffic the relay saw (what the vehicle really received and
 really reported), the bridge's exit code and run directory, and the vehicle's own report.
 
-``python -m sim.soak [--only NAME[,NAME]] [--quick] [--seed N] [--list]`` prints one JSON
+``python -m lab.soak [--only NAME[,NAME]] [--quick] [--seed N] [--list]`` prints one JSON
 object: ``{"scenarios": [row, ...], "wall_s": ..., "all_pass": ...}``; exit status 0 when all
 rows pass. ``--quick`` shortens the missions (the fast test subset uses it).
 """
@@ -30,9 +30,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from sim.soak.checks import Limits
-from sim.soak.inputs import scenario_bad_input, scenario_output_dir, scenario_spoof
-from sim.soak.missions import (
+from lab.soak.checks import Limits
+from lab.soak.inputs import scenario_bad_input, scenario_output_dir, scenario_spoof
+from lab.soak.missions import (
     scenario_baseline,
     scenario_blackout_link,
     scenario_blackout_link_reengage,
@@ -46,7 +46,7 @@ from sim.soak.missions import (
     scenario_sigkill,
     scenario_target_loss,
 )
-from sim.soak.rig import Opts, Row, vehicle_main
+from lab.soak.rig import Opts, Row, vehicle_main
 
 SCENARIOS: dict[str, Callable[..., Row]] = {
     "baseline": scenario_baseline,
