@@ -345,11 +345,9 @@ def adapt(
     ``hold_s`` (s): how long the set-point is held (the telemetry period; 0: a continuous
     loop), with R_B_N the attitude when it starts acting (:func:`roll_rate_gain`).
     ``airspeed_sp`` (m/s): the airspeed set-point now (None: ``params.airspeed_sp_m_s``, raised
-    by the energy reserve, :func:`reserve_airspeed`); its rate is fed forward
-    (:meth:`Tecs.energy_rate_thrust`). ``path_down_m`` (m, NED down): where the law's path
-    point is now; its rate, low-passed over reserve_tau_s, is the sustained climb the reserve
-    is sized for.
-    """
+    by the energy reserve, :func:`reserve_airspeed`), its rate fed forward (Tecs.thrust);
+    ``path_down_m`` (m, NED down): the law's path point now, whose rate low-passed over
+    reserve_tau_s is the sustained climb the reserve is sized for."""
     roll, pitch, ok = _roll_pitch_if_finite(omega_w1_I, airspeed, R_B_N, w1, dt)
     if not ok:
         return safe_setpoint(params, roll), state
