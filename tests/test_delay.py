@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpf_mavlink.bridge.controller import Controller
+from mpf_mavlink.bridge.controller import Controller, mission_time_at
 from mpf_mavlink.config.schema import load_config
 from mpf_mavlink.core.guidance.law import VehicleState
 from mpf_mavlink.core.guidance.predict import (
@@ -114,7 +114,7 @@ def test_loop_delay_is_measured_from_the_attitude_target_echo():
     """The echo carries our body rates as float32 and the autopilot's receive time: the delay is
     that time minus the ATTITUDE time the setpoint answered (median of the last 9)."""
     ctl = Controller(load_config(DEMO))
-    assert ctl.delay_s == 0.0  # mavlink.known_delay_s until measured
+    assert ctl.delay.delay_s == 0.0  # mavlink.known_delay_s until measured
     ctl.est.t0 = 100.0
     for k in range(12):
         ctl.delay.sent.append((1.0 + 0.02 * k, (0.1 + 0.01 * k, -0.2, 0.3)))
@@ -122,10 +122,10 @@ def test_loop_delay_is_measured_from_the_attitude_target_echo():
         rates = tuple(float(np.float32(v)) for v in (0.1 + 0.01 * k, -0.2, 0.3))
         late = 0.065 if k != 5 else 0.4  # one late echo does not move the median
         ctl.feed_vehicle(AttitudeTargetSample(101.0 + 0.02 * k + late, rates, 0.3, 128), None)
-    assert ctl.delay_s == pytest.approx(0.065, abs=1e-9)
+    assert ctl.delay.delay_s == pytest.approx(0.065, abs=1e-9)
     # an echo of rates never sent is no measurement
     ctl.feed_vehicle(AttitudeTargetSample(102.0, (9.0, 9.0, 9.0), 0.3, 128), None)
-    assert ctl.delay_s == pytest.approx(0.065, abs=1e-9)
+    assert ctl.delay.delay_s == pytest.approx(0.065, abs=1e-9)
 
 
 def test_look_ahead_grows_only_where_the_hold_costs_phase():
@@ -152,13 +152,13 @@ def test_target_samples_are_stamped_from_the_newest_vehicle_time():
 
     ctl = Controller(load_config(DEMO))
     ctl.feed_vehicle(AttitudeSample(1.0, np.eye(3), np.zeros(3)), 10.0)
-    assert ctl.mission_time_at(10.002) == pytest.approx(1.002)
+    assert mission_time_at(ctl.est, 10.002) == pytest.approx(1.002)
     ctl.feed_vehicle(LocalPositionSample(1.08, np.zeros(3), np.array([16.0, 0.0, 0.0])), 10.001)
-    assert ctl.mission_time_at(10.002) == pytest.approx(1.081)
+    assert mission_time_at(ctl.est, 10.002) == pytest.approx(1.081)
     # an older position sample (received later) does not pull the stamp back
     ctl.feed_vehicle(AttitudeSample(1.1, np.eye(3), np.zeros(3)), 10.003)
     ctl.feed_vehicle(LocalPositionSample(1.06, np.zeros(3), np.zeros(3)), 10.004)
-    assert ctl.mission_time_at(10.005) == pytest.approx(1.102)
+    assert mission_time_at(ctl.est, 10.005) == pytest.approx(1.102)
 
 
 def test_scalar_prediction_matches_matrix_exponentials():

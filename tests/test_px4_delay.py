@@ -67,9 +67,9 @@ def _fly_px4_like(
         st = ctl.step()
         if st is None:
             continue
-        ctl.note_sent(rx + COMPUTE)
-        ctl.note_sent(rx + COMPUTE + 0.05)  # a re-send of the same setpoint measures nothing
-        used.append(ctl.delay_s)
+        ctl.delay.note_sent(rx + COMPUTE)
+        ctl.delay.note_sent(rx + COMPUTE + 0.05)  # a re-send of the same setpoint measures nothing
+        used.append(ctl.delay.delay_s)
         p, q, r = (float(np.float32(v)) for v in st.setpoint.body_rates_frd)
         ctl.feed_vehicle(AttitudeTargetSample(FROZEN_S, (p, q, r), 0.5, 128), rx + 0.008)
     return used
@@ -87,7 +87,7 @@ def test_frozen_echo_stamps_never_measure_and_timesync_does():
     assert ctl.delay.delay_source() == "timesync"
     want = DOWN + COMPUTE + UP
     # float64 of times ~1.7e9 s resolve 0.24 us
-    assert ctl.delay_s == pytest.approx(want, abs=1e-6)
+    assert ctl.delay.delay_s == pytest.approx(want, abs=1e-6)
     # measured from the first step on (an answer came before it): the configured 0.1 s never used
     assert used[0] == pytest.approx(want, abs=1e-6)
 
@@ -124,7 +124,7 @@ def test_a_moving_echo_stamp_is_preferred_over_timesync():
         rates = (float(np.float32(0.1 + 0.01 * k)), 0.0, 0.0)
         ctl.feed_vehicle(AttitudeTargetSample(50.0 + 0.02 * k + 0.013, rates, 0.5, 128), None)
     assert ctl.delay.delay_source() == "echo"
-    assert ctl.delay_s == pytest.approx(0.013, abs=1e-9)
+    assert ctl.delay.delay_s == pytest.approx(0.013, abs=1e-9)
 
 
 def test_answers_to_other_requests_are_ignored():

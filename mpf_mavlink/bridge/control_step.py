@@ -159,7 +159,7 @@ class ControlLoop:
         self.send_setpoint(st.setpoint, st.time_boot_ms)
         t_tx = self.vl.last_tx_record_s()
         if t_tx is not None:  # its record time, as replay reads it
-            ctl.note_sent(t_tx)
+            ctl.delay.note_sent(t_tx)
         self.last_sp, self.last_time_boot_ms = st.setpoint, st.time_boot_ms
         self.last_good_mono, self.last_good_vt = time.monotonic(), self.vl.vehicle_t
         self._show(st)  # after the setpoint: off its path

@@ -358,23 +358,7 @@ class Controller:
     def feed_target(self, sample: Any, rx: float | None) -> None:
         """A decoded sample of the live target (ignored with a scripted target)."""
         if self.live:
-            self.target.update(sample, self.mission_time_at(rx))
-
-    def mission_time_at(self, rx: float | None) -> float | None:
-        """The vehicle's mission time (s) at receive time rx (s): the autopilot time of the
-        most recently received time-stamped sample (ATTITUDE or LOCAL_POSITION_NED) plus the
-        receive time since. The most recent one: with ATTITUDE at 10 Hz and the position at
-        50 Hz, the ATTITUDE is up to 80 ms old, and under a lockstep clock the receive times do
-        not advance with the vehicle's (a target sample was stamped that much too early: 0.15 m
-        at the demo boat's 3 m/s)."""
-        est = self.est
-        if est.att is None or rx is None or est.att_rx is None:
-            return None
-        tb, trx = est.att.t_boot_s, est.att_rx
-        loc, lrx = est.local, est.local_rx
-        if loc is not None and lrx is not None and lrx > trx and loc.t_boot_s > tb:
-            tb, trx = loc.t_boot_s, lrx
-        return tb + (rx - trx) - est.t0
+            self.target.update(sample, mission_time_at(self.est, rx))
 
     # -- initialisation -----------------------------------------------------------------------
     def ready(self) -> bool:
@@ -426,63 +410,13 @@ class Controller:
         self.sdot_prev = 0.0
         self.w1_prev = None
         # the airframe's learned trim and turn stay; thrust starts from the autopilot's own
-        self.ad_state = self.ad_state.for_reengage(self.thrust_flown())
+        self.ad_state = self.ad_state.for_reengage(thrust_flown(self.est))
         return self.s
-
-    def thrust_flown(self) -> float | None:
-        """The thrust (0..1) the autopilot reports now (VFR_HUD.throttle), None when unknown:
-        at engagement the energy control starts from it, so that its first set-point is no step
-        (PX4 SIH flies ~0.8 in AUTO.LOITER where a configured trim of 0.5 lost ~5 m in 8 s)."""
-        vfr = getattr(self.est, "vfr", None)
-        thr = getattr(vfr, "throttle_frac", None)
-        if thr is None or not math.isfinite(thr) or not 0.0 <= thr <= 1.0:
-            return None
-        return float(thr)
-
-    def note_sent(self, t_tx: float) -> None:
-        """The latest step's setpoint left at record time t_tx (s): :meth:`LoopDelay.note_sent`."""
-        self.delay.note_sent(t_tx)
-
-    @property
-    def delay_s(self) -> float:
-        """The loop delay in use (s)."""
-        return self.delay.delay_s
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(position NED m, R_W^I) of the latest estimate, for the pre-flight checks."""
         est, _ = self.est.estimate()
         return None if est is None else (est.vehicle.position, est.vehicle.R_W_I)
-
-    def measured_inputs(self) -> Any:
-        """What the autopilot reports now for the pre-engage checks
-        (:class:`~mpf_mavlink.bridge.preflight.MeasuredInputs`): the estimator's wind with its
-        source (and WIND_COV's variance), VFR_HUD's airspeed as true airspeed, and the live
-        target's estimated motion at mission time 0 as a constant-turn target. None without a
-        state. Call after :meth:`set_origin`."""
-        from mpf_mavlink.bridge.estimator import eas_to_tas
-        from mpf_mavlink.bridge.preflight import MeasuredInputs
-        from mpf_mavlink.config.schema import TargetConfig
-
-        est, _ = self.est.estimate()
-        if est is None:
-            return None
-        wn, we, wd = (float(x) for x in est.vehicle.wind)
-        var = None
-        w = self.est.wind
-        if est.wind_source == "WIND_COV" and w is not None:
-            var = getattr(w, "var_horiz_m2_s2", None)
-        airspeed = None
-        vfr = self.est.vfr
-        if vfr is not None and math.isfinite(float(vfr.airspeed_m_s)):
-            airspeed = float(vfr.airspeed_m_s)
-            if self.est.p.airspeed_is_eas:
-                airspeed *= eas_to_tas(float(vfr.alt_amsl_m))
-        target = None
-        if self.live:
-            st = self.target.state(0.0)
-            if not isinstance(st, str):
-                target = target_as_constant_turn(st, TargetConfig)
-        return MeasuredInputs((wn, we, wd), est.wind_source, var, airspeed, target)
 
     # -- control ------------------------------------------------------------------------------
     def step(self) -> Step | None:
@@ -526,7 +460,7 @@ class Controller:
         self.tau_s = tau
         gains = self.gains
         if delay_comp:
-            a = look_ahead(gains.alpha, gains.K_R, vs.airspeed, self.delay_s, self.period_s)
+            a = look_ahead(gains.alpha, gains.K_R, vs.airspeed, self.delay.delay_s, self.period_s)
             if a > gains.alpha:
                 gains = Gains(gains.K_p, gains.K_R, a)
         self.alpha_m = gains.alpha
@@ -557,7 +491,9 @@ class Controller:
         # The logs describe the sample's own instant (errors, frames, the relative position:
         # replay and the SIL truth align on them); the command and its saturation flag are
         # the predicted evaluation's, which is what was sent.
-        diag, errors = self._at_sample(self.s, vs, tgt, gains, diag_law.mode)
+        diag, errors = diagnostics_at_sample(
+            self.cfg_law, self.path, self.ext, self.s, vs, tgt, gains, diag_law.mode
+        )
         return Step(t, est.t_boot_s, tb_ms, dt, est, tgt, cmd, diag, sp, w1, w1_prev, errors)
 
     def _advance(self, dt: float) -> None:
@@ -595,35 +531,6 @@ class Controller:
         s_law = self.s + self.sdot_prev * tau
         return vl, R_B_N, w1l, s_law, tp, tau
 
-    def _at_sample(
-        self,
-        s: float,
-        vs: VehicleState,
-        tgt: TargetState | Callable[[], TargetState],
-        gains: Any,
-        mode: str,
-    ) -> tuple[Callable[[], MpfDiagnostics], Callable[[], MpfErrors] | None]:
-        """The diagnostics of the law at the sample's own instant, and their rows' part
-        (:func:`mpf_errors`; None for a baseline law), each when asked for; ``mode`` the
-        flown evaluation's."""
-        law, path, ext = self.cfg_law, self.path, self.ext
-
-        def diag() -> MpfDiagnostics:
-            _, dm = guidance_law(law, s, vs, tgt() if callable(tgt) else tgt, path, gains, ext)
-            assert dm is not None
-            # dm._replace(mode=mode) without its keyword machinery (~1 us a recorded row)
-            fields = list(dm)
-            fields[_MODE] = mode
-            return tuple.__new__(MpfDiagnostics, fields)
-
-        if law != "mpf":
-            return diag, None
-
-        def errors() -> MpfErrors:
-            return mpf_errors(s, vs, tgt() if callable(tgt) else tgt, path, gains, ext, mode)
-
-        return diag, errors
-
     def roll(self) -> float:
         """Roll (rad) of the latest ATTITUDE, 0 without one (for the wings-level setpoint)."""
         a = self.est.att
@@ -631,6 +538,96 @@ class Controller:
             return 0.0
         R = a.R_B_N
         return math.atan2(R[2][1], R[2][2])
+
+
+def mission_time_at(est: Estimator, rx: float | None) -> float | None:
+    """The vehicle's mission time (s) at receive time rx (s): the autopilot time of the
+    most recently received time-stamped sample (ATTITUDE or LOCAL_POSITION_NED) plus the
+    receive time since. The most recent one: with ATTITUDE at 10 Hz and the position at
+    50 Hz, the ATTITUDE is up to 80 ms old, and under a lockstep clock the receive times do
+    not advance with the vehicle's (a target sample was stamped that much too early: 0.15 m
+    at the demo boat's 3 m/s)."""
+    if est.att is None or rx is None or est.att_rx is None:
+        return None
+    tb, trx = est.att.t_boot_s, est.att_rx
+    loc, lrx = est.local, est.local_rx
+    if loc is not None and lrx is not None and lrx > trx and loc.t_boot_s > tb:
+        tb, trx = loc.t_boot_s, lrx
+    return tb + (rx - trx) - est.t0
+
+
+def thrust_flown(est: Estimator) -> float | None:
+    """The thrust (0..1) the autopilot reports now (VFR_HUD.throttle), None when unknown:
+    at engagement the energy control starts from it, so that its first set-point is no step
+    (PX4 SIH flies ~0.8 in AUTO.LOITER where a configured trim of 0.5 lost ~5 m in 8 s)."""
+    vfr = getattr(est, "vfr", None)
+    thr = getattr(vfr, "throttle_frac", None)
+    if thr is None or not math.isfinite(thr) or not 0.0 <= thr <= 1.0:
+        return None
+    return float(thr)
+
+
+def measured_inputs(ctl: Controller) -> Any:
+    """What the autopilot reports now for the pre-engage checks
+    (:class:`~mpf_mavlink.bridge.preflight.MeasuredInputs`): the estimator's wind with its
+    source (and WIND_COV's variance), VFR_HUD's airspeed as true airspeed, and the live
+    target's estimated motion at mission time 0 as a constant-turn target. None without a
+    state. Call after :meth:`Controller.set_origin`."""
+    from mpf_mavlink.bridge.estimator import eas_to_tas
+    from mpf_mavlink.bridge.preflight import MeasuredInputs
+    from mpf_mavlink.config.schema import TargetConfig
+
+    est, _ = ctl.est.estimate()
+    if est is None:
+        return None
+    wn, we, wd = (float(x) for x in est.vehicle.wind)
+    var = None
+    w = ctl.est.wind
+    if est.wind_source == "WIND_COV" and w is not None:
+        var = getattr(w, "var_horiz_m2_s2", None)
+    airspeed = None
+    vfr = ctl.est.vfr
+    if vfr is not None and math.isfinite(float(vfr.airspeed_m_s)):
+        airspeed = float(vfr.airspeed_m_s)
+        if ctl.est.p.airspeed_is_eas:
+            airspeed *= eas_to_tas(float(vfr.alt_amsl_m))
+    target = None
+    if ctl.live:
+        st = ctl.target.state(0.0)
+        if not isinstance(st, str):
+            target = target_as_constant_turn(st, TargetConfig)
+    return MeasuredInputs((wn, we, wd), est.wind_source, var, airspeed, target)
+
+
+def diagnostics_at_sample(
+    law: str,
+    path: Any,
+    ext: Any,
+    s: float,
+    vs: VehicleState,
+    tgt: TargetState | Callable[[], TargetState],
+    gains: Any,
+    mode: str,
+) -> tuple[Callable[[], MpfDiagnostics], Callable[[], MpfErrors] | None]:
+    """The diagnostics of the law at the sample's own instant, and their rows' part
+    (:func:`mpf_errors`; None for a baseline law), each when asked for; ``mode`` the
+    flown evaluation's."""
+
+    def diag() -> MpfDiagnostics:
+        _, dm = guidance_law(law, s, vs, tgt() if callable(tgt) else tgt, path, gains, ext)
+        assert dm is not None
+        # dm._replace(mode=mode) without its keyword machinery (~1 us a recorded row)
+        fields = list(dm)
+        fields[_MODE] = mode
+        return tuple.__new__(MpfDiagnostics, fields)
+
+    if law != "mpf":
+        return diag, None
+
+    def errors() -> MpfErrors:
+        return mpf_errors(s, vs, tgt() if callable(tgt) else tgt, path, gains, ext, mode)
+
+    return diag, errors
 
 
 __all__ = [
@@ -647,4 +644,7 @@ __all__ = [
     "parse_marker",
     "adapter_params",
     "estimator_params",
+    "measured_inputs",
+    "mission_time_at",
+    "thrust_flown",
 ]

@@ -341,7 +341,7 @@ class _Replayer:
         )
         st = self._pending
         if st is not None and rec["time_boot_ms"] == st.time_boot_ms:
-            self.ctl.note_sent(t)  # the step's first send measures the loop delay (TIMESYNC)
+            self.ctl.delay.note_sent(t)  # the step's first send measures the loop delay (TIMESYNC)
             self._compare(where, rec, self._expected(st.setpoint, st.time_boot_ms))
             return
         if rec == self._last_sent or rec == self._last_expected:

@@ -12,7 +12,7 @@ from typing import Any
 
 from mpf_mavlink.bridge.base import EXIT_OK, EXIT_SAFETY, BridgeResult, Phase, State, _Stop
 from mpf_mavlink.bridge.control_step import ControlLoop
-from mpf_mavlink.bridge.controller import origin_texts
+from mpf_mavlink.bridge.controller import measured_inputs, origin_texts
 from mpf_mavlink.bridge.operator import OperatorDisplay
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.frames import matrix_to_euler
@@ -187,7 +187,7 @@ class Session:
             plant = dataclasses.replace(plant, initial_position_ned_m=p0)
         # what the autopilot reports now (wind, airspeed, the live target's motion), not what
         # the configuration assumes: a mission the measured wind makes infeasible is refused
-        measured = self.ctl.measured_inputs()
+        measured = measured_inputs(self.ctl)
         res.measured = _measured_record(measured)
         results = run_checks(cfg, scripted_target, measured, plant)
         text = format_checks(results)
