@@ -413,11 +413,6 @@ class Controller:
         self.ad_state = self.ad_state.for_reengage(thrust_flown(self.est))
         return self.s
 
-    def initial_state(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """(position NED m, R_W^I) of the latest estimate, for the pre-flight checks."""
-        est, _ = self.est.estimate()
-        return None if est is None else (est.vehicle.position, est.vehicle.R_W_I)
-
     # -- control ------------------------------------------------------------------------------
     def step(self) -> Step | None:
         """One control step at the latest control instant (ATTITUDE, or a position instant:

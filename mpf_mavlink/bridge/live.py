@@ -83,7 +83,7 @@ from mpf_mavlink.bridge.fallback import FallbackSetup
 from mpf_mavlink.bridge.link_io import LinkHandlers, VehicleLink
 from mpf_mavlink.bridge.operator import OperatorDisplay
 from mpf_mavlink.bridge.recording import Recorder, is_lean
-from mpf_mavlink.bridge.session import Session
+from mpf_mavlink.bridge.session import Session, preflight_checks
 from mpf_mavlink.bridge.streams import StreamNegotiator
 from mpf_mavlink.config import bridge as bridge_config  # noqa: F401  (registers the sections)
 from mpf_mavlink.config.bridge import hold_mode_error
@@ -321,7 +321,7 @@ class Bridge:
                 "estimated from ground velocity and airspeed"
             )
         self.phase.set(State.CHECKS)
-        failed = self.session.checks(res, scripted_target=not self.ctl.live)
+        failed = preflight_checks(self.ctl, self.cfg, self.m.mission_duration_s, res, self.log)
         names = ", ".join(r.name for r in failed)
         if failed and self.opts.force:
             res.forced = [r.name for r in failed]

@@ -12,7 +12,7 @@ from typing import Any
 
 from mpf_mavlink.bridge.base import EXIT_OK, EXIT_SAFETY, BridgeResult, Phase, State, _Stop
 from mpf_mavlink.bridge.control_step import ControlLoop
-from mpf_mavlink.bridge.controller import measured_inputs, origin_texts
+from mpf_mavlink.bridge.controller import Controller, measured_inputs, origin_texts
 from mpf_mavlink.bridge.operator import OperatorDisplay
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.frames import matrix_to_euler
@@ -52,6 +52,46 @@ def _measured_record(m: Any) -> dict[str, Any]:
             "climb_rate_m_s": t.climb_rate_m_s,
         },
     }  # fmt: skip
+
+
+def preflight_checks(
+    ctl: Controller,
+    cfg: Config,
+    duration_s: float,
+    res: BridgeResult,
+    log: Callable[[str], None],
+) -> list[Any]:
+    """The pre-flight checks of a ``duration_s`` (s) mission from the vehicle's state now, with
+    what it measures (wind, airspeed, a live target's motion); those failed (CheckResult). The
+    checks' text goes to ``res.checks`` and ``log``."""
+    from mpf_mavlink.bridge.preflight import format_checks, run_checks, simulated_plant
+
+    ctl.set_origin()  # mission time 0: the checks' and the scripted target's origin
+    est, _ = ctl.est.estimate()
+    assert est is not None
+    pos, R_W_I = est.vehicle.position, est.vehicle.R_W_I
+    p0 = (float(pos[0]), float(pos[1]), float(pos[2]))
+    cfg = dataclasses.replace(
+        cfg,
+        sim=dataclasses.replace(cfg.sim, duration_s=duration_s),
+        kinematic=dataclasses.replace(
+            cfg.kinematic,
+            initial_position_ned_m=p0,
+            initial_attitude_rpy_rad=matrix_to_euler(R_W_I),
+        ),
+    )
+    plant = simulated_plant(cfg)
+    if plant is not None:  # the SIL's own start gives way to where the aircraft is
+        plant = dataclasses.replace(plant, initial_position_ned_m=p0)
+    # what the autopilot reports now (wind, airspeed, the live target's motion), not what
+    # the configuration assumes: a mission the measured wind makes infeasible is refused
+    measured = measured_inputs(ctl)
+    res.measured = _measured_record(measured)
+    results = run_checks(cfg, not ctl.live, measured, plant)
+    text = format_checks(results)
+    res.checks = text.splitlines()
+    log(text)
+    return [r for r in results if not r.ok]
 
 
 class Session:
@@ -161,40 +201,7 @@ class Session:
     def in_offboard(self) -> bool:
         return self.vl.hb is not None and is_offboard(self.vl.flavour, self.vl.hb)
 
-    # -- checks and the virtual point ------------------------------------------------------------
-    def checks(self, res: BridgeResult, scripted_target: bool) -> list[Any]:
-        """The pre-flight checks from the vehicle's state now, with what it measures (wind,
-        airspeed, a live target's motion); those failed (CheckResult)."""
-        from mpf_mavlink.bridge.preflight import format_checks, run_checks, simulated_plant
-
-        self.ctl.set_origin()  # mission time 0: the checks' and the scripted target's origin
-        init = self.ctl.initial_state()
-        assert init is not None
-        pos, R_W_I = init
-        cfg = self.cfg
-        p0 = (float(pos[0]), float(pos[1]), float(pos[2]))
-        cfg = dataclasses.replace(
-            cfg,
-            sim=dataclasses.replace(cfg.sim, duration_s=self.m.mission_duration_s),
-            kinematic=dataclasses.replace(
-                cfg.kinematic,
-                initial_position_ned_m=p0,
-                initial_attitude_rpy_rad=matrix_to_euler(R_W_I),
-            ),
-        )
-        plant = simulated_plant(cfg)
-        if plant is not None:  # the SIL's own start gives way to where the aircraft is
-            plant = dataclasses.replace(plant, initial_position_ned_m=p0)
-        # what the autopilot reports now (wind, airspeed, the live target's motion), not what
-        # the configuration assumes: a mission the measured wind makes infeasible is refused
-        measured = measured_inputs(self.ctl)
-        res.measured = _measured_record(measured)
-        results = run_checks(cfg, scripted_target, measured, plant)
-        text = format_checks(results)
-        res.checks = text.splitlines()
-        self.log(text)
-        return [r for r in results if not r.ok]
-
+    # -- the virtual point -----------------------------------------------------------------------
     def init_s(self) -> None:
         s0 = self.ctl.init_s()
         assert self.ctl.t0 is not None
