@@ -91,6 +91,19 @@ class FallbackSetup:
             if attempt >= 1 and all(n in p for n in core):
                 break
 
+    def px4_prepare(self, res: BridgeResult) -> str | None:
+        """PX4, before engaging: with ``mavlink.set_fallback`` :meth:`px4_params` (and why not
+        to engage, or None); without, what decides instead (into ``res.fallback``)."""
+        if not self.vl.m.set_fallback:
+            res.fallback = (
+                "not read or set (mavlink.set_fallback: false): PX4's COM_OBL_RC_ACT decides "
+                "(stock 0: Position mode, which on a fixed-wing flies straight on, not a hold)"
+            )
+            return None
+        why = self.px4_params(res)
+        self.log(f"fallback if the bridge dies: {res.fallback}")
+        return why
+
     def px4_reposition(self, res: BridgeResult) -> None:
         """PX4 in OFFBOARD: MAV_CMD_DO_REPOSITION to the path's centre at the path's altitude,
         without a mode change (param2 = 0): the navigator keeps it as the loiter point of the

@@ -201,6 +201,12 @@ class VehicleLink:
         if cls is AttitudeSample and self.m.lockstep:
             self.answer_clock(sample.t_boot_s)
 
+    def before_heartbeat(self, msg: Any) -> None:
+        """Lockstep: the vehicle's ATTITUDE read while its HEARTBEAT is awaited is answered
+        (with a clock answer), or the simulation would wait for it on the wall clock."""
+        if self.m.lockstep and msg.get_type() == "ATTITUDE" and msg.get_srcSystem() == self.sysid:
+            self.answer_clock(msg.time_boot_ms * 1e-3)
+
     def answer_clock(self, t_boot_s: float) -> None:
         """Lockstep: let the simulation past the frame of the ATTITUDE stamped ``t_boot_s`` (s of
         the boot clock) when no setpoint answered it, with a SYSTEM_TIME carrying that stamp

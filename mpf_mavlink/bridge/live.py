@@ -45,6 +45,7 @@ saw), ``setpoints.csv``, ``metrics.json`` (figures, counters, exit) and the plot
 from __future__ import annotations
 
 import dataclasses
+import functools
 import gc
 import math
 import signal
@@ -129,14 +130,10 @@ def _collect_young() -> None:
 
 
 class Bridge:
-    """One run against one vehicle. Use :func:`run_bridge`.
-
-    Wires the pieces, each owning its state: :class:`~.link_io.VehicleLink` (the link, what
-    the vehicle says, the bounded wait), :class:`~.controller.Controller` (the per-sample
-    computation), :class:`~.control_step.ControlLoop` (steps, setpoints, watchdog),
-    :class:`~.streams.StreamNegotiator`, :class:`~.fallback.FallbackSetup`,
-    :class:`~.session.Session` (modes, checks, hand-back, re-engagement) and
-    :class:`~.recording.Recorder`; :meth:`run` is the life cycle that strings them together."""
+    """One run against one vehicle (use :func:`run_bridge`): the pieces, each owning its state
+    (VehicleLink: the link and what the vehicle says; Controller: the per-sample computation;
+    ControlLoop: steps, setpoints, watchdog; StreamNegotiator; FallbackSetup; Session: modes,
+    hand-back, re-engagement; Recorder), strung together by :meth:`run`'s life cycle."""
 
     def __init__(
         self, cfg: Config, opts: BridgeOptions, log: Callable[[str], None] = print
@@ -150,7 +147,12 @@ class Bridge:
         self.rec = Recorder(cfg, m, opts.url, Path(opts.out_dir))
         self.envelope = envelope_monitor(cfg, self.ctl.ad_params)
         self.loop = ControlLoop(
-            self.ctl, self.vl, self.phase, self.rec.record, self._show, self._envelope
+            self.ctl,
+            self.vl,
+            self.phase,
+            self.rec.record,
+            self._show,
+            functools.partial(report_envelope, self.envelope, self.ctl, self.vl, log),
         )
         self.session = Session(cfg, self.loop, self.phase, self.display, log)
         self.streams = StreamNegotiator(self.vl, log)
@@ -177,17 +179,6 @@ class Bridge:
         if sent != self._sent_at_tick:  # a setpoint went out in this wake-up
             self._sent_at_tick = sent
             _collect_young()
-
-    def _envelope(self, st: Step) -> tuple[bool, str | None]:
-        """The envelope monitor on one tracking step: its STATUSTEXTs go to the ground station
-        (severity WARNING, once per episode) and the log; (clipped, hand-back reason)."""
-        mon = self.envelope
-        d = demand_of_step(st, self.ctl, mon.lim)
-        acts = mon.update(d)
-        for text in acts.texts:
-            self.log(f"[ENVELOPE] t = {st.t:.1f} s: {text}")
-            self.vl.send_text(text, dialect.MAV_SEVERITY_WARNING)
-        return d.clipped, acts.hand_back
 
     def _on_state(self, s: State) -> None:
         self.log(f"[{s.name}]")
@@ -249,35 +240,15 @@ class Bridge:
             enable_signing(vl.link, signing_key, m.signing_link_id)
         fleet_link.open_(self.fleet, m)  # fleet: the coordination link
         self.phase.set(State.WAIT_HEARTBEAT)
-        hb = wait_heartbeat(vl.link, m.heartbeat_timeout_s, on_other=self._before_heartbeat)
+        hb = wait_heartbeat(vl.link, m.heartbeat_timeout_s, on_other=vl.before_heartbeat)
         vl.compid = hb.get_srcComponent()
         vl.dispatch(hb)
-        seen = flavour_from_heartbeat(hb)
-        want = Flavour(m.flavour) if m.flavour != "auto" else seen
-        if want is Flavour.UNKNOWN:
-            raise MpfError(
-                f"unknown autopilot (HEARTBEAT.autopilot = {hb.autopilot}); "
-                "use --flavour px4|ardupilot"
-            )
-        if m.flavour != "auto" and seen is not Flavour.UNKNOWN and seen is not want:
-            raise MpfError(f"--flavour {m.flavour} but the vehicle's HEARTBEAT says {seen.value}")
-        if m.hold_mode and (why := hold_mode_error(m.hold_mode, want.value)):
-            raise MpfError(f"{self.cfg.source}: mavlink.hold_mode: {why}")  # before any send
+        want = settle_flavour(m, hb, self.cfg.source)
         vl.flavour = want
         res.flavour = want.value
         self.log(
             f"heartbeat from system {m.vehicle_sysid}: {want.value}, mode {self.session.mode_str()}"
         )
-
-    def _before_heartbeat(self, msg: Any) -> None:
-        """Lockstep: the vehicle's ATTITUDE read while its HEARTBEAT is awaited is answered
-        (with a clock answer), or the simulation would wait for it on the wall clock."""
-        if (
-            self.m.lockstep
-            and msg.get_type() == "ATTITUDE"
-            and msg.get_srcSystem() == self.vl.sysid
-        ):
-            self.vl.answer_clock(msg.time_boot_ms * 1e-3)
 
     def _prepare(self, res: BridgeResult) -> None:
         """Streams, home, the autopilot's fallback, a complete state, the checks; raises
@@ -287,26 +258,9 @@ class Bridge:
             raise _Refused(why)
         need_home = self.ctl.live or (vl.flavour is Flavour.ARDUPILOT and m.set_fallback)
         if need_home and est.geodetic_origin() is None:
-
-            def home() -> str:
-                h = est.home
-                return f"{h.lat_deg:.7f}, {h.lon_deg:.7f}, {h.alt_amsl_m:.2f} m AMSL"
-
-            if not self.streams.await_home(lambda: est.home is not None, home) and self.ctl.live:
-                raise _Refused(
-                    f"no HOME_POSITION within {m.home_timeout_s:g} s "
-                    "(the live target is placed about it; or set mavlink.origin_*)"
-                )
-        if vl.flavour is Flavour.PX4 and m.set_fallback:
-            why = self.fallback.px4_params(res)
-            self.log(f"fallback if the bridge dies: {res.fallback}")
-            if why is not None:
-                raise _Refused(why)
-        elif vl.flavour is Flavour.PX4:
-            res.fallback = (
-                "not read or set (mavlink.set_fallback: false): PX4's COM_OBL_RC_ACT decides "
-                "(stock 0: Position mode, which on a fixed-wing flies straight on, not a hold)"
-            )
+            await_home(m, est, self.streams, self.ctl.live)
+        if vl.flavour is Flavour.PX4 and (why := self.fallback.px4_prepare(res)) is not None:
+            raise _Refused(why)
         # wait for a complete state (and the live target) before checking anything
         if not vl.spin(m.heartbeat_timeout_s, self.ctl.ready):
             raise MpfError(
@@ -322,16 +276,8 @@ class Bridge:
             )
         self.phase.set(State.CHECKS)
         failed = preflight_checks(self.ctl, self.cfg, self.m.mission_duration_s, res, self.log)
-        names = ", ".join(r.name for r in failed)
         if failed and self.opts.force:
-            res.forced = [r.name for r in failed]
-            self.log(
-                f"[FORCED] --force: ENGAGING DESPITE THE FAILED CHECK: {names} "
-                "(recorded in metrics.json: forced)"
-            )
-            # the ground station hears it too (STATUSTEXT, WARNING, <= 50 characters)
-            vl.send_text(f"MPF FORCED despite failed {names}"[:50], dialect.MAV_SEVERITY_WARNING)
-            failed = []
+            failed = force_through(failed, res, vl, self.log)
         # the wind the monitor holds the flight to: what the checks accepted plus its margin
         self.envelope.lim = dataclasses.replace(
             self.envelope.lim, wind_max_m_s=wind_limit_m_s(self.cfg, res.measured)
@@ -386,7 +332,7 @@ class Bridge:
         span = loop.prestream_span_s()
         self.log(f"pre-streamed {loop.prestream_sends} setpoints in {span:.2f} s")
         if m.arm and not (vl.hb is not None and vl.hb.armed):
-            self._arm()
+            arm(vl, m)
         self.phase.set(State.ENGAGE)
         mode = session.offboard_mode()
         ok, why = session.request_mode(mode, session.in_offboard)
@@ -410,22 +356,6 @@ class Bridge:
         gc.freeze()
         vl.spin(math.inf)
 
-    def _arm(self) -> None:
-        """ARM, confirmed by an armed HEARTBEAT; a rejected ARM ends the wait at once."""
-        vl, m = self.vl, self.m
-        timeout = m.mode_timeout_s * m.mode_retries
-        t_end = time.monotonic() + timeout
-
-        def armed() -> bool:
-            return vl.hb is not None and vl.hb.armed
-
-        msg = encode_arm(vl.link.mav, vl.sysid, vl.compid, True)
-        ack = vl.commands.command(msg, MAV_CMD_COMPONENT_ARM_DISARM, timeout, armed)
-        refused = ack is not None and not ack.accepted
-        if refused or not vl.spin(max(0.0, t_end - time.monotonic()), armed):
-            why = f"ARM refused ({ack.result_name})" if refused and ack else "no armed HEARTBEAT"
-            raise _Stop(f"vehicle did not arm: {why}", "engage")
-
     def _finish(self, res: BridgeResult) -> BridgeResult:
         gc.unfreeze()  # run_bridge may be called again in this process (tests, SIL)
         res.state_reached = self.phase.furthest.name
@@ -448,6 +378,80 @@ class Bridge:
         if res.records_error:
             self.log(f"could not write the run directory: {res.records_error}")
         return res
+
+
+def settle_flavour(m: Any, hb: Any, source: str) -> Flavour:
+    """The autopilot flavour to fly: ``mavlink.flavour``, or the HEARTBEAT's with ``auto``;
+    raises MpfError (before anything is sent) when unknown, contradicted by the HEARTBEAT, or
+    when ``mavlink.hold_mode`` is not one of that flavour's modes (``source``: the config)."""
+    seen = flavour_from_heartbeat(hb)
+    want = Flavour(m.flavour) if m.flavour != "auto" else seen
+    if want is Flavour.UNKNOWN:
+        raise MpfError(
+            f"unknown autopilot (HEARTBEAT.autopilot = {hb.autopilot}); use --flavour px4|ardupilot"
+        )
+    if m.flavour != "auto" and seen is not Flavour.UNKNOWN and seen is not want:
+        raise MpfError(f"--flavour {m.flavour} but the vehicle's HEARTBEAT says {seen.value}")
+    if m.hold_mode and (why := hold_mode_error(m.hold_mode, want.value)):
+        raise MpfError(f"{source}: mavlink.hold_mode: {why}")  # before any send
+    return want
+
+
+def await_home(m: Any, est: Any, streams: StreamNegotiator, live: bool) -> None:
+    """Wait for HOME_POSITION (the geodetic origin); raises :class:`_Refused` without it when
+    a ``live`` target is placed about it."""
+
+    def home() -> str:
+        h = est.home
+        return f"{h.lat_deg:.7f}, {h.lon_deg:.7f}, {h.alt_amsl_m:.2f} m AMSL"
+
+    if not streams.await_home(lambda: est.home is not None, home) and live:
+        raise _Refused(
+            f"no HOME_POSITION within {m.home_timeout_s:g} s "
+            "(the live target is placed about it; or set mavlink.origin_*)"
+        )
+
+
+def force_through(
+    failed: list[Any], res: BridgeResult, vl: VehicleLink, log: Callable[[str], None]
+) -> list[Any]:
+    """``--force``: engage despite the ``failed`` checks, said loudly (log, metrics.json's
+    ``forced``, a STATUSTEXT to the ground station); nothing is left failed."""
+    names = ", ".join(r.name for r in failed)
+    res.forced = [r.name for r in failed]
+    log(f"[FORCED] --force: ENGAGING DESPITE THE FAILED CHECK: {names} (metrics.json: forced)")
+    # the ground station hears it too (STATUSTEXT, WARNING, <= 50 characters)
+    vl.send_text(f"MPF FORCED despite failed {names}"[:50], dialect.MAV_SEVERITY_WARNING)
+    return []
+
+
+def arm(vl: VehicleLink, m: Any) -> None:
+    """ARM, confirmed by an armed HEARTBEAT; a rejected ARM ends the wait at once."""
+    timeout = m.mode_timeout_s * m.mode_retries
+    t_end = time.monotonic() + timeout
+
+    def armed() -> bool:
+        return vl.hb is not None and vl.hb.armed
+
+    msg = encode_arm(vl.link.mav, vl.sysid, vl.compid, True)
+    ack = vl.commands.command(msg, MAV_CMD_COMPONENT_ARM_DISARM, timeout, armed)
+    refused = ack is not None and not ack.accepted
+    if refused or not vl.spin(max(0.0, t_end - time.monotonic()), armed):
+        why = f"ARM refused ({ack.result_name})" if refused and ack else "no armed HEARTBEAT"
+        raise _Stop(f"vehicle did not arm: {why}", "engage")
+
+
+def report_envelope(
+    mon: Any, ctl: Controller, vl: VehicleLink, log: Callable[[str], None], st: Step
+) -> tuple[bool, str | None]:
+    """The envelope monitor on one tracking step: its STATUSTEXTs go to the ground station
+    (severity WARNING, once per episode) and the log; (clipped, hand-back reason)."""
+    d = demand_of_step(st, ctl, mon.lim)
+    acts = mon.update(d)
+    for text in acts.texts:
+        log(f"[ENVELOPE] t = {st.t:.1f} s: {text}")
+        vl.send_text(text, dialect.MAV_SEVERITY_WARNING)
+    return d.clipped, acts.hand_back
 
 
 def run_bridge(
