@@ -44,15 +44,21 @@ def free_port() -> int:
 
 class StallingClock(LockstepClock):
     """A lockstep clock whose simulation stalls ``stall_s`` of wall time after every
-    ``every`` frames while the bridge commands it: no telemetry and no simulated time meanwhile."""
+    ``every`` frames once the bridge is tracking (:meth:`tracking`, given to :func:`fly` as
+    ``during``): no telemetry and no simulated time meanwhile. Before, the vehicle is in
+    lockstep without stalls, so the hand-over (stream rates, modes) is not what is tested."""
 
     def __init__(self, every: int, stall_s: float) -> None:
         super().__init__()
         self.every, self.stall_s, self.stalls, self._n = every, stall_s, 0, 0
+        self.tracking_ = False
+
+    def tracking(self, vehicle: Any) -> None:
+        self.tracking_ = True
 
     def wait(self, sim_t: float, poll: Any, has_peer: Any) -> None:
         super().wait(sim_t, poll, has_peer)
-        if has_peer():  # the lockstep peer: the bridge has taken control (realtime before)
+        if has_peer() and self.tracking_:
             self._n += 1
             if self._n % self.every == 0:
                 self.stalls += 1
@@ -108,7 +114,7 @@ def test_a_stalling_lockstep_simulation_is_flown_to_the_end_not_lost(tmp_path):
     m = load_config(str(ROOT / "configs" / "default.yaml")).section("mavlink")
     assert m.telemetry_timeout_s == 0.5 and m.lockstep_wall_timeout_s >= 10.0 * 0.8
     clock = StallingClock(every=25, stall_s=0.8)
-    res = fly(tmp_path / "lockstep", clock, ["mavlink.lockstep=true"])
+    res = fly(tmp_path / "lockstep", clock, ["mavlink.lockstep=true"], during=clock.tracking)
     # 3 s of tracking cross >= 5 stalls (one every 0.5 s) and the mission ends by its duration
     assert clock.stalls >= 5, clock.stalls
     assert res.exit_code == NOT_JUDGED, res.exit_reason
@@ -116,9 +122,9 @@ def test_a_stalling_lockstep_simulation_is_flown_to_the_end_not_lost(tmp_path):
     assert res.tracked_s >= TRACK_S - 0.02  # one 20 ms frame
     # the same vehicle, timeouts on the wall clock (a real link's): lost at the first stall
     clock = StallingClock(every=25, stall_s=0.8)
-    res = fly(tmp_path / "wall", clock, ["mavlink.lockstep=false"])
+    res = fly(tmp_path / "wall", clock, ["mavlink.lockstep=false"], during=clock.tracking)
     assert res.exit_code == 4 and "telemetry lost" in res.exit_reason, res.exit_reason
-    # (a loaded host may lose it even before the first stall: wall-clock timeouts, after all)
+    # lost at the first stall (a loaded host may lose it even before: wall-clock timeouts)
     assert clock.stalls <= 1 and res.tracked_s < 0.5 + 0.02
 
 
