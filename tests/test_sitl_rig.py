@@ -158,6 +158,12 @@ def test_hold_figures_judge_the_issue_bounds():
     steep = [(t, 0.7, 100.0, 0.0, -115.0) for t in range(61)]
     v = hold_figures(steep, (0.0, 0.0), 100.0, 150.0)["hold_verdict"]
     assert "|bank| 40.1 deg" in v and "altitude off by 15.0 m" in v
+    # judged against the autopilot's own roll limit (ArduPlane's stock ROLL_LIMIT_DEG is 45)
+    level = [(t, 0.7, 100.0, 0.0, -100.0) for t in range(61)]
+    assert hold_figures(level, (0.0, 0.0), 100.0, 150.0, 45.0)["hold_verdict"] == "PASS"
+    assert (
+        "(> 35, the hold's limit)" in hold_figures(level, (0.0, 0.0), 100.0, 150.0)["hold_verdict"]
+    )
 
 
 def test_pty_relay_carries_bytes_both_ways_untouched():

@@ -32,6 +32,8 @@ NAME = "arduplane"
 FLAVOUR = Flavour.ARDUPILOT
 DEFAULT_CONFIG = ROOT / "configs" / "bridge_arduplane.yaml"
 TRACK_MODE, HOLD_MODE = "GUIDED", "LOITER"
+# the roll limit (deg) the autopilot flies its own hold within: what its hold is judged against
+ROLL_LIMIT_PARAM = "ROLL_LIMIT_DEG"
 HAS_WIND = True
 
 

@@ -592,7 +592,8 @@ def _until_bridge_exits(
             bridge.wait()
             tracked = g.t_boot_s - t_engaged
             print(f"bridge SIGKILLed {tracked:.1f} s into tracking", flush=True)
-            kill = watch_hold(g, a.watch_s, centre, -centre[2], radius, out)
+            lim = hold_bank_limit_deg(g, mod)
+            kill = watch_hold(g, a.watch_s, centre, -centre[2], radius, out, lim)
             kill["killed_after_s"] = tracked
             return kill
     return {}
@@ -660,8 +661,24 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
     return 0 if summary["verdict"] == "PASS" else 1
 
 
+def hold_bank_limit_deg(g: Gcs, mod: ModuleType) -> float:
+    """The autopilot's own roll limit (deg, its parameter), which its hold flies within; 35 deg
+    when the parameter cannot be read, said on the terminal."""
+    v = g.get_param(mod.ROLL_LIMIT_PARAM)
+    if v is None or not math.isfinite(v) or v <= 0.0:
+        print(f"  {mod.ROLL_LIMIT_PARAM} not read: the hold is judged with |bank| <= 35 deg")
+        return 35.0
+    return float(v)
+
+
 def watch_hold(
-    g: Gcs, secs: float, centre: list[float], alt_m: float, radius: float, out: Path
+    g: Gcs,
+    secs: float,
+    centre: list[float],
+    alt_m: float,
+    radius: float,
+    out: Path,
+    bank_limit_deg: float = 35.0,
 ) -> dict[str, Any]:
     """What the autopilot does on its own for ``secs`` (its clock) after the bridge died."""
     t0 = g.t_boot_s
@@ -673,7 +690,7 @@ def watch_hold(
     with open(out / "after_kill.csv", "w") as f:
         f.write("t_s,roll_rad,north_m,east_m,down_m\n")
         f.writelines(",".join(f"{x:.4f}" for x in r) + "\n" for r in trace)
-    h = hold_figures(trace, (centre[0], centre[1]), alt_m, radius)
+    h = hold_figures(trace, (centre[0], centre[1]), alt_m, radius, bank_limit_deg)
     h["modes"] = modes
     return h
 

@@ -191,10 +191,12 @@ def hold_figures(
     centre: tuple[float, float],
     alt_m: float,
     radius_m: float,
+    bank_limit_deg: float = 35.0,
 ) -> dict[str, Any]:
     """After a SIGKILL: rows (t, roll rad, north, east, down) over the watch window -> the
     largest distance from the path's centre, |bank| and altitude error, and the hold verdict
-    (within 2x the path radius, |bank| <= 35 deg, altitude within 10 m)."""
+    (within 2x the path radius, |bank| within ``bank_limit_deg``, the autopilot's own roll limit
+    where it was read, altitude within 10 m)."""
     if not trace:
         return {"hold_verdict": "FAIL: nothing seen after the kill"}
     A = np.array(trace, float)
@@ -204,8 +206,8 @@ def hold_figures(
     fails = []
     if dist.max() > 2.0 * radius_m:
         fails.append(f"{dist.max():.0f} m from the centre (> 2 x {radius_m:g} m)")
-    if bank.max() > 35.0:
-        fails.append(f"|bank| {bank.max():.1f} deg (> 35)")
+    if bank.max() > bank_limit_deg:
+        fails.append(f"|bank| {bank.max():.1f} deg (> {bank_limit_deg:g}, the hold's limit)")
     if dalt.max() > 10.0:
         fails.append(f"altitude off by {dalt.max():.1f} m (> 10)")
     tail = A[:, 0] >= A[-1, 0] - 15.0
@@ -214,6 +216,7 @@ def hold_figures(
         "max_dist_from_centre_m": float(dist.max()),
         "last15_mean_dist_m": float(np.mean(dist[tail])),
         "max_bank_deg": float(bank.max()),
+        "bank_limit_deg": bank_limit_deg,
         "max_alt_error_m": float(dalt.max()),
         "hold_verdict": "PASS" if not fails else "FAIL: " + "; ".join(fails),
     }

@@ -342,6 +342,7 @@ def _kill_hold(a: argparse.Namespace, v: dict[str, Any], f: _Fleet) -> None:
     """The killed aircraft's hold about the path's centre where the target was at the kill (the
     bridge re-places its fallback loiter with the target: ``mavlink.fallback_follow_s``), into
     ``kill_info``; FAIL when its autopilot left the track and hold modes."""
+    from lab.rigs.common import hold_bank_limit_deg
     from mpf_mavlink.config.scenario import build_target
 
     mod, cfg = v["mod"], v["cfg"]
@@ -349,7 +350,8 @@ def _kill_hold(a: argparse.Namespace, v: dict[str, Any], f: _Fleet) -> None:
     tc = dataclasses.replace(cfg.target, position_ned_m=tuple(f.centre))
     st = build_target(tc).state(f.t_kill - f.epoch)
     hc = np.asarray(st.position, float)
-    h = hold_figures(f.trace, (float(hc[0]), float(hc[1])), -f.centre[2], f.radius)
+    lim = hold_bank_limit_deg(f.gcs[a.kill_member], mod)
+    h = hold_figures(f.trace, (float(hc[0]), float(hc[1])), -f.centre[2], f.radius, lim)
     ma = h["modes"] = f.modes_after
     if ma and any(m != mod.TRACK_MODE and m != mod.HOLD_MODE for m in ma):
         h["hold_verdict"] = f"FAIL: modes {ma}"

@@ -27,6 +27,8 @@ NAME = "px4"
 FLAVOUR = Flavour.PX4
 DEFAULT_CONFIG = ROOT / "configs" / "bridge_px4.yaml"
 TRACK_MODE, HOLD_MODE = "OFFBOARD", "AUTO.LOITER"
+# the roll limit (deg) the autopilot flies its own hold within: what its hold is judged against
+ROLL_LIMIT_PARAM = "FW_R_LIM"
 HAS_WIND = False
 LOCK = "/tmp/mpf-px4.lock"
 MAV_CMD_NAV_TAKEOFF = 22
