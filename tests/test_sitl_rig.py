@@ -158,7 +158,7 @@ def test_hold_figures_judge_the_issue_bounds():
     steep = [(t, 0.7, 100.0, 0.0, -115.0) for t in range(61)]
     v = hold_figures(steep, (0.0, 0.0), 100.0, 150.0)["hold_verdict"]
     assert "|bank| 40.1 deg" in v and "altitude off by 15.0 m" in v
-    # judged against the autopilot's own roll limit (ArduPlane's stock ROLL_LIMIT_DEG is 45)
+    # judged against the limit passed in (the autopilot's own roll limit), 35 deg without one
     level = [(t, 0.7, 100.0, 0.0, -100.0) for t in range(61)]
     assert hold_figures(level, (0.0, 0.0), 100.0, 150.0, 45.0)["hold_verdict"] == "PASS"
     assert (

@@ -40,6 +40,7 @@ from typing import Any, NoReturn
 from lab.rigs import arduplane, fleet, native, px4
 from lab.rigs.bundles import ROOT, RigError, bundle_version, check_bundle, die_with_parent, unpack
 from lab.rigs.figures import (
+    HOLD_BANK_DEG,
     cross_track,
     fmt,
     hold_figures,
@@ -592,8 +593,7 @@ def _until_bridge_exits(
             bridge.wait()
             tracked = g.t_boot_s - t_engaged
             print(f"bridge SIGKILLed {tracked:.1f} s into tracking", flush=True)
-            lim = hold_bank_limit_deg(g, mod)
-            kill = watch_hold(g, a.watch_s, centre, -centre[2], radius, out, lim)
+            kill = watch_hold(g, mod, a.watch_s, centre, -centre[2], radius, out)
             kill["killed_after_s"] = tracked
             return kill
     return {}
@@ -662,25 +662,28 @@ def fly(a: argparse.Namespace, v: dict[str, Any], fw: Any, summary: dict[str, An
 
 
 def hold_bank_limit_deg(g: Gcs, mod: ModuleType) -> float:
-    """The autopilot's own roll limit (deg, its parameter), which its hold flies within; 35 deg
-    when the parameter cannot be read, said on the terminal."""
+    """The autopilot's own roll limit (deg, its parameter), which its hold flies within;
+    HOLD_BANK_DEG when the parameter cannot be read, said on the terminal."""
     v = g.get_param(mod.ROLL_LIMIT_PARAM)
     if v is None or not math.isfinite(v) or v <= 0.0:
-        print(f"  {mod.ROLL_LIMIT_PARAM} not read: the hold is judged with |bank| <= 35 deg")
-        return 35.0
+        print(
+            f"  {mod.ROLL_LIMIT_PARAM} not read: hold judged with |bank| <= {HOLD_BANK_DEG:g} deg"
+        )
+        return HOLD_BANK_DEG
     return float(v)
 
 
 def watch_hold(
     g: Gcs,
+    mod: ModuleType,
     secs: float,
     centre: list[float],
     alt_m: float,
     radius: float,
     out: Path,
-    bank_limit_deg: float = 35.0,
 ) -> dict[str, Any]:
-    """What the autopilot does on its own for ``secs`` (its clock) after the bridge died."""
+    """What the autopilot does on its own for ``secs`` (its clock) after the bridge died; its
+    roll limit is read after the watch, so the parameter exchange costs none of it."""
     t0 = g.t_boot_s
     modes: list[str] = []
     trace: list[tuple[float, float, float, float, float]] = []
@@ -690,7 +693,7 @@ def watch_hold(
     with open(out / "after_kill.csv", "w") as f:
         f.write("t_s,roll_rad,north_m,east_m,down_m\n")
         f.writelines(",".join(f"{x:.4f}" for x in r) + "\n" for r in trace)
-    h = hold_figures(trace, (centre[0], centre[1]), alt_m, radius, bank_limit_deg)
+    h = hold_figures(trace, (centre[0], centre[1]), alt_m, radius, hold_bank_limit_deg(g, mod))
     h["modes"] = modes
     return h
 

@@ -186,12 +186,16 @@ def tlog_stream_hz(tlog: Path, msg: str = "ATTITUDE", component: int = 191) -> f
     return n / (last - first)
 
 
+# |bank| (deg) a hold is judged with when the autopilot's own roll limit is not known
+HOLD_BANK_DEG = 35.0
+
+
 def hold_figures(
     trace: list[tuple[float, float, float, float, float]],
     centre: tuple[float, float],
     alt_m: float,
     radius_m: float,
-    bank_limit_deg: float = 35.0,
+    bank_limit_deg: float = HOLD_BANK_DEG,
 ) -> dict[str, Any]:
     """After a SIGKILL: rows (t, roll rad, north, east, down) over the watch window -> the
     largest distance from the path's centre, |bank| and altitude error, and the hold verdict
