@@ -266,11 +266,11 @@ def test_a_new_home_position_moves_the_local_frame():
     """The conversion's origin is kept between fixes; a new HOME_POSITION replaces it."""
     lat, lon, alt = 47.40, 8.55, 500.0
     est = Estimator()
-    assert est.to_local(lat, lon, alt) is None and not est.has_geodetic_origin()
+    assert est.origin.ned(lat, lon, alt) is None and not est.origin.known()
     for home, pos in ((HOME, (0.0, 0.0, 0.0)), ((47.39, 8.54, 480.0), (5.0, -3.0, 1.0))):
         est.update(HomeSample(*home, np.array(pos)), 1.0)
         n, e, d = pymap3d.geodetic2ned(lat, lon, alt, *home)
-        assert est.to_local(lat, lon, alt).tolist() == (np.array([n, e, d]) + pos).tolist()
+        assert est.origin.ned(lat, lon, alt).tolist() == (np.array([n, e, d]) + pos).tolist()
 
 
 def test_configured_origin_wins_over_home_and_missing_origin_is_a_reason():
@@ -432,7 +432,7 @@ def test_estimate_is_pure_and_the_wind_low_pass_advances_once_per_attitude():
     f.vfr(V, rx=9.98)
     e, _ = f.estimate()
     assert e is not None and e.wind_source == "estimated" and e.vehicle.wind.tolist() == [0.0] * 3
-    assert f.est._wind_lp is None
+    assert f.est.wind_lp.value is None
     want: np.ndarray | None = None
     for k in range(50):
         t = round(10.0 + 0.02 * k, 3)
@@ -448,11 +448,11 @@ def test_estimate_is_pure_and_the_wind_low_pass_advances_once_per_attitude():
         np.testing.assert_allclose(first.vehicle.wind, want, rtol=0, atol=1e-12)
         assert first.vehicle.wind.tolist() == again.vehicle.wind.tolist()
         assert first.vehicle.position.tolist() == again.vehicle.position.tolist()
-    lp = f.est._wind_lp
+    lp = f.est.wind_lp.value
     # a later position (another ground velocity) changes the estimate's frame but not the wind
     f.local(10.99, (0.0, 0.0, -100.0), (0.0, 30.0, 0.0))
     e, _ = f.estimate()
-    assert f.est._wind_lp == lp and e is not None and e.vehicle.wind.tolist() == list(lp)
+    assert f.est.wind_lp.value == lp and e is not None and e.vehicle.wind.tolist() == list(lp)
     assert e.ground_velocity.tolist() == [0.0, 30.0, 0.0]
 
 
@@ -635,7 +635,7 @@ def test_real_arduplane_log_gives_finite_estimates_and_a_sane_own_wind():
         if e.vehicle.airspeed > 18.0:
             assert e.wind_source == "WIND"
             np.testing.assert_allclose(e.vehicle.wind, 0.0, atol=1e-6)
-            own.append(float(np.linalg.norm(est._wind_lp)))
+            own.append(float(np.linalg.norm(est.wind_lp.value)))
     assert n_att > 800 and n_est > n_att // 2 and n_wind >= 0.95 * n_est
     assert len(own) > 100 and max(own) < 1.5
 

@@ -303,7 +303,7 @@ def test_fleet_csv_is_written_as_the_flight_goes(tmp_path: Path) -> None:
     a, b, clock = _pair()
     vs, tgt = _vs_tgt()
     try:
-        a.csv_path = tmp_path / "fleet.csv"
+        a.record.path = tmp_path / "fleet.csv"
         a.step(0.0, 0.0, 22.0, vs, tgt)  # the first row is flushed at once
         lines = (tmp_path / "fleet.csv").read_text().splitlines()
         assert lines[0].startswith("t_unix_s,") and len(lines) == 2

@@ -435,7 +435,7 @@ def test_struct_of_tlog_record_written_by_link(tmp_path):
     port = free_udp_port()
     clock_s = 1_700_000_000.25
     link = open_link(f"udpout:127.0.0.1:{port}", tlog_path=tmp_path / "x.tlog")
-    link._clock = lambda: clock_s  # controlled wall clock for the log
+    link.record._clock = lambda: clock_s  # controlled wall clock for the log
     msg = encode_set_attitude_target_rates(link.mav, 9, 1, 1, 0.0, 0.0, 0.0, 0.5)
     link.send(msg)
     link.close()

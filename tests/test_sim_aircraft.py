@@ -323,7 +323,7 @@ def test_every_turbulence_seed_its_own_draw():
     w0, w1, w0b = gusts(0), gusts(1), gusts(0)
     assert np.abs(w0 - w0b).max() == 0.0  # reproducible
     assert np.abs(w0 - w1).max() > 0.1
-    from sim.plant.jsbsim_plant import jsbsim_turbulence_seed
+    from sim.plant.atmosphere import jsbsim_turbulence_seed
 
     assert jsbsim_turbulence_seed(7) == 7  # the demo's turbulence is unchanged
     with pytest.raises(ValueError):

@@ -438,6 +438,8 @@ def fly_fleet(a: argparse.Namespace, v: dict[str, Any]) -> int:
         rc = 0 if summary["verdict"] == "PASS" else 1
     finally:
         _tear_down(f)
+        if f.relays and "mission" in summary:
+            summary["mission"]["link"]["relays"] = [r.counters() for r in f.relays]
         (out / "fleet.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
     print_fleet_table(summary)
     return rc
@@ -465,8 +467,18 @@ def verdict(s: dict[str, Any], a: argparse.Namespace) -> str:
 
 def print_fleet_table(s: dict[str, Any]) -> None:
     print("\n" + "=" * 78)
+    link = dict(s.get("mission", {}).get("link") or {})
+    relays = link.pop("relays", None)
     print(f"fleet flight: {s.get('flight')}  {s.get('mission', {}).get('target', '')}  link "
-          f"{s.get('mission', {}).get('link')}")  # fmt: skip
+          f"{link}")  # fmt: skip
+    if relays:  # what the relays did, measured: not what was asked of them
+        tot = {k: sum(d.get(k, 0) for r in relays for d in r.values())
+               for k in ("received", "dropped_loss", "delayed", "reordered")}  # fmt: skip
+        frac = tot["dropped_loss"] / tot["received"] if tot["received"] else float("nan")
+        print(
+            f"coordination relays: {tot['received']} reports in, {tot['dropped_loss']} dropped "
+            f"({100 * frac:.1f} %), {tot['delayed']} delayed, {tot['reordered']} reordered"
+        )
     print(f"{'aircraft':>8} {'-I':>3} {'steady RMS m':>12} {'max m':>7} {'xtrack RMS':>10} "
           f"{'thr@ceil':>8}  verdict")  # fmt: skip
     for k, f in enumerate(s.get("aircraft", [])):

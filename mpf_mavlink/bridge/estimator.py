@@ -286,6 +286,74 @@ class _Fused(NamedTuple):
     airspeed: float | None
 
 
+class LocalOrigin:
+    """The geodetic point of the local NED frame: ``fixed`` (lat deg, lon deg, alt m AMSL,
+    ``mavlink.origin_*``) when configured, else the vehicle's HOME_POSITION (``home``)."""
+
+    def __init__(self, fixed: tuple[float, float, float] | None) -> None:
+        self.fixed = fixed
+        self.home: Any = None  # HomeSample
+        self._frame: tuple[object, LocalFrame] | None = None  # (what it was built from, it)
+
+    def geodetic(self) -> tuple[float, float, float, NDArray[np.float64]] | None:
+        """(lat, lon, alt, local offset of that point) of the local frame, or None if unknown."""
+        if self.fixed is not None:
+            return (*self.fixed, np.zeros(3))
+        if self.home is not None:
+            h = self.home
+            return (h.lat_deg, h.lon_deg, h.alt_amsl_m, np.asarray(h.pos_ned, float))
+        return None
+
+    def known(self) -> bool:
+        """Whether :meth:`geodetic` is known."""
+        return self.fixed is not None or self.home is not None
+
+    def ned(self, lat: float, lon: float, alt: float) -> NDArray[np.float64] | None:
+        """A geodetic point (deg, deg, m AMSL) in the local NED frame (m), None without an
+        origin."""
+        q = self.ned_xyz(lat, lon, alt)
+        return None if q is None else np.array(q)
+
+    def ned_xyz(self, lat: float, lon: float, alt: float) -> tuple[float, float, float] | None:
+        """:meth:`ned` as a tuple (the hot path: every target fix)."""
+        key: object = self.fixed if self.fixed is not None else self.home
+        if key is None:
+            return None
+        f = self._frame
+        if f is None or f[0] is not key:
+            o = self.geodetic()
+            assert o is not None
+            f = self._frame = (key, LocalFrame(o[0], o[1], o[2], tuple(o[3].tolist())))
+        return f[1].ned(lat, lon, alt)
+
+
+class WindLowPass:
+    """Our wind (m/s NED) when the autopilot reports none: a low-pass (``tau_s``) of
+    v_ground - v_air x_b, started at the first measurement (not at zero: a calm start would bias
+    w1 by the drift angle for several tau) and restarted when the autopilot's clock goes back (a
+    reboot). Vertical wind is not observable this way (angle of attack): 0."""
+
+    def __init__(self, tau_s: float) -> None:
+        self.tau_s = float(tau_s)
+        self.value: tuple[float, float, float] | None = None
+        self.t: float | None = None  # autopilot time (s since boot) of the latest input
+
+    def restart_if_back(self, t: float) -> None:
+        if self.t is not None and t < self.t:
+            self.value = self.t = None
+
+    def add(self, t: float, x: float, y: float) -> None:
+        """The horizontal wind measured at autopilot time t (s)."""
+        lp = self.value
+        if lp is None or self.t is None:
+            self.value = (x, y, 0.0)
+        else:
+            k = 1.0 - math.exp(-max(0.0, t - self.t) / self.tau_s)
+            lx, ly, lz = lp
+            self.value = (lx + k * (x - lx), ly + k * (y - ly), lz + k * (0.0 - lz))
+        self.t = t
+
+
 class Estimator:
     """Keeps the latest sample of each stream; :meth:`estimate` fuses them at the attitude time."""
 
@@ -300,14 +368,12 @@ class Estimator:
         self.local_rx: float | None = None
         self.glob: Any = None  # GlobalPositionSample
         self.glob_rx: float | None = None
-        self.home: Any = None  # HomeSample
+        self.origin = LocalOrigin(params.origin)
         self.vfr: Any = None  # VfrHudSample
         self.vfr_rx: float | None = None
         self.wind: Any = None  # WindSample
         self.wind_rx: float | None = None
-        self._frame: tuple[object, LocalFrame] | None = None  # (what it was built from, it)
-        self._wind_lp: tuple[float, float, float] | None = None
-        self._wind_lp_t: float | None = None
+        self.wind_lp = WindLowPass(params.wind_tau_s)
         self._gen = 0  # samples stored so far
         self._fused: tuple[int, bool, _Fused | tuple[None, str]] | None = (
             None  # (_gen, at, _fuse())
@@ -349,7 +415,7 @@ class Estimator:
         elif name == "GlobalPositionSample":
             self.glob, self.glob_rx = sample, t_rx
         elif name == "HomeSample":
-            self.home = sample
+            self.origin.home = sample
         elif name == "VfrHudSample":
             self.vfr, self.vfr_rx = sample, t_rx
         elif name == "WindSample":
@@ -362,37 +428,6 @@ class Estimator:
         if self.att_source is None and self.att is not None:
             self.att_source = getattr(self.att, "source", "ATTITUDE")
         return self.att_source
-
-    def geodetic_origin(self) -> tuple[float, float, float, NDArray[np.float64]] | None:
-        """(lat, lon, alt, local offset of that point) of the local frame, or None if unknown."""
-        if self.p.origin is not None:
-            return (*self.p.origin, np.zeros(3))
-        if self.home is not None:
-            h = self.home
-            return (h.lat_deg, h.lon_deg, h.alt_amsl_m, np.asarray(h.pos_ned, float))
-        return None
-
-    def has_geodetic_origin(self) -> bool:
-        """Whether :meth:`geodetic_origin` is known."""
-        return self.p.origin is not None or self.home is not None
-
-    def to_local(self, lat: float, lon: float, alt: float) -> NDArray[np.float64] | None:
-        """A geodetic point (deg, deg, m AMSL) in the local NED frame (m), None without an
-        origin."""
-        q = self.to_local_xyz(lat, lon, alt)
-        return None if q is None else np.array(q)
-
-    def to_local_xyz(self, lat: float, lon: float, alt: float) -> tuple[float, float, float] | None:
-        """:meth:`to_local` as a tuple (the hot path: every target fix)."""
-        key: object = self.p.origin if self.p.origin is not None else self.home
-        if key is None:
-            return None
-        f = self._frame
-        if f is None or f[0] is not key:
-            o = self.geodetic_origin()
-            assert o is not None
-            f = self._frame = (key, LocalFrame(o[0], o[1], o[2], tuple(o[3].tolist())))
-        return f[1].ned(lat, lon, alt)
 
     # -- fusing -------------------------------------------------------------------------------
     def _position(
@@ -408,7 +443,7 @@ class Estimator:
             return (x + dt * vx, y + dt * vy, z + dt * vz), vel, "local"
         g = self.glob
         if g is not None and abs(t - g.t_boot_s) <= p.position_stale_s:
-            q = self.to_local_xyz(g.lat_deg, g.lon_deg, g.alt_amsl_m)
+            q = self.origin.ned_xyz(g.lat_deg, g.lon_deg, g.alt_amsl_m)
             if q is None:
                 return (
                     "GLOBAL_POSITION_INT without an origin (no HOME_POSITION, no mavlink.origin_*)"
@@ -488,29 +523,15 @@ class Estimator:
         return f
 
     def _advance_wind(self, att: AttitudeSample) -> None:
-        """Advance the wind low-pass to the attitude sample just stored (once per sample).
-
-        Our wind: a low-pass of vg - v_air x_b, started at the first measurement (not at zero:
-        a calm start would bias w1 by the drift angle for several tau) and restarted when the
-        autopilot's clock goes back (a reboot)."""
+        """Advance the wind low-pass to the attitude sample just stored (once per sample)."""
         t = att.t_boot_s
-        if self._wind_lp_t is not None and t < self._wind_lp_t:
-            self._wind_lp = self._wind_lp_t = None
+        self.wind_lp.restart_if_back(t)
         f = self._fused_now()
         if not isinstance(f, _Fused) or f.airspeed is None:
             return
         R_rows = f.R_rows
         gx, gy, _ = f.vg.tolist()
-        # vertical wind is not observable this way (angle of attack): 0
-        ix, iy = gx - f.airspeed * R_rows[0][0], gy - f.airspeed * R_rows[1][0]
-        lp = self._wind_lp
-        if lp is None or self._wind_lp_t is None:
-            self._wind_lp = (ix, iy, 0.0)
-        else:
-            k = 1.0 - math.exp(-max(0.0, t - self._wind_lp_t) / self.p.wind_tau_s)
-            lx, ly, lz = lp
-            self._wind_lp = (lx + k * (ix - lx), ly + k * (iy - ly), lz + k * (0.0 - lz))
-        self._wind_lp_t = t
+        self.wind_lp.add(t, gx - f.airspeed * R_rows[0][0], gy - f.airspeed * R_rows[1][0])
 
     def estimate(self, at_position: bool = False) -> tuple[Estimate | None, str]:
         """The state at the latest attitude sample, or (None, reason). Pure: the wind low-pass
@@ -540,7 +561,7 @@ class Estimator:
             wsrc = w.source
             ex, ey, ez = np.asarray(w.wind_ned, float).tolist()
         else:
-            lp = self._wind_lp
+            lp = self.wind_lp.value
             ex, ey, ez = (0.0, 0.0, 0.0) if lp is None else lp
             wsrc = "estimated"
         v_air = (gx - ex, gy - ey, gz - ez)

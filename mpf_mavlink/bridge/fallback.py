@@ -209,7 +209,7 @@ class FallbackSetup:
         """(lat, lon, alt AMSL, radius m, counter-clockwise) of the path's centre now, or why
         not."""
         ctl = self.ctl
-        o = ctl.est.geodetic_origin()
+        o = ctl.est.origin.geodetic()
         est, _ = ctl.est.estimate()
         if o is None or est is None:
             return "no HOME_POSITION"

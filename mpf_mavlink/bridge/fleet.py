@@ -88,6 +88,51 @@ class FleetCounts:
         return d
 
 
+class FleetRecord:
+    """fleet.csv, one row a control step (:attr:`HEADER`): streamed to ``path`` as the flight
+    goes (flushed each second: a SIGKILLed bridge's record is there too, for the rig to judge
+    the fleet before the kill), or written at the end without one. Never ends a flight."""
+
+    HEADER = ("t_unix_s", "t_s", "s_m", "sdot_m_s", "e_m", "du_m_s", "airspeed_sp_m_s",
+              "n_peers", "slot_deg")  # fmt: skip
+
+    def __init__(self) -> None:
+        self.path: Path | None = None
+        self.rows: list[tuple[float, ...]] = []
+        self._fh: Any = None
+        self._flushed = -math.inf
+
+    def add(self, row: tuple[float, ...], now: float) -> None:
+        """One step's row at ``now`` (Unix s)."""
+        self.rows.append(row)
+        if self.path is None:
+            return
+        try:
+            if self._fh is None:
+                self._fh = open(self.path, "w", newline="")  # noqa: SIM115 - whole flight
+                self._fh.write(",".join(self.HEADER) + "\n")
+            self._fh.write(",".join(repr(float(x)) for x in row) + "\n")
+            if now - self._flushed >= 1.0:
+                self._flushed = now
+                self._fh.flush()
+        except OSError:
+            self.path = None
+
+    def close(self, out: Path, log: Callable[[str], None]) -> None:
+        """The streamed file closed, or every row written to ``out``/fleet.csv."""
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+            return
+        try:
+            with open(out / "fleet.csv", "w", newline="") as fh:
+                w = csv.writer(fh)
+                w.writerow(self.HEADER)
+                w.writerows(self.rows)
+        except OSError as e:
+            log(f"fleet: could not write fleet.csv: {e}")
+
+
 class FleetMember:
     """This aircraft on the coordination link. ``now``: the common clock (Unix s)."""
 
@@ -122,12 +167,7 @@ class FleetMember:
         self.lp = co.LowPass(self.f.filter_tau_s)
         self.t_sent = -math.inf
         self.t_prev: float | None = None
-        self.rows: list[tuple[float, ...]] = []
-        # fleet.csv written as the flight goes (flushed each second): a SIGKILLed bridge's
-        # record is there too, for the rig to judge the fleet before the kill
-        self.csv_path: Path | None = None
-        self._fh: Any = None
-        self._flushed = -math.inf
+        self.record = FleetRecord()
         self.last: dict[str, float] = {}
         self._warned: set[str] = set()
 
@@ -286,8 +326,7 @@ class FleetMember:
         asp = self.airspeed_sp(u, s, vs, tgt)
         self.last = {"e_m": e, "du_m_s": du, "airspeed_sp_m_s": asp, "n_peers": float(n)}
         row = (now, t_mission, s, sdot, e, du, asp, float(n), mine * 360.0)
-        self.rows.append(row)
-        self._stream(row, now)
+        self.record.add(row, now)
         return asp
 
     def airspeed_sp(self, u: float, s: float, vs: Any, tgt: Any) -> float:
@@ -316,38 +355,10 @@ class FleetMember:
             a += k_u * (u - u_now)
         return min(max(a, self.window[0]), self.window[1])
 
-    # -- records ----------------------------------------------------------------------------
-    HEADER = ("t_unix_s", "t_s", "s_m", "sdot_m_s", "e_m", "du_m_s", "airspeed_sp_m_s",
-              "n_peers", "slot_deg")  # fmt: skip
-
-    def _stream(self, row: tuple[float, ...], now: float) -> None:
-        if self.csv_path is None:
-            return
-        try:
-            if self._fh is None:
-                self._fh = open(self.csv_path, "w", newline="")  # noqa: SIM115 - whole flight
-                self._fh.write(",".join(self.HEADER) + "\n")
-            self._fh.write(",".join(repr(float(x)) for x in row) + "\n")
-            if now - self._flushed >= 1.0:
-                self._flushed = now
-                self._fh.flush()
-        except OSError:
-            self.csv_path = None  # the records never end a flight
-
     def write(self, out: Path) -> dict[str, Any]:
         """fleet.csv (one row a step) and the summary that goes into metrics.json."""
-        if self._fh is not None:
-            self._fh.close()
-            self._fh = None
-        else:
-            try:
-                with open(out / "fleet.csv", "w", newline="") as fh:
-                    w = csv.writer(fh)
-                    w.writerow(self.HEADER)
-                    w.writerows(self.rows)
-            except OSError as e:
-                self.log(f"fleet: could not write fleet.csv: {e}")
-        es = [r[4] for r in self.rows if r[7] > 0]
+        self.record.close(out, self.log)
+        es = [r[4] for r in self.record.rows if r[7] > 0]
         summary: dict[str, Any] = {
             "member": self.f.member,
             "slot_deg": self.slot_deg,
@@ -405,7 +416,7 @@ def attach(bridge: Any) -> FleetMember | None:
     if f.target_epoch_unix_s is not None and not ctl.live:
         ctl.target = EpochTarget(ctl.target, f.target_epoch_unix_s)
     member = FleetMember(cfg, ctl.path, bridge.log)
-    member.csv_path = Path(bridge.opts.out_dir) / "fleet.csv"
+    member.record.path = Path(bridge.opts.out_dir) / "fleet.csv"
     failed: list[bool] = []
 
     def hook(t: float, s: float, sdot: float, vs: Any, tgt: Any) -> float | None:

@@ -257,7 +257,7 @@ class Bridge:
         if m.request_streams and (why := self.streams.negotiate(res)) is not None:
             raise _Refused(why)
         need_home = self.ctl.live or (vl.flavour is Flavour.ARDUPILOT and m.set_fallback)
-        if need_home and est.geodetic_origin() is None:
+        if need_home and est.origin.geodetic() is None:
             await_home(m, est, self.streams, self.ctl.live)
         if vl.flavour is Flavour.PX4 and (why := self.fallback.px4_prepare(res)) is not None:
             raise _Refused(why)
@@ -402,10 +402,10 @@ def await_home(m: Any, est: Any, streams: StreamNegotiator, live: bool) -> None:
     a ``live`` target is placed about it."""
 
     def home() -> str:
-        h = est.home
+        h = est.origin.home
         return f"{h.lat_deg:.7f}, {h.lon_deg:.7f}, {h.alt_amsl_m:.2f} m AMSL"
 
-    if not streams.await_home(lambda: est.home is not None, home) and live:
+    if not streams.await_home(lambda: est.origin.home is not None, home) and live:
         raise _Refused(
             f"no HOME_POSITION within {m.home_timeout_s:g} s "
             "(the live target is placed about it; or set mavlink.origin_*)"

@@ -92,7 +92,7 @@ class ExtrapolatedTarget:
             return
         if name == "GlobalPositionSample" and t_mission - self.rich_stamp <= self.timeout_s:
             return  # the richer FOLLOW_TARGET state stands (see the class docstring)
-        pos = self.est.to_local(sample.lat_deg, sample.lon_deg, sample.alt_amsl_m)
+        pos = self.est.origin.ned(sample.lat_deg, sample.lon_deg, sample.alt_amsl_m)
         if pos is None:
             return
         vel = np.asarray(sample.vel_ned if sample.vel_ned is not None else np.zeros(3), float)
@@ -190,7 +190,7 @@ class LiveTarget:
             return Report(float(sample.t_boot_s), turn_rate=turn, yaw=yaw, attitude=True)
         if name not in ("FollowTargetSample", "GlobalPositionSample"):
             return None
-        pos = self.est.to_local_xyz(sample.lat_deg, sample.lon_deg, sample.alt_amsl_m)
+        pos = self.est.origin.ned_xyz(sample.lat_deg, sample.lon_deg, sample.alt_amsl_m)
         if pos is None:
             return None
         vel = None if sample.vel_ned is None else _floats(sample.vel_ned)
@@ -212,7 +212,7 @@ class LiveTarget:
     def update(self, sample: Any, t_mission: float | None) -> None:
         if t_mission is None:
             return
-        if type(sample).__name__ == "GlobalPositionSample" and self.est.has_geodetic_origin():
+        if type(sample).__name__ == "GlobalPositionSample" and self.est.origin.known():
             # the second report of a fix (FOLLOW_TARGET's twin) is dropped by the estimator:
             # decided before the geodetic conversion of a report that would be dropped
             why = self.kf.known_position(float(sample.t_boot_s), t_mission)

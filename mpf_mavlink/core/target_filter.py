@@ -390,6 +390,101 @@ def _update_vertical(
     return x, P, _innovation(s, nu, g)
 
 
+def _course(x: Sequence[float] | NDArray[np.float64], held: float) -> float:
+    """The course (rad) of the state's ground velocity, or ``held`` when too slow to tell."""
+    vn, ve = float(x[3]), float(x[4])
+    if vn * vn + ve * ve > MIN_COURSE_SPEED_M_S**2:
+        return math.atan2(ve, vn)
+    return held
+
+
+class TargetEkf:
+    """One step of the EKF (module docstring): a report fused into the posterior before it,
+    with ``params``'s noises and gate; it keeps no state of its own."""
+
+    def __init__(self, params: TargetFilterParams) -> None:
+        self.p = params
+        self.gates = [0.0] + [chi2_quantile(params.gate_probability, k) for k in range(1, 8)]
+        self.q = (
+            params.accel_noise_m_s2**2,
+            params.vertical_accel_noise_m_s2**2,
+            params.turn_accel_noise_rad_s2**2,
+        )  # the process noise densities squared (_predict)
+
+    def init(self, r: Report, nrej: int = 0) -> _Post:
+        assert r.position is not None
+        pn, pe, pd = self._pos_var(r)
+        n, e, d = _floats(r.position)
+        if r.velocity is not None:
+            vn, ve, vd = _floats(r.velocity)
+            vv = self.p.velocity_noise_m_s**2
+        else:
+            vn = ve = vd = 0.0
+            vv = INIT_VEL_SIGMA_M_S**2
+        if r.turn_rate is not None:
+            w, ww = float(r.turn_rate), self.p.turn_rate_noise_rad_s**2
+        else:
+            w, ww = 0.0, INIT_TURN_SIGMA_RAD_S**2
+        x = (n, e, d, vn, ve, vd, w)
+        Ph = (pn, 0.0, 0.0, 0.0, 0.0, pe, 0.0, 0.0, 0.0, vv, 0.0, 0.0, vv, 0.0, ww)
+        Pv = (pd, 0.0, vv)
+        yaw = r.yaw if r.yaw is not None else 0.0
+        return _Post(r.t, x, Ph, Pv, nrej, _course(x, yaw), r.t)
+
+    def _pos_var(self, r: Report) -> list[float]:
+        if r.pos_var is not None:
+            return _floats(r.pos_var)
+        h, v = self.p.position_noise_m**2, self.p.vertical_noise_m**2
+        return [h, h, v]
+
+    def fuse(self, prev: _Post | None, r: Report) -> tuple[_Post | None, str]:
+        """The posterior after ``r`` from ``prev`` (None: none yet) and what became of it."""
+        if prev is None:
+            if r.position is None:
+                return None, "waiting"
+            return self.init(r), "fused"
+        x, Ph, Pv = _predict(prev.x, prev.Ph, prev.Pv, r.t - prev.t, self.q)
+        held = r.yaw if r.yaw is not None else prev.yaw
+        meas = self._measurements(r)
+        if not meas:
+            return _Post(r.t, x, Ph, Pv, prev.nrej, _course(x, held), prev.t_fix), "fused"
+        # the components one at a time (module docstring); the gate's distance is their sum,
+        # and once it is past the gate the rest cannot bring it back (each term is >= 0)
+        gate = self.gates[len(meas)]
+        xh: Vec = (x[0], x[1], x[3], x[4], x[6])
+        xv: Vec = (x[2], x[5])
+        d2 = 0.0
+        for j, z, rv in meas:
+            block, i = _IN_BLOCK[j]
+            if block == 0:
+                xh, Ph, term = _update_horizontal(xh, Ph, i, z, rv)
+            else:
+                xv, Pv, term = _update_vertical(xv, Pv, i, z, rv)
+            d2 += term
+            if not d2 <= gate:  # nan, or past the gate (the terms are >= 0): gated
+                break
+        if not math.isfinite(d2) or d2 > gate:
+            nrej = prev.nrej + 1
+            if nrej >= self.p.reinit_after and r.position is not None:
+                return self.init(r), "reinit"
+            return _Post(prev.t, prev.x, prev.Ph, prev.Pv, nrej, prev.yaw, prev.t_fix), "gated"
+        x = (xh[0], xh[1], xv[0], xh[2], xh[3], xv[1], xh[4])
+        t_fix = r.t if r.position is not None else prev.t_fix
+        return _Post(r.t, x, Ph, Pv, 0, _course(x, held), t_fix), "fused"
+
+    def _measurements(self, r: Report) -> list[tuple[int, float, float]]:
+        """(state index, value, variance) of each component the report measures."""
+        meas: list[tuple[int, float, float]] = []
+        if r.position is not None:
+            meas += zip((0, 1, 2), _floats(r.position), self._pos_var(r), strict=True)
+        if r.velocity is not None:
+            vv = self.p.velocity_noise_m_s**2
+            meas += ((j, z, vv) for j, z in zip((3, 4, 5), _floats(r.velocity), strict=True))
+        if r.turn_rate is not None:
+            meas.append((6, float(r.turn_rate), self.p.turn_rate_noise_rad_s**2))
+        return meas
+
+
 class TargetEstimator:
     """The EKF with its report history and clock offset (see the module docstring).
 
@@ -399,7 +494,8 @@ class TargetEstimator:
 
     def __init__(self, params: TargetFilterParams) -> None:
         self.p = params
-        self.gates = [0.0] + [chi2_quantile(params.gate_probability, k) for k in range(1, 8)]
+        self.ekf = TargetEkf(params)
+        self.q = self.ekf.q
         self.hist: list[Report] = []
         self.times: list[float] = []  # hist's report times, for bisect
         self.posts: list[_Post | None] = []
@@ -408,11 +504,6 @@ class TargetEstimator:
         self.rx_last = 0.0
         self.t_last = -math.inf  # newest report time (sender clock)
         self.att: tuple[float, float] | None = None  # newest reported attitude: (t, yaw)
-        self.q = (
-            params.accel_noise_m_s2**2,
-            params.vertical_accel_noise_m_s2**2,
-            params.turn_accel_noise_rad_s2**2,
-        )  # the process noise densities squared (_predict)
         # trace of Q's position block over T: q_pos T^3 / 3 (state())
         self.q_pos = 2.0 * params.accel_noise_m_s2**2 + params.vertical_accel_noise_m_s2**2
         self.counts = dict(
@@ -487,7 +578,7 @@ class TargetEstimator:
         outcome = ""
         for i in range(k, len(hist)):  # replay from the insertion on
             prev = self.anchor if i == 0 else self.posts[i - 1]
-            post, what = self._fuse(prev, hist[i])
+            post, what = self.ekf.fuse(prev, hist[i])
             self.posts[i] = post
             if i == k:
                 outcome = what
@@ -523,85 +614,6 @@ class TargetEstimator:
             self.hist.pop(0)
             self.times.pop(0)
             self.anchor = self.posts.pop(0)
-
-    def _init(self, r: Report, nrej: int = 0) -> _Post:
-        assert r.position is not None
-        pn, pe, pd = self._pos_var(r)
-        n, e, d = _floats(r.position)
-        if r.velocity is not None:
-            vn, ve, vd = _floats(r.velocity)
-            vv = self.p.velocity_noise_m_s**2
-        else:
-            vn = ve = vd = 0.0
-            vv = INIT_VEL_SIGMA_M_S**2
-        if r.turn_rate is not None:
-            w, ww = float(r.turn_rate), self.p.turn_rate_noise_rad_s**2
-        else:
-            w, ww = 0.0, INIT_TURN_SIGMA_RAD_S**2
-        x = (n, e, d, vn, ve, vd, w)
-        Ph = (pn, 0.0, 0.0, 0.0, 0.0, pe, 0.0, 0.0, 0.0, vv, 0.0, 0.0, vv, 0.0, ww)
-        Pv = (pd, 0.0, vv)
-        yaw = r.yaw if r.yaw is not None else 0.0
-        return _Post(r.t, x, Ph, Pv, nrej, self._course(x, yaw), r.t)
-
-    def _pos_var(self, r: Report) -> list[float]:
-        if r.pos_var is not None:
-            return _floats(r.pos_var)
-        h, v = self.p.position_noise_m**2, self.p.vertical_noise_m**2
-        return [h, h, v]
-
-    @staticmethod
-    def _course(x: Sequence[float] | NDArray[np.float64], held: float) -> float:
-        vn, ve = float(x[3]), float(x[4])
-        if vn * vn + ve * ve > MIN_COURSE_SPEED_M_S**2:
-            return math.atan2(ve, vn)
-        return held
-
-    def _fuse(self, prev: _Post | None, r: Report) -> tuple[_Post | None, str]:
-        if prev is None:
-            if r.position is None:
-                return None, "waiting"
-            return self._init(r), "fused"
-        x, Ph, Pv = _predict(prev.x, prev.Ph, prev.Pv, r.t - prev.t, self.q)
-        held = r.yaw if r.yaw is not None else prev.yaw
-        meas = self._measurements(r)
-        if not meas:
-            return _Post(r.t, x, Ph, Pv, prev.nrej, self._course(x, held), prev.t_fix), "fused"
-        # the components one at a time (module docstring); the gate's distance is their sum,
-        # and once it is past the gate the rest cannot bring it back (each term is >= 0)
-        gate = self.gates[len(meas)]
-        xh: Vec = (x[0], x[1], x[3], x[4], x[6])
-        xv: Vec = (x[2], x[5])
-        d2 = 0.0
-        for j, z, rv in meas:
-            block, i = _IN_BLOCK[j]
-            if block == 0:
-                xh, Ph, term = _update_horizontal(xh, Ph, i, z, rv)
-            else:
-                xv, Pv, term = _update_vertical(xv, Pv, i, z, rv)
-            d2 += term
-            if not d2 <= gate:  # nan, or past the gate (the terms are >= 0): gated
-                break
-        if not math.isfinite(d2) or d2 > gate:
-            nrej = prev.nrej + 1
-            if nrej >= self.p.reinit_after and r.position is not None:
-                return self._init(r), "reinit"
-            return _Post(prev.t, prev.x, prev.Ph, prev.Pv, nrej, prev.yaw, prev.t_fix), "gated"
-        x = (xh[0], xh[1], xv[0], xh[2], xh[3], xv[1], xh[4])
-        t_fix = r.t if r.position is not None else prev.t_fix
-        return _Post(r.t, x, Ph, Pv, 0, self._course(x, held), t_fix), "fused"
-
-    def _measurements(self, r: Report) -> list[tuple[int, float, float]]:
-        """(state index, value, variance) of each component the report measures."""
-        meas: list[tuple[int, float, float]] = []
-        if r.position is not None:
-            meas += zip((0, 1, 2), _floats(r.position), self._pos_var(r), strict=True)
-        if r.velocity is not None:
-            vv = self.p.velocity_noise_m_s**2
-            meas += ((j, z, vv) for j, z in zip((3, 4, 5), _floats(r.velocity), strict=True))
-        if r.turn_rate is not None:
-            meas.append((6, float(r.turn_rate), self.p.turn_rate_noise_rad_s**2))
-        return meas
 
     # -- output ----------------------------------------------------------------------------
     def latest(self) -> _Post | None:
@@ -678,7 +690,7 @@ class TargetEstimator:
         if att is not None and ts - att[0] <= p.attitude_timeout_s:
             yaw = att[1] + x[6] * (ts - att[0])  # the target's own yaw, turned at the turn rate
         else:
-            yaw = self._course(x, post.yaw)
+            yaw = _course(x, post.yaw)
         return (*x, yaw)
 
     @staticmethod

@@ -42,7 +42,8 @@ from mpf_mavlink.mavlink.encode import (
     encode_set_message_interval,
     encode_set_mode,
 )
-from mpf_mavlink.mavlink.link import Link, LinkCounters, open_link, wait_heartbeat
+from mpf_mavlink.mavlink.link import Link, open_link, wait_heartbeat
+from mpf_mavlink.mavlink.link_send import LinkCounters
 from mpf_mavlink.mavlink.modes import (
     Flavour,
     flavour_from_heartbeat,

@@ -14,19 +14,18 @@ works like a real port.
 
 from __future__ import annotations
 
-import math
 import os
 import select
 import socket
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.mavlink.boot_clock import BootClockGate
 from mpf_mavlink.mavlink.encode import encode_companion_heartbeat
+from mpf_mavlink.mavlink.link_send import LinkCounters, LinkRecord, LinkSender
 from mpf_mavlink.mavlink.ports import _Serial, _TcpClient
 from mpf_mavlink.mavlink.pymav import DIALECT_NAME, dialect, mavutil
 from mpf_mavlink.mavlink.url import MAV_COMP_ID_ONBOARD_COMPUTER, ParsedUrl, parse_url
@@ -40,50 +39,6 @@ UDP_MAX_PACKET_LEN = 65535  # pymavlink's mavutil.UDP_MAX_PACKET_LEN
 # ---------------------------------------------------------------------------------------------
 # Link
 # ---------------------------------------------------------------------------------------------
-class _LogThenWrite:
-    """Stands in for ``mav.file`` during one send: logs the packed bytes, then writes them."""
-
-    def __init__(self, file: Any, log: Callable[[bytes | bytearray], None]) -> None:
-        self._file, self._log = file, log
-
-    def write(self, buf: bytes | bytearray) -> Any:
-        self._log(buf)
-        return self._file.write(buf)
-
-
-@dataclass
-class LinkCounters:
-    rx_packets: int = 0  # frames with a good CRC (before filtering)
-    rx_by_type: Counter[str] = field(default_factory=Counter)  # accepted messages by type
-    tx_packets: int = 0
-    tx_by_type: Counter[str] = field(default_factory=Counter)
-    bad_data: int = 0  # framing / CRC / length errors (pymavlink BAD_DATA)
-    rejected_sysid: int = 0  # from a system/component we were not told to trust ("spoofed ids")
-    rejected_by_source: Counter[tuple[int, int]] = field(
-        default_factory=Counter
-    )  # (sysid, compid) -> count
-    rejected_unsigned: int = 0  # unsigned while signing is on
-    rejected_bad_signature: int = 0  # signed, but wrong key / forged
-    rejected_replay: int = 0  # right key, timestamp not newer than the stream's last one
-    rejected_identity: int = 0  # HEARTBEAT from the autopilot's ids claiming another autopilot type
-    rejected_time: int = 0  # vehicle time_boot_ms inconsistent with its clock (absurd, or a reboot)
-    rejected_stale: int = (
-        0  # vehicle sample not newer than the last of its type (reordered, duplicate)
-    )
-    clock_resets: int = 0  # the vehicle's boot clock restarted (a reboot) and was adopted
-    clock_settling: int = 0  # samples dropped before the vehicle's clock was established
-    unknown_msgid: int = 0  # ids this dialect does not know (CRC cannot be checked)
-    io_errors: int = 0
-    tlog_write_errors: int = 0  # records the tlog could not take (disk full, I/O error): lost
-
-    def as_dict(self) -> dict[str, Any]:
-        d = dict(self.__dict__)
-        d["rx_by_type"] = dict(self.rx_by_type)
-        d["tx_by_type"] = dict(self.tx_by_type)
-        d["rejected_by_source"] = {f"{s}/{c}": n for (s, c), n in self.rejected_by_source.items()}
-        return d
-
-
 class DatagramReader:
     """Reads a pymavlink UDP connection datagram by datagram (:meth:`read`, then :meth:`recv`).
 
@@ -164,22 +119,6 @@ class DatagramReader:
         return True
 
 
-def _pack(mav: Any, msg: Any) -> bytes | None:
-    """The unsigned packet pymavlink's ``mav.send(msg)`` would write (its packer, ``mav``'s
-    sequence number and ids), without writing it; None when ``mav.send`` must do it itself
-    (signing, a send callback). Does not advance ``mav.seq`` (:func:`_sent` does)."""
-    if mav.signing.sign_outgoing or mav.send_callback is not None:
-        return None
-    return bytes(msg.pack(mav))
-
-
-def _sent(mav: Any, buf: bytes) -> None:
-    """The bookkeeping pymavlink's ``MAVLink.send`` does after writing ``buf``."""
-    mav.seq = (mav.seq + 1) % 256
-    mav.total_packets_sent += 1
-    mav.total_bytes_sent += len(buf)
-
-
 def _count_bad(c: LinkCounters, msg: Any, signing_counts_itself: bool) -> None:
     """Count a BAD_DATA: an unsigned or badly signed packet while signing is on, or a bad
     frame (a hardened signing setup counts its bad signatures itself)."""
@@ -204,14 +143,6 @@ def _wait_readable(conn: Any, timeout_s: float) -> None:
         select.select([fd], [], [], timeout_s)
     except (OSError, ValueError):
         time.sleep(timeout_s)
-
-
-def _advance_signing_timestamp(mav: Any) -> None:
-    """MAVLink signing timestamps are 10 us ticks since 2015-01-01 and must follow the wall
-    clock: pymavlink only adds 1 per packet, so a long session would fall behind and a rebooted
-    autopilot would reject us as a stale stream (> 60 s old)."""
-    now_ticks = int((time.time() - 1420070400) * 100_000)
-    mav.signing.timestamp = max(mav.signing.timestamp, now_ticks)
 
 
 class Link:
@@ -247,20 +178,16 @@ class Link:
         self.vehicle_autopilot: int | None = None
         self.clock_gate = BootClockGate()
         self.allowed_sysids = frozenset(int(s) for s in allowed_sysids)
-        self.tlog = tlog
-        self._clock = clock
-        # lockstep: record times follow the vehicle's clock (see VehicleTimeStamps)
-        self.vehicle_time = VehicleTimeStamps(clock) if vehicle_time else None
         self.counters = LinkCounters()
-        self.signing_enabled = False
+        # lockstep: record times follow the vehicle's clock (link_send.VehicleTimeStamps)
+        self.record = LinkRecord(tlog, clock, self.counters, vehicle_time)
         self._signing_counts_itself = False  # set by signing.enable_signing(hardened=True)
         self._closed = False
         # a UDP link is read datagram by datagram
         self._udp = (
             DatagramReader(conn, self.counters) if isinstance(conn, mavutil.mavudp) else None
         )
-        self.last_tx_s: float | None = None  # record time (s) of the latest packet sent
-        self._tx_file: _LogThenWrite | None = None  # mav.file during a send (send)
+        self.sender = LinkSender(conn, self.record, self.counters, self._udp is not None)
 
     # -- identity ---------------------------------------------------------------------------
     @property
@@ -327,7 +254,7 @@ class Link:
             tb = getattr(msg, "time_boot_ms", None)
             if isinstance(tb, int):
                 tb_s = tb * 1e-3  # the vehicle's clock
-        t_rec = self._record(msg, tb_s)
+        t_rec = self.record.rx(msg, tb_s)
         if mtype.startswith("UNKNOWN_"):
             c.unknown_msgid += 1
             return True, None
@@ -358,23 +285,6 @@ class Link:
         c.rx_by_type[mtype] += 1
         return True, msg
 
-    def _record(self, msg: Any, tb_s: float | None) -> float:
-        """Stamp ``msg`` with its receive time (s) and write it to the tlog; the time."""
-        # one receive time for the record and the clock gate, quantised as the tlog stores it
-        # (us): a replay of the tlog can then take exactly the gate's decisions
-        vt = self.vehicle_time
-        t_rec: float = round((self._clock() if vt is None else vt.stamp(tb_s)) * 1e6) * 1e-6
-        # the receive time a consumer sees, with or without a tlog: the record's time exactly
-        msg._timestamp = t_rec
-        tlog = self.tlog
-        if tlog is not None:
-            try:
-                tlog.write(msg.get_msgbuf(), t_rec)
-            except (OSError, ValueError):
-                self.counters.io_errors += 1
-                self.counters.tlog_write_errors += 1
-        return t_rec
-
     def recv(self, timeout_s: float = 0.0) -> Any:
         """Next accepted message, waiting at most ``timeout_s`` (0 = poll). Never raises on
         malformed input: bad frames, spoofed ids and rejected signatures are counted instead."""
@@ -388,10 +298,7 @@ class Link:
                 return msg
             if more:
                 continue
-            tlog = self.tlog
-            if tlog is not None:  # nothing left to read: the held records go out now, and a
-                self._flush_tlog()  # mapped tlog's next page is made ready (off any path)
-                tlog.ahead()
+            self.record.idle()  # nothing left to read
             now = time.monotonic()
             if deadline is None:
                 deadline = now + max(0.0, float(timeout_s))
@@ -432,127 +339,29 @@ class Link:
 
     # -- send -------------------------------------------------------------------------------
     def send(self, msg: Any) -> None:
-        """Pack (MAVLink 2, signed if signing is on), write and log one message."""
+        """Pack (MAVLink 2, signed if signing is on), log and write one message."""
         if self._closed:
             raise MpfError(f"link {self.url} is closed")
-        mav = self.conn.mav
-        if self.signing_enabled:
-            _advance_signing_timestamp(mav)
-        # logged before it is written: a process killed between the two (SIGKILL) never leaves
-        # a packet the vehicle received out of the tlog (write-ahead; a packet the socket then
-        # refuses stays in the tlog, counted in io_errors)
-        buf = _pack(mav, msg)
-        if buf is None:  # signed (or a send callback): pymavlink packs and writes
-            if not self._send_pymavlink(mav, msg):
-                return
-        else:
-            self._log_tx(buf)
-            try:
-                self._write(buf)
-            except OSError:
-                self.counters.io_errors += 1
-                return
-            _sent(mav, buf)
-        self.counters.tx_packets += 1
-        self.counters.tx_by_type[msg.get_type()] += 1
+        self.sender.send(msg)
 
     def send_many(self, msgs: list[Any]) -> None:
-        """Several messages in one write (on UDP one datagram, as PX4 bundles its telemetry)
-        and one tlog write: a burst that wakes the peer once, not once per packet. Packed,
-        logged and counted as :meth:`send` does; with signing on they go one by one."""
+        """Several messages in one write (:meth:`LinkSender.send_many`)."""
         if self._closed:
             raise MpfError(f"link {self.url} is closed")
-        mav = self.conn.mav
-        bufs: list[bytes] = []
-        for i, msg in enumerate(msgs):
-            buf = None if self.signing_enabled else _pack(mav, msg)
-            if buf is None:  # pymavlink must send this one: it and the rest one by one
-                self._send_bufs(mav, bufs, msgs[:i])
-                for m in msgs[i:]:
-                    self.send(m)
-                return
-            _sent(mav, buf)  # the next packet's sequence number
-            bufs.append(buf)
-        self._send_bufs(mav, bufs, msgs)
-
-    def _send_bufs(self, mav: Any, bufs: list[bytes], msgs: list[Any]) -> None:
-        """Log then write packed ``bufs`` (of ``msgs``) in one go."""
-        if not bufs:
-            return
-        for buf in bufs:
-            self._log_tx(buf, flush=False)
-        if self.tlog is not None:  # write-ahead, as send
-            self._flush_tlog()
-        try:
-            self._write(b"".join(bufs))
-        except OSError:
-            self.counters.io_errors += 1
-            return
-        self.counters.tx_packets += len(bufs)
-        for msg in msgs:
-            self.counters.tx_by_type[msg.get_type()] += 1
-
-    def _send_pymavlink(self, mav: Any, msg: Any) -> bool:
-        """pymavlink packs (seq, signing) and hands the bytes to ``mav.file.write``: they are
-        logged there, before the socket (write-ahead, as :meth:`send`). False: not written."""
-        file = mav.file
-        tx = self._tx_file
-        if tx is None or tx._file is not file:
-            tx = self._tx_file = _LogThenWrite(file, self._log_tx)
-        mav.file = tx
-        try:
-            mav.send(msg)
-        except OSError:
-            self.counters.io_errors += 1
-            return False
-        finally:
-            mav.file = file
-        return True
-
-    def _write(self, buf: bytes) -> None:
-        """Write one packet as pymavlink's connection would (a UDP server: to every client it
-        heard from; a refused datagram is dropped, as mavudp does)."""
-        conn = self.conn
-        if self._udp is not None and conn.udp_server:
-            clients = conn.clients
-            if len(clients) == 1:
-                for addr in clients:
-                    try:
-                        conn.port.sendto(buf, addr)
-                    except OSError:
-                        pass
-                return
-        conn.write(buf)
-
-    def _log_tx(self, packet: bytes | bytearray, flush: bool = True) -> None:
-        """Log one packet about to be written; ``flush``: the held records go in the file
-        first (write-ahead)."""
-        vt = self.vehicle_time
-        t = self._clock() if vt is None else vt.now()
-        # the record time of the latest packet sent (s): what a tlog reader computes from its
-        # microseconds, kept with or without a tlog
-        self.last_tx_s = round(t * 1e6) * 1e-6
-        if self.tlog is None:
-            return
-        try:
-            self.tlog.write(packet, t)
-            if flush:  # write-ahead: in the file, with all received before it, first
-                self.tlog.flush()
-        except (OSError, ValueError):
-            self.counters.io_errors += 1
-            self.counters.tlog_write_errors += 1
-
-    def _flush_tlog(self) -> None:
-        assert self.tlog is not None
-        try:
-            self.tlog.flush()
-        except (OSError, ValueError):
-            self.counters.io_errors += 1
-            self.counters.tlog_write_errors += 1
+        self.sender.send_many(msgs)
 
     def clock(self) -> float:
         """The link's clock (s since the epoch): what its tlog records are stamped with."""
-        return float(self._clock())
+        return self.record.clock()
+
+    @property
+    def tlog(self) -> TlogWriter | None:
+        return self.record.tlog
+
+    @property
+    def last_tx_s(self) -> float | None:
+        """Record time (s) of the latest packet sent."""
+        return self.record.last_tx_s
 
     def send_heartbeat(self) -> None:
         """Companion heartbeat (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID), ~1 Hz."""
@@ -567,9 +376,7 @@ class Link:
             self.conn.close()
         except Exception:  # noqa: BLE001 - closing must not fail the caller's cleanup
             pass
-        if self.tlog is not None:
-            self._flush_tlog()  # held records: a failed write is counted, not lost unseen
-            self.tlog.close()
+        self.record.close()
 
     def __enter__(self) -> Link:
         return self
@@ -581,49 +388,10 @@ class Link:
         return f"Link({self.url!r}, vehicle={self.vehicle_sysid}/{self.vehicle_compid})"
 
 
-class VehicleTimeStamps:
-    """Record times (s since the epoch) that follow the vehicle's boot clock, for a link to a
-    lockstep simulation (``mavlink.lockstep``): its time runs at whatever speed the host allows,
-    so wall-clock record times would squeeze a minute of flight into the seconds it took to
-    compute, and every MAVLink log tool (mavflightmodes, mavsummarize, MAVExplorer) would report
-    those seconds. Here a record's time is the wall time of the first time-stamped vehicle
-    sample plus the vehicle time elapsed since (``time_boot_ms``); untimed messages (HEARTBEAT,
-    VFR_HUD, the target's, ours) take the latest vehicle instant. Only samples the boot-clock
-    gate did not reject as another clock move it (:meth:`commit`), it never goes back, and one
-    sample moves it by at most ``max_step_s``: a forged time stays a rejected sample instead of
-    becoming "now". A real autopilot's link keeps wall-clock record times."""
-
-    def __init__(self, wall: Callable[[], float] = time.time, max_step_s: float = 5.0) -> None:
-        self._wall = wall
-        self.max_step_s = float(max_step_s)
-        self.offset: float | None = None  # record time - vehicle boot time (s)
-        self.t_last: float | None = None  # the latest committed instant (s since the epoch)
-
-    def now(self) -> float:
-        """The latest vehicle instant as a record time (the wall clock before any sample)."""
-        return self._wall() if self.t_last is None else self.t_last
-
-    def stamp(self, t_boot_s: float | None) -> float:
-        """The record time of a message stamped ``t_boot_s`` (s, vehicle boot clock; None for
-        an untimed message)."""
-        if t_boot_s is None or not math.isfinite(t_boot_s):
-            return self.now()
-        if self.offset is None or self.t_last is None:
-            self.offset = self._wall() - t_boot_s
-            self.t_last = self.offset + t_boot_s
-            return self.t_last
-        t = self.offset + t_boot_s
-        return min(t, self.t_last + self.max_step_s) if t > self.t_last else self.t_last
-
-    def commit(self, t: float) -> None:
-        """A sample stamped ``t`` (from :meth:`stamp`) was accepted: time moves on to it."""
-        self.t_last = t if self.t_last is None else max(self.t_last, t)
-
-
 def _clock_rejects(link: Link, mtype: str, tb_s: float, t_rec: float) -> bool:
     """Whether ``link``'s clock gate rejects a vehicle message stamped ``tb_s`` (its boot time,
     s) received at ``t_rec`` (s), counted by why; the vehicle's clock moves on otherwise."""
-    c, gate, vt = link.counters, link.clock_gate, link.vehicle_time
+    c, gate, vt = link.counters, link.clock_gate, link.record.vehicle_time
     why = gate.check(mtype, tb_s, t_rec)
     c.clock_resets = gate.resets
     if vt is not None and why != "time":
@@ -659,7 +427,7 @@ def open_link(
     uses; PX4 and ArduPilot check ``target_system`` of setpoints, not the sender) and component
     191 MAV_COMP_ID_ONBOARD_COMPUTER. ``timeout_s`` bounds the TCP connect.
     ``baud`` (serial only) defaults to 57600 unless the URL carries one. ``vehicle_time``:
-    record times follow the vehicle's clock (a lockstep simulation; :class:`VehicleTimeStamps`).
+    record times follow the vehicle's clock (lockstep; ``link_send.VehicleTimeStamps``).
     """
     if not (1 <= int(source_system) <= 255 and 0 <= int(source_component) <= 255):
         raise MpfError(
@@ -679,7 +447,7 @@ def open_link(
         try:
             # records copied into a map of the file (in the page cache at once, as a write
             # would put them, for a copy's cost); where it cannot be mapped, held until the
-            # link sends or pauses (Link.recv, Link._log_tx); with fsync_every_s 0, neither:
+            # link sends or pauses (Link.recv, LinkRecord.tx); with fsync_every_s 0, neither:
             # each record written and on the disk at once
             from mpf_mavlink.mavlink.tlog import TlogWriter  # only a recording link loads it
 

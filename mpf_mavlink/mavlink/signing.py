@@ -120,11 +120,11 @@ def enable_signing(
         # decode() calls self.check_signature(...): an instance attribute shadows the method
         link.conn.mav.check_signature = _hardened_check_signature(link)
     link._signing_counts_itself = hardened
-    link.signing_enabled = True
+    link.sender.signing_enabled = True
 
 
 def disable_signing(link: Link) -> None:
     link.conn.disable_signing()
     link.conn.mav.__dict__.pop("check_signature", None)
     link._signing_counts_itself = False
-    link.signing_enabled = False
+    link.sender.signing_enabled = False

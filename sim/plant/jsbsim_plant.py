@@ -22,7 +22,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -30,7 +30,10 @@ os.environ.setdefault("JSBSIM_DEBUG", "0")
 import jsbsim  # noqa: E402
 
 from mpf_mavlink.constants import FT_TO_M, WGS84_A_M, WGS84_F  # noqa: E402
-from sim.plant.sitl_turbulence import SitlTurbulence  # noqa: E402
+from sim.plant.atmosphere import JSBSimAtmosphere  # noqa: E402
+
+if TYPE_CHECKING:
+    from sim.plant.sitl_turbulence import SitlTurbulence
 
 KTS_PER_MS = 1.0 / 0.514444
 DEFAULT_ROOT = Path(__file__).resolve().parents[1] / "jsbsim_root"
@@ -47,28 +50,16 @@ DEFAULT_CONTROLS: dict[str, tuple[str, float]] = {
 WGS84_E2 = WGS84_F * (2.0 - WGS84_F)  # first eccentricity squared
 _ONE_MINUS_E2 = 1.0 - WGS84_E2
 
-# Milspec Dryden settings (spec): windspeed at 20 ft AGL (ft/s), severity index.
-TURBULENCE_LEVELS: dict[str, tuple[float, int]] = {
-    "none": (0.0, 0),
-    "light": (25.0, 3),
-    "moderate": (50.0, 4),
-    "severe": (75.0, 6),
-}
-
-
-# JSBSim's turbulence generator is a minimal-standard linear congruential engine (modulus
-# 2^31 - 1): a seed is taken modulo 2^31 - 1 and 0 is replaced by 1, so seeds 0 and 1 drew the same
-# turbulence (measured). Accepted seeds are below this limit, and 0 is sent as the one value left.
-TURBULENCE_SEED_LIMIT = 2**31 - 2
-
-
-def jsbsim_turbulence_seed(seed: int) -> int:
-    """The ``atmosphere/randomseed`` for a seed in [0, TURBULENCE_SEED_LIMIT): itself, except 0
-    (which JSBSim's engine would turn into 1) -> 2^31 - 2, a distinct stream no other seed has."""
-    s = int(seed)
-    if not 0 <= s < TURBULENCE_SEED_LIMIT:
-        raise ValueError(f"turbulence seed must be in [0, {TURBULENCE_SEED_LIMIT}), got {seed}")
-    return s if s > 0 else TURBULENCE_SEED_LIMIT
+_EULER = ("phi", "theta", "psi")
+# the properties JSBSimPlant.state reads, in the order it unpacks them
+_STATE_PROPERTIES = (
+    "position/lat-geod-deg", "position/long-gc-deg", "position/h-sl-ft",
+    *(f"attitude/{a}-rad" for a in _EULER), "simulation/sim-time-sec",
+    *(f"velocities/v-{a}-fps" for a in ("north", "east", "down")),
+    *(f"velocities/{a}-rad_sec" for a in "pqr"), "velocities/vt-fps", "aero/alpha-rad",
+    "aero/beta-rad", *(f"atmosphere/total-wind-{a}-fps" for a in ("north", "east", "down")),
+    *(f"accelerations/a-pilot-{a}-ft_sec2" for a in "xyz"), "fcs/throttle-pos-norm",
+)  # fmt: skip
 
 
 def _geodetic_to_ecef(lat_rad: float, lon_rad: float, h: float) -> tuple[float, float, float]:
@@ -337,6 +328,8 @@ def _initial_conditions(
 class JSBSimPlant:
     """A JSBSim aircraft driven by normalized commands; see module docstring."""
 
+    has_random_wind = True
+
     def __init__(
         self,
         root_dir: str | os.PathLike[str] | None = None,
@@ -373,50 +366,20 @@ class JSBSimPlant:
         if not ok:
             raise RuntimeError("JSBSim run_ic() failed")
         thr_prop, thr_sign = dict(DEFAULT_CONTROLS, **(controls or {}))["throttle"]
-        self._spin_up(thr_prop, thr_sign, throttle)
+        _spin_up(self, thr_prop, thr_sign, throttle)
         self._bind_controls(model, controls or {})
         self._bind_state()
-        self._run = fdm.run
-        self._steady_wind = (0.0, 0.0, 0.0)  # m/s NED, what set_wind last set
-        self.random_wind: SitlTurbulence | None = None
+        self.atmosphere = JSBSimAtmosphere(self._node, fdm.run, self.dt)
 
     def _bind_state(self) -> None:
         """The state nodes and their bound getters (what state() and the rate loops read)."""
         n = self._node
-        # state nodes
         self._n_t = n("simulation/sim-time-sec")
-        self._n_lat = n("position/lat-geod-deg")
-        self._n_lon = n("position/long-gc-deg")
-        self._n_alt = n("position/h-sl-ft")
-        self._n_vn = n("velocities/v-north-fps")
-        self._n_ve = n("velocities/v-east-fps")
-        self._n_vd = n("velocities/v-down-fps")
-        self._n_phi = n("attitude/phi-rad")
-        self._n_theta = n("attitude/theta-rad")
-        self._n_psi = n("attitude/psi-rad")
-        self._n_p = n("velocities/p-rad_sec")
-        self._n_q = n("velocities/q-rad_sec")
-        self._n_r = n("velocities/r-rad_sec")
+        self._n_phi, self._n_theta, self._n_psi = (n(f"attitude/{a}-rad") for a in _EULER)
+        self._n_p, self._n_q, self._n_r = (n(f"velocities/{a}-rad_sec") for a in "pqr")
         self._n_vt = n("velocities/vt-fps")
-        self._n_alpha = n("aero/alpha-rad")
-        self._n_beta = n("aero/beta-rad")
-        self._n_wn = n("atmosphere/total-wind-north-fps")
-        self._n_we = n("atmosphere/total-wind-east-fps")
-        self._n_wd = n("atmosphere/total-wind-down-fps")
-        self._n_ax = n("accelerations/a-pilot-x-ft_sec2")
-        self._n_ay = n("accelerations/a-pilot-y-ft_sec2")
-        self._n_az = n("accelerations/a-pilot-z-ft_sec2")
-        self._n_thrpos = n("fcs/throttle-pos-norm")
         # what state() reads, in its order: the nodes' bound getters
-        self._state_getters = tuple(
-            x.get_double_value
-            for x in (
-                self._n_lat, self._n_lon, self._n_alt, self._n_phi, self._n_theta, self._n_psi,
-                self._n_t, self._n_vn, self._n_ve, self._n_vd, self._n_p, self._n_q, self._n_r,
-                self._n_vt, self._n_alpha, self._n_beta, self._n_wn, self._n_we, self._n_wd,
-                self._n_ax, self._n_ay, self._n_az, self._n_thrpos,
-            )
-        )  # fmt: skip
+        self._state_getters = tuple(n(name).get_double_value for name in _STATE_PROPERTIES)
         # the rate loops' inputs, read after every step: the nodes' bound getters
         self._get_pqr_vt = tuple(
             x.get_double_value for x in (self._n_p, self._n_q, self._n_r, self._n_vt)
@@ -446,34 +409,6 @@ class JSBSimPlant:
         )
         self._unit_signs = (self._s_ail, self._s_ele, self._s_rud, self._s_thr) == (1.0,) * 4
 
-    def _spin_up(self, thr_prop: str, thr_sign: float, throttle: float) -> None:
-        """Start the engines and spin the propeller up. FGPropeller divides the shaft power by
-        max(omega, 1 rad/s), so throttling up a propeller at 0 RPM gives a huge one-step RPM and
-        torque spike that wrecks a 3 kg aircraft (and JSBSim's own steady-state spin-up does not
-        run here). So: one step at 1 % throttle (-> ~1500 RPM for the X8), 0.5 s at the initial
-        throttle (propeller at its equilibrium RPM), then run_ic() again, which restores the
-        initial position/attitude/velocity but keeps the propeller RPM; the clock is reset to 0."""
-        fdm, pm = self.fdm, self._pm
-        if pm.hasNode("fcs/mixture-cmd-norm"):
-            self._set("fcs/mixture-cmd-norm", 1.0)  # piston models (c172x) need fuel mixture
-        if pm.hasNode("fcs/advance-cmd-norm"):
-            # propeller lever full forward (maximum RPM), as flown in the pattern: a constant-speed
-            # propeller (pa28) left at 0 governs to its minimum RPM and the engine gives ~2/3 of
-            # its power (118 of 174 hp at full throttle, 45 m/s); fixed-pitch propellers ignore it
-            self._set("fcs/advance-cmd-norm", 1.0)
-        self._set("propulsion/set-running", -1)
-        self._set(thr_prop, 0.01 * thr_sign)
-        fdm.run()
-        self._set(thr_prop, throttle * thr_sign)
-        for _ in range(int(round(0.5 / self.dt))):
-            fdm.run()
-        with _QuietStderr():  # every run_ic re-opens the model's output files
-            ok = fdm.run_ic()
-        shutil.rmtree(self._outdir, ignore_errors=True)
-        if not ok:
-            raise RuntimeError("JSBSim run_ic() failed")
-        fdm.set_sim_time(0.0)
-
     # ------------------------------------------------------------------ helpers
     def _node(self, name: str) -> Any:
         node = self._nodes.get(name)
@@ -497,95 +432,24 @@ class JSBSimPlant:
 
     # ------------------------------------------------------------------ environment
     def set_wind(self, wind_ned_m_s: Any) -> None:
-        """Steady air-mass velocity (m/s, NED, the direction the air moves TOWARD)."""
-        wn, we, wd = (float(v) for v in wind_ned_m_s)
-        self._steady_wind = (wn, we, wd)  # the random wind (if any) is added to it every step
-        self._set("atmosphere/wind-north-fps", wn / FT_TO_M)
-        self._set("atmosphere/wind-east-fps", we / FT_TO_M)
-        self._set("atmosphere/wind-down-fps", wd / FT_TO_M)
+        """:meth:`JSBSimAtmosphere.set_wind`."""
+        self.atmosphere.set_wind(wind_ned_m_s)
 
     def set_turbulence(self, kind: str = "none", seed: int = 0) -> None:
-        """Milspec Dryden turbulence (JSBSim turb-type 3): none, light, moderate or severe.
-
-        Windspeed at 20 ft AGL / severity: light 25 fps / 3, moderate 50 fps / 4, severe 75 fps / 6.
-        ``seed`` (0 <= seed < :data:`TURBULENCE_SEED_LIMIT`) picks the turbulence noise: every
-        seed its own draw (:func:`jsbsim_turbulence_seed`).
-
-        JSBSim evaluates the MIL-F-8785C scales at the altitude above SEA LEVEL (FGWinds::Run
-        passes AltitudeASL), not above ground: with a home 488 m AMSL the X8 at 100 m AGL is at
-        1932 ft, in the blend towards the high-altitude model (L_u = L_w ~ 520 m, sigma ~ 2 m/s in
-        every axis for "light"), not the low-altitude one the levels are named after (at 100 m
-        AGL: L_w = 100 m, sigma_w = 0.76 m/s). Its gusts are therefore long and strong: the mean
-        of one 300 s flight can sit ~1 m/s (one sigma of sigma sqrt(2 L / (V T))) off the steady
-        wind.
-        """
-        if kind not in TURBULENCE_LEVELS:
-            raise ValueError(f"turbulence kind must be one of {sorted(TURBULENCE_LEVELS)}")
-        w20, sev = TURBULENCE_LEVELS[kind]
-        self._set("atmosphere/randomseed", jsbsim_turbulence_seed(seed))
-        if kind == "none":
-            self._set("atmosphere/turb-type", 0)
-            self._set("atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps", 0.0)
-            self._set("atmosphere/turbulence/milspec/severity", 0)
-            return
-        self._set("atmosphere/turb-type", 3)
-        self._set("atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps", w20)
-        self._set("atmosphere/turbulence/milspec/severity", sev)
+        """:meth:`JSBSimAtmosphere.set_turbulence`."""
+        self.atmosphere.set_turbulence(kind, seed)
 
     def set_random_wind(self, turbulence_m_s: float, seed: int = 0) -> None:
-        """ArduPilot SITL's ``SIM_WIND_TURB`` (m/s; 0: off): a random air-mass velocity added to
-        the steady wind before every physics step, as the firmware's simulator does
-        (:mod:`sim.plant.sitl_turbulence`: its process at its 1200 Hz, averaged over our step).
-        ``seed``: every seed its own draw, the same seed the same flight."""
-        if turbulence_m_s <= 0.0:
-            self.random_wind = None
-            self._run = self.fdm.run
-            self.set_wind(self._steady_wind)
-            return
-        rw = self.random_wind = SitlTurbulence(turbulence_m_s, self.dt, seed)
-        nxt, run = rw.next, self.fdm.run
-        n_n = self._node("atmosphere/wind-north-fps")
-        n_e = self._node("atmosphere/wind-east-fps")
-        n_d = self._node("atmosphere/wind-down-fps")
-        k = 1.0 / FT_TO_M
+        """:meth:`JSBSimAtmosphere.set_random_wind`."""
+        self.atmosphere.set_random_wind(turbulence_m_s, seed)
 
-        def run_with_random_wind() -> bool:
-            wn, we, wd = nxt()
-            sn, se, sd = self._steady_wind
-            n_n.set_double_value((sn + wn) * k)
-            n_e.set_double_value((se + we) * k)
-            n_d.set_double_value((sd + wd) * k)
-            return bool(run())
+    def trigger_gust(self, *args: Any, **kw: Any) -> None:
+        """:meth:`JSBSimAtmosphere.trigger_gust`."""
+        self.atmosphere.trigger_gust(*args, **kw)
 
-        self._run = run_with_random_wind
-
-    def trigger_gust(
-        self,
-        direction_ned: Any = (0.0, 1.0, 0.0),
-        magnitude_m_s: float = 5.0,
-        rise_s: float = 1.0,
-        hold_s: float = 2.0,
-        decay_s: float = 1.0,
-    ) -> None:
-        """One-minus-cosine gust (JSBSim ``atmosphere/cosine-gust``), air-mass velocity in NED.
-
-        The air moves along ``direction_ned`` (normalized here) with a (1 - cos) ramp up over
-        ``rise_s``, ``magnitude_m_s`` held for ``hold_s`` and a cosine decay over ``decay_s``.
-        """
-        d = [float(v) for v in direction_ned]
-        nrm = math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
-        if nrm < 1e-9:
-            raise ValueError("gust direction must be non-zero")
-        p = "atmosphere/cosine-gust/"
-        self._set(p + "startup-duration-sec", rise_s)
-        self._set(p + "steady-duration-sec", hold_s)
-        self._set(p + "end-duration-sec", decay_s)
-        self._set(p + "magnitude-ft_sec", magnitude_m_s / FT_TO_M)
-        self._set(p + "frame", 3)  # gfLocal: NED
-        self._set(p + "X-velocity-ft_sec", d[0] / nrm)
-        self._set(p + "Y-velocity-ft_sec", d[1] / nrm)
-        self._set(p + "Z-velocity-ft_sec", d[2] / nrm)
-        self._set(p + "start", 1)
+    @property
+    def random_wind(self) -> SitlTurbulence | None:
+        return self.atmosphere.random_wind
 
     # ------------------------------------------------------------------ stepping
     def step(self, aileron: float, elevator: float, rudder: float, throttle: float) -> None:
@@ -594,7 +458,7 @@ class JSBSimPlant:
         self._n_ele.set_double_value(elevator * self._s_ele)
         self._n_rud.set_double_value(rudder * self._s_rud)
         self._n_thr.set_double_value(throttle * self._s_thr)
-        self._run()
+        self.atmosphere.run()
 
     def step_rates(
         self, aileron: float, elevator: float, rudder: float, throttle: float
@@ -613,7 +477,7 @@ class JSBSimPlant:
             set_e(elevator * self._s_ele)
             set_r(rudder * self._s_rud)
             set_t(throttle * self._s_thr)
-        self._run()
+        self.atmosphere.run()
         get_p, get_q, get_r, get_vt = self._get_pqr_vt
         return get_p(), get_q(), get_r(), get_vt() * FT_TO_M
 
@@ -623,7 +487,7 @@ class JSBSimPlant:
         self._n_ele.set_double_value(elevator * self._s_ele)
         self._n_rud.set_double_value(rudder * self._s_rud)
         self._n_thr.set_double_value(throttle * self._s_thr)
-        r = self._run
+        r = self.atmosphere.run
         for _ in range(n):
             r()
 
@@ -696,6 +560,35 @@ class JSBSimPlant:
             extra=dict(cfg.extra),
             throttle=cfg.throttle,
         )
+
+
+def _spin_up(plant: JSBSimPlant, thr_prop: str, thr_sign: float, throttle: float) -> None:
+    """Start the engines and spin the propeller up. FGPropeller divides the shaft power by
+    max(omega, 1 rad/s), so throttling up a propeller at 0 RPM gives a huge one-step RPM and
+    torque spike that wrecks a 3 kg aircraft (and JSBSim's own steady-state spin-up does not
+    run here). So: one step at 1 % throttle (-> ~1500 RPM for the X8), 0.5 s at the initial
+    throttle (propeller at its equilibrium RPM), then run_ic() again, which restores the
+    initial position/attitude/velocity but keeps the propeller RPM; the clock is reset to 0."""
+    fdm, pm, set_ = plant.fdm, plant._pm, plant.set
+    if pm.hasNode("fcs/mixture-cmd-norm"):
+        set_("fcs/mixture-cmd-norm", 1.0)  # piston models (c172x) need fuel mixture
+    if pm.hasNode("fcs/advance-cmd-norm"):
+        # propeller lever full forward (maximum RPM), as flown in the pattern: a constant-speed
+        # propeller (pa28) left at 0 governs to its minimum RPM and the engine gives ~2/3 of
+        # its power (118 of 174 hp at full throttle, 45 m/s); fixed-pitch propellers ignore it
+        set_("fcs/advance-cmd-norm", 1.0)
+    set_("propulsion/set-running", -1)
+    set_(thr_prop, 0.01 * thr_sign)
+    fdm.run()
+    set_(thr_prop, throttle * thr_sign)
+    for _ in range(int(round(0.5 / plant.dt))):
+        fdm.run()
+    with _QuietStderr():  # every run_ic re-opens the model's output files
+        ok = fdm.run_ic()
+    shutil.rmtree(plant._outdir, ignore_errors=True)
+    if not ok:
+        raise RuntimeError("JSBSim run_ic() failed")
+    fdm.set_sim_time(0.0)
 
 
 def benchmark(seconds: float = 600.0, state_hz: float = 50.0) -> float:

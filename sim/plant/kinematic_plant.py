@@ -97,6 +97,13 @@ class KinematicMavPlant:
         w = [float(v) for v in wind_ned_m_s]
         self._wind = (w[0], w[1], w[2])
 
+    has_random_wind = False
+    random_wind = None
+
+    def set_random_wind(self, turbulence_m_s: float, seed: int = 0) -> None:
+        if turbulence_m_s > 0.0:
+            raise ValueError("the kinematic plant has no random wind (use jsbsim)")
+
     def set_turbulence(self, kind: str = "none", seed: int = 0) -> None:
         if kind != "none":
             raise NotImplementedError("the kinematic plant has steady wind only")
@@ -135,6 +142,12 @@ class KinematicMavPlant:
     def run(self, n: int, aileron: float, elevator: float, rudder: float, throttle: float) -> None:
         for _ in range(n):
             self.step(aileron, elevator, rudder, throttle)
+
+    def step_rates(
+        self, aileron: float, elevator: float, rudder: float, throttle: float
+    ) -> tuple[float, float, float, float]:
+        self.step(aileron, elevator, rudder, throttle)
+        return (self._p, self._q, self._r, self.V)
 
     def rates_airspeed(self) -> tuple[float, float, float, float]:
         """(p, q, r) rad/s and the airspeed (m/s), as in :meth:`state`."""

@@ -70,7 +70,7 @@ class VehicleConfig:
     # the answer to the telemetry just written (strict alternation: the same flight, slower)
     lockstep_overlap: bool = True
     realtime_speed: float = 1.0  # realtime clock: times real time
-    # pace at real time until the bridge commands the vehicle (see SimVehicle._lockstep_peer)
+    # pace at real time until the bridge commands the vehicle (see sim.vehicle.vehicle._pacing)
     realtime_until_engaged: bool = False
     # lockstep from the peer's first message on, in every phase (a peer that answers every
     # ATTITUDE, with a setpoint or a clock answer: the bridge with mavlink.lockstep): no frame

@@ -122,7 +122,7 @@ def _set_wind(v: Any, speed: float | None = None, from_deg: float | None = None)
 
 def _random_wind(v: Any) -> float:
     """SIM_WIND_TURB (m/s) of the plant's random wind (0: off)."""
-    rw = getattr(v.plant, "random_wind", None)
+    rw = v.plant.random_wind
     return 0.0 if rw is None else float(rw.turbulence_m_s)
 
 
@@ -187,7 +187,7 @@ def vehicle_params(v: Any) -> list[Param]:
         Param("SIM_WIND_SPD", R32, lambda: _wind_from(v)[0],
               lambda x: _set_wind(v, speed=x), 0.0, 50.0),
     ]  # fmt: skip
-    if hasattr(v.plant, "set_random_wind"):  # the firmware's random wind (jsbsim plant only)
+    if v.plant.has_random_wind:  # the firmware's random wind (jsbsim plant only)
         wind.append(Param("SIM_WIND_TURB", R32, lambda: _random_wind(v),
                           lambda x: _set_random_wind(v, x), 0.0, 50.0))  # fmt: skip
     return [
@@ -201,7 +201,7 @@ def vehicle_params(v: Any) -> list[Param]:
         _rate_param(v, "MAV1_EXTRA2", ("vfr_hud",)),
         _rate_param(v, "MAV1_EXTRA3", ("wind", "system_time")),
         _rate_param(v, "MAV1_POSITION", ("global_position", "local_position")),
-        *(wind if hasattr(v.plant, "set_wind") else []),
+        *wind,
         Param("SYSID_THISMAV", I16, lambda: float(v.sysid), None),
         Param("WP_LOITER_RAD", I16, lambda: tun.loiter_radius,
               lambda x: _set_loiter_radius(v, x), 1.0, 32767.0),

@@ -54,6 +54,27 @@ def _ignored(data: bytes, wanted: frozenset[int]) -> int:
     return frames if i == n else 0
 
 
+def _route(conn: Any, me: tuple[int, int], msgs: Any, src: Any) -> None:
+    """Forward what one peer sends to the others, as ArduPilot's MAVLink routing (and PX4's
+    forwarding) does: every message not addressed to this vehicle (no target, or another
+    system's) from another component, so a ground station on the link sees the bridge's
+    NAMED_VALUE_FLOAT and STATUSTEXT. Only with two peers or more (never on the lockstep
+    path of a lone bridge). ``me``: the vehicle's (system, component)."""
+    port = conn.port
+    for msg in msgs:
+        if msg.get_type() == "BAD_DATA" or (msg.get_srcSystem(), msg.get_srcComponent()) == me:
+            continue
+        if getattr(msg, "target_system", 0) == me[0]:
+            continue
+        buf = msg.get_msgbuf()
+        for addr in list(conn.clients):
+            if addr != src:
+                try:
+                    port.sendto(buf, addr)
+                except OSError:
+                    pass
+
+
 class _QueueWriter:
     """File-like sink for a pymavlink encoder: packets go to the link's outgoing delay queue."""
 
@@ -64,93 +85,30 @@ class _QueueWriter:
         self.link.put(bytes(buf))
 
 
-class Link:
-    """Receive into the incoming delay queue, send from the outgoing one, batch datagrams.
-
-    ``accept`` names the message types the autopilot acts on (the rest is dropped on arrival);
-    ``on_epoch`` takes the bridge's STATUSTEXT (the target's epoch), ``on_new_peer`` is told
-    when a new peer writes (it should hear our HEARTBEAT at once)."""
+class Outgoing:
+    """The outgoing delay queue (a packet leaves ``latency_s`` of sim time after it was queued)
+    and the bundling of what is due into datagrams, on pymavlink's connection ``conn`` (``udp``:
+    a ``mavudp``); tells ``lockstep`` which telemetry left."""
 
     def __init__(
-        self,
-        url: str,
-        sysid: int,
-        compid: int,
-        target_ids: tuple[int, int],
-        clock: StepClock,
-        lockstep: Lockstep,
-        *,
-        telemetry_latency_s: float,
-        command_latency_s: float,
-        lockstep_clock: bool,
-        accept: frozenset[str],
+        self, conn: Any, udp: bool, clock: StepClock, lockstep: Lockstep, latency_s: float
     ) -> None:
-        self.url = url
-        self.sysid, self.compid = sysid, compid
-        self.clock = clock
-        self.lockstep = lockstep
-        self.telemetry_latency_s = float(telemetry_latency_s)
-        self.command_latency_s = float(command_latency_s)
-        self._lockstep_clock = lockstep_clock  # an answer's latency runs from its telemetry
-        self.accept = accept
-        # a peer in lockstep in every phase: its commands act a frame after the latency from the
-        # telemetry its latest answer answered (not from when they were read), so the frame a
-        # mode request acts in does not depend on which wait read it
-        self.commands_on_answers = False
-        # ids of what _on_msg acts on: a datagram with none of them is not parsed (see _ignored)
-        self._wanted = frozenset(
-            mid
-            for mid, cls in M.mavlink_map.items()
-            if cls.msgname in accept
-            or cls.msgname in ("SET_ATTITUDE_TARGET", "STATUSTEXT", "SYSTEM_TIME")
-        )
-        self.conn = mavutil.mavlink_connection(
-            url,
-            source_system=sysid,
-            source_component=compid,
-            dialect="ardupilotmega",
-            autoreconnect=True,
-        )
-        # plain UDP links are read datagram by datagram (the setpoints decoded without pymavlink)
-        self._udp = type(self.conn).__name__ == "mavudp"
+        self.conn, self.clock, self.lockstep = conn, clock, lockstep
+        self.latency_s = float(latency_s)
         # a udpout link to one fixed address is written straight to its socket (pymavlink's
         # write re-checks the client list and the address on every packet)
         self._sendto: Callable[[bytes, Any], Any] | None = None
         self._dest: Any = None
-        c = self.conn
-        if self._udp and not c.udp_server and not getattr(c, "broadcast", False):
-            host, port = c.destination_addr
-            self._sendto, self._dest = c.port.sendto, (socket.gethostbyname(host), port)
-        # a link that neither listens for UDP clients nor accepts TCP ones (udpout, serial...)
-        # always has its peer
-        self._fixed_peer = not getattr(c, "udp_server", False) and not hasattr(c, "listen")
-        # the lockstep wait polls the UDP socket with one prepared poll object (mavfile.select
-        # builds three lists and a select call each time)
-        self._poller: Any = None
-        if self._udp:
-            self._poller = select.poll()
-            self._poller.register(c.port.fileno(), select.POLLIN)
+        if udp and not conn.udp_server and not getattr(conn, "broadcast", False):
+            host, port = conn.destination_addr
+            self._sendto, self._dest = conn.port.sendto, (socket.gethostbyname(host), port)
         # (due boot s, packet, ATTITUDE ms or -1, LOCAL_POSITION_NED ms or -1)
         self._out: deque[tuple[float, bytes, int, int]] = deque()
         # without a telemetry latency packets leave at the next flush: a plain list (and the
         # highest ATTITUDE / LOCAL_POSITION_NED stamps in it) instead of the delay queue
-        self._now: list[bytes] | None = [] if self.telemetry_latency_s <= 0.0 else None
+        self._now: list[bytes] | None = [] if self.latency_s <= 0.0 else None
         self._now_att = self._now_pos = -1
-        self.incoming: deque[tuple[float, Any]] = deque()  # (due boot s, message)
-        self.mav = M.MAVLink(_QueueWriter(self), srcSystem=sysid, srcComponent=compid)
-        self.tmav = M.MAVLink(
-            _QueueWriter(self), srcSystem=target_ids[0], srcComponent=target_ids[1]
-        )
-        self.framer, self.target_framer = Framer(self.mav), Framer(self.tmav)
-        self.statustexts: list[tuple[float, str]] = []  # (t, text) sent
-        self.rx_count = 0
-        # True right after a read found nothing more waiting: the frame that follows the
-        # lockstep wait need not read again (a syscall that would find nothing)
-        self.drained = False
-        self.on_epoch: Callable[[Any], None] = lambda msg: None
-        self.on_new_peer: Callable[[], None] = lambda: None
 
-    # ------------------------------------------------------------------ output
     def put(self, buf: bytes, attitude_ms: int = -1, position_ms: int = -1) -> None:
         """Queue one framed packet; it leaves ``telemetry_latency_s`` of sim time from now.
         ``attitude_ms``: the time_boot_ms of an ATTITUDE packet (the bridge answers those);
@@ -163,32 +121,10 @@ class Link:
             if position_ms > self._now_pos:
                 self._now_pos = position_ms
             return
-        self._out.append(
-            (self.clock.boot_s + self.telemetry_latency_s, buf, attitude_ms, position_ms)
-        )
+        self._out.append((self.clock.boot_s + self.latency_s, buf, attitude_ms, position_ms))
 
-    def statustext(self, severity: int, text: str) -> None:
-        self.statustexts.append((self.clock.t, text))
-        self.mav.send(self.mav.statustext_encode(severity, text.encode()[:50]))
-
-    def ack(self, command: int, result: int, msg: Any, reason: str | None = None) -> None:
-        """COMMAND_ACK of ``msg`` to its sender; a STATUSTEXT saying why, when given."""
-        src = (msg.get_srcSystem(), msg.get_srcComponent())
-        self.mav.send(self.mav.command_ack_encode(command, result, 0, 0, *src))
-        if reason:
-            ok = result == M.MAV_RESULT_ACCEPTED
-            self.statustext(M.MAV_SEVERITY_INFO if ok else M.MAV_SEVERITY_WARNING, reason)
-
-    def flush(self) -> None:
-        """Send the packets that are due, bundled into as few datagrams as fit (PX4 does the same:
-        one datagram per send cycle), so the peer wakes up once per frame, not once per packet.
-        A frame that writes no ATTITUDE still awaits the answer that acts in the next frame (with
-        ATTITUDE at 10 Hz over 20 ms frames the vehicle would otherwise apply each setpoint
-        whenever the bridge's process got to it)."""
-        self._flush_due()
-        self.lockstep.choose(self.clock.boot_s)
-
-    def _flush_due(self) -> None:
+    def flush_due(self) -> None:
+        """Send what is due and tell the lockstep which telemetry left."""
         now = self._now
         if now is not None:
             if now:
@@ -252,6 +188,106 @@ class Link:
             return True
         except OSError:
             return False
+
+
+class Link:
+    """Receive into the incoming delay queue, send from the outgoing one, batch datagrams.
+
+    ``accept`` names the message types the autopilot acts on (the rest is dropped on arrival);
+    ``on_epoch`` takes the bridge's STATUSTEXT (the target's epoch), ``on_new_peer`` is told
+    when a new peer writes (it should hear our HEARTBEAT at once)."""
+
+    def __init__(
+        self,
+        url: str,
+        sysid: int,
+        compid: int,
+        target_ids: tuple[int, int],
+        clock: StepClock,
+        lockstep: Lockstep,
+        *,
+        telemetry_latency_s: float,
+        command_latency_s: float,
+        lockstep_clock: bool,
+        accept: frozenset[str],
+    ) -> None:
+        self.url = url
+        self.sysid, self.compid = sysid, compid
+        self.clock = clock
+        self.lockstep = lockstep
+        self.command_latency_s = float(command_latency_s)
+        self._lockstep_clock = lockstep_clock  # an answer's latency runs from its telemetry
+        self.accept = accept
+        # a peer in lockstep in every phase: its commands act a frame after the latency from the
+        # telemetry its latest answer answered (not from when they were read), so the frame a
+        # mode request acts in does not depend on which wait read it
+        self.commands_on_answers = False
+        # ids of what _on_msg acts on: a datagram with none of them is not parsed (see _ignored)
+        self._wanted = frozenset(
+            mid
+            for mid, cls in M.mavlink_map.items()
+            if cls.msgname in accept
+            or cls.msgname in ("SET_ATTITUDE_TARGET", "STATUSTEXT", "SYSTEM_TIME")
+        )
+        self.conn = mavutil.mavlink_connection(
+            url,
+            source_system=sysid,
+            source_component=compid,
+            dialect="ardupilotmega",
+            autoreconnect=True,
+        )
+        # plain UDP links are read datagram by datagram (the setpoints decoded without pymavlink)
+        self._udp = type(self.conn).__name__ == "mavudp"
+        c = self.conn
+        # a link that neither listens for UDP clients nor accepts TCP ones (udpout, serial...)
+        # always has its peer
+        self._fixed_peer = not getattr(c, "udp_server", False) and not hasattr(c, "listen")
+        # the lockstep wait polls the UDP socket with one prepared poll object (mavfile.select
+        # builds three lists and a select call each time)
+        self._poller: Any = None
+        if self._udp:
+            self._poller = select.poll()
+            self._poller.register(c.port.fileno(), select.POLLIN)
+        self.out = Outgoing(c, self._udp, clock, lockstep, telemetry_latency_s)
+        self.incoming: deque[tuple[float, Any]] = deque()  # (due boot s, message)
+        self.mav = M.MAVLink(_QueueWriter(self), srcSystem=sysid, srcComponent=compid)
+        self.tmav = M.MAVLink(
+            _QueueWriter(self), srcSystem=target_ids[0], srcComponent=target_ids[1]
+        )
+        self.framer, self.target_framer = Framer(self.mav), Framer(self.tmav)
+        self.statustexts: list[tuple[float, str]] = []  # (t, text) sent
+        self.rx_count = 0
+        # True right after a read found nothing more waiting: the frame that follows the
+        # lockstep wait need not read again (a syscall that would find nothing)
+        self.drained = False
+        self.on_epoch: Callable[[Any], None] = lambda msg: None
+        self.on_new_peer: Callable[[], None] = lambda: None
+
+    # ------------------------------------------------------------------ output
+    def put(self, buf: bytes, attitude_ms: int = -1, position_ms: int = -1) -> None:
+        """:meth:`Outgoing.put`."""
+        self.out.put(buf, attitude_ms, position_ms)
+
+    def statustext(self, severity: int, text: str) -> None:
+        self.statustexts.append((self.clock.t, text))
+        self.mav.send(self.mav.statustext_encode(severity, text.encode()[:50]))
+
+    def ack(self, command: int, result: int, msg: Any, reason: str | None = None) -> None:
+        """COMMAND_ACK of ``msg`` to its sender; a STATUSTEXT saying why, when given."""
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        self.mav.send(self.mav.command_ack_encode(command, result, 0, 0, *src))
+        if reason:
+            ok = result == M.MAV_RESULT_ACCEPTED
+            self.statustext(M.MAV_SEVERITY_INFO if ok else M.MAV_SEVERITY_WARNING, reason)
+
+    def flush(self) -> None:
+        """Send the packets that are due, bundled into as few datagrams as fit (PX4 does the same:
+        one datagram per send cycle), so the peer wakes up once per frame, not once per packet.
+        A frame that writes no ATTITUDE still awaits the answer that acts in the next frame (with
+        ATTITUDE at 10 Hz over 20 ms frames the vehicle would otherwise apply each setpoint
+        whenever the bridge's process got to it)."""
+        self.out.flush_due()
+        self.lockstep.choose(self.clock.boot_s)
 
     # ------------------------------------------------------------------ input
     def has_peer(self) -> bool:
@@ -341,30 +377,10 @@ class Link:
             for msg in msgs:
                 self._on_msg(msg)
             if routed:
-                self._route(msgs, addr)
+                _route(conn, (self.sysid, self.compid), msgs, addr)
             if until_answered and lockstep.answered:
                 self.drained = True  # the frame that follows need not read (see poll)
                 return
-
-    def _route(self, msgs: Any, src: Any) -> None:
-        """Forward what one peer sends to the others, as ArduPilot's MAVLink routing (and PX4's
-        forwarding) does: every message not addressed to this vehicle (no target, or another
-        system's) from another component, so a ground station on the link sees the bridge's
-        NAMED_VALUE_FLOAT and STATUSTEXT. Only with two peers or more (never on the lockstep
-        path of a lone bridge)."""
-        port, me = self.conn.port, (self.sysid, self.compid)
-        for msg in msgs:
-            if msg.get_type() == "BAD_DATA" or (msg.get_srcSystem(), msg.get_srcComponent()) == me:
-                continue
-            if getattr(msg, "target_system", 0) == self.sysid:
-                continue
-            buf = msg.get_msgbuf()
-            for addr in list(self.conn.clients):
-                if addr != src:
-                    try:
-                        port.sendto(buf, addr)
-                    except OSError:
-                        pass
 
     def _on_msg(self, msg: Any) -> None:
         mt = msg.get_type()

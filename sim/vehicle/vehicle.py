@@ -78,9 +78,10 @@ os.environ.setdefault("JSBSIM_DEBUG", "0")
 
 
 from sim.autopilot.emulation import AutopilotEmulation  # noqa: E402
-from sim.autopilot.inner_loop import FixedWingAutopilot, body_rates, fly_to_trim  # noqa: E402
+from sim.autopilot.inner_loop import FixedWingAutopilot, fly_to_trim  # noqa: E402
 from sim.autopilot.modes import Tunables  # noqa: E402
 from sim.plant.kinematic_plant import KinematicMavPlant  # noqa: E402
+from sim.plant.protocol import Plant  # noqa: E402
 from sim.vehicle.clock import LockstepClock, StepClock, make_clock  # noqa: E402
 from sim.vehicle.config import VehicleConfig  # noqa: E402
 from sim.vehicle.dispatch import Dispatcher  # noqa: E402
@@ -117,7 +118,7 @@ def plant_kwargs(
     )
 
 
-def build_plant(cfg: VehicleConfig) -> tuple[Any, Any, Any]:
+def build_plant(cfg: VehicleConfig) -> tuple[Plant, Any, Any]:
     """The plant, trimmed where ``cfg`` asks: (plant, trim result or None, inner-loop autopilot).
     The plant starts behind the requested point along the ground track (heading + wind), so the
     trim flight ends about there whatever the wind."""
@@ -139,7 +140,7 @@ def build_plant(cfg: VehicleConfig) -> tuple[Any, Any, Any]:
     if cfg.turbulence != "none":
         plant.set_turbulence(cfg.turbulence, cfg.seed)
     if cfg.wind_turbulence_m_s > 0.0:
-        if not hasattr(plant, "set_random_wind"):
+        if not plant.has_random_wind:
             raise ValueError("wind_turbulence_m_s: the plant has no random wind (use jsbsim)")
         plant.set_random_wind(cfg.wind_turbulence_m_s, cfg.seed)
     ap = cfg.autopilot or FixedWingAutopilot()
@@ -167,6 +168,28 @@ def tunables(cfg: VehicleConfig) -> Tunables:
         airspeed_max=max(20.0 if cfg.flavour == "px4" else 30.0, v),
         px4_require_thrust=bool(cfg.px4_require_thrust),
     )
+
+
+def _initial_mode(modes: Any, cfg: VehicleConfig) -> None:
+    """The mode the vehicle boots in (cruise or hold), silently."""
+    (modes.cruise if cfg.initial_mode == "cruise" else modes.hold)(announce=False)
+    if cfg.initial_orbit is not None and cfg.initial_mode == "hold":
+        # the operator parked the aircraft in an orbit before the mission (DO_REPOSITION with
+        # a loiter radius, or a loiter mission item): the boot hold circles (north, east) at
+        # that radius; any later hold entry loiters where it happens, as stock
+        n, e, r = cfg.initial_orbit
+        modes.center, modes.hold_radius = (float(n), float(e)), float(r)
+
+
+def _link(cfg: VehicleConfig, clock: StepClock, lockstep: Lockstep, lockstep_clock: bool) -> Link:
+    """The vehicle's MAVLink link (``lockstep_clock``: the clock is the lockstep one)."""
+    link = Link(cfg.url, int(cfg.system_id), int(cfg.component_id),
+                (int(cfg.target_system), int(cfg.target_component)), clock, lockstep,
+                telemetry_latency_s=cfg.telemetry_latency_s,
+                command_latency_s=cfg.command_latency_s, lockstep_clock=lockstep_clock,
+                accept=_QUEUED)  # fmt: skip
+    link.commands_on_answers = cfg.lockstep_from_connect and lockstep_clock
+    return link
 
 
 class SimVehicle:
@@ -199,25 +222,14 @@ class SimVehicle:
                                 speed=cfg.realtime_speed)  # fmt: skip
         self.lockstep = Lockstep(self.frame_period, cfg.command_latency_s, cfg.lockstep_overlap,
                                  modes_end_waits=not cfg.lockstep_from_connect)  # fmt: skip
-        self.link = Link(cfg.url, self.sysid, self.compid,
-                         (int(cfg.target_system), int(cfg.target_component)), self.time,
-                         self.lockstep, telemetry_latency_s=cfg.telemetry_latency_s,
-                         command_latency_s=cfg.command_latency_s,
-                         lockstep_clock=self.clock.mode == "lockstep", accept=_QUEUED)  # fmt: skip
-        self.link.commands_on_answers = cfg.lockstep_from_connect and self.clock.mode == "lockstep"
+        self.link = _link(cfg, self.time, self.lockstep, self.clock.mode == "lockstep")
         if isinstance(self.clock, LockstepClock):
             self.clock.ready = self.link.readable
         self.tun = tunables(cfg)
         self.autopilot = AutopilotEmulation(self.px4, inner, self.dt, self.tun, self.time,
                                             self.link, self.plant.state, self.home_lla)  # fmt: skip
         self.modes = self.autopilot.modes
-        (self.modes.cruise if cfg.initial_mode == "cruise" else self.modes.hold)(announce=False)
-        if cfg.initial_orbit is not None and cfg.initial_mode == "hold":
-            # the operator parked the aircraft in an orbit before the mission (DO_REPOSITION with
-            # a loiter radius, or a loiter mission item): the boot hold circles (north, east) at
-            # that radius; any later hold entry loiters where it happens, as stock
-            n, e, r = cfg.initial_orbit
-            self.modes.center, self.modes.hold_radius = (float(n), float(e)), float(r)
+        _initial_mode(self.modes, cfg)
         self.telemetry = Telemetry(self.px4, cfg.telemetry_rates(), self.time, self.link,
                                    self.home_lla, self.frame_period,
                                    lambda: (self.modes.base_mode(), self.modes.custom_mode),
@@ -229,24 +241,15 @@ class SimVehicle:
                                    self.link, self.time)  # fmt: skip
         self.link.on_new_peer = self._new_peer
         self.link.on_epoch = self._take_epoch
-        self.target: TargetStream | None = None
-        if cfg.target is not None:
-            self.target = TargetStream(cfg.target, self.time, self.link, self.origin,
-                                       self.home_lla[2], cfg.target_rate_hz,
-                                       cfg.target_type == "boat", cfg.target_epoch == "bridge",
-                                       cfg.target_feed)  # fmt: skip
+        self.target = None if cfg.target is None else TargetStream(
+            cfg.target, self.time, self.link, self.origin, self.home_lla[2], cfg.target_rate_hz,
+            cfg.target_type == "boat", cfg.target_epoch == "bridge", cfg.target_feed)  # fmt: skip
         self.truth_record = TruthRecorder(cfg.record_truth)
         self.profile: Any = None  # the firmware's identified behaviour (see use_profile)
         self.estimate: Any = None  # truth PlantState -> the state the autopilot has (a profile's)
         self._truth_st = self._st = self.plant.state()
         self.telemetry.st = self._st
-        rates_fn = getattr(self.plant, "rates_airspeed", None)
-        self._rates_fn = rates_fn or (
-            lambda: (*body_rates(self.plant.state().pqr), float(self.plant.state().airspeed))
-        )
-        self._rates = self._rates_fn()  # (p, q, r) rad/s, airspeed m/s: what the rate loops read
-        # one physics step, then the rates and airspeed after it (one call for the plant's two)
-        self._step_rates = getattr(self.plant, "step_rates", None) or self._plant_step_rates
+        self._rates = self.plant.rates_airspeed()  # (p, q, r) rad/s, airspeed m/s: rate loops
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self.wall_time_running = 0.0  # wall seconds spent in run()
@@ -313,15 +316,6 @@ class SimVehicle:
     def has_peer(self) -> bool:
         return self.link.has_peer()
 
-    def _lockstep_peer(self) -> bool:
-        """With ``realtime_until_engaged``: the lockstep clock treats the peer as present only
-        while it commands the vehicle (OFFBOARD / GUIDED). Until the bridge has taken control its
-        hand-over rules run on wall-clock timers (>= 1 s of setpoints at >= 20 Hz before the mode
-        request) while the autopilot's run on vehicle time; pacing that phase at real time keeps
-        both in one time base, so the engagement happens after the same simulated time whatever
-        the clock (lockstep and realtime runs start tracking from the same state)."""
-        return self.modes.behaviour in ("offboard", "guided") and self.link.has_peer()
-
     def _new_peer(self) -> None:
         # a new peer hears who we are first: before our next 1 Hz HEARTBEAT a ground station
         # would take the target's (system 2) 10 Hz positions for the vehicle's
@@ -340,13 +334,6 @@ class SimVehicle:
             handle(q.popleft()[1])
 
     # ------------------------------------------------------------------ stepping
-    def _plant_step_rates(
-        self, aileron: float, elevator: float, rudder: float, throttle: float
-    ) -> tuple[float, float, float, float]:
-        """A plant without ``step_rates``: ``step`` then the rates and airspeed."""
-        self.plant.step(aileron, elevator, rudder, throttle)
-        return self._rates_fn()
-
     def step_once(self) -> float:
         """One frame: read pending input (no waiting), apply due commands, ``n_sub`` physics
         steps, due telemetry, truth. Returns the sim time ``t``.
@@ -367,7 +354,7 @@ class SimVehicle:
         if incoming:
             self._apply_due()
         ape, clock, dt = self.autopilot, self.time, self.dt
-        step, offboard_rates = self._step_rates, ape.offboard_rates
+        step, offboard_rates = self.plant.step_rates, ape.offboard_rates
         rates, fresh = self._rates, True  # fresh: self._st is the state now
         last = self.n_sub - 1
         for i in range(self.n_sub):
@@ -402,11 +389,6 @@ class SimVehicle:
         self._record()
         return self.time.t
 
-    def _poll_or_stop(self, timeout: float) -> bool:
-        """:meth:`poll` in slices of 50 ms that a :meth:`stop` ends: a peer gone for good (the
-        bridge done) is not waited for the full lockstep timeout."""
-        return self.link.poll(min(timeout, 0.05)) or self._stop.is_set()
-
     def run(self, duration_s: float) -> None:
         """Advance ``duration_s`` of sim time, paced by the clock (lockstep or realtime)."""
         clock = self.time
@@ -414,10 +396,8 @@ class SimVehicle:
         w0, k0 = time.perf_counter(), clock.k
         self.clock.start(clock.boot_s)
         try:
-            peer = self._lockstep_peer if self.config.realtime_until_engaged else self.has_peer
-            poll: Callable[[float], bool] = self.link.poll
+            peer, poll = _pacing(self)
             if self.config.lockstep_from_connect and self.clock.mode == "lockstep":
-                peer, poll = self.has_peer, self._poll_or_stop
                 # the peer's arrival is a wall-clock instant: the vehicle waits for it rather
                 # than fly on, so the hand-over starts from the same state every time
                 while not self._stop.is_set() and not self.has_peer():
@@ -455,6 +435,26 @@ class SimVehicle:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _pacing(v: SimVehicle) -> tuple[Callable[[], bool], Callable[[float], bool]]:
+    """How :meth:`SimVehicle.run` waits on its peer: (whether the clock counts the peer as
+    present, the poll it waits with).
+
+    With ``realtime_until_engaged`` the lockstep clock treats the peer as present only while it
+    commands the vehicle (OFFBOARD / GUIDED). Until the bridge has taken control its hand-over
+    rules run on wall-clock timers (>= 1 s of setpoints at >= 20 Hz before the mode request)
+    while the autopilot's run on vehicle time; pacing that phase at real time keeps both in one
+    time base, so the engagement happens after the same simulated time whatever the clock
+    (lockstep and realtime runs start tracking from the same state). In lockstep from the
+    connection on, the poll comes in slices of 50 ms that a :meth:`SimVehicle.stop` ends: a peer
+    gone for good (the bridge done) is not waited for the full lockstep timeout."""
+    if v.config.lockstep_from_connect and v.clock.mode == "lockstep":
+        return v.has_peer, lambda timeout: v.link.poll(min(timeout, 0.05)) or v._stop.is_set()
+    if v.config.realtime_until_engaged:
+        engaged = ("offboard", "guided")
+        return (lambda: v.modes.behaviour in engaged and v.link.has_peer()), v.link.poll
+    return v.has_peer, v.link.poll
 
 
 def use_profile(

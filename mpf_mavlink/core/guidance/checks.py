@@ -170,7 +170,7 @@ def demanded_directions(
 
 # MIL-F-8785C Fig. 7: sigma (ft/s) of medium/high-altitude turbulence at 500, 1750, 3750 and
 # 7500 ft for the probability-of-exceedance rows the SIL's levels use (light 10^-2, moderate
-# 10^-3, severe 10^-5), and the low-altitude W20 (ft/s) of sim/plant_jsbsim.TURBULENCE_LEVELS
+# 10^-3, severe 10^-5), and the low-altitude W20 (ft/s) of sim/plant/atmosphere.TURBULENCE_LEVELS
 _POE_ALT_FT = (500.0, 1750.0, 3750.0, 7500.0)
 _POE_SIGMA_FPS = {
     "light": (6.6, 6.9, 7.4, 6.7),
