@@ -93,10 +93,8 @@ from mpf_mavlink.errors import MpfError
 from mpf_mavlink.mavlink import (
     Flavour,
     dialect,
-    enable_signing,
     encode_arm,
     flavour_from_heartbeat,
-    load_signing_key,
     open_link,
     wait_heartbeat,
 )
@@ -227,7 +225,11 @@ class Bridge:
     def _connect(self, res: BridgeResult) -> None:
         """Open the link, wait for the autopilot's HEARTBEAT and settle its flavour."""
         m, vl = self.m, self.vl
-        signing_key = load_signing_key(m.signing_key_file) if m.signing_key_file else None
+        key = None
+        if m.signing_key_file:  # the signing module is loaded by a signed flight only
+            from mpf_mavlink.mavlink.signing import load_signing_key
+
+            key = load_signing_key(m.signing_key_file)
         allowed = [m.target_sysid] if (self.ctl.live and m.target_sysid is not None) else []
         tlog = None if is_lean(m) else Path(self.opts.out_dir) / "mavlink.tlog"
         vl.link = open_link(
@@ -236,8 +238,10 @@ class Bridge:
             tlog_fsync_every_s=m.tlog_fsync_every_s, timeout_s=m.heartbeat_timeout_s,
             vehicle_time=m.lockstep,  # lockstep: the tlog carries the simulation's time
         )  # fmt: skip
-        if signing_key is not None:
-            enable_signing(vl.link, signing_key, m.signing_link_id)
+        if key is not None:
+            from mpf_mavlink.mavlink.signing import enable_signing
+
+            enable_signing(vl.link, key, m.signing_link_id)
         fleet_link.open_(self.fleet, m)  # fleet: the coordination link
         self.phase.set(State.WAIT_HEARTBEAT)
         hb = wait_heartbeat(vl.link, m.heartbeat_timeout_s, on_other=vl.before_heartbeat)

@@ -17,7 +17,7 @@ import numpy as np
 from mpf_mavlink.bridge.estimator import Estimator
 from mpf_mavlink.core import so3
 from mpf_mavlink.core.target import TargetMotion, TargetState
-from mpf_mavlink.core.target_filter import Report, TargetEstimator, TargetFilterParams
+from mpf_mavlink.core.target_report import Report, TargetFilterParams
 
 
 class ScriptedTarget:
@@ -178,6 +178,9 @@ class LiveTarget:
 
     def __init__(self, est: Estimator, params: TargetFilterParams) -> None:
         self.est = est
+        # the filter is loaded by a flight with a live target only
+        from mpf_mavlink.core.target_filter import TargetEstimator
+
         self.kf = TargetEstimator(params)
         self.samples = 0
         self.last_outcome = ""

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, fields
 from typing import Literal
 
 from mpf_mavlink.config.fields import _doc, _fail, _ge, _nonneg, _open, _pos
-from mpf_mavlink.core.target_filter import TargetFilterParams
+from mpf_mavlink.core.target_report import TargetFilterParams
 
 
 @dataclass(frozen=True)

@@ -69,6 +69,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mpf_mavlink.core.target import TargetState, target_state_of_floats
+from mpf_mavlink.core.target_report import Report, TargetFilterParams, Vec
 
 #: Upward leak of the clock-offset minimum (s per s): follows a sender clock drifting by up to
 #: 100 ppm (crystal clocks: 20-50 ppm) while a single fast report does not fix it for ever.
@@ -89,46 +90,6 @@ _IN_BLOCK = {0: (0, 0), 1: (0, 1), 3: (0, 2), 4: (0, 3), 6: (0, 4), 2: (1, 0), 5
 #: entries (p00, p01, p02, p03, p04, p11, ..., p44), the vertical's 3 (p_dd, p_dv, p_vv).
 #: _COL[i]: where column i of the horizontal block is in it.
 _COL = ((0, 1, 2, 3, 4), (1, 5, 6, 7, 8), (2, 6, 9, 10, 11), (3, 7, 10, 12, 13), (4, 8, 11, 13, 14))
-
-Vec = Sequence[float]
-
-
-@dataclass(frozen=True)
-class TargetFilterParams:
-    """Tuning and limits of :class:`TargetEstimator` (SI units; noise terms are 1-sigma, the
-    process terms square roots of white-noise spectral densities)."""
-
-    accel_noise_m_s2: float = 0.15  # horizontal acceleration, m/s^2/sqrt(Hz)
-    vertical_accel_noise_m_s2: float = 0.05  # m/s^2/sqrt(Hz)
-    turn_accel_noise_rad_s2: float = 0.003  # turn-rate random walk, rad/s/sqrt(s)
-    position_noise_m: float = 2.0  # horizontal, per axis, when the report carries none
-    vertical_noise_m: float = 3.0
-    velocity_noise_m_s: float = 0.3  # per axis
-    turn_rate_noise_rad_s: float = 0.01  # attitude-derived turn rate
-    gate_probability: float = 0.9999
-    reinit_after: int = 3
-    max_position_sigma_m: float = 4.0  # stale beyond (predicted, radial, see position_sigma)
-    manoeuvre_accel_m_s2: float = 0.3  # what the target may do unseen (staleness only)
-    max_age_s: float = 10.0  # stale beyond, whatever the uncertainty
-    latency_s: float = 0.0  # known smallest transport delay of the reports
-    history_s: float = 10.0  # reports kept for re-ordering late ones
-    attitude_timeout_s: float = 1.0  # a reported attitude older than this no longer sets {T}
-
-
-@dataclass(frozen=True)
-class Report:
-    """One report of the target. ``t``: the sender's timestamp (s). position / velocity: NED (m,
-    m/s; arrays or sequences of 3 floats) or None; pos_var: variances (m^2, n/e/d) or None for
-    the configured noise; turn_rate: rad/s about down or None; yaw: rad or None (only used to
-    hold the frame at low speed)."""
-
-    t: float
-    position: NDArray[np.float64] | Vec | None = None
-    velocity: NDArray[np.float64] | Vec | None = None
-    turn_rate: float | None = None
-    yaw: float | None = None
-    pos_var: NDArray[np.float64] | Vec | None = None
-    attitude: bool = False  # yaw is the target's measured attitude (not a heading hint)
 
 
 def _floats(v: NDArray[np.float64] | Vec) -> list[float]:

@@ -51,15 +51,18 @@ from mpf_mavlink.mavlink.modes import (
     mode_name,
 )
 from mpf_mavlink.mavlink.pymav import DIALECT_NAME, dialect, mavutil
-from mpf_mavlink.mavlink.signing import enable_signing, load_signing_key
 from mpf_mavlink.mavlink.url import parse_url
 
 if TYPE_CHECKING:
+    from mpf_mavlink.mavlink.signing import enable_signing, load_signing_key
     from mpf_mavlink.mavlink.tlog import TlogWriter
     from mpf_mavlink.mavlink.tlog_read import TlogReadResult, iter_tlog, read_tlog
 
-#: the tlog's names, imported when first asked for: a flight that does not record loads neither
+#: the tlog's and signing's names, imported when first asked for: a flight that does not record
+#: loads no tlog module, one unsigned no signing
 _LAZY = {
+    "enable_signing": "mpf_mavlink.mavlink.signing",
+    "load_signing_key": "mpf_mavlink.mavlink.signing",
     "TlogWriter": "mpf_mavlink.mavlink.tlog",
     "TlogReadResult": "mpf_mavlink.mavlink.tlog_read",
     "iter_tlog": "mpf_mavlink.mavlink.tlog_read",
