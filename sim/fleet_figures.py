@@ -11,10 +11,18 @@ import numpy as np
 COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
 
 
-def draw(out: Path, n: int, ser: dict[str, Any], t_all: float, t_kill: float | None) -> None:
+def draw(
+    out: Path,
+    n: int,
+    ser: dict[str, Any],
+    t_all: float,
+    t_kill: float | None,
+    dirs: list[Path] | None = None,
+) -> None:
     """DIR/fleet_tracks.png (each bridge's timeseries.csv rel_x/rel_y, m, target frame: north
     up, east right) and DIR/fleet_spacing.png (the worst neighbour error, m, against the
-    seconds since the last engagement)."""
+    seconds since the last engagement). ``dirs``: the bridges' run directories (DIR/bridgeK)."""
+    dirs = dirs if dirs is not None else [out / f"bridge{k}" for k in range(n)]
     import matplotlib
 
     matplotlib.use("Agg")
@@ -22,14 +30,14 @@ def draw(out: Path, n: int, ser: dict[str, Any], t_all: float, t_kill: float | N
 
     fig, ax = plt.subplots(figsize=(6, 6))
     for k in range(n):
-        ts = out / f"bridge{k}" / "timeseries.csv"
+        ts = dirs[k] / "timeseries.csv"
         if not ts.is_file():
             continue
         d = np.genfromtxt(ts, delimiter=",", names=True)
         if d.size < 2:
             continue
         ax.plot(d["rel_y"], d["rel_x"], lw=0.6, color=COLOURS[k % len(COLOURS)], label=f"{k}")
-    pt = out / "bridge0" / "path_T.csv"
+    pt = dirs[0] / "path_T.csv"
     if pt.is_file():
         P = np.genfromtxt(pt, delimiter=",", skip_header=1).reshape(-1, 3)
         ax.plot(P[:, 1], P[:, 0], "k--", lw=0.8, label="path")

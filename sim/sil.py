@@ -43,6 +43,7 @@ from mpf_mavlink.bridge.envelope import verdict_words
 from mpf_mavlink.bridge.recording import LEAN_ROW_EVERY, is_lean
 from mpf_mavlink.config.scenario import build_path, build_target
 from mpf_mavlink.config.schema import Config
+from mpf_mavlink.errors import ConfigError
 from mpf_mavlink.mavlink.url import free_udp_port
 from mpf_mavlink.runs.rundir import (
     RunTable,
@@ -268,8 +269,22 @@ def vehicle_config(cfg: Config, url: str, clock: str | None = None, **over: Any)
         target_epoch="ready" if sil.target_live else "bridge",
         target_feed=None if sil.target_feed is None else dataclasses.asdict(sil.target_feed),
     )
+    opts.update(_fleet_epoch(cfg, clock or sil.clock))
     opts.update(over)
     return VehicleConfig(**opts)
+
+
+def _fleet_epoch(cfg: Config, clock: str) -> dict[str, Any]:
+    """A fleet's common target epoch for the world's target (a realtime SIL fleet: every
+    member's bridge counts its scripted target from ``fleet.target_epoch_unix_s``)."""
+    f = cfg.section("fleet")
+    if not (f.enabled and f.target_epoch_unix_s is not None and not cfg.section("sil").target_live):
+        return {}
+    if clock != "realtime":
+        raise ConfigError(
+            f"{cfg.source}: fleet.target_epoch_unix_s: a SIL fleet needs sil.clock: realtime"
+        )
+    return {"target_epoch": "unix", "target_epoch_unix_s": float(f.target_epoch_unix_s)}
 
 
 def build_vehicle(cfg: Config, url: str, clock: str | None = None, **over: Any) -> Any:

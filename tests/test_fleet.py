@@ -12,7 +12,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mpf_mavlink.bridge.fleet import FleetMember, report_name
+from mpf_mavlink.bridge.fleet import FleetMember, _Peer, report_name
 from mpf_mavlink.config.scenario import build_path
 from mpf_mavlink.config.schema import load_config
 from mpf_mavlink.core.guidance import coordination as co
@@ -312,3 +312,105 @@ def test_fleet_csv_is_written_as_the_flight_goes(tmp_path: Path) -> None:
     finally:
         a.close()
         b.close()
+
+
+# -- spacing in time -----------------------------------------------------------------------
+def _nu_circle(theta: float, v_air: float, vx: float) -> float:
+    """The along-path speed on a counter-clockwise circle at angle theta (f1 = (-sin, cos)) of
+    an aircraft at v_air over a point moving at vx north, written out: the positive root of
+    nu^2 - 2 nu vx sin(theta) + vx^2 - v_air^2 = 0."""
+    b = -vx * math.sin(theta)
+    return -b + math.sqrt(b * b - vx * vx + v_air * v_air)
+
+
+def test_along_path_speed_is_the_root_of_the_airspeed() -> None:
+    # the point moving forward along the path at 3 m/s: 16 m/s of air is 13 along the path
+    assert co.along_path_speed(16.0, (1.0, 0.0, 0.0), (3.0, 0.0, 0.0), (0.0, 0.0, 0.0)) == 13.0
+    # a 4 m/s headwind on a still point: the aircraft makes 12 m/s along the path
+    assert co.along_path_speed(16.0, (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), (-4.0, 0.0, 0.0)) == 12.0
+    # the point outruns the airspeed across the path: no speed holds the aircraft on it
+    assert math.isnan(co.along_path_speed(5.0, (1.0, 0.0, 0.0), (0.0, 6.0, 0.0), (0, 0, 0)))
+    # and it is what airspeed_for inverts
+    f1, vp, w = (0.6, 0.8, 0.0), (1.0, -2.0, 0.5), (3.0, 1.0, 0.0)
+    nu = co.along_path_speed(17.0, f1, vp, w)
+    assert co.airspeed_for(nu, f1, vp, w) == pytest.approx(17.0, rel=1e-12)
+
+
+def test_lap_clock_against_quadrature() -> None:
+    """On a circle of 150 m about a point moving at 3 m/s, at 16 m/s of air: the lap time and
+    tau(s) of the lap clock against scipy's quadrature of 1/nu written out. The trapezoid on a
+    smooth periodic integrand is exact to rounding for the lap; shat in between is a linear
+    interpolation of tau, off by at most h^2/8 max|shat''| (h the grid's step)."""
+    from scipy.integrate import quad
+
+    cfg = _cfg("fleet.slots_deg=[0,180]", 'fleet.links=["udpin:127.0.0.1:14600"]')
+    path = build_path(cfg.path)
+    R, L = float(cfg.path.radius_m), float(path.length)
+    lap = co.LapClock(path, 256)
+    # the path's own tangent decides the sense: theta(s) = theta0 + sign s / R
+    p0, f0 = (np.asarray(x, float) for x in path.eval(0.0)[:2])
+    theta0 = math.atan2(p0[1], p0[0])
+    sign = 1.0 if np.dot(f0, (-math.sin(theta0), math.cos(theta0), 0.0)) > 0 else -1.0
+    vx, V = 3.0, 16.0
+    assert lap.update(np.eye(3), (vx, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), V)
+
+    def inv_nu(s: float) -> float:
+        th = theta0 + sign * s / R
+        return 1.0 / _nu_circle(th, V, vx) if sign > 0 else 1.0 / _nu_circle(-th, V, -vx)
+
+    T = quad(inv_nu, 0.0, L, limit=200, epsabs=1e-12)[0]
+    assert lap.lap_s == pytest.approx(T, rel=1e-9)
+    # shat's nodes are a cumulative trapezoid of f = 1/nu (error <= h^2/12 |f'(s) - f'(0)|) and
+    # linearly interpolated between (<= h^2/8 max|f'|), both times L/T
+    ss = np.linspace(0.0, L, 4001)
+    f = np.array([inv_nu(float(x)) for x in ss])
+    df = float(np.max(np.abs(np.gradient(f, ss))))
+    h = L / 256
+    bound = (L / T) * df * h * h * (2.0 / 12.0 + 1.0 / 8.0)
+    for s in (37.0, 250.0, 471.2, 900.0, L + 100.0):
+        tau = quad(inv_nu, 0.0, s, limit=200, epsabs=1e-12)[0]
+        assert lap.shat(s) == pytest.approx(L * tau / T, abs=bound)
+    # the equal-time coordinate: half a lap of shat is half the lap's time, not half the path
+    s_half = float(np.interp(0.5 * L, lap.shat_grid, lap.s))
+    assert quad(inv_nu, 0.0, s_half)[0] == pytest.approx(0.5 * T, abs=h * float(f.max()))
+    assert abs(s_half - 0.5 * L) > 10.0  # at 3 m/s of 16 the two halves differ by tens of m
+
+
+def test_time_spacing_law_on_shat() -> None:
+    # two members half a lap apart in shat: no correction; 5 s of lap time late: speed up by
+    # k_c shat-error (m) through tanh, in airspeed (the lap clock's own figures)
+    clock = _Clock()
+    cfg_a = _cfg("fleet.slots_deg=[0,180]", 'fleet.links=["udpin:127.0.0.1:14600"]',
+                 "fleet.spacing=time")  # fmt: skip
+    m = FleetMember(cfg_a, build_path(cfg_a.path), lambda _t: None, clock)
+    vs, tgt = _vs_tgt()
+    lap = m.lap
+    assert lap is not None
+    m.step(0.0, 0.0, 20.0, vs, tgt)  # fills the table for this target and wind
+    s_peer = float(np.interp(0.5 * lap.L, lap.shat_grid, lap.s))  # half a lap of time on
+    m.peers[7] = fl_peer = _Peer(7, 180.0)
+    fl_peer.report = co.PeerReport(0.5, s_peer, 0.0, clock.t)
+    fl_peer.last_rx = clock.t
+    m.lp.y = None
+    m.step(0.0, 0.0, 20.0, vs, tgt)
+    assert m.last["e_m"] == pytest.approx(0.0, abs=1e-6)
+    assert m.last["airspeed_sp_m_s"] == pytest.approx(m.u_ref)
+    m.lp.y = None
+    s_late = float(np.interp(-5.0 * lap.L / lap.lap_s % lap.L, lap.shat_grid, lap.s))
+    m.step(0.0, s_late - lap.L, 20.0, vs, tgt)
+    e = -5.0 * lap.L / lap.lap_s
+    assert m.last["e_m"] == pytest.approx(e, abs=1e-6)
+    du = -m.f.du_max_m_s * math.tanh(m.f.k_c * e / m.f.du_max_m_s)
+    assert m.last["airspeed_sp_m_s"] == pytest.approx(min(m.u_ref + du, m.window[1]))
+
+
+def test_time_spacing_checks_on_the_demo() -> None:
+    """configs/fleet_demo.yaml: a common along-path speed fails fleet_speed (10-25 m/s of air
+    asked), spacing in time passes; its convergence condition carries the lap clock's gain
+    factor g, so k_c = 0.2 (the path spacing's default) fails where 0.1 passes."""
+    from mpf_mavlink.cli.main import main
+
+    demo = str(Path(__file__).resolve().parents[1] / "configs" / "fleet_demo.yaml")
+    assert main(["check", demo]) == 0
+    assert main(["check", demo, "--set", "fleet.spacing=path"]) == 3
+    assert main(["check", demo, "--set", "fleet.k_c=0.2"]) == 3

@@ -119,7 +119,9 @@ def spacing_series(
             j = int(np.searchsorted(tu, t))
             ok = 0 < j < len(tu) and tu[j] - tu[j - 1] < 1.0
             alive.append(bool(ok))
-            s_now.append(float(np.interp(t, tu, tr["s_m"])) if ok else 0.0)
+            # shat: s itself, or the lap-time coordinate of spacing in time (fleet.csv shat_m)
+            col = tr["shat_m"] if "shat_m" in tr else tr["s_m"]
+            s_now.append(float(np.interp(t, tu, col)) if ok else 0.0)
         n = sum(alive)
         n_alive[gi] = n
         if n < 2:

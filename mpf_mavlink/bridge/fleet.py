@@ -88,13 +88,50 @@ class FleetCounts:
         return d
 
 
+def path_airspeed(
+    f: FleetConfig, path: Any, window: tuple[float, float], u: float, s: float, vs: Any, tgt: Any
+) -> float:
+    """Spacing on the path: the airspeed set-point (m/s) that moves the aircraft at s (m) along
+    the path at u (m/s), |u f1 + v_point - wind| at the path point ``f.lead_s`` ahead, in the
+    airspeed ``window`` (``vs`` the VehicleState, ``tgt`` the TargetState)."""
+    pt = path.eval(s + u * f.lead_s)
+    R = tgt.R_T_I
+    p_d, f1T = pt[0], pt[1]
+    f1 = tuple(float(x) for x in R @ f1T)
+    w = tgt.omega_T
+    wxp = (w[1] * p_d[2] - w[2] * p_d[1], w[2] * p_d[0] - w[0] * p_d[2],
+           w[0] * p_d[1] - w[1] * p_d[0])  # fmt: skip
+    rot = R @ wxp
+    vp = tuple(float(tgt.velocity[k] + rot[k]) for k in range(3))
+    wind = _wind(vs)
+    a = co.airspeed_for(u, f1, vp, wind)  # type: ignore[arg-type]
+    a = u + f.ff_gain * (a - u)  # the lap's swing, scaled
+    k_u = f.speed_gain
+    if k_u > 0.0:
+        # the along-path speed flown now against the one asked: the energy control alone
+        # follows a set-point that swings every lap with ~30 % less amplitude (measured)
+        here = path.eval(s)
+        f1n = R @ here[1]
+        v_a = float(vs.airspeed)
+        w1 = vs.R_W_I[:, 0]
+        u_now = sum(float((v_a * w1[k] + wind[k] - vp[k]) * f1n[k]) for k in range(3))
+        a += k_u * (u - u_now)
+    return min(max(a, window[0]), window[1])
+
+
+def _wind(vs: Any) -> tuple[float, float, float]:
+    """The wind (m/s NED) of a VehicleState (calm when it has none)."""
+    w = getattr(vs, "wind", (0.0, 0.0, 0.0))
+    return (float(w[0]), float(w[1]), float(w[2]))
+
+
 class FleetRecord:
     """fleet.csv, one row a control step (:attr:`HEADER`): streamed to ``path`` as the flight
     goes (flushed each second: a SIGKILLed bridge's record is there too, for the rig to judge
     the fleet before the kill), or written at the end without one. Never ends a flight."""
 
     HEADER = ("t_unix_s", "t_s", "s_m", "sdot_m_s", "e_m", "du_m_s", "airspeed_sp_m_s",
-              "n_peers", "slot_deg")  # fmt: skip
+              "n_peers", "slot_deg", "shat_m")  # fmt: skip
 
     def __init__(self) -> None:
         self.path: Path | None = None
@@ -156,6 +193,9 @@ class FleetMember:
         v = cfg.vehicle
         u_ref = self.f.u_ref_m_s if self.f.u_ref_m_s is not None else float(v.airspeed_m_s)
         self.params = co.CoordParams(self.L, self.f.k_c, self.f.du_max_m_s, u_ref)
+        self.u_ref = u_ref
+        # spacing in time: the lap clock of this path (shat of s, docs/fleet.md)
+        self.lap = co.LapClock(path) if self.f.spacing == "time" else None
         lo = v.airspeed_min_m_s if v.airspeed_min_m_s is not None else 0.0
         hi = v.airspeed_max_m_s if v.airspeed_max_m_s is not None else math.inf
         m = self.f.airspeed_margin_m_s
@@ -317,43 +357,29 @@ class FleetMember:
             for p in alive
             if p.report is not None
         ]
-        e, n = co.coordination_error_m(s, mine, reps, now, self.L)
+        lap = self.lap
+        if lap is not None:  # spacing in time: the consensus on shat (peers propagated first)
+            if not lap.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, _wind(vs), self.u_ref):
+                self.n.extra["lap_unsolved"] = self.n.extra.get("lap_unsolved", 0) + 1
+            reps = [co.PeerReport(r.slot, lap.shat(r.s_m + r.sdot_m_s * max(0.0, now - r.t_s)),
+                                  0.0, now) for r in reps]  # fmt: skip
+            shat = lap.shat(s)
+        else:
+            shat = s
+        e, n = co.coordination_error_m(shat, mine, reps, now, self.L)
         du_raw = co.speed_correction(e, self.params.k_c, self.params.du_max_m_s)
         dt = 0.0 if self.t_prev is None else now - self.t_prev
         self.t_prev = now
         du = self.lp(du_raw, dt)
-        u = max(0.0, self.params.u_ref_m_s + du)
-        asp = self.airspeed_sp(u, s, vs, tgt)
+        if lap is not None:  # the energy control holds u_ref + du of airspeed
+            asp = min(max(self.u_ref + du, self.window[0]), self.window[1])
+        else:
+            u = max(0.0, self.params.u_ref_m_s + du)
+            asp = path_airspeed(self.f, self.path, self.window, u, s, vs, tgt)
         self.last = {"e_m": e, "du_m_s": du, "airspeed_sp_m_s": asp, "n_peers": float(n)}
-        row = (now, t_mission, s, sdot, e, du, asp, float(n), mine * 360.0)
+        row = (now, t_mission, s, sdot, e, du, asp, float(n), mine * 360.0, shat)
         self.record.add(row, now)
         return asp
-
-    def airspeed_sp(self, u: float, s: float, vs: Any, tgt: Any) -> float:
-        """|u f1 + v_point - wind| at the path point ``lead_s`` ahead, in the airspeed window."""
-        pt = self.path.eval(s + u * self.f.lead_s)
-        R = tgt.R_T_I
-        p_d, f1T = pt[0], pt[1]
-        f1 = tuple(float(x) for x in R @ f1T)
-        w = tgt.omega_T
-        wxp = (w[1] * p_d[2] - w[2] * p_d[1], w[2] * p_d[0] - w[0] * p_d[2],
-               w[0] * p_d[1] - w[1] * p_d[0])  # fmt: skip
-        rot = R @ wxp
-        vp = tuple(float(tgt.velocity[k] + rot[k]) for k in range(3))
-        wind = tuple(float(x) for x in getattr(vs, "wind", (0.0, 0.0, 0.0)))
-        a = co.airspeed_for(u, f1, vp, wind)  # type: ignore[arg-type]
-        a = u + self.f.ff_gain * (a - u)  # the lap's swing, scaled
-        k_u = self.f.speed_gain
-        if k_u > 0.0:
-            # the along-path speed flown now against the one asked: the energy control alone
-            # follows a set-point that swings every lap with ~30 % less amplitude (measured)
-            here = self.path.eval(s)
-            f1n = R @ here[1]
-            v_a = float(vs.airspeed)
-            w1 = vs.R_W_I[:, 0]
-            u_now = sum(float((v_a * w1[k] + wind[k] - vp[k]) * f1n[k]) for k in range(3))
-            a += k_u * (u - u_now)
-        return min(max(a, self.window[0]), self.window[1])
 
     def write(self, out: Path) -> dict[str, Any]:
         """fleet.csv (one row a step) and the summary that goes into metrics.json."""
@@ -367,6 +393,8 @@ class FleetMember:
             "k_c": self.f.k_c,
             "u_ref_m_s": self.params.u_ref_m_s,
             "on_peer_lost": self.f.on_peer_lost,
+            "spacing": self.f.spacing,
+            "lap_s": self.lap.lap_s if self.lap is not None else None,
             "peers": {str(p.sysid): p.slot_deg for p in self.peers.values()},
             "counts": self.n.as_dict(),
             "final_error_m": es[-1] if es else None,

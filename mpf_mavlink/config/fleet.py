@@ -30,6 +30,13 @@ class FleetConfig:
         default_factory=list,
         metadata=_doc("MAVLink URLs of the coordination link (udpin: read only; others: both)"),
     )
+    spacing: Literal["path", "time"] = field(
+        default="path",
+        metadata=_doc(
+            "path: a common along-path speed, slots as distance; time: every aircraft at "
+            "u_ref of airspeed, slots as lap time (where the path speed would leave the window)"
+        ),
+    )
     k_c: float = field(
         default=0.2, metadata=_pos("consensus gain (1/s) on the along-path spacing error")
     )
@@ -38,7 +45,10 @@ class FleetConfig:
     )
     u_ref_m_s: float | None = field(
         default=None,
-        metadata=_doc("common along-path reference speed (m/s); null: vehicle.airspeed_m_s"),
+        metadata=_doc(
+            "common reference speed (m/s): along the path (spacing: path) or of airspeed "
+            "(spacing: time); null: vehicle.airspeed_m_s"
+        ),
     )
     airspeed_margin_m_s: float = field(
         default=0.5,

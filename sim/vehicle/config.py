@@ -114,8 +114,10 @@ class VehicleConfig:
     target_component: int = 1
     target_type: str = "rover"  # "rover" or "boat" (its HEARTBEAT type)
     target_rate_hz: float = 10.0
-    # the target's t = 0: "ready" (the vehicle's) or "bridge" (the STATUSTEXT MPF t0= it sends)
+    # the target's t = 0: "ready" (the vehicle's), "bridge" (the STATUSTEXT MPF t0= it sends)
+    # or "unix" (target_epoch_unix_s, a fleet's common epoch; a realtime clock only)
     target_epoch: str = "ready"
+    target_epoch_unix_s: float | None = None
     target_feed: dict[str, Any] | None = None  # a realistic feed (sim.target.feed) instead
     record_truth: bool = True  # one truth row per frame (SimVehicle.truth)
 
@@ -124,8 +126,12 @@ class VehicleConfig:
             raise ValueError("flavour must be 'px4' or 'ardupilot'")
         if self.initial_mode not in ("hold", "cruise"):
             raise ValueError("initial_mode must be 'hold' or 'cruise'")
-        if self.target_epoch not in ("ready", "bridge"):
-            raise ValueError("target_epoch must be 'ready' or 'bridge'")
+        if self.target_epoch not in ("ready", "bridge", "unix"):
+            raise ValueError("target_epoch must be 'ready', 'bridge' or 'unix'")
+        if (self.target_epoch == "unix") != (self.target_epoch_unix_s is not None):
+            raise ValueError("target_epoch 'unix' goes with target_epoch_unix_s (and only it)")
+        if self.target_epoch == "unix" and self.clock != "realtime":
+            raise ValueError("target_epoch 'unix' needs the realtime clock (Unix time is wall)")
         if isinstance(self.plant, str) and self.plant not in ("jsbsim", "kinematic"):
             raise ValueError("plant must be 'jsbsim', 'kinematic' or a plant object")
         if not self.wind_turbulence_m_s >= 0.0:  # NaN too

@@ -6,6 +6,7 @@ mission origin the bridge announces)."""
 from __future__ import annotations
 
 import math
+import time
 from typing import Any
 
 import numpy as np
@@ -40,8 +41,12 @@ class TargetStream:
         boat: bool,
         epoch_from_bridge: bool,
         feed: dict[str, Any] | None,
+        epoch_unix_s: float | None = None,
     ) -> None:
         self.motion = motion
+        # a fleet's common epoch (Unix s): the target's t = 0 placed on the boot clock at the
+        # first frame, when the realtime clock runs with the wall clock
+        self._epoch_unix_s = epoch_unix_s
         self.clock, self.link = clock, link
         self.origin = origin
         self.home_alt_m = home_alt_m
@@ -84,6 +89,9 @@ class TargetStream:
 
     def frame(self) -> None:
         """Queue what is due this frame."""
+        if self._epoch_unix_s is not None:
+            self.epoch_boot_s = self.clock.boot_s - (time.time() - self._epoch_unix_s)
+            self._epoch_unix_s = None
         if self._due("heartbeat", 1.0):
             self.link.put(
                 self.link.target_framer.pack(

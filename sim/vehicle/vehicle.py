@@ -243,7 +243,8 @@ class SimVehicle:
         self.link.on_epoch = self._take_epoch
         self.target = None if cfg.target is None else TargetStream(
             cfg.target, self.time, self.link, self.origin, self.home_lla[2], cfg.target_rate_hz,
-            cfg.target_type == "boat", cfg.target_epoch == "bridge", cfg.target_feed)  # fmt: skip
+            cfg.target_type == "boat", cfg.target_epoch == "bridge", cfg.target_feed,
+            cfg.target_epoch_unix_s)  # fmt: skip
         self.truth_record = TruthRecorder(cfg.record_truth)
         self.profile: Any = None  # the firmware's identified behaviour (see use_profile)
         self.estimate: Any = None  # truth PlantState -> the state the autopilot has (a profile's)

@@ -35,6 +35,15 @@ communication the averaged Laplacian's largest eigenvalue is ``N / (N - 1)``; a 
 uncompensated information age (one update period plus the worst link latency) plus the speed
 loop's lag ``tau_V`` (the energy control's time constant, treated as a delay: conservative), so
 the condition checked is ``k_c N/(N-1) (1/rate + latency + tau_V) < pi/2``.
+
+Spacing in time (``fleet.spacing: time``, :class:`LapClock`): where a common along-path speed
+asks airspeeds outside the window (a figure-eight over a moving boat in wind), every aircraft
+flies the reference airspeed instead and the fleet is spaced in lap time: the consensus above
+runs on ``shat = L tau(s) / T`` (tau the time to reach s at that airspeed, T the lap's) in place
+of s, and the correction is added to the airspeed. ``shat`` advances at ``L / T`` wherever an
+aircraft flying the reference airspeed is, so equal slots of ``shat`` are equal gaps in time;
+a correction du changes its rate by about ``du (L / T) / nu(s)`` (nu the along-path speed), so
+the gain the consensus sees is k_c times up to ``max (L / T) / nu``: the condition checked.
 """
 
 from __future__ import annotations
@@ -43,6 +52,8 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
 
 Vec3 = tuple[float, float, float]
 
@@ -110,6 +121,63 @@ def airspeed_for(u_m_s: float, f1_I: Vec3, v_point_I: Vec3, wind_I: Vec3) -> flo
          u_m_s * f1_I[1] + v_point_I[1] - wind_I[1],
          u_m_s * f1_I[2] + v_point_I[2] - wind_I[2])  # fmt: skip
     return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+
+
+def along_path_speed(v_air_m_s: float, f1_I: Vec3, v_point_I: Vec3, wind_I: Vec3) -> float:
+    """The along-path speed nu (m/s) relative to the moving path of an aircraft on it at the
+    airspeed v_air: the positive root of |nu f1 + d| = v_air, d = v_point - wind (NED); nan
+    where there is none (the point's motion through the air outruns the airspeed)."""
+    d = (v_point_I[0] - wind_I[0], v_point_I[1] - wind_I[1], v_point_I[2] - wind_I[2])
+    b = f1_I[0] * d[0] + f1_I[1] * d[1] + f1_I[2] * d[2]
+    disc = b * b - (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) + v_air_m_s * v_air_m_s
+    nu = -b + math.sqrt(disc) if disc >= 0.0 else math.nan
+    return nu if nu > 0.0 else math.nan
+
+
+class LapClock:
+    """Spacing in time (module docstring): ``shat(s)`` (m) for a path fixed to the target,
+    sampled at ``n`` points of its closed length L.
+
+    :meth:`update` takes the target's attitude R_T_I, velocity (m/s NED) and angular velocity
+    omega_T (rad/s, target frame), the wind (m/s NED) and the airspeed (m/s); it returns False
+    (and keeps the previous table) where the along-path speed has no root somewhere."""
+
+    def __init__(self, path: Any, n: int = 256) -> None:
+        self.L = L = float(path.length)
+        self.s = np.linspace(0.0, L, n + 1)
+        pts = [path.eval(float(x)) for x in self.s[:-1]]
+        self.p_T = np.array([np.asarray(q[0], float) for q in pts])  # (n, 3) target frame
+        self.f1_T = np.array([np.asarray(q[1], float) for q in pts])
+        self.shat_grid = self.s.copy()  # before any update: shat = s
+        self.rate_ratio_max = 1.0  # max over the path of (L / T) / nu
+        self.lap_s = math.nan  # T (s)
+
+    def update(
+        self, R_T_I: Any, v_target_I: Any, omega_T: Any, wind_I: Any, v_air_m_s: float
+    ) -> bool:
+        R = np.asarray(R_T_I, float)
+        f1 = self.f1_T @ R.T
+        vp = np.asarray(v_target_I, float) + np.cross(np.asarray(omega_T, float), self.p_T) @ R.T
+        d = vp - np.asarray(wind_I, float)
+        b = np.einsum("ij,ij->i", f1, d)
+        disc = b * b - np.einsum("ij,ij->i", d, d) + v_air_m_s * v_air_m_s
+        if not np.all(disc > 0.0):
+            return False
+        nu = -b + np.sqrt(disc)
+        if not np.all(nu > 0.0):
+            return False
+        inv = 1.0 / np.append(nu, nu[0])
+        tau = np.concatenate(([0.0], np.cumsum(0.5 * (inv[1:] + inv[:-1]) * np.diff(self.s))))
+        T = float(tau[-1])
+        self.lap_s = T
+        self.shat_grid = self.L * tau / T
+        self.rate_ratio_max = float(np.max((self.L / T) / nu))
+        return True
+
+    def shat(self, s_m: float) -> float:
+        """shat (m) of s (m), laps counted: continuous and increasing in s."""
+        laps = math.floor(s_m / self.L)
+        return laps * self.L + float(np.interp(s_m - laps * self.L, self.s, self.shat_grid))
 
 
 def respaced_slots(slots: Sequence[float], alive: Sequence[bool]) -> list[float | None]:
@@ -206,6 +274,8 @@ def fleet_checks(
     """
     from mpf_mavlink.core.guidance.checks import CheckResult
 
+    if getattr(fleet, "spacing", "path") == "time":
+        return _time_checks(fleet, vehicle, path, target, wind_I, horizon_s, speed_tau_s)
     n = len(fleet.slots_deg)
     m = convergence_margin(fleet.k_c, n, fleet.rate_hz, fleet.max_latency_s + fleet.filter_tau_s,
                            speed_tau_s)  # fmt: skip
@@ -256,3 +326,70 @@ def fleet_checks(
         figs,
     )
     return [conv, speed], min(fe.hi_full, hi_w)
+
+
+def _time_checks(
+    fleet: Any,
+    vehicle: Any,
+    path: Any,
+    target: Any,
+    wind_I: Vec3,
+    horizon_s: float,
+    speed_tau_s: float,
+) -> tuple[list[Any], float]:
+    """:func:`fleet_checks` of ``spacing: time``: the lap clock solvable at u_ref of airspeed
+    over the target's motion (fail otherwise), u_ref -/+ du_max inside the window (fail for
+    u_ref, warn for the correction), and the convergence condition with the gain's largest
+    factor ``max (L / T) / nu`` over the path and the motion."""
+    from mpf_mavlink.core.guidance.checks import CheckResult
+
+    n = len(fleet.slots_deg)
+    u = fleet.u_ref_m_s if fleet.u_ref_m_s is not None else float(vehicle.airspeed_m_s)
+    lap = LapClock(path, 240)
+    ratios, laps, unsolved = [], [], []
+    for k in range(13):
+        t = horizon_s * k / 12.0
+        st = target.state(t)
+        if lap.update(st.R_T_I, st.velocity, st.omega_T, wind_I, u):
+            ratios.append(lap.rate_ratio_max)
+            laps.append(lap.lap_s)
+        else:
+            unsolved.append(t)
+    g = max(ratios) if ratios else math.inf
+    tau = 1.0 / fleet.rate_hz + fleet.max_latency_s + fleet.filter_tau_s + speed_tau_s
+    x = fleet.k_c * g * lambda_max(n) * tau
+    conv = CheckResult(
+        "fleet_convergence",
+        "pass" if x < 0.5 * math.pi else "fail",
+        f"k_c g lambda_max tau = {fleet.k_c:g} x {g:.2f} x {lambda_max(n):.2f} x {tau:.2f} s = "
+        f"{x:.2f} {'<' if x < 0.5 * math.pi else '>='} pi/2 (N {n}; spacing in time, g the "
+        "largest (L/T)/nu; tau: 1/rate + latency + filter + speed lag)",
+        {"margin": 0.5 * math.pi - x, "tau_s": tau, "gain_factor": g},
+    )
+    lo_w = (vehicle.airspeed_min_m_s or 0.0) + fleet.airspeed_margin_m_s
+    hi_w = (vehicle.airspeed_max_m_s or math.inf) - fleet.airspeed_margin_m_s
+    du = fleet.du_max_m_s
+    if unsolved or not lo_w <= u <= hi_w:
+        st_ = "fail"
+    elif u - du < lo_w or u + du > hi_w:
+        st_ = "warn"
+    else:
+        st_ = "pass"
+    why = (
+        f"no along-path speed at {u:.1f} m/s of airspeed at t = {unsolved[0]:.0f} s"
+        if unsolved
+        else f"laps of {min(laps):.1f}-{max(laps):.1f} s"
+    )
+    speed = CheckResult(
+        "fleet_speed",
+        st_,
+        f"spacing in time at u_ref {u:.1f} m/s of airspeed ({u - du:.1f}-{u + du:.1f} with "
+        f"du_max {du:g}) against the window {lo_w:.1f}-{hi_w:.1f} m/s: {why}",
+        {
+            "lap_lo_s": min(laps, default=math.nan),
+            "lap_hi_s": max(laps, default=math.nan),
+            "window_lo_m_s": lo_w,
+            "window_hi_m_s": hi_w,
+        },  # fmt: skip
+    )
+    return [conv, speed], min(u + du, hi_w)
