@@ -414,3 +414,40 @@ def test_time_spacing_checks_on_the_demo() -> None:
     assert main(["check", demo]) == 0
     assert main(["check", demo, "--set", "fleet.spacing=path"]) == 3
     assert main(["check", demo, "--set", "fleet.k_c=0.2"]) == 3
+
+
+def test_sil_fleet_refuses_bad_arguments_in_one_line(tmp_path: Path, capsys) -> None:
+    from lab.rigs.sil_fleet import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["--out", str(tmp_path / "x"), "--seeds", "1,a"])
+    assert e.value.code == 2 and "--seeds '1,a'" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        main(["--out", str(tmp_path / "x"), "--n", "1"])
+    assert e.value.code == 2 and not (tmp_path / "x").exists()  # nothing left behind
+
+
+def test_lap_clock_learns_the_time_flown() -> None:
+    # an aircraft at half the nominal speed over the first half of the path: once flown, that
+    # half takes two thirds of the lap's time, and shat follows the time flown, not the path
+    cfg = _cfg("fleet.slots_deg=[0,180]", 'fleet.links=["udpin:127.0.0.1:14600"]')
+    path = build_path(cfg.path)
+    lap = co.LapClock(path, 64)
+    V = 16.0
+    assert lap.update(np.eye(3), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), V)
+    L = lap.L
+    assert lap.lap_s == pytest.approx(L / V, rel=1e-12)  # still air, still target: L / V
+    t, s, dt = 0.0, 0.0, 0.01
+    while s < L + 1.0:  # one lap and a bit: 8 m/s over [0, L/2), 16 beyond
+        lap.learn(s, t)
+        s += (V / 2 if (s % L) < L / 2 else V) * dt
+        t += dt
+    lap.update(np.eye(3), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), V)
+    # each segment timed to within one step (dt) of its true duration
+    T_true = (L / 2) / (V / 2) + (L / 2) / V
+    assert lap.lap_s == pytest.approx(T_true, abs=lap.n * dt)
+    assert lap.shat(L / 2) == pytest.approx(L * (2.0 / 3.0), abs=L * lap.n * dt / T_true)
+    # a jump (an aircraft re-engaged elsewhere) times nothing: every duration as it was
+    before = lap.flown.copy()
+    lap.learn(L / 4, t + 1.0)
+    assert np.array_equal(before, lap.flown)
