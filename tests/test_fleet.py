@@ -427,27 +427,18 @@ def test_sil_fleet_refuses_bad_arguments_in_one_line(tmp_path: Path, capsys) -> 
     assert e.value.code == 2 and not (tmp_path / "x").exists()  # nothing left behind
 
 
-def test_lap_clock_learns_the_time_flown() -> None:
-    # an aircraft at half the nominal speed over the first half of the path: once flown, that
-    # half takes two thirds of the lap's time, and shat follows the time flown, not the path
-    cfg = _cfg("fleet.slots_deg=[0,180]", 'fleet.links=["udpin:127.0.0.1:14600"]')
-    path = build_path(cfg.path)
-    lap = co.LapClock(path, 64)
-    V = 16.0
-    assert lap.update(np.eye(3), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), V)
-    L = lap.L
-    assert lap.lap_s == pytest.approx(L / V, rel=1e-12)  # still air, still target: L / V
-    t, s, dt = 0.0, 0.0, 0.01
-    while s < L + 1.0:  # one lap and a bit: 8 m/s over [0, L/2), 16 beyond
-        lap.learn(s, t)
-        s += (V / 2 if (s % L) < L / 2 else V) * dt
-        t += dt
-    lap.update(np.eye(3), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), V)
-    # each segment timed to within one step (dt) of its true duration
-    T_true = (L / 2) / (V / 2) + (L / 2) / V
-    assert lap.lap_s == pytest.approx(T_true, abs=lap.n * dt)
-    assert lap.shat(L / 2) == pytest.approx(L * (2.0 / 3.0), abs=L * lap.n * dt / T_true)
-    # a jump (an aircraft re-engaged elsewhere) times nothing: every duration as it was
-    before = lap.flown.copy()
-    lap.learn(L / 4, t + 1.0)
-    assert np.array_equal(before, lap.flown)
+def test_time_spacing_judge_from_the_records() -> None:
+    # three members at one constant speed, a third of a lap apart in time, one of them 2 s
+    # late: the pairs around it are -/+ 2 s x L/T off, the third pair on its slot
+    from lab.rigs.sil_fleet import time_spacing_series
+
+    L, v, T = 900.0, 15.0, 60.0
+    t = np.arange(0.0, 200.0, 0.05)
+    late = (0.0, 2.0, 0.0)
+    tracks = [{"t_unix_s": t, "s_m": v * (t - late[k]) + k * L / 3.0} for k in range(3)]
+    ser = time_spacing_series(tracks, [0.0, 1 / 3, 2 / 3], L)
+    ok = ser["n_alive"] == 3
+    assert ok.sum() > 100  # judged once every member has flown a lap
+    i = int(np.flatnonzero(ok)[-1])
+    errs = sorted(ser["pairs"][i])
+    assert errs == pytest.approx([-2.0 * L / T, 0.0, 2.0 * L / T], abs=1e-6)

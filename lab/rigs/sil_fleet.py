@@ -3,15 +3,15 @@
 N ``mpf-mavlink sim`` processes (each a JSBSim vehicle and its own bridge) fly CONFIG's mission
 together on the realtime clock: the coordination and the target's common epoch are on the
 wall clock, so N lockstep simulations, each as fast as it can go, would not share a time. They
-start from loiters ``--spread`` m apart across the path's start, get the slots 360/N apart over
-a direct UDP mesh on loopback (``--loss`` / ``--jitter`` put the soak relay in front of every
-member's port) and the same target epoch. Figures as the firmware rig's (lab/rigs/fleet.py),
-all of them our own SIL's: per aircraft the plant truth's steady RMS and max of |pt| and the
-sim's verdict; for the fleet the spacing error between neighbours against their slots (on the
-bridges' shat: the along-path position, or with ``fleet.spacing: time`` the lap-time coordinate
-in metres of the path), the time to converge after the last engagement and the RMS and max
-after it. ``--seeds 1,2,3`` is the campaign row: one fleet flight per seed (every aircraft's
-turbulence seeded apart), a row each and the aggregate, in DIR/campaign.json.
+start ``--gap`` s apart (the last slot first, as the firmware rig's bridges engage one after
+another) from loiters ``--spread`` m apart, with the slots 360/N apart over a direct UDP mesh
+on loopback and the same target epoch. Figures as the firmware rig's (lab/rigs/fleet.py), all
+of them our own SIL's: per aircraft the plant truth's steady RMS and max of |pt| and the sim's
+verdict; for the fleet the spacing error between neighbours against their slots (with
+``fleet.spacing: time`` judged in time from the records alone: :func:`time_spacing_series`),
+the time to converge after the last engagement, and the RMS and max from ``--judge-after`` s
+on (the verdict's window). ``--seeds 1,2,3`` is the campaign row: one fleet flight per seed
+(every aircraft's turbulence seeded apart), a row each and the aggregate, DIR/campaign.json.
 """
 
 from __future__ import annotations
@@ -39,16 +39,16 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _member_sets(
-    a: argparse.Namespace, k: int, seed: int, ports: list[int], epoch: float
+    a: argparse.Namespace, k: int, seed: int, ports: list[int], epoch: float, duration: float
 ) -> list[str]:
     """The ``--set`` overrides of member k: the realtime clock, its start loiter, its own
-    turbulence seed, the fleet's slots, links and epoch, the duration."""
+    turbulence seed, the fleet's slots, links and epoch, its duration (s)."""
     offset = (k - (a.n - 1) / 2.0) * a.spread
     return [
         "sil.clock=realtime",
         f"sil.seed={seed * 100 + k}",
         f"sil.initial_position_ned_m=[{a.start[0]},{a.start[1] + offset},{a.start[2]}]",
-        f"sim.duration_s={a.duration}",
+        f"sim.duration_s={duration}",
         *[s for s in fleet_sets(a.n, k, ports, ports, epoch) if not s.startswith("mavlink.")],
         *a.set,
     ]
@@ -59,17 +59,21 @@ def fly(a: argparse.Namespace, out: Path, seed: int) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=False)
     ports = _free_udp_ports(a.n)
     epoch = time.time() + 10.0  # every bridge up and placing its target before t = 0
-    procs = []
-    for k in range(a.n):
+    procs: list[Any] = [None] * a.n
+    print(f"seed {seed}: {a.n} SIL aircraft flying {a.duration:g} s (realtime), started "
+          f"{a.gap:g} s apart, into {out}", flush=True)  # fmt: skip
+    # the last slot first: each one engages a gap after the one ahead of it, as the firmware
+    # rig's bridges do, so the fleet starts spread about the lap rather than bunched
+    for rank, k in enumerate(reversed(range(a.n))):
+        if rank:
+            time.sleep(a.gap)
         cmd = [sys.executable, "-m", "mpf_mavlink.cli", "sim", str(a.config), "--no-plots", "-q",
                "--out", str(out / f"member{k}")]  # fmt: skip
-        for s in _member_sets(a, k, seed, ports, epoch):
+        for s in _member_sets(a, k, seed, ports, epoch, a.duration + (a.n - 1 - rank) * a.gap):
             cmd += ["--set", s]
         (out / f"member{k}.cmd").write_text(" ".join(cmd) + "\n")
         log = open(out / f"member{k}.log", "w")  # noqa: SIM115 - the child's lifetime
-        procs.append((subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT), log))
-    print(f"seed {seed}: {a.n} SIL aircraft flying {a.duration:g} s (realtime) into {out}",
-          flush=True)  # fmt: skip
+        procs[k] = (subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT), log)
     t0 = time.time()
     try:
         while any(p.poll() is None for p, _ in procs):
@@ -111,7 +115,11 @@ def judge(a: argparse.Namespace, out: Path, codes: list[int | None], seed: int) 
         s["fleet"] = {"converged": False, "why": "a member wrote no fleet.csv"}
     else:
         t_all = max(float(tr["t_unix_s"][0]) for tr in tracks if tr is not None)
-        ser = spacing_series(tracks, [j / a.n for j in range(a.n)], L, True)
+        slots = [j / a.n for j in range(a.n)]
+        if cfg.section("fleet").spacing == "time":
+            ser = time_spacing_series([tr for tr in tracks if tr is not None], slots, L)
+        else:
+            ser = spacing_series(tracks, slots, L, True)
         s["fleet"] = spacing_figures(ser, t_all, math.inf, a.converge_m, a.n)
         # and over a stated window: from --judge-after s after the last engagement to the end
         s["fleet"]["window"] = _window(ser, t_all + a.judge_after, a.n)
@@ -138,6 +146,52 @@ def judge(a: argparse.Namespace, out: Path, codes: list[int | None], seed: int) 
         s["verdict"] = "PASS"
     (out / "fleet.json").write_text(json.dumps(s, indent=2, default=str) + "\n")
     return s
+
+
+def time_spacing_series(
+    tracks: list[dict[str, np.ndarray]], slots: list[float], length_m: float, hz: float = 2.0
+) -> dict[str, Any]:
+    """Spacing in time judged from the records alone (each member's s against the common clock,
+    no lap-clock model): for each neighbour pair (a, b ahead by the slot difference dsigma) at
+    time t, the gap since b was where a is now, against dsigma times a's own last lap (the time
+    since a was there one lap ago); the error in metres at the lap's mean along-path speed
+    (L / lap). Where a has not flown a lap yet, the pair is not judged."""
+    L = length_m
+    hist = []
+    for tr in tracks:
+        t, sm = tr["t_unix_s"], np.maximum.accumulate(tr["s_m"])  # s flown, for interpolation
+        hist.append((t, sm))
+    t0 = max(h[0][0] for h in hist)
+    t1 = min(h[0][-1] for h in hist)
+    grid = np.arange(t0, t1, 1.0 / hz)
+    order = sorted(range(len(tracks)), key=lambda k: slots[k] % 1.0)
+    worst = np.full(len(grid), np.nan)
+    n_alive = np.zeros(len(grid), int)
+    pairs: list[list[float]] = []
+
+    def when(k: int, s_val: float) -> float:
+        t, sm = hist[k]
+        if s_val < sm[0]:
+            return math.nan
+        return float(np.interp(s_val, sm, t))
+
+    for gi, t in enumerate(grid):
+        errs = []
+        for i, a in enumerate(order):
+            b = order[(i + 1) % len(order)]
+            sa = float(np.interp(t, *hist[a]))
+            sb = float(np.interp(t, *hist[b]))
+            lap = t - when(a, sa - L)
+            tb = when(b, sb - ((sb - sa) % L))  # b's latest time at a's place
+            if not (math.isfinite(lap) and math.isfinite(tb)):
+                continue
+            dsig = (slots[b] - slots[a]) % 1.0
+            errs.append(((t - tb) - dsig * lap) * L / lap)
+        n_alive[gi] = len(tracks) if len(errs) == len(order) else 0
+        pairs.append(errs if n_alive[gi] else [])
+        if errs and n_alive[gi]:
+            worst[gi] = max(abs(e) for e in errs)
+    return {"t_unix_s": grid, "worst_m": worst, "n_alive": n_alive, "pairs": pairs}
 
 
 def _window(ser: dict[str, Any], t_from: float, n: int) -> dict[str, Any]:
@@ -207,7 +261,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--n", type=int, default=3, help="aircraft (default 3)")
     p.add_argument("--duration", type=float, default=300.0, help="s of tracking (default 300)")
     p.add_argument("--seeds", default="1", help="comma-separated seeds: one flight each")
-    p.add_argument("--spread", type=float, default=200.0, help="m between start loiters")
+    p.add_argument("--spread", type=float, default=30.0, help="m between start loiters")
+    p.add_argument("--gap", type=float, default=18.0,
+                   help="s between the members' starts (default 18: a third of the demo's "
+                   "~53 s lap)")  # fmt: skip
     p.add_argument("--start", type=float, nargs=3, default=(-100.0, 0.0, -100.0),
                    metavar=("N", "E", "D"), help="the middle start loiter (m, NED)")  # fmt: skip
     p.add_argument("--converge-m", type=float, default=10.0, help="converged: pairs within")

@@ -359,7 +359,6 @@ class FleetMember:
         ]
         lap = self.lap
         if lap is not None:  # spacing in time: the consensus on shat (peers propagated first)
-            lap.learn(s, now)
             if not lap.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, _wind(vs), self.u_ref):
                 self.n.extra["lap_unsolved"] = self.n.extra.get("lap_unsolved", 0) + 1
             reps = [co.PeerReport(r.slot, lap.shat(r.s_m + r.sdot_m_s * max(0.0, now - r.t_s)),

@@ -136,31 +136,21 @@ def along_path_speed(v_air_m_s: float, f1_I: Vec3, v_point_I: Vec3, wind_I: Vec3
 
 class LapClock:
     """Spacing in time (module docstring): ``shat(s)`` (m) for a path fixed to the target,
-    sampled in ``n`` segments of its closed length L.
-
-    A segment's duration is the time this aircraft took over it the last time it flew it
-    (:meth:`learn`), else the nominal one at the reference airspeed (:meth:`update`): the
-    airspeed an aircraft actually holds varies along the path (the energy control lags in the
-    turns), the same for every aircraft at the same place, so the time measured flying it
-    spaces the fleet in time where the nominal speed would see an error that is not there.
+    sampled at ``n`` points of its closed length L.
 
     :meth:`update` takes the target's attitude R_T_I, velocity (m/s NED) and angular velocity
     omega_T (rad/s, target frame), the wind (m/s NED) and the airspeed (m/s); it returns False
-    (and keeps the previous nominal speeds) where the along-path speed has no root somewhere."""
+    (and keeps the previous table) where the along-path speed has no root somewhere."""
 
     def __init__(self, path: Any, n: int = 256) -> None:
         self.L = L = float(path.length)
-        self.n = n
         self.s = np.linspace(0.0, L, n + 1)
         pts = [path.eval(float(x)) for x in self.s[:-1]]
         self.p_T = np.array([np.asarray(q[0], float) for q in pts])  # (n, 3) target frame
         self.f1_T = np.array([np.asarray(q[1], float) for q in pts])
         self.shat_grid = self.s.copy()  # before any update: shat = s
-        self.rate_ratio_max = 1.0  # max over the path of (L / T) / nu (nominal)
+        self.rate_ratio_max = 1.0  # max over the path of (L / T) / nu
         self.lap_s = math.nan  # T (s)
-        self.nominal = np.full(n, math.nan)  # s per segment at the reference airspeed
-        self.flown = np.full(n, math.nan)  # s per segment, as last flown
-        self._seg, self._t_in = -1, math.nan  # segment now, time (s) it was entered
 
     def update(
         self, R_T_I: Any, v_target_I: Any, omega_T: Any, wind_I: Any, v_air_m_s: float
@@ -171,34 +161,18 @@ class LapClock:
         d = vp - np.asarray(wind_I, float)
         b = np.einsum("ij,ij->i", f1, d)
         disc = b * b - np.einsum("ij,ij->i", d, d) + v_air_m_s * v_air_m_s
-        ok = bool(np.all(disc > 0.0))
-        nu = -b + np.sqrt(np.maximum(disc, 0.0))
-        ok = ok and bool(np.all(nu > 0.0))
-        if ok:
-            inv = 1.0 / np.append(nu, nu[0])
-            self.nominal = 0.5 * (inv[1:] + inv[:-1]) * np.diff(self.s)
-            T_nom = float(np.sum(self.nominal))
-            self.rate_ratio_max = float(np.max((self.L / T_nom) / nu))
-        self._table()
-        return ok
-
-    def learn(self, s_m: float, t_s: float) -> None:
-        """This aircraft at s (m) at time t (s): a segment left for the next one is timed; a
-        jump (more than one segment, or back) times nothing."""
-        k = int(((s_m % self.L) / self.L) * self.n) % self.n
-        if k == self._seg:
-            return
-        if k == (self._seg + 1) % self.n and math.isfinite(self._t_in) and t_s > self._t_in:
-            self.flown[self._seg] = t_s - self._t_in
-        self._seg, self._t_in = k, t_s
-
-    def _table(self) -> None:
-        d = np.where(np.isfinite(self.flown), self.flown, self.nominal)
-        if not np.all(np.isfinite(d)):
-            return
-        tau = np.concatenate(([0.0], np.cumsum(d)))
-        self.lap_s = float(tau[-1])
-        self.shat_grid = self.L * tau / self.lap_s
+        if not np.all(disc > 0.0):
+            return False
+        nu = -b + np.sqrt(disc)
+        if not np.all(nu > 0.0):
+            return False
+        inv = 1.0 / np.append(nu, nu[0])
+        tau = np.concatenate(([0.0], np.cumsum(0.5 * (inv[1:] + inv[:-1]) * np.diff(self.s))))
+        T = float(tau[-1])
+        self.lap_s = T
+        self.shat_grid = self.L * tau / T
+        self.rate_ratio_max = float(np.max((self.L / T) / nu))
+        return True
 
     def shat(self, s_m: float) -> float:
         """shat (m) of s (m), laps counted: continuous and increasing in s."""
