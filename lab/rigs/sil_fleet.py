@@ -110,7 +110,7 @@ def judge(a: argparse.Namespace, out: Path, codes: list[int | None], seed: int) 
             "verdict": m.get("verdict_status", "NO RUN"), "exit_code": codes[k],
         })  # fmt: skip
     s: dict[str, Any] = {"seed": seed, "config": str(a.config), "n": a.n, "aircraft": aircraft,
-                         "length_m": L, "link": {"loss": a.loss, "jitter_s": a.jitter}}  # fmt: skip
+                         "length_m": L}  # fmt: skip
     if any(tr is None for tr in tracks):
         s["fleet"] = {"converged": False, "why": "a member wrote no fleet.csv"}
     else:
@@ -274,10 +274,8 @@ def main(argv: list[str] | None = None) -> int:
         type=float,
         default=150.0,
         help="the spacing is judged from this many s after the last engagement "
-        "(default 150: the capture from 200 m apart takes ~130 s at du_max 1.5)",
+        "(default 150: the captures and the first laps)",
     )
-    p.add_argument("--loss", type=float, default=0.0, help="coordination loss (0..1)")
-    p.add_argument("--jitter", type=float, default=0.0, help="coordination jitter (s)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override for every member (repeatable)")  # fmt: skip
     p.add_argument("--no-progress", dest="progress", action="store_false")
@@ -288,8 +286,6 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--seeds {a.seeds!r}: expected integers separated by commas")
     if a.n < 2 or not a.config.is_file() or a.out.exists() and any(a.out.iterdir()):
         p.error("--n >= 2, an existing CONFIG and a new or empty --out are needed")
-    if a.loss or a.jitter:
-        p.error("--loss / --jitter: not wired in the SIL fleet yet (the firmware rig has them)")
     a.out.mkdir(parents=True, exist_ok=True)
     rows = []
     for seed in seeds:
