@@ -202,7 +202,9 @@ def _time_own_share() -> list[float]:
             return r
 
     reader_init = link_mod.DatagramReader.__init__
-    write = link_mod.Link._write
+    from mpf_mavlink.mavlink import link_send
+
+    write = link_send.LinkSender._write
 
     def init(self: Any, *a: Any) -> None:
         reader_init(self, *a)
@@ -215,7 +217,7 @@ def _time_own_share() -> list[float]:
         write(self, buf)
 
     link_mod.DatagramReader.__init__ = init  # type: ignore[method-assign, assignment]
-    link_mod.Link._write = timed_write  # type: ignore[method-assign]
+    link_send.LinkSender._write = timed_write  # type: ignore[method-assign]
     return out
 
 

@@ -206,7 +206,8 @@ def sil_vehicle_frame_us(frames: int = 3000) -> dict[str, Any]:
         if v.modes.behaviour != "offboard":
             raise RuntimeError(f"the vehicle did not enter OFFBOARD: {v.mode_name}")
         clock = time.perf_counter
-        plant, fdm_run = v.plant, v.plant._run
+        atm = v.plant.atmosphere
+        fdm_run = atm.run
         fdm = [0.0]
 
         def timed_run() -> bool:
@@ -215,7 +216,7 @@ def sil_vehicle_frame_us(frames: int = 3000) -> dict[str, Any]:
             fdm[0] += clock() - t
             return bool(ok)
 
-        plant._run = timed_run  # what every physics step calls (JSBSim's FGFDMExec.run)
+        atm.run = timed_run  # what every physics step calls (JSBSim's FGFDMExec.run)
 
         def fly(idle_s: float) -> tuple[Any, Any]:
             total, physics = np.empty(frames), np.empty(frames)
