@@ -19,7 +19,7 @@ sil_tracking: steady RMS |pt| (t >= 120 s after engagement, 360 s of tracking) i
 atmospheres, the demo otherwise unchanged. Bars: <= 2 m without wind, <= 3 m in 5 m/s wind
 with light turbulence (the 5 m/s steady case has no bar of its own; 3 m is quoted).
 
-sil_vehicle_frame_us: the demo's vehicle alone against a scripted peer (sim/sil_peer.py) in the
+sil_vehicle_frame_us: the demo's vehicle alone against a scripted peer (bench/sil_peer.py) in the
 same thread: its own cost per frame, without the bridge or the lockstep wait. Goal <= 150 us.
 ``frame_us_idle_between``: the same frames with the process asleep 0.3 ms after each, as it is
 in the SIL while the bridge computes (the in-SIL CPU per frame is about this figure, not
@@ -177,7 +177,7 @@ def sil_tracking(duration_s: float = 360.0) -> dict[str, Any]:
 
 def sil_vehicle_frame_us(frames: int = 3000) -> dict[str, Any]:
     """The demo's SIL vehicle alone: wall time (us) per 20 ms lockstep frame in OFFBOARD
-    (``step_once`` + reading the answer), with a scripted peer (:mod:`sim.sil_peer`) answering
+    (``step_once`` + reading the answer), with a scripted peer (:mod:`bench.sil_peer`) answering
     every ATTITUDE in the same thread, outside the timed calls. The vehicle's part of
     ``cpu_us_per_frame_vehicle`` without the bridge's process and the lockstep wait. Quantiles
     over the frames, and the JSBSim steps' share: on a loaded machine the 10th-50th
@@ -186,9 +186,9 @@ def sil_vehicle_frame_us(frames: int = 3000) -> dict[str, Any]:
 
     import numpy as np
 
+    from bench.sil_peer import ScriptedPeer
     from mpf_mavlink.config.schema import load_config
     from sim.sil import build_vehicle
-    from sim.sil_peer import ScriptedPeer
 
     cfg = load_config(DEMO)
     peer = ScriptedPeer()

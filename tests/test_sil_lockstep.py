@@ -2,7 +2,7 @@
 its peer answers frame k's ATTITUDE (the answer acts at the end of frame k+1 anyway). That must
 be a speed-up only: the flight is bit for bit the one of the strictly alternating lockstep.
 
-The peer (:mod:`sim.sil_peer`) runs in a process of its own, answering each ATTITUDE with body
+The peer (bench/sil_peer.py) runs in a process of its own, answering each ATTITUDE with body
 rates computed from that ATTITUDE alone, so any difference between the runs can only come from
 when the vehicle applies the answers; it sleeps before each answer, so that the overlapped
 vehicle really is stepping (or waiting) while the peer works, at whatever point the scheduler
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from sim.sil_peer import serve_forever
+from bench.sil_peer import serve_forever
 from sim.vehicle.config import VehicleConfig
 from sim.vehicle.vehicle import SimVehicle
 

@@ -14,7 +14,7 @@ max of |pt|, cross-track), for the fleet the spacing error (the along-path dista
 neighbours against their slots, from each bridge's fleet.csv on the common clock), the time to
 converge (every pair within ``--converge-m`` for good, counted from the last engagement), the
 RMS and max after it; after a kill the same for the survivors against the re-spaced slots (or
-the held ones). Figures: DIR/fleet_tracks.png, DIR/fleet_spacing.png (sim/fleet_figures.py).
+the held ones). Figures: DIR/fleet_tracks.png, DIR/fleet_spacing.png (lab/rigs/fleet_figures.py).
 """
 
 from __future__ import annotations
@@ -397,7 +397,7 @@ def _fleet_figures(
         n_alive=ser["n_alive"],
     )
     try:
-        from sim.fleet_figures import draw
+        from lab.rigs.fleet_figures import draw
 
         draw(out, n, ser, f.t_all, f.t_kill)
     except Exception as e:  # noqa: BLE001 - figures never fail a flight

@@ -127,7 +127,7 @@ def judge(a: argparse.Namespace, out: Path, codes: list[int | None], seed: int) 
         np.savez(out / "spacing.npz", t_unix_s=ser["t_unix_s"], worst_m=ser["worst_m"],
                  n_alive=ser["n_alive"])  # fmt: skip
         try:
-            from sim.fleet_figures import draw
+            from lab.rigs.fleet_figures import draw
 
             draw(out, a.n, ser, t_all, None, dirs)
         except Exception as e:  # noqa: BLE001 - figures never fail a flight

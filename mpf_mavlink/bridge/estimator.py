@@ -152,17 +152,6 @@ def _vec3_ok(a: object, bound: float) -> bool:
     return bool(-bound <= x <= bound and -bound <= y <= bound and -bound <= z <= bound)
 
 
-def _arr_ok(a: object, shape: tuple[int, ...], bound: float) -> bool:
-    """Finite, of that shape, every |element| <= bound (NaN fails the comparison)."""
-    if shape == (3,):
-        return _vec3_ok(a, bound)
-    try:
-        v = np.asarray(a, dtype=float)
-    except (TypeError, ValueError):
-        return False
-    return v.shape == shape and all(abs(x) <= bound for x in v.ravel().tolist())
-
-
 def _num_ok(x: object, lo: float, hi: float) -> bool:
     try:
         f = float(x)  # type: ignore[arg-type]

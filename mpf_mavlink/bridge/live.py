@@ -55,6 +55,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from mpf_mavlink import mavlink as mav
 from mpf_mavlink.bridge import fleet_hooks as fleet_link
 from mpf_mavlink.bridge.base import (
     EXIT_CHECK,
@@ -225,11 +226,8 @@ class Bridge:
     def _connect(self, res: BridgeResult) -> None:
         """Open the link, wait for the autopilot's HEARTBEAT and settle its flavour."""
         m, vl = self.m, self.vl
-        key = None
-        if m.signing_key_file:  # the signing module is loaded by a signed flight only
-            from mpf_mavlink.mavlink.signing import load_signing_key
-
-            key = load_signing_key(m.signing_key_file)
+        # (mav.*signing*: the package loads its signing module for a signed flight only)
+        key = mav.load_signing_key(m.signing_key_file) if m.signing_key_file else None
         allowed = [m.target_sysid] if (self.ctl.live and m.target_sysid is not None) else []
         tlog = None if is_lean(m) else Path(self.opts.out_dir) / "mavlink.tlog"
         vl.link = open_link(
@@ -239,9 +237,7 @@ class Bridge:
             vehicle_time=m.lockstep,  # lockstep: the tlog carries the simulation's time
         )  # fmt: skip
         if key is not None:
-            from mpf_mavlink.mavlink.signing import enable_signing
-
-            enable_signing(vl.link, key, m.signing_link_id)
+            mav.enable_signing(vl.link, key, m.signing_link_id)
         fleet_link.open_(self.fleet, m)  # fleet: the coordination link
         self.phase.set(State.WAIT_HEARTBEAT)
         hb = wait_heartbeat(vl.link, m.heartbeat_timeout_s, on_other=vl.before_heartbeat)

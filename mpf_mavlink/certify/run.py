@@ -12,7 +12,6 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
-import os
 import resource
 import sys
 import time
@@ -227,7 +226,3 @@ def _submit(
                 + f" ({fails} not ok; {60.0 * k / el:.1f} flights/min, "
                 f"{(len(todo) - k) * el / k / 60.0:.1f} min left)")  # fmt: skip
     return len(futs)
-
-
-def workers_default() -> int:
-    return os.cpu_count() or 1

@@ -65,8 +65,3 @@ def mat_T_vec(M: Mat3, v: Vec3) -> Vec3:
     (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = M
     v0, v1, v2 = v
     return (a0 * v0 + a1 * v1 + a2 * v2, b0 * v0 + b1 * v1 + b2 * v2, c0 * v0 + c1 * v1 + c2 * v2)
-
-
-def mat_mul(A: Mat3, B: Mat3) -> Mat3:
-    """A B, whose columns are A b1, A b2, A b3: R_B^C R_A^B = R_A^C."""
-    return mat_vec(A, B[0]), mat_vec(A, B[1]), mat_vec(A, B[2])

@@ -20,7 +20,7 @@ import math
 import os
 import shutil
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -252,32 +252,6 @@ def vector_floats(st: Any, name: str) -> Any:
         return v
     v = getattr(st, name)
     return v.tolist() if type(v) is np.ndarray else [float(x) for x in v]
-
-
-def make_state(**fields: object) -> PlantState:
-    """A snapshot from its fields; ``_euler`` (roll, pitch, yaw rad) stands in for ``R_B_N``
-    and the tuples of :data:`VECTOR_FLOATS` for the arrays until those are read."""
-    st = object.__new__(_Snapshot)
-    st.__dict__.update(fields)
-    return st
-
-
-@dataclass
-class PlantConfig:
-    """Constructor arguments of :class:`JSBSimPlant` (dataclass-friendly for configs)."""
-
-    root_dir: str | None = None  # None: the shipped sim/jsbsim_root
-    model: str = "x8"
-    dt: float = 1.0 / 120.0
-    lat0_deg: float = 47.397742  # origin (PX4 SITL default home)
-    lon0_deg: float = 8.545594
-    alt0_m: float = 488.0
-    position_ned: tuple[float, float, float] = (0.0, 0.0, -100.0)
-    heading: float = 0.0  # rad
-    airspeed: float = 16.0  # m/s
-    ground_alt_m: float | None = None  # terrain height (m AMSL); None: alt0_m
-    extra: dict[str, float] = field(default_factory=dict)  # extra property -> value before run_ic
-    throttle: float = 0.3  # initial throttle (propeller spun up to equilibrium at start)
 
 
 def _load(root_dir: Path, model: str, dt: float) -> tuple[Any, str]:
@@ -543,23 +517,6 @@ class JSBSimPlant:
             throttle=g_thr(),
         )
         return st
-
-    @classmethod
-    def from_config(cls, cfg: PlantConfig) -> JSBSimPlant:
-        return cls(
-            root_dir=cfg.root_dir,
-            model=cfg.model,
-            dt=cfg.dt,
-            lat0_deg=cfg.lat0_deg,
-            lon0_deg=cfg.lon0_deg,
-            alt0_m=cfg.alt0_m,
-            position_ned=cfg.position_ned,
-            heading=cfg.heading,
-            airspeed=cfg.airspeed,
-            ground_alt_m=cfg.ground_alt_m,
-            extra=dict(cfg.extra),
-            throttle=cfg.throttle,
-        )
 
 
 def _spin_up(plant: JSBSimPlant, thr_prop: str, thr_sign: float, throttle: float) -> None:

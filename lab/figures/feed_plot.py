@@ -1,4 +1,4 @@
-"""Truth, raw reports and the estimate of a target feed: ``python -m sim.target.feed_plot``.
+"""Truth, raw reports and the estimate of a target feed: ``python -m lab.figures.feed_plot``.
 
 The demo's boat (configs/default.yaml) reports itself through the SIL's feed
 (:mod:`sim.target.feed`: 1 Hz, 2 m and 0.3 m/s noise, 0.3 s latency, 10 % drop-outs, its clock
@@ -143,7 +143,7 @@ def plot(res: dict[str, Any], path: str, window: tuple[float, float]) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m sim.target.feed_plot", description=__doc__)
+    p = argparse.ArgumentParser(prog="python -m lab.figures.feed_plot", description=__doc__)
     p.add_argument("--config", default="configs/default.yaml")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     p.add_argument("--duration", type=float, default=600.0)
