@@ -394,14 +394,14 @@ def test_time_spacing_law_on_shat() -> None:
     m.lp.y = None
     m.step(0.0, 0.0, 20.0, vs, tgt)
     assert m.last["e_m"] == pytest.approx(0.0, abs=1e-6)
-    assert m.last["airspeed_sp_m_s"] == pytest.approx(m.u_ref)
+    assert m.last["airspeed_sp_m_s"] == pytest.approx(m.params.u_ref_m_s)
     m.lp.y = None
     s_late = float(np.interp(-5.0 * lap.L / lap.lap_s % lap.L, lap.shat_grid, lap.s))
     m.step(0.0, s_late - lap.L, 20.0, vs, tgt)
     e = -5.0 * lap.L / lap.lap_s
     assert m.last["e_m"] == pytest.approx(e, abs=1e-6)
     du = -m.f.du_max_m_s * math.tanh(m.f.k_c * e / m.f.du_max_m_s)
-    assert m.last["airspeed_sp_m_s"] == pytest.approx(min(m.u_ref + du, m.window[1]))
+    assert m.last["airspeed_sp_m_s"] == pytest.approx(min(m.params.u_ref_m_s + du, m.window[1]))
 
 
 def test_time_spacing_checks_on_the_demo() -> None:

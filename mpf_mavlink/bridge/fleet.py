@@ -190,16 +190,13 @@ class FleetMember:
         self.name = report_name(self.pid)
         self.slot_deg = float(self.f.slots_deg[self.f.member])
         self.slot = self.f.slots[self.f.member]
-        v = cfg.vehicle
-        u_ref = self.f.u_ref_m_s if self.f.u_ref_m_s is not None else float(v.airspeed_m_s)
+        u_ref = co.reference_speed(self.f, cfg.vehicle)
         self.params = co.CoordParams(self.L, self.f.k_c, self.f.du_max_m_s, u_ref)
-        self.u_ref = u_ref
-        # spacing in time: the lap clock of this path (shat of s, docs/fleet.md)
+        # spacing in time: the lap clock of this path (shat of s, docs/fleet.md), its table
+        # recomputed at the report rate (the target turns and the wind changes slowly)
         self.lap = co.LapClock(path) if self.f.spacing == "time" else None
-        lo = v.airspeed_min_m_s if v.airspeed_min_m_s is not None else 0.0
-        hi = v.airspeed_max_m_s if v.airspeed_max_m_s is not None else math.inf
-        m = self.f.airspeed_margin_m_s
-        self.window: tuple[float, float] = (float(lo + m), float(hi - m))
+        self.t_lap = -math.inf
+        self.window = co.airspeed_window(self.f, cfg.vehicle)
         self.signing = signing
         self.links: list[tuple[Any, bool]] = []  # (Link, written)
         self.peers: dict[int, _Peer] = {}
@@ -359,8 +356,11 @@ class FleetMember:
         ]
         lap = self.lap
         if lap is not None:  # spacing in time: the consensus on shat (peers propagated first)
-            if not lap.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, _wind(vs), self.u_ref):
-                self.n.extra["lap_unsolved"] = self.n.extra.get("lap_unsolved", 0) + 1
+            if now - self.t_lap >= 1.0 / self.f.rate_hz:
+                self.t_lap = now
+                u = self.params.u_ref_m_s
+                if not lap.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, _wind(vs), u):
+                    self.n.extra["lap_unsolved"] = self.n.extra.get("lap_unsolved", 0) + 1
             reps = [co.PeerReport(r.slot, lap.shat(r.s_m + r.sdot_m_s * max(0.0, now - r.t_s)),
                                   0.0, now) for r in reps]  # fmt: skip
             shat = lap.shat(s)
@@ -372,7 +372,7 @@ class FleetMember:
         self.t_prev = now
         du = self.lp(du_raw, dt)
         if lap is not None:  # the energy control holds u_ref + du of airspeed
-            asp = min(max(self.u_ref + du, self.window[0]), self.window[1])
+            asp = min(max(self.params.u_ref_m_s + du, self.window[0]), self.window[1])
         else:
             u = max(0.0, self.params.u_ref_m_s + du)
             asp = path_airspeed(self.f, self.path, self.window, u, s, vs, tgt)

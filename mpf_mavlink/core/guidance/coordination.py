@@ -180,6 +180,20 @@ class LapClock:
         return laps * self.L + float(np.interp(s_m - laps * self.L, self.s, self.shat_grid))
 
 
+def reference_speed(fleet: Any, vehicle: Any) -> float:
+    """u_ref (m/s): ``fleet.u_ref_m_s``, else the vehicle's cruise airspeed."""
+    return float(fleet.u_ref_m_s if fleet.u_ref_m_s is not None else vehicle.airspeed_m_s)
+
+
+def airspeed_window(fleet: Any, vehicle: Any) -> tuple[float, float]:
+    """The airspeeds (m/s) the coordination may ask: the vehicle's window less
+    ``fleet.airspeed_margin_m_s`` at each end (0 and inf where the vehicle gives none)."""
+    lo = vehicle.airspeed_min_m_s if vehicle.airspeed_min_m_s is not None else 0.0
+    hi = vehicle.airspeed_max_m_s if vehicle.airspeed_max_m_s is not None else math.inf
+    m = fleet.airspeed_margin_m_s
+    return float(lo + m), float(hi - m)
+
+
 def respaced_slots(slots: Sequence[float], alive: Sequence[bool]) -> list[float | None]:
     """The slots the living members fly after a loss (``on_peer_lost: respace``): in their
     configured order, evenly spaced from the first living one's own slot; None for the dead.
@@ -274,7 +288,7 @@ def fleet_checks(
     """
     from mpf_mavlink.core.guidance.checks import CheckResult
 
-    if getattr(fleet, "spacing", "path") == "time":
+    if fleet.spacing == "time":
         return _time_checks(fleet, vehicle, path, target, wind_I, horizon_s, speed_tau_s)
     n = len(fleet.slots_deg)
     m = convergence_margin(fleet.k_c, n, fleet.rate_hz, fleet.max_latency_s + fleet.filter_tau_s,
@@ -288,7 +302,7 @@ def fleet_checks(
         f"+ filter + speed lag)",
         {"margin": m, "tau_s": tau},
     )
-    u = fleet.u_ref_m_s if fleet.u_ref_m_s is not None else float(vehicle.airspeed_m_s)
+    u = reference_speed(fleet, vehicle)
     L = float(path.length)
     ss = [L * k / 240.0 for k in range(240)]
     ts = [horizon_s * k / 12.0 for k in range(13)]
@@ -307,10 +321,11 @@ def fleet_checks(
             tangents.append((float(f1[0]), float(f1[1]), float(f1[2])))
             vps.append(tuple(float(st.velocity[k] + rot[k]) for k in range(3)))  # type: ignore[arg-type]
     fe = feasibility(tangents, vps, wind_I, u, fleet.du_max_m_s)
-    lo_w = (vehicle.airspeed_min_m_s or 0.0) + fleet.airspeed_margin_m_s
-    hi_w = (vehicle.airspeed_max_m_s or math.inf) - fleet.airspeed_margin_m_s
-    figs = {"airspeed_lo_m_s": fe.lo, "airspeed_hi_m_s": fe.hi, "with_du_lo_m_s": fe.lo_full,
-            "with_du_hi_m_s": fe.hi_full, "window_lo_m_s": lo_w, "window_hi_m_s": hi_w}  # fmt: skip
+    lo_w, hi_w = airspeed_window(fleet, vehicle)
+    figs: dict[str, float | bool | None] = {
+        "airspeed_lo_m_s": fe.lo, "airspeed_hi_m_s": fe.hi, "with_du_lo_m_s": fe.lo_full,
+        "with_du_hi_m_s": fe.hi_full, "window_lo_m_s": lo_w, "window_hi_m_s": hi_w,
+    }  # fmt: skip
     if fe.lo < lo_w or fe.hi > hi_w:
         st_, why = "fail", "outside"
     elif fe.lo_full < lo_w or fe.hi_full > hi_w:
@@ -344,7 +359,7 @@ def _time_checks(
     from mpf_mavlink.core.guidance.checks import CheckResult
 
     n = len(fleet.slots_deg)
-    u = fleet.u_ref_m_s if fleet.u_ref_m_s is not None else float(vehicle.airspeed_m_s)
+    u = reference_speed(fleet, vehicle)
     lap = LapClock(path, 240)
     ratios, laps, unsolved = [], [], []
     for k in range(13):
@@ -366,8 +381,7 @@ def _time_checks(
         "largest (L/T)/nu; tau: 1/rate + latency + filter + speed lag)",
         {"margin": 0.5 * math.pi - x, "tau_s": tau, "gain_factor": g},
     )
-    lo_w = (vehicle.airspeed_min_m_s or 0.0) + fleet.airspeed_margin_m_s
-    hi_w = (vehicle.airspeed_max_m_s or math.inf) - fleet.airspeed_margin_m_s
+    lo_w, hi_w = airspeed_window(fleet, vehicle)
     du = fleet.du_max_m_s
     if unsolved or not lo_w <= u <= hi_w:
         st_ = "fail"
