@@ -88,12 +88,10 @@ class FleetCounts:
         return d
 
 
-def path_airspeed(
-    f: FleetConfig, path: Any, window: tuple[float, float], u: float, s: float, vs: Any, tgt: Any
-) -> float:
-    """Spacing on the path: the airspeed set-point (m/s) that moves the aircraft at s (m) along
-    the path at u (m/s), |u f1 + v_point - wind| at the path point ``f.lead_s`` ahead, in the
-    airspeed ``window`` (``vs`` the VehicleState, ``tgt`` the TargetState)."""
+def path_airspeed(f: FleetConfig, path: Any, u: float, s: float, vs: Any, tgt: Any) -> float:
+    """Spacing on the path: the airspeed (m/s) that moves the aircraft at s (m) along the path
+    at u (m/s), |u f1 + v_point - wind| at the path point ``f.lead_s`` ahead, before the
+    airspeed window (``vs`` the VehicleState, ``tgt`` the TargetState)."""
     pt = path.eval(s + u * f.lead_s)
     R = tgt.R_T_I
     p_d, f1T = pt[0], pt[1]
@@ -116,7 +114,7 @@ def path_airspeed(
         w1 = vs.R_W_I[:, 0]
         u_now = sum(float((v_a * w1[k] + wind[k] - vp[k]) * f1n[k]) for k in range(3))
         a += k_u * (u - u_now)
-    return min(max(a, window[0]), window[1])
+    return a
 
 
 def _wind(vs: Any) -> tuple[float, float, float]:
@@ -372,10 +370,13 @@ class FleetMember:
         self.t_prev = now
         du = self.lp(du_raw, dt)
         if lap is not None:  # the energy control holds u_ref + du of airspeed
-            asp = min(max(self.params.u_ref_m_s + du, self.window[0]), self.window[1])
+            want = self.params.u_ref_m_s + du
         else:
-            u = max(0.0, self.params.u_ref_m_s + du)
-            asp = path_airspeed(self.f, self.path, self.window, u, s, vs, tgt)
+            want = path_airspeed(self.f, self.path, max(0.0, self.params.u_ref_m_s + du), s, vs,
+                                 tgt)  # fmt: skip
+        asp = min(max(want, self.window[0]), self.window[1])
+        if asp != want:  # the window takes part of what the coordination asks: counted
+            self.n.extra["airspeed_clipped"] = self.n.extra.get("airspeed_clipped", 0) + 1
         self.last = {"e_m": e, "du_m_s": du, "airspeed_sp_m_s": asp, "n_peers": float(n)}
         row = (now, t_mission, s, sdot, e, du, asp, float(n), mine * 360.0, shat)
         self.record.add(row, now)
