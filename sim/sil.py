@@ -395,6 +395,7 @@ def _bridge_run(
 ) -> None:
     """Child process: fly the bridge; results and log lines go to ``q``."""
     from mpf_mavlink.bridge.live import BridgeOptions, run_bridge
+    from mpf_mavlink.bridge.preflight import simulated_plant
     from mpf_mavlink.errors import MpfError
 
     def on_int(signum: int, frame: Any) -> None:
@@ -406,7 +407,13 @@ def _bridge_run(
     try:
         res = run_bridge(
             cfg,
-            BridgeOptions(url=url, out_dir=Path(out), duration_s=duration, force=force),
+            BridgeOptions(
+                url=url,
+                out_dir=Path(out),
+                duration_s=duration,
+                force=force,
+                plant=simulated_plant(cfg),
+            ),  # fmt: skip
             log=lambda s: q.put(("log", s)),
         )
         q.put(("result", res))

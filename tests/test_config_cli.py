@@ -164,3 +164,34 @@ def test_a_config_written_out_loads_back_to_the_same_config(path):
     cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / path)
     back = config_from_dict(yaml.safe_load(yaml.safe_dump(config_to_dict(cfg))), "written")
     assert dataclasses.replace(back, source=cfg.source) == cfg
+
+
+def test_run_keeps_the_simulators_sections_as_read_and_never_loads_their_schema(tmp_path):
+    # the live bridge flies what the link says: `run` neither validates nor imports the sil
+    # and aircraft sections (a typo there is the simulator's error, raised where one is built)
+    import subprocess
+    import sys
+
+    from mpf_mavlink.config import load_config
+    from mpf_mavlink.config.schema import config_to_dict
+    from mpf_mavlink.errors import ConfigError
+
+    src = Path(__file__).resolve().parents[1] / "configs" / "bridge_px4.yaml"
+    bad = ["sil.bogus_key=1"]
+    with pytest.raises(ConfigError, match="sil.bogus_key"):
+        load_config(src, bad)
+    cfg = load_config(src, bad, sim_sections=False)
+    # written out as read, so the run directory keeps what the file said
+    assert config_to_dict(cfg)["sil"]["bogus_key"] == 1
+    with pytest.raises(ConfigError, match="sil.bogus_key"):
+        _ = cfg.sil  # read on first use, validated like the file
+    good = load_config(src, sim_sections=False)
+    assert good.sil == load_config(src).sil
+    code = (
+        "import sys\nfrom mpf_mavlink.config import load_config\n"
+        "import mpf_mavlink.bridge.live, mpf_mavlink.cli.run\n"
+        f"load_config({str(src)!r}, sim_sections=False)\n"
+        "print('mpf_mavlink.config.sil' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False", out.stderr

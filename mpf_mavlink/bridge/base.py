@@ -7,9 +7,12 @@ import enum
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from mpf_mavlink.config.schema import Config
+
+if TYPE_CHECKING:
+    from mpf_mavlink.bridge.preflight import SimulatedPlant
 
 
 class State(enum.IntEnum):
@@ -59,6 +62,9 @@ class BridgeOptions:
     plots: bool | None = None
     reengage: int | None = None  # None: mavlink.reengage_max
     force: bool = False  # engage even when a pre-flight check fails
+    #: the simulated vehicle behind the link, for the checks (the SIL gives it); None: the
+    #: vehicle is what the link says (its measured wind, airspeed and state), as on a real one
+    plant: SimulatedPlant | None = None
 
 
 @dataclass

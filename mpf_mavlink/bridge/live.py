@@ -275,7 +275,9 @@ class Bridge:
                 "estimated from ground velocity and airspeed"
             )
         self.phase.set(State.CHECKS)
-        failed = preflight_checks(self.ctl, self.cfg, self.m.mission_duration_s, res, self.log)
+        failed = preflight_checks(
+            self.ctl, self.cfg, self.m.mission_duration_s, res, self.log, self.opts.plant
+        )
         if failed and self.opts.force:
             failed = force_through(failed, res, vl, self.log)
         # the wind the monitor holds the flight to: what the checks accepted plus its margin

@@ -8,7 +8,7 @@ import signal
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mpf_mavlink.bridge.base import EXIT_OK, EXIT_SAFETY, BridgeResult, Phase, State, _Stop
 from mpf_mavlink.bridge.control_step import ControlLoop
@@ -28,6 +28,9 @@ from mpf_mavlink.mavlink.modes import (
     px4_mode_from_name,
 )
 from mpf_mavlink.mavlink.wire_limits import MAV_CMD_DO_SET_MODE
+
+if TYPE_CHECKING:
+    from mpf_mavlink.bridge.preflight import SimulatedPlant
 
 #: Extra mode requests a session may send for ACKs lost while the HEARTBEAT shows the mode.
 MODE_REASKS = 8
@@ -60,11 +63,13 @@ def preflight_checks(
     duration_s: float,
     res: BridgeResult,
     log: Callable[[str], None],
+    plant: SimulatedPlant | None = None,
 ) -> list[Any]:
     """The pre-flight checks of a ``duration_s`` (s) mission from the vehicle's state now, with
     what it measures (wind, airspeed, a live target's motion); those failed (CheckResult). The
-    checks' text goes to ``res.checks`` and ``log``."""
-    from mpf_mavlink.bridge.preflight import format_checks, run_checks, simulated_plant
+    checks' text goes to ``res.checks`` and ``log``. ``plant``: the simulated vehicle behind the
+    link when there is one (:attr:`BridgeOptions.plant`)."""
+    from mpf_mavlink.bridge.preflight import format_checks, run_checks
 
     ctl.set_origin()  # mission time 0: the checks' and the scripted target's origin
     est, _ = ctl.est.estimate()
@@ -80,7 +85,6 @@ def preflight_checks(
             initial_attitude_rpy_rad=matrix_to_euler(R_W_I),
         ),
     )
-    plant = simulated_plant(cfg)
     if plant is not None:  # the SIL's own start gives way to where the aircraft is
         plant = dataclasses.replace(plant, initial_position_ned_m=p0)
     # what the autopilot reports now (wind, airspeed, the live target's motion), not what

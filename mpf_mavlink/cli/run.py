@@ -48,7 +48,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     from mpf_mavlink.config.schema import load_config
     from mpf_mavlink.runs.rundir import prepare_out_dir
 
-    cfg = load_config(args.config, args.overrides)
+    # the simulator's sections are not read: the bridge flies what the link says
+    cfg = load_config(args.config, args.overrides, sim_sections=False)
     check_host(args.connect, "--connect")
     out = prepare_out_dir(args.out or default_out("run", cfg.name))
     opts = BridgeOptions(

@@ -18,7 +18,7 @@ from dataclasses import MISSING
 from typing import Any, Literal
 
 from mpf_mavlink.config.build import describe_check
-from mpf_mavlink.config.schema import SECTIONS, Config
+from mpf_mavlink.config.schema import Config, section_types
 
 COMMAND = "python -m mpf_mavlink.config.reference > docs/configuration.md"
 
@@ -128,7 +128,7 @@ def reference() -> str:
             out += [f"## `{f.name}`", "", f"{_type(hints[f.name])}, default {_default(f)}.", ""]
         else:
             _section(f.name, cls, out)
-    for name, cls in SECTIONS.items():
+    for name, cls in section_types().items():
         _section(name, cls, out)
     return "\n".join(out).rstrip() + "\n"
 

@@ -10,11 +10,12 @@ docs/configuration.md, is generated from these classes (:mod:`mpf_mavlink.config
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, overload
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 import yaml
 
@@ -22,9 +23,11 @@ from mpf_mavlink.config.bridge import AdapterSection, MavlinkConfig
 from mpf_mavlink.config.build import S, _build, parse_yaml
 from mpf_mavlink.config.fields import Vec3, _doc, _fail, _nonneg, _open, _pos, _rng
 from mpf_mavlink.config.fleet import FleetConfig, validate_fleet  # fleet: cooperative MPF
-from mpf_mavlink.config.sil import AircraftConfig, SilConfig
 from mpf_mavlink.config.target import TargetEstimatorConfig
 from mpf_mavlink.errors import ConfigError
+
+if TYPE_CHECKING:
+    from mpf_mavlink.config.sil import AircraftConfig, SilConfig
 
 
 # ----------------------------------------------------------------------------- sections
@@ -337,15 +340,33 @@ class EnvelopeConfig:
     )
 
 
-#: the sections of the bridge, the SIL vehicle and the target estimator, by their YAML name
+#: the sections of the bridge and the target estimator, by their YAML name
 SECTIONS: dict[str, type] = {
     "mavlink": MavlinkConfig,
     "adapter": AdapterSection,
     "target_estimator": TargetEstimatorConfig,
-    "sil": SilConfig,
-    "aircraft": AircraftConfig,
     "fleet": FleetConfig,
 }
+#: the sections the simulator owns (mpf_mavlink.config.sil): validated with the rest where a
+#: simulated flight may be built (load_config's default), kept as read where only the bridge
+#: flies (``sim_sections=False``: ``mpf-mavlink run``), which never reads them
+SIM_SECTIONS = ("sil", "aircraft")
+
+
+def section_types() -> dict[str, type]:
+    """Every section's type by its YAML name, the simulator's included (imported here)."""
+    from mpf_mavlink.config.sil import AircraftConfig, SilConfig
+
+    sim = {"sil": SilConfig, "aircraft": AircraftConfig}
+    order = ("mavlink", "adapter", "target_estimator", "sil", "aircraft", "fleet")
+    return {name: sim[name] if name in sim else SECTIONS[name] for name in order}
+
+
+@dataclass(frozen=True)
+class _Unread:
+    """A simulator's section as the file gave it, validated on first use."""
+
+    data: dict[str, Any]
 
 
 @dataclass(frozen=True)
@@ -374,6 +395,8 @@ class Config:
         value = self.extra.get(name)
         if value is None:
             return cls()
+        if isinstance(value, _Unread):
+            value = self._read_sim_sections()[name]
         if not isinstance(value, cls):
             raise TypeError(f"section {name} is a {type(value).__name__}, not {cls.__name__}")
         return value
@@ -390,12 +413,26 @@ class Config:
     def target_estimator(self) -> TargetEstimatorConfig:
         return self._get("target_estimator", TargetEstimatorConfig)
 
+    def _read_sim_sections(self) -> dict[str, Any]:
+        """Validate the simulator's sections kept as read (:data:`SIM_SECTIONS`), in place."""
+        types = section_types()
+        for name in SIM_SECTIONS:
+            value = self.extra.get(name)
+            if isinstance(value, _Unread):
+                self.extra[name] = _build(types[name], value.data, self.source, name)
+        _validate_sim(self)
+        return self.extra
+
     @property
     def sil(self) -> SilConfig:
+        from mpf_mavlink.config.sil import SilConfig
+
         return self._get("sil", SilConfig)
 
     @property
     def aircraft(self) -> AircraftConfig:
+        from mpf_mavlink.config.sil import AircraftConfig
+
         return self._get("aircraft", AircraftConfig)
 
     @overload
@@ -412,9 +449,10 @@ class Config:
     def section(self, name: Literal["fleet"]) -> FleetConfig: ...
     def section(self, name: str) -> object:
         """The section called ``name`` (one of :data:`SECTIONS`), with its type."""
-        if name not in SECTIONS:
-            raise KeyError(f"no configuration section {name!r} (known: {', '.join(SECTIONS)})")
-        return self._get(name, SECTIONS[name])
+        types = SECTIONS if name in SECTIONS else section_types()
+        if name not in types:
+            raise KeyError(f"no configuration section {name!r} (known: {', '.join(types)})")
+        return self._get(name, types[name])
 
 
 def bank_limit_rad(cfg: Config) -> float:
@@ -453,8 +491,13 @@ def _validate_cross(cfg: Config) -> None:
         )
 
 
-def load_config(path: str | Path, overrides: list[str] | None = None) -> Config:
-    """Read, override and validate a YAML configuration; raise ConfigError naming key and file."""
+def load_config(
+    path: str | Path, overrides: list[str] | None = None, *, sim_sections: bool = True
+) -> Config:
+    """Read, override and validate a YAML configuration; raise ConfigError naming key and file.
+
+    ``sim_sections=False``: the simulator's sections (:data:`SIM_SECTIONS`) are kept as read and
+    validated only if something reads them (the live bridge does not)."""
     src = str(path)
     try:
         text = Path(path).read_text()
@@ -468,7 +511,7 @@ def load_config(path: str | Path, overrides: list[str] | None = None) -> Config:
     for ov in overrides or []:
         apply_override(raw, ov, src)
     _follow_sil_flavour(raw, overrides or [])
-    return config_from_dict(raw, src)
+    return config_from_dict(raw, src, sim_sections=sim_sections)
 
 
 def _follow_sil_flavour(raw: dict[str, Any], overrides: list[str]) -> None:
@@ -511,30 +554,41 @@ def apply_override(raw: dict[str, Any], spec: str, src: str = "--set") -> None:
     node[parts[-1]] = value
 
 
-def config_from_dict(raw: dict[str, Any], src: str = "<config>") -> Config:
-    """Validate a raw mapping into a :class:`Config` (every section of :data:`SECTIONS` too).
+def config_from_dict(
+    raw: dict[str, Any], src: str = "<config>", *, sim_sections: bool = True
+) -> Config:
+    """Validate a raw mapping into a :class:`Config` (every section of :data:`SECTIONS` too, and
+    those of :data:`SIM_SECTIONS` unless ``sim_sections`` is False: then on first use).
 
     Checks across sections (a section's ``validate(cfg, src)``) run once the whole
     configuration is built and raise ConfigError like the rest."""
-    base = {k: v for k, v in raw.items() if k not in SECTIONS}
+    base = {k: v for k, v in raw.items() if k not in SECTIONS and k not in SIM_SECTIONS}
     cfg = _build(Config, base, src, "")
     extra: dict[str, Any] = {}
-    for name, cls in SECTIONS.items():
+    for name in [*SECTIONS, *SIM_SECTIONS]:
         data = raw.get(name, {})
         if data is None:
             data = {}
         if not isinstance(data, dict):
             raise _fail(src, name, "must be a mapping")
-        extra[name] = _build(cls, data, src, name)
+        if name in SECTIONS:
+            extra[name] = _build(SECTIONS[name], data, src, name)
+        else:
+            extra[name] = _Unread(copy.deepcopy(data))
     cfg = dataclasses.replace(cfg, source=src, extra=extra)
     _validate_cross(cfg)
     cfg.mavlink.validate(src, cfg.target.type)
     cfg.adapter.validate(src)
     cfg.target_estimator.validate(src)
-    cfg.sil.validate(src, cfg.target.type, cfg.mavlink)
-    cfg.aircraft.validate(src, cfg.sil)
     validate_fleet(cfg, src)
+    if sim_sections:
+        cfg._read_sim_sections()
     return cfg
+
+
+def _validate_sim(cfg: Config) -> None:
+    cfg.sil.validate(cfg.source, cfg.target.type, cfg.mavlink)
+    cfg.aircraft.validate(cfg.source, cfg.sil)
 
 
 def config_to_dict(cfg: Config, omit: tuple[str, ...] = ()) -> dict[str, Any]:
@@ -560,7 +614,12 @@ def config_to_dict(cfg: Config, omit: tuple[str, ...] = ()) -> dict[str, Any]:
         for f in dataclasses.fields(cfg)
         if not f.metadata.get("internal")
     }
-    out.update({name: plain(cfg._get(name, cls)) for name, cls in SECTIONS.items()})
+    for name in [*SECTIONS, *SIM_SECTIONS]:
+        value = cfg.extra.get(name)
+        if isinstance(value, _Unread):  # as read: the run that kept it never validated it
+            out[name] = copy.deepcopy(value.data)
+        else:
+            out[name] = plain(cfg.section(name))  # type: ignore[call-overload]
     for k in omit:
         out.pop(k, None)
     return out
