@@ -185,7 +185,7 @@ def run_closure(root: Path, fly: bool) -> dict[str, Any]:
     if not fly:
         # what `mpf-mavlink run` has imported when it starts the bridge (cli/run.py: cmd_run)
         body = (
-            "import sys\nfrom mpf_mavlink.cli.main import build_parser\nbuild_parser()\n"
+            "import sys\nfrom mpf_mavlink.cli.main import build_parser\nbuild_parser('run')\n"
             "import mpf_mavlink.cli.run, mpf_mavlink.bridge.live, mpf_mavlink.config.schema\n"
             "import mpf_mavlink.runs.rundir"
         )

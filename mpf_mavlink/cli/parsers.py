@@ -1,6 +1,5 @@
-"""The argument definitions of the sub-commands ``replay``, ``vehicle``, ``campaign``,
-``certify`` and ``compare``: cheap to build, each handler's module imported only when its
-command runs, so that ``mpf-mavlink run`` does not load the others (issue 44)."""
+"""The argument definitions of the sub-commands (``run``'s is in :mod:`.run`): cheap to
+build, each handler's module imported only when its command runs."""
 
 from __future__ import annotations
 
@@ -26,6 +25,66 @@ def _lazy(module: str, name: str) -> Callable[[argparse.Namespace], int]:
         return int(getattr(importlib.import_module(module), name)(args))
 
     return handler
+
+
+SET_HELP = (
+    "override one configuration key, e.g. --set guidance.K_R=3 or "
+    "--set kinematic.autopilot_bandwidth_rad_s=2.5 (repeatable; validated like the file)"
+)
+
+
+def add_config(p: argparse.ArgumentParser) -> None:
+    p.add_argument("config", metavar="CONFIG", help="scenario YAML file (see configs/)")
+    p.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help=SET_HELP
+    )
+
+
+def add_check_parser(sub: Any) -> None:
+    c = sub.add_parser(
+        "check",
+        help="run the pre-flight checks (Assumption 1, gain condition, feasibility)",
+        description="Run the pre-flight checks for a scenario; exit 3 when one fails.",
+        epilog=exit_codes_epilog("check"),
+    )
+    add_config(c)
+    c.add_argument("--json", action="store_true", help="also print the figures as JSON")
+    c.set_defaults(func=_lazy("mpf_mavlink.cli.commands", "cmd_check"))
+
+
+def add_sim_parser(sub: Any) -> None:
+    s = sub.add_parser(
+        "sim",
+        help="simulate a scenario and write a run directory",
+        description="Simulate a scenario and write a run directory: timeseries.csv, metrics.json "
+        "and the paper's figures as PNG. With sil.link: none (the default) the paper's kinematic "
+        "closed loop runs in-process; with sil.link: udp the simulated vehicle (JSBSim aircraft or "
+        "kinematic plant behind a PX4 / ArduPlane MAVLink endpoint) and the bridge fly the mission "
+        "as two processes over UDP loopback, the metrics come from the plant's truth and the "
+        "bridge's tlog is kept (see configs/default.yaml).",
+        epilog=exit_codes_epilog("sim"),
+    )
+    add_config(s)
+    s.add_argument("--out", type=Path, help="run directory (default: runs/<time>-sim-<name>)")
+    s.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    s.add_argument(
+        "--force", action="store_true",
+        help="fly even when a pre-flight check fails (mpf-mavlink check): the verdict still "
+        "judges it",
+    )  # fmt: skip
+    s.set_defaults(func=_lazy("mpf_mavlink.cli.commands", "cmd_sim"))
+
+
+def add_plot_parser(sub: Any) -> None:
+    pl = sub.add_parser(
+        "plot",
+        help="re-draw the figures of a run directory",
+        description="Re-draw the PNG figures of a run directory (sim, run or replay).",
+        epilog=exit_codes_epilog("plot"),
+    )
+    pl.add_argument("run_dir", metavar="RUN_DIR", type=Path)
+    pl.set_defaults(func=_lazy("mpf_mavlink.cli.commands", "cmd_plot"))
 
 
 REPLAY_DESCRIPTION = """\
@@ -127,7 +186,7 @@ example:
 SERVE_HELP = "MAVLink connection to serve: udpout:HOST:PORT, udpin:HOST:PORT or tcpin:HOST:PORT"
 
 
-def add_vehicle_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentParser:
+def add_vehicle_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Add the ``vehicle`` sub-command (with ``func``)."""
     p: argparse.ArgumentParser = subparsers.add_parser(
         "vehicle",
@@ -223,7 +282,7 @@ def add_certify_parser(sub: Any) -> None:
     c.set_defaults(func=_lazy("mpf_mavlink.cli.certify", "cmd_certify"))
 
 
-def add_compare_parser(subparsers: Any, add_config: Any) -> argparse.ArgumentParser:
+def add_compare_parser(subparsers: Any) -> argparse.ArgumentParser:
     p: argparse.ArgumentParser = subparsers.add_parser(
         "compare",
         help="fly the same mission with MPF and the baseline guidance laws; one table",
