@@ -259,7 +259,7 @@ def add_certify_parser(sub: Any) -> None:
             "sil.autopilot_profile auto unless CONFIG names one) under conditions drawn from "
             "FILE (configs/certify/*.yaml; docs/certify.md), on dask.distributed as `campaign` "
             "does: as many flights as a one-sided bound of the quantile at the confidence needs "
-            "(59 for 95 %% at 95 %%) or --flights N. Writes DIR/flights.csv (row by row; the "
+            "(59 for 95 % at 95 %) or --flights N. Writes DIR/flights.csv (row by row; the "
             "same command again flies only the missing flights), DIR/certificate.json and "
             "DIR/report.md with ecdf.png and conditions.png."
         ),
@@ -267,8 +267,10 @@ def add_certify_parser(sub: Any) -> None:
     )
     c.add_argument("config", metavar="CONFIG", type=Path, help="the mission's configuration")
     c.add_argument("--autopilot", required=True, choices=("px4", "arduplane"))
-    c.add_argument("--conditions", required=True, type=Path, help="conditions YAML")
-    c.add_argument("--out", required=True, type=Path, help="output directory (resumable)")
+    c.add_argument("--conditions", required=True, type=Path, metavar="FILE",
+                   help="conditions YAML")  # fmt: skip
+    c.add_argument("--out", required=True, type=Path, metavar="DIR",
+                   help="output directory (resumable)")  # fmt: skip
     c.add_argument("--flights", type=int, default=None,
                    help="flights to fly (default: what the bound needs)")  # fmt: skip
     c.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
