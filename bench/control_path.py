@@ -104,13 +104,13 @@ def controller_path_us(passes: int = 5) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="mpf-bench-ctl-") as d:
         tlog, config = demo_tlog(Path(d))
         cfg, calls = record_calls(tlog, config)
-    from mpf_mavlink.bridge.controller import Controller
+    from mpf_mavlink.bridge.controller import Controller, ControlSetup
 
     n = sum(1 for k, _ in calls if k == "step")
     _freeze()
     per: list[float] = []
     for _ in range(passes):
-        ctl = Controller(cfg)
+        ctl = Controller(ControlSetup.of(cfg))
         t0 = time.perf_counter()
         issue(ctl, calls)
         per.append((time.perf_counter() - t0) / n * 1e6)
@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     issue them N times (for valgrind, which would spend minutes on the recording replay)."""
     import pickle
 
-    from mpf_mavlink.bridge.controller import Controller
+    from mpf_mavlink.bridge.controller import Controller, ControlSetup
 
     p = argparse.ArgumentParser(prog="python -m bench.control_path")
     p.add_argument("tlog", nargs="?")
@@ -155,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
         a.save.write_bytes(pickle.dumps((cfg, calls)))
     _freeze()
     for _ in range(a.passes):
-        issue(Controller(cfg), calls)
+        issue(Controller(ControlSetup.of(cfg)), calls)
     print(f"steps {sum(1 for k, _ in calls if k == 'step')} calls {len(calls)}", file=sys.stderr)
     return 0
 

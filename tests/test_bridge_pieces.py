@@ -15,7 +15,7 @@ import pytest
 from mpf_mavlink.bridge import control_step, link_io, session, streams
 from mpf_mavlink.bridge.base import BridgeResult, Phase, State, _Stop
 from mpf_mavlink.bridge.control_step import ControlLoop
-from mpf_mavlink.bridge.controller import Controller
+from mpf_mavlink.bridge.controller import Controller, ControlSetup
 from mpf_mavlink.bridge.link_io import LinkHandlers, VehicleLink
 from mpf_mavlink.bridge.operator import OperatorDisplay
 from mpf_mavlink.bridge.session import Session
@@ -235,7 +235,7 @@ def test_streams_not_reached_say_which_and_how_fast(clock: FakeClock) -> None:
 def make_session(v: FakeVehicle) -> tuple[Session, ControlLoop, Phase]:
     vl = vehicle_link(v)
     cfg = px4_cfg()
-    ctl = Controller(cfg, vl.m)
+    ctl = Controller(ControlSetup.of(cfg, vl.m))
     phase = Phase(lambda s: None)
     loop = ControlLoop(ctl, vl, phase, lambda st: None, lambda st: None)
     s = Session(cfg, loop, phase, OperatorDisplay(False), lambda s: None)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpf_mavlink.bridge.controller import Controller, mission_time_at
+from mpf_mavlink.bridge.controller import Controller, ControlSetup, mission_time_at
 from mpf_mavlink.config.schema import load_config
 from mpf_mavlink.core.guidance.law import VehicleState
 from mpf_mavlink.core.guidance.predict import (
@@ -113,7 +113,7 @@ def test_segments_compose_like_one_turn():
 def test_loop_delay_is_measured_from_the_attitude_target_echo():
     """The echo carries our body rates as float32 and the autopilot's receive time: the delay is
     that time minus the ATTITUDE time the setpoint answered (median of the last 9)."""
-    ctl = Controller(load_config(DEMO))
+    ctl = Controller(ControlSetup.of(load_config(DEMO)))
     assert ctl.delay.delay_s == 0.0  # mavlink.known_delay_s until measured
     ctl.est.t0 = 100.0
     for k in range(12):
@@ -150,7 +150,7 @@ def test_target_samples_are_stamped_from_the_newest_vehicle_time():
     the receive times barely move, so the older ATTITUDE stamped targets 80 ms early)."""
     from mpf_mavlink.mavlink.codec import AttitudeSample, LocalPositionSample
 
-    ctl = Controller(load_config(DEMO))
+    ctl = Controller(ControlSetup.of(load_config(DEMO)))
     ctl.feed_vehicle(AttitudeSample(1.0, np.eye(3), np.zeros(3)), 10.0)
     assert mission_time_at(ctl.est, 10.002) == pytest.approx(1.002)
     ctl.feed_vehicle(LocalPositionSample(1.08, np.zeros(3), np.array([16.0, 0.0, 0.0])), 10.001)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpf_mavlink.bridge.controller import Controller
+from mpf_mavlink.bridge.controller import Controller, ControlSetup
 from mpf_mavlink.bridge.estimator import Estimator
 from mpf_mavlink.config.schema import load_config
 from mpf_mavlink.core.frames import euler_to_matrix
@@ -106,7 +106,7 @@ def test_position_instants_fall_between_attitude_samples_only():
     streams (a position 5 or 15 ms after the ATTITUDE is within half a position period of it
     or of the next one). Not before the ATTITUDE period is known (two samples), and not at
     all with position_instants off."""
-    ctl = Controller(load_config(DEMO))
+    ctl = Controller(ControlSetup.of(load_config(DEMO)))
     inst = _feed(ctl, 10.0, 50.0, 1.0)
     pos_ms = [ms for kind, ms in inst if kind == "pos"]
     att_ms = [ms for kind, ms in inst if kind == "att"]
@@ -116,23 +116,23 @@ def test_position_instants_fall_between_attitude_samples_only():
     assert ctl.instants.att_period_s == pytest.approx(
         0.1
     ) and ctl.instants.pos_period_s == pytest.approx(0.02)
-    ctl = Controller(load_config(DEMO))
+    ctl = Controller(ControlSetup.of(load_config(DEMO)))
     inst = _feed(ctl, 25.0, 50.0, 1.0)
     assert [ms for kind, ms in inst if kind == "pos"] == list(range(60, 1000, 40))
-    ctl = Controller(load_config(DEMO))
+    ctl = Controller(ControlSetup.of(load_config(DEMO)))
     inst = _feed(ctl, 50.0, 50.0, 1.0)
     assert [kind for kind, _ in inst] == ["att"] * 50
     for lag in (3, 5, 15, 17):
-        ctl = Controller(load_config(DEMO))
+        ctl = Controller(ControlSetup.of(load_config(DEMO)))
         inst = _feed(ctl, 50.0, 50.0, 1.0, pos_lag_ms=lag)
         assert [kind for kind, _ in inst] == ["att"] * 50, lag
     # 10 Hz ATTITUDE, 30 Hz position 7 ms behind (PX4's onboard default rate): positions
     # 7 + 33.3 k ms after each ATTITUDE step when 10 <= delta < 100 - 16.7 (half a period each)
-    ctl = Controller(load_config(DEMO))
+    ctl = Controller(ControlSetup.of(load_config(DEMO)))
     inst = _feed(ctl, 10.0, 30.0, 1.0, pos_lag_ms=7)
     deltas = sorted({ms % 100 for kind, ms in inst if kind == "pos"})
     assert deltas and all(16.6 <= d < 100 - 16.6 for d in deltas)
-    ctl = Controller(load_config(DEMO, ["mavlink.position_instants=false"]))
+    ctl = Controller(ControlSetup.of(load_config(DEMO, ["mavlink.position_instants=false"])))
     inst = _feed(ctl, 10.0, 50.0, 1.0)
     assert [kind for kind, _ in inst] == ["att"] * 10
 
@@ -140,7 +140,7 @@ def test_position_instants_fall_between_attitude_samples_only():
 def test_a_step_at_a_position_instant_uses_the_newer_position_and_its_time():
     """The step's time, the setpoint's time_boot_ms (what the SIL's lockstep keys on) and the
     law's position are the position sample's; the next ATTITUDE steps again 20 ms later."""
-    ctl = Controller(load_config(DEMO))
+    ctl = Controller(ControlSetup.of(load_config(DEMO)))
     R = euler_to_matrix(0.0, 0.0, 0.0)
     rates = np.array([0.0, 0.0, 0.1])
     for k in range(6):  # ATTITUDE at 1.0 and 1.1 s, positions every 20 ms

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpf_mavlink.bridge.controller import Controller
+from mpf_mavlink.bridge.controller import Controller, ControlSetup
 from mpf_mavlink.config.schema import load_config
 from mpf_mavlink.core.frames import euler_to_matrix
 from mpf_mavlink.mavlink.boot_clock import BootClockGate
@@ -81,7 +81,7 @@ def test_frozen_echo_stamps_never_measure_and_timesync_does():
     bridge's time (COMPUTE) and the uplink (UP), exactly, on an asymmetric link too: the offset
     assumes half the round trip each way, and the one-way latency added back is that same half,
     so their sum is tc1 - ts1, the request's own uplink latency plus the clocks' offset."""
-    ctl = Controller(load_config(DEMO, ["mavlink.known_delay_s=0.1"]))
+    ctl = Controller(ControlSetup.of(load_config(DEMO, ["mavlink.known_delay_s=0.1"])))
     used = _fly_px4_like(ctl, 4.0)
     assert not ctl.delay.delays and ctl.delay.echoes_frozen == len(used) - 1
     assert ctl.delay.delay_source() == "timesync"
@@ -98,7 +98,7 @@ def test_a_drifting_px4_clock_is_followed():
     clock rate (DOWN + COMPUTE + UP) x rate, within 0.2 ms; the offset of the oldest answer
     kept (8 s back) would be ~90 ms off."""
     rate = 0.989
-    ctl = Controller(load_config(DEMO))
+    ctl = Controller(ControlSetup.of(load_config(DEMO)))
     used = _fly_px4_like(ctl, 20.0, rate=rate)
     assert ctl.delay.delay_source() == "timesync"
     want = rate * (DOWN + COMPUTE + UP)
@@ -106,7 +106,7 @@ def test_a_drifting_px4_clock_is_followed():
 
 
 def test_without_timesync_the_configured_delay_stays_and_says_so():
-    ctl = Controller(load_config(DEMO, ["mavlink.known_delay_s=0.03"]))
+    ctl = Controller(ControlSetup.of(load_config(DEMO, ["mavlink.known_delay_s=0.03"])))
     used = _fly_px4_like(ctl, 1.0, timesync=False)
     assert used and all(d == 0.03 for d in used)
     assert ctl.delay.delay_source() == "mavlink.known_delay_s" and ctl.delay.echoes_frozen > 0
@@ -115,7 +115,7 @@ def test_without_timesync_the_configured_delay_stays_and_says_so():
 def test_a_moving_echo_stamp_is_preferred_over_timesync():
     """An autopilot that stamps the echo on receipt (PX4 with attitude set-points, our SIL):
     the echo measures everything, TIMESYNC is not used."""
-    ctl = Controller(load_config(DEMO))
+    ctl = Controller(ControlSetup.of(load_config(DEMO)))
     _fly_px4_like(ctl, 0.5)
     ctl.est.t0 = 0.0
     ctl.delay.sent.clear()
@@ -130,7 +130,7 @@ def test_a_moving_echo_stamp_is_preferred_over_timesync():
 def test_answers_to_other_requests_are_ignored():
     """A TIMESYNC answer whose ts1 is not a recent time of ours (another client's request, or
     PX4's own) gives a round trip outside [0, 1] s and is not used."""
-    ctl = Controller(load_config(DEMO))
+    ctl = Controller(ControlSetup.of(load_config(DEMO)))
     ctl.feed_vehicle(TimesyncSample(5_000_000_000, 123_456_789), BOOT)
     ctl.feed_vehicle(TimesyncSample(5_000_000_000, round((BOOT + 5.0) * 1e9)), BOOT)
     assert not ctl.delay.timesync
@@ -159,7 +159,7 @@ def test_attitude_source_is_one_per_flight_whatever_the_boot_order():
     first; with ATTITUDE_QUATERNION alone, it is the source, and stays so after the origin."""
     R = euler_to_matrix(0.0, 0.0, 0.3)
     for quat_first in (True, False):
-        ctl = Controller(load_config(DEMO))
+        ctl = Controller(ControlSetup.of(load_config(DEMO)))
         steps = 0
         for k in range(100):  # 1 s
             tb = 5.0 + 0.02 * k
@@ -174,7 +174,7 @@ def test_attitude_source_is_one_per_flight_whatever_the_boot_order():
         # the first quaternion (before any ATTITUDE) may count once; the rest never
         assert steps in (100, 101) and ctl.est.att_ignored >= 99
         assert ctl.instants.att_period_s == pytest.approx(0.02, rel=1e-6)
-    ctl = Controller(load_config(DEMO))
+    ctl = Controller(ControlSetup.of(load_config(DEMO)))
     for k in range(10):
         ctl.feed_vehicle(AttitudeSample(5.0 + 0.02 * k, R, np.zeros(3), "ATTITUDE_QUATERNION"), 1.0)
     assert ctl.est.lock_attitude_source() == "ATTITUDE_QUATERNION"

@@ -198,10 +198,10 @@ def test_an_attitude_that_is_no_new_instant_is_named_when_it_starves_the_loop():
     stop 21: the blackout's last ATTITUDE before the cut was such a sample)."""
     import numpy as np
 
-    from mpf_mavlink.bridge.controller import Controller
+    from mpf_mavlink.bridge.controller import Controller, ControlSetup
     from mpf_mavlink.mavlink.codec import AttitudeSample, LocalPositionSample
 
-    ctl = Controller(load_config(str(ROOT / "configs" / "default.yaml")))
+    ctl = Controller(ControlSetup.of(load_config(str(ROOT / "configs" / "default.yaml"))))
     ctl.feed_vehicle(AttitudeSample(1.0, np.eye(3), np.zeros(3)), 10.0)
     ctl.feed_vehicle(LocalPositionSample(1.0, np.zeros(3), np.array([16.0, 0.0, 0.0])), 10.0)
     ctl.set_origin()

@@ -31,6 +31,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
 
@@ -40,6 +41,7 @@ from mpf_mavlink.bridge.estimator import Estimate, Estimator, EstimatorParams
 from mpf_mavlink.bridge.instants import ControlInstants
 from mpf_mavlink.bridge.loop_delay import LoopDelay
 from mpf_mavlink.bridge.target_sources import ExtrapolatedTarget, LiveTarget, ScriptedTarget
+from mpf_mavlink.config.bridge import MavlinkConfig
 from mpf_mavlink.config.scenario import (
     build_capture,
     build_extensions,
@@ -48,9 +50,12 @@ from mpf_mavlink.config.scenario import (
     build_target,
 )
 from mpf_mavlink.config.schema import Config
+from mpf_mavlink.config.target import TargetEstimatorConfig
 from mpf_mavlink.core.adapter import AdapterParams, AdapterState, Setpoint, adapt, safe_setpoint
+from mpf_mavlink.core.guidance.capture import CaptureGuard
 from mpf_mavlink.core.guidance.dispatch import guidance_law
 from mpf_mavlink.core.guidance.law import (
+    Extensions,
     Gains,
     MpfCommand,
     MpfDiagnostics,
@@ -59,7 +64,8 @@ from mpf_mavlink.core.guidance.law import (
     mpf_errors,
 )
 from mpf_mavlink.core.guidance.predict import look_ahead, predict_rows, prediction_horizon
-from mpf_mavlink.core.target import TargetState
+from mpf_mavlink.core.paths import TabulatedPath
+from mpf_mavlink.core.target import TargetMotion, TargetState
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.runs.rundir import row_from
 
@@ -258,7 +264,7 @@ def adapter_params(cfg: Config) -> AdapterParams:
     )  # fmt: skip
 
 
-def estimator_params(m: Any) -> EstimatorParams:
+def estimator_params(m: MavlinkConfig) -> EstimatorParams:
     """The estimator's staleness limits and origin from the ``mavlink`` section."""
     origin = None
     if m.origin_lat_deg is not None and m.origin_lon_deg is not None and m.origin_alt_m is not None:
@@ -288,33 +294,66 @@ def target_as_constant_turn(st: TargetState, make: Any) -> Any:
     )  # fmt: skip
 
 
-class Controller:
-    """Estimator + target + s + law + adapter for one run (see the module docstring).
+@dataclass(frozen=True)
+class ControlSetup:
+    """What one run's controller flies, built once from the configuration (:meth:`of`)."""
 
-    ``m``: the (possibly command-line adjusted) ``mavlink`` section; default: the config's.
-    """
+    law: str  # guidance.law: MPF or a baseline (core/guidance/baselines.py)
+    path: TabulatedPath  # in the target frame {T}
+    gains: Gains
+    ext: Extensions
+    capture: CaptureGuard | None  # the capture guards (core/guidance/capture.py)
+    #: the scripted target motion; None: the live target of MAVLink (``target``)
+    target_motion: TargetMotion | None
+    target_estimator: TargetEstimatorConfig  # how a live target is estimated
+    target_timeout_s: float  # an extrapolated live target's staleness limit (s)
+    estimator: EstimatorParams
+    adapter: AdapterParams
+    initial_s_m: float | None  # None: the closest point of the moving path
+    flavour: str  # the autopilot (mavlink.flavour: px4 streams body rates)
+    known_delay_s: float
+    delay_compensation: bool
+    position_instants: bool
 
-    def __init__(self, cfg: Config, m: Any = None) -> None:
-        self.cfg = cfg
-        self.m = m = cfg.section("mavlink") if m is None else m
-        self.ad_params = adapter_params(cfg)
-        self.est = Estimator(estimator_params(m))
-        self.live = cfg.target.type == "mavlink"
-        if self.live and m.target_sysid is None:
+    @classmethod
+    def of(cls, cfg: Config, m: MavlinkConfig | None = None) -> ControlSetup:
+        """The setup of ``cfg``; ``m``: its (possibly command-line adjusted) ``mavlink``."""
+        m = cfg.mavlink if m is None else m
+        live = cfg.target.type == "mavlink"
+        if live and m.target_sysid is None:
             raise MpfError(f"{cfg.source}: target.type mavlink needs mavlink.target_sysid")
-        te = cfg.section("target_estimator")
+        return cls(
+            law=cfg.guidance.law, path=build_path(cfg.path), gains=build_gains(cfg),
+            ext=build_extensions(cfg), capture=build_capture(cfg),
+            target_motion=None if live else build_target(cfg.target),
+            target_estimator=cfg.target_estimator, target_timeout_s=m.target_timeout_s,
+            estimator=estimator_params(m), adapter=adapter_params(cfg),
+            initial_s_m=cfg.guidance.initial_s_m, flavour=m.flavour,
+            known_delay_s=m.known_delay_s, delay_compensation=m.delay_compensation,
+            position_instants=m.position_instants,
+        )  # fmt: skip
+
+
+class Controller:
+    """Estimator + target + s + law + adapter for one run (see the module docstring)."""
+
+    def __init__(self, setup: ControlSetup) -> None:
+        self.setup = su = setup
+        self.ad_params = su.adapter
+        self.est = Estimator(su.estimator)
+        self.live = su.target_motion is None
         self.target: Any = (
-            ScriptedTarget(build_target(cfg.target))
-            if not self.live
-            else LiveTarget(self.est, te.params())
-            if te.mode == "filter"
-            else ExtrapolatedTarget(self.est, m.target_timeout_s)
+            ScriptedTarget(su.target_motion)
+            if su.target_motion is not None
+            else LiveTarget(self.est, su.target_estimator.params())
+            if su.target_estimator.mode == "filter"
+            else ExtrapolatedTarget(self.est, su.target_timeout_s)
         )
-        self.path = build_path(cfg.path)
-        self.gains = build_gains(cfg)
-        self.ext = build_extensions(cfg)
-        self.cfg_law = cfg.guidance.law  # MPF or a baseline (core/guidance/baselines.py)
-        self.capture = build_capture(cfg)  # the capture guards (core/guidance/capture.py)
+        self.path = su.path
+        self.gains = su.gains
+        self.ext = su.ext
+        self.cfg_law = su.law
+        self.capture = su.capture
         self.s = 0.0
         self.t0: float | None = None  # mission-time origin (autopilot boot time, s)
         self.t_prev: float | None = None
@@ -327,16 +366,14 @@ class Controller:
         self.airspeed_hook: Callable[[float, float, float, Any, Any], float] | None = None
         # delay compensation: the step period (s, filtered), the loop delay (loop_delay.py)
         self.period_s = 0.0
-        self.rates_pipeline = getattr(m, "flavour", "auto") == "px4"
-        self.delay = LoopDelay(getattr(m, "known_delay_s", 0.0), self.rates_pipeline)
+        self.rates_pipeline = su.flavour == "px4"
+        self.delay = LoopDelay(su.known_delay_s, self.rates_pipeline)
         self.tau_s = 0.0  # the prediction horizon of the latest step
         self.alpha_m = self.gains.alpha  # the look-ahead of the latest step (guidance/predict.py)
         if not self.rates_pipeline:  # body rates not sent: no pitch-rate bias to take off them
             self.ad_params = dataclasses.replace(self.ad_params, rate_bias_tau_s=0.0)
         # multi-rate loop: which samples are control instants (instants.py)
-        self.instants = ControlInstants(
-            self.est, self.rates_pipeline and bool(getattr(m, "position_instants", False))
-        )
+        self.instants = ControlInstants(self.est, self.rates_pipeline and su.position_instants)
 
     # -- feeding ----------------------------------------------------------------------------
     def feed_vehicle(self, sample: Any, rx: float | None) -> bool:
@@ -394,7 +431,7 @@ class Controller:
         sdot, the adapter's integrator) starts afresh, as on a re-engagement it must: s is not
         integrated across the time the law was not flying the vehicle."""
         if s0 is None:
-            s0 = self.cfg.guidance.initial_s_m
+            s0 = self.setup.initial_s_m
         if s0 is None:
             est, why = self.est.estimate()
             if est is None:
@@ -450,7 +487,7 @@ class Controller:
         # the measured attitude by rows and rates: the prediction and the adapter use scalars
         R_m, rates_m = est.R_B_N.tolist(), est.rates_frd.tolist()
         vl, R_B_N, w1l, s_law, tgt_law, tau = self._predicted(est, tgt, w1, R_m, rates_m)
-        delay_comp = self.m.delay_compensation
+        delay_comp = self.setup.delay_compensation
         hold = self.period_s if delay_comp else 0.0  # for the adapter's roll loop
         self.tau_s = tau
         gains = self.gains
@@ -514,7 +551,7 @@ class Controller:
         sample's, its body rates rad/s; ``tgt`` the target there, or the function that gives
         it)."""
         vs = est.vehicle
-        tau = prediction_horizon(self.delay.delay_s) if self.m.delay_compensation else 0.0
+        tau = prediction_horizon(self.delay.delay_s) if self.setup.delay_compensation else 0.0
         if not tau > 0.0:
             return vs, R_m, w1, self.s, tgt() if callable(tgt) else tgt, tau
         t = vs.t

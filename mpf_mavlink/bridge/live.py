@@ -76,6 +76,7 @@ from mpf_mavlink.bridge.controller import (
     HALT_TEXT,
     STREAM_TEXT,
     Controller,
+    ControlSetup,
     LiveTarget,
     ScriptedTarget,
     Step,
@@ -139,7 +140,7 @@ class Bridge:
     ) -> None:
         self.cfg, self.opts, self.log = cfg, opts, log
         self.m = m = resolve_mavlink(cfg, opts)
-        self.ctl = Controller(cfg, m)
+        self.ctl = Controller(ControlSetup.of(cfg, m))
         self.display = OperatorDisplay(m.operator_display, m.operator_display_hz)
         self.vl = VehicleLink(m, live_target=self.ctl.live)
         self.phase = Phase(self._on_state)

@@ -50,7 +50,13 @@ from typing import Any
 
 import numpy as np
 
-from mpf_mavlink.bridge.controller import Controller, Step, parse_marker, write_setpoints
+from mpf_mavlink.bridge.controller import (
+    Controller,
+    ControlSetup,
+    Step,
+    parse_marker,
+    write_setpoints,
+)
 from mpf_mavlink.bridge.envelope import demand_of_step, envelope_monitor
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.adapter import Setpoint, safe_setpoint
@@ -142,7 +148,7 @@ class _Replayer:
     ) -> None:
         self.cfg = cfg
         self.m = m = cfg.section("mavlink")
-        self.ctl = Controller(cfg)
+        self.ctl = Controller(ControlSetup.of(cfg))
         self.env_lim = envelope_monitor(cfg, self.ctl.ad_params).lim
         self.link = _LinkFilter(m, self.ctl.live)
         self.own = (m.source_system, m.source_component)
