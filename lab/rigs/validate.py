@@ -88,12 +88,15 @@ def verdict_row(
     """Where one real flight lands against the certificate."""
     # the link's latency is the real link's own on the rig: not a drawn condition there
     out: dict[str, Any] = {"flight": j, "conditions": describe(_rig_drawn(d))}
+    out["verdict"] = verdict = str(fig.get("verdict", "?"))
+    # a flight that ended before its steady window (a safety exit, a lost link) says nothing
+    # of the mission's tracking: not judged against the bound, not in the medians
+    out["judged"] = judged = verdict.startswith(("PASS", "FAIL"))
     for key in ("steady_rms_m", "steady_max_m"):
         v, b = fig.get(key), _bound(cert, key)
-        out[key] = v
+        out[key] = v if judged else None
         out[f"{key}_bound"] = b
-        out[f"{key}_inside"] = None if v is None or b is None else bool(v <= b)
-    out["verdict"] = fig.get("verdict", "?")
+        out[f"{key}_inside"] = None if v is None or b is None or not judged else bool(v <= b)
     return out
 
 
@@ -141,7 +144,11 @@ def summary(cert: dict[str, Any], rows: list[dict[str, Any]]) -> list[str]:
     out = []
     n_out = sum(1 for r in rows if r["steady_rms_m_inside"] is False or
                 r["steady_max_m_inside"] is False)  # fmt: skip
-    out.append(f"Outside the bound: {n_out} of {len(rows)} flights.")
+    judged = [r for r in rows if r.get("judged", True)]
+    line = f"Outside the bound: {n_out} of {len(judged)} judged flights"
+    if len(judged) < len(rows):
+        line += f" ({len(rows) - len(judged)} of {len(rows)} NOT JUDGED: see the verdict column)"
+    out.append(line + ".")
     for key, what in (("steady_rms_m", "steady RMS"), ("steady_max_m", "max |pt|")):
         vals = [r[key] for r in rows if r[key] is not None]
         pm = cert.get(key, {}).get("median")
@@ -212,6 +219,12 @@ def main(argv: list[str]) -> int:
         dest = ROOT / "docs" / "results" / f"validation-{cert['mission']['name']}.md"
         dest.write_text(text)
         print(f"recorded: {dest}")
+    unjudged = [r["flight"] for r in rows if not r["judged"]]
+    if unjudged:
+        print(
+            f"sitl: flights {unjudged} could not be judged (their verdicts above)", file=sys.stderr
+        )
+        return 1
     return 0
 
 
