@@ -43,6 +43,7 @@ from mpf_mavlink.bridge.envelope import verdict_words
 from mpf_mavlink.bridge.recording import LEAN_ROW_EVERY, is_lean
 from mpf_mavlink.config.scenario import build_path, build_target
 from mpf_mavlink.config.schema import Config
+from mpf_mavlink.core.paths import TabulatedPath
 from mpf_mavlink.errors import ConfigError
 from mpf_mavlink.mavlink.url import free_udp_port
 from mpf_mavlink.runs.rundir import (
@@ -658,7 +659,7 @@ def _measure(
         )
         info: dict[str, Any] = {}
     else:
-        cols, metrics, info, vd = _judge_truth(cfg, truth, bc, bres.metrics)
+        cols, metrics, info, vd = _judge_truth(cfg, truth, bc, bres.metrics, path)
     # real-time factor while the bridge was in control (the lockstep figure) and overall
     ml = vinfo["mode_log"]
     rtf_track = _tracking_rtf(ml, float(vinfo["sim_time_s"]))
@@ -693,11 +694,15 @@ def _measure(
 
 
 def _judge_truth(
-    cfg: Config, truth: dict[str, np.ndarray], bc: dict[str, np.ndarray], bm: dict[str, Any]
+    cfg: Config,
+    truth: dict[str, np.ndarray],
+    bc: dict[str, np.ndarray],
+    bm: dict[str, Any],
+    path: TabulatedPath,
 ) -> tuple[dict[str, np.ndarray], dict[str, Any], dict[str, Any], Verdict]:
     """The plant's truth against the bridge's rows ``bc`` (its metrics ``bm``): the truth's
     table, metrics, alignment info and verdict while the bridge was flying it."""
-    cols, info = truth_table(cfg, truth, bc)
+    cols, info = truth_table(cfg, truth, bc, path)
     metrics = compute_metrics(cols, cfg.metrics.steady_after_s, cfg.metrics.converge_threshold_m)
     m = cols["t"] >= cfg.metrics.steady_after_s
     ct = info["cross_track_m"]

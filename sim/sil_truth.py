@@ -15,6 +15,7 @@ from mpf_mavlink.config.scenario import build_extensions, build_gains, build_pat
 from mpf_mavlink.config.schema import Config
 from mpf_mavlink.core.guidance.dispatch import guidance_law
 from mpf_mavlink.core.guidance.law import vehicle_state_of_floats
+from mpf_mavlink.core.paths import TabulatedPath
 from mpf_mavlink.core.target import state_floats
 from mpf_mavlink.runs.compare import distance_to_polyline
 from mpf_mavlink.runs.rundir import RunTable, row_from
@@ -40,10 +41,15 @@ def _align(truth: dict[str, np.ndarray], bc: dict[str, np.ndarray]) -> tuple[flo
 
 
 def truth_table(
-    cfg: Config, truth: dict[str, np.ndarray], bc: dict[str, np.ndarray]
+    cfg: Config,
+    truth: dict[str, np.ndarray],
+    bc: dict[str, np.ndarray],
+    path: TabulatedPath | None = None,
 ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """The run table from the plant's truth (see module docstring); ``t`` = s since engagement."""
-    path, target = build_path(cfg.path), build_target(cfg.target)
+    """The run table from the plant's truth (see module docstring); ``t`` = s since engagement
+    (``path``: the config's, already built)."""
+    path = build_path(cfg.path) if path is None else path
+    target = build_target(cfg.target)
     gains, ext = build_gains(cfg), build_extensions(cfg)
     t0, resid = _align(truth, bc)
     bt, bs = bc["t"], bc["s"]

@@ -322,9 +322,10 @@ class ControlSetup:
         live = cfg.target.type == "mavlink"
         if live and m.target_sysid is None:
             raise MpfError(f"{cfg.source}: target.type mavlink needs mavlink.target_sysid")
+        path = build_path(cfg.path)
         return cls(
-            law=cfg.guidance.law, path=build_path(cfg.path), gains=build_gains(cfg),
-            ext=build_extensions(cfg), capture=build_capture(cfg),
+            law=cfg.guidance.law, path=path, gains=build_gains(cfg),
+            ext=build_extensions(cfg), capture=build_capture(cfg, path),
             target_motion=None if live else build_target(cfg.target),
             target_estimator=cfg.target_estimator, target_timeout_s=m.target_timeout_s,
             estimator=estimator_params(m), adapter=adapter_params(cfg),

@@ -30,6 +30,7 @@ from mpf_mavlink.core.guidance.law import VehicleState, mpf_law
 
 if TYPE_CHECKING:
     from mpf_mavlink.config.autopilot_profile import ResolvedProfile
+    from mpf_mavlink.core.paths import TabulatedPath
 
 
 @dataclass(frozen=True)
@@ -369,9 +370,11 @@ def run_checks(
     scripted_target: bool = True,
     measured: MeasuredInputs | None = None,
     plant: PlantArg = FROM_CONFIG,
+    path: TabulatedPath | None = None,
 ) -> list[CheckResult]:
-    """All checks for a config. With a live target only the gain condition can be checked,
-    unless ``measured`` gives its estimated motion.
+    """All checks for a config (``path``: the config's path, already built). With a live
+    target only the gain condition can be checked, unless ``measured`` gives its estimated
+    motion.
 
     ``measured`` (the live bridge, right before engaging): the wind the autopilot reports
     replaces the scenario's steady wind (the turbulence allowance stays the config's), the live
@@ -383,7 +386,7 @@ def run_checks(
     sim = _plant(cfg, plant)
     ch = cfg.checks
     horizon = ch.horizon_s if ch.horizon_s is not None else cfg.sim.duration_s
-    path = build_path(cfg.path)
+    path = build_path(cfg.path) if path is None else path
     steady, gust = scenario_wind(cfg, sim)
     if measured is not None:
         steady = measured.wind_ned_m_s

@@ -91,7 +91,7 @@ def preflight_checks(
     # the configuration assumes: a mission the measured wind makes infeasible is refused
     measured = measured_inputs(ctl)
     res.measured = _measured_record(measured)
-    results = run_checks(cfg, not ctl.live, measured, plant)
+    results = run_checks(cfg, not ctl.live, measured, plant, ctl.path)
     text = format_checks(results)
     res.checks = text.splitlines()
     log(text)

@@ -10,14 +10,10 @@ from mpf_mavlink.core.guidance.law import Extensions, Gains
 from mpf_mavlink.core.paths import TabulatedPath, circle, helix, lemniscate, line, spline
 from mpf_mavlink.core.target import ConstantTurn, PaperProfile, Stationary, TargetMotion
 
-_PATH_CACHE: dict[PathConfig, TabulatedPath] = {}
-
 
 def build_path(p: PathConfig) -> TabulatedPath:
-    """The path described by the config (tabulated once per distinct description)."""
-    key = p if p.waypoints_m is None else None
-    if key is not None and key in _PATH_CACHE:
-        return _PATH_CACHE[key]
+    """The path described by the config, tabulated (a few ms to a second for a long one: the
+    caller builds it once and hands it on)."""
     if p.type == "lemniscate":
         assert p.size_m is not None
         path = lemniscate(p.size_m, p.center_m)
@@ -33,8 +29,6 @@ def build_path(p: PathConfig) -> TabulatedPath:
     else:
         assert p.waypoints_m is not None
         path = spline(p.waypoints_m, p.closed)
-    if key is not None:
-        _PATH_CACHE[key] = path
     return path
 
 
@@ -68,9 +62,10 @@ def build_extensions(cfg: Config) -> Extensions:
     )
 
 
-def build_capture(cfg: Config) -> CaptureGuard | None:
-    """The capture guards of ``guidance`` (core/guidance/capture.py) for the config's path, or
-    None when ``guidance.capture_guards`` is off or the law is a baseline."""
+def build_capture(cfg: Config, path: TabulatedPath | None = None) -> CaptureGuard | None:
+    """The capture guards of ``guidance`` (core/guidance/capture.py) for the config's path
+    (``path``: that path already built), or None when ``guidance.capture_guards`` is off or the
+    law is a baseline."""
     g = cfg.guidance
     if not g.capture_guards or g.law != "mpf":
         return None
@@ -92,4 +87,4 @@ def build_capture(cfg: Config) -> CaptureGuard | None:
         floor_margin_m=g.capture_floor_margin_m,
         altitude_floor_m=cfg.metrics.altitude_floor_m,
     )
-    return CaptureGuard(build_path(cfg.path).positions(), params)
+    return CaptureGuard((build_path(cfg.path) if path is None else path).positions(), params)

@@ -62,21 +62,8 @@ class PathSample:
         return self.R_F_T[:, 0]
 
 
-def _mrot(v: Tuple3, a: Tuple3, b: Tuple3) -> Tuple3:
-    """Carry v by the minimal rotation taking unit vector a onto unit vector b (Rodrigues)."""
-    cx = a[1] * b[2] - a[2] * b[1]
-    cy = a[2] * b[0] - a[0] * b[2]
-    cz = a[0] * b[1] - a[1] * b[0]
-    d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-    # c x v and c x (c x v), scaled by 1/(1+d): exact rotation for d > -1.
-    ux = cy * v[2] - cz * v[1]
-    uy = cz * v[0] - cx * v[2]
-    uz = cx * v[1] - cy * v[0]
-    k = 1.0 / (1.0 + d) if d > -0.999999 else 0.0
-    wx = cy * uz - cz * uy
-    wy = cz * ux - cx * uz
-    wz = cx * uy - cy * ux
-    return (v[0] + ux + k * wx, v[1] + uy + k * wy, v[2] + uz + k * wz)
+def _floats3(v: NDArray[np.float64]) -> Tuple3:
+    return (float(v[0]), float(v[1]), float(v[2]))
 
 
 def _arc_length_table(
@@ -135,21 +122,40 @@ def _transported_f2(P: NDArray[np.float64], T: NDArray[np.float64], n: int) -> N
     if np.linalg.norm(f3) < 1e-6:
         f3 = np.array([1.0, 0.0, 0.0]) - T[0, 0] * T[0]
     f3 /= np.linalg.norm(f3)
+    # the reflections' planes depend only on the nodes (vectorised); the carried f2 is the one
+    # sequential part, on floats (a numpy call per node costs ~20x the arithmetic)
+    V1 = P[1:] - P[:-1]
+    c1 = np.einsum("ij,ij->i", V1, V1)
+    k1 = np.divide(2.0, c1, out=np.zeros_like(c1), where=c1 >= 1e-30)
+    V2 = T[1:] - (T[:-1] - (k1 * np.einsum("ij,ij->i", V1, T[:-1]))[:, None] * V1)
+    c2 = np.einsum("ij,ij->i", V2, V2)
+    k2 = np.divide(2.0, c2, out=np.zeros_like(c2), where=c2 > 1e-30)
     F2 = np.empty_like(T)
     F2[0] = np.cross(f3, T[0])
-    for i in range(n):
-        v1 = P[i + 1] - P[i]
-        c1 = float(v1 @ v1)
-        if c1 < 1e-30:
-            F2[i + 1] = F2[i]
+    x, y, z = (float(v) for v in F2[0])
+    out = [(x, y, z)]
+    for (a0, a1, a2), ka, (b0, b1, b2), kb, (t0, t1, t2), deg in zip(
+        V1.tolist(),
+        k1.tolist(),
+        V2.tolist(),
+        k2.tolist(),
+        T[1:].tolist(),
+        (c1 < 1e-30).tolist(),
+        strict=True,
+    ):
+        if deg:  # coincident nodes: f2 carried unchanged
+            out.append((x, y, z))
             continue
-        rL = F2[i] - (2.0 / c1) * float(v1 @ F2[i]) * v1
-        tL = T[i] - (2.0 / c1) * float(v1 @ T[i]) * v1
-        v2 = T[i + 1] - tL
-        c2 = float(v2 @ v2)
-        r = rL - (2.0 / c2) * float(v2 @ rL) * v2 if c2 > 1e-30 else rL
-        r = r - float(r @ T[i + 1]) * T[i + 1]
-        F2[i + 1] = r / np.linalg.norm(r)
+        d = ka * (a0 * x + a1 * y + a2 * z)
+        x, y, z = x - d * a0, y - d * a1, z - d * a2
+        d = kb * (b0 * x + b1 * y + b2 * z)
+        x, y, z = x - d * b0, y - d * b1, z - d * b2
+        d = x * t0 + y * t1 + z * t2
+        x, y, z = x - d * t0, y - d * t1, z - d * t2
+        r = math.sqrt(x * x + y * y + z * z)
+        x, y, z = x / r, y / r, z / r
+        out.append((x, y, z))
+    F2[:] = out
     return F2
 
 
@@ -168,21 +174,22 @@ def _closing_twist(
     return F2, tau
 
 
-def _closing_angles(Tl: list[Tuple3], F2l: list[Tuple3]) -> list[float]:
+def _closing_angles(T: NDArray[np.float64], F2: NDArray[np.float64]) -> NDArray[np.float64]:
     """Per cell: the angle about f1_{i+1} between f2_i carried to node i+1 and f2_{i+1}.
     Interpolating it linearly makes the frame continuous at every node with one transport."""
-    corr = []
-    for i in range(len(Tl) - 1):
-        r = _mrot(F2l[i], Tl[i], Tl[i + 1])
-        t1, f2b = Tl[i + 1], F2l[i + 1]
-        cos_ = r[0] * f2b[0] + r[1] * f2b[1] + r[2] * f2b[2]
-        x = (
-            r[1] * f2b[2] - r[2] * f2b[1],
-            r[2] * f2b[0] - r[0] * f2b[2],
-            r[0] * f2b[1] - r[1] * f2b[0],
-        )
-        corr.append(math.atan2(x[0] * t1[0] + x[1] * t1[1] + x[2] * t1[2], cos_))
-    return corr
+    a, b, v = T[:-1], T[1:], F2[:-1]
+    # f2_i carried by the minimal rotation taking f1_i onto f1_{i+1} (Rodrigues: c x v and
+    # c x (c x v) scaled by 1/(1+d), exact for d > -1)
+    c = np.cross(a, b)
+    d = np.einsum("ij,ij->i", a, b)
+    k = np.divide(1.0, 1.0 + d, out=np.zeros_like(d), where=d > -0.999999)
+    u = np.cross(c, v)
+    r = v + u + k[:, None] * np.cross(c, u)
+    f2b = F2[1:]
+    cos_ = np.einsum("ij,ij->i", r, f2b)
+    sin_ = np.einsum("ij,ij->i", np.cross(r, f2b), b)
+    out: NDArray[np.float64] = np.arctan2(sin_, cos_)
+    return out
 
 
 def _cell_point(cell: _Cell, s: float) -> PathPointFlat:
@@ -279,36 +286,30 @@ class TabulatedPath:
         self._F2 = F2
         self._K1 = np.sum(kappa * F2, axis=1)
         self._K2 = np.sum(kappa * F3, axis=1)
-        # Python lists: scalar access to them is ~10x faster than to numpy arrays.
-        self._Pl: list[Tuple3] = [(float(r[0]), float(r[1]), float(r[2])) for r in P]
-        self._Tl: list[Tuple3] = [(float(r[0]), float(r[1]), float(r[2])) for r in T]
-        self._F2l: list[Tuple3] = [(float(r[0]), float(r[1]), float(r[2])) for r in F2]
-        self._K1l = [float(v) for v in self._K1]
-        self._K2l = [float(v) for v in self._K2]
-        self._C = _closing_angles(self._Tl, self._F2l)
-        self._cells = self._hermite_cells()
+        self._cells = self._hermite_cells(_closing_angles(T, F2))
+        # the end nodes on floats: beyond an open end the path continues straight
+        self._ends: dict[int, tuple[Tuple3, Tuple3, Tuple3]] = {
+            j: (_floats3(P[j]), _floats3(T[j]), _floats3(F2[j])) for j in (0, n)
+        }
 
-    def _hermite_cells(self) -> list[_Cell]:
+    def _hermite_cells(self, C: NDArray[np.float64]) -> list[_Cell]:
         """Per cell, what evaluation needs in one flat tuple of floats (unpacked at once): the
         cell's start s_i = i ds (m), the Hermite cubic in the arc length from there, p(x) = p_i
         + x (t_i + x (B + x C)) (x = s - s_i; t_i is the node's tangent), 2 B and 3 C (the
         derivatives' coefficients, formed once here rather than at every evaluation), the
-        node's f2, the cell's closing angle per metre and the curvatures k1, k2 at its start
-        and their slopes (1/m^2)."""
-        h = self.ds
-        cells: list[_Cell] = []
-        for i in range(self.n):
-            pa, pb = self._Pl[i], self._Pl[i + 1]
-            ta, tb = self._Tl[i], self._Tl[i + 1]
-            # From the power form in w = x / h: b / h^2 and c / h^3.
-            B = [(3.0 * (pb[j] - pa[j]) - h * (2.0 * ta[j] + tb[j])) / (h * h) for j in range(3)]
-            C = [(2.0 * (pa[j] - pb[j]) + h * (ta[j] + tb[j])) / (h * h * h) for j in range(3)]
-            k1a, k1b, k2a, k2b = self._K1l[i], self._K1l[i + 1], self._K2l[i], self._K2l[i + 1]
-            cells.append(
-                (i * h, *pa, *ta, *B, *C, *[b + b for b in B], *[3.0 * c for c in C],
-                 *self._F2l[i], self._C[i] / h, k1a, (k1b - k1a) / h, k2a, (k2b - k2a) / h)
-            )  # fmt: skip
-        return cells
+        node's f2, the cell's closing angle per metre (``C``: :func:`_closing_angles`) and the
+        curvatures k1, k2 at its start and their slopes (1/m^2)."""
+        h, n = self.ds, self.n
+        pa, pb, ta, tb = self._P[:-1], self._P[1:], self._T[:-1], self._T[1:]
+        # From the power form in w = x / h: b / h^2 and c / h^3.
+        B = (3.0 * (pb - pa) - h * (2.0 * ta + tb)) / (h * h)
+        Cc = (2.0 * (pa - pb) + h * (ta + tb)) / (h * h * h)
+        K1, K2 = self._K1, self._K2
+        cols = np.column_stack([
+            np.arange(n) * h, pa, ta, B, Cc, B + B, 3.0 * Cc, self._F2[:-1], C / h,
+            K1[:-1], (K1[1:] - K1[:-1]) / h, K2[:-1], (K2[1:] - K2[:-1]) / h,
+        ])  # fmt: skip
+        return [tuple(row) for row in cols.tolist()]
 
     # ------------------------------------------------------------------ evaluation
     def eval(self, s: float) -> PathPoint:
@@ -342,7 +343,7 @@ class TabulatedPath:
         elif s <= 0.0 or s >= L:
             # Beyond an open end the path continues straight along the end tangent.
             j = 0 if s <= 0.0 else self.n
-            p, t, f2 = self._Pl[j], self._Tl[j], self._F2l[j]
+            p, t, f2 = self._ends[j]
             ds = s if j == 0 else s - L
             return (*add_scaled(p, ds, t), *t, *f2, *cross(t, f2), 0.0, 0.0, *t, *_ZERO)
         i = int(s / self.ds)
