@@ -286,6 +286,26 @@ def test_the_ekf_error_fit_recovers_a_gauss_markov_process():
     assert t == pytest.approx(tau, rel=0.25)
 
 
+def test_turn_per_bank_fit_of_a_gusty_turn_recovers_the_gain_and_its_window_scatter():
+    # the dataflash analysis of identify (--dataflash): a turn of gain 0.74 whose heading rate
+    # carries white noise of 0.3 of its own rate at 25 Hz (ATT's rate): the whole fit is the gain
+    # to its standard error, and a window of w s scatters by 0.3 / sqrt(25 w) of it (white
+    # noise's mean over 25 w samples); allowed: 30 % on that scatter (50 windows of 5 s: the
+    # sample sd of 50 draws is good to ~1/sqrt(2 * 49) = 10 %, three of those)
+    from lab.calibration.identify import turn_per_bank_windows
+
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 250.02, 0.04)  # 250 s: fifty windows of 5 s
+    roll = np.radians(22.0 + 8.0 * np.sin(2 * np.pi * t / 43.0))
+    v = np.full_like(t, 22.0)
+    psid = 0.74 * G * np.tan(roll) / v * (1.0 + 0.3 * rng.standard_normal(t.size))
+    r = turn_per_bank_windows(t, roll, psid, v, windows=(5.0,))
+    assert r["turn_gain"] == pytest.approx(0.74, abs=4 * 0.74 * 0.3 / math.sqrt(t.size))
+    w5 = r["windows"]["5"]
+    assert w5["n"] == 50
+    assert w5["sd_rel"] == pytest.approx(0.3 / math.sqrt(25 * 5.0), rel=0.3)
+
+
 def test_shaper_without_an_identified_attitude_loop_passes_the_command_through():
     # the PX4 profile identifies no attitude loop (body-rate offboard): the SIL's own stays
     sh = AttitudeShaper(AttitudeResponse(), 0.01, native_tau_s=0.4)
