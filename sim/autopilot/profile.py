@@ -11,9 +11,11 @@ are one-line errors naming the key and the file). What each section changes in t
   loop is given so that the whole (its loop's own lag included) matches.
 * ``turn``: heading rate per bank, ``turn_gain = psi_dot / (g tan(bank) / V)`` as the bridge's
   adapter measures it from the reported attitude. A turn gain below 1 (the airframe slips in the
-  turn, rudder neutral) is emulated by reporting, in a steady turn, the bank
-  ``atan(V psi_dot / (g turn_gain))`` for the plant's heading rate (whatever the plant's own
-  turn per bank), so the autopilot's loops and the bridge bank more for the same turn.
+  turn, rudder neutral) is emulated by reporting the bank ``atan((k_plant / turn_gain)
+  tan(roll))`` for the plant's roll, with the plant's own turn per bank ``k_plant`` fitted in its
+  held turns, so the autopilot's loops and the bridge bank more for the same turn (a static map
+  of the roll, not the bank the plant's instantaneous heading rate implies: that carries the
+  gusts, which a firmware's reported roll does not).
 * ``estimator``: what the reported state adds to the truth: white noise on position, velocity,
   attitude; a first-order Gauss-Markov position wander (sigma, correlation time); a lag.
 
@@ -43,10 +45,12 @@ TURN_TAU_S = 2.0  # s, the low-pass of the reported heading's offset (StateEstim
 # from the profile's: several seconds of turning, so that the yaw's lag behind a roll transient
 # averages out
 KP_TAU_S = 8.0
-# s, the longest memory of that fit (it grows with the time learned, up to this): the plant's turn
-# per bank is a property of its airframe at the flown airspeed, constant over a mission; a gusty
-# heading rate per bank scatters by +-10 % from one 5-10 s stretch to the next (the lift's
-# horizontal part), which a short memory would pass into the reported bank
+# s, the longest memory of that fit (it grows with the time learned, up to this): the turn per
+# bank is a property of the airframe at the flown airspeed, constant over a mission, while in
+# gusts the heading rate per bank of a stretch of a few seconds scatters by several per cent (the
+# lift's horizontal part); ArduPlane's own in SIM_WIND_TURB 2 scatters by 0.5 % between 60 s
+# stretches (docs/calibration.md, `identify arduplane --dataflash`), a short memory would pass
+# the rest into the reported bank
 KP_MEMORY_S = 60.0
 MIN_LEARN_BANK_RAD = 0.05  # below this bank the heading rate per bank is mostly noise
 MAX_LEARN_ROLL_RATE_RAD_S = 0.05  # a held turn: rolling faster, the heading rate lags the bank
