@@ -60,6 +60,8 @@ def test_sil_leg_flies_the_real_flights_start_state_mission_and_wind(tmp_path):
     for o in rec["overrides"]:  # the rig's own overrides as the real flight flew them
         k, v = o.split("=", 1)
         assert s[k] == v
+    # as long as the real flight tracked: no hand-back by the envelope monitor's hold policy
+    assert s["envelope.policy"] == "warn"
 
 
 def test_compare_row_judges_the_band_and_the_means():

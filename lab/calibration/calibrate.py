@@ -225,6 +225,11 @@ def sil_command(
         f"sil.initial_position_ned_m=[{p0[0]:.2f},{p0[1]:.2f},{p0[2]:.2f}]",
         f"sil.seed={seed}",
     ]
+    if not any(s.startswith("envelope.policy=") for s in sets):
+        # the leg flies as long as the real flight tracked: the envelope monitor's hold policy
+        # (newer than the stored flights) must not end it earlier at a bank-limit episode the
+        # real flight flew through (the wind6 row sits at its bank limit ~20 % of the time)
+        sil_sets.append("envelope.policy=warn")
     if cruise is not None:
         sil_sets.append(f"aircraft.trim_airspeed_m_s={cruise:g}")
     if heading is not None:
