@@ -150,6 +150,38 @@ def test_turn_emulation_holds_the_turn_per_bank_at_every_instant_of_a_varying_tu
     assert min(ks) == pytest.approx(0.745, rel=2e-3)
 
 
+def test_turn_emulation_in_gusts_reports_the_plants_mean_turn_per_bank():
+    # SIM_WIND_TURB's vertical gusts make a banked plant's heading rate noisy (the lift's
+    # horizontal part) while its roll is held; a firmware reports its own roll, so the turn per
+    # reported bank must stay the profile's, neither creeping up nor wandering with the gusts.
+    # White heading-rate noise of half the turn's own rate at 100 Hz (a third of the per-sample
+    # ratios outside 0.5-1.5 of the textbook; SIM_WIND_TURB 2 m/s puts more there): the fit's
+    # standard error is 0.5 sqrt(dt / (2 KP_MEMORY_S)) of the plant's gain (the variance of a
+    # running mean of white noise), 0.5 % here; allowed: 4 of them
+    from sim.autopilot.profile import KP_MEMORY_S
+
+    prof = AutopilotProfile(turn=TurnResponse(turn_gain=0.745))
+    est = StateEstimate(prof)
+    rng = np.random.default_rng(3)
+    dt, k_plant, v, bank = 0.01, 0.93, 22.0, math.radians(20.0)
+    psid0 = k_plant * G * math.tan(bank) / v
+    se = 0.5 * math.sqrt(dt / (2.0 * KP_MEMORY_S))
+    ks = []
+    for i in range(int(3 * KP_MEMORY_S / dt)):
+        t = i * dt
+        psid = psid0 * (1.0 + 0.5 * float(rng.standard_normal()))
+        st = _turn(t, bank, k_plant, v)
+        st = dataclasses.replace(
+            st, pqr=np.array((0.0, psid * math.sin(bank), psid * math.cos(bank)))
+        )
+        rep = est(st)
+        if t > KP_MEMORY_S:  # the fit's memory full
+            ks.append(psid0 / (G * math.tan(rep.euler[0]) / v) / 0.745)
+    ks = np.array(ks)
+    assert abs(ks.mean() - 1.0) < 4 * se  # no bias: the mean gain is the profile's
+    assert ks.max() - ks.min() < 2 * 4 * se  # no wander beyond the fit's own error
+
+
 def test_airspeed_scale_changes_the_report_not_what_the_autopilot_flies():
     # real ArduPlane reports 0.936 of the true airspeed where the SIL's EAS is 0.972 of it: the
     # report is scaled, and the emulated autopilot's loops undo the scale (they fly the truth)
@@ -252,6 +284,26 @@ def test_the_ekf_error_fit_recovers_a_gauss_markov_process():
     # 600 correlation times: sigma to ~3 / sqrt(600) ~ 12 %, tau to ~20 %
     assert s == pytest.approx(sig, rel=0.15)
     assert t == pytest.approx(tau, rel=0.25)
+
+
+def test_turn_per_bank_fit_of_a_gusty_turn_recovers_the_gain_and_its_window_scatter():
+    # the dataflash analysis of identify (--dataflash): a turn of gain 0.74 whose heading rate
+    # carries white noise of 0.3 of its own rate at 25 Hz (ATT's rate): the whole fit is the gain
+    # to its standard error, and a window of w s scatters by 0.3 / sqrt(25 w) of it (white
+    # noise's mean over 25 w samples); allowed: 30 % on that scatter (50 windows of 5 s: the
+    # sample sd of 50 draws is good to ~1/sqrt(2 * 49) = 10 %, three of those)
+    from lab.calibration.identify import turn_per_bank_windows
+
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 250.02, 0.04)  # 250 s: fifty windows of 5 s
+    roll = np.radians(22.0 + 8.0 * np.sin(2 * np.pi * t / 43.0))
+    v = np.full_like(t, 22.0)
+    psid = 0.74 * G * np.tan(roll) / v * (1.0 + 0.3 * rng.standard_normal(t.size))
+    r = turn_per_bank_windows(t, roll, psid, v, windows=(5.0,))
+    assert r["turn_gain"] == pytest.approx(0.74, abs=4 * 0.74 * 0.3 / math.sqrt(t.size))
+    w5 = r["windows"]["5"]
+    assert w5["n"] == 50
+    assert w5["sd_rel"] == pytest.approx(0.3 / math.sqrt(25 * 5.0), rel=0.3)
 
 
 def test_shaper_without_an_identified_attitude_loop_passes_the_command_through():

@@ -60,6 +60,8 @@ def test_sil_leg_flies_the_real_flights_start_state_mission_and_wind(tmp_path):
     for o in rec["overrides"]:  # the rig's own overrides as the real flight flew them
         k, v = o.split("=", 1)
         assert s[k] == v
+    # as long as the real flight tracked: no hand-back by the envelope monitor's hold policy
+    assert s["envelope.policy"] == "warn"
 
 
 def test_compare_row_judges_the_band_and_the_means():
@@ -75,6 +77,13 @@ def test_compare_row_judges_the_band_and_the_means():
     assert not compare_row("a", real, sil(hi * 1.01, -0.1))["within"]
     assert not compare_row("a", real, sil(0.2, 0.21))["within"]  # 0.31 m apart
     assert math.isclose(compare_row("a", real, sil(0.25, 0.0))["ratio"], 0.8)
+    # a SIL leg handed back before the real flight's tracked time is not compared
+    leg = sil(0.2, -0.1)
+    leg["bridge"]["tracked_s"] = 77.3
+    row = compare_row("a", {**real, "tracked_s": 240.0}, leg)
+    assert not row["within"] and row["sil_short"]
+    leg["bridge"]["tracked_s"] = 240.0
+    assert compare_row("a", {**real, "tracked_s": 240.0}, leg)["within"]
 
 
 def test_calibration_and_profiled_robustness_are_bench_groups():

@@ -27,6 +27,9 @@ from lab.rigs.bundles import sitl_dir
 ROOT = Path(__file__).resolve().parents[2]
 BAND = (0.67, 1.5)  # real / SIL steady RMS (issue 24's acceptance)
 MEAN_TOL_M = 0.3  # |SIL - real| mean radial and mean vertical
+# s: a SIL leg that tracked this much less than the real flight ended early (a hand-back); the
+# legs fly the real flight's tracked time, which the SIL's clock meets to a control step
+TRACKED_TOL_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -225,6 +228,11 @@ def sil_command(
         f"sil.initial_position_ned_m=[{p0[0]:.2f},{p0[1]:.2f},{p0[2]:.2f}]",
         f"sil.seed={seed}",
     ]
+    if not any(s.startswith("envelope.policy=") for s in sets):
+        # the leg flies as long as the real flight tracked: the envelope monitor's hold policy
+        # (newer than the stored flights) must not end it earlier at a bank-limit episode the
+        # real flight flew through (the wind6 row sits at its bank limit ~20 % of the time)
+        sil_sets.append("envelope.policy=warn")
     if cruise is not None:
         sil_sets.append(f"aircraft.trim_airspeed_m_s={cruise:g}")
     if heading is not None:
@@ -294,6 +302,9 @@ def aggregate_seeds(legs: list[dict[str, Any]]) -> dict[str, Any]:
         ms = [leg[side] for leg in legs]
         rms = [m.get("steady_rms_m") for m in ms]
         agg: dict[str, Any] = {"seeds_rms_m": rms}
+        tracked = [m.get("tracked_s") for m in ms]
+        if all(v is not None for v in tracked):
+            agg["tracked_s"] = min(tracked)  # the shortest seed's
         if all(v is not None for v in rms):
             agg["steady_rms_m"] = math.sqrt(sum(v * v for v in rms) / len(rms))
             for k in ("steady_mean_radial_m", "steady_mean_vertical_m"):
@@ -322,8 +333,12 @@ def compare_row(name: str, real: dict[str, Any], sil: dict[str, Any]) -> dict[st
     ratio = r_rms / s_rms if (r_rms is not None and s_rms) else None
     keys = ("steady_mean_radial_m", "steady_mean_vertical_m")
     d = {k: (None if real.get(k) is None or b.get(k) is None else b[k] - real[k]) for k in keys}
+    # a SIL leg that ended before the real flight's tracked time (a hand-back) is not compared
+    r_t, s_t = real.get("tracked_s"), b.get("tracked_s")
+    short = r_t is not None and s_t is not None and s_t < r_t - TRACKED_TOL_S
     ok = (
-        ratio is not None
+        not short
+        and ratio is not None
         and BAND[0] <= ratio <= BAND[1]
         and all(v is not None and abs(v) <= MEAN_TOL_M for v in d.values())
     )
@@ -340,6 +355,8 @@ def compare_row(name: str, real: dict[str, Any], sil: dict[str, Any]) -> dict[st
         "real_radial_se_m": real.get("steady_mean_radial_se_m"),
         "real_vertical_se_m": real.get("steady_mean_vertical_se_m"),
         "within": ok,
+        "sil_tracked_s": s_t,
+        "sil_short": short,
         "sil_seeds_rms_m": b.get("seeds_rms_m"),
     }
 
@@ -369,9 +386,14 @@ def table(rows: list[dict[str, Any]], title: str) -> str:
             f"| {_g(r['real_radial_m'], '+.2f')} / {_g(r['real_vertical_m'], '+.2f')} "
             f"| {_g(r['sil_radial_m'], '+.2f')} / {_g(r['sil_vertical_m'], '+.2f')} "
             f"| {_g(r.get('real_radial_se_m'), '.2f')} / {_g(r.get('real_vertical_se_m'), '.2f')} "
-            f"| {'yes' if r['within'] else 'NO'} |"
+            f"| {'yes' if r['within'] else 'NO'}{_ended(r)} |"
         )
     return "\n".join(lines)
+
+
+def _ended(r: dict[str, Any]) -> str:
+    """Why a row is out when its SIL leg ended before the real flight's tracked time."""
+    return f" (SIL tracked {r['sil_tracked_s']:.0f} s)" if r.get("sil_short") else ""
 
 
 def _parser() -> argparse.ArgumentParser:

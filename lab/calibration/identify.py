@@ -653,6 +653,107 @@ def write_profile(
     return path
 
 
+GUIDED_ARDUPLANE = 15  # ArduPlane's GUIDED mode number (MODE.Mode of its dataflash log)
+TURN_WINDOWS_S = (5.0, 10.0, 20.0, 60.0)
+
+
+def turn_per_bank_windows(
+    t: np.ndarray,
+    roll: np.ndarray,
+    psi_dot: np.ndarray,
+    airspeed: np.ndarray,
+    windows: tuple[float, ...] = TURN_WINDOWS_S,
+) -> dict[str, Any]:
+    """The turn per bank ``V psi_dot = k g tan(roll)`` fitted by least squares over the whole
+    series and over consecutive windows of each length: the fit, and per window length the mean
+    and the standard deviation of the windows' fits (how much a stretch of that length scatters:
+    what a memory of that length would carry into a turn emulation)."""
+    ok = np.abs(roll) > 0.05
+    tr = np.tan(roll)
+
+    def fit(m: np.ndarray) -> float:
+        return float(np.sum(airspeed[m] * psi_dot[m] * tr[m]) / np.sum(G * tr[m] ** 2))
+
+    res: dict[str, Any] = {"turn_gain": fit(ok), "windows": {}}
+    for w in windows:
+        ks = [
+            fit(ok & (t >= a) & (t < a + w))
+            for a in np.arange(t[0], t[-1] - w + 1e-9, w)
+            if np.count_nonzero(ok & (t >= a) & (t < a + w)) > 10
+        ]
+        if len(ks) >= 2:
+            k = np.array(ks)
+            res["windows"][f"{w:g}"] = {
+                "n": len(ks),
+                "mean": float(k.mean()),
+                "sd": float(k.std(ddof=1)),
+                "sd_rel": float(k.std(ddof=1) / k.mean()),
+            }
+    return res
+
+
+def dataflash_turn(path: Path, after_s: float = 60.0) -> dict[str, Any]:
+    """What ArduPlane SITL reports in a flight (its dataflash log, GUIDED from ``after_s`` after
+    the last switch to GUIDED to the next mode change): ATT (the EKF's attitude, what it sends
+    as ATTITUDE) against SIM (the simulator's true attitude) in degrees, and the turn per bank
+    of the true heading rate (SIM's yaw) and airspeed (SIM2.As) against the reported roll and
+    the true one (:func:`turn_per_bank_windows`)."""
+    from pymavlink import DFReader
+
+    f = DFReader.DFReader_binary(str(path))
+    rows: dict[str, list[tuple[float, ...]]] = {"ATT": [], "SIM": [], "SIM2": []}
+    modes: list[tuple[float, int]] = []
+    while True:
+        m = f.recv_match(type=["ATT", "SIM", "SIM2", "MODE"])
+        if m is None:
+            break
+        k, tu = m.get_type(), m.TimeUS * 1e-6
+        if k == "MODE":
+            modes.append((tu, int(m.Mode)))
+        elif k == "ATT":
+            rows[k].append((tu, m.Roll, m.Pitch, m.Yaw))
+        elif k == "SIM":
+            rows[k].append((tu, m.Roll, m.Pitch, m.Yaw))
+        else:
+            rows[k].append((tu, m.As))
+    starts = [i for i, (_, mo) in enumerate(modes) if mo == GUIDED_ARDUPLANE]
+    if not starts or not rows["ATT"] or not rows["SIM"] or not rows["SIM2"]:
+        raise SystemExit(f"identify: {path}: no GUIDED stretch with ATT, SIM and SIM2")
+    i = starts[-1]
+    t0 = modes[i][0] + after_s
+    t1 = modes[i + 1][0] if i + 1 < len(modes) else math.inf
+    att, sim, s2 = (np.array(rows[k]) for k in ("ATT", "SIM", "SIM2"))
+    ta = att[:, 0]
+    w = (ta >= t0) & (ta < t1)
+    if np.count_nonzero(w) < 100:
+        raise SystemExit(f"identify: {path}: under 100 ATT samples in the GUIDED stretch")
+    ta = ta[w]
+    roll_rep, pitch_rep, yaw_rep = (np.radians(att[w, j]) for j in (1, 2, 3))
+    roll_true = np.interp(ta, sim[:, 0], np.radians(sim[:, 1]))
+    pitch_true = np.interp(ta, sim[:, 0], np.radians(sim[:, 2]))
+    yaw_u = np.unwrap(np.radians(sim[:, 3]))
+    yaw_true = np.interp(ta, sim[:, 0], yaw_u)
+    psi_dot = np.interp(ta, sim[:, 0], np.gradient(yaw_u, sim[:, 0]))
+    v = np.interp(ta, s2[:, 0], s2[:, 1])
+    dyaw = (yaw_rep - yaw_true + math.pi) % (2.0 * math.pi) - math.pi
+
+    def stat(x: np.ndarray) -> dict[str, float]:
+        return {"mean_deg": float(np.degrees(x.mean())), "sd_deg": float(np.degrees(x.std()))}
+
+    return {
+        "log": str(path),
+        "window_s": [float(ta[0]), float(ta[-1])],
+        "roll_true": stat(roll_true),
+        "reported_minus_true": {
+            "roll": stat(roll_rep - roll_true),
+            "pitch": stat(pitch_rep - pitch_true),
+            "yaw": stat(dyaw),
+        },
+        "turn_per_reported_bank": turn_per_bank_windows(ta, roll_rep, psi_dot, v),
+        "turn_per_true_bank": turn_per_bank_windows(ta, roll_true, psi_dot, v),
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("autopilot", choices=("arduplane", "px4"))
@@ -686,11 +787,31 @@ def main(argv: list[str] | None = None) -> int:
         default=str(ROOT / "configs" / "autopilots" / "px4-1.16-sih.yaml"),
         help="PX4 with --ulog: the profile whose other sections are kept",
     )
+    ap.add_argument(
+        "--dataflash",
+        nargs="+",
+        default=None,
+        help="ArduPlane: what the firmware reports in these dataflash logs of bridge flights "
+        "(ATT against SIM, the turn per bank over windows; dataflash.json), fly nothing",
+    )
     a = ap.parse_args(argv)
     out = Path(a.out).resolve()
     cmd = "python -m lab.calibration.identify " + " ".join(
         argv if argv is not None else sys.argv[1:]
     )
+    if a.dataflash:
+        if a.autopilot != "arduplane":
+            print("identify: --dataflash is for arduplane", file=sys.stderr)
+            return 2
+        missing = [d for d in a.dataflash if not Path(d).is_file()]
+        if missing:
+            print(f"identify: {missing[0]}: no such file", file=sys.stderr)
+            return 2
+        out.mkdir(parents=True, exist_ok=True)
+        rep = [dataflash_turn(Path(d)) for d in a.dataflash]
+        (out / "dataflash.json").write_text(json.dumps(rep, indent=1))
+        print(json.dumps(rep, indent=1))
+        return 0
     if a.ulog:
         if a.autopilot != "px4":
             print("identify: --ulog is for px4", file=sys.stderr)

@@ -11,9 +11,11 @@ are one-line errors naming the key and the file). What each section changes in t
   loop is given so that the whole (its loop's own lag included) matches.
 * ``turn``: heading rate per bank, ``turn_gain = psi_dot / (g tan(bank) / V)`` as the bridge's
   adapter measures it from the reported attitude. A turn gain below 1 (the airframe slips in the
-  turn, rudder neutral) is emulated by reporting, in a steady turn, the bank
-  ``atan(V psi_dot / (g turn_gain))`` for the plant's heading rate (whatever the plant's own
-  turn per bank), so the autopilot's loops and the bridge bank more for the same turn.
+  turn, rudder neutral) is emulated by reporting the bank ``atan((k_plant / turn_gain)
+  tan(roll))`` for the plant's roll, with the plant's own turn per bank ``k_plant`` fitted in its
+  held turns, so the autopilot's loops and the bridge bank more for the same turn (a static map
+  of the roll, not the bank the plant's instantaneous heading rate implies: that carries the
+  gusts, which a firmware's reported roll does not).
 * ``estimator``: what the reported state adds to the truth: white noise on position, velocity,
   attitude; a first-order Gauss-Markov position wander (sigma, correlation time); a lag.
 
@@ -39,11 +41,22 @@ from mpf_mavlink.config.autopilot_profile import (
 from mpf_mavlink.constants import GRAVITY_M_S2 as G
 
 TURN_TAU_S = 2.0  # s, the low-pass of the reported heading's offset (StateEstimate._yaw_offset)
-# s, the low-pass of the plant's own turn per bank (StateEstimate._bank_offset): several seconds of
-# turning, so that the yaw's lag behind a roll transient averages out
+# s of held turns over which the plant's own turn per bank (StateEstimate._bank_offset) takes over
+# from the profile's: several seconds of turning, so that the yaw's lag behind a roll transient
+# averages out
 KP_TAU_S = 8.0
+# s, the longest memory of that fit (it grows with the time learned, up to this): the turn per
+# bank is a property of the airframe at the flown airspeed, constant over a mission, while in
+# gusts the heading rate per bank of a stretch of a few seconds scatters by several per cent (the
+# lift's horizontal part); ArduPlane's own in SIM_WIND_TURB 2 scatters by 0.5 % between 60 s
+# stretches (docs/calibration.md, `identify arduplane --dataflash`), a short memory would pass
+# the rest into the reported bank
+KP_MEMORY_S = 60.0
 MIN_LEARN_BANK_RAD = 0.05  # below this bank the heading rate per bank is mostly noise
 MAX_LEARN_ROLL_RATE_RAD_S = 0.05  # a held turn: rolling faster, the heading rate lags the bank
+# s, the low-pass of the roll rate that the held-turn test looks at: a roll transient lasts
+# seconds, a gust's roll rate (SIM_WIND_TURB: +-0.1 rad/s at tens of Hz) averages out
+ROLL_RATE_TAU_S = 1.0
 MAX_LEAD = 5.0  # largest high-frequency gain of the attitude shaper's lead-lag
 
 
@@ -187,6 +200,12 @@ class StateEstimate:
         self._w: np.ndarray | None = None
         # the plant's own turn gain, from the profile's (no offset) until turns have taught it
         self._kp = self.k_turn
+        # the least-squares sums of the plant's turn per bank, V psi_dot tan(roll) and
+        # g tan(roll)^2 (means over the time learned, at most KP_MEMORY_S), the time learned
+        self._kn = 0.0
+        self._kd = 0.0
+        self._kl = 0.0
+        self._pl = 0.0  # the plant's roll rate low-passed over ROLL_RATE_TAU_S
         self._kt: float | None = None
         self._y = 0.0
         self._yt: float | None = None
@@ -221,20 +240,42 @@ class StateEstimate:
         """What the reported bank adds to the plant's: the bank the profile's turn gain needs for
         the plant's turn, ``atan((k_plant / k) tan(roll))``, minus the plant's own. A static map
         of the plant's roll (a real airframe's turn per bank is the same at every instant of a
-        varying turn), with the plant's own turn gain ``k_plant`` (the X8 turns ~0.93x the
-        textbook) learned from its heading rate per bank in held turns over KP_TAU_S, from the
-        profile's own (no offset) at the start."""
+        varying turn, and a firmware reports its own estimate of the roll, not the bank its
+        heading rate implies), with the plant's own turn gain ``k_plant`` (the X8 turns ~0.93x
+        the textbook) learned in held turns: the profile's own (no offset) at the start, the
+        plant's fitted one after KP_TAU_S of held turns (blended in between).
+
+        The fit is the least-squares ``V psi_dot = k_plant g tan(roll)`` over the time learned
+        (at most KP_MEMORY_S): the ratio of the mean ``V psi_dot tan(roll)`` to the mean
+        ``g tan(roll)^2``, which averages the gusts of the plant's heading rate out linearly.
+        A low-passed ratio of each sample would not do in turbulence (sil.wind_turbulence_m_s):
+        the gusts put three quarters of the per-sample ratios outside 0.5-1.5 of the textbook,
+        their clipped mean sits ~8 % above the fit, so the gain creeps up through the flight;
+        and a memory of KP_TAU_S alone lets the fit wander +-5 % with the gusts. Either moves the
+        reported bank off the plant's by degrees at 0.02-0.2 Hz, where a firmware's report (its
+        estimate of the roll) follows the true roll. A held turn: the roll rate low-passed over
+        ROLL_RATE_TAU_S below MAX_LEARN_ROLL_RATE_RAD_S."""
         roll, pitch, _ = st.euler
         t = float(st.t)
         p, q, r = (float(x) for x in st.pqr)
         dt = 0.0 if self._kt is None else max(0.0, t - self._kt)
         self._kt = t
+        self._pl += (1.0 - math.exp(-dt / ROLL_RATE_TAU_S)) * (p - self._pl)
         # learn in held turns only: in a roll transient the heading rate lags the bank
-        if abs(roll) > MIN_LEARN_BANK_RAD and abs(p) < MAX_LEARN_ROLL_RATE_RAD_S:
+        if (
+            dt > 0.0
+            and abs(roll) > MIN_LEARN_BANK_RAD
+            and abs(self._pl) < MAX_LEARN_ROLL_RATE_RAD_S
+        ):
             psid = (q * math.sin(roll) + r * math.cos(roll)) / max(math.cos(pitch), 0.2)
             v = max(float(st.airspeed), 1.0)
-            kp = _clip(v * psid / (G * math.tan(roll)), 0.5, 1.5)
-            self._kp += (1.0 - math.exp(-dt / KP_TAU_S)) * (kp - self._kp)
+            tr = math.tan(_clip(roll, -1.2, 1.2))
+            self._kl += dt
+            a = dt / min(self._kl, KP_MEMORY_S)  # the running mean, then a memory of KP_MEMORY_S
+            self._kn += a * (v * psid * tr - self._kn)
+            self._kd += a * (G * tr * tr - self._kd)
+            w = min(1.0, self._kl / KP_TAU_S)
+            self._kp = self.k_turn + w * (_clip(self._kn / self._kd, 0.5, 1.5) - self.k_turn)
         rc = _clip(roll, -1.2, 1.2)
         return _clip(math.atan(self._kp / self.k_turn * math.tan(rc)) - rc, -0.3, 0.3)
 
