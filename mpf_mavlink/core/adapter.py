@@ -15,6 +15,7 @@ from typing import Any, NamedTuple
 
 from mpf_mavlink.constants import GRAVITY_M_S2
 from mpf_mavlink.core.energy import EnergyState, Tecs, reserve_airspeed
+from mpf_mavlink.quaternion import quat_of_euler
 
 __all__ = [
     "AdapterParams", "AdapterState", "Setpoint", "TrimSchedule", "adapt", "reserve_airspeed",
@@ -262,19 +263,6 @@ def _clip(x: float, lo: float, hi: float) -> float:
     return lo if x < lo else hi if x > hi else x
 
 
-def _euler_to_quat_wxyz(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    # ZYX, the same convention as frames.euler_to_quat_wxyz (kept scalar for the hot path).
-    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
-    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
-    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
-    return (
-        cr * cp * cy + sr * sp * sy,
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-    )
-
-
 def heading_and_path_angle_rates(w1: Vec, omega: Vec) -> tuple[float, float]:
     """(chi_dot, gamma_dot) rad/s of the direction w1 = [cos g cos c, cos g sin c, -sin g]
     turning at omega (NED, rad/s): w1_dot = omega x w1. Vertical w1 gives (0, gamma_dot)."""
@@ -312,7 +300,7 @@ def safe_setpoint(p: AdapterParams, roll: float = 0.0) -> Setpoint:
     pitch = _clip(p.trim_pitch_rad, p.min_pitch_rad, p.max_pitch_rad)
     thr = _clip(p.trim_thrust, p.thrust_min, p.thrust_max)
     return Setpoint(
-        (rr, 0.0, 0.0), _euler_to_quat_wxyz(0.0, pitch, 0.0), thr, 0.0, pitch, 1.0, True
+        (rr, 0.0, 0.0), quat_of_euler(0.0, pitch, 0.0), thr, 0.0, pitch, 1.0, True
     )
 
 
@@ -381,7 +369,7 @@ def adapt(
     )
     trim, pitch_sp = _pitch_setpoint(params, trim_hat, gamma, gamd, sched.offset(x_sp))
     thrust, energy = tecs.thrust(energy, v, v_sp, gamma, gamd_law, trim, n, bal, dt, g)
-    qw, qx, qy, qz = quat = _euler_to_quat_wxyz(bank, pitch_sp, 0.0)
+    qw, qx, qy, qz = quat = quat_of_euler(bank, pitch_sp, 0.0)
     if not (
         math.isfinite(p) and math.isfinite(q) and math.isfinite(r) and math.isfinite(thrust)
         and math.isfinite(bank) and math.isfinite(pitch_sp) and math.isfinite(qw)
