@@ -195,3 +195,38 @@ def test_run_keeps_the_simulators_sections_as_read_and_never_loads_their_schema(
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False", out.stderr
+
+
+def test_a_flown_run_against_a_simulated_vehicle_never_reads_the_simulators_sections(tmp_path):
+    # `run` flies what the link says: from the parser to the hand-back (the checks, the
+    # envelope's wind limit) nothing may read the sil section, so its schema is never imported
+    import socket
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    veh = subprocess.Popen(
+        [sys.executable, "-m", "mpf_mavlink.cli", "vehicle", "configs/default.yaml", "--serve",
+         f"udpin:127.0.0.1:{port}", "--duration", "60"],
+        cwd=root, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    try:
+        assert veh.stdout is not None
+        veh.stdout.readline()  # printed once the vehicle serves
+        code = (
+            "import sys\nfrom mpf_mavlink.cli.main import main\n"
+            f"rc = main(['run', 'configs/default.yaml', '--connect', 'udpout:127.0.0.1:{port}',"
+            f" '--duration', '3', '--no-plots', '-q', '--out', {str(tmp_path / 'run')!r}])\n"
+            "print(rc, 'mpf_mavlink.config.sil' in sys.modules)"
+        )
+        p = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True,
+                           text=True, timeout=180)  # fmt: skip
+    finally:
+        veh.terminate()
+        veh.wait(10)
+    rc, loaded = p.stdout.split()[-2:]
+    # 6: flown to its end, too short to judge (3 s): the flight went through every phase
+    assert (rc, loaded) == ("6", "False"), p.stdout[-2000:] + p.stderr[-2000:]

@@ -392,16 +392,17 @@ def demand_of_step(st: Any, ctl: Any, lim: EnvelopeLimits) -> Demand:
     return dataclasses.replace(d, capture=act.limited, pt_m=act.pt_m)
 
 
-def wind_limit_m_s(cfg: Any, measured: dict[str, Any]) -> float | None:
+def wind_limit_m_s(cfg: Any, measured: dict[str, Any], plant: Any = None) -> float | None:
     """The horizontal wind (m/s) the monitor holds a flight to: the one the pre-engage checks
-    measured, plus its margin and the config's gust allowance (preflight.scenario_wind); None
+    measured, plus its margin and the gust allowance of the plant (preflight.scenario_wind:
+    ``plant``, the simulated vehicle behind the link, or the config's kinematic gusts); None
     without a measurement."""
     from mpf_mavlink.bridge.preflight import scenario_wind
 
     if not measured:
         return None
     w = measured["wind_ned_m_s"]
-    _, gust = scenario_wind(cfg)
+    _, gust = scenario_wind(cfg, plant)
     return math.hypot(w[0], w[1]) + float(measured["wind_margin_m_s"]) + gust
 
 

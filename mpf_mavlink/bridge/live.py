@@ -283,7 +283,8 @@ class Bridge:
             failed = force_through(failed, res, vl, self.log)
         # the wind the monitor holds the flight to: what the checks accepted plus its margin
         self.envelope.lim = dataclasses.replace(
-            self.envelope.lim, wind_max_m_s=wind_limit_m_s(self.cfg, res.measured)
+            self.envelope.lim,
+            wind_max_m_s=wind_limit_m_s(self.cfg, res.measured, self.opts.plant),
         )
         if failed:
             # the wording of `check` and `sim`'s gate: each failed check with its figures
