@@ -407,13 +407,19 @@ def test_time_spacing_law_on_shat() -> None:
 def test_time_spacing_checks_on_the_demo() -> None:
     """configs/fleet_demo.yaml: a common along-path speed fails fleet_speed (10-25 m/s of air
     asked), spacing in time passes; its convergence condition carries the lap clock's gain
-    factor g, so k_c = 0.2 (the path spacing's default) fails where 0.1 passes."""
+    factor g, so without the along-path speed loop k_c = 0.2 (the path spacing's default) fails
+    where 0.1 passes; with it (the demo's k_v 1) the margin is the phase criterion's, and 0.3
+    fails."""
     from mpf_mavlink.cli.main import main
 
     demo = str(Path(__file__).resolve().parents[1] / "configs" / "fleet_demo.yaml")
     assert main(["check", demo]) == 0
     assert main(["check", demo, "--set", "fleet.spacing=path"]) == 3
-    assert main(["check", demo, "--set", "fleet.k_c=0.2"]) == 3
+    off = ["--set", "fleet.ground_speed_gain=0"]
+    assert main(["check", demo, *off]) == 0
+    assert main(["check", demo, *off, "--set", "fleet.k_c=0.2"]) == 3
+    assert main(["check", demo, "--set", "fleet.k_c=0.3"]) == 3
+    assert main(["check", demo, "--set", "fleet.ground_speed_gain=1.5"]) == 3  # small gain
 
 
 def test_sil_fleet_refuses_bad_arguments_in_one_line(tmp_path: Path, capsys) -> None:

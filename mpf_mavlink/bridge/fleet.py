@@ -88,21 +88,31 @@ class FleetCounts:
         return d
 
 
-def path_airspeed(f: FleetConfig, path: Any, u: float, s: float, vs: Any, tgt: Any) -> float:
-    """Spacing on the path: the airspeed (m/s) that moves the aircraft at s (m) along the path
-    at u (m/s), |u f1 + v_point - wind| at the path point ``f.lead_s`` ahead, before the
-    airspeed window (``vs`` the VehicleState, ``tgt`` the TargetState)."""
-    pt = path.eval(s + u * f.lead_s)
+def path_motion(path: Any, s: float, tgt: Any) -> tuple[co.Vec3, co.Vec3]:
+    """(f1, v_point) in NED at s (m): the path's unit tangent and its point's inertial velocity
+    (m/s) with the target's motion ``tgt`` (a TargetState)."""
+    pt = path.eval(s)
     R = tgt.R_T_I
     p_d, f1T = pt[0], pt[1]
-    f1 = tuple(float(x) for x in R @ f1T)
+    f1v = R @ f1T
     w = tgt.omega_T
     wxp = (w[1] * p_d[2] - w[2] * p_d[1], w[2] * p_d[0] - w[0] * p_d[2],
            w[0] * p_d[1] - w[1] * p_d[0])  # fmt: skip
     rot = R @ wxp
-    vp = tuple(float(tgt.velocity[k] + rot[k]) for k in range(3))
+    f1 = (float(f1v[0]), float(f1v[1]), float(f1v[2]))
+    vp = (float(tgt.velocity[0] + rot[0]), float(tgt.velocity[1] + rot[1]),
+          float(tgt.velocity[2] + rot[2]))  # fmt: skip
+    return f1, vp
+
+
+def path_airspeed(f: FleetConfig, path: Any, u: float, s: float, vs: Any, tgt: Any) -> float:
+    """Spacing on the path: the airspeed (m/s) that moves the aircraft at s (m) along the path
+    at u (m/s), |u f1 + v_point - wind| at the path point ``f.lead_s`` ahead, before the
+    airspeed window (``vs`` the VehicleState, ``tgt`` the TargetState)."""
+    f1, vp = path_motion(path, s + u * f.lead_s, tgt)
+    R = tgt.R_T_I
     wind = _wind(vs)
-    a = co.airspeed_for(u, f1, vp, wind)  # type: ignore[arg-type]
+    a = co.airspeed_for(u, f1, vp, wind)
     a = u + f.ff_gain * (a - u)  # the lap's swing, scaled
     k_u = f.speed_gain
     if k_u > 0.0:
@@ -129,7 +139,7 @@ class FleetRecord:
     the fleet before the kill), or written at the end without one. Never ends a flight."""
 
     HEADER = ("t_unix_s", "t_s", "s_m", "sdot_m_s", "e_m", "du_m_s", "airspeed_sp_m_s",
-              "n_peers", "slot_deg", "shat_m")  # fmt: skip
+              "n_peers", "slot_deg", "shat_m", "du_v_m_s")  # fmt: skip
 
     def __init__(self) -> None:
         self.path: Path | None = None
@@ -200,6 +210,11 @@ class FleetMember:
         self.peers: dict[int, _Peer] = {}
         self.n = FleetCounts()
         self.lp = co.LowPass(self.f.filter_tau_s)
+        # spacing in time: the inner loop on the measured along-path speed (k_v 0: none)
+        self.gs = (
+            co.GroundSpeedLoop(self.f.ground_speed_gain, self.f.ground_speed_tau_s)
+            if self.lap is not None and self.f.ground_speed_gain > 0.0 else None
+        )  # fmt: skip
         self.t_sent = -math.inf
         self.t_prev: float | None = None
         self.record = FleetRecord()
@@ -369,16 +384,25 @@ class FleetMember:
         dt = 0.0 if self.t_prev is None else now - self.t_prev
         self.t_prev = now
         du = self.lp(du_raw, dt)
+        du_v = 0.0
         if lap is not None:  # the energy control holds u_ref + du of airspeed
-            want = self.params.u_ref_m_s + du
+            u_c = self.params.u_ref_m_s + du
+            if self.gs is not None and n:  # ... less k_v of the along-path speed error
+                f1, vp = path_motion(self.path, s, tgt)
+                wind = _wind(vs)
+                nu_c = co.along_path_speed(u_c, f1, vp, wind)
+                du_v = self.gs(sdot - nu_c, co.along_path_slope(nu_c, u_c, f1, vp, wind), dt)
+            dmax = self.params.du_max_m_s  # du + du_v within the correction's bound
+            want = self.params.u_ref_m_s + min(max(du + du_v, -dmax), dmax)
         else:
             want = path_airspeed(self.f, self.path, max(0.0, self.params.u_ref_m_s + du), s, vs,
                                  tgt)  # fmt: skip
         asp = min(max(want, self.window[0]), self.window[1])
         if asp != want:  # the window takes part of what the coordination asks: counted
             self.n.extra["airspeed_clipped"] = self.n.extra.get("airspeed_clipped", 0) + 1
-        self.last = {"e_m": e, "du_m_s": du, "airspeed_sp_m_s": asp, "n_peers": float(n)}
-        row = (now, t_mission, s, sdot, e, du, asp, float(n), mine * 360.0, shat)
+        self.last = {"e_m": e, "du_m_s": du, "airspeed_sp_m_s": asp, "n_peers": float(n),
+                     "du_v_m_s": du_v}  # fmt: skip
+        row = (now, t_mission, s, sdot, e, du, asp, float(n), mine * 360.0, shat, du_v)
         self.record.add(row, now)
         return asp
 

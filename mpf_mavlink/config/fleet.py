@@ -76,6 +76,17 @@ class FleetConfig:
             "attenuation made up)"
         ),
     )
+    ground_speed_gain: float = field(
+        default=0.0,
+        metadata=_nonneg(
+            "spacing: time: the share k_v (<= 1) of the measured along-path speed error taken "
+            "off the airspeed set-point (0: off; spacing: path has speed_gain)"
+        ),
+    )
+    ground_speed_tau_s: float = field(
+        default=1.0,
+        metadata=_pos("low-pass time constant (s) of that along-path speed error"),
+    )
     rate_hz: float = field(default=5.0, metadata=_rng(0.2, 50.0, "reports sent per second"))
     max_latency_s: float = field(
         default=0.5, metadata=_nonneg("the worst link latency the convergence check allows (s)")
