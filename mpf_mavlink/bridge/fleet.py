@@ -204,6 +204,9 @@ class FleetMember:
         # recomputed at the report rate (the target turns and the wind changes slowly)
         self.lap = co.LapClock(path) if self.f.spacing == "time" else None
         self.t_lap = -math.inf
+        # ... in the wind averaged over fleet.lap_wind_tau_s (co.LapWind: a gust moves the
+        # aircraft, it does not re-map the lap)
+        self.lap_wind = co.LapWind(self.f.lap_wind_tau_s)
         self.window = co.airspeed_window(self.f, cfg.vehicle)
         self.signing = signing
         self.links: list[tuple[Any, bool]] = []  # (Link, written)
@@ -370,9 +373,11 @@ class FleetMember:
         lap = self.lap
         if lap is not None:  # spacing in time: the consensus on shat (peers propagated first)
             if now - self.t_lap >= 1.0 / self.f.rate_hz:
+                dt_lap = now - self.t_lap if math.isfinite(self.t_lap) else 0.0
                 self.t_lap = now
                 u = self.params.u_ref_m_s
-                if not lap.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, _wind(vs), u):
+                w_lap = self.lap_wind(_wind(vs), dt_lap)
+                if not lap.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, w_lap, u):
                     self.n.extra["lap_unsolved"] = self.n.extra.get("lap_unsolved", 0) + 1
             reps = [co.PeerReport(r.slot, lap.shat(r.s_m + r.sdot_m_s * max(0.0, now - r.t_s)),
                                   0.0, now) for r in reps]  # fmt: skip

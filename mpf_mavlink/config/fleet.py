@@ -76,6 +76,13 @@ class FleetConfig:
             "attenuation made up)"
         ),
     )
+    lap_wind_tau_s: float = field(
+        default=100.0,
+        metadata=_nonneg(
+            "spacing: time: the lap clock's wind is the estimate low-passed over this (s; 0: "
+            "as estimated); two of the demo's laps"
+        ),
+    )
     ground_speed_gain: float = field(
         default=0.0,
         metadata=_nonneg(
