@@ -507,8 +507,16 @@ def test_consensus_phase_margin_is_the_closed_form_with_no_inner_loop() -> None:
         assert pm == pytest.approx(0.5 * math.pi - K * tau, abs=tau * K * (r - 1.0) + 1e-12)
 
 
-def _fly_inner(K_c: float, k_v: float, t_end: float, d: tuple[float, float, float],
-               tau_v: float = 4.0, tau_f: float = 1.0, delay_s: float = 1.2, dt: float = 0.01):
+def _fly_inner(
+    K_c: float,
+    k_v: float,
+    t_end: float,
+    d: tuple[float, float, float],
+    tau_v: float = 4.0,
+    tau_f: float = 1.0,
+    delay_s: float = 1.2,
+    dt: float = 0.01,
+):
     """Three aircraft, all-to-all: xi_i' = v_i + d_i, v_i' = (c_i - v_i) / tau_v (the speed
     lag), c_i = -K_c e_i(t - delay) - k_v y_i, y_i' = (v_i + d_i - (-K_c e_i) - y_i) / tau_f (the
     filtered along-path speed error against what the consensus asked): the linear model
@@ -530,7 +538,7 @@ def _fly_inner(K_c: float, k_v: float, t_end: float, d: tuple[float, float, floa
         v += (c - v) * dt / tau_v
         xi = xi + (v + dd) * dt
         hist.append(xi.copy())
-        hist = hist[-lag - 1:]
+        hist = hist[-lag - 1 :]
         out[k] = [np.mean([xi[i] - xi[j] for j in range(3) if j != i]) for i in range(3)]
     return out
 
@@ -598,3 +606,46 @@ def test_member_takes_the_along_path_speed_error_off_the_set_point() -> None:
     slope = co.along_path_slope(nu, u, f1, vp, _wind(vs))
     assert m.last["du_v_m_s"] == pytest.approx(-0.7 * 1.2 / slope, rel=1e-6)
     assert m.last["airspeed_sp_m_s"] == pytest.approx(u - 0.7 * 1.2 / slope, rel=1e-6)
+
+
+def test_lap_wind_averages_gusts_not_the_wind() -> None:
+    """LapWind: a wind shift reaches 1 - e^-1 of itself after tau (exact for the exp filter); a
+    gust of period P is attenuated to 1 / sqrt(1 + (2 pi tau / P)^2) (the continuous filter;
+    the 0.2 s discrete step changes it by O(dt / P) = 2 %, the tolerance)."""
+    lw = co.LapWind(100.0)
+    assert lw((0.0, 4.0, 0.0), 0.0) == (0.0, 4.0, 0.0)  # starts at the first estimate
+    out = (0.0, 4.0, 0.0)
+    for _ in range(500):
+        out = lw((1.0, 4.0, 0.0), 0.2)
+    assert out[0] == pytest.approx(1.0 - math.exp(-1.0), rel=1e-9)
+    assert out[1] == pytest.approx(4.0)
+    assert lw((math.nan, 0.0, 0.0), 0.2) == out  # a non-finite estimate: the last average
+    P, tau, dt = 20.0, 100.0, 0.2
+    lw = co.LapWind(tau)
+    xs = [lw((math.sin(2 * math.pi * k * dt / P), 0.0, 0.0), dt)[0] for k in range(20000)]
+    amp = max(abs(x) for x in xs[-1000:])
+    assert amp == pytest.approx(1.0 / math.sqrt(1.0 + (2 * math.pi * tau / P) ** 2), rel=0.02)
+
+
+def test_member_lap_clock_uses_the_averaged_wind() -> None:
+    # a 2 m/s gust in the estimate for one report period: the lap clock moves by the filter's
+    # share of it (1 - e^(-0.2/100)), not by the gust
+    clock = _Clock()
+    cfg = _cfg("fleet.slots_deg=[0,180]", 'fleet.links=["udpin:127.0.0.1:14600"]',
+               "fleet.spacing=time")  # fmt: skip
+    m = FleetMember(cfg, build_path(cfg.path), lambda _t: None, clock)
+    vs, tgt = _vs_tgt()
+    lap = m.lap
+    assert lap is not None
+    m.step(0.0, 0.0, 20.0, vs, tgt)
+    T0 = lap.lap_s
+    clock.t += 0.2
+    gust = SimpleNamespace(wind=np.array([2.0, 0.0, 0.0]), airspeed=22.0, R_W_I=np.eye(3))
+    m.step(0.0, 0.0, 20.0, gust, tgt)
+    a = 1.0 - math.exp(-0.2 / cfg.section("fleet").lap_wind_tau_s)
+    want = co.LapClock(m.path)
+    assert want.update(
+        tgt.R_T_I, tgt.velocity, tgt.omega_T, (2.0 * a, 0.0, 0.0), m.params.u_ref_m_s
+    )
+    assert lap.lap_s == pytest.approx(want.lap_s, rel=1e-9)
+    assert abs(lap.lap_s - T0) < 0.01 * T0

@@ -12,9 +12,15 @@ with truth.csv, bridge/timeseries.csv and bridge/fleet.csv). Per member, on the 
 so that u - nu_ref = (nu_sp - nu_ref) [coordination] + (nu_air - nu_sp) [airspeed tracking]
 + (u - nu_air) [the wind the aircraft rides less the estimate, and its crab]. shat advances at
 g(s) u with g = dshat/ds = (L/T) / nu_ref; e_i = mean_j (xi_i - xi_j), so each term X
-contributes c_X,i = g_i X_i - mean_j g_j X_j to d(e_i)/dt. Each contribution is then passed
-through the loop the coordination closes (de/dt = c - k e, k fitted: the coordination term's
-own slope against e), which gives the part of e each one is responsible for.
+contributes c_X,i = g_i X_i - mean_j g_j X_j to d(e_i)/dt. Per member: those contributions'
+RMS, the along-path speed error (nu_air - nu_sp, u - nu_air and their sum: what moves the
+aircraft against what the coordination asked), how the two correlate, the sum's variance by
+period and its share that repeats with the lap (binned on s).
+
+And the lap clock (:func:`clock_artifact`): every bridge computes e through a lap clock in its
+own wind estimate; e is recomputed from the members' s through each one's logged estimate (it
+must match the logged e) and through one common clock (the members' mean estimate): their
+difference is what the bridges' own clocks add to e.
 """
 
 from __future__ import annotations
@@ -66,9 +72,9 @@ def member_terms(d: Path, path: Any, u_ref: float, turn_rate: float, v_t: float)
         w = np.array([0.0, 0.0, turn_rate])
         vp = np.array([v_t * c, v_t * s_, 0.0]) + R @ np.cross(w, p_T)
         f1t, vpt, wet = tuple(f1), tuple(vp), tuple(we[i])
-        nref[i] = along_path_speed(u_ref, f1t, vpt, wet)  # type: ignore[arg-type]
-        nsp[i] = along_path_speed(float(vsp[i]), f1t, vpt, wet)  # type: ignore[arg-type]
-        nair[i] = along_path_speed(float(V[i]), f1t, vpt, wet)  # type: ignore[arg-type]
+        nref[i] = along_path_speed(u_ref, f1t, vpt, wet)
+        nsp[i] = along_path_speed(float(vsp[i]), f1t, vpt, wet)
+        nair[i] = along_path_speed(float(V[i]), f1t, vpt, wet)
         u[i] = float((vg[i] - vp) @ f1)
         uw[i] = float((wt[i] - we[i]) @ f1)
     return {"t_unix": t_unix, "t": tb, "s": B["s"], "sdot": B["sdot"], "shat": shat, "e": e,
@@ -92,59 +98,112 @@ def budget(out: Path, config: Path, n: int = 3, after_s: float = 150.0) -> dict[
     grid = np.arange(t0, t1, 0.1)
     terms = ("coord", "airspeed", "wind", "residual")
     X: dict[str, list[np.ndarray]] = {k: [] for k in terms}
-    es, gs = [], []
+    es = []
     lap_T = L / np.nanmean(np.concatenate([m["nref"] for m in ms]))
     for m in ms:
         f = {k: np.interp(grid, m["t_unix"], m[k]) for k in m if k != "t_unix"}
         # g = dshat/ds: the lap clock's (L/T)/nu_ref
         g = (L / lap_T) / f["nref"]
-        gs.append(g)
         X["coord"].append(g * (f["nsp"] - f["nref"]))
         X["airspeed"].append(g * (f["nair"] - f["nsp"]))
         X["wind"].append(g * (f["u"] - f["nair"]))
         X["residual"].append(g * (f["sdot"] - f["u"]))
         es.append(f["e"])
     res: dict[str, Any] = {"window_s": float(t1 - t0), "members": []}
-    dt = 0.1
+    bands = ((0.0, 1 / 100), (1 / 100, 1 / 40), (1 / 40, 1 / 15), (1 / 15, 1 / 5), (1 / 5, 5.0))
     for i in range(n):
         c = {k: X[k][i] - np.mean([X[k][j] for j in range(n) if j != i], axis=0) for k in terms}
         e = es[i]
-        de = np.gradient(e, dt)
-        # the loop's own slope: coordination contribution against e (least squares)
-        k_loop = float(-np.sum(c["coord"] * e) / np.sum(e * e))
-        row: dict[str, Any] = {"e_rms_m": float(np.sqrt(np.mean(e**2))),
-                               "de_dt_rms_m_s": float(np.sqrt(np.mean(de**2))),
-                               "k_loop_1_s": k_loop}  # fmt: skip
+        row: dict[str, Any] = {"e_rms_m": float(np.sqrt(np.mean(e**2)))}
         for k in terms:
             row[f"c_{k}_rms_m_s"] = float(np.sqrt(np.mean(c[k] ** 2)))
-        # the part of e each disturbance makes through the closed loop de/dt = c - k e
-        a = math.exp(-k_loop * dt)
-        for k in ("airspeed", "wind", "residual"):
-            y = np.zeros_like(e)
-            for j in range(1, len(e)):
-                y[j] = a * y[j - 1] + (1.0 - a) / k_loop * c[k][j]
-            row[f"e_from_{k}_rms_m"] = float(np.sqrt(np.mean((y - y.mean()) ** 2)))
-        # how well the sum of contributions explains de/dt
-        tot = sum(c[k] for k in terms)
-        row["de_dt_vs_sum_corr"] = float(np.corrcoef(de, tot)[0, 1])
         m = ms[i]
         sel = m["t_unix"] >= t0
+        air = (m["nair"] - m["nsp"])[sel]
+        wind = (m["u"] - m["nair"])[sel]
+        tot = air + wind
         row["airspeed_err_rms_m_s"] = float(np.sqrt(np.nanmean((m["V"] - m["vsp"])[sel] ** 2)))
+        row["airspeed_err_mean_m_s"] = float(np.nanmean((m["V"] - m["vsp"])[sel]))
         row["airspeed_range_m_s"] = [float(np.min(m["V"][sel])), float(np.max(m["V"][sel]))]
         row["du_rms_m_s"] = float(np.sqrt(np.mean(m["du"][sel] ** 2)))
-        row["wind_err_along_rms_m_s"] = float(np.sqrt(np.nanmean(m["wind_err_along"][sel] ** 2)))
-        row["u_minus_nair_rms_m_s"] = float(np.sqrt(np.nanmean((m["u"] - m["nair"])[sel] ** 2)))
-        row["nair_minus_nsp_rms_m_s"] = float(
-            np.sqrt(np.nanmean((m["nair"] - m["nsp"])[sel] ** 2))
-        )
+        row["along_from_airspeed_rms_m_s"] = float(np.nanstd(air))
+        row["along_from_wind_rms_m_s"] = float(np.nanstd(wind))
+        row["along_total_rms_m_s"] = float(np.nanstd(tot))
+        row["corr_airspeed_wind"] = float(np.corrcoef(air, wind)[0, 1])
+        x = tot - np.nanmean(tot)
+        P = np.abs(np.fft.rfft(np.nan_to_num(x))) ** 2
+        fr = np.fft.rfftfreq(len(x), 0.02)
+        row["total_variance_by_period"] = {
+            f"{1 / hi if hi < 5 else 0.2:g}-{1 / lo if lo > 0 else math.inf:g} s":
+            float(P[(fr >= lo) & (fr < hi)].sum() / P.sum()) for lo, hi in bands
+        }  # fmt: skip
+        ph = np.floor((m["s"][sel] % L) / L * 24).astype(int)
+        prof = np.array([np.nanmean(tot[ph == b]) if np.any(ph == b) else 0.0 for b in range(24)])
+        row["total_lap_periodic_share"] = float(np.nanvar(prof[ph]) / np.nanvar(tot))
         res["members"].append(row)
+    res["clock"] = clock_artifact(out, path, u_ref, tg.turn_rate_rad_s, tg.speed_m_s, n, after_s)
     return res
+
+
+def clock_artifact(
+    out: Path, path: Any, u_ref: float, turn_rate: float, v_t: float, n: int, after_s: float
+) -> dict[str, Any]:
+    """Each bridge's e against the same error in one common lap clock: e recomputed from the
+    members' s (fleet.csv) through a lap clock in each bridge's own logged wind estimate (a
+    check of the recomputation: it must match the logged e) and through one clock in the
+    members' mean estimate over the window (the error the fleet would agree on)."""
+    from mpf_mavlink.core.guidance import coordination as co
+
+    L = float(path.length)
+    F = [_csv(out / f"member{k}" / "bridge" / "fleet.csv") for k in range(n)]
+    B = [_csv(out / f"member{k}" / "bridge" / "timeseries.csv") for k in range(n)]
+    t0 = max(f["t_unix_s"][0] for f in F) + after_s
+    t1 = min(f["t_unix_s"][-1] for f in F)
+    g = np.arange(t0, t1, 0.5)
+
+    def on(k: int, name: str) -> np.ndarray:
+        tb = np.interp(B[k]["t"], F[k]["t_s"], F[k]["t_unix_s"])
+        return np.asarray(np.interp(g, tb, B[k][name]), float)
+
+    W = [np.column_stack([on(k, "wind_n"), on(k, "wind_e"), on(k, "wind_d")]) for k in range(n)]
+    Y = [on(k, "tgt_yaw") for k in range(n)]
+    S = [np.interp(g, f["t_unix_s"], f["s_m"]) for f in F]
+    E = [np.interp(g, f["t_unix_s"], f["e_m"]) for f in F]
+    wm = np.mean([w.mean(axis=0) for w in W], axis=0)
+    lap = co.LapClock(path, 256)
+
+    def e_in(wind: Any) -> np.ndarray:
+        res = np.zeros((n, len(g)))
+        for i in range(len(g)):
+            for k in range(n):
+                c, s_ = math.cos(Y[k][i]), math.sin(Y[k][i])
+                R = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+                lap.update(R, (v_t * c, v_t * s_, 0.0), (0.0, 0.0, turn_rate), wind(k, i), u_ref)
+                xi = [lap.shat(S[j][i]) - j / n * L for j in range(n)]
+                res[k, i] = np.mean([co.wrap_m(xi[k] - xi[j], L) for j in range(n) if j != k])
+        return res
+
+    own = e_in(lambda k, i: tuple(W[k][i]))
+    com = e_in(lambda k, i: tuple(wm))
+
+    def rms(x: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(x**2)))
+
+    return {
+        "wind_estimate_mean_m_s": [w.mean(axis=0).round(2).tolist() for w in W],
+        "wind_estimate_std_m_s": [w.std(axis=0).round(2).tolist() for w in W],
+        "e_logged_rms_m": [rms(E[k]) for k in range(n)],
+        "recomputed_vs_logged_rms_m": [rms(own[k] - E[k]) for k in range(n)],
+        "e_common_clock_rms_m": [rms(com[k]) for k in range(n)],
+        "logged_vs_common_clock_rms_m": [rms(E[k] - com[k]) for k in range(n)],
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
     a = sys.argv[1:] if argv is None else argv
     out = Path(a[0])
-    config = Path(a[1]) if len(a) > 1 else Path(__file__).resolve().parents[2] / "configs" / "fleet_demo.yaml"
+    root = Path(__file__).resolve().parents[2]
+    config = Path(a[1]) if len(a) > 1 else root / "configs" / "fleet_demo.yaml"
     print(json.dumps(budget(out, config), indent=2))
     return 0
 

@@ -207,6 +207,7 @@ class FleetMember:
         # ... in the wind averaged over fleet.lap_wind_tau_s (co.LapWind: a gust moves the
         # aircraft, it does not re-map the lap)
         self.lap_wind = co.LapWind(self.f.lap_wind_tau_s)
+        self.w_lap: co.Vec3 = (0.0, 0.0, 0.0)
         self.window = co.airspeed_window(self.f, cfg.vehicle)
         self.signing = signing
         self.links: list[tuple[Any, bool]] = []  # (Link, written)
@@ -376,7 +377,7 @@ class FleetMember:
                 dt_lap = now - self.t_lap if math.isfinite(self.t_lap) else 0.0
                 self.t_lap = now
                 u = self.params.u_ref_m_s
-                w_lap = self.lap_wind(_wind(vs), dt_lap)
+                w_lap = self.w_lap = self.lap_wind(_wind(vs), dt_lap)
                 if not lap.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, w_lap, u):
                     self.n.extra["lap_unsolved"] = self.n.extra.get("lap_unsolved", 0) + 1
             reps = [co.PeerReport(r.slot, lap.shat(r.s_m + r.sdot_m_s * max(0.0, now - r.t_s)),
@@ -393,8 +394,10 @@ class FleetMember:
         if lap is not None:  # the energy control holds u_ref + du of airspeed
             u_c = self.params.u_ref_m_s + du
             if self.gs is not None and n:  # ... less k_v of the along-path speed error
+                # against the lap clock's own speed (its wind: the error is what moves shat
+                # off its rate, not the estimate's gusts)
                 f1, vp = path_motion(self.path, s, tgt)
-                wind = _wind(vs)
+                wind = self.w_lap
                 nu_c = co.along_path_speed(u_c, f1, vp, wind)
                 du_v = self.gs(sdot - nu_c, co.along_path_slope(nu_c, u_c, f1, vp, wind), dt)
             dmax = self.params.du_max_m_s  # du + du_v within the correction's bound

@@ -180,8 +180,9 @@ class LapClock:
         return laps * self.L + float(np.interp(s_m - laps * self.L, self.s, self.shat_grid))
 
 
-def along_path_slope(nu_m_s: float, v_air_m_s: float, f1_I: Vec3, v_point_I: Vec3,
-                     wind_I: Vec3) -> float:
+def along_path_slope(
+    nu_m_s: float, v_air_m_s: float, f1_I: Vec3, v_point_I: Vec3, wind_I: Vec3
+) -> float:
     """d nu / d V_air (dimensionless) where :func:`along_path_speed` gives nu at V_air:
     differentiating |nu f1 + d|^2 = V^2 (d = v_point - wind), V / (nu + f1 . d); 1 in calm air
     over a still path, more where the aircraft crabs; nan where it is not defined."""
@@ -199,7 +200,7 @@ class GroundSpeedLoop:
     aircraft along the path by as much again (measured in our SIL: 0.43-0.46 m/s RMS, mostly at
     periods of 15-100 s, the lap's). This loop measures that along-path speed error,
     ``sdot - nu_c`` (nu_c the along-path speed the airspeed u_ref + du gives where the aircraft
-    is, in the estimated wind), low-passes it over ``tau_s`` (gusts shorter than that are left
+    is, in the lap clock's wind, :class:`LapWind`), low-passes it over ``tau_s`` (gusts shorter than that are left
     to the airspeed hold) and takes ``k_v`` of it off the airspeed set-point, divided by the
     slope d nu / dV so that k_v is in along-path units:
 
@@ -237,8 +238,9 @@ def inner_loop_response(
     return G * (1.0 + k_v * F) / (1.0 + k_v * F * G)
 
 
-def consensus_phase_margin(gain_1_s: float, delay_s: float, H: Any = None,
-                           omega: np.ndarray | None = None) -> float:
+def consensus_phase_margin(
+    gain_1_s: float, delay_s: float, H: Any = None, omega: np.ndarray | None = None
+) -> float:
     """The least phase margin (rad) of the consensus mode K H(s) e^{-s tau} / s over the
     frequencies where its loop gain is at least 1 (K = ``gain_1_s``, k_c times the gain factor
     times the Laplacian's eigenvalue; tau = ``delay_s``; ``H`` a callable of omega giving the
