@@ -200,9 +200,9 @@ class GroundSpeedLoop:
     aircraft along the path by as much again (measured in our SIL: 0.43-0.46 m/s RMS, mostly at
     periods of 15-100 s, the lap's). This loop measures that along-path speed error,
     ``sdot - nu_c`` (nu_c the along-path speed the airspeed u_ref + du gives where the aircraft
-    is, in the lap clock's wind, :class:`LapWind`), low-passes it over ``tau_s`` (gusts shorter than that are left
-    to the airspeed hold) and takes ``k_v`` of it off the airspeed set-point, divided by the
-    slope d nu / dV so that k_v is in along-path units:
+    is, in the lap clock's wind, :class:`LapWind`), low-passes it over ``tau_s`` (gusts shorter
+    than that are left to the airspeed hold) and takes ``k_v`` of it off the airspeed
+    set-point, divided by the slope d nu / dV so that k_v is in along-path units:
 
         du_v = -k_v F(sdot - nu_c) / (d nu / dV),  F = 1 / (tau_s s + 1)
 
