@@ -153,7 +153,11 @@ class _Clock:
         return self.t
 
 
-def _pair(extra_b: tuple[str, ...] = (), signing: tuple[bytes | None, bytes | None] = (None, None)):
+def _pair(
+    extra_b: tuple[str, ...] = (),
+    signing: tuple[bytes | None, bytes | None] = (None, None),
+    extra: tuple[str, ...] = (),
+):
     pa, pb = _ports(2)
     clock = _Clock()
     members = []
@@ -164,7 +168,7 @@ def _pair(extra_b: tuple[str, ...] = (), signing: tuple[bytes | None, bytes | No
         ]  # fmt: skip
         if k == 1:
             sets += list(extra_b)
-        cfg = _cfg(*sets)
+        cfg = _cfg(*sets, *extra)
         key = signing[k]
         m = FleetMember(cfg, build_path(cfg.path), lambda _t: None, clock,
                         (key, k) if key is not None else None)  # fmt: skip
@@ -609,27 +613,28 @@ def test_member_takes_the_along_path_speed_error_off_the_set_point() -> None:
 
 
 def test_lap_wind_averages_gusts_not_the_wind() -> None:
-    """LapWind: a wind shift reaches 1 - e^-1 of itself after tau (exact for the exp filter); a
-    gust of period P is attenuated to 1 / sqrt(1 + (2 pi tau / P)^2) (the continuous filter;
-    the 0.2 s discrete step changes it by O(dt / P) = 2 %, the tolerance)."""
+    """LapWind: the running mean of the first estimates (exact, to rounding) while that weighs
+    the newest more than the low-pass (n + 1 < 1 / (1 - e^(-dt/tau)), ~500 at 0.2 s and
+    100 s), then the low-pass: a gust of period P attenuated to 1 / sqrt(1 + (2 pi tau / P)^2)
+    (the continuous filter; the 0.2 s step changes it by O(dt / P) = 1 %: tolerance 2 %)."""
     lw = co.LapWind(100.0)
-    assert lw((0.0, 4.0, 0.0), 0.0) == (0.0, 4.0, 0.0)  # starts at the first estimate
-    out = (0.0, 4.0, 0.0)
-    for _ in range(500):
-        out = lw((1.0, 4.0, 0.0), 0.2)
-    assert out[0] == pytest.approx(1.0 - math.exp(-1.0), rel=1e-9)
+    xs = [0.3, -1.2, 2.0, 0.5, 0.1]
+    out = (0.0, 0.0, 0.0)
+    for x in xs:
+        out = lw((x, 4.0, 0.0), 0.2)
+    assert out[0] == pytest.approx(sum(xs) / len(xs), abs=1e-12)
     assert out[1] == pytest.approx(4.0)
     assert lw((math.nan, 0.0, 0.0), 0.2) == out  # a non-finite estimate: the last average
     P, tau, dt = 20.0, 100.0, 0.2
     lw = co.LapWind(tau)
-    xs = [lw((math.sin(2 * math.pi * k * dt / P), 0.0, 0.0), dt)[0] for k in range(20000)]
-    amp = max(abs(x) for x in xs[-1000:])
+    ys = [lw((math.sin(2 * math.pi * k * dt / P), 0.0, 0.0), dt)[0] for k in range(20000)]
+    amp = max(abs(y) for y in ys[-1000:])
     assert amp == pytest.approx(1.0 / math.sqrt(1.0 + (2 * math.pi * tau / P) ** 2), rel=0.02)
 
 
 def test_member_lap_clock_uses_the_averaged_wind() -> None:
-    # a 2 m/s gust in the estimate for one report period: the lap clock moves by the filter's
-    # share of it (1 - e^(-0.2/100)), not by the gust
+    # a 2 m/s gust in the estimate for one report period after 50 calm ones: the lap clock
+    # moves by the average's share of it (1/51), not by the gust
     clock = _Clock()
     cfg = _cfg("fleet.slots_deg=[0,180]", 'fleet.links=["udpin:127.0.0.1:14600"]',
                "fleet.spacing=time")  # fmt: skip
@@ -637,15 +642,41 @@ def test_member_lap_clock_uses_the_averaged_wind() -> None:
     vs, tgt = _vs_tgt()
     lap = m.lap
     assert lap is not None
-    m.step(0.0, 0.0, 20.0, vs, tgt)
+    for _ in range(50):
+        m.step(0.0, 0.0, 20.0, vs, tgt)
+        clock.t += 0.2
     T0 = lap.lap_s
-    clock.t += 0.2
     gust = SimpleNamespace(wind=np.array([2.0, 0.0, 0.0]), airspeed=22.0, R_W_I=np.eye(3))
     m.step(0.0, 0.0, 20.0, gust, tgt)
-    a = 1.0 - math.exp(-0.2 / cfg.section("fleet").lap_wind_tau_s)
-    want = co.LapClock(m.path)
-    assert want.update(
-        tgt.R_T_I, tgt.velocity, tgt.omega_T, (2.0 * a, 0.0, 0.0), m.params.u_ref_m_s
-    )
+    want = co.LapClock(m.path)  # the 51st estimate, in the running mean (no peer's wind heard)
+    w = (2.0 / 51.0, 0.0, 0.0)
+    assert want.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, w, m.params.u_ref_m_s)
     assert lap.lap_s == pytest.approx(want.lap_s, rel=1e-9)
     assert abs(lap.lap_s - T0) < 0.01 * T0
+
+
+def test_members_share_their_averaged_wind_for_one_lap_clock() -> None:
+    # a's estimate (1, 0, 0), b's (-1, 2, 0) m/s: once each has heard the other (DEBUG_VECT
+    # "MPW" + path id, x y z the average), both lap clocks are in the mean (0, 1, 0), exactly
+    a, b, clock = _pair(extra=("fleet.spacing=time",))
+    tgt = _vs_tgt()[1]
+    va = SimpleNamespace(wind=np.array([1.0, 0.0, 0.0]), airspeed=22.0, R_W_I=np.eye(3))
+    vb = SimpleNamespace(wind=np.array([-1.0, 2.0, 0.0]), airspeed=22.0, R_W_I=np.eye(3))
+    try:
+        a.step(0.0, 0.0, 22.0, va, tgt)
+        b.step(0.0, L150 / 2, 22.0, vb, tgt)
+        assert a.w_lap == (1.0, 0.0, 0.0)  # nobody heard yet: its own
+        _settle(a, b)
+        clock.t += 0.25
+        a.step(0.25, 5.0, 22.0, va, tgt)
+        b.step(0.25, L150 / 2 + 5.0, 22.0, vb, tgt)
+        for m in (a, b):
+            assert m.n.extra["wind_rx"] == 1
+            assert m.w_lap == pytest.approx((0.0, 1.0, 0.0), abs=1e-12)
+        want = co.LapClock(a.path)
+        assert want.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, (0.0, 1.0, 0.0), 22.0)
+        assert a.lap is not None and b.lap is not None
+        assert a.lap.lap_s == pytest.approx(want.lap_s, rel=1e-12) == b.lap.lap_s
+    finally:
+        a.close()
+        b.close()

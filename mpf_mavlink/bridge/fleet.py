@@ -49,6 +49,14 @@ def report_name(pid: str) -> str:
     return (MSG_PREFIX + pid)[:10]
 
 
+WIND_PREFIX = "MPW"
+
+
+def wind_name(pid: str) -> str:
+    """The DEBUG_VECT name of a member's lap-clock wind on that path: "MPW" + 7 hex digits."""
+    return (WIND_PREFIX + pid)[:10]
+
+
 def path_id(cfg: Any) -> str:
     """Seven hex digits naming the moving path (path, target and the target's epoch): the
     coordination messages carry it, and a peer whose id differs flies another path."""
@@ -207,7 +215,11 @@ class FleetMember:
         # ... in the wind averaged over fleet.lap_wind_tau_s (co.LapWind: a gust moves the
         # aircraft, it does not re-map the lap)
         self.lap_wind = co.LapWind(self.f.lap_wind_tau_s)
-        self.w_lap: co.Vec3 = (0.0, 0.0, 0.0)
+        self.w_lap: co.Vec3 = (0.0, 0.0, 0.0)  # the fleet's: the mean of the members' averages
+        self.w_own: co.Vec3 | None = None  # this member's average, told to the peers at 1 Hz
+        self.peer_wind: dict[int, tuple[co.Vec3, float]] = {}  # sysid: (wind, our clock)
+        self.t_wind_sent = -math.inf
+        self.wind_name = wind_name(self.pid)
         self.window = co.airspeed_window(self.f, cfg.vehicle)
         self.signing = signing
         self.links: list[tuple[Any, bool]] = []  # (Link, written)
@@ -273,6 +285,8 @@ class FleetMember:
         name = msg.name
         name = name.decode(errors="replace") if isinstance(name, bytes) else str(name)
         name = name.rstrip("\x00")
+        if name.startswith(WIND_PREFIX):
+            return self._take_wind(sysid, name, msg)
         if not name.startswith(MSG_PREFIX):
             return False  # someone else's debug vector
         self.n.rx += 1
@@ -311,6 +325,45 @@ class FleetMember:
             self.log(f"fleet: peer system {sysid} back")
         self.n.accepted += 1
         return True
+
+    def _take_wind(self, sysid: int, name: str, msg: Any) -> bool:
+        """A peer's lap-clock wind (DEBUG_VECT "MPW" + path id: x, y, z the wind m/s NED)."""
+        if name != self.wind_name:
+            return False  # another path's (its reports are refused and counted)
+        w = (float(msg.x), float(msg.y), float(msg.z))
+        if not all(math.isfinite(v) and abs(v) < 100.0 for v in w):
+            self.n.bad_value += 1
+            return False
+        self.peer_wind[sysid] = (w, self.now())
+        self.n.extra["wind_rx"] = self.n.extra.get("wind_rx", 0) + 1
+        return True
+
+    def fleet_wind(self, alive: list[_Peer], now: float) -> co.Vec3:
+        """The lap clock's wind: the mean of this member's averaged estimate and the living
+        peers' (heard within peer_timeout_s), so that every member computes one clock."""
+        assert self.w_own is not None
+        ws = [self.w_own]
+        for p in alive:
+            got = self.peer_wind.get(p.sysid)
+            if got is not None and now - got[1] <= self.f.peer_timeout_s:
+                ws.append(got[0])
+        n = float(len(ws))
+        return (sum(w[0] for w in ws) / n, sum(w[1] for w in ws) / n, sum(w[2] for w in ws) / n)
+
+    def send_wind(self, w: co.Vec3, now: float) -> None:
+        from mpf_mavlink.mavlink import dialect
+
+        msg = dialect.MAVLink_debug_vect_message(
+            self.wind_name.encode(), int(now * 1e6), float(w[0]), float(w[1]), float(w[2])
+        )
+        for link, written in self.links:
+            if not written:
+                continue
+            try:
+                link.send(msg)
+                self.n.sent += 1
+            except (OSError, MpfError):
+                self.n.send_errors += 1
 
     def send(self, s: float, sdot: float, now: float) -> None:
         from mpf_mavlink.mavlink import dialect
@@ -377,7 +430,14 @@ class FleetMember:
                 dt_lap = now - self.t_lap if math.isfinite(self.t_lap) else 0.0
                 self.t_lap = now
                 u = self.params.u_ref_m_s
-                w_lap = self.w_lap = self.lap_wind(_wind(vs), dt_lap)
+                self.w_own = self.lap_wind(_wind(vs), dt_lap)
+                if self.f.share_wind:
+                    if now - self.t_wind_sent >= 1.0:
+                        self.t_wind_sent = now
+                        self.send_wind(self.w_own, now)
+                    w_lap = self.w_lap = self.fleet_wind(alive, now)
+                else:
+                    w_lap = self.w_lap = self.w_own
                 if not lap.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, w_lap, u):
                     self.n.extra["lap_unsolved"] = self.n.extra.get("lap_unsolved", 0) + 1
             reps = [co.PeerReport(r.slot, lap.shat(r.s_m + r.sdot_m_s * max(0.0, now - r.t_s)),

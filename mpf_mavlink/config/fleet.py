@@ -83,6 +83,13 @@ class FleetConfig:
             "as estimated); two of the demo's laps"
         ),
     )
+    share_wind: bool = field(
+        default=True,
+        metadata=_doc(
+            "spacing: time: tell the peers this member's averaged wind (DEBUG_VECT MPW, 1 Hz) "
+            "and compute the lap clock in the mean of the members' (one clock for the fleet)"
+        ),
+    )
     ground_speed_gain: float = field(
         default=0.0,
         metadata=_nonneg(

@@ -272,15 +272,25 @@ class LapWind:
     clock's own (its attitude), so tau_s of a few laps costs only a lag to a real wind shift."""
 
     def __init__(self, tau_s: float) -> None:
-        self.lp = [LowPass(tau_s), LowPass(tau_s), LowPass(tau_s)]
+        self.tau_s = tau_s
+        self.y: list[float] | None = None
+        self.n = 0  # estimates averaged so far
 
     def __call__(self, wind_I: Vec3, dt: float) -> Vec3:
+        """The average after the estimate ``wind_I`` (m/s NED), ``dt`` (s) after the last: the
+        running mean of the estimates so far while it weighs the newest more than the
+        low-pass would (about tau_s / dt of them: one estimate at the start is one gust), then
+        the first-order low-pass over tau_s; a non-finite estimate changes nothing."""
         if not all(math.isfinite(w) for w in wind_I):
-            y = [lp.y for lp in self.lp]
-            if any(v is None for v in y):
-                return wind_I
-            return (float(y[0]), float(y[1]), float(y[2]))  # type: ignore[arg-type]
-        return (self.lp[0](wind_I[0], dt), self.lp[1](wind_I[1], dt), self.lp[2](wind_I[2], dt))
+            return wind_I if self.y is None else (self.y[0], self.y[1], self.y[2])
+        if self.y is None or self.tau_s <= 0.0:
+            self.y = [float(wind_I[0]), float(wind_I[1]), float(wind_I[2])]
+            self.n = 1
+        elif dt > 0.0:
+            a = max(1.0 - math.exp(-dt / self.tau_s), 1.0 / (self.n + 1))
+            self.n += 1
+            self.y = [y + a * (w - y) for y, w in zip(self.y, wind_I, strict=True)]
+        return (self.y[0], self.y[1], self.y[2])
 
 
 def reference_speed(fleet: Any, vehicle: Any) -> float:
