@@ -486,6 +486,9 @@ def test_ground_speed_loop_gain_and_filter() -> None:
     assert out[-1] == pytest.approx(final * (1.0 - math.exp(-1.0)), rel=1e-9)
     assert loop(math.nan, slope, dt) == out[-1]
     assert loop(err, math.nan, dt) == out[-1]
+    # beyond the window's span of along-path speed (a capture's sdot): nothing, filter reset
+    assert loop(30.0, slope, dt, span_m_s=3.6) == 0.0 and loop.lp.y is None
+    assert loop(err, slope, dt, span_m_s=3.6) == pytest.approx(final)
 
 
 def test_inner_loop_response() -> None:

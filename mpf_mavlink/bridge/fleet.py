@@ -459,7 +459,9 @@ class FleetMember:
                 f1, vp = path_motion(self.path, s, tgt)
                 wind = self.w_lap
                 nu_c = co.along_path_speed(u_c, f1, vp, wind)
-                du_v = self.gs(sdot - nu_c, co.along_path_slope(nu_c, u_c, f1, vp, wind), dt)
+                slope = co.along_path_slope(nu_c, u_c, f1, vp, wind)
+                span = (self.window[1] - self.window[0]) * slope  # the window's worth
+                du_v = self.gs(sdot - nu_c, slope, dt, span)
             dmax = self.params.du_max_m_s  # du + du_v within the correction's bound
             want = self.params.u_ref_m_s + min(max(du + du_v, -dmax), dmax)
         else:

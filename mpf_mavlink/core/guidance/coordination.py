@@ -218,10 +218,20 @@ class GroundSpeedLoop:
         self.lp = LowPass(tau_s)
         self.du = 0.0
 
-    def __call__(self, err_m_s: float, slope: float, dt: float) -> float:
+    def __call__(
+        self, err_m_s: float, slope: float, dt: float, span_m_s: float = math.inf
+    ) -> float:
         """du_v (m/s of airspeed) for the along-path speed error ``err_m_s`` (sdot - nu_c) and
-        the slope d nu / dV; where either is not finite, the previous du_v (filter untouched)."""
-        if math.isfinite(err_m_s) and math.isfinite(slope) and slope > 0.0:
+        the slope d nu / dV; where either is not finite, the previous du_v (filter untouched).
+        An error beyond ``span_m_s`` (the along-path speed the whole airspeed window spans)
+        is not one the airspeed made: the virtual point is catching up with the aircraft (a
+        capture; the MPF law's sdot then has a distance-driven part): 0, the filter reset."""
+        if not (math.isfinite(err_m_s) and math.isfinite(slope) and slope > 0.0):
+            return self.du
+        if abs(err_m_s) > span_m_s:
+            self.lp.y = None
+            self.du = 0.0
+        else:
             self.du = -self.k_v * self.lp(err_m_s, dt) / slope
         return self.du
 
