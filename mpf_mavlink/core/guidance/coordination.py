@@ -44,6 +44,10 @@ of s, and the correction is added to the airspeed. ``shat`` advances at ``L / T`
 aircraft flying the reference airspeed is, so equal slots of ``shat`` are equal gaps in time;
 a correction du changes its rate by about ``du (L / T) / nu(s)`` (nu the along-path speed), so
 the gain the consensus sees is k_c times up to ``max (L / T) / nu``: the condition checked.
+The clock is computed in the wind averaged over laps (:class:`LapWind`; the bridge also averages
+it over the fleet), and an inner loop on the along-path speed measured (:class:`GroundSpeedLoop`)
+may hold each aircraft to the clock's speed; the consensus' condition through that loop is
+:func:`consensus_phase_margin`'s.
 """
 
 from __future__ import annotations
