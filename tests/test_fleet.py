@@ -153,7 +153,11 @@ class _Clock:
         return self.t
 
 
-def _pair(extra_b: tuple[str, ...] = (), signing: tuple[bytes | None, bytes | None] = (None, None)):
+def _pair(
+    extra_b: tuple[str, ...] = (),
+    signing: tuple[bytes | None, bytes | None] = (None, None),
+    extra: tuple[str, ...] = (),
+):
     pa, pb = _ports(2)
     clock = _Clock()
     members = []
@@ -164,7 +168,7 @@ def _pair(extra_b: tuple[str, ...] = (), signing: tuple[bytes | None, bytes | No
         ]  # fmt: skip
         if k == 1:
             sets += list(extra_b)
-        cfg = _cfg(*sets)
+        cfg = _cfg(*sets, *extra)
         key = signing[k]
         m = FleetMember(cfg, build_path(cfg.path), lambda _t: None, clock,
                         (key, k) if key is not None else None)  # fmt: skip
@@ -407,13 +411,19 @@ def test_time_spacing_law_on_shat() -> None:
 def test_time_spacing_checks_on_the_demo() -> None:
     """configs/fleet_demo.yaml: a common along-path speed fails fleet_speed (10-25 m/s of air
     asked), spacing in time passes; its convergence condition carries the lap clock's gain
-    factor g, so k_c = 0.2 (the path spacing's default) fails where 0.1 passes."""
+    factor g, so without the along-path speed loop k_c = 0.2 (the path spacing's default) fails
+    where 0.1 passes; with it (the demo's k_v 1) the margin is the phase criterion's, and 0.3
+    fails."""
     from mpf_mavlink.cli.main import main
 
     demo = str(Path(__file__).resolve().parents[1] / "configs" / "fleet_demo.yaml")
     assert main(["check", demo]) == 0
     assert main(["check", demo, "--set", "fleet.spacing=path"]) == 3
-    assert main(["check", demo, "--set", "fleet.k_c=0.2"]) == 3
+    off = ["--set", "fleet.ground_speed_gain=0"]
+    assert main(["check", demo, *off]) == 0
+    assert main(["check", demo, *off, "--set", "fleet.k_c=0.2"]) == 3
+    assert main(["check", demo, "--set", "fleet.k_c=0.3"]) == 3
+    assert main(["check", demo, "--set", "fleet.ground_speed_gain=1.5"]) == 3  # small gain
 
 
 def test_sil_fleet_refuses_bad_arguments_in_one_line(tmp_path: Path, capsys) -> None:
@@ -442,3 +452,234 @@ def test_time_spacing_judge_from_the_records() -> None:
     i = int(np.flatnonzero(ok)[-1])
     errs = sorted(ser["pairs"][i])
     assert errs == pytest.approx([-2.0 * L / T, 0.0, 2.0 * L / T], abs=1e-6)
+
+
+# -- the along-path speed loop (spacing in time, fleet.ground_speed_gain) ----------------------
+def test_along_path_slope_is_the_derivative() -> None:
+    # d nu / dV against a central difference of along_path_speed: its error is h^2/6 |nu'''|,
+    # below 1e-7 at h = 1e-3 m/s for these speeds (nu''' ~ |d|^2 / V^4 < 1e-2); calm air over
+    # a still point: 1 exactly; crabbing into a 4 m/s crosswind: 1 / cos(crab) = V / nu
+    f1, vp, w = (0.6, 0.8, 0.0), (1.0, -2.0, 0.5), (3.0, 1.0, 0.0)
+    V, h = 16.0, 1e-3
+    nu = co.along_path_speed(V, f1, vp, w)
+    fd = (co.along_path_speed(V + h, f1, vp, w) - co.along_path_speed(V - h, f1, vp, w)) / (2 * h)
+    assert co.along_path_slope(nu, V, f1, vp, w) == pytest.approx(fd, abs=1e-7)
+    assert co.along_path_slope(16.0, 16.0, (1.0, 0, 0), (0, 0, 0), (0, 0, 0)) == 1.0
+    nu_x = co.along_path_speed(16.0, (1.0, 0, 0), (0, 0, 0), (0.0, 4.0, 0))
+    assert nu_x == pytest.approx(math.sqrt(16.0**2 - 16.0))
+    slope = co.along_path_slope(nu_x, 16.0, (1.0, 0, 0), (0, 0, 0), (0.0, 4.0, 0))
+    assert slope == pytest.approx(16.0 / nu_x, rel=1e-12)
+
+
+def test_ground_speed_loop_gain_and_filter() -> None:
+    # a constant along-path speed error err: du_v -> -k_v err / slope with the filter's time
+    # constant (1 - e^-1 of it after tau, exact for the discrete exp filter); a non-finite
+    # sample holds the last output
+    loop = co.GroundSpeedLoop(0.8, 2.0)
+    err, slope, dt = 1.5, 1.2, 0.02
+    out = [loop(err, slope, dt) for _ in range(round(2.0 / dt) + 1)]
+    final = -0.8 * err / slope
+    assert out[0] == pytest.approx(final)  # the filter starts at its first sample
+    loop = co.GroundSpeedLoop(0.8, 2.0)
+    loop(0.0, slope, dt)
+    out = [loop(err, slope, dt) for _ in range(round(2.0 / dt))]
+    assert out[-1] == pytest.approx(final * (1.0 - math.exp(-1.0)), rel=1e-9)
+    assert loop(math.nan, slope, dt) == out[-1]
+    assert loop(err, math.nan, dt) == out[-1]
+    # beyond the window's span of along-path speed (a capture's sdot): nothing, filter reset
+    assert loop(30.0, slope, dt, span_m_s=3.6) == 0.0 and loop.lp.y is None
+    assert loop(err, slope, dt, span_m_s=3.6) == pytest.approx(final)
+
+
+def test_inner_loop_response() -> None:
+    """H = G (1 + k F) / (1 + k F G): DC gain 1; k 0 is the speed lag G itself; its group delay
+    at 0 Hz is tau_V / (1 + k) (the filter's lag cancels between the zero and the poles), read
+    from the phase at omega 1e-4 (the next term of the phase is O(omega^3 tau^3): < 1e-9 here)."""
+    w = np.array([1e-4, 0.1, 1.0])
+    G = 1.0 / (4.0j * w + 1.0)
+    assert np.allclose(co.inner_loop_response(w, 0.0, 1.0, 4.0), G, rtol=1e-12)
+    for k in (0.5, 1.0):
+        H = co.inner_loop_response(np.array([0.0, 1e-4]), k, 1.0, 4.0)
+        assert H[0] == pytest.approx(1.0)
+        assert -np.angle(H[1]) / 1e-4 == pytest.approx(4.0 / (1.0 + k), rel=1e-6)
+
+
+def test_consensus_phase_margin_is_the_closed_form_with_no_inner_loop() -> None:
+    # H = 1: the mode K e^{-s tau} / s crosses |L| = 1 at omega = K, where its margin is
+    # pi/2 - K tau; the grid's step (ratio r = 10^(6/20000)) can put the last point at most
+    # K (r - 1) short of it, hence a tolerance tau K (r - 1)
+    r = 10.0 ** (6.0 / 20000.0)
+    for K, tau in ((0.27, 1.2), (0.5, 3.0), (0.1, 5.2)):
+        pm = co.consensus_phase_margin(K, tau)
+        assert pm == pytest.approx(0.5 * math.pi - K * tau, abs=tau * K * (r - 1.0) + 1e-12)
+
+
+def _fly_inner(
+    K_c: float,
+    k_v: float,
+    t_end: float,
+    d: tuple[float, float, float],
+    tau_v: float = 4.0,
+    tau_f: float = 1.0,
+    delay_s: float = 1.2,
+    dt: float = 0.01,
+):
+    """Three aircraft, all-to-all: xi_i' = v_i + d_i, v_i' = (c_i - v_i) / tau_v (the speed
+    lag), c_i = -K_c e_i(t - delay) - k_v y_i, y_i' = (v_i + d_i - (-K_c e_i) - y_i) / tau_f (the
+    filtered along-path speed error against what the consensus asked): the linear model
+    GroundSpeedLoop and the consensus make (gain factor g and slope 1)."""
+    n = round(t_end / dt)
+    lag = round(delay_s / dt)
+    xi = np.array([30.0, -10.0, -20.0])
+    v = np.zeros(3)
+    y = np.zeros(3)
+    dd = np.array(d)
+    hist = [xi.copy()] * (lag + 1)
+    out = np.zeros((n, 3))
+    for k in range(n):
+        old = hist[-lag - 1]
+        e = np.array([np.mean([old[i] - old[j] for j in range(3) if j != i]) for i in range(3)])
+        c_e = -K_c * e
+        c = c_e - k_v * y
+        y += (v + dd - c_e - y) * dt / tau_f
+        v += (c - v) * dt / tau_v
+        xi = xi + (v + dd) * dt
+        hist.append(xi.copy())
+        hist = hist[-lag - 1 :]
+        out[k] = [np.mean([xi[i] - xi[j] for j in range(3) if j != i]) for i in range(3)]
+    return out
+
+
+def test_inner_loop_divides_a_steady_disturbance_and_keeps_convergence() -> None:
+    """A steady along-path speed disturbance d on one aircraft (a gust it rides, the energy
+    control's airspeed offset): the consensus alone holds e_1 = d (2/3) / (K_c lambda) with
+    lambda = 3/2; the inner loop divides it by 1 + k_v (its DC rejection; the derivation in
+    GroundSpeedLoop). Euler at 10 ms on dynamics of >= 1 s: 1 % of the figure."""
+    K_c = 0.1 * 1.81  # the demo's k_c times its largest gain factor
+    d = (0.6, 0.0, 0.0)
+    e_off = _fly_inner(K_c, 0.0, 400.0, d)[-1]
+    e_on = _fly_inner(K_c, 1.0, 400.0, d)[-1]
+    # steady: every xi' equal, v_i = -K_c e_i, sum e_i = 0: -K_c e_1 + d = K_c e_1 / 2
+    want = d[0] / (K_c * 1.5)
+    assert e_off[0] == pytest.approx(want, rel=0.01)
+    assert e_on[0] == pytest.approx(want / 2.0, rel=0.01)
+
+
+def test_phase_criterion_boundary_in_the_time_domain() -> None:
+    """The check's criterion at k_v 1 through the speed lag and 1.2 s of delay: where its margin
+    is positive (the demo's K, 0.9 of the boundary) the consensus converges, at 1.1 of it the
+    error grows (one gain crossover here, so the criterion is also necessary). Read from the
+    envelope of the last 50 s against the 50 s before 100 s earlier; 10 % either side of the
+    boundary is the criterion's grid (1 %) and the 10 ms Euler step's phase (~ omega dt / 2 at
+    the 0.5 rad/s crossover, 0.25 %) with room."""
+    H = lambda w: co.inner_loop_response(w, 1.0, 1.0, 4.0)  # noqa: E731
+    Ks = np.linspace(0.3, 1.5, 121)
+    pms = np.array([co.consensus_phase_margin(K * 1.5, 1.2, H) for K in Ks])
+    K_star = float(Ks[np.argmax(pms < 0.0)])  # K_c (before lambda 1.5) at the boundary
+    assert co.consensus_phase_margin(0.1 * 1.81 * 1.5, 1.2, H) > 0.0
+    for frac, grows in ((0.1 * 1.81 / K_star, False), (0.9, False), (1.1, True)):
+        e = _fly_inner(frac * K_star, 1.0, 300.0, (0.0, 0.0, 0.0))
+        before = np.max(np.abs(e[15000:20000]))
+        late = np.max(np.abs(e[25000:30000]))
+        assert bool(late > before) is grows, (frac, before, late)
+
+
+def test_member_takes_the_along_path_speed_error_off_the_set_point() -> None:
+    # e 0 (the peer half a lap on in lap time), the aircraft 1.2 m/s faster along the path than
+    # u_ref gives where it is: after 20 filter time constants (e^-20 left) the set-point is
+    # u_ref - k_v 1.2 / slope
+    clock = _Clock()
+    cfg = _cfg("fleet.slots_deg=[0,180]", 'fleet.links=["udpin:127.0.0.1:14600"]',
+               "fleet.spacing=time", "fleet.ground_speed_gain=0.7", "fleet.ground_speed_tau_s=0.5",
+               "fleet.du_max_m_s=3")  # fmt: skip
+    m = FleetMember(cfg, build_path(cfg.path), lambda _t: None, clock)
+    vs, tgt = _vs_tgt()
+    lap = m.lap
+    assert lap is not None and m.gs is not None
+    m.step(0.0, 0.0, 20.0, vs, tgt)
+    s_peer = float(np.interp(0.5 * lap.L, lap.shat_grid, lap.s))
+    m.peers[7] = p = _Peer(7, 180.0)
+    from mpf_mavlink.bridge.fleet import _wind, path_motion
+
+    f1, vp = path_motion(m.path, 0.0, tgt)
+    u = m.params.u_ref_m_s
+    nu = co.along_path_speed(u, f1, vp, _wind(vs))
+    for _ in range(200):
+        clock.t += 0.05
+        p.report = co.PeerReport(0.5, s_peer, 0.0, clock.t)
+        p.last_rx = clock.t
+        m.step(0.0, 0.0, nu + 1.2, vs, tgt)
+    assert m.last["e_m"] == pytest.approx(0.0, abs=1e-6)
+    slope = co.along_path_slope(nu, u, f1, vp, _wind(vs))
+    assert m.last["du_v_m_s"] == pytest.approx(-0.7 * 1.2 / slope, rel=1e-6)
+    assert m.last["airspeed_sp_m_s"] == pytest.approx(u - 0.7 * 1.2 / slope, rel=1e-6)
+
+
+def test_lap_wind_averages_gusts_not_the_wind() -> None:
+    """LapWind: the running mean of the first estimates (exact, to rounding) while that weighs
+    the newest more than the low-pass (n + 1 < 1 / (1 - e^(-dt/tau)), ~500 at 0.2 s and
+    100 s), then the low-pass: a gust of period P attenuated to 1 / sqrt(1 + (2 pi tau / P)^2)
+    (the continuous filter; the 0.2 s step changes it by O(dt / P) = 1 %: tolerance 2 %)."""
+    lw = co.LapWind(100.0)
+    xs = [0.3, -1.2, 2.0, 0.5, 0.1]
+    out = (0.0, 0.0, 0.0)
+    for x in xs:
+        out = lw((x, 4.0, 0.0), 0.2)
+    assert out[0] == pytest.approx(sum(xs) / len(xs), abs=1e-12)
+    assert out[1] == pytest.approx(4.0)
+    assert lw((math.nan, 0.0, 0.0), 0.2) == out  # a non-finite estimate: the last average
+    P, tau, dt = 20.0, 100.0, 0.2
+    lw = co.LapWind(tau)
+    ys = [lw((math.sin(2 * math.pi * k * dt / P), 0.0, 0.0), dt)[0] for k in range(20000)]
+    amp = max(abs(y) for y in ys[-1000:])
+    assert amp == pytest.approx(1.0 / math.sqrt(1.0 + (2 * math.pi * tau / P) ** 2), rel=0.02)
+
+
+def test_member_lap_clock_uses_the_averaged_wind() -> None:
+    # a 2 m/s gust in the estimate for one report period after 50 calm ones: the lap clock
+    # moves by the average's share of it (1/51), not by the gust
+    clock = _Clock()
+    cfg = _cfg("fleet.slots_deg=[0,180]", 'fleet.links=["udpin:127.0.0.1:14600"]',
+               "fleet.spacing=time")  # fmt: skip
+    m = FleetMember(cfg, build_path(cfg.path), lambda _t: None, clock)
+    vs, tgt = _vs_tgt()
+    lap = m.lap
+    assert lap is not None
+    for _ in range(50):
+        m.step(0.0, 0.0, 20.0, vs, tgt)
+        clock.t += 0.2
+    T0 = lap.lap_s
+    gust = SimpleNamespace(wind=np.array([2.0, 0.0, 0.0]), airspeed=22.0, R_W_I=np.eye(3))
+    m.step(0.0, 0.0, 20.0, gust, tgt)
+    want = co.LapClock(m.path)  # the 51st estimate, in the running mean (no peer's wind heard)
+    w = (2.0 / 51.0, 0.0, 0.0)
+    assert want.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, w, m.params.u_ref_m_s)
+    assert lap.lap_s == pytest.approx(want.lap_s, rel=1e-9)
+    assert abs(lap.lap_s - T0) < 0.01 * T0
+
+
+def test_members_share_their_averaged_wind_for_one_lap_clock() -> None:
+    # a's estimate (1, 0, 0), b's (-1, 2, 0) m/s: once each has heard the other (DEBUG_VECT
+    # "MPW" + path id, x y z the average), both lap clocks are in the mean (0, 1, 0), exactly
+    a, b, clock = _pair(extra=("fleet.spacing=time",))
+    tgt = _vs_tgt()[1]
+    va = SimpleNamespace(wind=np.array([1.0, 0.0, 0.0]), airspeed=22.0, R_W_I=np.eye(3))
+    vb = SimpleNamespace(wind=np.array([-1.0, 2.0, 0.0]), airspeed=22.0, R_W_I=np.eye(3))
+    try:
+        a.step(0.0, 0.0, 22.0, va, tgt)
+        b.step(0.0, L150 / 2, 22.0, vb, tgt)
+        assert a.w_lap == (1.0, 0.0, 0.0)  # nobody heard yet: its own
+        _settle(a, b)
+        clock.t += 0.25
+        a.step(0.25, 5.0, 22.0, va, tgt)
+        b.step(0.25, L150 / 2 + 5.0, 22.0, vb, tgt)
+        for m in (a, b):
+            assert m.n.extra["wind_rx"] == 1
+            assert m.w_lap == pytest.approx((0.0, 1.0, 0.0), abs=1e-12)
+        want = co.LapClock(a.path)
+        assert want.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, (0.0, 1.0, 0.0), 22.0)
+        assert a.lap is not None and b.lap is not None
+        assert a.lap.lap_s == pytest.approx(want.lap_s, rel=1e-12) == b.lap.lap_s
+    finally:
+        a.close()
+        b.close()

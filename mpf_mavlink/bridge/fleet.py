@@ -49,6 +49,14 @@ def report_name(pid: str) -> str:
     return (MSG_PREFIX + pid)[:10]
 
 
+WIND_PREFIX = "MPW"
+
+
+def wind_name(pid: str) -> str:
+    """The DEBUG_VECT name of a member's lap-clock wind on that path: "MPW" + 7 hex digits."""
+    return (WIND_PREFIX + pid)[:10]
+
+
 def path_id(cfg: Any) -> str:
     """Seven hex digits naming the moving path (path, target and the target's epoch): the
     coordination messages carry it, and a peer whose id differs flies another path."""
@@ -88,21 +96,31 @@ class FleetCounts:
         return d
 
 
-def path_airspeed(f: FleetConfig, path: Any, u: float, s: float, vs: Any, tgt: Any) -> float:
-    """Spacing on the path: the airspeed (m/s) that moves the aircraft at s (m) along the path
-    at u (m/s), |u f1 + v_point - wind| at the path point ``f.lead_s`` ahead, before the
-    airspeed window (``vs`` the VehicleState, ``tgt`` the TargetState)."""
-    pt = path.eval(s + u * f.lead_s)
+def path_motion(path: Any, s: float, tgt: Any) -> tuple[co.Vec3, co.Vec3]:
+    """(f1, v_point) in NED at s (m): the path's unit tangent and its point's inertial velocity
+    (m/s) with the target's motion ``tgt`` (a TargetState)."""
+    pt = path.eval(s)
     R = tgt.R_T_I
     p_d, f1T = pt[0], pt[1]
-    f1 = tuple(float(x) for x in R @ f1T)
+    f1v = R @ f1T
     w = tgt.omega_T
     wxp = (w[1] * p_d[2] - w[2] * p_d[1], w[2] * p_d[0] - w[0] * p_d[2],
            w[0] * p_d[1] - w[1] * p_d[0])  # fmt: skip
     rot = R @ wxp
-    vp = tuple(float(tgt.velocity[k] + rot[k]) for k in range(3))
+    f1 = (float(f1v[0]), float(f1v[1]), float(f1v[2]))
+    vp = (float(tgt.velocity[0] + rot[0]), float(tgt.velocity[1] + rot[1]),
+          float(tgt.velocity[2] + rot[2]))  # fmt: skip
+    return f1, vp
+
+
+def path_airspeed(f: FleetConfig, path: Any, u: float, s: float, vs: Any, tgt: Any) -> float:
+    """Spacing on the path: the airspeed (m/s) that moves the aircraft at s (m) along the path
+    at u (m/s), |u f1 + v_point - wind| at the path point ``f.lead_s`` ahead, before the
+    airspeed window (``vs`` the VehicleState, ``tgt`` the TargetState)."""
+    f1, vp = path_motion(path, s + u * f.lead_s, tgt)
+    R = tgt.R_T_I
     wind = _wind(vs)
-    a = co.airspeed_for(u, f1, vp, wind)  # type: ignore[arg-type]
+    a = co.airspeed_for(u, f1, vp, wind)
     a = u + f.ff_gain * (a - u)  # the lap's swing, scaled
     k_u = f.speed_gain
     if k_u > 0.0:
@@ -129,7 +147,7 @@ class FleetRecord:
     the fleet before the kill), or written at the end without one. Never ends a flight."""
 
     HEADER = ("t_unix_s", "t_s", "s_m", "sdot_m_s", "e_m", "du_m_s", "airspeed_sp_m_s",
-              "n_peers", "slot_deg", "shat_m")  # fmt: skip
+              "n_peers", "slot_deg", "shat_m", "du_v_m_s")  # fmt: skip
 
     def __init__(self) -> None:
         self.path: Path | None = None
@@ -194,12 +212,25 @@ class FleetMember:
         # recomputed at the report rate (the target turns and the wind changes slowly)
         self.lap = co.LapClock(path) if self.f.spacing == "time" else None
         self.t_lap = -math.inf
+        # ... in the wind averaged over fleet.lap_wind_tau_s (co.LapWind: a gust moves the
+        # aircraft, it does not re-map the lap)
+        self.lap_wind = co.LapWind(self.f.lap_wind_tau_s)
+        self.w_lap: co.Vec3 = (0.0, 0.0, 0.0)  # the fleet's: the mean of the members' averages
+        self.w_own: co.Vec3 | None = None  # this member's average, told to the peers at 1 Hz
+        self.peer_wind: dict[int, tuple[co.Vec3, float]] = {}  # sysid: (wind, our clock)
+        self.t_wind_sent = -math.inf
+        self.wind_name = wind_name(self.pid)
         self.window = co.airspeed_window(self.f, cfg.vehicle)
         self.signing = signing
         self.links: list[tuple[Any, bool]] = []  # (Link, written)
         self.peers: dict[int, _Peer] = {}
         self.n = FleetCounts()
         self.lp = co.LowPass(self.f.filter_tau_s)
+        # spacing in time: the inner loop on the measured along-path speed (k_v 0: none)
+        self.gs = (
+            co.GroundSpeedLoop(self.f.ground_speed_gain, self.f.ground_speed_tau_s)
+            if self.lap is not None and self.f.ground_speed_gain > 0.0 else None
+        )  # fmt: skip
         self.t_sent = -math.inf
         self.t_prev: float | None = None
         self.record = FleetRecord()
@@ -254,6 +285,8 @@ class FleetMember:
         name = msg.name
         name = name.decode(errors="replace") if isinstance(name, bytes) else str(name)
         name = name.rstrip("\x00")
+        if name.startswith(WIND_PREFIX):
+            return self._take_wind(sysid, name, msg)
         if not name.startswith(MSG_PREFIX):
             return False  # someone else's debug vector
         self.n.rx += 1
@@ -292,6 +325,45 @@ class FleetMember:
             self.log(f"fleet: peer system {sysid} back")
         self.n.accepted += 1
         return True
+
+    def _take_wind(self, sysid: int, name: str, msg: Any) -> bool:
+        """A peer's lap-clock wind (DEBUG_VECT "MPW" + path id: x, y, z the wind m/s NED)."""
+        if name != self.wind_name:
+            return False  # another path's (its reports are refused and counted)
+        w = (float(msg.x), float(msg.y), float(msg.z))
+        if not all(math.isfinite(v) and abs(v) < 100.0 for v in w):
+            self.n.bad_value += 1
+            return False
+        self.peer_wind[sysid] = (w, self.now())
+        self.n.extra["wind_rx"] = self.n.extra.get("wind_rx", 0) + 1
+        return True
+
+    def fleet_wind(self, alive: list[_Peer], now: float) -> co.Vec3:
+        """The lap clock's wind: the mean of this member's averaged estimate and the living
+        peers' (heard within peer_timeout_s), so that every member computes one clock."""
+        assert self.w_own is not None
+        ws = [self.w_own]
+        for p in alive:
+            got = self.peer_wind.get(p.sysid)
+            if got is not None and now - got[1] <= self.f.peer_timeout_s:
+                ws.append(got[0])
+        n = float(len(ws))
+        return (sum(w[0] for w in ws) / n, sum(w[1] for w in ws) / n, sum(w[2] for w in ws) / n)
+
+    def send_wind(self, w: co.Vec3, now: float) -> None:
+        from mpf_mavlink.mavlink import dialect
+
+        msg = dialect.MAVLink_debug_vect_message(
+            self.wind_name.encode(), int(now * 1e6), float(w[0]), float(w[1]), float(w[2])
+        )
+        for link, written in self.links:
+            if not written:
+                continue
+            try:
+                link.send(msg)
+                self.n.sent += 1
+            except (OSError, MpfError):
+                self.n.send_errors += 1
 
     def send(self, s: float, sdot: float, now: float) -> None:
         from mpf_mavlink.mavlink import dialect
@@ -355,9 +427,18 @@ class FleetMember:
         lap = self.lap
         if lap is not None:  # spacing in time: the consensus on shat (peers propagated first)
             if now - self.t_lap >= 1.0 / self.f.rate_hz:
+                dt_lap = now - self.t_lap if math.isfinite(self.t_lap) else 0.0
                 self.t_lap = now
                 u = self.params.u_ref_m_s
-                if not lap.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, _wind(vs), u):
+                self.w_own = self.lap_wind(_wind(vs), dt_lap)
+                if self.f.share_wind:
+                    if now - self.t_wind_sent >= 1.0:
+                        self.t_wind_sent = now
+                        self.send_wind(self.w_own, now)
+                    w_lap = self.w_lap = self.fleet_wind(alive, now)
+                else:
+                    w_lap = self.w_lap = self.w_own
+                if not lap.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, w_lap, u):
                     self.n.extra["lap_unsolved"] = self.n.extra.get("lap_unsolved", 0) + 1
             reps = [co.PeerReport(r.slot, lap.shat(r.s_m + r.sdot_m_s * max(0.0, now - r.t_s)),
                                   0.0, now) for r in reps]  # fmt: skip
@@ -369,16 +450,29 @@ class FleetMember:
         dt = 0.0 if self.t_prev is None else now - self.t_prev
         self.t_prev = now
         du = self.lp(du_raw, dt)
+        du_v = 0.0
         if lap is not None:  # the energy control holds u_ref + du of airspeed
-            want = self.params.u_ref_m_s + du
+            u_c = self.params.u_ref_m_s + du
+            if self.gs is not None and n:  # ... less k_v of the along-path speed error
+                # against the lap clock's own speed (its wind: the error is what moves shat
+                # off its rate, not the estimate's gusts)
+                f1, vp = path_motion(self.path, s, tgt)
+                wind = self.w_lap
+                nu_c = co.along_path_speed(u_c, f1, vp, wind)
+                slope = co.along_path_slope(nu_c, u_c, f1, vp, wind)
+                span = (self.window[1] - self.window[0]) * slope  # the window's worth
+                du_v = self.gs(sdot - nu_c, slope, dt, span)
+            dmax = self.params.du_max_m_s  # du + du_v within the correction's bound
+            want = self.params.u_ref_m_s + min(max(du + du_v, -dmax), dmax)
         else:
             want = path_airspeed(self.f, self.path, max(0.0, self.params.u_ref_m_s + du), s, vs,
                                  tgt)  # fmt: skip
         asp = min(max(want, self.window[0]), self.window[1])
         if asp != want:  # the window takes part of what the coordination asks: counted
             self.n.extra["airspeed_clipped"] = self.n.extra.get("airspeed_clipped", 0) + 1
-        self.last = {"e_m": e, "du_m_s": du, "airspeed_sp_m_s": asp, "n_peers": float(n)}
-        row = (now, t_mission, s, sdot, e, du, asp, float(n), mine * 360.0, shat)
+        self.last = {"e_m": e, "du_m_s": du, "airspeed_sp_m_s": asp, "n_peers": float(n),
+                     "du_v_m_s": du_v}  # fmt: skip
+        row = (now, t_mission, s, sdot, e, du, asp, float(n), mine * 360.0, shat, du_v)
         self.record.add(row, now)
         return asp
 

@@ -76,6 +76,31 @@ class FleetConfig:
             "attenuation made up)"
         ),
     )
+    lap_wind_tau_s: float = field(
+        default=100.0,
+        metadata=_nonneg(
+            "spacing: time: the lap clock's wind is the estimate low-passed over this (s; 0: "
+            "as estimated); two of the demo's laps"
+        ),
+    )
+    share_wind: bool = field(
+        default=True,
+        metadata=_doc(
+            "spacing: time: tell the peers this member's averaged wind (DEBUG_VECT MPW, 1 Hz) "
+            "and compute the lap clock in the mean of the members' (one clock for the fleet)"
+        ),
+    )
+    ground_speed_gain: float = field(
+        default=0.0,
+        metadata=_nonneg(
+            "spacing: time: the share k_v (<= 1) of the measured along-path speed error taken "
+            "off the airspeed set-point (0: off; spacing: path has speed_gain)"
+        ),
+    )
+    ground_speed_tau_s: float = field(
+        default=1.0,
+        metadata=_pos("low-pass time constant (s) of that along-path speed error"),
+    )
     rate_hz: float = field(default=5.0, metadata=_rng(0.2, 50.0, "reports sent per second"))
     max_latency_s: float = field(
         default=0.5, metadata=_nonneg("the worst link latency the convergence check allows (s)")

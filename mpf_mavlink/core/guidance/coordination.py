@@ -44,6 +44,10 @@ of s, and the correction is added to the airspeed. ``shat`` advances at ``L / T`
 aircraft flying the reference airspeed is, so equal slots of ``shat`` are equal gaps in time;
 a correction du changes its rate by about ``du (L / T) / nu(s)`` (nu the along-path speed), so
 the gain the consensus sees is k_c times up to ``max (L / T) / nu``: the condition checked.
+The clock is computed in the wind averaged over laps (:class:`LapWind`; the bridge also averages
+it over the fleet), and an inner loop on the along-path speed measured (:class:`GroundSpeedLoop`)
+may hold each aircraft to the clock's speed; the consensus' condition through that loop is
+:func:`consensus_phase_margin`'s.
 """
 
 from __future__ import annotations
@@ -178,6 +182,129 @@ class LapClock:
         """shat (m) of s (m), laps counted: continuous and increasing in s."""
         laps = math.floor(s_m / self.L)
         return laps * self.L + float(np.interp(s_m - laps * self.L, self.s, self.shat_grid))
+
+
+def along_path_slope(
+    nu_m_s: float, v_air_m_s: float, f1_I: Vec3, v_point_I: Vec3, wind_I: Vec3
+) -> float:
+    """d nu / d V_air (dimensionless) where :func:`along_path_speed` gives nu at V_air:
+    differentiating |nu f1 + d|^2 = V^2 (d = v_point - wind), V / (nu + f1 . d); 1 in calm air
+    over a still path, more where the aircraft crabs; nan where it is not defined."""
+    b = sum(f1_I[k] * (v_point_I[k] - wind_I[k]) for k in range(3))
+    den = nu_m_s + b
+    return v_air_m_s / den if den > 0.0 and math.isfinite(den) else math.nan
+
+
+class GroundSpeedLoop:
+    """The coordination's inner loop on the along-path speed it measures (spacing in time,
+    ``fleet.ground_speed_gain`` k_v > 0; docs/fleet.md).
+
+    The correction du of the consensus reaches the along-path speed only through the energy
+    control, while a gust along the track and the energy control's own airspeed error move the
+    aircraft along the path by as much again (measured in our SIL: 0.43-0.46 m/s RMS, mostly at
+    periods of 15-100 s, the lap's). This loop measures that along-path speed error,
+    ``sdot - nu_c`` (nu_c the along-path speed the airspeed u_ref + du gives where the aircraft
+    is, in the lap clock's wind, :class:`LapWind`), low-passes it over ``tau_s`` (gusts shorter
+    than that are left to the airspeed hold) and takes ``k_v`` of it off the airspeed
+    set-point, divided by the slope d nu / dV so that k_v is in along-path units:
+
+        du_v = -k_v F(sdot - nu_c) / (d nu / dV),  F = 1 / (tau_s s + 1)
+
+    Closed around a speed response G (airspeed set-point -> along-path speed, |G| <= 1: the
+    energy control does not amplify), the disturbance d at low frequency is divided by
+    1 + k_v, and the consensus sees H = G (1 + k_v F) / (1 + k_v F G) (module docstring). The
+    loop k_v F G has gain at most k_v, so with k_v <= 1 it is stable for any such G (small
+    gain: the Nyquist curve stays in the unit disc, on its edge only at 0 Hz, where it is +1),
+    whatever the energy control's time constant: the condition the check states."""
+
+    def __init__(self, k_v: float, tau_s: float) -> None:
+        self.k_v = k_v
+        self.lp = LowPass(tau_s)
+        self.du = 0.0
+
+    def __call__(
+        self, err_m_s: float, slope: float, dt: float, span_m_s: float = math.inf
+    ) -> float:
+        """du_v (m/s of airspeed) for the along-path speed error ``err_m_s`` (sdot - nu_c) and
+        the slope d nu / dV; where either is not finite, the previous du_v (filter untouched).
+        An error beyond ``span_m_s`` (the along-path speed the whole airspeed window spans)
+        is not one the airspeed made: the virtual point is catching up with the aircraft (a
+        capture; the MPF law's sdot then has a distance-driven part): 0, the filter reset."""
+        if not (math.isfinite(err_m_s) and math.isfinite(slope) and slope > 0.0):
+            return self.du
+        if abs(err_m_s) > span_m_s:
+            self.lp.y = None
+            self.du = 0.0
+        else:
+            self.du = -self.k_v * self.lp(err_m_s, dt) / slope
+        return self.du
+
+
+def inner_loop_response(
+    omega: np.ndarray, k_v: float, filter_tau_s: float, speed_tau_s: float
+) -> np.ndarray:
+    """H(j omega) = G (1 + k_v F) / (1 + k_v F G) with the speed loop G = 1 / (tau_V s + 1)
+    and F = 1 / (tau_F s + 1): what the consensus' correction becomes along the path through
+    :class:`GroundSpeedLoop` (k_v 0: G itself)."""
+    s = 1j * np.asarray(omega, float)
+    G = 1.0 / (speed_tau_s * s + 1.0)
+    F = 1.0 / (filter_tau_s * s + 1.0)
+    return G * (1.0 + k_v * F) / (1.0 + k_v * F * G)
+
+
+def consensus_phase_margin(
+    gain_1_s: float, delay_s: float, H: Any = None, omega: np.ndarray | None = None
+) -> float:
+    """The least phase margin (rad) of the consensus mode K H(s) e^{-s tau} / s over the
+    frequencies where its loop gain is at least 1 (K = ``gain_1_s``, k_c times the gain factor
+    times the Laplacian's eigenvalue; tau = ``delay_s``; ``H`` a callable of omega giving the
+    inner response, None: 1). > 0 for every eigenvalue up to K means the Nyquist curve
+    crosses the negative real axis only inside the unit circle: no encirclement of -1, the
+    consensus converges (sufficient). With H = 1 it is pi/2 - K tau, the closed form."""
+    w = np.geomspace(1e-4, 1e2, 20001) if omega is None else omega
+    h = np.ones(len(w), complex) if H is None else np.asarray(H(w), complex)
+    mag = gain_1_s * np.abs(h) / w
+    ph = np.unwrap(np.angle(h)) - w * delay_s - 0.5 * math.pi
+    on = mag >= 1.0
+    if not np.any(on):
+        return math.pi
+    return float(np.min(ph[on] + math.pi))
+
+
+class LapWind:
+    """The wind (m/s NED) the lap clock is computed in: the bridge's estimate low-passed over
+    ``tau_s`` (0: as estimated).
+
+    The lap clock maps every aircraft's s to lap time through one wind, so each bridge's
+    coordination error e carries its own wind estimate: in the demo a third of a lap of shat
+    moves by 4.7 m RMS (7.9 m at most) per m/s of wind, and the estimates in turbulence swing
+    0.55-1.5 m/s (std) and differ between the aircraft, so e differed from the error in one
+    common clock by 7-13 m RMS (seed 1): the consensus chased its own clock. A gust moves the
+    aircraft (the consensus sees that through s); the lap's time is set by the wind over laps.
+    Averaging over tau_s divides the estimate's noise of correlation time T_c by about
+    sqrt(2 tau_s / T_c); the wind in NED changes over minutes, the target's turn is the lap
+    clock's own (its attitude), so tau_s of a few laps costs only a lag to a real wind shift."""
+
+    def __init__(self, tau_s: float) -> None:
+        self.tau_s = tau_s
+        self.y: list[float] | None = None
+        self.n = 0  # estimates averaged so far
+
+    def __call__(self, wind_I: Vec3, dt: float) -> Vec3:
+        """The average after the estimate ``wind_I`` (m/s NED), ``dt`` (s) after the last: the
+        running mean of the estimates so far while it weighs the newest more than the
+        low-pass would (about tau_s / dt of them: one estimate at the start is one gust), then
+        the first-order low-pass over tau_s; a non-finite estimate changes nothing."""
+        if not all(math.isfinite(w) for w in wind_I):
+            return wind_I if self.y is None else (self.y[0], self.y[1], self.y[2])
+        if self.y is None or self.tau_s <= 0.0:
+            self.y = [float(wind_I[0]), float(wind_I[1]), float(wind_I[2])]
+            self.n = 1
+        elif dt > 0.0:
+            a = max(1.0 - math.exp(-dt / self.tau_s), 1.0 / (self.n + 1))
+            self.n += 1
+            self.y = [y + a * (w - y) for y, w in zip(self.y, wind_I, strict=True)]
+        return (self.y[0], self.y[1], self.y[2])
 
 
 def reference_speed(fleet: Any, vehicle: Any) -> float:
@@ -371,16 +498,20 @@ def _time_checks(
         else:
             unsolved.append(t)
     g = max(ratios) if ratios else math.inf
-    tau = 1.0 / fleet.rate_hz + fleet.max_latency_s + fleet.filter_tau_s + speed_tau_s
-    x = fleet.k_c * g * lambda_max(n) * tau
-    conv = CheckResult(
-        "fleet_convergence",
-        "pass" if x < 0.5 * math.pi else "fail",
-        f"k_c g lambda_max tau = {fleet.k_c:g} x {g:.2f} x {lambda_max(n):.2f} x {tau:.2f} s = "
-        f"{x:.2f} {'<' if x < 0.5 * math.pi else '>='} pi/2 (N {n}; spacing in time, g the "
-        "largest (L/T)/nu; tau: 1/rate + latency + filter + speed lag)",
-        {"margin": 0.5 * math.pi - x, "tau_s": tau, "gain_factor": g},
-    )
+    k_v = fleet.ground_speed_gain
+    if k_v > 0.0:
+        conv = _inner_loop_check(fleet, n, g, speed_tau_s)
+    else:
+        tau = 1.0 / fleet.rate_hz + fleet.max_latency_s + fleet.filter_tau_s + speed_tau_s
+        x = fleet.k_c * g * lambda_max(n) * tau
+        conv = CheckResult(
+            "fleet_convergence",
+            "pass" if x < 0.5 * math.pi else "fail",
+            f"k_c g lambda_max tau = {fleet.k_c:g} x {g:.2f} x {lambda_max(n):.2f} x {tau:.2f} s "
+            f"= {x:.2f} {'<' if x < 0.5 * math.pi else '>='} pi/2 (N {n}; spacing in time, g the "
+            "largest (L/T)/nu; tau: 1/rate + latency + filter + speed lag)",
+            {"margin": 0.5 * math.pi - x, "tau_s": tau, "gain_factor": g},
+        )
     lo_w, hi_w = airspeed_window(fleet, vehicle)
     du = fleet.du_max_m_s
     if unsolved or not lo_w <= u <= hi_w:
@@ -407,3 +538,31 @@ def _time_checks(
         },  # fmt: skip
     )
     return [conv, speed], min(u + du, hi_w)
+
+
+def _inner_loop_check(fleet: Any, n: int, g: float, speed_tau_s: float) -> Any:
+    """``fleet_convergence`` with the along-path speed loop (:class:`GroundSpeedLoop`): the
+    inner loop by small gain (k_v <= 1), and the consensus mode K H(s) e^{-s tau} / s by
+    :func:`consensus_phase_margin` at K = k_c g lambda_max, H the inner response with the
+    energy control's speed loop as the first-order lag tau_V (its design: V_dot demand =
+    (V_sp - V) / tau_V), tau the pure delays 1/rate + latency + the correction's low-pass."""
+    from mpf_mavlink.core.guidance.checks import CheckResult
+
+    k_v, tau_f = fleet.ground_speed_gain, fleet.ground_speed_tau_s
+    K = fleet.k_c * g * lambda_max(n)
+    tau = 1.0 / fleet.rate_hz + fleet.max_latency_s + fleet.filter_tau_s
+    pm = consensus_phase_margin(
+        K, tau, lambda w: inner_loop_response(w, k_v, tau_f, speed_tau_s)
+    ) if math.isfinite(K) else -math.inf  # fmt: skip
+    ok = k_v <= 1.0 and pm > 0.0
+    why = (
+        f"along-path speed loop k_v {k_v:g} {'<=' if k_v <= 1.0 else '>'} 1 (small gain); "
+        f"consensus K = k_c g lambda_max = {fleet.k_c:g} x {g:.2f} x {lambda_max(n):.2f} = "
+        f"{K:.3f} 1/s through the inner loop (speed lag {speed_tau_s:g} s, filter {tau_f:g} s) "
+        f"and {tau:.2f} s of delay: phase margin {math.degrees(pm):.0f} deg (N {n}; spacing in "
+        "time)"
+    )
+    return CheckResult(
+        "fleet_convergence", "pass" if ok else "fail", why,
+        {"margin": pm, "tau_s": tau, "gain_factor": g, "inner_gain": k_v},
+    )  # fmt: skip
