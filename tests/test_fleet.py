@@ -668,14 +668,14 @@ def test_members_share_their_averaged_wind_for_one_lap_clock() -> None:
     try:
         a.step(0.0, 0.0, 22.0, va, tgt)
         b.step(0.0, L150 / 2, 22.0, vb, tgt)
-        assert a.w_lap == (1.0, 0.0, 0.0)  # nobody heard yet: its own
+        assert a.wind.lap == (1.0, 0.0, 0.0)  # nobody heard yet: its own
         _settle(a, b)
         clock.t += 0.25
         a.step(0.25, 5.0, 22.0, va, tgt)
         b.step(0.25, L150 / 2 + 5.0, 22.0, vb, tgt)
         for m in (a, b):
             assert m.n.extra["wind_rx"] == 1
-            assert m.w_lap == pytest.approx((0.0, 1.0, 0.0), abs=1e-12)
+            assert m.wind.lap == pytest.approx((0.0, 1.0, 0.0), abs=1e-12)
         want = co.LapClock(a.path)
         assert want.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, (0.0, 1.0, 0.0), 22.0)
         assert a.lap is not None and b.lap is not None

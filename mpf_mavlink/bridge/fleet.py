@@ -186,6 +186,63 @@ class FleetRecord:
             log(f"fleet: could not write fleet.csv: {e}")
 
 
+class FleetWind:
+    """The lap clock's wind (spacing in time): this member's estimate averaged over
+    ``fleet.lap_wind_tau_s`` (co.LapWind: a gust moves the aircraft, it does not re-map the
+    lap), told to the peers at 1 Hz (DEBUG_VECT "MPW" + path id: x, y, z the wind m/s NED) and,
+    with ``fleet.share_wind``, meaned with theirs so that every member computes one clock."""
+
+    def __init__(self, f: FleetConfig, pid: str, n: FleetCounts) -> None:
+        self.f, self.n = f, n
+        self.avg = co.LapWind(f.lap_wind_tau_s)
+        self.name = wind_name(pid)
+        self.own: co.Vec3 | None = None  # this member's average
+        self.lap: co.Vec3 = (0.0, 0.0, 0.0)  # the fleet's: the mean of the members' averages
+        self.peers: dict[int, tuple[co.Vec3, float]] = {}  # sysid: (wind, our clock)
+        self.t_sent = -math.inf
+
+    def take(self, sysid: int, name: str, msg: Any, now: float) -> bool:
+        """A peer's averaged wind; True when accepted."""
+        if name != self.name:
+            return False  # another path's (its reports are refused and counted)
+        w = (float(msg.x), float(msg.y), float(msg.z))
+        if not all(math.isfinite(v) and abs(v) < 100.0 for v in w):
+            self.n.bad_value += 1
+            return False
+        self.peers[sysid] = (w, now)
+        self.n.extra["wind_rx"] = self.n.extra.get("wind_rx", 0) + 1
+        return True
+
+    def update(
+        self, estimate: co.Vec3, dt: float, alive: list[_Peer], now: float,
+        send: Callable[[Any], None],
+    ) -> co.Vec3:  # fmt: skip
+        """The lap clock's wind now (m/s NED) from this member's ``estimate`` ``dt`` s after
+        the last; the living peers' averages (heard within peer_timeout_s) meaned in."""
+        own = self.own = self.avg(estimate, dt)
+        if not self.f.share_wind:
+            self.lap = own
+            return own
+        if now - self.t_sent >= 1.0:
+            self.t_sent = now
+            send(debug_vect(self.name, now, own))
+        ws = [own] + [
+            w for p in alive if (got := self.peers.get(p.sysid)) is not None
+            for w, t in [got] if now - t <= self.f.peer_timeout_s
+        ]  # fmt: skip
+        k = float(len(ws))
+        self.lap = (sum(w[0] for w in ws) / k, sum(w[1] for w in ws) / k, sum(w[2] for w in ws) / k)
+        return self.lap
+
+
+def debug_vect(name: str, now: float, xyz: co.Vec3) -> Any:
+    """The DEBUG_VECT ``name`` stamped ``now`` (Unix s) carrying ``xyz``."""
+    from mpf_mavlink.mavlink import dialect
+
+    x, y, z = (float(v) for v in xyz)
+    return dialect.MAVLink_debug_vect_message(name.encode(), int(now * 1e6), x, y, z)
+
+
 class FleetMember:
     """This aircraft on the coordination link. ``now``: the common clock (Unix s)."""
 
@@ -214,17 +271,12 @@ class FleetMember:
         self.t_lap = -math.inf
         # ... in the wind averaged over fleet.lap_wind_tau_s (co.LapWind: a gust moves the
         # aircraft, it does not re-map the lap)
-        self.lap_wind = co.LapWind(self.f.lap_wind_tau_s)
-        self.w_lap: co.Vec3 = (0.0, 0.0, 0.0)  # the fleet's: the mean of the members' averages
-        self.w_own: co.Vec3 | None = None  # this member's average, told to the peers at 1 Hz
-        self.peer_wind: dict[int, tuple[co.Vec3, float]] = {}  # sysid: (wind, our clock)
-        self.t_wind_sent = -math.inf
-        self.wind_name = wind_name(self.pid)
+        self.n = FleetCounts()
+        self.wind = FleetWind(self.f, self.pid, self.n)
         self.window = co.airspeed_window(self.f, cfg.vehicle)
         self.signing = signing
         self.links: list[tuple[Any, bool]] = []  # (Link, written)
         self.peers: dict[int, _Peer] = {}
-        self.n = FleetCounts()
         self.lp = co.LowPass(self.f.filter_tau_s)
         # spacing in time: the inner loop on the measured along-path speed (k_v 0: none)
         self.gs = (
@@ -286,7 +338,7 @@ class FleetMember:
         name = name.decode(errors="replace") if isinstance(name, bytes) else str(name)
         name = name.rstrip("\x00")
         if name.startswith(WIND_PREFIX):
-            return self._take_wind(sysid, name, msg)
+            return self.wind.take(sysid, name, msg, self.now())
         if not name.startswith(MSG_PREFIX):
             return False  # someone else's debug vector
         self.n.rx += 1
@@ -326,51 +378,11 @@ class FleetMember:
         self.n.accepted += 1
         return True
 
-    def _take_wind(self, sysid: int, name: str, msg: Any) -> bool:
-        """A peer's lap-clock wind (DEBUG_VECT "MPW" + path id: x, y, z the wind m/s NED)."""
-        if name != self.wind_name:
-            return False  # another path's (its reports are refused and counted)
-        w = (float(msg.x), float(msg.y), float(msg.z))
-        if not all(math.isfinite(v) and abs(v) < 100.0 for v in w):
-            self.n.bad_value += 1
-            return False
-        self.peer_wind[sysid] = (w, self.now())
-        self.n.extra["wind_rx"] = self.n.extra.get("wind_rx", 0) + 1
-        return True
-
-    def fleet_wind(self, alive: list[_Peer], now: float) -> co.Vec3:
-        """The lap clock's wind: the mean of this member's averaged estimate and the living
-        peers' (heard within peer_timeout_s), so that every member computes one clock."""
-        assert self.w_own is not None
-        ws = [self.w_own]
-        for p in alive:
-            got = self.peer_wind.get(p.sysid)
-            if got is not None and now - got[1] <= self.f.peer_timeout_s:
-                ws.append(got[0])
-        n = float(len(ws))
-        return (sum(w[0] for w in ws) / n, sum(w[1] for w in ws) / n, sum(w[2] for w in ws) / n)
-
-    def send_wind(self, w: co.Vec3, now: float) -> None:
-        from mpf_mavlink.mavlink import dialect
-
-        msg = dialect.MAVLink_debug_vect_message(
-            self.wind_name.encode(), int(now * 1e6), float(w[0]), float(w[1]), float(w[2])
-        )
-        for link, written in self.links:
-            if not written:
-                continue
-            try:
-                link.send(msg)
-                self.n.sent += 1
-            except (OSError, MpfError):
-                self.n.send_errors += 1
-
     def send(self, s: float, sdot: float, now: float) -> None:
-        from mpf_mavlink.mavlink import dialect
+        self.broadcast(debug_vect(self.name, now, (float(s % self.L), float(sdot), self.slot_deg)))
 
-        msg = dialect.MAVLink_debug_vect_message(
-            self.name.encode(), int(now * 1e6), float(s % self.L), float(sdot), self.slot_deg
-        )
+    def broadcast(self, msg: Any) -> None:
+        """``msg`` on every link this member writes to (a failure is counted, never raised)."""
         for link, written in self.links:
             if not written:
                 continue
@@ -430,14 +442,7 @@ class FleetMember:
                 dt_lap = now - self.t_lap if math.isfinite(self.t_lap) else 0.0
                 self.t_lap = now
                 u = self.params.u_ref_m_s
-                self.w_own = self.lap_wind(_wind(vs), dt_lap)
-                if self.f.share_wind:
-                    if now - self.t_wind_sent >= 1.0:
-                        self.t_wind_sent = now
-                        self.send_wind(self.w_own, now)
-                    w_lap = self.w_lap = self.fleet_wind(alive, now)
-                else:
-                    w_lap = self.w_lap = self.w_own
+                w_lap = self.wind.update(_wind(vs), dt_lap, alive, now, self.broadcast)
                 if not lap.update(tgt.R_T_I, tgt.velocity, tgt.omega_T, w_lap, u):
                     self.n.extra["lap_unsolved"] = self.n.extra.get("lap_unsolved", 0) + 1
             reps = [co.PeerReport(r.slot, lap.shat(r.s_m + r.sdot_m_s * max(0.0, now - r.t_s)),
@@ -457,7 +462,7 @@ class FleetMember:
                 # against the lap clock's own speed (its wind: the error is what moves shat
                 # off its rate, not the estimate's gusts)
                 f1, vp = path_motion(self.path, s, tgt)
-                wind = self.w_lap
+                wind = self.wind.lap
                 nu_c = co.along_path_speed(u_c, f1, vp, wind)
                 slope = co.along_path_slope(nu_c, u_c, f1, vp, wind)
                 span = (self.window[1] - self.window[0]) * slope  # the window's worth
@@ -478,27 +483,32 @@ class FleetMember:
 
     def write(self, out: Path) -> dict[str, Any]:
         """fleet.csv (one row a step) and the summary that goes into metrics.json."""
-        self.record.close(out, self.log)
-        es = [r[4] for r in self.record.rows if r[7] > 0]
-        summary: dict[str, Any] = {
-            "member": self.f.member,
-            "slot_deg": self.slot_deg,
-            "path_id": self.pid,
-            "length_m": self.L,
-            "k_c": self.f.k_c,
-            "u_ref_m_s": self.params.u_ref_m_s,
-            "on_peer_lost": self.f.on_peer_lost,
-            "spacing": self.f.spacing,
-            "lap_s": self.lap.lap_s if self.lap is not None else None,
-            "peers": {str(p.sysid): p.slot_deg for p in self.peers.values()},
-            "counts": self.n.as_dict(),
-            "final_error_m": es[-1] if es else None,
-        }
-        try:
-            (out / "fleet.json").write_text(json.dumps(summary, indent=2) + "\n")
-        except OSError:
-            pass
-        return summary
+        return write_member(self, out)
+
+
+def write_member(m: FleetMember, out: Path) -> dict[str, Any]:
+    """A member's fleet.csv (one row a step) and the summary that goes into metrics.json."""
+    m.record.close(out, m.log)
+    es = [r[4] for r in m.record.rows if r[7] > 0]
+    summary: dict[str, Any] = {
+        "member": m.f.member,
+        "slot_deg": m.slot_deg,
+        "path_id": m.pid,
+        "length_m": m.L,
+        "k_c": m.f.k_c,
+        "u_ref_m_s": m.params.u_ref_m_s,
+        "on_peer_lost": m.f.on_peer_lost,
+        "spacing": m.f.spacing,
+        "lap_s": m.lap.lap_s if m.lap is not None else None,
+        "peers": {str(p.sysid): p.slot_deg for p in m.peers.values()},
+        "counts": m.n.as_dict(),
+        "final_error_m": es[-1] if es else None,
+    }
+    try:
+        (out / "fleet.json").write_text(json.dumps(summary, indent=2) + "\n")
+    except OSError:
+        pass
+    return summary
 
 
 class EpochTarget:

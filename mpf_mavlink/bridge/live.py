@@ -276,16 +276,13 @@ class Bridge:
                 "estimated from ground velocity and airspeed"
             )
         self.phase.set(State.CHECKS)
-        failed = preflight_checks(
-            self.ctl, self.cfg, self.m.mission_duration_s, res, self.log, self.opts.plant
-        )
+        plant, duration = self.opts.plant, self.m.mission_duration_s
+        failed = preflight_checks(self.ctl, self.cfg, duration, res, self.log, plant)
         if failed and self.opts.force:
             failed = force_through(failed, res, vl, self.log)
         # the wind the monitor holds the flight to: what the checks accepted plus its margin
-        self.envelope.lim = dataclasses.replace(
-            self.envelope.lim,
-            wind_max_m_s=wind_limit_m_s(self.cfg, res.measured, self.opts.plant),
-        )
+        wind = wind_limit_m_s(self.cfg, res.measured, plant)
+        self.envelope.lim = dataclasses.replace(self.envelope.lim, wind_max_m_s=wind)
         if failed:
             # the wording of `check` and `sim`'s gate: each failed check with its figures
             raise _Refused(

@@ -372,10 +372,8 @@ def run_checks(
     plant: PlantArg = FROM_CONFIG,
     path: TabulatedPath | None = None,
 ) -> list[CheckResult]:
-    """All checks for a config (``path``: the config's path, already built). With a live
-    target only the gain condition can be checked, unless ``measured`` gives its estimated
-    motion.
-
+    """All checks for a config (``path``: its path, already built). With a live target only
+    the gain condition can be checked, unless ``measured`` gives its estimated motion.
     ``measured`` (the live bridge, right before engaging): the wind the autopilot reports
     replaces the scenario's steady wind (the turbulence allowance stays the config's), the live
     target's estimated motion replaces ``target`` and the measured airspeed adds a feasibility

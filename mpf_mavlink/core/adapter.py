@@ -299,9 +299,7 @@ def safe_setpoint(p: AdapterParams, roll: float = 0.0) -> Setpoint:
     rr = _clip(rr, -p.max_roll_rate_rad_s, p.max_roll_rate_rad_s)
     pitch = _clip(p.trim_pitch_rad, p.min_pitch_rad, p.max_pitch_rad)
     thr = _clip(p.trim_thrust, p.thrust_min, p.thrust_max)
-    return Setpoint(
-        (rr, 0.0, 0.0), quat_of_euler(0.0, pitch, 0.0), thr, 0.0, pitch, 1.0, True
-    )
+    return Setpoint((rr, 0.0, 0.0), quat_of_euler(0.0, pitch, 0.0), thr, 0.0, pitch, 1.0, True)
 
 
 def adapt(
