@@ -249,11 +249,11 @@ class StateEstimate:
         (at most KP_MEMORY_S): the ratio of the mean ``V psi_dot tan(roll)`` to the mean
         ``g tan(roll)^2``, which averages the gusts of the plant's heading rate out linearly.
         A low-passed ratio of each sample would not do in turbulence (sil.wind_turbulence_m_s):
-        the gusts put three quarters of the per-sample ratios outside 0.5-1.5 of the textbook,
-        their clipped mean sits ~8 % above the fit, so the gain creeps up through the flight;
-        and a memory of KP_TAU_S alone lets the fit wander +-5 % with the gusts. Either moves the
-        reported bank off the plant's by degrees at 0.02-0.2 Hz, where a firmware's report (its
-        estimate of the roll) follows the true roll. A held turn: the roll rate low-passed over
+        the gusts throw most per-sample ratios outside any sane clip, whose clipped mean then
+        sits above the fit, so the gain creeps up through the flight; and a memory of KP_TAU_S
+        alone lets the fit wander with the gusts. Either moves the reported bank off the
+        plant's by degrees, where a firmware's report (its estimate of the roll) follows the
+        true roll (docs/calibration.md has the figures). A held turn: the roll rate low-passed over
         ROLL_RATE_TAU_S below MAX_LEARN_ROLL_RATE_RAD_S."""
         roll, pitch, _ = st.euler
         t = float(st.t)

@@ -201,8 +201,8 @@ class GroundSpeedLoop:
 
     The correction du of the consensus reaches the along-path speed only through the energy
     control, while a gust along the track and the energy control's own airspeed error move the
-    aircraft along the path by as much again (measured in our SIL: 0.43-0.46 m/s RMS, mostly at
-    periods of 15-100 s, the lap's). This loop measures that along-path speed error,
+    aircraft along the path by as much again, mostly at periods of the order of a lap
+    (docs/fleet.md). This loop measures that along-path speed error,
     ``sdot - nu_c`` (nu_c the along-path speed the airspeed u_ref + du gives where the aircraft
     is, in the lap clock's wind, :class:`LapWind`), low-passes it over ``tau_s`` (gusts shorter
     than that are left to the airspeed hold) and takes ``k_v`` of it off the airspeed
@@ -276,10 +276,10 @@ class LapWind:
     ``tau_s`` (0: as estimated).
 
     The lap clock maps every aircraft's s to lap time through one wind, so each bridge's
-    coordination error e carries its own wind estimate: in the demo a third of a lap of shat
-    moves by 4.7 m RMS (7.9 m at most) per m/s of wind, and the estimates in turbulence swing
-    0.55-1.5 m/s (std) and differ between the aircraft, so e differed from the error in one
-    common clock by 7-13 m RMS (seed 1): the consensus chased its own clock. A gust moves the
+    coordination error e carries its own wind estimate: a third of a lap of shat moves by
+    metres per m/s of wind, and estimates in turbulence swing and differ between the aircraft,
+    so with each bridge's own estimate the consensus chases its own clock (docs/fleet.md has the
+    figures). A gust moves the
     aircraft (the consensus sees that through s); the lap's time is set by the wind over laps.
     Averaging over tau_s divides the estimate's noise of correlation time T_c by about
     sqrt(2 tau_s / T_c); the wind in NED changes over minutes, the target's turn is the lap
