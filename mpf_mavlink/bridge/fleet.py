@@ -226,10 +226,11 @@ class FleetWind:
         if now - self.t_sent >= 1.0:
             self.t_sent = now
             send(debug_vect(self.name, now, own))
-        ws = [own] + [
-            w for p in alive if (got := self.peers.get(p.sysid)) is not None
-            for w, t in [got] if now - t <= self.f.peer_timeout_s
-        ]  # fmt: skip
+        ws = [own]
+        for p in alive:
+            got = self.peers.get(p.sysid)
+            if got is not None and now - got[1] <= self.f.peer_timeout_s:
+                ws.append(got[0])
         k = float(len(ws))
         self.lap = (sum(w[0] for w in ws) / k, sum(w[1] for w in ws) / k, sum(w[2] for w in ws) / k)
         return self.lap

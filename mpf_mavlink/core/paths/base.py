@@ -130,9 +130,7 @@ def _transported_f2(P: NDArray[np.float64], T: NDArray[np.float64], n: int) -> N
     V2 = T[1:] - (T[:-1] - (k1 * np.einsum("ij,ij->i", V1, T[:-1]))[:, None] * V1)
     c2 = np.einsum("ij,ij->i", V2, V2)
     k2 = np.divide(2.0, c2, out=np.zeros_like(c2), where=c2 > 1e-30)
-    F2 = np.empty_like(T)
-    F2[0] = np.cross(f3, T[0])
-    x, y, z = (float(v) for v in F2[0])
+    x, y, z = (float(v) for v in np.cross(f3, T[0]))
     out = [(x, y, z)]
     for (a0, a1, a2), ka, (b0, b1, b2), kb, (t0, t1, t2), deg in zip(
         V1.tolist(),
@@ -155,8 +153,7 @@ def _transported_f2(P: NDArray[np.float64], T: NDArray[np.float64], n: int) -> N
         r = math.sqrt(x * x + y * y + z * z)
         x, y, z = x / r, y / r, z / r
         out.append((x, y, z))
-    F2[:] = out
-    return F2
+    return np.array(out, dtype=float)
 
 
 def _closing_twist(
