@@ -615,6 +615,35 @@ def test_member_takes_the_along_path_speed_error_off_the_set_point() -> None:
     assert m.last["airspeed_sp_m_s"] == pytest.approx(u - 0.7 * 1.2 / slope, rel=1e-6)
 
 
+def test_member_counts_a_correction_its_bound_clips() -> None:
+    # the same along-path speed error as above (du_v ~ -0.84 m/s) against du_max 0.3: the
+    # set-point is u_ref - 0.3 and every step that clipped is counted, none silently
+    clock = _Clock()
+    cfg = _cfg("fleet.slots_deg=[0,180]", 'fleet.links=["udpin:127.0.0.1:14600"]',
+               "fleet.spacing=time", "fleet.ground_speed_gain=0.7", "fleet.ground_speed_tau_s=0.5",
+               "fleet.du_max_m_s=0.3")  # fmt: skip
+    m = FleetMember(cfg, build_path(cfg.path), lambda _t: None, clock)
+    vs, tgt = _vs_tgt()
+    lap = m.lap
+    assert lap is not None
+    m.step(0.0, 0.0, 20.0, vs, tgt)
+    s_peer = float(np.interp(0.5 * lap.L, lap.shat_grid, lap.s))
+    m.peers[7] = p = _Peer(7, 180.0)
+    from mpf_mavlink.bridge.fleet import _wind, path_motion
+
+    f1, vp = path_motion(m.path, 0.0, tgt)
+    u = m.params.u_ref_m_s
+    nu = co.along_path_speed(u, f1, vp, _wind(vs))
+    for _ in range(200):
+        clock.t += 0.05
+        p.report = co.PeerReport(0.5, s_peer, 0.0, clock.t)
+        p.last_rx = clock.t
+        m.step(0.0, 0.0, nu + 1.2, vs, tgt)
+    assert m.last["airspeed_sp_m_s"] == pytest.approx(u - 0.3, rel=1e-9)
+    # past the filter's first time constant (0.5 s = 10 steps) |du_v| > 0.3 at every step
+    assert m.n.extra.get("correction_clipped", 0) >= 190
+
+
 def test_lap_wind_averages_gusts_not_the_wind() -> None:
     """LapWind: the running mean of the first estimates (exact, to rounding) while that weighs
     the newest more than the low-pass (n + 1 < 1 / (1 - e^(-dt/tau)), ~500 at 0.2 s and

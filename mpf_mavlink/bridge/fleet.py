@@ -468,7 +468,9 @@ class FleetMember:
                 slope = co.along_path_slope(nu_c, u_c, f1, vp, wind)
                 span = (self.window[1] - self.window[0]) * slope  # the window's worth
                 du_v = self.gs(sdot - nu_c, slope, dt, span)
-            dmax = self.params.du_max_m_s  # du + du_v within the correction's bound
+            dmax = self.params.du_max_m_s  # du + du_v within the correction's bound: counted
+            if abs(du + du_v) > dmax:
+                self.n.extra["correction_clipped"] = self.n.extra.get("correction_clipped", 0) + 1
             want = self.params.u_ref_m_s + min(max(du + du_v, -dmax), dmax)
         else:
             want = path_airspeed(self.f, self.path, max(0.0, self.params.u_ref_m_s + du), s, vs,
