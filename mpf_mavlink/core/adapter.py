@@ -52,66 +52,10 @@ def bank_and_load_factor(w1: Vec, accel: Vec, g: float = GRAVITY_M_S2) -> tuple[
 
 
 # ----------------------------------------------------------------------------- setpoints
-# Everything below turns the law's command into what an autopilot accepts. Pure: the memory
-# (airspeed integrator, learned pitch trim, learned turn gain) is passed in and returned as an
-# explicit AdapterState.
-#
-# Two loops the law leaves open are closed here, on an airframe we did not model:
-# - vertical: the pitch an autopilot must be told to fly a flight-path angle gamma is gamma plus
-#   an offset (angle of attack, cos(bank) in a turn, its own pitch-loop bias) that no fixed trim
-#   gets right (real ArduPlane SITL flies level at -1.8 deg at 15 m/s; a fixed 0.03 rad trim
-#   left it 10.5 m above the path). trim_hat starts at the measured theta - gamma and then
-#   integrates the law's vertical demand: d trim_hat / dt = (tau_pitch / trim_tau_s)
-#   gamma_dot_cmd (not while the pitch set-point is saturated that way). The law demands a
-#   flight-path rate only while there is a vertical error, so none stands: integral action
-#   that also absorbs a bias of the autopilot's pitch loop.
-# - pitch trim scheduled with airspeed: at a given load factor the lift coefficient goes as
-#   1 / V^2, so the angle of attack (and with it theta - gamma, which in a level turn is
-#   alpha cos(phi) = alpha_0 cos(phi) + K / V^2, the bank cancelling) changes with every airspeed
-#   change asked; the integrator above follows it only with its lag (a ramp leaves an error
-#   proportional to its rate: a fleet's lap-periodic airspeed set-point left a vertical error of
-#   0.94 m per m/s^2 of d(v_sp)/dt). The trim flown is trim_hat + K_hat (x - x_mean) with
-#   x = (V_0 / v_sp)^2 (V_0: airspeed_sp_m_s), K_hat the least-squares slope of the measured
-#   theta - gamma on x over trim_schedule_tau_s (exponential forgetting) and x_mean that
-#   window's mean, so trim_hat keeps the mean and the schedule only the deviation. Regressed on
-#   the set-point's x (not the measured airspeed's), K_hat is the feed-forward gain of the
-#   signal it multiplies, the autopilot's speed response included; no learning below
-#   trim_schedule_min_dv_m_s of set-point spread (a constant set-point: the schedule is 0).
-#   The set-point enters one tau_pitch ahead (v_sp + tau_pitch dv_sp/dt, the rate low-passed
-#   over vdot_tau_s), as the flight-path angle does: the pitch set-point aims there (ArduPlane
-#   SITL fleet, 3 x 300 s: theta - gamma fitted (22 / v_sp)^2 best 1.5 s ahead, R^2 0.98
-#   against 0.93 with the set-point of the instant).
-# - lateral: the bank for a turn rate is atan(V chi_dot / g) only in a coordinated turn that the
-#   autopilot banks exactly as told; with the rudder elsewhere (sideslip) or a roll-loop bias
-#   the aircraft turns less per commanded bank (0.69x measured on ArduPlane SITL with yaw = 0:
-#   a wider circle). The bank set-point is atan(tan(bank_ideal) / turn_gain), and turn_gain
-#   integrates the relative error between the achieved heading rate psi_dot = (q sin(phi) +
-#   r cos(phi)) / cos(theta) and turn_gain g tan(phi) / V for the bank phi actually flown
-#   (time constant turn_gain_tau_s; not below turn_learn_min_bank_rad). Against the flown bank
-#   the roll loop's lag and a clipped bank teach nothing false: in the mean the commanded turn
-#   is achieved, so no standing radial error remains.
-# - pitch rate (PX4 body rates): the autopilot's pitch-rate loop does not deliver the pitch
-#   rate it is sent in a turn. Its feed-forward (elevator per rad/s, FW_PR_FF) is the pull-up's,
-#   where the load factor grows by V q / g; the turn's pitch rate q = g sin(phi) tan(phi) / V
-#   needs only n - 1 = 1/cos(phi) - 1, cos(phi) / (1 + cos(phi)) of that (0.43 at 40 deg), so
-#   the angle-of-attack part of the elevator (78 % of the X8's pull-up FF: C_ma against C_mq)
-#   is nearly doubled and the loop's slow integral takes seconds to take it back. SIL X8,
-#   wind 6 m/s: 0.32 rad/s flown for 0.29 sent at 41 deg of bank, 0.03 for 0.05 in the
-#   roll-out; the vehicle climbed in every turn and sank after it (pt_d against bank^2
-#   correlation -0.86), the whole of the turn-locked vertical error. The bridge measures the
-#   pitch rate flown (ATTITUDE) and subtracts the low-passed error of the previous set-point
-#   (flown - sent) from the next: integral action on the delivered rate, so that in the mean
-#   the autopilot flies the law's pitch rate whatever its own loop's bias. With the
-#   autopilot's response H (delay d plus rate-loop lag T_r) the estimate's loop is
-#   F (H - 1), F = 1 / (1 + s tau_b), |H - 1| <= min(w (d + T_r), 2): its gain is below 1 at
-#   every frequency when tau_b > d + T_r (a small-gain bound), so tau_b (rate_bias_tau_s,
-#   1 s against ~0.2 s) cannot make the loop ring. Not while the sent rate is clipped or the
-#   pitch limits cut the law's demand (the error is then the limit's, not a bias), and never
-#   beyond the turn's own pitch rate cos(theta) sin(phi) chi_dot: the bias is the loop's error
-#   on that rate, and with the wings level there is none to take off. Unbounded, the estimate
-#   followed moderate turbulence's gust-driven pitch rates (+-0.28 rad/s on straights), wound
-#   the autopilot's own pitch integrator against the next pull-up and the X8 sank 12 m below
-#   the path (600 s: 1.89 / 12.2 m against 1.37 / 9.2 without the estimate; bounded: 1.12 / 7.7).
+# The law's command -> what an autopilot accepts. Pure: the memory (airspeed integrator,
+# learned pitch trim and its airspeed schedule, learned turn gain, pitch-rate bias) is passed in
+# and returned as an explicit AdapterState. Why each loop the law leaves open is closed here,
+# with its derivation and stability bound: docs/architecture.md, "The setpoint adapter".
 
 
 @dataclass(frozen=True)
@@ -557,12 +501,8 @@ def _learn(
             )
     if dt > 0.0 and params.turn_learn_min_bank_rad <= abs(phi) < 1.2 and v > 1.0:
         psid = (q_m * math.sin(phi) + r_m * math.cos(phi)) / max(math.cos(theta), 0.2)
-        # The model is psi_dot = k g tan(phi) / V for the bank FLOWN (measured), not the bank or
-        # turn rate asked last cycle: those lead what is flown by the roll loop's lag, and an
-        # error against them read every capture's roll-in as a sluggish airframe (the X8 circle
-        # of tests/test_sil.py converged in 36 s instead of 10, 1.44 m RMS instead of 0.22).
-        # Integral of the relative error (achieved - modelled): unbiased in the mean, where a
-        # low-pass of the ratio is not (fluctuations correlate).
+        # psi_dot = k g tan(phi) / V for the bank flown, not the bank asked (it leads by the
+        # roll loop's lag); the integral of the relative error is unbiased where a ratio is not
         pred = k_turn * g * math.tan(phi) / v
         err = (psid - pred) / max(abs(pred), 1e-3) * (1.0 if pred > 0 else -1.0)
         if math.isfinite(err):
