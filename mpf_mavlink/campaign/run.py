@@ -61,20 +61,60 @@ def _fingerprint(spec: CampaignSpec) -> str:
     return hashlib.sha256(text).hexdigest()[:16]
 
 
-def read_rows(path: Path, header: list[str]) -> dict[int, dict[str, Any]]:
-    """The rows of an existing results table, last row per sample wins."""
+def read_table(path: Path, header: list[str], key: str, other: str) -> dict[int, dict[str, Any]]:
+    """The rows of an existing results table by their integer ``key`` column, the last row of
+    a key winning; ``other``: what a table with other columns is, for the error."""
     if not path.is_file():
         return {}
     with path.open(newline="") as f:
         r = csv.DictReader(f)
         if r.fieldnames != header:
-            raise MpfError(
-                f"{path}: written by another campaign (its columns differ); choose another --out"
-            )
-        rows: dict[int, dict[str, Any]] = {}
-        for row in r:
-            rows[int(row["sample"])] = row
-    return rows
+            raise MpfError(f"{path}: {other}; choose another --out")
+        return {int(row[key]): row for row in r}
+
+
+def fly_table(
+    pool: tuple[Any, Any],
+    jobs: dict[int, tuple[Any, ...]],
+    table: Path,
+    header: list[str],
+    rows: dict[int, dict[str, Any]],
+    finish: Callable[[int, dict[str, Any]], dict[str, Any]],
+    on_row: Callable[[int, dict[str, Any]], None],
+) -> int:
+    """Run each job ``i: (function, *args)`` on the ``pool`` (client, cluster: closed after) and
+    append ``finish(i, row)`` to ``table`` (its header written when it is new) the moment it
+    lands, flushed, into ``rows`` too; a job that raised is an error row. ``on_row(k, row)``
+    after the k-th. Returns how many ran."""
+    from distributed import as_completed
+
+    client, cluster = pool
+    new_file = not table.is_file()
+    try:
+        with table.open("a", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=header, extrasaction="ignore")
+            if new_file:
+                w.writeheader()
+                fh.flush()
+            futs = {
+                client.submit(*job, key=f"mpf-{table.stem}-{i}-{time.time_ns()}", pure=False): i
+                for i, job in jobs.items()
+            }
+            for k, f in enumerate(as_completed(list(futs)), start=1):
+                i = futs[f]
+                try:
+                    row = f.result()
+                except Exception as e:  # noqa: BLE001 - KilledWorker, a lost scheduler...: a row
+                    row = {"status": "error", "error": f"{type(e).__name__}: {e}".splitlines()[0]}
+                rows[i] = row = finish(i, row)
+                w.writerow(row)
+                fh.flush()
+                on_row(k, row)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return len(futs)
 
 
 def _client(workers: int | None, scheduler: str | None) -> tuple[Any, Any, int]:
@@ -110,7 +150,6 @@ def run_campaign(
     log: Callable[[str], None] = lambda s: print(s, file=sys.stderr),
 ) -> CampaignResult:
     """Fly every sample without a finished row; returns all rows (old and new)."""
-    from tqdm import tqdm
 
     header = columns(spec)
     table = out / "results.csv"
@@ -123,7 +162,7 @@ def run_campaign(
                 f"{out}: holds the results of another version of the campaign or its base "
                 "configuration; choose another --out"
             )
-    rows = read_rows(table, header)
+    rows = read_table(table, header, "sample", "written by another campaign (its columns differ)")
     redo = FINISHED if retry_errors else (*FINISHED, *RETRYABLE)
     done = {i for i, r in rows.items() if r.get("status") in redo}
     base = load_config(spec.base_path, spec.set)
@@ -147,74 +186,47 @@ def run_campaign(
     t0 = time.perf_counter()
     result = CampaignResult(out, [], 0, len(done), 0.0, 0)
     if todo:
-        new_file = not table.is_file()
-        fh = table.open("a", newline="")
-        w = csv.DictWriter(fh, fieldnames=header, extrasaction="ignore")
-        if new_file:
-            w.writeheader()
-            fh.flush()
         result.workers = n
         log(f"campaign {spec.name}: {len(todo)} flights to fly ({len(done)} already in "
             f"{table}), {spec.plant} plant, {n} worker(s)")  # fmt: skip
-        try:
-            result.flown = _fly_all(
-                client, spec, base, all_samples, todo, w, fh, rows, progress, tqdm
-            )
-        finally:
-            fh.close()
-            if client is not None:
-                client.close()
-            if cluster is not None:
-                cluster.close()
+        result.flown = _fly_all((client, cluster), spec, base, all_samples, todo, table, rows,
+                                progress)  # fmt: skip
     result.wall_s = time.perf_counter() - t0
     result.rows = [rows[i] for i in sorted(rows)]
     return result
 
 
 def _fly_all(
-    client: Any,
+    pool: tuple[Any, Any],
     spec: CampaignSpec,
     base: Config,
     all_samples: list[dict[str, Any]],
     todo: list[int],
-    w: Any,
-    fh: Any,
+    table: Path,
     rows: dict[int, dict[str, Any]],
     progress: bool,
-    tqdm: Any,
 ) -> int:
-    from distributed import as_completed
+    from tqdm import tqdm
 
-    base_path = str(spec.base_path)
-    futs = {}
-    for i in todo:
-        sets = [*spec.set, *overrides_for(base, all_samples[i])]
-        f = client.submit(
-            fly, base_path, sets, spec.plant, spec.metrics, spec.timeout_s,
-            spec.stop_after_converged_s, spec.force,
-            key=f"mpf-flight-{spec.name}-{i}-{time.time_ns()}", pure=False,
-        )  # fmt: skip
-        futs[f] = i
-    failures = 0
+    jobs = {
+        i: (fly, str(spec.base_path), [*spec.set, *overrides_for(base, all_samples[i])],
+            spec.plant, spec.metrics, spec.timeout_s, spec.stop_after_converged_s, spec.force)
+        for i in todo
+    }  # fmt: skip
     bar = tqdm(total=len(todo), desc=f"campaign {spec.name}", unit="flight", disable=not progress,
                file=sys.stderr, mininterval=0.5, dynamic_ncols=True)  # fmt: skip
-    n = 0
+    failures = [0]
+
+    def finish(i: int, row: dict[str, Any]) -> dict[str, Any]:
+        row = {**row, "sample": i, **all_samples[i]}
+        return {k: ("" if v is None else v) for k, v in row.items()}
+
+    def on_row(_: int, row: dict[str, Any]) -> None:
+        failures[0] += row.get("status") != "ok"
+        bar.set_postfix(failures=failures[0], refresh=False)
+        bar.update(1)
+
     try:
-        for f in as_completed(list(futs)):
-            i = futs[f]
-            try:
-                row = f.result()
-            except Exception as e:  # noqa: BLE001 - KilledWorker, a lost scheduler...: a row
-                row = {"status": "error", "error": f"{type(e).__name__}: {e}".splitlines()[0]}
-            row = {**row, "sample": i, **all_samples[i]}
-            w.writerow({k: ("" if v is None else v) for k, v in row.items()})
-            fh.flush()
-            rows[i] = {k: ("" if v is None else v) for k, v in row.items()}
-            n += 1
-            if row.get("status") != "ok":
-                failures += 1
-            bar.set_postfix(failures=failures, refresh=False)
-            bar.update(1)
+        return fly_table(pool, jobs, table, columns(spec), rows, finish, on_row)
     finally:
         bar.close()
-    return n

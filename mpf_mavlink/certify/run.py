@@ -9,7 +9,6 @@ changes the old ones.
 
 from __future__ import annotations
 
-import csv
 import hashlib
 import json
 import resource
@@ -112,17 +111,6 @@ def _cpu_s() -> float:
     return me.ru_utime + me.ru_stime + ch.ru_utime + ch.ru_stime
 
 
-def read_flights(path: Path) -> dict[int, dict[str, Any]]:
-    """The rows already flown (last row per flight wins)."""
-    if not path.is_file():
-        return {}
-    with path.open(newline="") as f:
-        r = csv.DictReader(f)
-        if r.fieldnames != COLUMNS:
-            raise MpfError(f"{path}: not a certify flights table; choose another --out")
-        return {int(row["flight"]): row for row in r}
-
-
 @dataclass
 class Flown:
     rows: list[dict[str, Any]]
@@ -143,7 +131,7 @@ def fly_all(
     log: Callable[[str], None] = lambda s: print(s, file=sys.stderr, flush=True),
 ) -> Flown:
     """Fly flights 0..n-1 that have no finished row in ``out/flights.csv``."""
-    from mpf_mavlink.campaign.run import _client
+    from mpf_mavlink.campaign.run import _client, read_table
     from mpf_mavlink.config import load_config
 
     table = out / "flights.csv"
@@ -153,7 +141,7 @@ def fly_all(
         raise MpfError(
             f"{out}: holds the flights of another mission or conditions; choose another --out"
         )
-    rows = read_flights(table)
+    rows = read_table(table, COLUMNS, "flight", "not a certify flights table")
     todo = [i for i in range(n) if rows.get(i, {}).get("status") not in DONE]
     client, cluster, nw = _client(workers, scheduler) if todo else (None, None, 0)
     out.mkdir(parents=True, exist_ok=True)
@@ -164,65 +152,42 @@ def fly_all(
         cfg = load_config(m.config, m.sets)
         log(f"certify {cond.name}: {len(todo)} flights to fly ({n - len(todo)} already in "
             f"{table}), calibrated SIL ({m.profile}), {nw} worker(s)")  # fmt: skip
-        new = not table.is_file()
-        fh = table.open("a", newline="")
-        w = csv.DictWriter(fh, fieldnames=COLUMNS, extrasaction="ignore")
-        if new:
-            w.writeheader()
-            fh.flush()
-        try:
-            flown = _submit(client, m, cond, cfg, todo, w, fh, rows, progress, log, t0)
-        finally:
-            fh.close()
-            if client is not None:
-                client.close()
-            if cluster is not None:
-                cluster.close()
+        flown = _submit((client, cluster), m, cond, cfg, todo, table, rows, progress, log, t0)
     wall = time.perf_counter() - t0
     return Flown([rows[i] for i in sorted(rows) if i < n], flown, n - len(todo), wall, nw)
 
 
 def _submit(
-    client: Any,
+    pool: tuple[Any, Any],
     m: Mission,
     cond: Conditions,
     cfg: Any,
     todo: list[int],
-    w: Any,
-    fh: Any,
+    table: Path,
     rows: dict[int, dict[str, Any]],
     progress: bool,
     log: Callable[[str], None],
     t0: float,
 ) -> int:
-    from distributed import as_completed
+    from mpf_mavlink.campaign.run import fly_table
 
-    futs = {}
-    for i in todo:
-        d = draw(cond, i)
-        f = client.submit(
-            fly_one, m.config, [*m.sets, *flight_sets(cfg, d)], cond.timeout_s,
-            key=f"mpf-certify-{cond.name}-{i}-{time.time_ns()}", pure=False,
-        )  # fmt: skip
-        futs[f] = (i, d)
-    fails = 0
-    for k, f in enumerate(as_completed(list(futs)), start=1):
-        i, d = futs[f]
-        try:
-            row = f.result()
-        except Exception as e:  # noqa: BLE001 - KilledWorker, a lost scheduler...: a row
-            row = {"status": "error", "error": f"{type(e).__name__}: {e}".splitlines()[0]}
-        row = {**row, "flight": i, "conditions": json.dumps(d, sort_keys=True)}
-        row = {c: ("" if row.get(c) is None else row.get(c)) for c in COLUMNS}
-        w.writerow(row)
-        fh.flush()
-        rows[i] = row
-        fails += row["status"] != "ok"
+    draws = {i: draw(cond, i) for i in todo}
+    jobs = {i: (fly_one, m.config, [*m.sets, *flight_sets(cfg, d)], cond.timeout_s)
+            for i, d in draws.items()}  # fmt: skip
+    fails = [0]
+
+    def finish(i: int, row: dict[str, Any]) -> dict[str, Any]:
+        row = {**row, "flight": i, "conditions": json.dumps(draws[i], sort_keys=True)}
+        return {c: ("" if row.get(c) is None else row.get(c)) for c in COLUMNS}
+
+    def on_row(k: int, row: dict[str, Any]) -> None:
+        fails[0] += row["status"] != "ok"
         if progress:
             el = time.perf_counter() - t0
             rms = row.get("steady_rms_m")
-            log(f"  [{k}/{len(todo)}] flight {i}: {row['status']}"
+            log(f"  [{k}/{len(todo)}] flight {row['flight']}: {row['status']}"
                 + (f", steady RMS {float(rms):.3f} m" if rms not in ("", None) else "")
-                + f" ({fails} not ok; {60.0 * k / el:.1f} flights/min, "
+                + f" ({fails[0]} not ok; {60.0 * k / el:.1f} flights/min, "
                 f"{(len(todo) - k) * el / k / 60.0:.1f} min left)")  # fmt: skip
-    return len(futs)
+
+    return fly_table(pool, jobs, table, COLUMNS, rows, finish, on_row)
