@@ -484,36 +484,4 @@ def use_profile(
     v.observe()
 
 
-def main(argv: list[str] | None = None) -> int:
-    """``python -m sim.vehicle --flavour px4 --url udpin:127.0.0.1:14540 --duration 600``."""
-    import argparse
-
-    ap = argparse.ArgumentParser(description="Simulated fixed-wing MAVLink vehicle (SIL)")
-    ap.add_argument("--flavour", choices=("px4", "ardupilot"), default="px4")
-    ap.add_argument("--url", default="udpin:127.0.0.1:14540")
-    ap.add_argument("--plant", choices=("jsbsim", "kinematic"), default="jsbsim")
-    ap.add_argument("--clock", choices=("lockstep", "realtime"), default="lockstep")
-    ap.add_argument(
-        "--duration", type=float, default=math.inf, help="sim seconds (default: forever)"
-    )
-    ap.add_argument("--target", choices=("none", "paper", "stationary"), default="none")
-    a = ap.parse_args(argv)
-    target = None
-    if a.target != "none":
-        from mpf_mavlink.core.target import PaperProfile, Stationary
-
-        target = PaperProfile() if a.target == "paper" else Stationary()
-    cfg = VehicleConfig(a.flavour, a.url, plant=a.plant, clock=a.clock, target=target)
-    v = SimVehicle(cfg)
-    print(f"SimVehicle {a.flavour} on {a.url} ({a.plant}, {a.clock}) in {v.mode_name}", flush=True)
-    try:
-        v.run(a.duration)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        v.close()
-    print(f"sim {v.t:.1f} s, real-time factor {v.real_time_factor:.1f}", flush=True)
-    return 0
-
-
-__all__ = ["SimVehicle", "VehicleConfig", "build_plant", "main", "tunables", "use_profile"]
+__all__ = ["SimVehicle", "VehicleConfig", "build_plant", "tunables", "use_profile"]
