@@ -9,7 +9,7 @@ import numpy as np
 
 from mpf_mavlink.cli.main import main
 from mpf_mavlink.config.schema import load_config
-from mpf_mavlink.runs.verdict import EXIT_VERDICT, judge, verdict_line
+from mpf_mavlink.runs.verdict import EXIT_VERDICT, assess, verdict_line
 
 DEMO = str(Path(__file__).resolve().parents[1] / "configs" / "default.yaml")
 CFG = load_config(DEMO)  # steady after 120 s, X8 limits 14-18 m/s, 45 deg bank
@@ -24,7 +24,7 @@ def _flight(n: int = 3001, dt: float = 0.1) -> dict[str, np.ndarray]:
 
 
 def _judge(f: dict[str, np.ndarray]) -> list[str]:
-    return judge(CFG, f["t"], f["pt"], f["alt"], f["v"], f["roll"], f["pitch"])
+    return assess(CFG, f["t"], f["pt"], f["alt"], f["v"], f["roll"], f["pitch"]).clauses
 
 
 def test_a_good_flight_passes():
@@ -89,16 +89,16 @@ def test_thrust_pinned_at_its_ceiling_fails_as_an_energy_problem():
     f = _flight()
     thr = np.full(len(f["t"]), 0.3)
     thr[1300:] = 1.0  # 170 of the 180 s steady window at adapter.thrust_max = 1 (94 %)
-    (c,) = judge(CFG, f["t"], f["pt"], f["alt"], f["v"], f["roll"], f["pitch"], thr)
+    (c,) = assess(CFG, f["t"], f["pt"], f["alt"], f["v"], f["roll"], f["pitch"], thr).clauses
     assert c.startswith("energy: thrust at its ceiling 1 for 94 % of the steady window")
     v = assess(CFG, f["t"], f["pt"], f["alt"], f["v"], f["roll"], f["pitch"], thr)
     assert v.status == "FAIL" and v.classes == ["energy"] and v.exit_code(0) == EXIT_VERDICT
     assert v.line().startswith("verdict: FAIL (energy): energy: thrust at its ceiling")
     thr[1300:1320] = 0.5  # 20 s short of the ceiling: 83 %, still a failure; 15 % passes
-    assert judge(CFG, f["t"], f["pt"], f["alt"], f["v"], f["roll"], f["pitch"], thr)
+    assert assess(CFG, f["t"], f["pt"], f["alt"], f["v"], f["roll"], f["pitch"], thr).clauses
     thr[:] = 0.3
     thr[2700:] = 1.0  # 30 s of 180 = 17 % (a climb, a gust): within 20 %
-    assert judge(CFG, f["t"], f["pt"], f["alt"], f["v"], f["roll"], f["pitch"], thr) == []
+    assert assess(CFG, f["t"], f["pt"], f["alt"], f["v"], f["roll"], f["pitch"], thr).clauses == []
 
 
 def test_an_airspeed_the_aircraft_cannot_hold_fails():

@@ -371,21 +371,6 @@ def limits_line(figures: dict[str, Any]) -> str | None:
     return f"limits ({f.get('source', '?')}): " + "; ".join(parts)
 
 
-def judge(
-    cfg: Config,
-    t: np.ndarray,
-    pt_norm: np.ndarray,
-    altitude: np.ndarray | None = None,
-    airspeed: np.ndarray | None = None,
-    roll: np.ndarray | None = None,
-    pitch: np.ndarray | None = None,
-    thrust: np.ndarray | None = None,
-) -> list[str]:
-    """The failures of :func:`assess` as ``class: clause`` strings (empty: passed or not
-    judged)."""
-    return assess(cfg, t, pt_norm, altitude, airspeed, roll, pitch, thrust).clauses
-
-
 def verdict_line(failures: list[str]) -> str:
     """One line for a list of ``class: clause`` failures: ``verdict: PASS`` or
     ``verdict: FAIL: <clause>; <clause>`` (a :class:`Verdict` says more: :meth:`Verdict.line`)."""
@@ -399,7 +384,6 @@ __all__ = [
     "Verdict",
     "assess",
     "bank_limit_rad",
-    "judge",
     "limits_line",
     "thrust_ceiling",
     "verdict_line",
