@@ -219,6 +219,14 @@ def add_vehicle_parser(subparsers: Any) -> argparse.ArgumentParser:
     return p
 
 
+def _add_workers(p: argparse.ArgumentParser) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=int, default=None,
+                   help="local worker processes (default: one per core)")  # fmt: skip
+    g.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="an existing dask scheduler instead of local workers")  # fmt: skip
+
+
 def add_campaign_parser(sub: Any) -> None:
     c = sub.add_parser(
         "campaign",
@@ -236,12 +244,7 @@ def add_campaign_parser(sub: Any) -> None:
     )
     c.add_argument("campaign", metavar="CAMPAIGN", type=Path, help="campaign YAML file")
     c.add_argument("--out", type=Path, required=True, help="output directory (resumable)")
-    g = c.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=int, default=None,
-                   help="local worker processes (default: one per core)")  # fmt: skip
-    g.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
-                   help="an existing dask scheduler to run on instead of local "
-                        "workers")  # fmt: skip
+    _add_workers(c)
     c.add_argument("--retry-errors", action="store_true",
                    help="fly again the samples whose row is an error or a timeout")  # fmt: skip
     c.add_argument("--no-report", action="store_true",
@@ -275,11 +278,7 @@ def add_certify_parser(sub: Any) -> None:
                    help="flights to fly (default: what the bound needs)")  # fmt: skip
     c.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a key of CONFIG (repeatable)")  # fmt: skip
-    g = c.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=int, default=None,
-                   help="local worker processes (default: one per core)")  # fmt: skip
-    g.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
-                   help="an existing dask scheduler")  # fmt: skip
+    _add_workers(c)
     c.add_argument("-q", "--quiet", action="store_true", help="no per-flight progress")
     c.set_defaults(func=_lazy("mpf_mavlink.cli.certify", "cmd_certify"))
 
