@@ -15,13 +15,13 @@ from mpf_mavlink.core import frames
 from mpf_mavlink.errors import MpfError
 from mpf_mavlink.mavlink import dialect as mavlink
 from mpf_mavlink.mavlink import mavutil, read_tlog
-from mpf_mavlink.mavlink.codec import TYPE_MASK_ARDUPLANE_ATTITUDE, TYPE_MASK_PX4_RATES
 from mpf_mavlink.mavlink.encode import (
     encode_set_attitude_target_quat,
     encode_set_attitude_target_rates,
 )
 from mpf_mavlink.mavlink.link import open_link, parse_url, wait_heartbeat
 from mpf_mavlink.mavlink.modes import px4_custom_mode
+from mpf_mavlink.mavlink.wire_limits import TYPE_MASK_ARDUPLANE_ATTITUDE, TYPE_MASK_PX4_RATES
 
 
 def free_udp_port() -> int:

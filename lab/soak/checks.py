@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from lab.soak.rig import CONFIGS, VEHICLE_COMPID, VEHICLE_SYSID, Tap
-from mpf_mavlink.mavlink.codec import TYPE_MASK_ARDUPLANE_ATTITUDE
+from mpf_mavlink.mavlink.wire_limits import TYPE_MASK_ARDUPLANE_ATTITUDE
 
 
 @dataclass

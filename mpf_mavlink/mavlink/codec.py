@@ -33,67 +33,12 @@ from mpf_mavlink.mavlink.wire_limits import (
     MAX_SPEED_M_S,
     MIN_ALT_M,
     QUAT_NORM_TOL,
-    TM_ATTITUDE_IGNORE,
-    TM_BODY_PITCH_RATE_IGNORE,
-    TM_BODY_ROLL_RATE_IGNORE,
-    TM_BODY_YAW_RATE_IGNORE,
-    TM_THROTTLE_IGNORE,
-    TM_THRUST_BODY_SET,
-    TYPE_MASK_ARDUPLANE_ATTITUDE,
-    TYPE_MASK_PX4_RATES,
     _finite,
     _geodetic_ok,
 )
 from mpf_mavlink.quaternion import rows_of_unit_quat
 
-# The wire limits the decoders apply (wire_limits) are re-exported: callers import decoders and
-# limits from this module, encoders and command ids from mpf_mavlink.mavlink.encode/wire_limits.
 _T = TypeVar("_T")
-
-__all__ = [
-    "AttitudeSample",
-    "AttitudeTargetSample",
-    "CommandAckSample",
-    "DECODED_TYPES",
-    "FollowTargetSample",
-    "GlobalPositionSample",
-    "HeartbeatSample",
-    "HomeSample",
-    "LocalPositionSample",
-    "MAX_ACCEL_M_S2",
-    "MAX_ALT_M",
-    "MAX_ANGLE_RAD",
-    "MAX_LOCAL_POS_M",
-    "MAX_RATE_RAD_S",
-    "MAX_SPEED_M_S",
-    "MIN_ALT_M",
-    "QUAT_NORM_TOL",
-    "TM_ATTITUDE_IGNORE",
-    "TM_BODY_PITCH_RATE_IGNORE",
-    "TM_BODY_ROLL_RATE_IGNORE",
-    "TM_BODY_YAW_RATE_IGNORE",
-    "TM_THROTTLE_IGNORE",
-    "TM_THRUST_BODY_SET",
-    "TimesyncSample",
-    "TYPE_MASK_ARDUPLANE_ATTITUDE",
-    "TYPE_MASK_PX4_RATES",
-    "VfrHudSample",
-    "WindSample",
-    "decode",
-    "decode_attitude",
-    "decode_attitude_quaternion",
-    "decode_attitude_target",
-    "decode_command_ack",
-    "decode_follow_target",
-    "decode_global_position_int",
-    "decode_heartbeat",
-    "decode_home_position",
-    "decode_timesync",
-    "decode_local_position_ned",
-    "decode_vfr_hud",
-    "decode_wind",
-    "decode_wind_cov",
-]
 
 
 # Read-only float64 arrays made from packed doubles: np.frombuffer over immutable bytes is

@@ -1,5 +1,5 @@
 """Plain values -> pymavlink messages. Encoders refuse (``ValueError``) to put a non-finite or
-out-of-range number on the wire. :mod:`mpf_mavlink.mavlink.codec` re-exports them.
+out-of-range number on the wire.
 """
 
 from __future__ import annotations
