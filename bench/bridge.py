@@ -121,7 +121,8 @@ class _ScriptedPx4:
 def bridge_latency_ms(n_samples: int = 300, rate_hz: float = 50.0) -> dict[str, float]:
     """p50 / p99 (ms) of ATTITUDE-sent -> setpoint-received over ``n_samples`` control cycles
     (after the first 20, which warm up caches). Also returns the sample count and max."""
-    from mpf_mavlink.bridge.live import BridgeOptions, run_bridge
+    from mpf_mavlink.bridge.base import BridgeOptions
+    from mpf_mavlink.bridge.live import run_bridge
 
     port = free_udp_port()
     peer = _ScriptedPx4(port)

@@ -395,7 +395,8 @@ def _bridge_run(
     cfg: Config, url: str, out: str, duration: float, q: Any, force: bool = False
 ) -> None:
     """Child process: fly the bridge; results and log lines go to ``q``."""
-    from mpf_mavlink.bridge.live import BridgeOptions, run_bridge
+    from mpf_mavlink.bridge.base import BridgeOptions
+    from mpf_mavlink.bridge.live import run_bridge
     from mpf_mavlink.bridge.preflight import simulated_plant
     from mpf_mavlink.errors import MpfError
 

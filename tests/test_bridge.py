@@ -19,7 +19,8 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from mav_peer import MavPeer, PeerOptions  # noqa: E402
 
-from mpf_mavlink.bridge.live import BridgeOptions, run_bridge  # noqa: E402
+from mpf_mavlink.bridge.base import BridgeOptions  # noqa: E402
+from mpf_mavlink.bridge.live import run_bridge  # noqa: E402
 from mpf_mavlink.config import bridge as bridge_config  # noqa: E402,F401
 from mpf_mavlink.config.schema import load_config  # noqa: E402
 from mpf_mavlink.errors import MpfError  # noqa: E402

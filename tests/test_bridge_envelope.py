@@ -16,7 +16,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mav_peer import MavPeer, PeerOptions  # noqa: E402
 from test_bridge import AP_CRUISE_M_S, cfg_for, free_port  # noqa: E402
 
-from mpf_mavlink.bridge.live import BridgeOptions, run_bridge  # noqa: E402
+from mpf_mavlink.bridge.base import BridgeOptions  # noqa: E402
+from mpf_mavlink.bridge.live import run_bridge  # noqa: E402
 from mpf_mavlink.mavlink import dialect, read_tlog  # noqa: E402
 
 # 7.7 m/s blowing south (from the north), the peer's kinematics carried by it as well; the

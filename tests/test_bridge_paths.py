@@ -21,7 +21,8 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from mav_peer import MavPeer, PeerOptions  # noqa: E402
 
-from mpf_mavlink.bridge.live import BridgeOptions, BridgeResult, run_bridge  # noqa: E402
+from mpf_mavlink.bridge.base import BridgeOptions, BridgeResult  # noqa: E402
+from mpf_mavlink.bridge.live import run_bridge  # noqa: E402
 from mpf_mavlink.config import bridge as bridge_config  # noqa: E402,F401
 from mpf_mavlink.config.schema import Config, load_config  # noqa: E402
 from mpf_mavlink.core.frames import ned_to_geodetic  # noqa: E402

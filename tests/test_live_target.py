@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 
-from mpf_mavlink.bridge.controller import ExtrapolatedTarget as LiveTarget
 from mpf_mavlink.bridge.estimator import Estimator, EstimatorParams
+from mpf_mavlink.bridge.target_sources import ExtrapolatedTarget as LiveTarget
 from mpf_mavlink.core.frames import matrix_to_quat_wxyz, ned_to_geodetic
 from mpf_mavlink.core.target import ConstantTurn
 from mpf_mavlink.mavlink import dialect

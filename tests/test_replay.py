@@ -23,8 +23,9 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from mav_peer import MavPeer, PeerOptions  # noqa: E402
 
+from mpf_mavlink.bridge.base import BridgeOptions, BridgeResult  # noqa: E402
 from mpf_mavlink.bridge.controller import origin_texts, parse_marker  # noqa: E402
-from mpf_mavlink.bridge.live import BridgeOptions, BridgeResult, run_bridge  # noqa: E402
+from mpf_mavlink.bridge.live import run_bridge  # noqa: E402
 from mpf_mavlink.bridge.replay import TOLERANCE, replay  # noqa: E402
 from mpf_mavlink.cli.main import main  # noqa: E402
 from mpf_mavlink.config import bridge as bridge_config  # noqa: E402,F401

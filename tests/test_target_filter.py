@@ -294,8 +294,8 @@ def test_follow_target_accuracy_fields_set_the_fix_noise():
     report without them (zeros) gets the configured noise."""
     from pymavlink.dialects.v20 import ardupilotmega as M
 
-    from mpf_mavlink.bridge.controller import LiveTarget
     from mpf_mavlink.bridge.estimator import Estimator, EstimatorParams
+    from mpf_mavlink.bridge.target_sources import LiveTarget
     from mpf_mavlink.mavlink.codec import decode_follow_target
 
     origin = (41.185, -8.76, 0.0)

@@ -22,7 +22,8 @@ import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
 
-from mpf_mavlink.bridge.live import BridgeOptions, BridgeResult, run_bridge
+from mpf_mavlink.bridge.base import BridgeOptions, BridgeResult
+from mpf_mavlink.bridge.live import run_bridge
 from mpf_mavlink.config.schema import load_config
 
 # a lifecycle flight of seconds has no steady window: it ends NOT JUDGED (exit 6), not PASS

@@ -26,8 +26,8 @@ os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
-from mpf_mavlink.bridge.controller import ExtrapolatedTarget, LiveTarget  # noqa: E402
 from mpf_mavlink.bridge.estimator import Estimator, EstimatorParams  # noqa: E402
+from mpf_mavlink.bridge.target_sources import ExtrapolatedTarget, LiveTarget  # noqa: E402
 from mpf_mavlink.config.scenario import build_target  # noqa: E402
 from mpf_mavlink.config.schema import load_config  # noqa: E402
 from mpf_mavlink.mavlink.codec import decode  # noqa: E402

@@ -661,23 +661,3 @@ def diagnostics_at_sample(
         return mpf_errors(s, vs, tgt() if callable(tgt) else tgt, path, gains, ext, mode)
 
     return diag, errors
-
-
-__all__ = [
-    "Controller",
-    "ExtrapolatedTarget",
-    "LiveTarget",
-    "ScriptedTarget",
-    "Step",
-    "SETPOINT_COLUMNS",
-    "write_setpoints",
-    "STREAM_TEXT",
-    "HALT_TEXT",
-    "origin_texts",
-    "parse_marker",
-    "adapter_params",
-    "estimator_params",
-    "measured_inputs",
-    "mission_time_at",
-    "thrust_flown",
-]

@@ -77,8 +77,6 @@ from mpf_mavlink.bridge.controller import (
     STREAM_TEXT,
     Controller,
     ControlSetup,
-    LiveTarget,
-    ScriptedTarget,
     Step,
 )
 from mpf_mavlink.bridge.envelope import demand_of_step, envelope_monitor, wind_limit_m_s
@@ -101,7 +99,7 @@ from mpf_mavlink.mavlink import (
     wait_heartbeat,
 )
 from mpf_mavlink.mavlink.wire_limits import MAV_CMD_COMPONENT_ARM_DISARM
-from mpf_mavlink.runs.rundir import COLUMNS, prepare_out_dir
+from mpf_mavlink.runs.rundir import prepare_out_dir
 
 
 class _Refused(Exception):
@@ -476,15 +474,3 @@ def run_bridge(
     finally:
         if main and prev is not None:
             signal.signal(signal.SIGTERM, prev)
-
-
-__all__ = [
-    "Bridge",
-    "BridgeOptions",
-    "BridgeResult",
-    "LiveTarget",
-    "ScriptedTarget",
-    "State",
-    "run_bridge",
-    "COLUMNS",
-]

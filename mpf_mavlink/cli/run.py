@@ -44,7 +44,8 @@ CONNECT_HELP = (
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from mpf_mavlink.bridge.live import BridgeOptions, run_bridge
+    from mpf_mavlink.bridge.base import BridgeOptions
+    from mpf_mavlink.bridge.live import run_bridge
     from mpf_mavlink.config.schema import load_config
     from mpf_mavlink.runs.rundir import prepare_out_dir
 

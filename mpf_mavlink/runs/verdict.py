@@ -375,16 +375,3 @@ def verdict_line(failures: list[str]) -> str:
     """One line for a list of ``class: clause`` failures: ``verdict: PASS`` or
     ``verdict: FAIL: <clause>; <clause>`` (a :class:`Verdict` says more: :meth:`Verdict.line`)."""
     return "verdict: PASS" if not failures else "verdict: FAIL: " + "; ".join(failures)
-
-
-__all__ = [
-    "CLASSES",
-    "EXIT_NOT_JUDGED",
-    "EXIT_VERDICT",
-    "Verdict",
-    "assess",
-    "bank_limit_rad",
-    "limits_line",
-    "thrust_ceiling",
-    "verdict_line",
-]

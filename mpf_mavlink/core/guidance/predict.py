@@ -182,14 +182,3 @@ def predict_rows(
         return vs, R, w1_I
     vp = vehicle_state_of_floats(vs.t + tau, (*R_W[0], *R_W[1], *R_W[2], p0, p1, p2, e0, e1, e2), v)
     return vp, R, w1_I
-
-
-__all__ = [
-    "HOLD_PHASE_RAD",
-    "MAX_PREDICTION_S",
-    "look_ahead",
-    "predict",
-    "predict_rows",
-    "predict_segments",
-    "prediction_horizon",
-]
