@@ -505,11 +505,14 @@ def _measured_checks(
     ch, v = cfg.checks, cfg.vehicle
     out: list[CheckResult] = []
 
-    def feasible(speed: float, wind: tuple[float, float, float]) -> CheckResult:
-        return feasibility(
+    def warn(name: str, speed: float, wind: Any, what: str, then: str, fig: dict[str, Any]) -> None:
+        r = feasibility(
             path, target, speed, horizon, bank_limit_rad(cfg), v.max_turn_rate_rad_s, s0, wind,
             bank_margin_rad=ch.bank_margin_rad, turn_gain=v.turn_gain,
         )  # fmt: skip
+        out.append(CheckResult(name, "pass" if r.ok else "warn",
+                               f"{what}: {r.summary}" + ("" if r.ok else f"; expect {then}"),
+                               {**r.figures, **fig}))  # fmt: skip
 
     w = measured.wind_ned_m_s
     margin, how = measured.wind_margin_m_s()
@@ -517,28 +520,16 @@ def _measured_checks(
     # the margin along the measured wind's direction (from the north when there is none)
     ux, uy = (w[0] / speed, w[1] / speed) if speed > 1e-6 else (-1.0, 0.0)
     wm = (w[0] + margin * ux, w[1] + margin * uy, w[2])
-    r = feasible(v.airspeed_m_s, wm)
-    what = (
-        f"with the measured wind plus its margin {margin:.1f} m/s ({how}), "
-        f"{wind_words(wm, measured.wind_source)}: {r.summary}"
-    )
-    out.append(
-        CheckResult("wind_margin", "pass" if r.ok else "warn",
-                    what + ("" if r.ok else "; expect the turn to saturate if the wind is that"),
-                    {**r.figures, "wind_margin_m_s": margin})
-    )  # fmt: skip
+    warn("wind_margin", v.airspeed_m_s, wm,
+         f"with the measured wind plus its margin {margin:.1f} m/s ({how}), "
+         f"{wind_words(wm, measured.wind_source)}", "the turn to saturate if the wind is that",
+         {"wind_margin_m_s": margin})  # fmt: skip
     va = measured.airspeed_m_s
     if va is not None and math.isfinite(va) and va > v.airspeed_m_s + 0.5:
-        r = feasible(va, w)
-        what = (
-            f"at the measured airspeed {va:.1f} m/s (VFR_HUD; the law flies "
-            f"{v.airspeed_m_s:g}): {r.summary}"
-        )
-        out.append(
-            CheckResult("measured_airspeed", "pass" if r.ok else "warn",
-                        what + ("" if r.ok else "; expect the turn to saturate until it slows"),
-                        {**r.figures, "measured_airspeed_m_s": va})
-        )  # fmt: skip
+        warn("measured_airspeed", va, w,
+             f"at the measured airspeed {va:.1f} m/s (VFR_HUD; the law flies "
+             f"{v.airspeed_m_s:g})", "the turn to saturate until it slows",
+             {"measured_airspeed_m_s": va})  # fmt: skip
     return out
 
 
