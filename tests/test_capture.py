@@ -73,7 +73,7 @@ def test_the_bounds_hold_on_random_inputs_beyond_the_capture_distance():
         veh, cmd, f1, wd1, pt_norm, pt_along, floor_d = _random_case(rng)
         diag = _diag(pt_norm, pt_along, f1, wd1)
         ceil_d = floor_d - rng.uniform(0.0, 60.0)
-        out, beta = cap.guard(cmd, diag, veh, floor_d, K_p, P, ceil_d)
+        out, beta, _ = cap.guard_limited(cmd, diag, veh, floor_d, K_p, P, ceil_d)
         assert beta == 1.0
         R, v = np.asarray(veh.R_W_I), veh.airspeed
         # (a) sdot within +-v_w of the on-path rate

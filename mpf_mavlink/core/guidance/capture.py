@@ -143,24 +143,6 @@ def flight_path_band(gamma: float, v_w: float, height_above_floor_m: float,
     return (bottom - gamma) / tau, (top - gamma) / tau
 
 
-def guard(
-    cmd: MpfCommand,
-    diag: MpfDiagnostics,
-    vehicle: VehicleState,
-    floor_down_m: float,
-    K_p: float,
-    p: CaptureParams,
-    ceiling_down_m: float = -math.inf,
-) -> tuple[MpfCommand, float]:
-    """The law's command with the guards applied, blended by :func:`capture_weight` of |pt|,
-    and that weight (0: the law's command itself, returned as it is).
-
-    floor_down_m, ceiling_down_m: :func:`floor_and_ceiling_down` (NED down, m); K_p (1/s) the
-    gain sdot (22) used."""
-    out, beta, _ = guard_limited(cmd, diag, vehicle, floor_down_m, K_p, p, ceiling_down_m)
-    return out, beta
-
-
 def guard_limited(
     cmd: MpfCommand,
     diag: MpfDiagnostics,
@@ -170,8 +152,13 @@ def guard_limited(
     p: CaptureParams,
     ceiling_down_m: float = -math.inf,
 ) -> tuple[MpfCommand, float, tuple[str, ...]]:
-    """:func:`guard`, and which guards changed the law's command: a subset of ("sdot", "turn",
-    "path") in that order, (a), (b), (c); empty when the law's command was inside every bound."""
+    """The law's command with the guards applied, blended by :func:`capture_weight` of |pt|
+    (0: the law's command itself, returned as it is), that weight, and which guards changed the
+    law's command: a subset of ("sdot", "turn", "path") in that order, (a), (b), (c); empty when
+    the law's command was inside every bound.
+
+    floor_down_m, ceiling_down_m: :func:`floor_and_ceiling_down` (NED down, m); K_p (1/s) the
+    gain sdot (22) used."""
     beta = capture_weight(diag.pt_norm, p.distance_m, p.blend_m)
     if beta == 0.0:
         return cmd, 0.0, ()
@@ -222,7 +209,7 @@ class GuardAction:
 
 
 class CaptureGuard:
-    """:func:`guard` for one path: its nodes in {T} (for the floor) and the limits."""
+    """:func:`guard_limited` for one path: its nodes in {T} (for the floor) and the limits."""
 
     def __init__(self, path_nodes_T: NDArray[np.float64], params: CaptureParams) -> None:
         self.nodes = np.asarray(path_nodes_T, dtype=float)
