@@ -385,9 +385,9 @@ class MavPeer:
             )  # fmt: skip
         # ATTITUDE last: the bridge acts on it, with the position of the same instant in hand
         if self.o.attitude_quaternion:
-            from mpf_mavlink.core.frames import euler_to_quat_wxyz
+            from mpf_mavlink.quaternion import quat_of_euler
 
-            q = euler_to_quat_wxyz(self.roll, self.pitch, self.yaw)  # (w, x, y, z) = q1..q4
+            q = quat_of_euler(self.roll, self.pitch, self.yaw)  # (w, x, y, z) = q1..q4
             self.mav.attitude_quaternion_send(
                 tb, *q, self.p, 0.0, getattr(self, "_r", 0.0), [0.0, 0.0, 0.0, 0.0]
             )

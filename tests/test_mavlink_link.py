@@ -22,6 +22,7 @@ from mpf_mavlink.mavlink.encode import (
 from mpf_mavlink.mavlink.link import open_link, parse_url, wait_heartbeat
 from mpf_mavlink.mavlink.modes import px4_custom_mode
 from mpf_mavlink.mavlink.wire_limits import TYPE_MASK_ARDUPLANE_ATTITUDE, TYPE_MASK_PX4_RATES
+from mpf_mavlink.quaternion import quat_of_euler
 
 
 def free_udp_port() -> int:
@@ -104,7 +105,7 @@ def test_udp_quaternion_order_and_ardupilot_type_mask(udp_pair):
     px4_heartbeat(peer)
     wait_heartbeat(link, 2.0)
     # roll 30 deg, pitch 0, yaw 0 -> q = (cos 15deg, sin 15deg, 0, 0) in (w, x, y, z)
-    q = frames.euler_to_quat_wxyz(math.radians(30.0), 0.0, 0.0)
+    q = quat_of_euler(math.radians(30.0), 0.0, 0.0)
     link.send(encode_set_attitude_target_quat(link.mav, 50, 1, 1, q, 0.45))
     sat = peer_recv(peer, "SET_ATTITUDE_TARGET")
     assert sat.q[0] == pytest.approx(math.cos(math.radians(15)), abs=1e-7)  # 0.9659258 first
@@ -267,7 +268,7 @@ def test_pty_serial_exchange(tmp_path):
         got = wait_heartbeat(link, 2.0)
         assert (got.autopilot, got.custom_mode) == (3, 15)  # ArduPilot, GUIDED
 
-        q = frames.euler_to_quat_wxyz(0.0, math.radians(5.0), 0.0)
+        q = quat_of_euler(0.0, math.radians(5.0), 0.0)
         link.send(encode_set_attitude_target_quat(link.mav, 77, 1, 1, q, 0.7))
         parser = mavlink.MAVLink(None)
         msg = None

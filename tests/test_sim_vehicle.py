@@ -24,13 +24,10 @@ pytest.importorskip("pymavlink")
 from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as M  # noqa: E402
 
-from mpf_mavlink.core.frames import (  # noqa: E402
-    euler_to_quat_wxyz,
-    geodetic_to_ned,
-    matrix_to_quat_wxyz,
-)
+from mpf_mavlink.core.frames import geodetic_to_ned, matrix_to_quat_wxyz  # noqa: E402
 from mpf_mavlink.core.target import ConstantTurn  # noqa: E402
 from mpf_mavlink.mavlink.modes import px4_custom_mode  # noqa: E402
+from mpf_mavlink.quaternion import quat_of_euler  # noqa: E402
 from sim.plant.kinematic_plant import KinematicMavPlant, ned_to_geodetic_fast  # noqa: E402
 from sim.vehicle.clock import LockstepClock  # noqa: E402
 from sim.vehicle.vehicle import SimVehicle  # noqa: E402
@@ -99,7 +96,7 @@ class Gcs:
     def attitude(
         self, roll: float, pitch: float, yaw: float = 0.0, thrust: float = 0.3, mask: int = 0
     ):
-        q = list(euler_to_quat_wxyz(roll, pitch, yaw))
+        q = list(quat_of_euler(roll, pitch, yaw))
         self.c.mav.set_attitude_target_send(0, 1, 1, mask, q, 0.0, 0.0, 0.0, thrust)
 
     def close(self) -> None:

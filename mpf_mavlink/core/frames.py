@@ -46,11 +46,6 @@ def matrix_to_euler(R: ArrayLike) -> tuple[float, float, float]:
     return roll, pitch, yaw
 
 
-def euler_to_quat_wxyz(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    """ZYX Euler angles (rad) -> quaternion (w, x, y, z), as MAVLink's SET_ATTITUDE_TARGET wants."""
-    return matrix_to_quat_wxyz(euler_to_matrix(roll, pitch, yaw))
-
-
 def wind_frame_from_velocity(v_air_ned: ArrayLike, roll_ref: float = 0.0) -> Mat3:
     """Wind frame R_W^I whose w1 is along the air-relative velocity (NED, m/s).
 
