@@ -202,6 +202,14 @@ def build_autopilot(cfg: Config) -> Any:
     return FixedWingAutopilot(gains, att, hold)
 
 
+_SAME_NAMES = (
+    "flavour", "plant", "target_system", "target_rate_hz", "target_type", "physics_rate_hz",
+    "telemetry_latency_s", "command_latency_s", "wind_estimate_tau_s", "answer_timeout_s",
+    "lockstep_spin_s", "realtime_speed", "initial_mode", "turbulence", "wind_turbulence_m_s",
+    "seed",
+)  # fmt: skip
+
+
 def vehicle_config(cfg: Config, url: str, clock: str | None = None, **over: Any) -> VehicleConfig:
     """The :class:`sim.vehicle.config.VehicleConfig` of a config's SIL vehicle (``over`` wins)."""
     sil, ac, k = cfg.section("sil"), cfg.section("aircraft"), cfg.kinematic
@@ -227,10 +235,10 @@ def vehicle_config(cfg: Config, url: str, clock: str | None = None, **over: Any)
         }
         if root is not None:
             plant_options["root_dir"] = str(root)
-    opts: dict[str, Any] = dict(
-        flavour=sil.flavour,
+    # the fields the two sections name alike; the rest are renamed or derived below
+    opts: dict[str, Any] = {n: getattr(sil, n) for n in _SAME_NAMES}
+    opts.update(
         url=url,
-        plant=sil.plant,
         clock=clock or sil.clock,
         position_ned=tuple(pos),
         heading=float(heading),
@@ -239,27 +247,13 @@ def vehicle_config(cfg: Config, url: str, clock: str | None = None, **over: Any)
         lon0_deg=sil.home_lon_deg,
         alt0_m=sil.home_alt_m,
         target=build_target(cfg.target),
-        target_system=sil.target_system,
-        target_rate_hz=sil.target_rate_hz,
-        target_type=sil.target_type,
         rates=rates,
         frame_period=sil.frame_period_s,
-        physics_rate_hz=sil.physics_rate_hz,
-        telemetry_latency_s=sil.telemetry_latency_s,
-        command_latency_s=sil.command_latency_s,
-        wind_estimate_tau_s=sil.wind_estimate_tau_s,
-        answer_timeout_s=sil.answer_timeout_s,
-        lockstep_spin_s=sil.lockstep_spin_s,
-        realtime_speed=sil.realtime_speed,
         com_of_loss_t=sil.offboard_loss_timeout_s,
         guided_timeout=sil.guided_timeout_s,
         loiter_radius=sil.loiter_radius_m,
         trim_seconds=sil.trim_s,
-        initial_mode=sil.initial_mode,
         wind_ned=tuple(sil.wind_ned_m_s),
-        turbulence=sil.turbulence,
-        wind_turbulence_m_s=sil.wind_turbulence_m_s,
-        seed=sil.seed,
         gusts=[dataclasses.asdict(g) for g in sil.gusts],
         plant_options=plant_options,
         autopilot=build_autopilot(cfg),
