@@ -26,6 +26,7 @@ def controller_step_us(n: int = 3000, passes: int = 7) -> dict[str, Any]:
 
     from mpf_mavlink.config.schema import load_config
     from mpf_mavlink.core.guidance.law import VehicleState, mpf_law
+    from mpf_mavlink.core.guidance.law_unrolled import mpf_law_unrolled
     from sim.runner import kinematic_loop
 
     cfg = load_config("configs/paper_lemniscate.yaml", ["sim.duration_s=30"])
@@ -42,6 +43,7 @@ def controller_step_us(n: int = 3000, passes: int = 7) -> dict[str, Any]:
     # several passes spread over ~0.5 s and the figure is the median of all.
     times = np.empty((passes, n))
     arrays = np.empty((passes, n))
+    unrolled = np.empty((passes, n))
     for k in range(passes):
         for i, (s, veh, tgt) in enumerate(states):
             t0 = clock()
@@ -51,10 +53,16 @@ def controller_step_us(n: int = 3000, passes: int = 7) -> dict[str, Any]:
             t0 = clock()
             mpf_law(s, veh, tgt, path, gains, ext)
             arrays[k, i] = clock() - t0
+        # the kinematic simulator's form of the same law (law_unrolled), timed in the same pass
+        for i, (s, veh, tgt) in enumerate(states):
+            t0 = clock()
+            mpf_law_unrolled(s, veh, tgt, path, gains, ext)
+            unrolled[k, i] = clock() - t0
     return {
         "median": float(np.median(times) * 1e6),
         "p99": float(np.percentile(times, 99) * 1e6),
         "median_target_arrays": float(np.median(arrays) * 1e6),
+        "median_unrolled": float(np.median(unrolled) * 1e6),
         "pass_medians": [round(float(np.median(p)) * 1e6, 2) for p in times],
     }
 
