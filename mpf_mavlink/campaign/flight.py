@@ -101,8 +101,8 @@ def _kinematic(
     from sim.runner import kinematic_loop, record_sample
 
     cfg = load_config(base, sets)
-    pt0, psi0, _ = initial_errors(cfg)
     loop, x = kinematic_loop(cfg)
+    pt0, psi0, _ = initial_errors(cfg, loop.path, loop.target)  # the path built once a flight
     dt = cfg.kinematic.dt_s
     n = int(round(cfg.sim.duration_s / dt))
     every = cfg.sim.record_every
